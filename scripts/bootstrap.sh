@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Create (or reuse) the project's virtual environment in .venv and install everything the
+# project needs from its own files: requirements.txt (all pins) and the four packages in src/.
+# Re-installs only when requirements.txt or a package's setup files changed (stamp file).
+# Usage: source from the other scripts, or run it alone: bash scripts/bootstrap.sh
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+venv="${TRUST_AV_VENV:-$root/.venv}"
+python_bin="${PYTHON:-python3.11}"
+command -v "$python_bin" >/dev/null 2>&1 || python_bin=python3
+packages=(preceding_traffic trust_monitor human_driver_sim trust_av_planner)
+
+stamp_inputs() {
+  cat "$root/requirements.txt"
+  for p in "${packages[@]}"; do cat "$root/src/$p/setup.py" "$root/src/$p/setup.cfg" "$root/src/$p/package.xml"; done
+}
+want="$(stamp_inputs | sha256sum | cut -d' ' -f1)"
+stamp="$venv/.trust_av_stamp"
+
+if [ ! -x "$venv/bin/python" ]; then
+  echo "[bootstrap] creating virtual environment $venv ($("$python_bin" --version))" >&2
+  "$python_bin" -m venv "$venv"
+fi
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  echo "[bootstrap] installing pinned dependencies (first run takes about a minute)" >&2
+  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$root/requirements.txt" 2> >(grep -v "^WARNING: Location" >&2)
+  args=()
+  for p in "${packages[@]}"; do args+=(-e "$root/src/$p"); done
+  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation "${args[@]}" 2> >(grep -v "^WARNING: Location" >&2)
+  echo "$want" > "$stamp"
+fi
+export PATH="$venv/bin:$PATH"
+export VIRTUAL_ENV="$venv"

@@ -1,0 +1,1 @@
+"""IRL-style MPC model of the human driver following the AV (Ozkan & Ma, eq. 13)."""

@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = 'human_driver_sim'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    package_data={package_name: ['py.typed']},
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=False,
+    maintainer='trust-av maintainers',
+    maintainer_email='maintainers@trust-av.invalid',
+    description='IRL-style MPC model of the human driver following the AV (Ozkan & Ma, eq. 13).',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            
+        ],
+    },
+)

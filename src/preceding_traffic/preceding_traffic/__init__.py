@@ -1,0 +1,1 @@
+"""Preceding-traffic speed source: drive-cycle traces, validation, resampling and preview."""

@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = 'preceding_traffic'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    package_data={package_name: ['py.typed', 'data/*.csv', 'data/*.md', 'data/*.txt']},
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=False,
+    maintainer='trust-av maintainers',
+    maintainer_email='maintainers@trust-av.invalid',
+    description='Preceding-traffic speed source: drive-cycle traces, validation, resampling and preview.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            
+        ],
+    },
+)

@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = 'trust_av_planner'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    package_data={package_name: ['py.typed', 'config/*.yaml']},
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=False,
+    maintainer='trust-av maintainers',
+    maintainer_email='maintainers@trust-av.invalid',
+    description='Trust-aware nonlinear MPC for the automated vehicle, in-process simulator and CLI.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'trust-av = trust_av_planner.cli:main'
+        ],
+    },
+)

@@ -1,0 +1,105 @@
+"""Load the whole run configuration from one ROS 2 params file (``config/trust_av.yaml``).
+
+The in-process simulator and the node graph read the same file; every key must belong to
+a known component (typos are errors), every value is type- and range-checked by the
+component's frozen dataclass.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from human_driver_sim.driver_mpc import DriverConfig
+from preceding_traffic.traces import SpeedTrace, TraceConfig
+from trust_monitor.params import (
+    WILDCARD,
+    ParamsError,
+    build_config,
+    check_known,
+    node_params,
+    read_params_file,
+    require,
+)
+from trust_monitor.trust_model import TrustConfig
+
+from trust_av_planner.nmpc import PlannerConfig
+
+DEFAULT_PARAMS_FILE = Path(__file__).resolve().parent / 'config' / 'trust_av.yaml'
+"""The shipped params file (``config/trust_av.yaml`` of the repository)."""
+
+
+@dataclass(frozen=True)
+class SharedConfig:
+    """Parameters in the ``/**`` section that are not owned by one component."""
+
+    vehicle_length_m: float
+    speed_max_from_trace: bool
+
+    def __post_init__(self) -> None:
+        require(self.vehicle_length_m >= 0.0, 'vehicle_length_m must be >= 0')
+
+
+# Node name -> the configuration classes its section may hold.
+NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
+    'preceding_traffic': (TraceConfig, SharedConfig),
+    'planner': (PlannerConfig, TrustConfig, SharedConfig),
+    'human_driver': (DriverConfig, SharedConfig),
+    'trust_monitor': (TrustConfig,),
+}
+_ALL = tuple({c for comps in NODE_COMPONENTS.values() for c in comps})
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything one closed-loop run needs."""
+
+    shared: SharedConfig
+    trace: TraceConfig
+    planner: PlannerConfig
+    driver: DriverConfig
+    trust: TrustConfig
+
+    def for_trace(self, trace: SpeedTrace) -> RunConfig:
+        """Apply Table I's ``v_max = max(v_PT)`` when ``speed_max_from_trace`` is set."""
+        if not self.shared.speed_max_from_trace:
+            return self
+        vmax = trace.max_speed_mps
+        return dataclasses.replace(
+            self, planner=dataclasses.replace(self.planner, speed_max_mps=vmax),
+            driver=dataclasses.replace(self.driver, speed_max_mps=vmax))
+
+
+def load_run_config(path: str | Path = DEFAULT_PARAMS_FILE,
+                    overrides: Mapping[str, Mapping[str, Any]] | None = None) -> RunConfig:
+    """Read and validate the params file, with optional per-node overrides.
+
+    Args:
+        path: ROS 2 params file.
+        overrides: node name (or ``/**``) to parameter values that replace the file's.
+
+    Raises:
+        ParamsError: unknown node or parameter, wrong type, or a value out of range.
+    """
+    sections = read_params_file(path)
+    for node, values in (overrides or {}).items():
+        sections.setdefault(node, {}).update(values)
+    for node, values in sections.items():
+        if node == WILDCARD:
+            check_known(values, *_ALL, where=f'{path}: section {node}')
+        elif node in NODE_COMPONENTS:
+            check_known(values, *NODE_COMPONENTS[node], where=f'{path}: section {node}')
+        else:
+            raise ParamsError(f'{path}: unknown node section {node!r} (known: '
+                              f'{", ".join(NODE_COMPONENTS)})')
+    traffic = node_params(sections, 'preceding_traffic')
+    return RunConfig(
+        shared=build_config(SharedConfig, traffic),
+        trace=build_config(TraceConfig, traffic),
+        planner=build_config(PlannerConfig, node_params(sections, 'planner')),
+        driver=build_config(DriverConfig, node_params(sections, 'human_driver')),
+        trust=build_config(TrustConfig, node_params(sections, 'trust_monitor')),
+    )

@@ -1,0 +1,242 @@
+"""Trust-aware nonlinear MPC of the automated vehicle, eq. (12) of Ozkan & Ma.
+
+Decision: the plan u_R^0..u_R^{N-1} (m/s^2). For the predicted states k = 1..N (the ones
+the plan influences)::
+
+    min  sum_k (d_s + tau v^k - d^k)^2 / tracking_cost_scale_m2 + alpha * E(u, u^H) / explicability_scale
+    s.t. d_min <= d^k <= d_max,  v_min <= v^k <= v_max,  u_min <= u^k <= u_max,
+         E(u, u^H) <= E_max(T)                     (the trust constraint T^k >= T_min)
+
+with the dynamics of :mod:`human_driver_sim.longitudinal` and E of
+:func:`trust_monitor.trust_model.explicability` (each written once). The trust constraint is
+the exact smooth equivalent of propagating eqs. (9)-(11) over the horizon, see
+:func:`trust_monitor.trust_model.explicability_bound`.
+
+The NLP is built once (CasADi SX, ``sqpmethod`` with the ``qrqp`` active-set QP solver),
+warm-started from the shifted previous plan. A solve that fails, or whose plan breaks a
+bound by more than :data:`BOUND_TOLERANCE`, is replaced by the documented fallback plan
+(:func:`human_driver_sim.longitudinal.hold_gap_plan`) and reported in the status.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+from human_driver_sim import longitudinal
+from human_driver_sim.solver import sqp_options
+from trust_monitor.params import require
+from trust_monitor.trust_model import TrustConfig, explicability, explicability_bound
+
+LOG = logging.getLogger(__name__)
+
+PREDICTORS = ('ca',)
+"""Names of the plan estimators (parameter ``predictor``)."""
+
+BOUND_TOLERANCE = 1e-6
+"""Largest bound violation (m, m/s, m/s^2 or E) accepted from the solver."""
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Parameters of the AV's NMPC (Table I and docs/MODEL.md)."""
+
+    dt_s: float
+    horizon_steps: int
+    standstill_gap_m: float
+    time_headway_s: float
+    gap_min_m: float
+    gap_max_m: float
+    speed_min_mps: float
+    speed_max_mps: float
+    accel_min_mps2: float
+    accel_max_mps2: float
+    trust_min: float
+    alpha: float
+    tracking_cost_scale_m2: float
+    explicability_scale: float
+    solver_max_iter: int
+    fallback_gap_gain_per_s2: float
+    fallback_speed_gain_per_s: float
+    predictor: str
+    time_headway_cap_s: float
+
+    def __post_init__(self) -> None:
+        require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
+        require(1 <= self.horizon_steps <= 50,
+                f'horizon_steps must be in [1, 50], got {self.horizon_steps}')
+        require(0.0 <= self.alpha <= 1.0, f'alpha must be in [0, 1], got {self.alpha}')
+        require(self.time_headway_s >= 0.0,
+                f'time_headway_s must be >= 0, got {self.time_headway_s}')
+        require(0.0 <= self.gap_min_m < self.gap_max_m,
+                f'need 0 <= gap_min_m < gap_max_m, got {self.gap_min_m}, {self.gap_max_m}')
+        require(0.0 <= self.speed_min_mps < self.speed_max_mps,
+                f'need 0 <= speed_min_mps < speed_max_mps, got {self.speed_min_mps}, '
+                f'{self.speed_max_mps}')
+        require(self.accel_min_mps2 < 0.0 < self.accel_max_mps2,
+                f'need accel_min_mps2 < 0 < accel_max_mps2, got {self.accel_min_mps2}, '
+                f'{self.accel_max_mps2}')
+        require(self.tracking_cost_scale_m2 > 0.0, 'tracking_cost_scale_m2 must be > 0')
+        require(self.explicability_scale > 0.0, 'explicability_scale must be > 0')
+        require(self.solver_max_iter >= 1, 'solver_max_iter must be >= 1')
+        require(self.time_headway_cap_s > 0.0, 'time_headway_cap_s must be > 0')
+        require(self.predictor in PREDICTORS, f'predictor must be one of {list(PREDICTORS)}, got '
+                f'{self.predictor!r}')
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """Outcome of one NMPC step.
+
+    Attributes:
+        plan_mps2: accelerations u_R^0..u_R^{N-1} to apply (solver's or fallback's).
+        status: solver return status, or ``fallback: <reason>``.
+        success: the solver's plan was used.
+        iterations: SQP iterations.
+        solve_time_s: wall time of the solver call (instrumentation only).
+        explicability_max: E_max of the trust constraint for this step.
+        cost: objective value of the returned plan.
+    """
+
+    plan_mps2: np.ndarray
+    status: str
+    success: bool
+    iterations: int
+    solve_time_s: float
+    explicability_max: float
+    cost: float = field(default=float('nan'))
+
+    @property
+    def fallback(self) -> bool:
+        """True when the fallback plan replaced the solver's."""
+        return not self.success
+
+
+class TrustAwareNmpc:
+    """The AV's trust-aware NMPC; build once, call :meth:`solve` every step."""
+
+    def __init__(self, config: PlannerConfig, trust: TrustConfig) -> None:
+        self.config = config
+        self.trust = trust
+        n = config.horizon_steps
+        u = ca.SX.sym('u', n)
+        gap0, speed0 = ca.SX.sym('gap0'), ca.SX.sym('speed0')
+        lead = ca.SX.sym('lead', n)
+        expected = ca.SX.sym('expected', n)
+        alpha = ca.SX.sym('alpha')
+        gaps, speeds = longitudinal.rollout(gap0, speed0, [lead[k] for k in range(n)],
+                                            [u[k] for k in range(n)], config.dt_s)
+        tracking = sum((config.standstill_gap_m + config.time_headway_s * speeds[k] - gaps[k])
+                       ** 2 for k in range(n))
+        score = explicability([u[k] for k in range(n)], [expected[k] for k in range(n)],
+                              trust.epsilon_mps2)
+        cost = tracking / config.tracking_cost_scale_m2 + alpha * score / config.explicability_scale
+        params = ca.vertcat(gap0, speed0, lead, expected, alpha)
+        # d^1 does not depend on the plan: a constant row would break the QP's constraint
+        # qualification, so it is checked before solving instead (:meth:`solve`).
+        constraints = ca.vertcat(*gaps[1:], *speeds, score)
+        self._solver = ca.nlpsol('trust_aware_nmpc', 'sqpmethod',
+                                 {'x': u, 'p': params, 'f': cost, 'g': constraints},
+                                 sqp_options(config.solver_max_iter))
+        self._cost = ca.Function('cost', [u, params], [cost])
+        self._previous: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Forget the warm start."""
+        self._previous = None
+
+    def bounds(self, explicability_max: float) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of the constraint vector (gaps d^1..d^N, speeds v^1..v^N, E)."""
+        c, n = self.config, self.config.horizon_steps
+        lower = np.concatenate([np.full(n, c.gap_min_m), np.full(n, c.speed_min_mps), [-np.inf]])
+        upper = np.concatenate([np.full(n, c.gap_max_m), np.full(n, c.speed_max_mps),
+                                [explicability_max]])
+        return lower, upper
+
+    def solve(self, gap_m: float, speed_mps: float, lead_speeds_mps: np.ndarray,
+              expected_mps2: np.ndarray, trust: float) -> PlanResult:
+        """Plan the next N accelerations.
+
+        Args:
+            gap_m: gap to the preceding traffic, m.
+            speed_mps: AV speed, m/s.
+            lead_speeds_mps: preview of the preceding traffic's speed, N values, m/s.
+            expected_mps2: the plan the human expects u_R^H, N values, m/s^2.
+            trust: current trust T(t).
+
+        Returns:
+            The plan and the solver's report; never raises for an infeasible problem.
+        """
+        c, n = self.config, self.config.horizon_steps
+        e_max = explicability_bound(trust, c.trust_min, self.trust, n)
+        params = np.concatenate([[gap_m, speed_mps], lead_speeds_mps, expected_mps2, [c.alpha]])
+        if e_max is None:
+            return self._fallback(gap_m, speed_mps, lead_speeds_mps, 'trust below T_min',
+                                  -1.0, 0, 0.0)
+        e_max = min(e_max, 1.0)  # E < 1 always: larger bounds are inactive
+        if self._previous is None:
+            guess = np.zeros(n)
+        else:
+            guess = np.concatenate([self._previous[1:], self._previous[-1:]])
+        lbg, ubg = self.bounds(e_max)
+        first_gap = gap_m + (lead_speeds_mps[0] - speed_mps) * c.dt_s
+        if not lbg[0] - BOUND_TOLERANCE <= first_gap <= ubg[0] + BOUND_TOLERANCE:
+            return self._fallback(gap_m, speed_mps, lead_speeds_mps,
+                                  f'gap {first_gap:.3f} m at k=1 is outside [{c.gap_min_m}, '
+                                  f'{c.gap_max_m}] m whatever the plan', e_max, 0, 0.0)
+        start = time.perf_counter()
+        sol = self._solver(x0=guess, p=params, lbx=c.accel_min_mps2, ubx=c.accel_max_mps2,
+                           lbg=lbg[1:], ubg=ubg[1:])
+        stats = self._solver.stats()
+        iterations = int(stats.get('iter_count', 0))
+        if not stats['success'] and self._previous is not None:
+            # A warm start can stall SQP on degenerate corners (standstill at d_min): retry cold.
+            sol = self._solver(x0=np.zeros(n), p=params, lbx=c.accel_min_mps2,
+                               ubx=c.accel_max_mps2, lbg=lbg[1:], ubg=ubg[1:])
+            stats = self._solver.stats()
+            iterations += int(stats.get('iter_count', 0))
+        elapsed = time.perf_counter() - start
+        plan = np.asarray(sol['x']).ravel()
+        if not stats['success']:
+            return self._fallback(gap_m, speed_mps, lead_speeds_mps,
+                                  str(stats['return_status']), e_max, iterations, elapsed)
+        violation = self.bound_violation(plan, gap_m, speed_mps, lead_speeds_mps,
+                                         expected_mps2, e_max)
+        if violation > BOUND_TOLERANCE:
+            return self._fallback(gap_m, speed_mps, lead_speeds_mps,
+                                  f'bound violated by {violation:.2e}', e_max, iterations,
+                                  elapsed)
+        self._previous = plan
+        return PlanResult(plan, str(stats['return_status']), True, iterations, elapsed, e_max,
+                          float(self._cost(plan, params)))
+
+    def bound_violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
+                        lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray,
+                        explicability_max: float) -> float:
+        """Largest violation of any bound of eq. (12) by ``plan`` (0 when all hold)."""
+        c = self.config
+        gaps, speeds = longitudinal.rollout(gap_m, speed_mps, list(lead_speeds_mps), list(plan),
+                                            c.dt_s)
+        score = explicability(list(plan), list(expected_mps2), self.trust.epsilon_mps2)
+        lower, upper = self.bounds(explicability_max)
+        values = np.concatenate([gaps, speeds, [score]])
+        return float(max(0.0, np.max(lower - values), np.max(values - upper),
+                         np.max(c.accel_min_mps2 - plan), np.max(plan - c.accel_max_mps2)))
+
+    def _fallback(self, gap_m: float, speed_mps: float, lead_speeds_mps: np.ndarray, reason: str,
+                  e_max: float, iterations: int, elapsed: float) -> PlanResult:
+        c = self.config
+        plan = np.asarray(longitudinal.hold_gap_plan(
+            gap_m, speed_mps, list(lead_speeds_mps), dt_s=c.dt_s,
+            standstill_gap_m=c.standstill_gap_m, time_headway_s=c.time_headway_s,
+            gap_gain_per_s2=c.fallback_gap_gain_per_s2,
+            speed_gain_per_s=c.fallback_speed_gain_per_s, accel_min_mps2=c.accel_min_mps2,
+            accel_max_mps2=c.accel_max_mps2, speed_min_mps=c.speed_min_mps,
+            speed_max_mps=c.speed_max_mps))
+        LOG.debug('NMPC fallback (%s) at gap %.2f m, speed %.2f m/s', reason, gap_m, speed_mps)
+        self._previous = None
+        return PlanResult(plan, f'fallback: {reason}', False, iterations, elapsed, e_max)
+

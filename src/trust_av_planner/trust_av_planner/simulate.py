@@ -1,0 +1,259 @@
+"""In-process closed loop: traffic -> predictor -> AV NMPC -> trust -> human -> integrate.
+
+One step follows do-mpc's ``make_step`` idiom and calls exactly the core the ROS nodes
+call, so the node graph reproduces these trajectories (a test checks it). Per step ``t``:
+
+1. the preceding traffic gives v_PT(t) and the preview v_PT(t .. t+N-1);
+2. the predictor gives the expected plan u_R^H(t) from the history up to t-1;
+3. the AV's NMPC plans u_R(t) from its gap, speed, the preview, u_R^H(t) and T(t);
+4. the trust monitor scores E(t) = dist(u_R(t), u_R^H(t)) and updates T(t+1), eqs. 8-11;
+5. the human's MPC plans u_H(t) against u_R^H(t);
+6. every vehicle's odometry is integrated one step with its first planned acceleration,
+   and the predictor observes what the human saw.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from human_driver_sim.driver_mpc import DriverMpc
+from preceding_traffic.traces import SpeedTrace
+from trust_monitor.trust_model import TrustEstimator
+
+from trust_av_planner.config import RunConfig
+from trust_av_planner.nmpc import TrustAwareNmpc
+from trust_av_planner.plant import VehicleState, gap_m, integrate
+from trust_av_planner.predictors import Observation, Predictor
+from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Initial odometry of the three vehicles (front-bumper positions, m; speeds, m/s)."""
+
+    traffic: VehicleState
+    av: VehicleState
+    human: VehicleState
+
+
+def equilibrium_start(config: RunConfig, trace: SpeedTrace) -> InitialState:
+    """Every vehicle at the traffic's first speed, each at its own desired gap.
+
+    The AV starts at its CTH gap ``d_s + tau_R v``, the human at ``d_s + tau_H v``; the human's
+    front bumper is at 0 m.
+    """
+    speed = float(trace.speeds_mps[0])
+    length = config.shared.vehicle_length_m
+    human_gap = config.driver.standstill_gap_m + config.driver.time_headway_s * speed
+    av_gap = config.planner.standstill_gap_m + config.planner.time_headway_s * speed
+    av_position = human_gap + length
+    return InitialState(traffic=VehicleState(av_position + av_gap + length, speed),
+                        av=VehicleState(av_position, speed), human=VehicleState(0.0, speed))
+
+
+def make_predictor(config: RunConfig) -> Predictor:
+    """The plan estimator named by the ``predictor`` parameter."""
+    c = config.planner
+    if c.predictor == 'ca':
+        return ConstantAccelerationPredictor(c.horizon_steps, c.accel_min_mps2, c.accel_max_mps2)
+    raise ValueError(f'unknown predictor {c.predictor!r}')
+
+
+def observe(av: VehicleState, human: VehicleState, av_accel_mps2: float, length_m: float,
+            headway_cap_s: float) -> Observation:
+    """What the human sees of the AV: eq. (6)'s features."""
+    gap = gap_m(av, human, length_m)
+    headway = gap / human.speed_mps if human.speed_mps * headway_cap_s > gap else headway_cap_s
+    return Observation(gap_m=gap, relative_speed_mps=av.speed_mps - human.speed_mps,
+                       time_headway_s=headway, av_accel_mps2=av_accel_mps2)
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """Everything that happened in one control step (states at the step's start)."""
+
+    t_s: float
+    traffic_position_m: float
+    traffic_speed_mps: float
+    av_position_m: float
+    av_speed_mps: float
+    av_gap_m: float
+    human_position_m: float
+    human_speed_mps: float
+    human_gap_m: float
+    av_accel_mps2: float
+    human_accel_mps2: float
+    av_plan_mps2: tuple[float, ...]
+    expected_plan_mps2: tuple[float, ...]
+    human_plan_mps2: tuple[float, ...]
+    explicability: float
+    performance: float
+    trust: float
+    explicability_max: float
+    solver_status: str
+    solver_success: bool
+    solver_iterations: int
+    solve_time_s: float
+    driver_status: str
+    driver_success: bool
+    driver_solve_time_s: float
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Summary of a run (DESIGN section 1)."""
+
+    steps: int
+    final_trust: float
+    mean_explicability: float
+    rmse_mps2: float
+    min_av_gap_m: float
+    min_human_gap_m: float
+    fallback_steps: int
+    driver_fallback_steps: int
+
+
+@dataclass
+class SimResult:
+    """Records of a run and its metrics."""
+
+    trace: str
+    alpha: float
+    predictor: str
+    records: list[StepRecord] = field(default_factory=list)
+
+    @property
+    def metrics(self) -> Metrics:
+        """Final trust, mean E, prediction RMSE, minimum gaps and fallback counts."""
+        return compute_metrics(self.records)
+
+    def write_csv(self, path: Path) -> None:
+        """One row per step; plans are spread over ``<name>_0 .. <name>_{N-1}`` columns."""
+        rows = [_flatten(r) for r in self.records]
+        with path.open('w', newline='') as handle:
+            writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else [])
+            writer.writeheader()
+            writer.writerows(rows)
+
+
+def _flatten(record: StepRecord) -> dict[str, object]:
+    out: dict[str, object] = {}
+    for key, value in asdict(record).items():
+        if isinstance(value, tuple):
+            out.update({f'{key}_{k}': v for k, v in enumerate(value)})
+        else:
+            out[key] = value
+    return out
+
+
+def compute_metrics(records: list[StepRecord]) -> Metrics:
+    """Metrics of DESIGN section 1; RMSE compares u_R^H(t) with the executed u_R(t..t+N-1)."""
+    if not records:
+        raise ValueError('no steps to summarise')
+    executed = np.array([r.av_accel_mps2 for r in records])
+    errors = []
+    for t, r in enumerate(records):
+        for k, predicted in enumerate(r.expected_plan_mps2):
+            if t + k < len(executed):
+                errors.append(predicted - executed[t + k])
+    return Metrics(
+        steps=len(records),
+        final_trust=records[-1].trust,
+        mean_explicability=float(np.mean([r.explicability for r in records])),
+        rmse_mps2=float(math.sqrt(np.mean(np.square(errors)))),
+        min_av_gap_m=min(r.av_gap_m for r in records),
+        min_human_gap_m=min(r.human_gap_m for r in records),
+        fallback_steps=sum(not r.solver_success for r in records),
+        driver_fallback_steps=sum(not r.driver_success for r in records),
+    )
+
+
+class ClosedLoop:
+    """The in-process closed loop over one trace; :meth:`make_step` advances one step."""
+
+    def __init__(self, config: RunConfig, trace: SpeedTrace,
+                 initial: InitialState | None = None) -> None:
+        if abs(trace.dt_s - config.planner.dt_s) > 1e-12:
+            raise ValueError(f'trace step {trace.dt_s} s differs from dt_s {config.planner.dt_s} s')
+        self.config = config.for_trace(trace)
+        self.trace = trace
+        state = initial or equilibrium_start(self.config, trace)
+        self.traffic, self.av, self.human = state.traffic, state.av, state.human
+        self.nmpc = TrustAwareNmpc(self.config.planner, self.config.trust)
+        self.driver = DriverMpc(self.config.driver)
+        self.monitor = TrustEstimator(self.config.trust)
+        self.predictor = make_predictor(self.config)
+        self.step_index = 0
+
+    @property
+    def done(self) -> bool:
+        """True after the last step of the trace."""
+        return self.step_index >= self.trace.steps
+
+    def make_step(self) -> StepRecord:
+        """Advance the closed loop by one control step and return its record."""
+        c = self.config
+        n, dt, length = c.planner.horizon_steps, c.planner.dt_s, c.shared.vehicle_length_m
+        t = self.step_index
+        self.traffic = VehicleState(self.traffic.position_m, float(self.trace.speeds_mps[t]))
+        preview = self.trace.preview(t, n)
+        expected = self.predictor.predict()
+        av_gap = gap_m(self.traffic, self.av, length)
+        human_gap = gap_m(self.av, self.human, length)
+        trust_before = self.monitor.trust
+        plan = self.nmpc.solve(av_gap, self.av.speed_mps, preview, expected, trust_before)
+        estimate = self.monitor.step(plan.plan_mps2, expected)
+        human = self.driver.solve(human_gap, self.human.speed_mps, self.av.speed_mps, expected)
+        record = StepRecord(
+            t_s=self.trace.time_s(t),
+            traffic_position_m=self.traffic.position_m, traffic_speed_mps=self.traffic.speed_mps,
+            av_position_m=self.av.position_m, av_speed_mps=self.av.speed_mps, av_gap_m=av_gap,
+            human_position_m=self.human.position_m, human_speed_mps=self.human.speed_mps,
+            human_gap_m=human_gap, av_accel_mps2=float(plan.plan_mps2[0]),
+            human_accel_mps2=float(human.plan_mps2[0]),
+            av_plan_mps2=tuple(float(x) for x in plan.plan_mps2),
+            expected_plan_mps2=tuple(float(x) for x in expected),
+            human_plan_mps2=tuple(float(x) for x in human.plan_mps2),
+            explicability=estimate.explicability, performance=estimate.performance,
+            trust=estimate.trust, explicability_max=plan.explicability_max,
+            solver_status=plan.status, solver_success=plan.success,
+            solver_iterations=plan.iterations, solve_time_s=plan.solve_time_s,
+            driver_status=human.status, driver_success=human.success,
+            driver_solve_time_s=human.solve_time_s)
+        self.traffic = integrate(self.traffic, 0.0, dt)
+        self.av = integrate(self.av, record.av_accel_mps2, dt)
+        self.human = integrate(self.human, record.human_accel_mps2, dt)
+        self.predictor.observe(observe(self.av, self.human, record.av_accel_mps2, length,
+                                       c.planner.time_headway_cap_s))
+        self.step_index += 1
+        return record
+
+    def steps(self) -> Iterator[StepRecord]:
+        """Run the remaining steps, yielding each record."""
+        while not self.done:
+            yield self.make_step()
+
+
+def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | None = None,
+             on_step: Callable[[int, int], None] | None = None) -> SimResult:
+    """Run the closed loop over the whole trace.
+
+    Args:
+        config: run configuration.
+        trace: preceding-traffic speeds on the control grid.
+        initial: initial odometry; default :func:`equilibrium_start`.
+        on_step: called with (steps done, total steps) after each step (progress).
+    """
+    loop = ClosedLoop(config, trace, initial)
+    result = SimResult(trace=trace.name, alpha=config.planner.alpha,
+                       predictor=config.planner.predictor)
+    for record in loop.steps():
+        result.records.append(record)
+        if on_step is not None:
+            on_step(len(result.records), trace.steps)
+    return result

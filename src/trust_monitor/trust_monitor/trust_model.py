@@ -1,0 +1,167 @@
+"""Explicability, performance and trust dynamics of the human follower (Ozkan & Ma, eqs. 8-11).
+
+Everything here is pure: no ROS, no wall clock. :func:`explicability` is written with
+plain arithmetic so that the same function builds the CasADi expression inside the AV's
+NMPC and evaluates floats in the monitor: the equation exists once.
+
+Reading of the paper (docs/DESIGN.md, section 1): E is the Tanimoto (extended Jaccard)
+*distance* of the offset plans ``a = u_R + eps`` and ``b = u_R^H + eps``,
+``E = 1 - sum(a*b) / sum(a*a + b*b - a*b)``, so that E = 0 for equal plans and E is in
+[0, 1] whenever ``a, b > 0`` (accelerations above ``-eps``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from trust_monitor.params import require
+
+
+@dataclass(frozen=True)
+class TrustConfig:
+    """Parameters of the trust model (paper: Table I and Section III-C).
+
+    Attributes:
+        epsilon_mps2: acceleration offset eps of eq. (8), m/s^2 (paper: 6).
+        trust_growth_rate: delta of eq. (10), trust units per step (paper: 0.1).
+        performance_threshold: P_thre of eq. (11), dimensionless in (0, 1) (paper: 0.8).
+        trust_initial: T(0), trust units.
+    """
+
+    epsilon_mps2: float
+    trust_growth_rate: float
+    performance_threshold: float
+    trust_initial: float
+
+    def __post_init__(self) -> None:
+        require(self.epsilon_mps2 > 0.0, f'epsilon_mps2 must be > 0, got {self.epsilon_mps2}')
+        require(self.trust_growth_rate > 0.0,
+                f'trust_growth_rate must be > 0, got {self.trust_growth_rate}')
+        require(0.0 < self.performance_threshold < 1.0,
+                f'performance_threshold must be in (0, 1), got {self.performance_threshold}')
+
+
+def explicability(plan: Sequence[Any], expected: Sequence[Any], epsilon_mps2: float) -> Any:
+    """Explicability score E of eq. (8), read as the Tanimoto distance (DESIGN section 1).
+
+    Works on floats (returns a float) and on CasADi symbols (returns an expression).
+
+    Args:
+        plan: the AV's planned accelerations u_R^0..u_R^{N-1}, m/s^2.
+        expected: the plan the human expects, u_R^H, m/s^2, same length.
+        epsilon_mps2: offset eps, m/s^2.
+
+    Returns:
+        E, dimensionless; 0 for equal plans.
+    """
+    if len(plan) != len(expected) or len(plan) == 0:
+        raise ValueError(f'plans must have the same non-zero length, got {len(plan)} and '
+                         f'{len(expected)}')
+    dot = 0.0
+    union = 0.0
+    for u, e in zip(plan, expected):
+        a = u + epsilon_mps2
+        b = e + epsilon_mps2
+        dot = dot + a * b
+        union = union + a * a + b * b - a * b
+    if isinstance(union, float) and union == 0.0:
+        return 0.0  # both offset plans are zero: equal plans
+    return 1.0 - dot / union
+
+
+def performance(score: float) -> float:
+    """Performance level P = 1 - tanh(E), eq. (9)."""
+    return 1.0 - math.tanh(score)
+
+
+def trust_input(perf: float, threshold: float) -> float:
+    """Trust input u_T of eq. (11): P when P >= P_thre, else -(1 - P)."""
+    return perf if perf >= threshold else -(1.0 - perf)
+
+
+def trust_step(trust: float, score: float, config: TrustConfig) -> float:
+    """One trust update, eq. (10): T(t+1) = T(t) + delta * u_T(t)."""
+    return trust + config.trust_growth_rate * trust_input(performance(score),
+                                                          config.performance_threshold)
+
+
+def propagate_trust(trust: float, score: float, config: TrustConfig, steps: int) -> list[float]:
+    """Trust over a horizon if the plan with score E were kept: T^1..T^steps."""
+    out = []
+    for _ in range(steps):
+        trust = trust_step(trust, score, config)
+        out.append(trust)
+    return out
+
+
+def explicability_bound(trust: float, trust_min: float, config: TrustConfig,
+                        steps: int) -> float | None:
+    """Largest E whose propagated trust stays >= trust_min over the horizon (eq. 12).
+
+    The constraint ``T^k >= T_min`` for k = 1..N, with ``T^k = T + k * delta * u_T(E)``,
+    depends on the plan only through E, and u_T(E) is non-increasing in E. So the set of
+    admissible plans is exactly ``E <= E_max`` with E_max computed here. The NMPC uses this
+    smooth inequality instead of the discontinuous if-else of eq. (11): the same feasible
+    set, without a jump for the SQP solver. ``tests`` check the equivalence against
+    :func:`propagate_trust`.
+
+    Args:
+        trust: current trust T(t).
+        trust_min: T_min of eq. (12).
+        config: trust model parameters.
+        steps: horizon length N in steps.
+
+    Returns:
+        E_max (>= 1 means no restriction, since E < 1 always), or None when no plan can
+        satisfy the constraint (trust cannot climb back to T_min in one step).
+    """
+    delta = config.trust_growth_rate
+    p_thr = config.performance_threshold
+    if trust >= trust_min:
+        # u_T >= 0 keeps every T^k >= T >= T_min; u_T < 0 is worst at k = N.
+        required = (trust_min - trust) / (steps * delta)
+    else:
+        # Below T_min now: T^1 must already be back above it, so u_T > 0 is needed.
+        required = (trust_min - trust) / delta
+    score_threshold = math.atanh(1.0 - p_thr)  # E at which P = P_thre
+    if required > 1.0:
+        return None
+    if required > p_thr:
+        return math.atanh(1.0 - required)  # need 1 - tanh(E) >= required
+    if required > -(1.0 - p_thr):
+        return score_threshold  # only the positive branch of eq. (11) reaches `required`
+    if required <= -1.0:
+        return math.inf
+    return max(math.atanh(-required), score_threshold)  # -tanh(E) >= required
+
+
+@dataclass(frozen=True)
+class TrustEstimate:
+    """One step of the monitor: E, P and the trust *after* the update of eq. (10)."""
+
+    explicability: float
+    performance: float
+    trust: float
+
+
+class TrustEstimator:
+    """Trust state of the human follower, updated once per control step from observed plans."""
+
+    def __init__(self, config: TrustConfig) -> None:
+        self.config = config
+        self.trust = config.trust_initial
+
+    def step(self, plan: Sequence[float], expected: Sequence[float]) -> TrustEstimate:
+        """Score the AV's plan against the expected plan and update the trust.
+
+        Args:
+            plan: the AV's plan u_R(t), m/s^2.
+            expected: the plan the human expects, u_R^H(t), m/s^2.
+        """
+        score = float(explicability(list(plan), list(expected), self.config.epsilon_mps2))
+        perf = performance(score)
+        self.trust = trust_step(self.trust, score, self.config)
+        return TrustEstimate(score, perf, self.trust)
