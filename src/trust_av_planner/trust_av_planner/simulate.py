@@ -4,12 +4,12 @@ One step follows do-mpc's ``make_step`` idiom and calls exactly the core the ROS
 call, so the node graph reproduces these trajectories (a test checks it). Per step ``t``:
 
 1. the preceding traffic gives v_PT(t) and the preview v_PT(t .. t+N-1);
-2. the predictor gives the expected plan u_R^H(t) from the history up to t-1;
-3. the AV's NMPC plans u_R(t) from its gap, speed, the preview, u_R^H(t) and T(t);
-4. the trust monitor scores E(t) = dist(u_R(t), u_R^H(t)) and updates T(t+1), eqs. 8-11;
-5. the human's MPC plans u_H(t) against u_R^H(t);
-6. every vehicle's odometry is integrated one step with its first planned acceleration,
-   and the predictor observes what the human saw.
+2. the AV's planner (:class:`~trust_av_planner.planner_core.AvPlanner`) lets its
+   predictor observe what the human saw after step t-1, predicts the expected plan
+   u_R^H(t), and plans u_R(t) with the NMPC from its gap, speed, the preview, u_R^H(t), T(t);
+3. the trust monitor scores E(t) = dist(u_R(t), u_R^H(t)) and updates T(t+1), eqs. 8-11;
+4. the human's MPC plans u_H(t) against u_R^H(t);
+5. every vehicle's odometry is integrated one step with its first planned acceleration.
 """
 
 from __future__ import annotations
@@ -26,10 +26,8 @@ from preceding_traffic.traces import SpeedTrace
 from trust_monitor.trust_model import TrustEstimator
 
 from trust_av_planner.config import RunConfig
-from trust_av_planner.nmpc import TrustAwareNmpc
+from trust_av_planner.planner_core import AvPlanner
 from trust_av_planner.plant import VehicleState, gap_m, integrate
-from trust_av_planner.predictors import Observation, Predictor
-from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
 
 
 @dataclass(frozen=True)
@@ -54,23 +52,6 @@ def equilibrium_start(config: RunConfig, trace: SpeedTrace) -> InitialState:
     av_position = human_gap + length
     return InitialState(traffic=VehicleState(av_position + av_gap + length, speed),
                         av=VehicleState(av_position, speed), human=VehicleState(0.0, speed))
-
-
-def make_predictor(config: RunConfig) -> Predictor:
-    """The plan estimator named by the ``predictor`` parameter."""
-    c = config.planner
-    if c.predictor == 'ca':
-        return ConstantAccelerationPredictor(c.horizon_steps, c.accel_min_mps2, c.accel_max_mps2)
-    raise ValueError(f'unknown predictor {c.predictor!r}')
-
-
-def observe(av: VehicleState, human: VehicleState, av_accel_mps2: float, length_m: float,
-            headway_cap_s: float) -> Observation:
-    """What the human sees of the AV: eq. (6)'s features."""
-    gap = gap_m(av, human, length_m)
-    headway = gap / human.speed_mps if human.speed_mps * headway_cap_s > gap else headway_cap_s
-    return Observation(gap_m=gap, relative_speed_mps=av.speed_mps - human.speed_mps,
-                       time_headway_s=headway, av_accel_mps2=av_accel_mps2)
 
 
 @dataclass(frozen=True)
@@ -184,10 +165,10 @@ class ClosedLoop:
         self.trace = trace
         state = initial or equilibrium_start(self.config, trace)
         self.traffic, self.av, self.human = state.traffic, state.av, state.human
-        self.nmpc = TrustAwareNmpc(self.config.planner, self.config.trust)
+        self.planner = AvPlanner(self.config.planner, self.config.trust,
+                                 self.config.shared.vehicle_length_m)
         self.driver = DriverMpc(self.config.driver)
         self.monitor = TrustEstimator(self.config.trust)
-        self.predictor = make_predictor(self.config)
         self.step_index = 0
 
     @property
@@ -202,17 +183,15 @@ class ClosedLoop:
         t = self.step_index
         self.traffic = VehicleState(self.traffic.position_m, float(self.trace.speeds_mps[t]))
         preview = self.trace.preview(t, n)
-        expected = self.predictor.predict()
-        av_gap = gap_m(self.traffic, self.av, length)
-        human_gap = gap_m(self.av, self.human, length)
-        trust_before = self.monitor.trust
-        plan = self.nmpc.solve(av_gap, self.av.speed_mps, preview, expected, trust_before)
+        out = self.planner.step(self.traffic, preview, self.av, self.human, self.monitor.trust)
+        plan, expected = out.result, out.expected_mps2
         estimate = self.monitor.step(plan.plan_mps2, expected)
+        human_gap = gap_m(self.av, self.human, length)
         human = self.driver.solve(human_gap, self.human.speed_mps, self.av.speed_mps, expected)
         record = StepRecord(
             t_s=self.trace.time_s(t),
             traffic_position_m=self.traffic.position_m, traffic_speed_mps=self.traffic.speed_mps,
-            av_position_m=self.av.position_m, av_speed_mps=self.av.speed_mps, av_gap_m=av_gap,
+            av_position_m=self.av.position_m, av_speed_mps=self.av.speed_mps, av_gap_m=out.gap_m,
             human_position_m=self.human.position_m, human_speed_mps=self.human.speed_mps,
             human_gap_m=human_gap, av_accel_mps2=float(plan.plan_mps2[0]),
             human_accel_mps2=float(human.plan_mps2[0]),
@@ -228,8 +207,6 @@ class ClosedLoop:
         self.traffic = integrate(self.traffic, 0.0, dt)
         self.av = integrate(self.av, record.av_accel_mps2, dt)
         self.human = integrate(self.human, record.human_accel_mps2, dt)
-        self.predictor.observe(observe(self.av, self.human, record.av_accel_mps2, length,
-                                       c.planner.time_headway_cap_s))
         self.step_index += 1
         return record
 
