@@ -15,11 +15,14 @@ setup(
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',
-    description='Preceding-traffic speed source: drive-cycle traces, validation, resampling and preview.',
+    description=(
+        'Preceding-traffic speed source: '
+        'drive-cycle traces, validation, resampling and preview.'
+    ),
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            
+
         ],
     },
 )

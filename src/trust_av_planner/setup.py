@@ -15,7 +15,7 @@ setup(
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',
-    description='Trust-aware nonlinear MPC for the automated vehicle, in-process simulator and CLI.',
+    description='Trust-aware NMPC for the automated vehicle, in-process simulator and CLI.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [

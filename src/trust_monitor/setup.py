@@ -15,7 +15,10 @@ setup(
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',
-    description='Explicability score, performance level and trust dynamics of the human follower (Ozkan & Ma, eqs. 8-11).',
+    description=(
+        'Explicability score, performance level and trust '
+        'dynamics of the human follower (Ozkan & Ma, eqs. 8-11).'
+    ),
     license='Apache-2.0',
     entry_points={
         'console_scripts': [

@@ -18,14 +18,16 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
-from trust_monitor.params import require
 
 from human_driver_sim import longitudinal
 from human_driver_sim.solver import sqp_options
+from trust_monitor.params import require
 
 LOG = logging.getLogger(__name__)
 
@@ -76,10 +78,9 @@ class DriverConfig:
                          self.weight_relative_speed, self.weight_relative_distance])
 
 
-def features(gap_m: object, speed_mps: object, av_speed_mps: object,
-             accels_mps2: list[object], expected_mps2: list[object], *, dt_s: float,
-             standstill_gap_m: float, time_headway_s: float,
-             desired_speed_mps: float) -> list[object]:
+def features(gap_m: Any, speed_mps: Any, av_speed_mps: Any, accels_mps2: Sequence[Any],
+             expected_mps2: Sequence[Any], *, dt_s: float, standstill_gap_m: float,
+             time_headway_s: float, desired_speed_mps: float) -> list[Any]:
     """The four summed features of eq. (13) (floats or CasADi expressions).
 
     Args:
@@ -91,11 +92,12 @@ def features(gap_m: object, speed_mps: object, av_speed_mps: object,
     """
     av_speeds = longitudinal.lead_speeds(av_speed_mps, expected_mps2, dt_s)
     gaps, speeds = longitudinal.rollout(gap_m, speed_mps, av_speeds, accels_mps2, dt_s)
-    av_next = [s + a * dt_s for s, a in zip(av_speeds, expected_mps2)]
+    av_next = [s + a * dt_s for s, a in zip(av_speeds, expected_mps2, strict=True)]
     f_a = sum(a * a for a in accels_mps2)
     f_ds = sum((v - desired_speed_mps) ** 2 for v in speeds)
-    f_rs = sum((vr - v) ** 2 for vr, v in zip(av_next, speeds))
-    f_rd = sum((d - standstill_gap_m - time_headway_s * v) ** 2 for d, v in zip(gaps, speeds))
+    f_rs = sum((vr - v) ** 2 for vr, v in zip(av_next, speeds, strict=True))
+    f_rd = sum((d - standstill_gap_m - time_headway_s * v) ** 2
+               for d, v in zip(gaps, speeds, strict=True))
     return [f_a, f_ds, f_rs, f_rd]
 
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from typing import Any
 
-def sqp_options(max_iter: int) -> dict[str, object]:
+
+def sqp_options(max_iter: int) -> dict[str, Any]:
     """Quiet ``sqpmethod`` + ``qrqp`` options for a few-variable NLP.
 
     SQP with an active-set QP fits problems of N = 3..10 variables: a handful of

@@ -102,7 +102,8 @@ def read_samples(path: Path, config: TraceConfig) -> tuple[np.ndarray, np.ndarra
         if header is None:
             raise TraceError(f'{path}: empty file (expected header time_s,speed_mps)')
         if [h.strip() for h in header] != ['time_s', 'speed_mps']:
-            raise TraceError(f'{path}:1: expected columns time_s,speed_mps, got {",".join(header)}')
+            raise TraceError(f'{path}:1: expected columns time_s,speed_mps, '
+                             f'got {",".join(header)}')
         for line, row in enumerate(reader, start=2):
             if not row:
                 continue
@@ -133,9 +134,10 @@ def resample(times_s: np.ndarray, speeds_mps: np.ndarray, dt_s: float) -> np.nda
     """Linear interpolation onto ``times_s[0] + k*dt_s`` up to the last sample."""
     if not dt_s > 0.0:
         raise TraceError(f'dt_s must be > 0, got {dt_s}')
-    count = int(math.floor((times_s[-1] - times_s[0]) / dt_s + 1e-9)) + 1
+    count = math.floor((times_s[-1] - times_s[0]) / dt_s + 1e-9) + 1
     grid = times_s[0] + dt_s * np.arange(count)
-    return np.interp(grid, times_s, speeds_mps)
+    speeds: np.ndarray = np.interp(grid, times_s, speeds_mps)
+    return speeds
 
 
 def load_trace(name_or_path: str, dt_s: float, config: TraceConfig) -> SpeedTrace:

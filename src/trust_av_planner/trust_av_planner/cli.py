@@ -15,9 +15,8 @@ import logging
 import sys
 
 from preceding_traffic.traces import TraceError
-from trust_monitor.params import ParamsError
-
 from trust_av_planner.errors import TrustAvError
+from trust_monitor.params import ParamsError
 
 COMMAND_MODULES = (
     'trust_av_planner.cmd_simulate',

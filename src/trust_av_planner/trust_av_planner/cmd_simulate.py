@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from preceding_traffic.traces import load_trace
-
 from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
 from trust_av_planner.nmpc import PREDICTORS
 from trust_av_planner.progress import ProgressBar
@@ -29,9 +27,9 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     """Options shared by the commands that run one closed loop."""
     parser.add_argument('--trace', default=None,
                         help='preceding-traffic trace: us06, nycc or a time_s,speed_mps CSV '
-                             '(default: the params file\'s preceding_traffic.trace)')
+                             "(default: the params file's preceding_traffic.trace)")
     parser.add_argument('--alpha', type=alpha_value, default=None,
-                        help='explicability weight in [0, 1] (default: the params file\'s)')
+                        help="explicability weight in [0, 1] (default: the params file's)")
     parser.add_argument('--predictor', choices=PREDICTORS, default=None,
                         help='estimator of the plan the human expects (default: params file)')
     parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,

@@ -15,6 +15,7 @@ from typing import Any
 
 from human_driver_sim.driver_mpc import DriverConfig
 from preceding_traffic.traces import SpeedTrace, TraceConfig
+from trust_av_planner.nmpc import PlannerConfig
 from trust_monitor.params import (
     WILDCARD,
     ParamsError,
@@ -25,8 +26,6 @@ from trust_monitor.params import (
     require,
 )
 from trust_monitor.trust_model import TrustConfig
-
-from trust_av_planner.nmpc import PlannerConfig
 
 DEFAULT_PARAMS_FILE = Path(__file__).resolve().parent / 'config' / 'trust_av.yaml'
 """The shipped params file (``config/trust_av.yaml`` of the repository)."""

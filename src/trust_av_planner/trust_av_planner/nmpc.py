@@ -3,7 +3,8 @@
 Decision: the plan u_R^0..u_R^{N-1} (m/s^2). For the predicted states k = 1..N (the ones
 the plan influences)::
 
-    min  sum_k (d_s + tau v^k - d^k)^2 / tracking_cost_scale_m2 + alpha * E(u, u^H) / explicability_scale
+    min  sum_k (d_s + tau v^k - d^k)^2 / tracking_cost_scale_m2
+         + alpha * E(u, u^H) / explicability_scale
     s.t. d_min <= d^k <= d_max,  v_min <= v^k <= v_max,  u_min <= u^k <= u_max,
          E(u, u^H) <= E_max(T)                     (the trust constraint T^k >= T_min)
 
@@ -26,6 +27,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+
 from human_driver_sim import longitudinal
 from human_driver_sim.solver import sqp_options
 from trust_monitor.params import require
@@ -38,6 +40,11 @@ PREDICTORS = ('ca',)
 
 BOUND_TOLERANCE = 1e-6
 """Largest bound violation (m, m/s, m/s^2 or E) accepted from the solver."""
+
+STATIONARY_STATUS = 'Search_Direction_Becomes_Too_Small'
+"""SQP stopped because its step vanished: the iterate cannot move. Accepted when it passes the
+bound check (it happens at standstill at d_min, where the feasible set shrinks to one point and
+the active gap and speed bounds have opposite gradients); otherwise the step falls back."""
 
 
 @dataclass(frozen=True)
@@ -133,7 +140,8 @@ class TrustAwareNmpc:
                        ** 2 for k in range(n))
         score = explicability([u[k] for k in range(n)], [expected[k] for k in range(n)],
                               trust.epsilon_mps2)
-        cost = tracking / config.tracking_cost_scale_m2 + alpha * score / config.explicability_scale
+        cost = (tracking / config.tracking_cost_scale_m2
+                + alpha * score / config.explicability_scale)
         params = ca.vertcat(gap0, speed0, lead, expected, alpha)
         # d^1 does not depend on the plan: a constant row would break the QP's constraint
         # qualification, so it is checked before solving instead (:meth:`solve`).
@@ -200,7 +208,7 @@ class TrustAwareNmpc:
             iterations += int(stats.get('iter_count', 0))
         elapsed = time.perf_counter() - start
         plan = np.asarray(sol['x']).ravel()
-        if not stats['success']:
+        if not stats['success'] and stats['return_status'] != STATIONARY_STATUS:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps,
                                   str(stats['return_status']), e_max, iterations, elapsed)
         violation = self.bound_violation(plan, gap_m, speed_mps, lead_speeds_mps,

@@ -10,12 +10,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from trust_monitor.trust_model import TrustConfig
 
 from trust_av_planner.nmpc import PlannerConfig, PlanResult, TrustAwareNmpc
 from trust_av_planner.plant import VehicleState, gap_m
 from trust_av_planner.predictors import Observation, Predictor
 from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
+from trust_monitor.trust_model import TrustConfig
 
 
 def make_predictor(config: PlannerConfig) -> Predictor:

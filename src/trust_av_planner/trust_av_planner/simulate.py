@@ -21,13 +21,13 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+
 from human_driver_sim.driver_mpc import DriverMpc
 from preceding_traffic.traces import SpeedTrace
-from trust_monitor.trust_model import TrustEstimator
-
 from trust_av_planner.config import RunConfig
 from trust_av_planner.planner_core import AvPlanner
 from trust_av_planner.plant import VehicleState, gap_m, integrate
+from trust_monitor.trust_model import TrustEstimator
 
 
 @dataclass(frozen=True)
@@ -160,7 +160,8 @@ class ClosedLoop:
     def __init__(self, config: RunConfig, trace: SpeedTrace,
                  initial: InitialState | None = None) -> None:
         if abs(trace.dt_s - config.planner.dt_s) > 1e-12:
-            raise ValueError(f'trace step {trace.dt_s} s differs from dt_s {config.planner.dt_s} s')
+            raise ValueError(f'trace step {trace.dt_s} s differs from dt_s '
+                             f'{config.planner.dt_s} s')
         self.config = config.for_trace(trace)
         self.trace = trace
         state = initial or equilibrium_start(self.config, trace)

@@ -1,1 +1,4 @@
-"""Explicability score, performance level and trust dynamics of the human follower (Ozkan & Ma, eqs. 8-11)."""
+"""Explicability score, performance level and trust dynamics of the human follower.
+
+Ozkan & Ma, eqs. (8)-(11).
+"""

@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     """Command line entry point ``trust-monitor-estimate``."""
     parser = argparse.ArgumentParser(
         prog='trust-monitor-estimate',
-        description='Estimate the human follower\'s trust from observed AV plans and expected '
+        description="Estimate the human follower's trust from observed AV plans and expected "
                     'plans (Ozkan & Ma, eqs. 8-11). Input CSV columns: t, plan_0..plan_{N-1}, '
                     'expected_0..expected_{N-1}; output CSV columns: t, E, P, trust.')
     parser.add_argument('input', type=Path, help='CSV of observed plans')

@@ -51,7 +51,8 @@ def read_params_file(path: str | Path) -> dict[str, dict[str, Any]]:
     sections: dict[str, dict[str, Any]] = {}
     for node, body in data.items():
         if not isinstance(body, dict) or set(body) != {'ros__parameters'}:
-            raise ParamsError(f'{path}: section {node!r} must hold exactly one key, ros__parameters')
+            raise ParamsError(f'{path}: section {node!r} must hold exactly one key, '
+                              'ros__parameters')
         params = body['ros__parameters']
         if not isinstance(params, dict):
             raise ParamsError(f'{path}: {node}.ros__parameters must be a mapping')

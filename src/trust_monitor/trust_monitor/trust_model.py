@@ -13,7 +13,7 @@ Reading of the paper (docs/DESIGN.md, section 1): E is the Tanimoto (extended Ja
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -62,7 +62,7 @@ def explicability(plan: Sequence[Any], expected: Sequence[Any], epsilon_mps2: fl
                          f'{len(expected)}')
     dot = 0.0
     union = 0.0
-    for u, e in zip(plan, expected):
+    for u, e in zip(plan, expected, strict=True):
         a = u + epsilon_mps2
         b = e + epsilon_mps2
         dot = dot + a * b
@@ -154,7 +154,7 @@ class TrustEstimator:
         self.config = config
         self.trust = config.trust_initial
 
-    def step(self, plan: Sequence[float], expected: Sequence[float]) -> TrustEstimate:
+    def step(self, plan: Iterable[float], expected: Iterable[float]) -> TrustEstimate:
         """Score the AV's plan against the expected plan and update the trust.
 
         Args:

@@ -1,0 +1,39 @@
+"""Shared fixtures: the shipped configuration and quick closed-loop runs (cached per session)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import pytest
+
+from preceding_traffic.traces import SpeedTrace, load_trace
+from trust_av_planner.config import RunConfig, load_run_config
+from trust_av_planner.simulate import SimResult, simulate
+
+ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+@pytest.fixture(scope='session')
+def run_config() -> RunConfig:
+    """The configuration in config/trust_av.yaml."""
+    return load_run_config()
+
+
+def with_alpha(config: RunConfig, alpha: float, predictor: str = 'ca') -> RunConfig:
+    """``config`` with another alpha and predictor."""
+    return dataclasses.replace(
+        config, planner=dataclasses.replace(config.planner, alpha=alpha, predictor=predictor))
+
+
+@functools.cache
+def shipped_trace(name: str) -> SpeedTrace:
+    """A shipped trace on the default grid."""
+    config = load_run_config()
+    return load_trace(name, config.planner.dt_s, config.trace)
+
+
+@functools.cache
+def closed_loop(trace: str, alpha: float, predictor: str = 'ca') -> SimResult:
+    """One whole-trace in-process run with the shipped configuration (cached)."""
+    return simulate(with_alpha(load_run_config(), alpha, predictor), shipped_trace(trace))

@@ -1,0 +1,113 @@
+"""The AV's NMPC (eq. 12): bounds, optimality against an independent IPOPT formulation,
+the trust constraint, and the fallback path."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from trust_av_planner.nmpc import TrustAwareNmpc
+from trust_monitor.trust_model import explicability
+
+
+def reference_plan(cfg, trust_cfg, gap, speed, lead, expected, e_max):
+    """Eq. (12) written out again from the paper with Opti + IPOPT (no project helpers)."""
+    opti = ca.Opti()
+    u = opti.variable(cfg.horizon_steps)
+    d, v, cost = gap, speed, 0
+    for k in range(cfg.horizon_steps):
+        d = d + (lead[k] - v) * cfg.dt_s
+        v = v + u[k] * cfg.dt_s
+        cost += (cfg.standstill_gap_m + cfg.time_headway_s * v - d) ** 2
+        if k > 0:
+            opti.subject_to(opti.bounded(cfg.gap_min_m, d, cfg.gap_max_m))
+        opti.subject_to(opti.bounded(cfg.speed_min_mps, v, cfg.speed_max_mps))
+    a, b = u + trust_cfg.epsilon_mps2, ca.DM(expected) + trust_cfg.epsilon_mps2
+    score = 1 - ca.dot(a, b) / ca.sum1(a * a + b * b - a * b)
+    opti.subject_to(score <= e_max)
+    opti.subject_to(opti.bounded(cfg.accel_min_mps2, u, cfg.accel_max_mps2))
+    opti.minimize(cost / cfg.tracking_cost_scale_m2 + cfg.alpha * score / cfg.explicability_scale)
+    opti.solver('ipopt', {'print_time': False}, {'print_level': 0, 'sb': 'yes', 'tol': 1e-12})
+    return np.asarray(opti.solve().value(u)).ravel()
+
+
+@pytest.mark.parametrize('alpha', [0.0, 0.5, 1.0])
+def test_matches_independent_ipopt_and_respects_bounds(run_config, alpha) -> None:
+    cfg = dataclasses.replace(run_config.planner, alpha=alpha, speed_max_mps=36.0)
+    nmpc = TrustAwareNmpc(cfg, run_config.trust)
+    rng = np.random.default_rng(7)
+    solved = 0
+    for _ in range(40):
+        speed = rng.uniform(0.0, 30.0)
+        gap = 5.0 + 1.2 * speed + rng.uniform(-3.0, 8.0)
+        lead = np.clip(speed + rng.uniform(-4, 4) + np.cumsum(rng.uniform(-2, 2, 3)), 0, 36)
+        expected = rng.uniform(-2.0, 2.0, 3)
+        nmpc.reset()
+        result = nmpc.solve(gap, speed, lead, expected, trust=5.0)
+        if not result.success:
+            continue
+        solved += 1
+        assert nmpc.bound_violation(result.plan_mps2, gap, speed, lead, expected,
+                                    result.explicability_max) <= 1e-6
+        ref = reference_plan(cfg, run_config.trust, gap, speed, lead, expected,
+                             result.explicability_max)
+        np.testing.assert_allclose(result.plan_mps2, ref, atol=1e-4)
+    assert solved >= 30
+
+
+def test_trust_constraint_limits_explicability(run_config) -> None:
+    """At T = T_min = 0 the plan must keep u_T >= 0, i.e. E <= atanh(0.2), even at alpha = 0."""
+    cfg = dataclasses.replace(run_config.planner, alpha=0.0, speed_max_mps=36.0)
+    nmpc = TrustAwareNmpc(cfg, run_config.trust)
+    # The tracking optimum brakes hard while the human expects strong acceleration.
+    gap, speed, lead, expected = 8.0, 15.0, np.array([10.0, 8.0, 6.0]), np.full(3, 3.0)
+    free = TrustAwareNmpc(dataclasses.replace(cfg, trust_min=-1e6), run_config.trust)
+    unconstrained = free.solve(gap, speed, lead, expected, trust=0.0)
+    result = nmpc.solve(gap, speed, lead, expected, trust=0.0)
+    assert explicability(list(unconstrained.plan_mps2), list(expected), 6.0) > np.arctanh(0.2)
+    if result.success:
+        assert explicability(list(result.plan_mps2), list(expected), 6.0) <= np.arctanh(0.2) + 1e-6
+    else:
+        assert result.status.startswith('fallback')
+
+
+def test_infeasible_start_uses_documented_fallback(run_config) -> None:
+    """Start inside the minimum gap, closing fast: no plan satisfies (12)."""
+    cfg = dataclasses.replace(run_config.planner, speed_max_mps=36.0)
+    nmpc = TrustAwareNmpc(cfg, run_config.trust)
+    result = nmpc.solve(3.0, 20.0, np.zeros(3), np.zeros(3), trust=5.0)
+    assert not result.success and result.fallback
+    assert result.status.startswith('fallback: ')
+    plan = result.plan_mps2
+    assert plan.shape == (3,)
+    assert np.all(plan >= cfg.accel_min_mps2) and np.all(plan <= cfg.accel_max_mps2)
+    assert plan[0] == cfg.accel_min_mps2          # brakes as hard as allowed
+    speeds = 20.0 + np.cumsum(plan)
+    assert np.all(speeds >= -1e-12)                # never reverses
+
+
+def test_fallback_when_trust_cannot_recover(run_config) -> None:
+    cfg = dataclasses.replace(run_config.planner, speed_max_mps=36.0)
+    nmpc = TrustAwareNmpc(cfg, run_config.trust)
+    result = nmpc.solve(20.0, 10.0, np.full(3, 10.0), np.zeros(3), trust=-5.0)
+    assert result.status == 'fallback: trust below T_min'
+
+
+def test_solver_failure_is_reported_not_raised(run_config) -> None:
+    cfg = dataclasses.replace(run_config.planner, speed_max_mps=36.0, solver_max_iter=1)
+    nmpc = TrustAwareNmpc(cfg, run_config.trust)
+    statuses = {nmpc.solve(g, 12.0, np.array([14.0, 9.0, 16.0]), np.array([2.0, -2.0, 1.0]),
+                           trust=5.0).status for g in (12.0, 25.0, 40.0)}
+    assert any(s.startswith('fallback: Maximum_Iterations') for s in statuses)
+
+
+def test_standstill_at_minimum_gap_is_solved_not_fallen_back(run_config) -> None:
+    """Stopped at d_min behind a stopped leader, the only feasible plan is to stay stopped."""
+    cfg = dataclasses.replace(run_config.planner, alpha=1.0, speed_max_mps=36.0)
+    nmpc = TrustAwareNmpc(cfg, run_config.trust)
+    result = nmpc.solve(5.0, 0.0, np.zeros(3), np.full(3, -0.03), trust=10.0)
+    assert result.success, result.status
+    np.testing.assert_allclose(result.plan_mps2, 0.0, atol=1e-6)
