@@ -1,4 +1,11 @@
-"""Benchmark of the pure core: NMPC solve time and in-process closed-loop speed on US06.
+"""Benchmark of the pure core: NMPC solve time against a plain baseline, closed-loop speed.
+
+1. Runs the in-process closed loop on US06 (``--repeats`` times): steps per second, and our
+   NMPC's and the driver MPC's solve times as the loop saw them.
+2. Replays the inputs of every NMPC call of that loop (gap, speed, preview, expected plan,
+   trust bound) into our solver and into the baseline built here, in the same process:
+   CasADi ``Opti`` + IPOPT with default options (``nmpc_reference.ReferenceNmpc``). Reports
+   both solve-time distributions, the speed-up at p99, and the largest plan difference.
 
 Prints the figures and writes them to benchmarks/results_core.json (or --out). Not a test:
 timings are noisy, so nothing here asserts a speed.
@@ -17,12 +24,35 @@ import resource
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from preceding_traffic.traces import load_trace
-from trust_av_planner.config import load_run_config
-from trust_av_planner.simulate import simulate
+from preceding_traffic.traces import SpeedTrace, load_trace
+from trust_av_planner.config import RunConfig, load_run_config
+from trust_av_planner.nmpc_reference import compare_on_records
+from trust_av_planner.simulate import SimResult, simulate
+
+
+def percentiles_ms(seconds: list[float]) -> dict[str, float]:
+    """p50, p99 and max of durations, in ms."""
+    ms = np.asarray(seconds) * 1e3
+    return {'p50': float(np.percentile(ms, 50)), 'p99': float(np.percentile(ms, 99)),
+            'max': float(ms.max())}
+
+
+def replay_against_baseline(config: RunConfig, trace: SpeedTrace,
+                            result: SimResult) -> dict[str, Any]:
+    """Our NMPC and the Opti + IPOPT baseline on the inputs of every step of ``result``."""
+    comparison = compare_on_records(config, trace, result.records)
+    ours_p = percentiles_ms(comparison.ours_s)
+    base_p = percentiles_ms(comparison.reference_s)
+    return {'ours_ms': ours_p, 'baseline_ipopt_ms': base_p,
+            'speedup_p99': base_p['p99'] / ours_p['p99'],
+            'speedup_p50': base_p['p50'] / ours_p['p50'],
+            'max_plan_difference_mps2': comparison.max_plan_difference_mps2,
+            'steps_compared': len(comparison.plan_differences_mps2),
+            'baseline_failures': comparison.reference_failures}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -49,27 +79,29 @@ def main(argv: list[str] | None = None) -> int:
         rates.append(len(result.records) / elapsed)
         solve_times += [r.solve_time_s for r in result.records]
         driver_times += [r.driver_solve_time_s for r in result.records]
-    nmpc = np.array(solve_times) * 1e3
-    driver = np.array(driver_times) * 1e3
+    baseline = replay_against_baseline(config, trace, result)
     figures = {
         'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
         'cpu_count': os.cpu_count(),
         'trace': trace.name, 'steps': trace.steps, 'alpha': args.alpha,
         'repeats': args.repeats,
-        'nmpc_solve_ms': {'p50': float(np.percentile(nmpc, 50)),
-                          'p99': float(np.percentile(nmpc, 99)), 'max': float(nmpc.max())},
-        'driver_solve_ms': {'p50': float(np.percentile(driver, 50)),
-                            'p99': float(np.percentile(driver, 99)),
-                            'max': float(driver.max())},
+        'nmpc_solve_ms': percentiles_ms(solve_times),
+        'driver_solve_ms': percentiles_ms(driver_times),
         'closed_loop_steps_per_s': {'median': float(np.median(rates)),
                                     'min': float(np.min(rates))},
+        'baseline': baseline,
         'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         'metrics': vars(result.metrics),
     }
-    print(f"NMPC solve time on {trace.name} (alpha {args.alpha}): "
-          f"p50 {figures['nmpc_solve_ms']['p50']:.3f} ms, "
-          f"p99 {figures['nmpc_solve_ms']['p99']:.3f} ms, "
-          f"max {figures['nmpc_solve_ms']['max']:.3f} ms")
+    nm, b = figures['nmpc_solve_ms'], baseline
+    print(f"NMPC solve time in the {trace.name} loop (alpha {args.alpha}): "
+          f"p50 {nm['p50']:.3f} ms, p99 {nm['p99']:.3f} ms, max {nm['max']:.3f} ms")
+    print(f"replayed inputs, whole solve() call, ours: p50 {b['ours_ms']['p50']:.3f} ms, "
+          f"p99 {b['ours_ms']['p99']:.3f} ms; baseline Opti+IPOPT: "
+          f"p50 {b['baseline_ipopt_ms']['p50']:.3f} ms, "
+          f"p99 {b['baseline_ipopt_ms']['p99']:.3f} ms; speed-up at p99 {b['speedup_p99']:.1f}x")
+    print(f"largest plan difference to the baseline: {b['max_plan_difference_mps2']:.2e} m/s^2 "
+          f"over {b['steps_compared']} steps")
     print(f"driver MPC solve time: p50 {figures['driver_solve_ms']['p50']:.3f} ms, "
           f"p99 {figures['driver_solve_ms']['p99']:.3f} ms")
     print(f"in-process closed loop: {figures['closed_loop_steps_per_s']['median']:.0f} steps/s "

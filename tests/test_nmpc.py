@@ -1,43 +1,24 @@
-"""The AV's NMPC (eq. 12): bounds, optimality against an independent IPOPT formulation,
+"""The AV's NMPC (eq. 12): bounds, optimality against the independent IPOPT formulation,
 the trust constraint, and the fallback path."""
 
 from __future__ import annotations
 
 import dataclasses
 
-import casadi as ca
 import numpy as np
 import pytest
+from conftest import closed_loop, shipped_trace, with_alpha
 
 from trust_av_planner.nmpc import TrustAwareNmpc
+from trust_av_planner.nmpc_reference import ReferenceNmpc, compare_on_records
 from trust_monitor.trust_model import explicability
-
-
-def reference_plan(cfg, trust_cfg, gap, speed, lead, expected, e_max):
-    """Eq. (12) written out again from the paper with Opti + IPOPT (no project helpers)."""
-    opti = ca.Opti()
-    u = opti.variable(cfg.horizon_steps)
-    d, v, cost = gap, speed, 0
-    for k in range(cfg.horizon_steps):
-        d = d + (lead[k] - v) * cfg.dt_s
-        v = v + u[k] * cfg.dt_s
-        cost += (cfg.standstill_gap_m + cfg.time_headway_s * v - d) ** 2
-        if k > 0:
-            opti.subject_to(opti.bounded(cfg.gap_min_m, d, cfg.gap_max_m))
-        opti.subject_to(opti.bounded(cfg.speed_min_mps, v, cfg.speed_max_mps))
-    a, b = u + trust_cfg.epsilon_mps2, ca.DM(expected) + trust_cfg.epsilon_mps2
-    score = 1 - ca.dot(a, b) / ca.sum1(a * a + b * b - a * b)
-    opti.subject_to(score <= e_max)
-    opti.subject_to(opti.bounded(cfg.accel_min_mps2, u, cfg.accel_max_mps2))
-    opti.minimize(cost / cfg.tracking_cost_scale_m2 + cfg.alpha * score / cfg.explicability_scale)
-    opti.solver('ipopt', {'print_time': False}, {'print_level': 0, 'sb': 'yes', 'tol': 1e-12})
-    return np.asarray(opti.solve().value(u)).ravel()
 
 
 @pytest.mark.parametrize('alpha', [0.0, 0.5, 1.0])
 def test_matches_independent_ipopt_and_respects_bounds(run_config, alpha) -> None:
     cfg = dataclasses.replace(run_config.planner, alpha=alpha, speed_max_mps=36.0)
     nmpc = TrustAwareNmpc(cfg, run_config.trust)
+    reference = ReferenceNmpc(cfg, run_config.trust, {'tol': 1e-12})
     rng = np.random.default_rng(7)
     solved = 0
     for _ in range(40):
@@ -52,8 +33,7 @@ def test_matches_independent_ipopt_and_respects_bounds(run_config, alpha) -> Non
         solved += 1
         assert nmpc.bound_violation(result.plan_mps2, gap, speed, lead, expected,
                                     result.explicability_max) <= 1e-6
-        ref = reference_plan(cfg, run_config.trust, gap, speed, lead, expected,
-                             result.explicability_max)
+        ref = reference.solve(gap, speed, lead, expected, result.explicability_max)
         np.testing.assert_allclose(result.plan_mps2, ref, atol=1e-4)
     assert solved >= 30
 
@@ -111,3 +91,22 @@ def test_standstill_at_minimum_gap_is_solved_not_fallen_back(run_config) -> None
     result = nmpc.solve(5.0, 0.0, np.zeros(3), np.full(3, -0.03), trust=10.0)
     assert result.success, result.status
     np.testing.assert_allclose(result.plan_mps2, 0.0, atol=1e-6)
+
+
+def test_cpu_budget_exceeded_falls_back(run_config) -> None:
+    """A tiny CPU budget: every solve overruns, every step is a documented fallback."""
+    cfg = dataclasses.replace(run_config.planner, speed_max_mps=36.0, solver_cpu_budget_s=1e-9)
+    nmpc = TrustAwareNmpc(cfg, run_config.trust)
+    result = nmpc.solve(20.0, 12.0, np.full(3, 12.0), np.zeros(3), trust=5.0)
+    assert result.status.startswith('fallback: CPU budget exceeded')
+    assert np.all(np.abs(result.plan_mps2) <= 3.0)
+
+
+def test_loop_plans_agree_with_the_baseline_solver(run_config) -> None:
+    """Issue 8: our SQP's plans equal the Opti + IPOPT baseline's within 1e-4 m/s^2 (US06)."""
+    result = closed_loop('us06', 0.5)
+    comparison = compare_on_records(with_alpha(run_config, 0.5), shipped_trace('us06'),
+                                    result.records[:150])
+    assert comparison.reference_failures == 0
+    assert len(comparison.plan_differences_mps2) >= 145
+    assert comparison.max_plan_difference_mps2 < 1e-4

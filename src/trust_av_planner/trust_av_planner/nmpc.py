@@ -14,8 +14,10 @@ the exact smooth equivalent of propagating eqs. (9)-(11) over the horizon, see
 :func:`trust_monitor.trust_model.explicability_bound`.
 
 The NLP is built once (CasADi SX, ``sqpmethod`` with the ``qrqp`` active-set QP solver),
-warm-started from the shifted previous plan. A solve that fails, or whose plan breaks a
-bound by more than :data:`BOUND_TOLERANCE`, is replaced by the documented fallback plan
+warm-started from the shifted previous plan. A solve that fails, that uses more CPU time
+than ``solver_cpu_budget_s`` (thread CPU time, so that a busy machine does not change the
+answer), or whose plan breaks a bound by more than :data:`BOUND_TOLERANCE`, is replaced by
+the documented fallback plan
 (:func:`human_driver_sim.longitudinal.hold_gap_plan`) and reported in the status.
 """
 
@@ -66,6 +68,7 @@ class PlannerConfig:
     tracking_cost_scale_m2: float
     explicability_scale: float
     solver_max_iter: int
+    solver_cpu_budget_s: float
     fallback_gap_gain_per_s2: float
     fallback_speed_gain_per_s: float
     predictor: str
@@ -89,6 +92,8 @@ class PlannerConfig:
         require(self.tracking_cost_scale_m2 > 0.0, 'tracking_cost_scale_m2 must be > 0')
         require(self.explicability_scale > 0.0, 'explicability_scale must be > 0')
         require(self.solver_max_iter >= 1, 'solver_max_iter must be >= 1')
+        require(self.solver_cpu_budget_s > 0.0,
+                f'solver_cpu_budget_s must be > 0, got {self.solver_cpu_budget_s}')
         require(self.time_headway_cap_s > 0.0, 'time_headway_cap_s must be > 0')
         require(self.predictor in PREDICTORS, f'predictor must be one of {list(PREDICTORS)}, got '
                 f'{self.predictor!r}')
@@ -149,7 +154,11 @@ class TrustAwareNmpc:
         self._solver = ca.nlpsol('trust_aware_nmpc', 'sqpmethod',
                                  {'x': u, 'p': params, 'f': cost, 'g': constraints},
                                  sqp_options(config.solver_max_iter))
-        self._cost = ca.Function('cost', [u, params], [cost])
+        n_ = config.horizon_steps
+        self._lower = np.concatenate([np.full(n_, config.gap_min_m),
+                                      np.full(n_, config.speed_min_mps), [-np.inf]])
+        self._upper = np.concatenate([np.full(n_, config.gap_max_m),
+                                      np.full(n_, config.speed_max_mps), [np.inf]])
         self._previous: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -158,11 +167,9 @@ class TrustAwareNmpc:
 
     def bounds(self, explicability_max: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounds of the constraint vector (gaps d^1..d^N, speeds v^1..v^N, E)."""
-        c, n = self.config, self.config.horizon_steps
-        lower = np.concatenate([np.full(n, c.gap_min_m), np.full(n, c.speed_min_mps), [-np.inf]])
-        upper = np.concatenate([np.full(n, c.gap_max_m), np.full(n, c.speed_max_mps),
-                                [explicability_max]])
-        return lower, upper
+        upper = self._upper.copy()
+        upper[-1] = explicability_max
+        return self._lower, upper
 
     def solve(self, gap_m: float, speed_mps: float, lead_speeds_mps: np.ndarray,
               expected_mps2: np.ndarray, trust: float) -> PlanResult:
@@ -195,7 +202,7 @@ class TrustAwareNmpc:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps,
                                   f'gap {first_gap:.3f} m at k=1 is outside [{c.gap_min_m}, '
                                   f'{c.gap_max_m}] m whatever the plan', e_max, 0, 0.0)
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.thread_time()
         sol = self._solver(x0=guess, p=params, lbx=c.accel_min_mps2, ubx=c.accel_max_mps2,
                            lbg=lbg[1:], ubg=ubg[1:])
         stats = self._solver.stats()
@@ -206,33 +213,45 @@ class TrustAwareNmpc:
                                ubx=c.accel_max_mps2, lbg=lbg[1:], ubg=ubg[1:])
             stats = self._solver.stats()
             iterations += int(stats.get('iter_count', 0))
-        elapsed = time.perf_counter() - start
+        elapsed, cpu = time.perf_counter() - start, time.thread_time() - cpu_start
         plan = np.asarray(sol['x']).ravel()
+        if cpu > c.solver_cpu_budget_s:
+            return self._fallback(gap_m, speed_mps, lead_speeds_mps,
+                                  f'CPU budget exceeded ({cpu * 1e3:.3f} ms > '
+                                  f'{c.solver_cpu_budget_s * 1e3:.3f} ms)', e_max, iterations,
+                                  elapsed)
         if not stats['success'] and stats['return_status'] != STATIONARY_STATUS:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps,
                                   str(stats['return_status']), e_max, iterations, elapsed)
-        violation = self.bound_violation(plan, gap_m, speed_mps, lead_speeds_mps,
-                                         expected_mps2, e_max)
+        violation = self._violation(plan, gap_m, speed_mps, lead_speeds_mps, expected_mps2,
+                                    lbg, ubg)
         if violation > BOUND_TOLERANCE:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps,
                                   f'bound violated by {violation:.2e}', e_max, iterations,
                                   elapsed)
         self._previous = plan
         return PlanResult(plan, str(stats['return_status']), True, iterations, elapsed, e_max,
-                          float(self._cost(plan, params)))
+                          float(sol['f']))
 
     def bound_violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
                         lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray,
                         explicability_max: float) -> float:
         """Largest violation of any bound of eq. (12) by ``plan`` (0 when all hold)."""
+        return self._violation(plan, gap_m, speed_mps, lead_speeds_mps, expected_mps2,
+                               *self.bounds(explicability_max))
+
+    def _violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
+                   lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray, lower: np.ndarray,
+                   upper: np.ndarray) -> float:
         c = self.config
-        gaps, speeds = longitudinal.rollout(gap_m, speed_mps, list(lead_speeds_mps), list(plan),
+        accels = plan.tolist()
+        gaps, speeds = longitudinal.rollout(gap_m, speed_mps, lead_speeds_mps.tolist(), accels,
                                             c.dt_s)
-        score = explicability(list(plan), list(expected_mps2), self.trust.epsilon_mps2)
-        lower, upper = self.bounds(explicability_max)
-        values = np.concatenate([gaps, speeds, [score]])
-        return float(max(0.0, np.max(lower - values), np.max(values - upper),
-                         np.max(c.accel_min_mps2 - plan), np.max(plan - c.accel_max_mps2)))
+        score = explicability(accels, expected_mps2.tolist(), self.trust.epsilon_mps2)
+        values = gaps + speeds + [score]
+        worst = max(max(lo - x, x - up) for lo, x, up in zip(lower, values, upper, strict=True))
+        worst_accel = max(max(c.accel_min_mps2 - a, a - c.accel_max_mps2) for a in accels)
+        return float(max(0.0, worst, worst_accel))
 
     def _fallback(self, gap_m: float, speed_mps: float, lead_speeds_mps: np.ndarray, reason: str,
                   e_max: float, iterations: int, elapsed: float) -> PlanResult:
