@@ -1,7 +1,7 @@
 """Speed traces of the preceding traffic: load, validate, resample onto the control grid, preview.
 
-A trace is a CSV with the header ``time_s,speed_mps``. Shipped traces (``us06``, ``nycc``)
-are selected by name; any other argument is read as a path. Validation errors name the
+A trace is a CSV with the header ``time_s,speed_mps``. Shipped traces (``us06``, ``nycc``,
+``commute_am``, ``commute_pm``) are selected by name; any other argument is read as a path. Validation errors name the
 file, the row (1-based line number, header = line 1) and the problem.
 """
 
@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-SHIPPED_TRACES = ('us06', 'nycc')
+SHIPPED_TRACES = ('us06', 'nycc', 'commute_am', 'commute_pm')
+"""Evaluation traces shipped in ``data/`` (sources and licences in ``data/SOURCES.md``)."""
 
 
 class TraceError(ValueError):
@@ -27,7 +28,7 @@ class TraceConfig:
     """How traces are read.
 
     Attributes:
-        trace: shipped trace name (``us06``, ``nycc``) or path to a CSV.
+        trace: shipped trace name (see :data:`SHIPPED_TRACES`) or path to a CSV.
         max_sample_gap_s: longest interval between two samples that is still interpolated, s.
     """
 

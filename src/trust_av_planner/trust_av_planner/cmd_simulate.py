@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from preceding_traffic.traces import load_trace
+from preceding_traffic.traces import SHIPPED_TRACES, load_trace
 from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
 from trust_av_planner.nmpc import PREDICTORS
 from trust_av_planner.progress import ProgressBar
@@ -26,7 +26,8 @@ def alpha_value(text: str) -> float:
 def add_run_options(parser: argparse.ArgumentParser) -> None:
     """Options shared by the commands that run one closed loop."""
     parser.add_argument('--trace', default=None,
-                        help='preceding-traffic trace: us06, nycc or a time_s,speed_mps CSV '
+                        help=f'preceding-traffic trace: one of {", ".join(SHIPPED_TRACES)} or a '
+                             'time_s,speed_mps CSV '
                              "(default: the params file's preceding_traffic.trace)")
     parser.add_argument('--alpha', type=alpha_value, default=None,
                         help="explicability weight in [0, 1] (default: the params file's)")
