@@ -12,6 +12,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
     ],
     install_requires=['setuptools'],
+    extras_require={'ray': ['ray==2.60.0']},
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',

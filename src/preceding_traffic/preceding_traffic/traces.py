@@ -1,8 +1,9 @@
 """Speed traces of the preceding traffic: load, validate, resample onto the control grid, preview.
 
 A trace is a CSV with the header ``time_s,speed_mps``. Shipped traces (``us06``, ``nycc``,
-``commute_am``, ``commute_pm``) are selected by name; any other argument is read as a path. Validation errors name the
-file, the row (1-based line number, header = line 1) and the problem.
+``commute_am``, ``commute_pm``) are selected by name; any other argument is read as a path.
+Validation errors name the file, the row (1-based line number, header = line 1) and the
+problem.
 """
 
 from __future__ import annotations

@@ -1,0 +1,269 @@
+"""Reproduce the paper's sweep: traces x predictors x alpha, cached, on a pluggable executor.
+
+Every case is one closed loop (in-process by default). A finished case is cached as JSON
+under ``<results>/cache/<key>.json``; the key hashes the case, the whole params file and the
+source of the four packages (so a code or parameter change re-runs what it affects and an
+unchanged rerun is read back). Cases run on an :class:`Executor`: local processes by default
+(one per core), or Ray (optional extra, ``--executor ray``).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import csv
+import dataclasses
+import hashlib
+import json
+import logging
+import multiprocessing
+import os
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+from preceding_traffic.traces import load_trace
+from trust_av_planner.config import load_run_config
+from trust_av_planner.errors import TrustAvError
+from trust_av_planner.paper_results import MAX_IMPROVEMENT_PERCENT
+from trust_av_planner.simulate import simulate
+
+LOG = logging.getLogger(__name__)
+
+TRACES = ('us06', 'nycc', 'commute_am', 'commute_pm')
+PREDICTORS = ('gru', 'ca')
+ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
+METRICS = ('final_trust', 'mean_explicability', 'rmse_mps2')
+PACKAGES = ('preceding_traffic', 'trust_monitor', 'human_driver_sim', 'trust_av_planner')
+PRESENTATION_MODULES = ('cli.py', 'progress.py', 'plots.py', 'paper_results.py')
+"""Files that cannot change a run's numbers: left out of the cache key (so are cmd_*.py)."""
+
+
+@dataclass(frozen=True)
+class Case:
+    """One closed loop of the sweep."""
+
+    trace: str
+    predictor: str
+    alpha: float
+
+    @property
+    def label(self) -> str:
+        """``us06/TAC-CA/alpha=0.5``."""
+        return f'{self.trace}/TAC-{self.predictor.upper()}/alpha={self.alpha:g}'
+
+
+def code_fingerprint() -> str:
+    """Hash of the source and data files of the four packages that results depend on."""
+    digest = hashlib.sha256()
+    for package in PACKAGES:
+        module = __import__(package)
+        root = Path(next(iter(module.__path__)))
+        for path in sorted(root.rglob('*')):
+            if path.name in PRESENTATION_MODULES or path.name.startswith('cmd_'):
+                continue
+            if path.is_file() and path.suffix in {'.py', '.csv', '.npz', '.json', '.pt'}:
+                digest.update(str(path.relative_to(root)).encode())
+                digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def case_key(case: Case, params_text: str, fingerprint: str) -> str:
+    """Cache key of a case: its fields, the params file's text and the code fingerprint."""
+    blob = json.dumps({'case': dataclasses.asdict(case), 'params': params_text,
+                       'code': fingerprint, 'runner': 'in-process'}, sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:24]
+
+
+def run_case(case: Case, params_file: str) -> dict[str, Any]:
+    """Run one case in-process and return its metrics and the series the figures need."""
+    config = load_run_config(params_file, {'planner': {'alpha': case.alpha,
+                                                       'predictor': case.predictor}})
+    trace = load_trace(case.trace, config.planner.dt_s, config.trace)
+    result = simulate(config, trace)
+    return {
+        'case': dataclasses.asdict(case),
+        'metrics': dataclasses.asdict(result.metrics),
+        'time_s': [r.t_s for r in result.records],
+        'trust': [r.trust for r in result.records],
+        'explicability': [r.explicability for r in result.records],
+    }
+
+
+class Executor(Protocol):
+    """Runs cases somewhere and reports each result as it arrives."""
+
+    def run(self, cases: Sequence[Case], params_file: str,
+            on_result: Callable[[Case, dict[str, Any]], None]) -> None:
+        """Run every case; call ``on_result`` in the calling process for each."""
+
+
+class LocalExecutor:
+    """A process pool on this machine (spawned workers, one per core by default)."""
+
+    def __init__(self, workers: int | None = None) -> None:
+        self.workers = workers or os.cpu_count() or 1
+
+    def run(self, cases: Sequence[Case], params_file: str,
+            on_result: Callable[[Case, dict[str, Any]], None]) -> None:
+        """Run the cases on the pool; the first failure stops the sweep with its case."""
+        if not cases:
+            return
+        context = multiprocessing.get_context('spawn')
+        with concurrent.futures.ProcessPoolExecutor(min(self.workers, len(cases)),
+                                                    mp_context=context) as pool:
+            futures = {pool.submit(run_case, case, params_file): case for case in cases}
+            for future in concurrent.futures.as_completed(futures):
+                case = futures[future]
+                try:
+                    result = future.result()
+                except Exception as err:
+                    for other in futures:
+                        other.cancel()
+                    raise TrustAvError(f'case {case.label} failed: {err}') from err
+                on_result(case, result)
+
+
+class RayExecutor:
+    """The same cases as Ray tasks (``pip install ray``; local cluster unless ``address``)."""
+
+    def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
+        self.address = address
+        self.num_cpus = num_cpus
+
+    def run(self, cases: Sequence[Case], params_file: str,
+            on_result: Callable[[Case, dict[str, Any]], None]) -> None:
+        """Submit one Ray task per case and collect them as they finish."""
+        try:
+            import ray
+        except ImportError as err:
+            raise TrustAvError('--executor ray needs the optional dependency ray '
+                               '(pip install ray)') from err
+        started = not ray.is_initialized()
+        if started:
+            ray.init(address=self.address, num_cpus=self.num_cpus, include_dashboard=False,
+                     log_to_driver=False)
+        try:
+            remote = ray.remote(run_case)
+            pending = {remote.remote(case, params_file): case for case in cases}
+            while pending:
+                done, _ = ray.wait(list(pending), num_returns=1)
+                case = pending.pop(done[0])
+                try:
+                    result = ray.get(done[0])
+                except Exception as err:
+                    raise TrustAvError(f'case {case.label} failed: {err}') from err
+                on_result(case, result)
+        finally:
+            if started:
+                ray.shutdown()
+
+
+def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PREDICTORS,
+                alphas: Iterable[float] = ALPHAS) -> list[Case]:
+    """Every combination, in table order."""
+    return [Case(t, p, a) for t in traces for p in predictors for a in alphas]
+
+
+def run_sweep(cases: Sequence[Case], params_file: Path, results_dir: Path, executor: Executor,
+              on_progress: Callable[[int, int], None] | None = None) -> dict[Case, dict[str, Any]]:
+    """Run the cases that are not cached, read the others back; return every result.
+
+    A result is written to the cache as soon as it arrives, so an interrupted sweep resumes
+    where it stopped.
+    """
+    cache = results_dir / 'cache'
+    cache.mkdir(parents=True, exist_ok=True)
+    params_text = Path(params_file).read_text()
+    fingerprint = code_fingerprint()
+    keys = {case: case_key(case, params_text, fingerprint) for case in cases}
+    results: dict[Case, dict[str, Any]] = {}
+    for case, key in keys.items():
+        path = cache / f'{key}.json'
+        if path.exists():
+            results[case] = json.loads(path.read_text())
+    todo = [c for c in cases if c not in results]
+    LOG.info('%d cases cached, %d to run', len(results), len(todo))
+    if on_progress is not None:
+        on_progress(len(results), len(cases))
+
+    def store(case: Case, result: dict[str, Any]) -> None:
+        tmp = cache / f'{keys[case]}.json.tmp'
+        tmp.write_text(json.dumps(result))
+        tmp.replace(cache / f'{keys[case]}.json')
+        results[case] = result
+        if on_progress is not None:
+            on_progress(len(results), len(cases))
+
+    executor.run(todo, str(params_file), store)
+    return results
+
+
+def improvement_percent(metric: str, base: float, value: float) -> float:
+    """Improvement of ``value`` over ``base`` (trust up, E and RMSE down), percent."""
+    if metric == 'final_trust':
+        return 100.0 * (value - base) / abs(base)
+    return 100.0 * (base - value) / base
+
+
+def max_improvements(results: dict[Case, dict[str, Any]], trace: str,
+                     predictor: str) -> tuple[float, float, float]:
+    """Largest improvement over alpha = 0 among the alphas, for each metric (Tables II-IV)."""
+    by_alpha = {c.alpha: r['metrics'] for c, r in results.items()
+                if c.trace == trace and c.predictor == predictor}
+    base = by_alpha[0.0]
+    out = []
+    for metric in METRICS:
+        out.append(max(improvement_percent(metric, base[metric], m[metric])
+                       for a, m in by_alpha.items() if a > 0.0))
+    return out[0], out[1], out[2]
+
+
+def write_rows(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
+    """Write a CSV and a Markdown table with the same content (``path`` without suffix)."""
+    with path.with_suffix('.csv').open('w', newline='') as handle:
+        writer = csv.writer(handle)
+        writer.writerow(header)
+        writer.writerows(rows)
+    lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+    lines += ['| ' + ' | '.join(str(v) for v in row) + ' |' for row in rows]
+    path.with_suffix('.md').write_text('\n'.join(lines) + '\n')
+
+
+def alpha_table(results: dict[Case, dict[str, Any]], trace: str, predictor: str,
+                paper: dict[float, tuple[float, float, float]] | None
+                ) -> tuple[list[str], list[list[object]]]:
+    """Table II/III layout: per alpha our three metrics (and the paper's), then max improvement."""
+    header = ['alpha', 'final trust', 'mean E', 'RMSE (m/s^2)']
+    if paper is not None:
+        header += ['paper final trust', 'paper mean E', 'paper RMSE (m/s^2)']
+    rows: list[list[object]] = []
+    for alpha in ALPHAS:
+        m = results[Case(trace, predictor, alpha)]['metrics']
+        row: list[object] = [f'{alpha:g}', f"{m['final_trust']:.3f}",
+                             f"{m['mean_explicability']:.4f}", f"{m['rmse_mps2']:.3f}"]
+        if paper is not None:
+            row += [f'{v:g}' for v in paper[alpha]]
+        rows.append(row)
+    ours = max_improvements(results, trace, predictor)
+    summary: list[object] = ['max improvement', *(f'{v:.2f} %' for v in ours)]
+    if paper is not None:
+        summary += [f'{v:.2f} %' for v in MAX_IMPROVEMENT_PERCENT[(predictor, trace)]]
+    rows.append(summary)
+    return header, rows
+
+
+def improvement_table(results: dict[Case, dict[str, Any]], traces: Sequence[str],
+                      predictors: Sequence[str]) -> tuple[list[str], list[list[object]]]:
+    """Table IV layout: maximum improvements per predictor and trace, ours beside the paper's."""
+    header = ['predictor', 'trace', 'final trust', 'mean E', 'RMSE', 'paper final trust',
+              'paper mean E', 'paper RMSE', 'ratio ours/paper (trust, E, RMSE)']
+    rows: list[list[object]] = []
+    for predictor in predictors:
+        for trace in traces:
+            ours = max_improvements(results, trace, predictor)
+            paper = MAX_IMPROVEMENT_PERCENT[(predictor, trace)]
+            ratios = ', '.join(f'{o / p:.2f}' for o, p in zip(ours, paper, strict=True))
+            rows.append([f'TAC-{predictor.upper()}', trace, *[f'{v:.2f} %' for v in ours],
+                         *[f'{v:.2f} %' for v in paper], ratios])
+    return header, rows

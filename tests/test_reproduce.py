@@ -1,0 +1,114 @@
+"""The reproduce sweep: cases, cache and resume, executors, tables, improvement maths."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from trust_av_planner import reproduce
+from trust_av_planner.config import DEFAULT_PARAMS_FILE
+from trust_av_planner.reproduce import Case
+
+
+class InlineExecutor:
+    """Runs cases in this process and remembers which it was asked to run."""
+
+    def __init__(self) -> None:
+        self.ran: list[Case] = []
+
+    def run(self, cases, params_file, on_result) -> None:  # type: ignore[no-untyped-def]
+        for case in cases:
+            self.ran.append(case)
+            on_result(case, reproduce.run_case(case, params_file))
+
+
+@pytest.fixture
+def short_trace(tmp_path: Path) -> str:
+    path = tmp_path / 'short.csv'
+    speeds = [min(t, 12) if t < 25 else max(12 - 2 * (t - 25), 0) for t in range(40)]
+    path.write_text('time_s,speed_mps\n' + ''.join(f'{t},{v}\n' for t, v in enumerate(speeds)))
+    return str(path)
+
+
+def test_improvement_maths() -> None:
+    assert reproduce.improvement_percent('final_trust', 44.36, 53.402) == pytest.approx(20.383,
+                                                                                      abs=1e-3)
+    assert reproduce.improvement_percent('rmse_mps2', 0.518, 0.353) == pytest.approx(31.85,
+                                                                                    abs=1e-2)
+
+
+def test_cache_resumes_and_reruns_only_changes(tmp_path: Path, short_trace: str) -> None:
+    cases = reproduce.sweep_cases([short_trace], ['ca'], [0.0, 1.0])
+    first = InlineExecutor()
+    results = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path, first)
+    assert first.ran == cases and set(results) == set(cases)
+    again = InlineExecutor()
+    cached = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path, again)
+    assert again.ran == []
+    assert cached[cases[1]]['metrics'] == results[cases[1]]['metrics']
+    # A different params file is a different key: everything runs again.
+    changed = tmp_path / 'changed.yaml'
+    changed.write_text(DEFAULT_PARAMS_FILE.read_text().replace('explicability_scale: 0.005',
+                                                               'explicability_scale: 0.006'))
+    third = InlineExecutor()
+    reproduce.run_sweep(cases, changed, tmp_path, third)
+    assert third.ran == cases
+
+
+def test_local_executor_equals_inline(tmp_path: Path, short_trace: str) -> None:
+    cases = reproduce.sweep_cases([short_trace], ['ca'], [0.0, 0.5, 1.0])
+    pooled = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'a',
+                                 reproduce.LocalExecutor(2))
+    inline = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'b', InlineExecutor())
+    for case in cases:
+        assert pooled[case]['trust'] == inline[case]['trust']
+        assert pooled[case]['metrics'] == inline[case]['metrics']
+
+
+def test_ray_executor_runs_the_same_sweep(tmp_path: Path, short_trace: str) -> None:
+    ray = pytest.importorskip('ray', reason='ray is pinned in requirements.txt; the venv has it')
+    assert ray is not None
+    cases = reproduce.sweep_cases([short_trace], ['ca'], [0.0, 1.0])
+    with_ray = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'ray',
+                                   reproduce.RayExecutor(num_cpus=2))
+    inline = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'in', InlineExecutor())
+    for case in cases:
+        assert with_ray[case]['metrics'] == inline[case]['metrics']
+
+
+def test_failing_case_names_itself(tmp_path: Path) -> None:
+    from trust_av_planner.errors import TrustAvError
+    with pytest.raises(TrustAvError, match=r'case .*missing\.csv/TAC-CA/alpha=0 failed'):
+        reproduce.run_sweep([Case(str(tmp_path / 'missing.csv'), 'ca', 0.0)],
+                            DEFAULT_PARAMS_FILE, tmp_path, reproduce.LocalExecutor(1))
+
+
+def test_tables_from_results() -> None:
+    def fake(trust: float, score: float, rmse: float) -> dict[str, Any]:
+        return {'metrics': {'final_trust': trust, 'mean_explicability': score,
+                            'rmse_mps2': rmse}}
+    results = {Case('us06', 'ca', a): fake(40 + 10 * a, 0.06 - 0.03 * a, 0.7 - 0.2 * a)
+               for a in reproduce.ALPHAS}
+    header, rows = reproduce.alpha_table(results, 'us06', 'ca', None)
+    assert header[:4] == ['alpha', 'final trust', 'mean E', 'RMSE (m/s^2)']
+    assert rows[-1] == ['max improvement', '25.00 %', '50.00 %', '28.57 %']
+    header, rows = reproduce.improvement_table(results, ['us06'], ['ca'])
+    assert rows[0][:3] == ['TAC-CA', 'us06', '25.00 %']
+    assert rows[0][-1] == '0.84, 0.89, 0.98'   # ours / paper (29.88, 56.37, 29.22)
+
+
+def test_reproduce_command_writes_tables_and_figures(tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+                           '--traces', 'nycc', '--predictors', 'ca', '--results-dir',
+                           str(tmp_path), '--no-progress', '--workers', '2'],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    for name in ('table_IV_max_improvements.md', 'table_IV_max_improvements.csv',
+                 'figure_2_speed_profiles.png', 'all_runs.csv'):
+        assert (tmp_path / name).stat().st_size > 0, name
+    assert 'TAC-CA nycc: ok' in proc.stdout
+    assert (tmp_path / 'figure_2_speed_profiles.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
