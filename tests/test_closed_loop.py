@@ -51,6 +51,7 @@ def test_no_collision_and_physical_speeds(trace: str, alpha: float, run_config) 
     d_s = run_config.planner.standstill_gap_m
     assert result.metrics.min_av_gap_m >= d_s - 0.5
     assert result.metrics.min_human_gap_m >= d_s - 0.5
+    assert result.metrics.unsafe_steps == 0
     for r in result.records:
         assert r.av_speed_mps >= -BOUND_TOLERANCE and r.human_speed_mps >= -BOUND_TOLERANCE
     # Odometry is consistent with the gaps the controllers saw.

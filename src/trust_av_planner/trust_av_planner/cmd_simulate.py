@@ -58,7 +58,8 @@ def format_metrics(metrics: Metrics, title: str) -> str:
             ('min AV gap (m)', f'{metrics.min_av_gap_m:.3f}'),
             ('min human gap (m)', f'{metrics.min_human_gap_m:.3f}'),
             ('NMPC fallback steps', f'{metrics.fallback_steps}'),
-            ('driver fallback steps', f'{metrics.driver_fallback_steps}')]
+            ('driver fallback steps', f'{metrics.driver_fallback_steps}'),
+            ('unsafe steps (gap < d_s - margin)', f'{metrics.unsafe_steps}')]
     width = max(len(k) for k, _ in rows)
     lines = [title, '-' * (width + 14)]
     lines += [f'{k:<{width}}  {v:>12}' for k, v in rows]

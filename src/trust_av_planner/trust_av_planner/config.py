@@ -37,9 +37,11 @@ class SharedConfig:
 
     vehicle_length_m: float
     speed_max_from_trace: bool
+    safety_gap_margin_m: float
 
     def __post_init__(self) -> None:
         require(self.vehicle_length_m >= 0.0, 'vehicle_length_m must be >= 0')
+        require(self.safety_gap_margin_m >= 0.0, 'safety_gap_margin_m must be >= 0')
 
 
 # Node name -> the configuration classes its section may hold.
@@ -61,6 +63,11 @@ class RunConfig:
     planner: PlannerConfig
     driver: DriverConfig
     trust: TrustConfig
+
+    @property
+    def min_safe_gap_m(self) -> float:
+        """Smallest gap counted as safe: d_s - safety_gap_margin_m."""
+        return self.planner.standstill_gap_m - self.shared.safety_gap_margin_m
 
     def for_trace(self, trace: SpeedTrace) -> RunConfig:
         """Apply Table I's ``v_max = max(v_PT)`` when ``speed_max_from_trace`` is set."""

@@ -15,6 +15,7 @@ call, so the node graph reproduces these trajectories (a test checks it). Per st
 from __future__ import annotations
 
 import csv
+import logging
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
@@ -28,6 +29,8 @@ from trust_av_planner.config import RunConfig
 from trust_av_planner.planner_core import AvPlanner
 from trust_av_planner.plant import VehicleState, gap_m, integrate
 from trust_monitor.trust_model import TrustEstimator
+
+LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -97,6 +100,7 @@ class Metrics:
     min_human_gap_m: float
     fallback_steps: int
     driver_fallback_steps: int
+    unsafe_steps: int = 0
 
 
 @dataclass
@@ -106,12 +110,13 @@ class SimResult:
     trace: str
     alpha: float
     predictor: str
+    min_safe_gap_m: float
     records: list[StepRecord] = field(default_factory=list)
 
     @property
     def metrics(self) -> Metrics:
-        """Final trust, mean E, prediction RMSE, minimum gaps and fallback counts."""
-        return compute_metrics(self.records)
+        """Final trust, mean E, prediction RMSE, minimum gaps, fallback and unsafe counts."""
+        return compute_metrics(self.records, self.min_safe_gap_m)
 
     def write_csv(self, path: Path) -> None:
         """One row per step; plans are spread over ``<name>_0 .. <name>_{N-1}`` columns."""
@@ -132,8 +137,12 @@ def _flatten(record: StepRecord) -> dict[str, object]:
     return out
 
 
-def compute_metrics(records: list[StepRecord]) -> Metrics:
-    """Metrics of DESIGN section 1; RMSE compares u_R^H(t) with the executed u_R(t..t+N-1)."""
+def compute_metrics(records: list[StepRecord], min_safe_gap_m: float) -> Metrics:
+    """Metrics of DESIGN section 1; RMSE compares u_R^H(t) with the executed u_R(t..t+N-1).
+
+    ``unsafe_steps`` counts steps where either gap is below ``min_safe_gap_m`` (a collision
+    margin, ``standstill_gap_m - safety_gap_margin_m``); every shipped run must have none.
+    """
     if not records:
         raise ValueError('no steps to summarise')
     executed = np.array([r.av_accel_mps2 for r in records])
@@ -151,6 +160,7 @@ def compute_metrics(records: list[StepRecord]) -> Metrics:
         min_human_gap_m=min(r.human_gap_m for r in records),
         fallback_steps=sum(not r.solver_success for r in records),
         driver_fallback_steps=sum(not r.driver_success for r in records),
+        unsafe_steps=sum(min(r.av_gap_m, r.human_gap_m) < min_safe_gap_m for r in records),
     )
 
 
@@ -229,9 +239,14 @@ def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | No
     """
     loop = ClosedLoop(config, trace, initial)
     result = SimResult(trace=trace.name, alpha=config.planner.alpha,
-                       predictor=config.planner.predictor)
+                       predictor=config.planner.predictor,
+                       min_safe_gap_m=config.min_safe_gap_m)
     for record in loop.steps():
         result.records.append(record)
+        if min(record.av_gap_m, record.human_gap_m) < config.min_safe_gap_m:
+            LOG.warning('t = %.1f s: gap below the safety minimum %.2f m (AV %.3f m, human '
+                        '%.3f m)', record.t_s, config.min_safe_gap_m, record.av_gap_m,
+                        record.human_gap_m)
         if on_step is not None:
             on_step(len(result.records), trace.steps)
     return result

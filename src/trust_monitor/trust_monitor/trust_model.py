@@ -67,8 +67,11 @@ def explicability(plan: Sequence[Any], expected: Sequence[Any], epsilon_mps2: fl
         b = e + epsilon_mps2
         dot = dot + a * b
         union = union + a * a + b * b - a * b
-    if isinstance(union, float) and union == 0.0:
-        return 0.0  # both offset plans are zero: equal plans
+    if isinstance(union, float):
+        if union == 0.0:
+            return 0.0  # both offset plans are zero: equal plans
+        # Rounding can put dot/union a few ulp above 1 for equal plans: E is a distance.
+        return min(max(1.0 - dot / union, 0.0), 1.0)
     return 1.0 - dot / union
 
 
