@@ -29,12 +29,18 @@ class TraceConfig:
     """How traces are read.
 
     Attributes:
-        trace: shipped trace name (see :data:`SHIPPED_TRACES`) or path to a CSV.
+        trace: shipped trace name (see :data:`SHIPPED_TRACES`), a CSV path, or a rosbag2 bag
+            (a directory with ``metadata.yaml``, or a ``.mcap``/``.db3`` file).
         max_sample_gap_s: longest interval between two samples that is still interpolated, s.
+        bag_topic: the preceding vehicle's topic when ``trace`` is a bag.
+        bag_message_type: its type: ``nav_msgs/msg/Odometry`` or
+            ``geometry_msgs/msg/TwistStamped``.
     """
 
     trace: str
     max_sample_gap_s: float
+    bag_topic: str = '/preceding_vehicle/odom'
+    bag_message_type: str = 'nav_msgs/msg/Odometry'
 
     def __post_init__(self) -> None:
         if not self.max_sample_gap_s > 0.0:
@@ -142,15 +148,25 @@ def resample(times_s: np.ndarray, speeds_mps: np.ndarray, dt_s: float) -> np.nda
     return speeds
 
 
+def is_bag(path: Path) -> bool:
+    """A rosbag2 bag: a directory with ``metadata.yaml``, or an ``.mcap``/``.db3`` file."""
+    return (path.is_dir() and (path / 'metadata.yaml').exists()) or path.suffix in {'.mcap',
+                                                                                   '.db3'}
+
+
 def load_trace(name_or_path: str, dt_s: float, config: TraceConfig) -> SpeedTrace:
-    """Load a shipped trace by name or a CSV by path onto the control grid.
+    """Load a shipped trace by name, a CSV, or a bag's speed topic onto the control grid.
 
     Args:
-        name_or_path: ``us06``, ``nycc`` or a path to a ``time_s,speed_mps`` CSV.
+        name_or_path: a name of :data:`SHIPPED_TRACES`, a ``time_s,speed_mps`` CSV, or a
+            rosbag2 bag (read with ``config.bag_topic`` and ``config.bag_message_type``).
         dt_s: control step, s.
         config: validation settings.
     """
     path = trace_path(name_or_path)
+    if is_bag(path):
+        from preceding_traffic.bags import load_bag_trace  # rosbags only when needed
+        return load_bag_trace(path, config.bag_topic, config.bag_message_type, dt_s, config)
     times, speeds = read_samples(path, config)
     name = name_or_path.lower() if name_or_path.lower() in SHIPPED_TRACES else path.stem
     return SpeedTrace(name=name, dt_s=dt_s, speeds_mps=resample(times, speeds, dt_s),

@@ -21,6 +21,7 @@ from trust_monitor.params import ParamsError
 COMMAND_MODULES = (
     'trust_av_planner.cmd_simulate',
     'trust_av_planner.cmd_reproduce',
+    'trust_av_planner.cmd_bags',
 )
 """Modules that add a subcommand (in help order)."""
 

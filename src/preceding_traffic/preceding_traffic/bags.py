@@ -1,0 +1,172 @@
+"""Speed traces to and from rosbag2 bags (MCAP or sqlite3), read and written with rosbags.
+
+Reading: the preceding vehicle's speed comes from one topic of a recorded bag, as
+``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``) or ``geometry_msgs/msg/TwistStamped``
+(``twist.linear.x``), stamped by the message header (the recording's log time when the
+header stamp is zero). The samples go through the same validation and resampling as a CSV
+trace (:func:`preceding_traffic.traces.read_samples` rules), so irregular sampling and
+short holes are interpolated and a hole longer than ``max_sample_gap_s`` is rejected with
+its time. The preview is the recorded future.
+
+Writing: :func:`write_trace_bag` turns a ``time_s,speed_mps`` trace into a rosbag2 MCAP bag
+of Odometry messages (position integrated from speed, header stamps at the recorded times,
+holes kept as they are).
+
+This module is I/O, not a model: it imports rosbags (pure Python), never rclpy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.typesys import Stores, get_typestore
+
+from preceding_traffic.traces import SpeedTrace, TraceConfig, TraceError, resample
+
+ODOMETRY = 'nav_msgs/msg/Odometry'
+TWIST_STAMPED = 'geometry_msgs/msg/TwistStamped'
+SPEED_TYPES = (ODOMETRY, TWIST_STAMPED)
+"""Message types a speed can be read from."""
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+
+
+class BagError(TraceError):
+    """A bag is unusable as a speed source; the message names the bag and the problem."""
+
+
+def _speed(msg: object, msgtype: str) -> float:
+    if msgtype == ODOMETRY:
+        return float(msg.twist.twist.linear.x)  # type: ignore[attr-defined]
+    return float(msg.twist.linear.x)  # type: ignore[attr-defined]
+
+
+def _stamp_s(msg: object, log_time_ns: int) -> float:
+    stamp = msg.header.stamp  # type: ignore[attr-defined]
+    ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+    return (ns if ns > 0 else log_time_ns) * 1e-9
+
+
+def read_bag_samples(path: Path, topic: str, msgtype: str,
+                     config: TraceConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Raw ``(time_s, speed_mps)`` samples of one topic of a rosbag2 bag, validated.
+
+    Args:
+        path: bag directory (with ``metadata.yaml``) or a single ``.mcap``/``.db3`` file.
+        topic: topic holding the preceding vehicle's state.
+        msgtype: expected message type, one of :data:`SPEED_TYPES`.
+        config: validation settings (``max_sample_gap_s``).
+
+    Raises:
+        BagError: unreadable or truncated bag, unsupported storage, missing topic, wrong
+            message type, no messages, or samples that fail the trace rules.
+    """
+    if msgtype not in SPEED_TYPES:
+        raise BagError(f'{path}: cannot read a speed from {msgtype}; use one of '
+                       f'{", ".join(SPEED_TYPES)}')
+    if not path.exists():
+        raise BagError(f'{path}: no such bag')
+    times: list[float] = []
+    speeds: list[float] = []
+    try:
+        with AnyReader([path], default_typestore=TYPESTORE) as reader:
+            connections = [c for c in reader.connections if c.topic == topic]
+            if not connections:
+                available = ', '.join(sorted({f'{c.topic} ({c.msgtype})'
+                                              for c in reader.connections})) or 'none'
+                raise BagError(f'{path}: no topic {topic}; the bag has: {available}')
+            wrong = [c.msgtype for c in connections if c.msgtype != msgtype]
+            if wrong:
+                raise BagError(f'{path}: topic {topic} has type {wrong[0]}, expected {msgtype}')
+            for connection, log_time, raw in reader.messages(connections=connections):
+                msg = reader.deserialize(raw, connection.msgtype)
+                times.append(_stamp_s(msg, log_time))
+                speeds.append(_speed(msg, connection.msgtype))
+    except (AnyReaderError, WriterError) as err:
+        raise BagError(f'{path}: cannot read bag ({err})') from err
+    if not times:
+        raise BagError(f'{path}: topic {topic} has no messages')
+    return _validated(path, topic, times, speeds, config)
+
+
+def _validated(path: Path, topic: str, times: list[float], speeds: list[float],
+               config: TraceConfig) -> tuple[np.ndarray, np.ndarray]:
+    for i, (t, v) in enumerate(zip(times, speeds, strict=True)):
+        where = f'{path}: {topic} message {i} at t = {t:.3f} s'
+        if not (math.isfinite(t) and math.isfinite(v)):
+            raise BagError(f'{where}: NaN or infinite value')
+        if v < 0.0:
+            raise BagError(f'{where}: negative speed {v} m/s')
+        if i and t <= times[i - 1]:
+            raise BagError(f'{where}: time does not increase')
+        if i and t - times[i - 1] > config.max_sample_gap_s:
+            raise BagError(f'{where}: gap of {t - times[i - 1]:g} s exceeds '
+                           f'max_sample_gap_s = {config.max_sample_gap_s:g} s')
+    if len(times) < 2:
+        raise BagError(f'{path}: topic {topic} needs at least 2 messages, got {len(times)}')
+    return np.asarray(times), np.asarray(speeds)
+
+
+def load_bag_trace(path: str | Path, topic: str, msgtype: str, dt_s: float,
+                   config: TraceConfig) -> SpeedTrace:
+    """A bag's speed topic on the control grid, as a :class:`SpeedTrace`."""
+    path = Path(path)
+    times, speeds = read_bag_samples(path, topic, msgtype, config)
+    return SpeedTrace(name=path.stem, dt_s=dt_s, speeds_mps=resample(times, speeds, dt_s),
+                      t0_s=float(times[0]))
+
+
+def odometry_messages(times_s: np.ndarray, speeds_mps: np.ndarray,
+                      frame_id: str, child_frame_id: str) -> Iterator[tuple[int, object]]:
+    """``(stamp_ns, Odometry)`` per sample; position integrated with the trapezoid rule."""
+    types = TYPESTORE.types
+    position = 0.0
+    for i, (t, v) in enumerate(zip(times_s, speeds_mps, strict=True)):
+        if i:
+            position += 0.5 * (v + speeds_mps[i - 1]) * (t - times_s[i - 1])
+        ns = round(t * 1e9)
+        header = types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=ns // 1_000_000_000,
+                                                        nanosec=ns % 1_000_000_000),
+            frame_id=frame_id)
+        point = types['geometry_msgs/msg/Point'](x=position, y=0.0, z=0.0)
+        identity = types['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0)
+        pose = types['geometry_msgs/msg/PoseWithCovariance'](
+            pose=types['geometry_msgs/msg/Pose'](position=point, orientation=identity),
+            covariance=np.zeros(36))
+        vector = types['geometry_msgs/msg/Vector3']
+        twist = types['geometry_msgs/msg/TwistWithCovariance'](
+            twist=types['geometry_msgs/msg/Twist'](linear=vector(x=float(v), y=0.0, z=0.0),
+                                                   angular=vector(x=0.0, y=0.0, z=0.0)),
+            covariance=np.zeros(36))
+        yield ns, types[ODOMETRY](header=header, child_frame_id=child_frame_id, pose=pose,
+                                  twist=twist)
+
+
+def write_trace_bag(times_s: np.ndarray, speeds_mps: np.ndarray, path: Path, topic: str, *,
+                    frame_id: str = 'odom', child_frame_id: str = 'preceding_vehicle') -> int:
+    """Write samples as a rosbag2 MCAP bag of ``nav_msgs/msg/Odometry``; log time = stamp.
+
+    Returns:
+        The number of messages written.
+
+    Raises:
+        BagError: the bag directory exists already or cannot be written.
+    """
+    if path.exists():
+        raise BagError(f'{path}: exists already; remove it or choose another name')
+    count = 0
+    try:
+        with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            connection = writer.add_connection(topic, ODOMETRY, typestore=TYPESTORE)
+            for ns, msg in odometry_messages(times_s, speeds_mps, frame_id, child_frame_id):
+                writer.write(connection, ns, TYPESTORE.serialize_cdr(msg, ODOMETRY))
+                count += 1
+    except WriterError as err:
+        raise BagError(f'{path}: cannot write bag ({err})') from err
+    return count
