@@ -22,7 +22,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-
+            'traffic = preceding_traffic.traffic_node:main',
         ],
     },
 )

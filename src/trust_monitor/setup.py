@@ -22,7 +22,8 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'trust-monitor-estimate = trust_monitor.estimate:main'
+            'trust-monitor-estimate = trust_monitor.estimate:main',
+            'monitor = trust_monitor.monitor_node:main',
         ],
     },
 )

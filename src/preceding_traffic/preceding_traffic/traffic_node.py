@@ -1,0 +1,140 @@
+"""``preceding_traffic`` node: the preceding vehicle, and the step authority in simulation.
+
+Publishes, once per step t (sim time): ``/clock``, the preceding vehicle's odometry
+``/preceding_vehicle/odom`` and its speed over the horizon ``/preceding_vehicle/speed_preview``
+(the trace's future; a replayed bag's recorded future). It starts after ``/sim/start`` and
+advances to t + 1 only when the step's outputs are in: ego and human odometry stamped
+t + dt, the trust and the planner status stamped t (lock-step, see
+:mod:`trust_monitor.graph_interface`). After the last step it sets ``finished`` and exits 0.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from dataclasses import dataclass
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Vector3Stamped
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Empty
+from trajectory_msgs.msg import JointTrajectory
+
+from preceding_traffic.traces import TraceConfig, load_trace
+from trust_monitor.graph_interface import StepBuffer, stamp_ns
+from trust_monitor.params import require
+from trust_monitor.ros_support import (
+    QOS,
+    declare_config,
+    msg_ns,
+    odometry,
+    spin_node,
+    time_msg,
+    trajectory,
+)
+
+
+@dataclass(frozen=True)
+class TrafficRunConfig:
+    """The traffic node's own parameters.
+
+    Attributes:
+        dt_s: control step, s.
+        horizon_steps: preview length N.
+        initial_position_m: the preceding vehicle's position at the first step, m.
+        max_steps: stop after this many steps (0: the whole trace).
+    """
+
+    dt_s: float
+    horizon_steps: int
+    initial_position_m: float = 0.0
+    max_steps: int = 0
+
+    def __post_init__(self) -> None:
+        require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
+        require(self.horizon_steps >= 1, f'horizon_steps must be >= 1, got {self.horizon_steps}')
+        require(self.max_steps >= 0, f'max_steps must be >= 0, got {self.max_steps}')
+
+
+class TrafficNode(Node):
+    """Replays a trace (CSV or bag) as the preceding vehicle and steps the graph."""
+
+    def __init__(self) -> None:
+        super().__init__('preceding_traffic')
+        self.run = declare_config(self, TrafficRunConfig)
+        trace_config = declare_config(self, TraceConfig)
+        trace = load_trace(trace_config.trace, self.run.dt_s, trace_config)
+        if self.run.max_steps:
+            trace = dataclasses.replace(
+                trace, speeds_mps=trace.speeds_mps[:self.run.max_steps + 1])
+        self.trace = trace
+        self.position_m = self.run.initial_position_m
+        self.step = -1
+        self.finished = False
+        self.buffer = StepBuffer(['ego', 'human', 'trust', 'status'])
+        self.pub_clock = self.create_publisher(Clock, '/clock', QOS['CLOCK'])
+        self.pub_odom = self.create_publisher(Odometry, '/preceding_vehicle/odom', QOS['STEP'])
+        self.pub_preview = self.create_publisher(JointTrajectory,
+                                                 '/preceding_vehicle/speed_preview', QOS['STEP'])
+        self.create_subscription(Empty, '/sim/start', self.on_start, QOS['LATCHED'])
+        self.create_subscription(Odometry, '/ego/odom', lambda m: self.on_done('ego', m, 1),
+                                 QOS['STEP'])
+        self.create_subscription(Odometry, '/human/odom', lambda m: self.on_done('human', m, 1),
+                                 QOS['STEP'])
+        self.create_subscription(Vector3Stamped, '/trust_monitor/trust',
+                                 lambda m: self.on_done('trust', m, 0), QOS['STEP'])
+        self.create_subscription(DiagnosticArray, '/ego/planner_status',
+                                 lambda m: self.on_done('status', m, 0), QOS['STEP'])
+        self.get_logger().info(f'trace {trace.name}: {trace.steps} steps of {trace.dt_s} s; '
+                               'waiting for /sim/start')
+
+    def stamp(self, step: int) -> int:
+        """Header stamp (ns) of a step."""
+        return stamp_ns(self.trace.time_s(step))
+
+    def on_start(self, _msg: Empty) -> None:
+        """Go: publish the first step."""
+        if self.step < 0:
+            self.publish_step(0)
+
+    def publish_step(self, step: int) -> None:
+        """Publish the clock, odometry and preview of ``step``."""
+        self.step = step
+        ns = self.stamp(step)
+        speed = float(self.trace.speeds_mps[step])
+        self.pub_clock.publish(Clock(clock=time_msg(ns)))
+        self.pub_odom.publish(odometry(ns, self.position_m, speed, 'preceding_vehicle'))
+        self.pub_preview.publish(trajectory(
+            ns, self.run.dt_s,
+            velocities=self.trace.preview(step, self.run.horizon_steps).tolist()))
+
+    def on_done(self, name: str, msg: Odometry | Vector3Stamped | DiagnosticArray,
+                offset: int) -> None:
+        """Collect a step output; advance when the current step is complete.
+
+        ``offset`` is 1 for odometry (stamped with the step's end), 0 otherwise.
+        """
+        ns = msg_ns(msg.header.stamp)
+        step = round((ns * 1e-9 - self.trace.t0_s) / self.run.dt_s) - offset
+        if step < 0:
+            return  # the initial odometry, published before the first step
+        self.buffer.put(name, step, msg)
+        if self.step >= 0 and self.buffer.ready(self.step):
+            self.buffer.pop(self.step)
+            self.position_m += float(self.trace.speeds_mps[self.step]) * self.run.dt_s
+            if self.step + 1 >= self.trace.steps:
+                self.get_logger().info(f'done: {self.trace.steps} steps')
+                self.finished = True
+            else:
+                self.publish_step(self.step + 1)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run preceding_traffic traffic``."""
+    return spin_node(TrafficNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
