@@ -66,6 +66,7 @@ class DriverNode(Node):
                                  QOS['STEP'])
         self.pub_odom.publish(odometry(stamp_ns(self.follower.start_time_s), self.position_m,
                                        self.speed_mps, 'human'))
+        self.get_logger().info(f'ready: weights {self.config.weights.tolist()}')
 
     def on_input(self, name: str, msg: JointTrajectory | Odometry) -> None:
         """Store an input; when a step's expected plan and AV odometry are in, drive."""

@@ -46,6 +46,7 @@ class EgoPlantNode(Node):
         self.create_subscription(AccelStamped, '/ego/accel_cmd', self.on_command, QOS['STEP'])
         self.pub.publish(odometry(stamp_ns(self.config.start_time_s), self.state.position_m,
                                   self.state.speed_mps, 'ego'))
+        self.get_logger().info(f'ready: initial state {self.state}')
 
     def on_command(self, msg: AccelStamped) -> None:
         """Apply the command for one step and publish the new odometry."""

@@ -69,6 +69,8 @@ class PlannerNode(Node):
                 ('trust', Vector3Stamped, '/trust_monitor/trust')):
             self.create_subscription(msgtype, topic,
                                      lambda m, n=name: self.on_input(n, m), QOS['STEP'])
+        self.get_logger().info(f'ready: predictor {self.config.predictor}, alpha '
+                               f'{self.config.alpha:g}, horizon {self.config.horizon_steps}')
 
     def on_input(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Store an input; plan every step whose inputs are complete, in order."""

@@ -199,6 +199,8 @@ def _make_node() -> Any:
                 self.create_subscription(message_class(topic.msgtype), topic.name,
                                          lambda data, t=topic.name: self.on_message(t, data),
                                          QOS[topic.qos], raw=True)
+            self.get_logger().info(f'ready: recording {len(self.expected)} topics to '
+                                   f'{self.bag.path}')
 
         def on_message(self, topic: str, data: bytes) -> None:
             if self.finished:

@@ -37,6 +37,7 @@ class MonitorNode(Node):
                                  lambda m: self.on_input('plan', m), QOS['STEP'])
         self.create_subscription(JointTrajectory, '/ego/expected_plan',
                                  lambda m: self.on_input('expected', m), QOS['STEP'])
+        self.get_logger().info('ready')
 
     def on_input(self, name: str, msg: JointTrajectory) -> None:
         """Store a plan; when both plans of a step are there, score them."""

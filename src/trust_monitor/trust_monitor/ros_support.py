@@ -17,7 +17,7 @@ from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -212,14 +212,16 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     """
     rclpy.init(args=args if args is not None else sys.argv)
     node = None
+    executor = SingleThreadedExecutor()
     try:
         try:
             node = factory()
         except user_errors as err:
             print(f'error: {err}', file=sys.stderr)
             return 2
+        executor.add_node(node)
         while rclpy.ok() and not getattr(node, 'finished', False):
-            rclpy.spin_once(node, timeout_sec=0.5)
+            executor.spin_once(timeout_sec=0.5)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass  # the documented way to stop a node: clean exit below
     finally:
@@ -227,6 +229,8 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
             close = getattr(node, 'close', None)
             if close is not None:
                 close()
+            executor.remove_node(node)
             node.destroy_node()
+        executor.shutdown()
         rclpy.try_shutdown()
     return 0

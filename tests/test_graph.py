@@ -1,0 +1,160 @@
+"""The ROS 2 node graph: equal to the in-process loop, recorded faithfully, isolated per run,
+and failing loudly (naming the node, leaving no process behind) when a node dies."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+
+from preceding_traffic.traces import load_trace
+from trust_av_planner.bag_records import records_from_bag
+from trust_av_planner.config import load_run_config
+from trust_av_planner.orchestrator import truncate
+from trust_av_planner.simulate import StepRecord, simulate
+from trust_monitor.graph_interface import TOPICS
+
+STEPS = 120
+RECORDED = {t.name for t in TOPICS if 'recorder' in t.subscribers}
+
+
+def run_command(bag: Path, *extra: str) -> list[str]:
+    return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
+            '--alpha', '0.5', '--predictor', 'ca', '--max-steps', str(STEPS), '--bag', str(bag),
+            '--no-progress', *extra]
+
+
+def in_process(steps: int = STEPS) -> list[StepRecord]:
+    config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'ca'}})
+    trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), steps)
+    return simulate(config, trace).records
+
+
+def assert_records_equal(graph: list[StepRecord], ref: list[StepRecord]) -> None:
+    assert len(graph) == len(ref)
+    for g, r in zip(graph, ref, strict=True):
+        for field in dataclasses.fields(StepRecord):
+            if 'solve_time' in field.name:
+                continue
+            a, b = getattr(g, field.name), getattr(r, field.name)
+            if isinstance(b, (tuple, float)):
+                assert a == pytest.approx(b, abs=1e-9), (r.t_s, field.name)
+            else:
+                assert a == b, (r.t_s, field.name)
+
+
+@pytest.fixture(scope='module')
+def graph_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    bag = tmp_path_factory.mktemp('graph') / 'us06.mcap'
+    proc = subprocess.run(run_command(bag), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return bag, proc.stdout
+
+
+def test_graph_equals_in_process(graph_run: tuple[Path, str]) -> None:
+    bag, stdout = graph_run
+    assert_records_equal(records_from_bag(bag), in_process())
+    assert 'final trust' in stdout and bag.with_suffix('.png').stat().st_size > 10_000
+
+
+def test_bag_reads_back_with_rosbags(graph_run: tuple[Path, str]) -> None:
+    bag, _ = graph_run
+    with AnyReader([bag]) as reader:
+        topics = {c.topic: c.msgcount for c in reader.connections}
+        assert set(topics) == RECORDED
+        for topic, count in topics.items():
+            extra = 1 if topic in {'/ego/odom', '/human/odom'} else 0   # + the initial state
+            assert count == STEPS + extra, topic
+        for connection, log_time, raw in reader.messages():
+            msg = reader.deserialize(raw, connection.msgtype)
+            stamp = msg.clock if connection.topic == '/clock' else msg.header.stamp
+            assert log_time == stamp.sec * 10**9 + stamp.nanosec     # log time = sim time
+
+
+def test_bag_decodes_with_mcap_ros2(graph_run: tuple[Path, str]) -> None:
+    bag, _ = graph_run
+    with bag.open('rb') as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == 'ros2'
+        summary = reader.get_summary()
+        assert summary is not None
+        assert {s.encoding for s in summary.schemas.values()} == {'ros2msg'}
+        assert all('offered_qos_profiles' in c.metadata for c in summary.channels.values())
+        assert any(m.name == 'rosbag2' for m in reader.iter_metadata())
+        decoded = 0
+        for _schema, channel, message, ros_msg in reader.iter_decoded_messages():
+            assert channel.message_encoding == 'cdr'
+            if channel.topic == '/trust_monitor/trust':
+                stamp = ros_msg.header.stamp
+                assert 0.0 <= ros_msg.vector.x <= 1.0
+                assert message.log_time == stamp.sec * 10**9 + stamp.nanosec
+            decoded += 1
+    assert decoded == STEPS * len(RECORDED) + 2
+
+
+def test_parallel_runs_do_not_hear_each_other(tmp_path: Path) -> None:
+    bags = [tmp_path / 'a.mcap', tmp_path / 'b.mcap']
+    procs = [subprocess.Popen(run_command(b, '--max-steps', '40'), stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for b in bags]
+    outputs = [p.communicate(timeout=300) for p in procs]
+    for proc, (out, err) in zip(procs, outputs, strict=True):
+        assert proc.returncode == 0, out + err
+    domains = {out.split('domain ')[1].split(')')[0] for out, _ in outputs}
+    assert len(domains) == 2
+    first, second = (records_from_bag(b) for b in bags)
+    assert_records_equal(first, in_process(40))
+    assert_records_equal(second, in_process(40))
+
+
+def children_of(pid: int) -> list[int]:
+    """Every live process whose parent is ``pid``."""
+    found = []
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid and fields[0] != 'Z':
+                found.append(int(entry.name))
+    return found
+
+
+def command_line(pid: int) -> str:
+    return (Path('/proc') / str(pid) / 'cmdline').read_bytes().replace(b'\0', b' ').decode()
+
+
+def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
+    bag = tmp_path / 'killed.mcap'
+    proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    planner = None
+    while time.monotonic() < deadline and planner is None:
+        time.sleep(0.2)
+        for pid in children_of(proc.pid):
+            if '__node:=planner' in command_line(pid):
+                planner = pid
+    assert planner is not None, 'planner process not found'
+    time.sleep(5.0)                 # let it run some steps
+    children = children_of(proc.pid)
+    os.kill(planner, signal.SIGKILL)
+    _out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2
+    assert 'node planner exited with code -9' in err
+    assert err.startswith('trust-av run: error:')
+    for pid in children:                                   # no orphans
+        assert not Path(f'/proc/{pid}').exists() or 'Z' in (
+            Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0])
+    records = records_from_bag(bag)                         # readable up to the kill
+    assert 0 < len(records) < 600
+    assert_records_equal(records, in_process(600)[:len(records)])
