@@ -158,3 +158,31 @@ def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
     records = records_from_bag(bag)                         # readable up to the kill
     assert 0 < len(records) < 600
     assert_records_equal(records, in_process(600)[:len(records)])
+
+
+def test_readme_topic_table_is_the_code_table() -> None:
+    from trust_monitor.graph_interface import topic_table_markdown
+    readme = (Path(__file__).resolve().parents[1] / 'README.md').read_text()
+    assert topic_table_markdown() in readme
+
+
+def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path) -> None:
+    bag = tmp_path / 'interrupted.mcap'
+    proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (bag.exists() and bag.stat().st_size > 20_000):
+        time.sleep(0.2)
+    children = children_of(proc.pid)
+    proc.send_signal(signal.SIGINT)
+    _out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert 'interrupted' in err and 'Traceback' not in err
+    for pid in children:
+        assert not Path(f'/proc/{pid}').exists() or 'Z' in (
+            Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0])
+    with AnyReader([bag]) as reader:                # finished normally: it has a summary
+        assert reader.message_count > 0
+    records = records_from_bag(bag)
+    assert 0 < len(records) < 600
+    assert_records_equal(records, in_process(600)[:len(records)])

@@ -52,6 +52,10 @@ def main(argv: list[str] | None = None) -> int:
     except (ParamsError, TraceError, TrustAvError) as err:
         print(f'trust-av {args.command}: error: {err}', file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # Everything started has been stopped and every recording finished on the way out.
+        print(f'trust-av {args.command}: interrupted', file=sys.stderr)
+        return 130
 
 
 if __name__ == '__main__':

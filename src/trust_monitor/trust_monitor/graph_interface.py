@@ -84,6 +84,19 @@ JOINT_NAME = 'longitudinal'
 """The one joint of every longitudinal JointTrajectory."""
 
 
+def topic_table_markdown() -> str:
+    """The README's topic table, generated from :data:`TOPICS` (a test keeps them equal)."""
+    qos = {'STEP': 'reliable, transient local, keep last 10',
+           'CLOCK': 'reliable, volatile, keep last 10',
+           'LATCHED': 'reliable, transient local, keep last 1'}
+    lines = ['| topic | type | publisher | subscribers | QoS | rate | units |',
+             '|---|---|---|---|---|---|---|']
+    for t in TOPICS:
+        lines.append(f'| `{t.name}` | `{t.msgtype}` | {t.publisher} | '
+                     f'{", ".join(t.subscribers)} | {qos[t.qos]} | {t.rate} | {t.units} |')
+    return '\n'.join(lines) + '\n'
+
+
 def stamp_ns(t_s: float) -> int:
     """Integer nanoseconds of a time in seconds (the key that pairs messages of a step)."""
     return round(t_s * 1e9)
