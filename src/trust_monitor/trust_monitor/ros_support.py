@@ -17,7 +17,8 @@ from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -212,7 +213,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     """
     rclpy.init(args=args if args is not None else sys.argv)
     node = None
-    executor = SingleThreadedExecutor()
+    executor = EventsExecutor()
     try:
         try:
             node = factory()
