@@ -186,3 +186,15 @@ def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path) -> None:
     records = records_from_bag(bag)
     assert 0 < len(records) < 600
     assert_records_equal(records, in_process(600)[:len(records)])
+
+
+def test_gru_planner_in_the_graph_equals_in_process(tmp_path: Path) -> None:
+    """Issue 4: TAC-GRU through the node graph gives the in-process trajectories."""
+    bag = tmp_path / 'gru.mcap'
+    command = run_command(bag, '--max-steps', '60')
+    command[command.index('ca')] = 'gru'
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'gru'}})
+    trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), 60)
+    assert_records_equal(records_from_bag(bag), simulate(config, trace).records)

@@ -6,7 +6,8 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={package_name: ['py.typed', 'config/*.yaml']},
+    package_data={package_name: ['py.typed', 'config/*.yaml', 'models/*.npz', 'models/*.json',
+                                 'models/*.md', 'models/*.png']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

@@ -18,6 +18,8 @@ import numpy as np
 
 SHIPPED_TRACES = ('us06', 'nycc', 'commute_am', 'commute_pm')
 """Evaluation traces shipped in ``data/`` (sources and licences in ``data/SOURCES.md``)."""
+TRAINING_TRACES = ('udds', 'hwfet', 'wltc_3b')
+"""Traces for training learned models only, in ``data/training/``."""
 
 
 class TraceError(ValueError):
@@ -85,9 +87,12 @@ class SpeedTrace:
 
 def trace_path(name_or_path: str) -> Path:
     """Path of a shipped trace (by name) or of a user file."""
-    if name_or_path.lower() in SHIPPED_TRACES:
-        ref = resources.files('preceding_traffic') / 'data' / f'{name_or_path.lower()}.csv'
-        return Path(str(ref))
+    name = name_or_path.lower()
+    if name in SHIPPED_TRACES:
+        return Path(str(resources.files('preceding_traffic') / 'data' / f'{name}.csv'))
+    if name in TRAINING_TRACES:
+        return Path(str(resources.files('preceding_traffic') / 'data' / 'training'
+                        / f'{name}.csv'))
     return Path(name_or_path)
 
 
@@ -168,6 +173,7 @@ def load_trace(name_or_path: str, dt_s: float, config: TraceConfig) -> SpeedTrac
         from preceding_traffic.bags import load_bag_trace  # rosbags only when needed
         return load_bag_trace(path, config.bag_topic, config.bag_message_type, dt_s, config)
     times, speeds = read_samples(path, config)
-    name = name_or_path.lower() if name_or_path.lower() in SHIPPED_TRACES else path.stem
+    shipped = name_or_path.lower() in SHIPPED_TRACES + TRAINING_TRACES
+    name = name_or_path.lower() if shipped else path.stem
     return SpeedTrace(name=name, dt_s=dt_s, speeds_mps=resample(times, speeds, dt_s),
                       t0_s=float(times[0]))

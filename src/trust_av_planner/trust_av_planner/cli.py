@@ -23,6 +23,7 @@ COMMAND_MODULES = (
     'trust_av_planner.cmd_run',
     'trust_av_planner.cmd_reproduce',
     'trust_av_planner.cmd_bags',
+    'trust_av_planner.cmd_train_gru',
 )
 """Modules that add a subcommand (in help order)."""
 

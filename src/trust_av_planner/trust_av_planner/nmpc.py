@@ -37,7 +37,7 @@ from trust_monitor.trust_model import TrustConfig, explicability, explicability_
 
 LOG = logging.getLogger(__name__)
 
-PREDICTORS = ('ca',)
+PREDICTORS = ('ca', 'gru')
 """Names of the plan estimators (parameter ``predictor``)."""
 
 BOUND_TOLERANCE = 1e-6
@@ -73,6 +73,7 @@ class PlannerConfig:
     fallback_speed_gain_per_s: float
     predictor: str
     time_headway_cap_s: float
+    gru_model: str
 
     def __post_init__(self) -> None:
         require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
@@ -95,6 +96,7 @@ class PlannerConfig:
         require(self.solver_cpu_budget_s > 0.0,
                 f'solver_cpu_budget_s must be > 0, got {self.solver_cpu_budget_s}')
         require(self.time_headway_cap_s > 0.0, 'time_headway_cap_s must be > 0')
+        require(bool(self.gru_model), 'gru_model must name a weights file')
         require(self.predictor in PREDICTORS, f'predictor must be one of {list(PREDICTORS)}, got '
                 f'{self.predictor!r}')
 

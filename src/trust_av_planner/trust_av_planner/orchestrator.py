@@ -32,6 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+import yaml
+
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.config import RunConfig
 from trust_av_planner.errors import TrustAvError
@@ -56,14 +58,6 @@ class NodeSpec:
     name: str
     module: str
     params: dict[str, Any]
-
-
-def _param(value: Any) -> str:
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, float):
-        return repr(value)
-    return str(value)
 
 
 def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: InitialState,
@@ -159,13 +153,21 @@ class Graph:
                         ROS_LOG_DIR=str(log_dir / 'ros'))
 
     def start(self) -> None:
-        """Start every node process."""
+        """Start every node process.
+
+        Per-run values go into a second params file with one section per node, after the
+        user's file: a node-specific entry there beats the same key in the user's file
+        (``-p`` would not: rcl lets a node's own section win over a command-line ``-p``).
+        """
         self.log_dir.mkdir(parents=True, exist_ok=True)
+        run_params = self.log_dir / 'run_params.yaml'
+        run_params.write_text(yaml.safe_dump(
+            {spec.name: {'ros__parameters': spec.params} for spec in self.specs if spec.params},
+            sort_keys=True))
         for spec in self.specs:
             command = [sys.executable, '-m', spec.module, '--ros-args', '-r',
-                       f'__node:={spec.name}', '--params-file', str(self.params_file)]
-            for key, value in spec.params.items():
-                command += ['-p', f'{key}:={_param(value)}']
+                       f'__node:={spec.name}', '--params-file', str(self.params_file),
+                       '--params-file', str(run_params)]
             log_path = self.log_dir / f'{spec.name}.log'
             log = log_path.open('wb')
             popen = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,

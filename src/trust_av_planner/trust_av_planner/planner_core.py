@@ -15,6 +15,7 @@ from trust_av_planner.nmpc import PlannerConfig, PlanResult, TrustAwareNmpc
 from trust_av_planner.plant import VehicleState, gap_m
 from trust_av_planner.predictors import Observation, Predictor
 from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
+from trust_av_planner.predictors.gru import GruPredictor, resolve_model
 from trust_monitor.trust_model import TrustConfig
 
 
@@ -23,6 +24,9 @@ def make_predictor(config: PlannerConfig) -> Predictor:
     if config.predictor == 'ca':
         return ConstantAccelerationPredictor(config.horizon_steps, config.accel_min_mps2,
                                              config.accel_max_mps2)
+    if config.predictor == 'gru':
+        return GruPredictor.from_file(resolve_model(config.gru_model), config.horizon_steps,
+                                      config.accel_min_mps2, config.accel_max_mps2)
     raise ValueError(f'unknown predictor {config.predictor!r}')
 
 

@@ -17,8 +17,7 @@ from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
-from rclpy.experimental import EventsExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -213,7 +212,10 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     """
     rclpy.init(args=args if args is not None else sys.argv)
     node = None
-    executor = EventsExecutor()
+    # SingleThreadedExecutor, not rclpy.experimental.EventsExecutor: the latter stepped the
+    # graph 1.5x faster but once aborted at shutdown ('Destroying callback manager with
+    # callbacks remaining'), which could cost the recorder its file.
+    executor = SingleThreadedExecutor()
     try:
         try:
             node = factory()
@@ -230,8 +232,8 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
             close = getattr(node, 'close', None)
             if close is not None:
                 close()
-            executor.remove_node(node)
-            node.destroy_node()
         executor.shutdown()
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown()
     return 0

@@ -1,0 +1,136 @@
+"""The GRU plan estimator: numpy forward == torch, warm-up, weights errors, seeded training,
+the shipped model, and a closed loop where it beats CA."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from conftest import shipped_trace
+
+from trust_av_planner.config import load_run_config
+from trust_av_planner.gru_training import (
+    TrainingSettings,
+    build_dataset,
+    train,
+    train_with_dagger,
+)
+from trust_av_planner.orchestrator import truncate
+from trust_av_planner.predictors import Observation
+from trust_av_planner.predictors.gru import (
+    MODELS_DIR,
+    GruPredictor,
+    GruWeights,
+    ModelError,
+    gru_forward,
+    load_weights,
+)
+from trust_av_planner.simulate import simulate
+
+SHIPPED = MODELS_DIR / 'gru_plan_estimator.npz'
+
+
+def random_weights(hidden: int = 8, horizon: int = 3, history: int = 4) -> GruWeights:
+    rng = np.random.default_rng(0)
+    return GruWeights(weight_ih=rng.normal(size=(3 * hidden, 4)),
+                      weight_hh=rng.normal(size=(3 * hidden, hidden)),
+                      bias_ih=rng.normal(size=3 * hidden), bias_hh=rng.normal(size=3 * hidden),
+                      out_weight=rng.normal(size=(horizon, hidden)),
+                      out_bias=rng.normal(size=horizon), feature_mean=np.zeros(4),
+                      feature_std=np.ones(4), history_steps=history)
+
+
+def save(weights: GruWeights, path: Path) -> Path:
+    np.savez(path, **{f.name: getattr(weights, f.name) for f in dataclasses.fields(weights)})
+    return path
+
+
+def test_numpy_forward_equals_torch() -> None:
+    w = random_weights()
+    gru = torch.nn.GRU(4, 8, batch_first=True).double()
+    with torch.no_grad():
+        gru.weight_ih_l0.copy_(torch.tensor(w.weight_ih))
+        gru.weight_hh_l0.copy_(torch.tensor(w.weight_hh))
+        gru.bias_ih_l0.copy_(torch.tensor(w.bias_ih))
+        gru.bias_hh_l0.copy_(torch.tensor(w.bias_hh))
+        x = np.random.default_rng(1).normal(size=(5, 4))
+        _, h = gru(torch.tensor(x[None]))
+        expected = w.out_weight @ h[-1, 0].numpy() + w.out_bias
+    np.testing.assert_allclose(gru_forward(w, x), expected, atol=1e-12)
+
+
+def test_warm_up_is_constant_acceleration_then_gru() -> None:
+    predictor = GruPredictor(random_weights(history=4), -3.0, 3.0)
+    assert predictor.predict().tolist() == [0.0, 0.0, 0.0]
+    for k in range(3):
+        predictor.observe(Observation(20.0, 0.5, 1.5, 0.4 + k))
+        assert predictor.predict().tolist() == [min(0.4 + k, 3.0)] * 3   # CA, clipped
+    predictor.observe(Observation(20.0, 0.5, 1.5, -0.2))
+    plan = predictor.predict()
+    assert plan.shape == (3,) and np.all(np.abs(plan) <= 3.0)
+    assert plan.tolist() != [-0.2] * 3
+
+
+def test_missing_and_mismatched_weights_are_named(tmp_path: Path) -> None:
+    with pytest.raises(ModelError, match=r'nope\.npz: GRU weights file not found'):
+        load_weights(tmp_path / 'nope.npz', 3)
+    path = save(random_weights(horizon=5), tmp_path / 'h5.npz')
+    with pytest.raises(ModelError, match=r'out_weight has shape \(5, 8\), expected \(3, 8\)'):
+        load_weights(path, 3)
+    broken = tmp_path / 'broken.npz'
+    np.savez(broken, weight_ih=np.zeros((3, 4)))
+    with pytest.raises(ModelError, match=r'broken\.npz: not a GRU weights file'):
+        load_weights(broken, 3)
+    config = load_run_config(overrides={'planner': {'predictor': 'gru',
+                                                    'gru_model': str(tmp_path / 'x.npz')}})
+    with pytest.raises(ModelError, match=r'x\.npz: GRU weights file not found'):
+        simulate(config, truncate(shipped_trace('us06'), 60))
+
+
+def test_training_is_seeded_and_deterministic() -> None:
+    config = load_run_config()
+    settings = TrainingSettings(traces=('hwfet',), alphas=(0.5,), epochs=2, hidden=8)
+    dataset = build_dataset(config, settings)
+    first, report_a = train(dataset, settings)
+    second, report_b = train(dataset, settings)
+    assert report_a['validation_rmse_gru'] == report_b['validation_rmse_gru']
+    np.testing.assert_array_equal(first.weight_hh, second.weight_hh)
+    other, _ = train(dataset, dataclasses.replace(settings, seed=8))
+    assert not np.array_equal(first.weight_hh, other.weight_hh)
+
+
+def test_shipped_model_loads_and_its_card_is_consistent() -> None:
+    weights = load_weights(SHIPPED, 3)
+    card = json.loads(SHIPPED.with_suffix('.json').read_text())
+    assert card['history_steps'] == weights.history_steps == 10
+    assert card['hidden'] == weights.hidden
+    assert card['results']['validation_rmse_gru'] < card['results']['validation_rmse_ca']
+    assert set(card['data']['traces']) == {'udds', 'hwfet', 'wltc_3b'}
+
+
+def test_retraining_reproduces_the_shipped_model() -> None:
+    """Issue 4: same seed, same data -> the shipped validation RMSE to 1e-6 (about 80 s)."""
+    card = json.loads(SHIPPED.with_suffix('.json').read_text())
+    settings = TrainingSettings(**{k: tuple(v) if isinstance(v, list) else v
+                                   for k, v in card['settings'].items()})
+    with tempfile.TemporaryDirectory() as work:
+        weights, report = train_with_dagger(load_run_config(), settings, Path(work))
+    assert report['validation_rmse_gru'] == pytest.approx(
+        card['results']['validation_rmse_gru'], abs=1e-6)
+    np.testing.assert_allclose(weights.out_weight, load_weights(SHIPPED, 3).out_weight,
+                               atol=1e-9)
+
+
+def test_gru_beats_ca_in_closed_loop_on_unseen_us06() -> None:
+    trace = truncate(shipped_trace('us06'), 200)
+    rmse = {}
+    for predictor in ('ca', 'gru'):
+        config = load_run_config(overrides={'planner': {'alpha': 0.5,
+                                                        'predictor': predictor}})
+        rmse[predictor] = simulate(config, trace).metrics.rmse_mps2
+    assert rmse['gru'] < rmse['ca']
