@@ -242,7 +242,9 @@ def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSe
         'features': list(FEATURES), 'history_steps': weights.history_steps,
         'hidden': weights.hidden, 'horizon_steps': weights.horizon_steps,
         'data': {'traces': list(settings.traces), 'alphas': list(settings.alphas),
-                 'runs': 'in-process TAC-CA closed loops, shipped config/trust_av.yaml',
+                 'runs': 'in-process TAC-CA closed loops with the shipped config/trust_av.yaml, '
+                         f'then {settings.dagger_rounds} DAgger round(s): TAC-GRU closed loops '
+                         'with the model so far, on the same training traces',
                  'split': f'last {settings.validation_fraction:.0%} of every trace '
                           '(contiguous) is validation'},
         'settings': dataclasses.asdict(settings),
