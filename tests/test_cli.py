@@ -84,3 +84,19 @@ def test_offline_estimator_names_bad_row(tmp_path: Path) -> None:
                            str(tmp_path / 'o.csv')], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert f'{plans}:3: NaN or infinite value' in proc.stderr
+
+
+@pytest.mark.parametrize(('body', 'message'), [
+    ('', 'header needs t, plan_0.., expected_0..'),
+    ('t,a,b\n0,1,2\n', 'header needs t, plan_0.., expected_0..'),
+    ('t,plan_0,expected_0\n1,0.1,0.2\n1,0.1,0.2\n', ':3: time 1.0 does not increase'),
+    ('t,plan_0,expected_0\n0,fast,0.2\n', ':2: not a number'),
+])
+def test_offline_estimator_rejects_bad_files(tmp_path: Path, body: str, message: str) -> None:
+    plans = tmp_path / 'plans.csv'
+    plans.write_text(body)
+    out = tmp_path / 'o.csv'
+    proc = subprocess.run([sys.executable, '-m', 'trust_monitor.estimate', str(plans), '-o',
+                           str(out)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and message in proc.stderr
+    assert proc.stderr.count('\n') == 1 and not out.exists()

@@ -198,3 +198,22 @@ def test_gru_planner_in_the_graph_equals_in_process(tmp_path: Path) -> None:
     config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'gru'}})
     trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), 60)
     assert_records_equal(records_from_bag(bag), simulate(config, trace).records)
+
+
+def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
+    """The recorder killed mid-run: exit 2 naming it, and the truncated MCAP is repaired."""
+    bag = tmp_path / 'cut.mcap'
+    proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (bag.exists() and bag.stat().st_size > 20_000):
+        time.sleep(0.2)
+    recorder = next(pid for pid in children_of(proc.pid)
+                    if '__node:=recorder' in command_line(pid))
+    os.kill(recorder, signal.SIGKILL)
+    _out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2
+    assert 'node recorder exited with code -9' in err
+    records = records_from_bag(bag)             # readable again after the repair
+    assert 0 < len(records) < 600
+    assert_records_equal(records, in_process(600)[:len(records)])

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import signal
 import sys
 
 from preceding_traffic.traces import TraceError
@@ -46,6 +47,9 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``trust-av``."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    # Ctrl-C must always reach us (a background start inherits SIGINT as ignored): long
+    # commands stop what they started and finish their files on the way out.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format='%(levelname)s %(name)s: %(message)s')
     try:

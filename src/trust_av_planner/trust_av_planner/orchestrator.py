@@ -225,6 +225,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Empty
 
@@ -238,7 +239,10 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
         os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
         graph.start()
         context = Context()
-        rclpy.init(context=context, domain_id=domain)
+        # No rclpy signal handler: SIGINT must reach us as KeyboardInterrupt so that the
+        # finally block below stops the nodes and finishes the recording.
+        rclpy.init(context=context, domain_id=domain,
+                   signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node('orchestrator', context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import signal
 import sys
 import typing
 from collections.abc import Callable, Sequence
@@ -21,6 +22,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -210,7 +212,12 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     exit code 2; anything else propagates with its traceback, so the orchestrator can name
     the node that died. SIGINT ends the node cleanly (exit code 0).
     """
-    rclpy.init(args=args if args is not None else sys.argv)
+    # rclpy's own SIGINT handler shuts the context down asynchronously, which races with the
+    # next wait ("the given context is not valid"); Python's KeyboardInterrupt does not. Set
+    # it explicitly: a process started in the background inherits SIGINT as ignored.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    rclpy.init(args=args if args is not None else sys.argv,
+               signal_handler_options=SignalHandlerOptions.NO)
     node = None
     # SingleThreadedExecutor, not rclpy.experimental.EventsExecutor: the latter stepped the
     # graph 1.5x faster but once aborted at shutdown ('Destroying callback manager with
