@@ -168,7 +168,7 @@ def test_training_inputs_are_what_the_predictor_observes_in_the_loop(
 
     monkeypatch.setattr(GruPredictor, 'observe', recording)
     config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'gru'}})
-    records = simulate(config, truncate(shipped_trace('nycc'), 40)).records
+    records = simulate(config, truncate(shipped_trace('hwfet'), 40)).records
     x, y, steps, _ = samples_from_run(records, 10, config.planner.horizon_steps,
                                       config.shared.vehicle_length_m,
                                       config.planner.time_headway_cap_s)
