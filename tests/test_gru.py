@@ -23,6 +23,7 @@ from trust_av_planner.gru_training import (
     train_with_dagger,
 )
 from trust_av_planner.orchestrator import truncate
+from trust_av_planner.planner_core import make_predictor
 from trust_av_planner.predictors import Observation
 from trust_av_planner.predictors.gru import (
     MODELS_DIR,
@@ -44,7 +45,7 @@ def random_weights(hidden: int = 8, horizon: int = 3, history: int = 4) -> GruWe
                       bias_ih=rng.normal(size=3 * hidden), bias_hh=rng.normal(size=3 * hidden),
                       out_weight=rng.normal(size=(horizon, hidden)),
                       out_bias=rng.normal(size=horizon), feature_mean=np.zeros(4),
-                      feature_std=np.ones(4), history_steps=history)
+                      feature_std=np.ones(4), history_steps=history, dt_s=1.0)
 
 
 def save(weights: GruWeights, path: Path) -> Path:
@@ -88,6 +89,11 @@ def test_missing_and_mismatched_weights_are_named(tmp_path: Path) -> None:
     np.savez(broken, weight_ih=np.zeros((3, 4)))
     with pytest.raises(ModelError, match=r'broken\.npz: not a GRU weights file'):
         load_weights(broken, 3)
+    with pytest.raises(ModelError, match=r'dt_s = 1 s, but the planner runs at dt_s = 0\.5 s'):
+        load_weights(save(random_weights(), tmp_path / 'dt.npz'), 3, dt_s=0.5)
+    shipped_step = load_run_config(overrides={'planner': {'predictor': 'gru', 'dt_s': 0.5}})
+    with pytest.raises(ModelError, match=r'gru_plan_estimator\.npz: trained at dt_s = 1 s'):
+        make_predictor(shipped_step.planner)   # what the simulator and the planner node call
     config = load_run_config(overrides={'planner': {'predictor': 'gru',
                                                     'gru_model': str(tmp_path / 'x.npz')}})
     with pytest.raises(ModelError, match=r'x\.npz: GRU weights file not found'):

@@ -54,6 +54,10 @@ class Dataset:
     targets: np.ndarray
     validation: np.ndarray
     ca_predictions: np.ndarray
+    dt_s: float  # control step of the runs
+
+
+ARRAY_FIELDS = ('inputs', 'targets', 'validation', 'ca_predictions')
 
 
 def samples_from_run(records: Sequence[StepRecord], history: int, horizon: int,
@@ -107,13 +111,18 @@ def build_dataset(config: RunConfig, settings: TrainingSettings,
             done += 1
             if on_run is not None:
                 on_run(done, total)
-    return Dataset(*(np.concatenate([p[i] for p in parts]) for i in range(4)))
+    arrays = {name: np.concatenate([p[i] for p in parts])
+              for i, name in enumerate(ARRAY_FIELDS)}
+    return Dataset(**arrays, dt_s=config.planner.dt_s)
 
 
 def merge(a: Dataset, b: Dataset) -> Dataset:
-    """Both datasets' samples."""
-    return Dataset(*(np.concatenate([getattr(a, f.name), getattr(b, f.name)])
-                     for f in dataclasses.fields(Dataset)))
+    """Both datasets' samples (runs at the same control step)."""
+    if a.dt_s != b.dt_s:
+        raise ValueError(f'cannot merge datasets at dt_s {a.dt_s} and {b.dt_s} s')
+    arrays = {name: np.concatenate([getattr(a, name), getattr(b, name)])
+              for name in ARRAY_FIELDS}
+    return Dataset(**arrays, dt_s=a.dt_s)
 
 
 def train_with_dagger(config: RunConfig, settings: TrainingSettings, work_dir: Path,
@@ -218,7 +227,8 @@ def train(dataset: Dataset, settings: TrainingSettings,
                 bias_hh=gru.bias_hh_l0.detach().numpy().copy(),
                 out_weight=head.weight.detach().numpy().copy(),
                 out_bias=head.bias.detach().numpy().copy(),
-                feature_mean=mean, feature_std=std, history_steps=settings.history_steps))
+                feature_mean=mean, feature_std=std, history_steps=settings.history_steps,
+                dt_s=dataset.dt_s))
         if on_epoch is not None:
             on_epoch(epoch + 1, settings.epochs)
     assert best is not None
@@ -240,7 +250,7 @@ def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSe
     card = {
         'model': 'one-layer GRU + linear read-out (Ozkan & Ma, eqs. 6-7)',
         'features': list(FEATURES), 'history_steps': weights.history_steps,
-        'hidden': weights.hidden, 'horizon_steps': weights.horizon_steps,
+        'hidden': weights.hidden, 'horizon_steps': weights.horizon_steps, 'dt_s': weights.dt_s,
         'data': {'traces': list(settings.traces), 'alphas': list(settings.alphas),
                  'runs': 'in-process TAC-CA closed loops with the shipped config/trust_av.yaml, '
                          f'then {settings.dagger_rounds} DAgger round(s): TAC-GRU closed loops '

@@ -26,7 +26,7 @@ def make_predictor(config: PlannerConfig) -> Predictor:
                                              config.accel_max_mps2)
     if config.predictor == 'gru':
         return GruPredictor.from_file(resolve_model(config.gru_model), config.horizon_steps,
-                                      config.accel_min_mps2, config.accel_max_mps2)
+                                      config.dt_s, config.accel_min_mps2, config.accel_max_mps2)
     raise ValueError(f'unknown predictor {config.predictor!r}')
 
 

@@ -47,6 +47,7 @@ class GruWeights:
     feature_mean: np.ndarray  # (features,)
     feature_std: np.ndarray   # (features,)
     history_steps: int
+    dt_s: float  # control step the model was trained at (H and N are counted in it)
 
     @property
     def hidden(self) -> int:
@@ -65,12 +66,18 @@ def resolve_model(name: str) -> Path:
     return path if path.is_absolute() or path.parent != Path('.') else MODELS_DIR / name
 
 
-def load_weights(path: Path, horizon_steps: int) -> GruWeights:
+def load_weights(path: Path, horizon_steps: int, *, dt_s: float | None = None) -> GruWeights:
     """Load and check a weights file.
 
+    Args:
+        path: the ``.npz`` file.
+        horizon_steps: the planner's N (the model must predict exactly N accelerations).
+        dt_s: the planner's control step in s; if given, it must be the one the model was
+            trained at (its 10-step history would otherwise span another time).
+
     Raises:
-        ModelError: missing file, missing array, or shapes that do not fit each other or the
-            planner's horizon.
+        ModelError: missing file, missing array, shapes that do not fit each other or the
+            planner's horizon, or another control step.
     """
     if not path.exists():
         raise ModelError(f'{path}: GRU weights file not found (train one with '
@@ -79,11 +86,12 @@ def load_weights(path: Path, horizon_steps: int) -> GruWeights:
         with np.load(path) as data:
             arrays = {k: np.asarray(data[k], dtype=float) for k in ARRAYS}
             history = int(data['history_steps'])
+            trained_dt_s = float(data['dt_s'])
     except KeyError as err:
         raise ModelError(f'{path}: not a GRU weights file (missing array {err})') from err
     except (OSError, ValueError) as err:
         raise ModelError(f'{path}: cannot read GRU weights ({err})') from err
-    weights = GruWeights(**arrays, history_steps=history)
+    weights = GruWeights(**arrays, history_steps=history, dt_s=trained_dt_s)
     h, f = weights.hidden, len(FEATURES)
     expected = {'weight_ih': (3 * h, f), 'weight_hh': (3 * h, h), 'bias_ih': (3 * h,),
                 'bias_hh': (3 * h,), 'out_weight': (horizon_steps, h),
@@ -93,8 +101,13 @@ def load_weights(path: Path, horizon_steps: int) -> GruWeights:
         if actual != shape:
             raise ModelError(f'{path}: {name} has shape {actual}, expected {shape} '
                              f'(hidden {h}, {f} features, horizon {horizon_steps} steps)')
-    if history < 1 or np.any(weights.feature_std <= 0):
-        raise ModelError(f'{path}: invalid history_steps or feature_std')
+    if history < 1:
+        raise ModelError(f'{path}: history_steps must be >= 1, got {history}')
+    if np.any(weights.feature_std <= 0):
+        raise ModelError(f'{path}: feature_std must be > 0, got {weights.feature_std.tolist()}')
+    if dt_s is not None and abs(trained_dt_s - dt_s) > 1e-9:
+        raise ModelError(f'{path}: trained at dt_s = {trained_dt_s:g} s, but the planner runs at '
+                         f'dt_s = {dt_s:g} s (retrain with `trust-av train-gru` at that step)')
     return weights
 
 
@@ -139,10 +152,12 @@ class GruPredictor:
         self._history: deque[np.ndarray] = deque(maxlen=weights.history_steps)
 
     @classmethod
-    def from_file(cls, path: Path, horizon_steps: int, accel_min_mps2: float,
+    def from_file(cls, path: Path, horizon_steps: int, dt_s: float, accel_min_mps2: float,
                   accel_max_mps2: float) -> GruPredictor:
-        """Load weights (checked against the horizon) and build the predictor."""
-        return cls(load_weights(path, horizon_steps), accel_min_mps2, accel_max_mps2)
+        """Load weights (checked against the horizon and the control step) and build the
+        predictor."""
+        return cls(load_weights(path, horizon_steps, dt_s=dt_s), accel_min_mps2,
+                   accel_max_mps2)
 
     def reset(self) -> None:
         """Forget the history."""
