@@ -133,28 +133,44 @@ def command_line(pid: int) -> str:
     return (Path('/proc') / str(pid) / 'cmdline').read_bytes().replace(b'\0', b' ').decode()
 
 
+def node_pid(orchestrator: int, node: str) -> int:
+    """Pid of a node process started by the orchestrator (waits for it to appear)."""
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        for pid in children_of(orchestrator):
+            if f'__node:={node}' in command_line(pid):
+                return pid
+        time.sleep(0.2)
+    raise AssertionError(f'{node} process not found')
+
+
+def wait_for_bag(bag: Path, size: int = 20_000) -> None:
+    """Wait until the recording has some steps in it."""
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (bag.exists() and bag.stat().st_size > size):
+        time.sleep(0.2)
+
+
+def assert_gone(pids: list[int]) -> None:
+    """None of ``pids`` is alive (zombies awaiting their reaper count as gone)."""
+    for pid in pids:
+        assert not Path(f'/proc/{pid}').exists() or 'Z' in (
+            Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0])
+
+
 def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
     bag = tmp_path / 'killed.mcap'
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    planner = None
-    while time.monotonic() < deadline and planner is None:
-        time.sleep(0.2)
-        for pid in children_of(proc.pid):
-            if '__node:=planner' in command_line(pid):
-                planner = pid
-    assert planner is not None, 'planner process not found'
-    time.sleep(5.0)                 # let it run some steps
+    planner = node_pid(proc.pid, 'planner')
+    wait_for_bag(bag)                # let it run some steps
     children = children_of(proc.pid)
     os.kill(planner, signal.SIGKILL)
     _out, err = proc.communicate(timeout=120)
     assert proc.returncode == 2
     assert 'node planner exited with code -9' in err
     assert err.startswith('trust-av run: error:')
-    for pid in children:                                   # no orphans
-        assert not Path(f'/proc/{pid}').exists() or 'Z' in (
-            Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0])
+    assert_gone(children)                                  # no orphans
     records = records_from_bag(bag)                         # readable up to the kill
     assert 0 < len(records) < 600
     assert_records_equal(records, in_process(600)[:len(records)])
@@ -170,17 +186,13 @@ def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path) -> None:
     bag = tmp_path / 'interrupted.mcap'
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (bag.exists() and bag.stat().st_size > 20_000):
-        time.sleep(0.2)
+    wait_for_bag(bag)
     children = children_of(proc.pid)
     proc.send_signal(signal.SIGINT)
     _out, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert 'interrupted' in err and 'Traceback' not in err
-    for pid in children:
-        assert not Path(f'/proc/{pid}').exists() or 'Z' in (
-            Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0])
+    assert_gone(children)
     with AnyReader([bag]) as reader:                # finished normally: it has a summary
         assert reader.message_count > 0
     records = records_from_bag(bag)
@@ -205,12 +217,8 @@ def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
     bag = tmp_path / 'cut.mcap'
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (bag.exists() and bag.stat().st_size > 20_000):
-        time.sleep(0.2)
-    recorder = next(pid for pid in children_of(proc.pid)
-                    if '__node:=recorder' in command_line(pid))
-    os.kill(recorder, signal.SIGKILL)
+    wait_for_bag(bag)
+    os.kill(node_pid(proc.pid, 'recorder'), signal.SIGKILL)
     _out, err = proc.communicate(timeout=120)
     assert proc.returncode == 2
     assert 'node recorder exited with code -9' in err

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import tempfile
 from pathlib import Path
 
@@ -136,8 +135,6 @@ def test_reduced_retraining_with_dagger_reproduces_itself(tmp_path: Path) -> Non
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not os.environ.get('TRUST_AV_GRU_FULL_RETRAIN'),
-                    reason='full retraining takes about 100 s; set TRUST_AV_GRU_FULL_RETRAIN=1')
 def test_retraining_reproduces_the_shipped_model() -> None:
     """Issue 4, full tier: same seed, same data -> the shipped validation RMSE to 1e-6."""
     card = json.loads(SHIPPED.with_suffix('.json').read_text())

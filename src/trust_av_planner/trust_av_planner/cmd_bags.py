@@ -7,7 +7,8 @@ from pathlib import Path
 
 from preceding_traffic.bags import write_trace_bag
 from preceding_traffic.traces import SHIPPED_TRACES, TraceConfig, read_samples, trace_path
-from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.cmd_simulate import add_params_file_option
+from trust_av_planner.config import load_run_config
 
 
 def run(args: argparse.Namespace) -> int:
@@ -34,6 +35,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('out', type=Path, help='bag directory to create (must not exist)')
     parser.add_argument('--topic', default=None,
                         help="topic name (default: the params file's bag_topic)")
-    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
-                        help='ROS 2 params file (default: %(default)s)')
+    add_params_file_option(parser)
     parser.set_defaults(func=run)

@@ -11,7 +11,8 @@ from typing import Any
 
 from preceding_traffic.traces import load_trace
 from trust_av_planner import reproduce
-from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.cmd_simulate import add_params_file_option
+from trust_av_planner.config import load_run_config
 from trust_av_planner.errors import TrustAvError
 from trust_av_planner.nmpc import PREDICTORS as KNOWN_PREDICTORS
 from trust_av_planner.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
@@ -139,7 +140,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='Ray cluster address (default: start a local one)')
     parser.add_argument('--results-dir', type=Path, default=Path('results/paper'),
                         help='where tables, figures and the cache go (default: %(default)s)')
-    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
-                        help='ROS 2 params file (default: %(default)s)')
+    add_params_file_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(func=run)

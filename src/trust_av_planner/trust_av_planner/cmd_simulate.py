@@ -23,6 +23,12 @@ def alpha_value(text: str) -> float:
     return value
 
 
+def add_params_file_option(parser: argparse.ArgumentParser) -> None:
+    """``--params-file``, defaulting to the shipped config/trust_av.yaml."""
+    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
+                        help='ROS 2 params file (default: %(default)s)')
+
+
 def add_run_options(parser: argparse.ArgumentParser) -> None:
     """Options shared by the commands that run one closed loop."""
     parser.add_argument('--trace', default=None,
@@ -33,8 +39,7 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="explicability weight in [0, 1] (default: the params file's)")
     parser.add_argument('--predictor', choices=PREDICTORS, default=None,
                         help='estimator of the plan the human expects (default: params file)')
-    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
-                        help='ROS 2 params file (default: %(default)s)')
+    add_params_file_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
 
 

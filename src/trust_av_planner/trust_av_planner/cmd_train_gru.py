@@ -9,7 +9,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.cmd_simulate import add_params_file_option
+from trust_av_planner.config import load_run_config
 from trust_av_planner.gru_training import TrainingSettings, save_model, train_with_dagger
 from trust_av_planner.predictors.gru import MODELS_DIR
 from trust_av_planner.progress import ProgressBar
@@ -67,6 +68,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='weights file to write (default: the shipped model)')
     parser.add_argument('--epochs', type=int, default=None, help='override the epochs')
     parser.add_argument('--seed', type=int, default=None, help='override the seed')
-    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
-                        help='ROS 2 params file (default: %(default)s)')
+    add_params_file_option(parser)
     parser.set_defaults(func=run)

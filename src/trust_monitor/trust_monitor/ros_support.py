@@ -31,17 +31,22 @@ from trust_monitor.params import ParamsError, build_config
 
 T = TypeVar('T')
 
-STEP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+HISTORY_DEPTH = 1000
+"""Samples kept per topic on both sides. The recorder is not part of the lock-step, so it may
+fall behind the graph while the machine is busy; a reader whose history overflows drops
+samples even on a reliable topic (seen with depth 10 on a loaded machine: 6 steps lost)."""
+
+STEP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
-"""Every per-step topic: nothing may be lost, and a late subscriber still gets the last
-steps (in lock-step at most one or two steps are in flight)."""
+"""Every per-step topic: nothing may be lost, and a late subscriber still gets the first
+steps."""
 
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
-"""/clock: reliable and volatile (compatible with rclpy's own time-source subscriber); depth
-10 so that the recorder gets every tick even when two steps follow closely."""
+"""/clock: reliable and volatile (compatible with rclpy's own time-source subscriber), deep
+enough that a lagging recorder gets every tick."""
 
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE,
