@@ -225,3 +225,18 @@ def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
     records = records_from_bag(bag)             # readable again after the repair
     assert 0 < len(records) < 600
     assert_records_equal(records, in_process(600)[:len(records)])
+
+
+@pytest.mark.parametrize('bag_name', ['commute_am', 'commute_pm'])
+def test_commute_bag_replays_through_the_graph(tmp_path: Path, bag_name: str) -> None:
+    """Issue 6: a real commute bag as the preceding vehicle, graph == in-process."""
+    trace_arg = str(Path(__file__).resolve().parents[1] / 'bags' / bag_name)
+    bag = tmp_path / 'replay.mcap'
+    command = run_command(bag, '--max-steps', '60')
+    command[command.index('us06')] = trace_arg
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'ca'}})
+    trace = truncate(load_trace(trace_arg, config.planner.dt_s, config.trace), 60)
+    assert trace.name == bag_name
+    assert_records_equal(records_from_bag(bag), simulate(config, trace).records)
