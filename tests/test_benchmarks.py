@@ -23,3 +23,18 @@ def test_benchmark_suite_smoke(tmp_path: Path) -> None:
     assert core['baseline']['max_plan_difference_mps2'] < 1e-4
     assert results['parts']['sweep']['cases'] == 5
     assert 'speed-up at p99' in out.with_suffix('.md').read_text()
+
+
+def test_soak_short_version(tmp_path: Path) -> None:
+    """Issue 7's soak, short: every node's RSS grows by < 20 MB from the baseline to the end
+    (the full hour: `python benchmarks/soak.py`)."""
+    out = tmp_path / 'soak.json'
+    proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'soak.py'),
+                           '--duration-s', '300', '--baseline-s', '60', '--out', str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    figures = json.loads(out.read_text())
+    assert set(figures['growth_mb']) == {'preceding_traffic', 'planner', 'ego_plant',
+                                         'human_driver', 'trust_monitor', 'recorder'}
+    assert figures['steps'] >= 300
+    assert all(mb < 20.0 for mb in figures['growth_mb'].values()), figures['growth_mb']

@@ -1,0 +1,113 @@
+"""Soak: a long trace through the node graph, with every node's memory sampled as it runs.
+
+Builds a trace of at least ``--duration-s`` (default one hour of sim time) by chaining the
+two commute trips (am, pm, am, ...; each trip's time shifted to follow the previous one),
+runs the whole graph over it, samples the resident memory (VmRSS) of every node process
+once per simulated minute, and reports each node's RSS at minute 5 and at the end. Writes
+benchmarks/results_soak.json (or --out). Issue 7 asks for growth < 20 MB per node.
+
+    python benchmarks/soak.py [--duration-s 3600]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+from preceding_traffic.traces import TraceConfig, load_trace, read_samples, trace_path
+from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.orchestrator import run_graph
+
+
+def chained_trace(path: Path, duration_s: float, config: TraceConfig) -> float:
+    """Write am, pm, am, ... back to back (1 s between trips) until ``duration_s``."""
+    rows: list[tuple[float, float]] = []
+    offset = 0.0
+    trips = ('commute_am', 'commute_pm')
+    k = 0
+    while offset < duration_s:
+        times, speeds = read_samples(trace_path(trips[k % 2]), config)
+        shift = offset - times[0]
+        rows += [(float(t + shift), float(v)) for t, v in zip(times, speeds, strict=True)]
+        offset = rows[-1][0] + 1.0
+        k += 1
+    path.write_text('time_s,speed_mps\n' + ''.join(f'{t!r},{v!r}\n' for t, v in rows))
+    return rows[-1][0]
+
+
+def node_rss_mb() -> dict[str, float]:
+    """VmRSS of every child process of this one, by ROS node name."""
+    out = {}
+    me = os.getpid()
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            ppid = int((entry / 'stat').read_text().rsplit(')', 1)[1].split()[1])
+            if ppid != me:
+                continue
+            cmdline = (entry / 'cmdline').read_bytes().split(b'\0')
+            status = (entry / 'status').read_text()
+        except OSError:
+            continue
+        name = next((c.decode().split(':=')[1] for c in cmdline
+                     if c.startswith(b'__node:=')), entry.name)
+        rss = next(int(line.split()[1]) for line in status.splitlines()
+                   if line.startswith('VmRSS:'))
+        out[name] = rss / 1024
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--duration-s', type=float, default=3600.0)
+    parser.add_argument('--baseline-s', type=float, default=300.0,
+                        help='sim time of the first memory reading (default: minute 5)')
+    parser.add_argument('--out', type=Path, default=Path(__file__).parent / 'results_soak.json')
+    args = parser.parse_args(argv)
+    config = load_run_config()
+    samples: dict[int, dict[str, float]] = {}
+    lock = threading.Lock()
+    with tempfile.TemporaryDirectory() as tmp:
+        csv = Path(tmp) / 'soak.csv'
+        end = chained_trace(csv, args.duration_s, config.trace)
+        trace = load_trace(str(csv), config.planner.dt_s, config.trace)
+        every = max(1, round(60.0 / trace.dt_s))
+        baseline_step = round(args.baseline_s / trace.dt_s)
+
+        def on_step(done: int, total: int) -> None:
+            if done % every == 0 or done in (baseline_step, total):
+                with lock:
+                    samples[done] = node_rss_mb()
+
+        run = run_graph(config, str(csv), trace, DEFAULT_PARAMS_FILE, Path(tmp) / 'soak.mcap',
+                        on_step=on_step)
+    steps = sorted(samples)
+    base = min(steps, key=lambda s: abs(s - baseline_step))
+    last = steps[-1]
+    growth = {node: samples[last][node] - samples[base][node]
+              for node in samples[base] if node in samples[last]}
+    figures = {'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
+               'cpu_count': os.cpu_count(), 'sim_s': end, 'steps': trace.steps,
+               'wall_s': run.wall_s, 'baseline_step': base, 'last_step': last,
+               'rss_mb_at_baseline': samples[base], 'rss_mb_at_end': samples[last],
+               'growth_mb': growth, 'samples': {str(k): v for k, v in samples.items()}}
+    print(f'soak: {trace.steps} steps ({end / 60:.0f} min of sim time) in {run.wall_s:.0f} s '
+          'wall')
+    for node, mb in sorted(growth.items()):
+        print(f'  {node:18s} RSS {samples[base][node]:7.1f} MB at step {base} -> '
+              f'{samples[last][node]:7.1f} MB at step {last}: {mb:+.1f} MB')
+    args.out.write_text(json.dumps(figures, indent=2) + '\n')
+    print(f'wrote {args.out}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
