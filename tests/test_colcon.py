@@ -73,3 +73,23 @@ def test_installed_executable_comes_up(install: Path, package: str, executable: 
     assert proc.returncode == 0, ''.join(lines) + rest
     assert 'Traceback' not in ''.join(lines) + rest
     shutil.rmtree(tmp_path / 'ros_log', ignore_errors=True)
+
+
+@pytest.mark.parametrize(('args', 'message'), [
+    (['-p', 'horizon_steps:=-3'], 'horizon_steps out of range. Min: 1, Max: 50'),
+    (['--params-file', 'OVERRIDE'], 'alpha out of range Min: 0.0, Max: 1.0'),
+    (['-p', 'speed_min_mps:=50.0'], 'need 0 <= speed_min_mps < speed_max_mps'),
+])
+def test_node_rejects_bad_parameters_at_start_up(tmp_path: Path, args: list[str],
+                                                 message: str) -> None:
+    """Issue 7: a node started with a bad value stops at once, naming it (exit 2)."""
+    override = tmp_path / 'override.yaml'
+    override.write_text('planner:\n  ros__parameters:\n    alpha: 1.5\n')
+    args = [str(override) if a == 'OVERRIDE' else a for a in args]
+    env = dict(os.environ, ROS_DOMAIN_ID='230', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_LOG_DIR=str(tmp_path / 'ros_log'))
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.planner_node', '--ros-args',
+                           '--params-file', str(PARAMS), *args], capture_output=True,
+                          text=True, timeout=60, env=env)
+    assert proc.returncode == 2
+    assert message in proc.stderr and 'Traceback' not in proc.stderr

@@ -18,6 +18,7 @@ from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -231,7 +232,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     try:
         try:
             node = factory()
-        except user_errors as err:
+        except (*user_errors, InvalidParameterValueException) as err:
             print(f'error: {err}', file=sys.stderr)
             return 2
         executor.add_node(node)
