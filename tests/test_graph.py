@@ -257,3 +257,25 @@ def test_eight_parallel_runs_are_isolated_and_equal(tmp_path: Path) -> None:
     reference = in_process(20)
     for bag in bags:
         assert_records_equal(records_from_bag(bag), reference)
+
+
+def test_solver_time_out_publishes_the_fallback_and_goes_on(tmp_path: Path) -> None:
+    """Issue 7: a tiny CPU budget makes every NMPC solve overrun: the planner publishes the
+    fallback plan with the reason in its status, the run completes, the metrics count it."""
+    params = tmp_path / 'tiny_budget.yaml'
+    params.write_text((Path(__file__).resolve().parents[1] / 'config' / 'trust_av.yaml')
+                      .read_text().replace('solver_cpu_budget_s: 0.02',
+                                           'solver_cpu_budget_s: 0.000000001'))
+    bag = tmp_path / 'fallback.mcap'
+    proc = subprocess.run(run_command(bag, '--max-steps', '30', '--params-file', str(params)),
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    records = records_from_bag(bag)
+    assert len(records) == 30
+    moving = [r for r in records if r.solver_iterations > 0]
+    assert moving and all(r.solver_status.startswith('fallback: CPU budget exceeded')
+                          for r in moving)
+    assert 'NMPC fallback steps' in proc.stdout
+    fallback_line = next(line for line in proc.stdout.splitlines()
+                         if line.startswith('NMPC fallback steps'))
+    assert int(fallback_line.split()[-1]) >= len(moving)

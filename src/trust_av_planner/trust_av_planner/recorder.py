@@ -12,6 +12,7 @@ of ``expected_steps`` steps.
 
 from __future__ import annotations
 
+import logging
 import struct
 import sys
 from dataclasses import dataclass
@@ -24,6 +25,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from rosbags.typesys import Stores, get_typestore
 
+LOG = logging.getLogger(__name__)
 ROS_DISTRO = 'jazzy'
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 _INFINITE = '{sec: 2147483647, nsec: 4294967295}'
@@ -135,8 +137,10 @@ def repair_mcap(path: Path) -> int:
                     channels[record.id] = record
                 elif isinstance(record, Message):
                     messages.append(record)
-    except (McapError, struct.error, EOFError, ValueError):
-        pass  # expected: the stream ends inside a record where the writer was killed
+    except (McapError, struct.error, EOFError, ValueError) as err:
+        # Expected: the stream ends inside the record the writer was writing when killed.
+        LOG.warning('%s: recording ends in a truncated record (%s); keeping the %d complete '
+                    'messages before it', path, err, len(messages))
     tmp = path.with_suffix('.mcap.tmp')
     with tmp.open('wb') as out:
         writer = Writer(out, compression=CompressionType.ZSTD)
