@@ -5,7 +5,9 @@ Publishes, once per step t (sim time): ``/clock``, the preceding vehicle's odome
 (the trace's future; a replayed bag's recorded future). It starts after ``/sim/start`` and
 advances to t + 1 only when the step's outputs are in: ego and human odometry stamped
 t + dt, the trust and the planner status stamped t (lock-step, see
-:mod:`trust_monitor.graph_interface`). After the last step it sets ``finished`` and exits 0.
+:mod:`trust_monitor.graph_interface`). After the last step it logs ``done`` and keeps its
+publishers alive until it is stopped: a writer that exits takes the samples a slow
+subscriber (the recorder) has not acknowledged yet with it.
 """
 
 from __future__ import annotations
@@ -72,7 +74,7 @@ class TrafficNode(Node):
         self.trace = trace
         self.position_m = self.run.initial_position_m
         self.step = -1
-        self.finished = False
+        self.done = False
         self.buffer = StepBuffer(['ego', 'human', 'trust', 'status'])
         self.pub_clock = self.create_publisher(Clock, '/clock', QOS['CLOCK'])
         self.pub_odom = self.create_publisher(Odometry, '/preceding_vehicle/odom', QOS['STEP'])
@@ -126,7 +128,7 @@ class TrafficNode(Node):
             self.position_m += float(self.trace.speeds_mps[self.step]) * self.run.dt_s
             if self.step + 1 >= self.trace.steps:
                 self.get_logger().info(f'done: {self.trace.steps} steps')
-                self.finished = True
+                self.done = True
             else:
                 self.publish_step(self.step + 1)
 

@@ -8,8 +8,9 @@ domain, so parallel runs never share one) with localhost-only discovery.
 
 Sequence: start the nodes; wait until every topic of the table has its publishers and
 subscribers (timeout: a clear error naming what is missing); publish ``/sim/start``; follow
-``/clock`` for progress; when the traffic node has stepped through the trace, wait for the
-recorder to finish its file; stop the rest in order (SIGINT, then SIGTERM, then SIGKILL
+``/clock`` for progress; the run is complete when the recorder, holding every message of
+every step, finishes its file and exits (until then every publisher stays up, so nothing
+unacknowledged is lost); stop the rest in order (SIGINT, then SIGTERM, then SIGKILL
 after grace periods). If any node dies, everything is stopped the same way, the recording
 is finished (or repaired if the recorder itself died) and :class:`GraphError` names the
 node and its last log lines.
@@ -261,26 +262,22 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
             _wait_connected(graph, node, executor, startup_timeout_s)
             startup = time.monotonic() - started
             start_pub.publish(Empty())
+            # The run is complete when the recorder holds every message of every step and
+            # exits by itself; the other nodes keep their publishers up until then.
             last_step, last_change = -1, time.monotonic()
-            while graph.by_name('preceding_traffic').popen.poll() is None:
+            recorder = graph.by_name('recorder').popen
+            while recorder.poll() is None:
                 executor.spin_once(timeout_sec=0.05)
-                graph.check_alive({'preceding_traffic', 'recorder'})
+                graph.check_alive({'recorder'})
                 if progress['step'] != last_step:
                     last_step, last_change = progress['step'], time.monotonic()
                 elif time.monotonic() - last_change > step_timeout_s:
-                    raise GraphError(f'no progress for {step_timeout_s:g} s at step '
-                                     f'{last_step}; node logs in {graph.log_dir}')
-            done = {'preceding_traffic', 'recorder'}
-            graph.check_alive(done)
-            recorder = graph.by_name('recorder').popen
-            deadline = time.monotonic() + step_timeout_s
-            while recorder.poll() is None and time.monotonic() < deadline:
-                executor.spin_once(timeout_sec=0.05)
-                graph.check_alive(done)
-            if recorder.poll() is None:
-                raise GraphError('node recorder did not receive every message of the run in '
-                                 f'{step_timeout_s:g} s')
-            graph.check_alive(done)
+                    what = ('node recorder did not receive every message of the run'
+                            if last_step + 1 >= trace.steps else
+                            f'no progress at step {last_step}')
+                    raise GraphError(f'{what} in {step_timeout_s:g} s; node logs in '
+                                     f'{graph.log_dir}')
+            graph.check_alive({'recorder'})
             ok = True
         finally:
             node.destroy_node()

@@ -38,9 +38,9 @@ def _qos_yaml(depth: int, durability: int) -> str:
             '  avoid_ros_namespace_conventions: false\n')
 
 
-QOS_YAML = {'STEP': _qos_yaml(1000, 1), 'CLOCK': _qos_yaml(1000, 2)}
+QOS_YAML = {'STEP': _qos_yaml(1000, 1), 'CLOCK': _qos_yaml(1000, 1)}
 """rosbag2's ``offered_qos_profiles`` (rmw enums: history 1 keep-last, reliability 1
-reliable, durability 1 transient-local / 2 volatile), matching :mod:`trust_monitor.ros_support`."""
+reliable, durability 1 transient-local), matching :mod:`trust_monitor.ros_support`."""
 
 
 def header_stamp_ns(data: bytes) -> int:

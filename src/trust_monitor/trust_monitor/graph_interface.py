@@ -87,7 +87,7 @@ JOINT_NAME = 'longitudinal'
 def topic_table_markdown() -> str:
     """The README's topic table, generated from :data:`TOPICS` (a test keeps them equal)."""
     qos = {'STEP': 'reliable, transient local, keep last 1000',
-           'CLOCK': 'reliable, volatile, keep last 1000',
+           'CLOCK': 'reliable, transient local, keep last 1000',
            'LATCHED': 'reliable, transient local, keep last 1'}
     lines = ['| topic | type | publisher | subscribers | QoS | rate | units |',
              '|---|---|---|---|---|---|---|']

@@ -45,9 +45,10 @@ steps."""
 
 CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH,
                        reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
-"""/clock: reliable and volatile (compatible with rclpy's own time-source subscriber), deep
-enough that a lagging recorder gets every tick."""
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""/clock: reliable and transient local, so that a subscriber whose match with the traffic
+node completes after the first tick still gets it (seen with 8 runs at once); rclpy's own
+volatile time-source subscriber is compatible with it."""
 
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE,
