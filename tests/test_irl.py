@@ -1,0 +1,37 @@
+"""Inverse KKT recovers known driver weights from synthetic demonstrations of our MPC."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from human_driver_sim.driver_mpc import DriverConfig, DriverMpc
+from human_driver_sim.irl import Demonstration, fit_inverse_kkt
+
+CONFIG = DriverConfig(dt_s=1.0, horizon_steps=3, standstill_gap_m=2.0, speed_min_mps=0.0,
+                      speed_max_mps=33.0, weight_acceleration=1.0, weight_desired_speed=0.02,
+                      weight_relative_speed=0.4, weight_relative_distance=0.15,
+                      time_headway_s=1.5, accel_min_mps2=-6.0, accel_max_mps2=3.0,
+                      gap_slack_weight=1000.0, solver_max_iter=50,
+                      fallback_gap_gain_per_s2=0.3, fallback_speed_gain_per_s=0.8)
+TOLERANCE = 0.10  # relative error on each normalised weight
+
+
+def test_inverse_kkt_recovers_weights() -> None:
+    rng = np.random.default_rng(3)
+    mpc = DriverMpc(CONFIG)
+    demos = []
+    for _ in range(40):
+        speed = rng.uniform(10.0, 28.0)
+        state = (speed * 1.5 + rng.uniform(-8.0, 8.0) + 5.0, speed, speed + rng.uniform(-3, 3))
+        expected = np.full(3, rng.uniform(-1.0, 1.0))
+        result = mpc.solve(*state, expected)
+        mpc.reset()
+        if result.success and np.all(np.abs(result.plan_mps2) < 2.9):
+            demos.append(Demonstration(*state, expected, result.plan_mps2))
+    assert len(demos) >= 20
+    fitted = fit_inverse_kkt(CONFIG, demos)
+    truth = CONFIG.weights / CONFIG.weight_acceleration
+    assert np.all(np.abs(fitted - truth) <= TOLERANCE * truth), (fitted, truth)
+    assert dataclasses.replace(CONFIG, weight_relative_speed=float(fitted[2]))
