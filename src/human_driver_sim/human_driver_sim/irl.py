@@ -9,13 +9,15 @@ weights are the non-negative least-squares solution of the stacked stationarity 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import dataclasses
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from human_driver_sim.driver_mpc import DriverConfig, features
+from human_driver_sim.car_following import FollowingPair
+from human_driver_sim.driver_mpc import DriverConfig, DriverMpc, features
 
 
 @dataclass(frozen=True)
@@ -46,10 +48,10 @@ def _gradient_function(config: DriverConfig) -> ca.Function:
 def _nnls(a: np.ndarray, b: np.ndarray, iterations: int = 5000) -> np.ndarray:
     """Non-negative least squares by projected gradient (no scipy)."""
     x = np.maximum(np.linalg.lstsq(a, b, rcond=None)[0], 0.0)
-    step = 1.0 / max(np.linalg.norm(a, 2) ** 2, 1e-12)
+    step = 1.0 / max(float(np.linalg.norm(a, 2)) ** 2, 1e-12)
     for _ in range(iterations):
         x = np.maximum(x - step * (a.T @ (a @ x - b)), 0.0)
-    return x
+    return np.asarray(x, dtype=float)
 
 
 def fit_inverse_kkt(config: DriverConfig, demos: Sequence[Demonstration]) -> np.ndarray:
@@ -68,3 +70,109 @@ def fit_inverse_kkt(config: DriverConfig, demos: Sequence[Demonstration]) -> np.
     scale[scale == 0.0] = 1.0
     rest = _nnls(stacked[:, 1:] / scale, -stacked[:, 0])
     return np.concatenate([[1.0], rest / scale])
+
+
+def demonstrations(pair: FollowingPair, horizon_steps: int) -> list[Demonstration]:
+    """Demonstrations from one recorded pair (already resampled to the control step).
+
+    The plan the follower expects of its leader is a stand-in: constant acceleration at the
+    leader's last observed acceleration (backward difference), as the planner's CA predictor.
+    The demonstrated plan is the follower's next N realised accelerations.
+    """
+    dt = pair.dt_s
+    accel = np.diff(pair.follower_speed_mps) / dt
+    lead_accel = np.diff(pair.leader_speed_mps) / dt
+    demos = []
+    for k in range(1, len(accel) - horizon_steps + 1):
+        demos.append(Demonstration(float(pair.gap_m[k]), float(pair.follower_speed_mps[k]),
+                                   float(pair.leader_speed_mps[k]),
+                                   np.full(horizon_steps, lead_accel[k - 1]),
+                                   accel[k:k + horizon_steps].copy()))
+    return demos
+
+
+def replay_mpc(config: DriverConfig, pair: FollowingPair) -> tuple[np.ndarray, np.ndarray]:
+    """Open-loop replay: our driver MPC follows the recorded leader from the recorded start.
+
+    Returns:
+        (gap_m, speed_mps) per sample.
+    """
+    mpc = DriverMpc(config)
+    dt = pair.dt_s
+    lead = pair.leader_speed_mps
+    count = len(lead)
+    gap = np.empty(count)
+    speed = np.empty(count)
+    gap[0], speed[0] = pair.gap_m[0], pair.follower_speed_mps[0]
+    for k in range(count - 1):
+        lead_accel = (lead[k] - lead[k - 1]) / dt if k > 0 else 0.0
+        plan = mpc.solve(float(gap[k]), float(speed[k]), float(lead[k]),
+                         np.full(config.horizon_steps, lead_accel)).plan_mps2
+        new_speed = max(0.0, speed[k] + float(plan[0]) * dt)
+        travelled = 0.5 * (speed[k] + new_speed) * dt
+        gap[k + 1] = gap[k] + 0.5 * (lead[k] + lead[k + 1]) * dt - travelled
+        speed[k + 1] = new_speed
+    return gap, speed
+
+
+def rmse(a: np.ndarray, b: np.ndarray) -> float:
+    """Root-mean-square difference."""
+    return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2)))
+
+
+def nelder_mead(func: Callable[[np.ndarray], float], start: np.ndarray, *, step: float = 0.5,
+                iterations: int = 60) -> tuple[np.ndarray, float]:
+    """Derivative-free minimisation (Nelder & Mead 1965), numpy only."""
+    dim = len(start)
+    simplex = [np.asarray(start, dtype=float)]
+    simplex += [simplex[0] + step * np.eye(dim)[i] for i in range(dim)]
+    values = [func(x) for x in simplex]
+    for _ in range(iterations):
+        order = np.argsort(values)
+        simplex = [simplex[i] for i in order]
+        values = [values[i] for i in order]
+        centre = np.mean(simplex[:-1], axis=0)
+        reflected = centre + (centre - simplex[-1])
+        f_r = func(reflected)
+        if f_r < values[0]:
+            expanded = centre + 2.0 * (centre - simplex[-1])
+            f_e = func(expanded)
+            simplex[-1], values[-1] = (expanded, f_e) if f_e < f_r else (reflected, f_r)
+        elif f_r < values[-2]:
+            simplex[-1], values[-1] = reflected, f_r
+        else:
+            contracted = centre + 0.5 * (simplex[-1] - centre)
+            f_c = func(contracted)
+            if f_c < values[-1]:
+                simplex[-1], values[-1] = contracted, f_c
+            else:
+                simplex = [simplex[0] + 0.5 * (x - simplex[0]) for x in simplex]
+                values = [values[0]] + [func(x) for x in simplex[1:]]
+    best = int(np.argmin(values))
+    return simplex[best], float(values[best])
+
+
+def with_weights(config: DriverConfig, weights: np.ndarray) -> DriverConfig:
+    """The config with W replaced."""
+    return dataclasses.replace(config, weight_acceleration=float(weights[0]),
+                               weight_desired_speed=float(weights[1]),
+                               weight_relative_speed=float(weights[2]),
+                               weight_relative_distance=float(weights[3]))
+
+
+def refine_bilevel(config: DriverConfig, pairs: Sequence[FollowingPair], start: np.ndarray, *,
+                   iterations: int = 40,
+                   progress: Callable[[int], None] | None = None) -> tuple[np.ndarray, float]:
+    """Bilevel refinement: minimise mean replay gap RMSE over log(w_ds, w_rs, w_rd), w_a = 1."""
+    calls = [0]
+
+    def loss(logs: np.ndarray) -> float:
+        calls[0] += 1
+        if progress is not None:
+            progress(calls[0])
+        cfg = with_weights(config, np.concatenate([[1.0], np.exp(logs)]))
+        return float(np.mean([rmse(replay_mpc(cfg, p)[0], p.gap_m) for p in pairs]))
+
+    logs, value = nelder_mead(loss, np.log(np.maximum(start[1:], 1e-4)), step=1.0,
+                              iterations=iterations)
+    return np.concatenate([[1.0], np.exp(logs)]), value

@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     'trust_av_planner.cmd_reproduce',
     'trust_av_planner.cmd_bags',
     'trust_av_planner.cmd_train_gru',
+    'trust_av_planner.cmd_fit_driver',
 )
 """Modules that add a subcommand (in help order)."""
 
