@@ -79,9 +79,7 @@ class PlannerNode(Node):
 
     def try_plan(self) -> None:
         """Plan the next step if its inputs (and the previous step's trust) are in."""
-        candidates = sorted(ns for ns in self.buffer._items
-                            if self.buffer.ready(ns, STEP_INPUTS))
-        for ns in candidates:
+        for ns in self.buffer.ready_stamps(STEP_INPUTS):
             if self.previous_ns is not None and not self.buffer.ready(self.previous_ns,
                                                                       ['trust']):
                 return

@@ -142,6 +142,11 @@ class StepBuffer:
         have = self._items.get(stamp, {})
         return all(n in have for n in (self.inputs if needed is None else needed))
 
+    def ready_stamps(self, needed: Iterable[str] | None = None) -> list[int]:
+        """Stamps whose needed inputs are all there, oldest first."""
+        needed = tuple(self.inputs if needed is None else needed)
+        return sorted(s for s in self._items if self.ready(s, needed))
+
     def pop(self, stamp: int) -> dict[str, object]:
         """Take the inputs of ``stamp`` (and forget older stamps)."""
         items = self._items.pop(stamp)
