@@ -21,10 +21,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from preceding_traffic.traces import load_trace
+from preceding_traffic.traces import load_trace, truncate
 from trust_av_planner.bag_records import records_from_bag
 from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_av_planner.orchestrator import run_graph, truncate
+from trust_av_planner.orchestrator import run_graph
 from trust_av_planner.simulate import StepRecord, simulate
 
 

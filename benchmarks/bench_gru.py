@@ -19,9 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from preceding_traffic.traces import load_trace
+from preceding_traffic.traces import load_trace, truncate
 from trust_av_planner.config import load_run_config
-from trust_av_planner.orchestrator import truncate
 from trust_av_planner.planner_core import make_predictor, observe
 from trust_av_planner.plant import VehicleState
 from trust_av_planner.simulate import simulate

@@ -16,10 +16,9 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from preceding_traffic.traces import load_trace
+from preceding_traffic.traces import load_trace, truncate
 from trust_av_planner.bag_records import records_from_bag
 from trust_av_planner.config import load_run_config
-from trust_av_planner.orchestrator import truncate
 from trust_av_planner.simulate import StepRecord, simulate
 from trust_monitor.graph_interface import TOPICS
 

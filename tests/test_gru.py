@@ -13,6 +13,7 @@ import pytest
 import torch
 from conftest import shipped_trace
 
+from preceding_traffic.traces import truncate
 from trust_av_planner.config import load_run_config
 from trust_av_planner.gru_training import (
     TrainingSettings,
@@ -21,7 +22,6 @@ from trust_av_planner.gru_training import (
     train,
     train_with_dagger,
 )
-from trust_av_planner.orchestrator import truncate
 from trust_av_planner.planner_core import make_predictor
 from trust_av_planner.predictors import Observation
 from trust_av_planner.predictors.gru import (

@@ -20,10 +20,12 @@ class InlineExecutor:
     def __init__(self) -> None:
         self.ran: list[Case] = []
 
-    def run(self, cases, params_file, on_result) -> None:  # type: ignore[no-untyped-def]
+    def run(self, cases, params_file, on_result,  # type: ignore[no-untyped-def]
+            settings=None) -> None:
         for case in cases:
             self.ran.append(case)
-            on_result(case, reproduce.run_case(case, params_file))
+            on_result(case, reproduce.run_case(case, params_file,
+                                               settings or reproduce.RunSettings()))
 
 
 @pytest.fixture
@@ -112,3 +114,44 @@ def test_reproduce_command_writes_tables_and_figures(tmp_path: Path) -> None:
         assert (tmp_path / name).stat().st_size > 0, name
     assert 'TAC-CA nycc: ok' in proc.stdout
     assert (tmp_path / 'figure_2_speed_profiles.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+@pytest.mark.slow
+def test_graph_sweep_equals_in_process_sweep(tmp_path: Path) -> None:
+    """``reproduce --graph``: every case through the ROS 2 node graph, numbers as in-process.
+
+    Five cases (NYCC, TAC-CA, every alpha) of 15 steps on two pooled workers: two graphs of six
+    processes each run at once, each on its own ROS domain.
+    """
+    steps = 15
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+                           '--traces', 'nycc', '--predictors', 'ca', '--graph', '--max-steps',
+                           str(steps), '--results-dir', str(tmp_path / 'graph'),
+                           '--no-progress', '--workers', '2'],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert '5 cases (graph)' in proc.stdout
+    bags = {b.name for b in (tmp_path / 'graph' / 'graph_bags').glob('*.mcap')}
+    assert bags == {f'nycc_ca_alpha{a:g}.mcap' for a in reproduce.ALPHAS}
+    cases = reproduce.sweep_cases(['nycc'], ['ca'])
+    # The same sweep again: read from the graph cache, and in-process with the same steps.
+    graph = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'graph',
+                                InlineExecutor(), runner='graph', max_steps=steps)
+    inline = InlineExecutor()
+    in_process = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'in',
+                                     inline, max_steps=steps)
+    assert inline.ran == cases
+    for case in cases:
+        assert graph[case]['runner'] == 'graph'
+        assert len(graph[case]['trust']) == steps
+        assert graph[case]['trust'] == pytest.approx(in_process[case]['trust'], abs=1e-9)
+        for name, value in in_process[case]['metrics'].items():
+            assert graph[case]['metrics'][name] == pytest.approx(value, abs=1e-9), name
+
+
+def test_run_settings_are_checked() -> None:
+    from trust_av_planner.errors import TrustAvError
+    with pytest.raises(TrustAvError, match=r"runner must be one of .*'rviz'"):
+        reproduce.RunSettings(runner='rviz')
+    with pytest.raises(TrustAvError, match='max_steps must be >= 0, got -1'):
+        reproduce.RunSettings(max_steps=-1)

@@ -9,6 +9,7 @@ problem.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from dataclasses import dataclass
 from importlib import resources
@@ -177,3 +178,12 @@ def load_trace(name_or_path: str, dt_s: float, config: TraceConfig) -> SpeedTrac
     name = name_or_path.lower() if shipped else path.stem
     return SpeedTrace(name=name, dt_s=dt_s, speeds_mps=resample(times, speeds, dt_s),
                       t0_s=float(times[0]))
+
+
+def truncate(trace: SpeedTrace, max_steps: int) -> SpeedTrace:
+    """The first ``max_steps`` control steps of ``trace`` (all of it for 0)."""
+    if max_steps < 0:
+        raise ValueError(f'max_steps must be >= 0, got {max_steps}')
+    if not max_steps:
+        return trace
+    return dataclasses.replace(trace, speeds_mps=trace.speeds_mps[:max_steps + 1])

@@ -63,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
     unknown = [p for p in args.predictors if p not in KNOWN_PREDICTORS]
     if unknown:
         raise TrustAvError(f'unknown predictor(s) {unknown}; available: {list(KNOWN_PREDICTORS)}')
+    if args.max_steps < 0:
+        raise TrustAvError(f'--max-steps must be >= 0, got {args.max_steps}')
     config = load_run_config(args.params_file)  # validate before starting workers
     out: Path = args.results_dir
     out.mkdir(parents=True, exist_ok=True)
@@ -74,8 +76,10 @@ def run(args: argparse.Namespace) -> int:
         executor = reproduce.LocalExecutor(args.workers)
     bar = None if args.no_progress else ProgressBar('reproduce', len(cases))
     start = time.monotonic()
+    runner = 'graph' if args.graph else 'in-process'
     results = reproduce.run_sweep(cases, args.params_file, out, executor,
-                                  None if bar is None else bar.update)
+                                  None if bar is None else bar.update, runner=runner,
+                                  max_steps=args.max_steps)
     if bar is not None:
         bar.close()
     elapsed = time.monotonic() - start
@@ -115,8 +119,10 @@ def run(args: argparse.Namespace) -> int:
     print('Trends (issue 5):')
     for line in trend_checks(results, args.traces, args.predictors):
         print(f'  {line}')
-    print(f'\n{len(cases)} cases in {elapsed:.1f} s wall; outputs in {out}/: '
+    print(f'\n{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; outputs in {out}/: '
           + ', '.join(written))
+    if args.graph:
+        print(f'graph recordings (MCAP, one per case): {out / "graph_bags"}/')
     return 0
 
 
@@ -138,6 +144,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='parallel workers (default: one per core)')
     parser.add_argument('--ray-address', default=None,
                         help='Ray cluster address (default: start a local one)')
+    parser.add_argument('--graph', action='store_true',
+                        help='run every case through the ROS 2 node graph (six processes in '
+                             'lock-step, recorded to MCAP under RESULTS_DIR/graph_bags/) '
+                             'instead of in-process; same numbers, about 10 s per case')
+    parser.add_argument('--max-steps', type=int, default=0,
+                        help='stop every case after this many steps, for a quick check '
+                             "(default: whole traces; tables then differ from the paper's)")
     parser.add_argument('--results-dir', type=Path, default=Path('results/paper'),
                         help='where tables, figures and the cache go (default: %(default)s)')
     add_params_file_option(parser)

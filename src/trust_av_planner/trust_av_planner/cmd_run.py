@@ -5,12 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from preceding_traffic.traces import load_trace
-from trust_av_planner.bag_records import records_from_bag
+from preceding_traffic.traces import load_trace, truncate
 from trust_av_planner.cmd_simulate import add_run_options, format_metrics, run_overrides
 from trust_av_planner.config import load_run_config
 from trust_av_planner.errors import TrustAvError
-from trust_av_planner.orchestrator import run_graph, truncate
+from trust_av_planner.orchestrator import run_graph_records
 from trust_av_planner.plots import run_overview
 from trust_av_planner.progress import ProgressBar
 from trust_av_planner.simulate import compute_metrics
@@ -29,16 +28,13 @@ def run(args: argparse.Namespace) -> int:
         bag.unlink()
     bar = None if args.no_progress else ProgressBar(f'graph {trace.name}', trace.steps)
     try:
-        result = run_graph(config, config.trace.trace, trace, args.params_file, bag,
-                           max_steps=args.max_steps, startup_timeout_s=args.startup_timeout_s,
-                           on_step=None if bar is None else bar.update)
+        result, records = run_graph_records(
+            config, config.trace.trace, trace, args.params_file, bag, max_steps=args.max_steps,
+            startup_timeout_s=args.startup_timeout_s,
+            on_step=None if bar is None else bar.update)
     finally:
         if bar is not None:
             bar.close()
-    records = records_from_bag(bag)
-    if len(records) != trace.steps:
-        raise TrustAvError(f'{bag}: {len(records)} complete steps recorded, expected '
-                           f'{trace.steps}')
     metrics = compute_metrics(records, config.min_safe_gap_m)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
              f'alpha = {config.planner.alpha:g} (ROS 2 graph, domain {result.domain_id})')

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import dataclasses
 import fcntl
 import os
 import signal
@@ -36,10 +35,11 @@ from typing import IO, Any
 import yaml
 
 from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.bag_records import records_from_bag
 from trust_av_planner.config import RunConfig
 from trust_av_planner.errors import TrustAvError
 from trust_av_planner.recorder import repair_mcap
-from trust_av_planner.simulate import InitialState, equilibrium_start
+from trust_av_planner.simulate import InitialState, StepRecord, equilibrium_start
 from trust_monitor.graph_interface import TOPICS, expected_endpoints
 
 DOMAIN_RANGE = range(1, 102)
@@ -289,6 +289,22 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
                     wall_s=time.monotonic() - started, startup_s=startup)
 
 
+def run_graph_records(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
+                      bag: Path, **options: Any) -> tuple[GraphRun, list[StepRecord]]:
+    """:func:`run_graph`, then the recording read back (rosbags) as one record per step.
+
+    Raises:
+        GraphError: as :func:`run_graph`.
+        TrustAvError: the recording does not hold every step of the run.
+    """
+    result = run_graph(config, trace_arg, trace, params_file, bag, **options)
+    records = records_from_bag(bag)
+    if len(records) != trace.steps:
+        raise TrustAvError(f'{bag}: {len(records)} complete steps recorded, expected '
+                           f'{trace.steps}')
+    return result, records
+
+
 def _wait_connected(graph: Graph, node: Any, executor: Any, timeout_s: float) -> None:
     """Wait until every topic has its expected publishers and subscribers."""
     expected = expected_endpoints()
@@ -311,9 +327,3 @@ def _wait_connected(graph: Graph, node: Any, executor: Any, timeout_s: float) ->
             return
     raise GraphError(f'graph not connected after {timeout_s:g} s: ' + '; '.join(missing))
 
-
-def truncate(trace: SpeedTrace, max_steps: int) -> SpeedTrace:
-    """The first ``max_steps`` steps of a trace (all of it for 0)."""
-    if not max_steps:
-        return trace
-    return dataclasses.replace(trace, speeds_mps=trace.speeds_mps[:max_steps + 1])

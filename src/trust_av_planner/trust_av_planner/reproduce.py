@@ -1,10 +1,12 @@
 """Reproduce the paper's sweep: traces x predictors x alpha, cached, on a pluggable executor.
 
-Every case is one closed loop (in-process by default). A finished case is cached as JSON
-under ``<results>/cache/<key>.json``; the key hashes the case, the whole params file and the
-source of the four packages (so a code or parameter change re-runs what it affects and an
-unchanged rerun is read back). Cases run on an :class:`Executor`: local processes by default
-(one per core), or Ray (optional extra, ``--executor ray``).
+Every case is one closed loop: in-process by default, or through the ROS 2 node graph
+(:class:`RunSettings`, ``--graph``; each case then leaves its MCAP recording in
+``<results>/graph_bags/``). A finished case is cached as JSON under
+``<results>/cache/<key>.json``; the key hashes the case, the run settings, the whole params
+file and the source of the four packages (so a code or parameter change re-runs what it
+affects and an unchanged rerun is read back). Cases run on an :class:`Executor`: local
+processes by default (one per core), or Ray (optional extra, ``--executor ray``).
 """
 
 from __future__ import annotations
@@ -22,11 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from preceding_traffic.traces import load_trace
+from preceding_traffic.traces import load_trace, truncate
 from trust_av_planner.config import load_run_config
 from trust_av_planner.errors import TrustAvError
 from trust_av_planner.paper_results import MAX_IMPROVEMENT_PERCENT
-from trust_av_planner.simulate import simulate
+from trust_av_planner.simulate import StepRecord, compute_metrics, simulate
 
 LOG = logging.getLogger(__name__)
 
@@ -35,6 +37,7 @@ PREDICTORS = ('gru', 'ca')
 ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 METRICS = ('final_trust', 'mean_explicability', 'rmse_mps2')
 PACKAGES = ('preceding_traffic', 'trust_monitor', 'human_driver_sim', 'trust_av_planner')
+RUNNERS = ('in-process', 'graph')
 PRESENTATION_MODULES = ('cli.py', 'progress.py', 'plots.py', 'paper_results.py')
 """Files that cannot change a run's numbers: left out of the cache key (so are cmd_*.py)."""
 
@@ -68,25 +71,64 @@ def code_fingerprint() -> str:
     return digest.hexdigest()
 
 
-def case_key(case: Case, params_text: str, fingerprint: str) -> str:
-    """Cache key of a case: its fields, the params file's text and the code fingerprint."""
+@dataclass(frozen=True)
+class RunSettings:
+    """How every case of a sweep runs.
+
+    Attributes:
+        runner: ``in-process`` (the simulator) or ``graph`` (the six ROS 2 node processes in
+            lock-step, recorded to MCAP and read back; same numbers, about 100x slower).
+        max_steps: stop each case after this many control steps (0: the whole trace).
+        bags_dir: where graph runs write ``<trace>_<predictor>_alpha<alpha>.mcap``.
+    """
+
+    runner: str = 'in-process'
+    max_steps: int = 0
+    bags_dir: str = 'graph_bags'
+
+    def __post_init__(self) -> None:
+        if self.runner not in RUNNERS:
+            raise TrustAvError(f'runner must be one of {list(RUNNERS)}, got {self.runner!r}')
+        if self.max_steps < 0:
+            raise TrustAvError(f'max_steps must be >= 0, got {self.max_steps}')
+
+
+def case_key(case: Case, params_text: str, fingerprint: str,
+             settings: RunSettings = RunSettings()) -> str:
+    """Cache key of a case: its fields, how it runs, the params file's text and the code."""
     blob = json.dumps({'case': dataclasses.asdict(case), 'params': params_text,
-                       'code': fingerprint, 'runner': 'in-process'}, sort_keys=True)
+                       'code': fingerprint, 'runner': settings.runner,
+                       'max_steps': settings.max_steps}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
-def run_case(case: Case, params_file: str) -> dict[str, Any]:
-    """Run one case in-process and return its metrics and the series the figures need."""
+def run_case(case: Case, params_file: str,
+             settings: RunSettings = RunSettings()) -> dict[str, Any]:
+    """Run one case and return its metrics and the series the figures need."""
     config = load_run_config(params_file, {'planner': {'alpha': case.alpha,
                                                        'predictor': case.predictor}})
-    trace = load_trace(case.trace, config.planner.dt_s, config.trace)
-    result = simulate(config, trace)
+    trace = truncate(load_trace(case.trace, config.planner.dt_s, config.trace),
+                     settings.max_steps)
+    records: list[StepRecord]
+    if settings.runner == 'graph':
+        # Imported here: the in-process sweep never loads rclpy.
+        from trust_av_planner.orchestrator import run_graph_records
+        bag = Path(settings.bags_dir) / (f'{Path(case.trace).stem}_{case.predictor}_'
+                                         f'alpha{case.alpha:g}.mcap')
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        bag.unlink(missing_ok=True)  # left by an interrupted sweep; its case is not cached
+        _, records = run_graph_records(config, case.trace, trace, Path(params_file), bag,
+                                       max_steps=settings.max_steps)
+    else:
+        records = simulate(config, trace).records
+    metrics = compute_metrics(records, config.min_safe_gap_m)
     return {
         'case': dataclasses.asdict(case),
-        'metrics': dataclasses.asdict(result.metrics),
-        'time_s': [r.t_s for r in result.records],
-        'trust': [r.trust for r in result.records],
-        'explicability': [r.explicability for r in result.records],
+        'runner': settings.runner,
+        'metrics': dataclasses.asdict(metrics),
+        'time_s': [r.t_s for r in records],
+        'trust': [r.trust for r in records],
+        'explicability': [r.explicability for r in records],
     }
 
 
@@ -94,8 +136,9 @@ class Executor(Protocol):
     """Runs cases somewhere and reports each result as it arrives."""
 
     def run(self, cases: Sequence[Case], params_file: str,
-            on_result: Callable[[Case, dict[str, Any]], None]) -> None:
-        """Run every case; call ``on_result`` in the calling process for each."""
+            on_result: Callable[[Case, dict[str, Any]], None],
+            settings: RunSettings = RunSettings()) -> None:
+        """Run every case (:func:`run_case`); call ``on_result`` in the calling process."""
 
 
 class LocalExecutor:
@@ -105,14 +148,15 @@ class LocalExecutor:
         self.workers = workers or os.cpu_count() or 1
 
     def run(self, cases: Sequence[Case], params_file: str,
-            on_result: Callable[[Case, dict[str, Any]], None]) -> None:
+            on_result: Callable[[Case, dict[str, Any]], None],
+            settings: RunSettings = RunSettings()) -> None:
         """Run the cases on the pool; the first failure stops the sweep with its case."""
         if not cases:
             return
         context = multiprocessing.get_context('spawn')
         with concurrent.futures.ProcessPoolExecutor(min(self.workers, len(cases)),
                                                     mp_context=context) as pool:
-            futures = {pool.submit(run_case, case, params_file): case for case in cases}
+            futures = {pool.submit(run_case, case, params_file, settings): case for case in cases}
             for future in concurrent.futures.as_completed(futures):
                 case = futures[future]
                 try:
@@ -132,7 +176,8 @@ class RayExecutor:
         self.num_cpus = num_cpus
 
     def run(self, cases: Sequence[Case], params_file: str,
-            on_result: Callable[[Case, dict[str, Any]], None]) -> None:
+            on_result: Callable[[Case, dict[str, Any]], None],
+            settings: RunSettings = RunSettings()) -> None:
         """Submit one Ray task per case and collect them as they finish."""
         try:
             import ray
@@ -145,7 +190,7 @@ class RayExecutor:
                      log_to_driver=False)
         try:
             remote = ray.remote(run_case)
-            pending = {remote.remote(case, params_file): case for case in cases}
+            pending = {remote.remote(case, params_file, settings): case for case in cases}
             while pending:
                 done, _ = ray.wait(list(pending), num_returns=1)
                 case = pending.pop(done[0])
@@ -166,17 +211,20 @@ def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PRED
 
 
 def run_sweep(cases: Sequence[Case], params_file: Path, results_dir: Path, executor: Executor,
-              on_progress: Callable[[int, int], None] | None = None) -> dict[Case, dict[str, Any]]:
+              on_progress: Callable[[int, int], None] | None = None, *,
+              runner: str = 'in-process', max_steps: int = 0) -> dict[Case, dict[str, Any]]:
     """Run the cases that are not cached, read the others back; return every result.
 
     A result is written to the cache as soon as it arrives, so an interrupted sweep resumes
-    where it stopped.
+    where it stopped. ``runner`` and ``max_steps`` are :class:`RunSettings`'; graph runs
+    record to ``<results_dir>/graph_bags/``.
     """
+    settings = RunSettings(runner, max_steps, str(Path(results_dir).resolve() / 'graph_bags'))
     cache = results_dir / 'cache'
     cache.mkdir(parents=True, exist_ok=True)
     params_text = Path(params_file).read_text()
     fingerprint = code_fingerprint()
-    keys = {case: case_key(case, params_text, fingerprint) for case in cases}
+    keys = {case: case_key(case, params_text, fingerprint, settings) for case in cases}
     results: dict[Case, dict[str, Any]] = {}
     for case, key in keys.items():
         path = cache / f'{key}.json'
@@ -195,7 +243,7 @@ def run_sweep(cases: Sequence[Case], params_file: Path, results_dir: Path, execu
         if on_progress is not None:
             on_progress(len(results), len(cases))
 
-    executor.run(todo, str(params_file), store)
+    executor.run(todo, str(params_file), store, settings)
     return results
 
 
