@@ -11,6 +11,7 @@ from pathlib import Path
 
 from trust_av_planner.cmd_simulate import add_params_file_option
 from trust_av_planner.config import load_run_config
+from trust_av_planner.errors import TrustAvError
 from trust_av_planner.gru_training import TrainingSettings, save_model, train_with_dagger
 from trust_av_planner.predictors.gru import MODELS_DIR
 from trust_av_planner.progress import ProgressBar
@@ -24,6 +25,10 @@ def run(args: argparse.Namespace) -> int:
         settings = dataclasses.replace(settings, epochs=args.epochs)
     if args.seed is not None:
         settings = dataclasses.replace(settings, seed=args.seed)
+    if args.dagger_rounds is not None:
+        if args.dagger_rounds < 0:
+            raise TrustAvError(f'--dagger-rounds must be >= 0, got {args.dagger_rounds}')
+        settings = dataclasses.replace(settings, dagger_rounds=args.dagger_rounds)
     start = time.monotonic()
     bar: ProgressBar | None = None
 
@@ -60,13 +65,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         'train-gru', help='train the GRU plan estimator (TAC-GRU)',
         description='Run TAC-CA closed loops on the training traces (UDDS, HWFET, WLTC 3b) '
                     'for alpha in {0, 0.25, 0.5, 0.75, 1}, build 10 s histories -> next N '
-                    'accelerations, train the GRU (seeded, deterministic, CPU), add one round '
-                    'of TAC-GRU runs on the same traces (DAgger) and retrain, then write the '
-                    'weights, a JSON model card and the loss curve. The default output '
-                    'replaces the shipped model (about 80 s on 2 cores).')
+                    'accelerations, train the GRU (seeded, deterministic, CPU), then two DAgger '
+                    'rounds (TAC-GRU runs of the current model on the same traces are added '
+                    'and the model retrained), then write the weights, a JSON model card and '
+                    'the loss curve. The default output replaces the shipped model (about '
+                    '2 min on 2 cores).')
     parser.add_argument('--out', type=Path, default=MODELS_DIR / 'gru_plan_estimator.npz',
                         help='weights file to write (default: the shipped model)')
     parser.add_argument('--epochs', type=int, default=None, help='override the epochs')
     parser.add_argument('--seed', type=int, default=None, help='override the seed')
+    parser.add_argument('--dagger-rounds', type=int, default=None,
+                        help='override the number of DAgger rounds (default: '
+                             f'{TrainingSettings().dagger_rounds})')
     add_params_file_option(parser)
     parser.set_defaults(func=run)

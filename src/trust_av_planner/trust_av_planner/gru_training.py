@@ -43,7 +43,7 @@ class TrainingSettings:
     learning_rate: float = 3e-3
     validation_fraction: float = 0.2
     seed: int = 7
-    dagger_rounds: int = 1
+    dagger_rounds: int = 2
 
 
 @dataclass
