@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc
 from human_driver_sim.irl import Demonstration, fit_inverse_kkt
@@ -35,3 +37,15 @@ def test_inverse_kkt_recovers_weights() -> None:
     truth = CONFIG.weights / CONFIG.weight_acceleration
     assert np.all(np.abs(fitted - truth) <= TOLERANCE * truth), (fitted, truth)
     assert dataclasses.replace(CONFIG, weight_relative_speed=float(fitted[2]))
+
+
+def test_shipped_driver_fit_has_per_pair_weights(tmp_path: Path) -> None:
+    from human_driver_sim.population import DriverFitError, per_pair_weights
+    weights = per_pair_weights()
+    assert weights.shape == (4, 4) and (weights[:, 0] == 1.0).all() and (weights >= 0).all()
+    bad = tmp_path / 'fit.yaml'
+    bad.write_text('per_pair_inverse_kkt:\n  a: [1.0, -2.0, 0.1, 0.1]\n')
+    with pytest.raises(DriverFitError, match=r"fit\.yaml: per_pair_inverse_kkt\['a'\] must be 4"):
+        per_pair_weights(bad)
+    with pytest.raises(DriverFitError, match='cannot read the driver fit'):
+        per_pair_weights(tmp_path / 'missing.yaml')

@@ -155,3 +155,61 @@ def test_run_settings_are_checked() -> None:
         reproduce.RunSettings(runner='rviz')
     with pytest.raises(TrustAvError, match='max_steps must be >= 0, got -1'):
         reproduce.RunSettings(max_steps=-1)
+
+
+def test_population_cases_are_seeded_and_named() -> None:
+    cases = reproduce.sweep_cases(['us06'], ['gru'], [0.0, 1.0])
+    first = reproduce.population_cases(cases, 3, seed=4)
+    again = reproduce.population_cases(cases, 3, seed=4)
+    other = reproduce.population_cases(cases, 3, seed=5)
+    assert first == again and first != other
+    assert len(first) == 6 and [c.driver for c in first] == [1, 2, 3, 1, 2, 3]
+    # The same driver k for every alpha, so improvements over alpha = 0 are per driver.
+    assert first[0].driver_weights == first[3].driver_weights
+    assert first[0].driver_weights[0] == 1.0 and len(first[0].driver_weights) == 4
+    assert first[1].label == 'us06/TAC-GRU/alpha=0/driver=2'
+    assert first[4].base == Case('us06', 'gru', 1.0)
+    from trust_av_planner.errors import TrustAvError
+    with pytest.raises(TrustAvError, match='number of drivers must be >= 1, got 0'):
+        reproduce.population_cases(cases, 0, seed=1)
+
+
+def test_population_tables_give_mean_and_95_percent_interval() -> None:
+    def fake(trust: float, score: float, rmse: float) -> dict[str, Any]:
+        return {'metrics': {'final_trust': trust, 'mean_explicability': score,
+                            'rmse_mps2': rmse}, 'time_s': [0.0, 1.0], 'trust': [0.0, trust]}
+    results = {}
+    for driver, offset in ((1, 0.0), (2, 2.0)):
+        for a in reproduce.ALPHAS:
+            case = Case('us06', 'ca', a, driver, (1.0, 0.0, 0.1, 0.01 * driver))
+            results[case] = fake(40 + 10 * a + offset, 0.06 - 0.03 * a, 0.7 - 0.2 * a)
+    _, rows = reproduce.population_alpha_table(results, 'us06', 'ca', None)
+    # Trust at alpha = 0: drivers 40 and 42 -> mean 41, half-width t(1) * 1 = 12.706.
+    assert rows[0][1] == '41.000 ± 12.706'
+    assert rows[0][3] == '0.700 ± 0.000'
+    # Max trust improvement per driver: 25 % and 23.81 %; E and RMSE the same for both.
+    assert rows[-1][2:] == ['50.00 ± 0.00 %', '28.57 ± 0.00 %']
+    assert rows[-1][1].startswith('24.40 ± 7.5')
+    mean = reproduce.population_mean(results)
+    assert mean[Case('us06', 'ca', 1.0)]['metrics']['final_trust'] == pytest.approx(51.0)
+    assert mean[Case('us06', 'ca', 1.0)]['trust'] == pytest.approx([0.0, 51.0])
+
+
+def test_reproduce_with_a_driver_population(tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+                           '--traces', 'nycc', '--predictors', 'gru', '--drivers', '2',
+                           '--max-steps', '40', '--results-dir', str(tmp_path),
+                           '--no-progress', '--workers', '2'],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert '10 cases (in-process)' in proc.stdout
+    assert 'a population of 2 drivers, seed 1' in proc.stdout
+    rows = (tmp_path / 'all_runs.csv').read_text().splitlines()
+    assert rows[0].startswith('trace,predictor,alpha,driver,weight_acceleration,')
+    assert sorted({r.split(',')[3] for r in rows[1:]}) == ['1', '2']
+    table = (tmp_path / 'table_IV_max_improvements.md').read_text()
+    assert table.count(' ± ') == 3
+    bad = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+                          '--drivers', '-1', '--results-dir', str(tmp_path)],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and '--drivers must be >= 0, got -1' in bad.stderr

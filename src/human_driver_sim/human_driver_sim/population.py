@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+import yaml
 
 
 def sample_population(per_pair_weights: np.ndarray, count: int, *, seed: int) -> np.ndarray:
@@ -28,3 +31,37 @@ def sample_population(per_pair_weights: np.ndarray, count: int, *, seed: int) ->
     rng = np.random.default_rng(seed)
     draws = np.exp(rng.normal(mean, std, size=(count, 3)))
     return np.column_stack([np.ones(count), draws])
+
+
+DRIVER_FIT_FILE = Path(__file__).parent / 'models' / 'driver_fit.yaml'
+"""The shipped fit of ``trust-av fit-driver`` (weights with provenance, docs/DRIVER_IRL.md)."""
+WEIGHT_NAMES = ('weight_acceleration', 'weight_desired_speed', 'weight_relative_speed',
+                'weight_relative_distance')
+"""Driver-MPC parameter names of W, in the order of the weight vectors."""
+
+
+class DriverFitError(ValueError):
+    """The driver-fit file is missing or malformed; the message names the file and key."""
+
+
+def per_pair_weights(path: Path = DRIVER_FIT_FILE) -> np.ndarray:
+    """The per-pair inverse-KKT weights of a driver-fit file, P x 4 (population source).
+
+    Raises:
+        DriverFitError: missing file, missing ``per_pair_inverse_kkt``, or a bad row.
+    """
+    try:
+        fit = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise DriverFitError(f'{path}: cannot read the driver fit ({err})') from err
+    pairs = fit.get('per_pair_inverse_kkt') if isinstance(fit, dict) else None
+    if not isinstance(pairs, dict) or not pairs:
+        raise DriverFitError(f'{path}: no per_pair_inverse_kkt weights')
+    rows = []
+    for name, weights in pairs.items():
+        if (not isinstance(weights, list) or len(weights) != len(WEIGHT_NAMES)
+                or not all(isinstance(w, int | float) and w >= 0 for w in weights)):
+            raise DriverFitError(f'{path}: per_pair_inverse_kkt[{name!r}] must be '
+                                 f'{len(WEIGHT_NAMES)} non-negative numbers, got {weights!r}')
+        rows.append([float(w) for w in weights])
+    return np.array(rows)

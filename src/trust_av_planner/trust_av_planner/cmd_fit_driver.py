@@ -14,6 +14,7 @@ import yaml
 from human_driver_sim import irl
 from human_driver_sim.car_following import CarFollowingDataError, FollowingPair, read_openacc
 from human_driver_sim.idm import IdmParams, replay
+from human_driver_sim.population import DRIVER_FIT_FILE
 from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
 from trust_av_planner.errors import TrustAvError
 from trust_av_planner.progress import ProgressBar
@@ -29,7 +30,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser = subparsers.add_parser('fit-driver', help=__doc__)
     parser.add_argument('--data', type=Path, required=True,
                         help='OpenACC Vicolungo directory (read only, never copied)')
-    parser.add_argument('--out', type=Path, default=Path('config/driver_fit.yaml'))
+    parser.add_argument('--out', type=Path, default=DRIVER_FIT_FILE,
+                        help='weights file with provenance (default: the shipped fit, '
+                             'human_driver_sim/models/driver_fit.yaml)')
     parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE)
     parser.add_argument('--iterations', type=int, default=25,
                         help='Nelder-Mead iterations of the bilevel refinement')

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from preceding_traffic.traces import load_trace
 from trust_av_planner import reproduce
 from trust_av_planner.cmd_simulate import add_params_file_option
@@ -65,10 +66,15 @@ def run(args: argparse.Namespace) -> int:
         raise TrustAvError(f'unknown predictor(s) {unknown}; available: {list(KNOWN_PREDICTORS)}')
     if args.max_steps < 0:
         raise TrustAvError(f'--max-steps must be >= 0, got {args.max_steps}')
+    if args.drivers < 0:
+        raise TrustAvError(f'--drivers must be >= 0, got {args.drivers}')
     config = load_run_config(args.params_file)  # validate before starting workers
     out: Path = args.results_dir
     out.mkdir(parents=True, exist_ok=True)
     cases = reproduce.sweep_cases(args.traces, args.predictors, reproduce.ALPHAS)
+    if args.drivers:
+        cases = reproduce.population_cases(cases, args.drivers, args.drivers_seed,
+                                           args.driver_fit)
     executor: reproduce.Executor
     if args.executor == 'ray':
         executor = reproduce.RayExecutor(args.ray_address, args.workers)
@@ -86,27 +92,35 @@ def run(args: argparse.Namespace) -> int:
 
     with (out / 'all_runs.csv').open('w', newline='') as handle:
         writer = csv.writer(handle)
-        writer.writerow(['trace', 'predictor', 'alpha', *results[cases[0]]['metrics']])
+        writer.writerow(['trace', 'predictor', 'alpha', 'driver', *WEIGHT_NAMES,
+                         *results[cases[0]]['metrics']])
         for case in cases:
-            writer.writerow([case.trace, case.predictor, case.alpha,
+            weights = case.driver_weights or (config.driver.weights.tolist())
+            writer.writerow([case.trace, case.predictor, case.alpha, case.driver, *weights,
                              *results[case]['metrics'].values()])
+    if args.drivers:
+        alpha_table, improvement_table = (reproduce.population_alpha_table,
+                                          reproduce.population_improvement_table)
+        summary = reproduce.population_mean(results)  # trends and Figure 3 on the means
+    else:
+        alpha_table, improvement_table = reproduce.alpha_table, reproduce.improvement_table
+        summary = results
     written = []
     if 'us06' in args.traces:
         for predictor, name, paper in (('gru', 'table_II_tac_gru_us06', TABLE_II_TAC_GRU_US06),
                                        ('ca', 'table_III_tac_ca_us06', TABLE_III_TAC_CA_US06)):
             if predictor in args.predictors:
-                reproduce.write_rows(out / name, *reproduce.alpha_table(results, 'us06',
-                                                                        predictor, paper))
+                reproduce.write_rows(out / name, *alpha_table(results, 'us06', predictor, paper))
                 written.append(f'{name}.md')
     reproduce.write_rows(out / 'table_IV_max_improvements',
-                         *reproduce.improvement_table(results, args.traces, args.predictors))
+                         *improvement_table(results, args.traces, args.predictors))
     written.append('table_IV_max_improvements.md')
     traces = [load_trace(t, config.planner.dt_s, config.trace) for t in args.traces]
     speed_profiles(traces, out / 'figure_2_speed_profiles.png')
     written.append('figure_2_speed_profiles.png')
     if 'us06' in args.traces:
-        series = {f'TAC-{p.upper()}': {a: (results[Case('us06', p, a)]['time_s'],
-                                           results[Case('us06', p, a)]['trust'])
+        series = {f'TAC-{p.upper()}': {a: (summary[Case('us06', p, a)]['time_s'],
+                                           summary[Case('us06', p, a)]['trust'])
                                        for a in reproduce.ALPHAS}
                   for p in args.predictors}
         trust_over_time(series, 'us06', out / 'figure_3_trust_us06.png',
@@ -117,7 +131,10 @@ def run(args: argparse.Namespace) -> int:
         if path.endswith('.md'):
             print(f'\n## {path}\n' + (out / path).read_text())
     print('Trends (issue 5):')
-    for line in trend_checks(results, args.traces, args.predictors):
+    if args.drivers:
+        print(f'(a population of {args.drivers} drivers, seed {args.drivers_seed}: tables give '
+              'mean ± 95 % CI over drivers; trends and Figure 3 use the means)')
+    for line in trend_checks(summary, args.traces, args.predictors):
         print(f'  {line}')
     print(f'\n{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; outputs in {out}/: '
           + ', '.join(written))
@@ -151,6 +168,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--max-steps', type=int, default=0,
                         help='stop every case after this many steps, for a quick check '
                              "(default: whole traces; tables then differ from the paper's)")
+    parser.add_argument('--drivers', type=int, default=0, metavar='K',
+                        help='run every case for K human drivers sampled from the fitted '
+                             "per-pair weights (seeded) instead of the params file's driver; "
+                             'tables then give mean ± 95 %% confidence interval per cell '
+                             "(default: 0, the params file's driver)")
+    parser.add_argument('--drivers-seed', type=int, default=1,
+                        help='seed of the driver population (default: %(default)s)')
+    parser.add_argument('--driver-fit', type=Path, default=DRIVER_FIT_FILE,
+                        help='driver-fit file with per-pair weights (default: the shipped fit, '
+                             'human_driver_sim/models/driver_fit.yaml)')
     parser.add_argument('--results-dir', type=Path, default=Path('results/paper'),
                         help='where tables, figures and the cache go (default: %(default)s)')
     add_params_file_option(parser)

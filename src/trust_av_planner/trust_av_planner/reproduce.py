@@ -24,11 +24,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+import numpy as np
+
+from human_driver_sim.population import (
+    DRIVER_FIT_FILE,
+    WEIGHT_NAMES,
+    per_pair_weights,
+    sample_population,
+)
 from preceding_traffic.traces import load_trace, truncate
 from trust_av_planner.config import load_run_config
 from trust_av_planner.errors import TrustAvError
 from trust_av_planner.paper_results import MAX_IMPROVEMENT_PERCENT
 from trust_av_planner.simulate import StepRecord, compute_metrics, simulate
+from trust_av_planner.stats import mean_ci95
 
 LOG = logging.getLogger(__name__)
 
@@ -44,16 +53,30 @@ PRESENTATION_MODULES = ('cli.py', 'progress.py', 'plots.py', 'paper_results.py')
 
 @dataclass(frozen=True)
 class Case:
-    """One closed loop of the sweep."""
+    """One closed loop of the sweep.
+
+    Attributes:
+        driver: 0 for the human driver of the params file; k >= 1 for the k-th driver of a
+            sampled population (``--drivers K``), whose weights W are ``driver_weights``.
+        driver_weights: (w_a, w_ds, w_rs, w_rd) of that driver; empty for driver 0.
+    """
 
     trace: str
     predictor: str
     alpha: float
+    driver: int = 0
+    driver_weights: tuple[float, ...] = ()
 
     @property
     def label(self) -> str:
-        """``us06/TAC-CA/alpha=0.5``."""
-        return f'{self.trace}/TAC-{self.predictor.upper()}/alpha={self.alpha:g}'
+        """``us06/TAC-CA/alpha=0.5`` (``.../driver=3`` for a population member)."""
+        label = f'{self.trace}/TAC-{self.predictor.upper()}/alpha={self.alpha:g}'
+        return label + (f'/driver={self.driver}' if self.driver else '')
+
+    @property
+    def base(self) -> Case:
+        """The same trace, predictor and alpha with the params file's driver."""
+        return Case(self.trace, self.predictor, self.alpha)
 
 
 def code_fingerprint() -> str:
@@ -105,8 +128,11 @@ def case_key(case: Case, params_text: str, fingerprint: str,
 def run_case(case: Case, params_file: str,
              settings: RunSettings = RunSettings()) -> dict[str, Any]:
     """Run one case and return its metrics and the series the figures need."""
-    config = load_run_config(params_file, {'planner': {'alpha': case.alpha,
-                                                       'predictor': case.predictor}})
+    overrides: dict[str, dict[str, Any]] = {
+        'planner': {'alpha': case.alpha, 'predictor': case.predictor}}
+    if case.driver_weights:
+        overrides['human_driver'] = dict(zip(WEIGHT_NAMES, case.driver_weights, strict=True))
+    config = load_run_config(params_file, overrides)
     trace = truncate(load_trace(case.trace, config.planner.dt_s, config.trace),
                      settings.max_steps)
     records: list[StepRecord]
@@ -208,6 +234,51 @@ def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PRED
                 alphas: Iterable[float] = ALPHAS) -> list[Case]:
     """Every combination, in table order."""
     return [Case(t, p, a) for t in traces for p in predictors for a in alphas]
+
+
+def population_cases(cases: Sequence[Case], drivers: int, seed: int,
+                     driver_fit: Path = DRIVER_FIT_FILE) -> list[Case]:
+    """Each case once per driver of a seeded population of ``drivers`` sampled drivers.
+
+    The population is :func:`human_driver_sim.population.sample_population` of the per-pair
+    fitted weights in ``driver_fit``: the same seed gives the same drivers.
+
+    Raises:
+        TrustAvError: ``drivers`` < 1, or an unreadable driver-fit file.
+    """
+    if drivers < 1:
+        raise TrustAvError(f'the number of drivers must be >= 1, got {drivers}')
+    try:
+        population = sample_population(per_pair_weights(driver_fit), drivers, seed=seed)
+    except ValueError as err:
+        raise TrustAvError(str(err)) from err
+    return [dataclasses.replace(case, driver=k + 1,
+                                driver_weights=tuple(float(w) for w in population[k]))
+            for case in cases for k in range(drivers)]
+
+
+def by_driver(results: dict[Case, dict[str, Any]]) -> dict[int, dict[Case, dict[str, Any]]]:
+    """Results split per driver, each keyed by the base case (trace, predictor, alpha)."""
+    out: dict[int, dict[Case, dict[str, Any]]] = {}
+    for case, result in results.items():
+        out.setdefault(case.driver, {})[case.base] = result
+    return out
+
+
+def population_mean(results: dict[Case, dict[str, Any]]) -> dict[Case, dict[str, Any]]:
+    """Per base case, the mean over drivers of every metric and of the trust series."""
+    groups: dict[Case, list[dict[str, Any]]] = {}
+    for case, result in results.items():
+        groups.setdefault(case.base, []).append(result)
+    out = {}
+    for case, members in groups.items():
+        out[case] = {
+            'metrics': {name: float(np.mean([m['metrics'][name] for m in members]))
+                        for name in members[0]['metrics']},
+            'time_s': members[0]['time_s'],
+            'trust': np.mean([m['trust'] for m in members], axis=0).tolist(),
+            'drivers': len(members)}
+    return out
 
 
 def run_sweep(cases: Sequence[Case], params_file: Path, results_dir: Path, executor: Executor,
@@ -313,5 +384,60 @@ def improvement_table(results: dict[Case, dict[str, Any]], traces: Sequence[str]
             paper = MAX_IMPROVEMENT_PERCENT[(predictor, trace)]
             ratios = ', '.join(f'{o / p:.2f}' for o, p in zip(ours, paper, strict=True))
             rows.append([f'TAC-{predictor.upper()}', trace, *[f'{v:.2f} %' for v in ours],
+                         *[f'{v:.2f} %' for v in paper], ratios])
+    return header, rows
+
+
+def _cell(values: Sequence[float], digits: int, suffix: str = '') -> str:
+    mean, half = mean_ci95(values)
+    return f'{mean:.{digits}f} ± {half:.{digits}f}{suffix}'
+
+
+def population_alpha_table(results: dict[Case, dict[str, Any]], trace: str, predictor: str,
+                           paper: dict[float, tuple[float, float, float]] | None
+                           ) -> tuple[list[str], list[list[object]]]:
+    """Table II/III with a driver population: mean ± 95 % CI over drivers in every cell.
+
+    The maximum improvement is computed per driver (against that driver's alpha = 0), then
+    summarised the same way.
+    """
+    drivers = by_driver(results)
+    header = ['alpha', 'final trust', 'mean E', 'RMSE (m/s^2)']
+    if paper is not None:
+        header += ['paper final trust', 'paper mean E', 'paper RMSE (m/s^2)']
+    rows: list[list[object]] = []
+    for alpha in ALPHAS:
+        per = [d[Case(trace, predictor, alpha)]['metrics'] for d in drivers.values()]
+        row: list[object] = [f'{alpha:g}', _cell([m['final_trust'] for m in per], 3),
+                             _cell([m['mean_explicability'] for m in per], 4),
+                             _cell([m['rmse_mps2'] for m in per], 3)]
+        if paper is not None:
+            row += [f'{v:g}' for v in paper[alpha]]
+        rows.append(row)
+    improvements = [max_improvements(d, trace, predictor) for d in drivers.values()]
+    summary: list[object] = ['max improvement', *(_cell([imp[i] for imp in improvements], 2,
+                                                        ' %') for i in range(3))]
+    if paper is not None:
+        summary += [f'{v:.2f} %' for v in MAX_IMPROVEMENT_PERCENT[(predictor, trace)]]
+    rows.append(summary)
+    return header, rows
+
+
+def population_improvement_table(results: dict[Case, dict[str, Any]], traces: Sequence[str],
+                                 predictors: Sequence[str]
+                                 ) -> tuple[list[str], list[list[object]]]:
+    """Table IV with a driver population: per-driver maximum improvements, mean ± 95 % CI."""
+    drivers = by_driver(results)
+    header = ['predictor', 'trace', 'final trust', 'mean E', 'RMSE', 'paper final trust',
+              'paper mean E', 'paper RMSE', 'ratio of means ours/paper (trust, E, RMSE)']
+    rows: list[list[object]] = []
+    for predictor in predictors:
+        for trace in traces:
+            improvements = [max_improvements(d, trace, predictor) for d in drivers.values()]
+            means = [float(np.mean([imp[i] for imp in improvements])) for i in range(3)]
+            paper = MAX_IMPROVEMENT_PERCENT[(predictor, trace)]
+            ratios = ', '.join(f'{o / p:.2f}' for o, p in zip(means, paper, strict=True))
+            rows.append([f'TAC-{predictor.upper()}', trace,
+                         *[_cell([imp[i] for imp in improvements], 2, ' %') for i in range(3)],
                          *[f'{v:.2f} %' for v in paper], ratios])
     return header, rows
