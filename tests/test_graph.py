@@ -232,7 +232,8 @@ def test_commute_bag_replays_through_the_graph(tmp_path: Path, bag_name: str) ->
     trace_arg = str(Path(__file__).resolve().parents[1] / 'bags' / bag_name)
     bag = tmp_path / 'replay.mcap'
     command = run_command(bag, '--max-steps', '60')
-    command[command.index('us06')] = trace_arg
+    at = command.index('--trace')
+    command[at:at + 2] = ['--bag-in', trace_arg]   # the issue's spelling; --trace BAG is alike
     proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'ca'}})
@@ -278,3 +279,41 @@ def test_solver_time_out_publishes_the_fallback_and_goes_on(tmp_path: Path) -> N
     fallback_line = next(line for line in proc.stdout.splitlines()
                          if line.startswith('NMPC fallback steps'))
     assert int(fallback_line.split()[-1]) >= len(moving)
+
+
+def test_twist_stamped_bag_on_a_remapped_topic_replays_through_the_graph(tmp_path: Path) -> None:
+    """``--bag-in`` with ``--bag-topic``/``--bag-type``: the traffic node replays the bag's own
+    topic and type (the orchestrator hands both to the node), equal to the in-process run."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from preceding_traffic.bags import TWIST_STAMPED, TYPESTORE
+    source = tmp_path / 'lead_twist'
+    types = TYPESTORE.types
+    speeds = [min(1.5 * t, 15.0) for t in range(41)]
+    with Writer(source, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection('/vehicle/lead/twist', TWIST_STAMPED, typestore=TYPESTORE)
+        for i, v in enumerate(speeds):
+            msg = types[TWIST_STAMPED](
+                header=types['std_msgs/msg/Header'](
+                    stamp=types['builtin_interfaces/msg/Time'](sec=100 + i, nanosec=0),
+                    frame_id='base_link'),
+                twist=types['geometry_msgs/msg/Twist'](
+                    linear=types['geometry_msgs/msg/Vector3'](x=v, y=0.0, z=0.0),
+                    angular=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0)))
+            writer.write(conn, (100 + i) * 10**9, TYPESTORE.serialize_cdr(msg, TWIST_STAMPED))
+    bag = tmp_path / 'replay.mcap'
+    command = run_command(bag, '--max-steps', '30', '--bag-topic', '/vehicle/lead/twist',
+                          '--bag-type', TWIST_STAMPED)
+    at = command.index('--trace')
+    command[at:at + 2] = ['--bag-in', str(source)]
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    config = load_run_config(overrides={
+        'planner': {'alpha': 0.5, 'predictor': 'ca'},
+        'preceding_traffic': {'bag_topic': '/vehicle/lead/twist',
+                              'bag_message_type': TWIST_STAMPED}})
+    trace = truncate(load_trace(str(source), config.planner.dt_s, config.trace), 30)
+    assert trace.t0_s == 100.0
+    records = records_from_bag(bag)
+    assert records[0].traffic_speed_mps == 0.0 and records[-1].t_s == pytest.approx(129.0)
+    assert_records_equal(records, simulate(config, trace).records)

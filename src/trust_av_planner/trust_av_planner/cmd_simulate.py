@@ -31,10 +31,20 @@ def add_params_file_option(parser: argparse.ArgumentParser) -> None:
 
 def add_run_options(parser: argparse.ArgumentParser) -> None:
     """Options shared by the commands that run one closed loop."""
-    parser.add_argument('--trace', default=None,
-                        help=f'preceding-traffic trace: one of {", ".join(SHIPPED_TRACES)} or a '
-                             'time_s,speed_mps CSV '
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument('--trace', default=None,
+                        help=f'preceding-traffic trace: one of {", ".join(SHIPPED_TRACES)}, a '
+                             'time_s,speed_mps CSV or a rosbag2 bag '
                              "(default: the params file's preceding_traffic.trace)")
+    source.add_argument('--bag-in', type=Path, default=None, metavar='BAG',
+                        help='replay a rosbag2 bag (MCAP or sqlite3 directory or file) as the '
+                             'preceding vehicle; the same as --trace BAG')
+    parser.add_argument('--bag-topic', default=None,
+                        help="the preceding vehicle's topic in the bag (default: the params "
+                             "file's preceding_traffic.bag_topic)")
+    parser.add_argument('--bag-type', default=None,
+                        choices=('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'),
+                        help='its message type (default: preceding_traffic.bag_message_type)')
     parser.add_argument('--alpha', type=alpha_value, default=None,
                         help="explicability weight in [0, 1] (default: the params file's)")
     parser.add_argument('--predictor', choices=PREDICTORS, default=None,
@@ -50,7 +60,15 @@ def run_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
         planner['alpha'] = args.alpha
     if args.predictor is not None:
         planner['predictor'] = args.predictor
-    traffic = {'trace': args.trace} if args.trace is not None else {}
+    traffic: dict[str, object] = {}
+    if args.trace is not None:
+        traffic['trace'] = args.trace
+    if args.bag_in is not None:
+        traffic['trace'] = str(args.bag_in)
+    if args.bag_topic is not None:
+        traffic['bag_topic'] = args.bag_topic
+    if args.bag_type is not None:
+        traffic['bag_message_type'] = args.bag_type
     return {'planner': planner, 'preceding_traffic': traffic}
 
 

@@ -81,7 +81,9 @@ def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: In
                  {**shared, 'alpha': cfg.planner.alpha, 'predictor': cfg.planner.predictor}),
         NodeSpec('preceding_traffic', 'preceding_traffic.traffic_node',
                  {'trace': trace_arg, 'initial_position_m': initial.traffic.position_m,
-                  'max_steps': max_steps}),
+                  'max_steps': max_steps, 'bag_topic': config.trace.bag_topic,
+                  'bag_message_type': config.trace.bag_message_type,
+                  'max_sample_gap_s': config.trace.max_sample_gap_s}),
     ]
 
 
