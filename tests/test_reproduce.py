@@ -165,8 +165,10 @@ def test_population_cases_are_seeded_and_named() -> None:
     assert first == again and first != other
     assert len(first) == 6 and [c.driver for c in first] == [1, 2, 3, 1, 2, 3]
     # The same driver k for every alpha, so improvements over alpha = 0 are per driver.
-    assert first[0].driver_weights == first[3].driver_weights
-    assert first[0].driver_weights[0] == 1.0 and len(first[0].driver_weights) == 4
+    assert first[0].driver_params == first[3].driver_params
+    params = dict(first[0].driver_params)
+    assert params['weight_acceleration'] == 1.0 and len(params) == 5
+    assert params['time_headway_s'] == pytest.approx(0.975, abs=1e-3)   # the shipped fit
     assert first[1].label == 'us06/TAC-GRU/alpha=0/driver=2'
     assert first[4].base == Case('us06', 'gru', 1.0)
     from trust_av_planner.errors import TrustAvError
@@ -181,7 +183,7 @@ def test_population_tables_give_mean_and_95_percent_interval() -> None:
     results = {}
     for driver, offset in ((1, 0.0), (2, 2.0)):
         for a in reproduce.ALPHAS:
-            case = Case('us06', 'ca', a, driver, (1.0, 0.0, 0.1, 0.01 * driver))
+            case = Case('us06', 'ca', a, driver, (('weight_relative_distance', 0.01 * driver),))
             results[case] = fake(40 + 10 * a + offset, 0.06 - 0.03 * a, 0.7 - 0.2 * a)
     _, rows = reproduce.population_alpha_table(results, 'us06', 'ca', None)
     # Trust at alpha = 0: drivers 40 and 42 -> mean 41, half-width t(1) * 1 = 12.706.

@@ -161,18 +161,38 @@ def with_weights(config: DriverConfig, weights: np.ndarray) -> DriverConfig:
 
 
 def refine_bilevel(config: DriverConfig, pairs: Sequence[FollowingPair], start: np.ndarray, *,
-                   iterations: int = 40,
-                   progress: Callable[[int], None] | None = None) -> tuple[np.ndarray, float]:
-    """Bilevel refinement: minimise mean replay gap RMSE over log(w_ds, w_rs, w_rd), w_a = 1."""
+                   iterations: int = 40, fit_time_headway: bool = True,
+                   progress: Callable[[int], None] | None = None
+                   ) -> tuple[np.ndarray, float, float]:
+    """Bilevel refinement: minimise the mean open-loop replay gap RMSE over the pairs.
+
+    The outer problem is Nelder-Mead on log(w_ds, w_rs, w_rd) (w_a = 1) and, with
+    ``fit_time_headway``, log(tau_H), the time headway of the relative-distance feature; the
+    inner problem is the driver MPC itself (:func:`replay_mpc`). tau_H starts at the
+    config's value.
+
+    Returns:
+        (W, tau_H in s, loss in m).
+    """
     calls = [0]
 
-    def loss(logs: np.ndarray) -> float:
+    def configured(x: np.ndarray) -> DriverConfig:
+        cfg = with_weights(config, np.concatenate([[1.0], np.exp(x[:3])]))
+        if fit_time_headway:
+            cfg = dataclasses.replace(cfg, time_headway_s=float(np.exp(x[3])))
+        return cfg
+
+    def loss(x: np.ndarray) -> float:
         calls[0] += 1
         if progress is not None:
             progress(calls[0])
-        cfg = with_weights(config, np.concatenate([[1.0], np.exp(logs)]))
+        cfg = configured(x)
         return float(np.mean([rmse(replay_mpc(cfg, p)[0], p.gap_m) for p in pairs]))
 
-    logs, value = nelder_mead(loss, np.log(np.maximum(start[1:], 1e-4)), step=1.0,
-                              iterations=iterations)
-    return np.concatenate([[1.0], np.exp(logs)]), value
+    x0 = np.log(np.maximum(start[1:], 1e-4))
+    if fit_time_headway:
+        x0 = np.append(x0, np.log(config.time_headway_s))
+    x, value = nelder_mead(loss, x0, step=0.7 if fit_time_headway else 1.0,
+                           iterations=iterations)
+    best = configured(x)
+    return best.weights / best.weight_acceleration, best.time_headway_s, value

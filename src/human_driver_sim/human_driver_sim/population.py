@@ -44,17 +44,39 @@ class DriverFitError(ValueError):
     """The driver-fit file is missing or malformed; the message names the file and key."""
 
 
+def _read_fit(path: Path) -> dict[str, object]:
+    try:
+        fit = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise DriverFitError(f'{path}: cannot read the driver fit ({err})') from err
+    if not isinstance(fit, dict):
+        raise DriverFitError(f'{path}: not a driver-fit file (expected a mapping)')
+    return fit
+
+
+def fitted_time_headway_s(path: Path = DRIVER_FIT_FILE) -> float | None:
+    """The pooled fit's time headway tau_H (s), or None for a fit that kept the config's.
+
+    Raises:
+        DriverFitError: unreadable file, or a tau_H that is not a positive number.
+    """
+    pooled = _read_fit(path).get('pooled')
+    value = pooled.get('time_headway_s') if isinstance(pooled, dict) else None
+    if value is None:
+        return None
+    if not isinstance(value, int | float) or value <= 0:
+        raise DriverFitError(f'{path}: pooled.time_headway_s must be > 0, got {value!r}')
+    return float(value)
+
+
 def per_pair_weights(path: Path = DRIVER_FIT_FILE) -> np.ndarray:
     """The per-pair inverse-KKT weights of a driver-fit file, P x 4 (population source).
 
     Raises:
         DriverFitError: missing file, missing ``per_pair_inverse_kkt``, or a bad row.
     """
-    try:
-        fit = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as err:
-        raise DriverFitError(f'{path}: cannot read the driver fit ({err})') from err
-    pairs = fit.get('per_pair_inverse_kkt') if isinstance(fit, dict) else None
+    fit = _read_fit(path)
+    pairs = fit.get('per_pair_inverse_kkt')
     if not isinstance(pairs, dict) or not pairs:
         raise DriverFitError(f'{path}: no per_pair_inverse_kkt weights')
     rows = []

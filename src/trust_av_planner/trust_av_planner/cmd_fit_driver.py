@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import subprocess
 import time
@@ -34,8 +35,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='weights file with provenance (default: the shipped fit, '
                              'human_driver_sim/models/driver_fit.yaml)')
     parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE)
-    parser.add_argument('--iterations', type=int, default=25,
-                        help='Nelder-Mead iterations of the bilevel refinement')
+    parser.add_argument('--iterations', type=int, default=40,
+                        help='Nelder-Mead iterations of the bilevel refinement (default: '
+                             '%(default)s)')
     parser.add_argument('--no-progress', action='store_true')
     parser.set_defaults(func=run)
 
@@ -75,18 +77,19 @@ def run(args: argparse.Namespace) -> int:
     except CarFollowingDataError as err:
         raise TrustAvError(str(err)) from err
     n = config.horizon_steps
-    per_pair = {p.name: irl.fit_inverse_kkt(config, irl.demonstrations(p, n)) for p in fit_pairs}
     kkt = irl.fit_inverse_kkt(config, [d for p in fit_pairs for d in irl.demonstrations(p, n)])
-    bar = None if args.no_progress else ProgressBar('fit-driver', 2 * (args.iterations * 2 + 4))
+    bar = None if args.no_progress else ProgressBar('fit-driver', 2 * (args.iterations * 2 + 5))
     update = None if bar is None else bar.update
     candidates = [irl.refine_bilevel(config, fit_pairs, start, iterations=args.iterations,
                                      progress=update)
                   for start in (kkt, config.weights / config.weight_acceleration)]
-    pooled, fit_gap = min(candidates, key=lambda c: c[1])
+    pooled, time_headway_s, fit_gap = min(candidates, key=lambda c: c[2])
     if bar is not None:
         bar.close()
+    fitted = dataclasses.replace(irl.with_weights(config, pooled), time_headway_s=time_headway_s)
+    # Per-pair weights (the population source) at the fitted time headway.
+    per_pair = {p.name: irl.fit_inverse_kkt(fitted, irl.demonstrations(p, n)) for p in fit_pairs}
     idm, idm_fit_gap = fit_idm(fit_pairs)
-    fitted = irl.with_weights(config, pooled)
     evaluation = {}
     for p in test_pairs:
         gap, speed = irl.replay_mpc(fitted, p)
@@ -105,13 +108,15 @@ def run(args: argparse.Namespace) -> int:
             'licence': 'JRC OpenACC database, CC BY 4.0, (c) European Union; resampled from '
                        '10 Hz to dt_s by linear interpolation, speeds and IVS gaps only',
             'method': 'inverse KKT (Keshavarz et al. 2011; Englert et al. 2017), w_a = 1, '
-                      'then bilevel Nelder-Mead on open-loop replay gap RMSE',
+                      'then bilevel Nelder-Mead on open-loop replay gap RMSE over W and the '
+                      'time headway tau_H; per-pair inverse KKT at the fitted tau_H',
             'expected_leader_plan': 'constant acceleration at the last observed one',
             'dt_s': config.dt_s, 'horizon_steps': n,
             'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
             'code_version': _code_version(),
             'fit_time_s': round(time.perf_counter() - started, 1)},
-        'pooled': {k: float(v) for k, v in zip(names, pooled, strict=True)},
+        'pooled': {**{k: float(v) for k, v in zip(names, pooled, strict=True)},
+                   'time_headway_s': float(time_headway_s)},
         'pooled_inverse_kkt': {k: float(v) for k, v in zip(names, kkt, strict=True)},
         'fit_gap_rmse_m': fit_gap,
         'per_pair_inverse_kkt': {name: [float(x) for x in w] for name, w in per_pair.items()},
@@ -122,5 +127,8 @@ def run(args: argparse.Namespace) -> int:
     args.out.write_text(yaml.safe_dump(result, sort_keys=False))
     for name, row in evaluation.items():
         print(name, ' '.join(f'{k}={v:.2f}' for k, v in row.items()))
-    print(f'pooled W = {pooled}; wrote {args.out}')
+    mean = {k: float(np.mean([row[k] for row in evaluation.values()]))
+            for k in next(iter(evaluation.values()))}
+    print('held-out mean: ' + ' '.join(f'{k}={v:.2f}' for k, v in mean.items()))
+    print(f'pooled W = {pooled}, tau_H = {time_headway_s:.3f} s; wrote {args.out}')
     return 0

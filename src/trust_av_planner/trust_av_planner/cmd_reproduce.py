@@ -92,11 +92,14 @@ def run(args: argparse.Namespace) -> int:
 
     with (out / 'all_runs.csv').open('w', newline='') as handle:
         writer = csv.writer(handle)
-        writer.writerow(['trace', 'predictor', 'alpha', 'driver', *WEIGHT_NAMES,
+        driver_names = (*WEIGHT_NAMES, 'time_headway_s')
+        writer.writerow(['trace', 'predictor', 'alpha', 'driver', *driver_names,
                          *results[cases[0]]['metrics']])
         for case in cases:
-            weights = case.driver_weights or (config.driver.weights.tolist())
-            writer.writerow([case.trace, case.predictor, case.alpha, case.driver, *weights,
+            driver = {**{name: getattr(config.driver, name) for name in driver_names},
+                      **dict(case.driver_params)}
+            writer.writerow([case.trace, case.predictor, case.alpha, case.driver,
+                             *(driver[name] for name in driver_names),
                              *results[case]['metrics'].values()])
     if args.drivers:
         alpha_table, improvement_table = (reproduce.population_alpha_table,

@@ -29,6 +29,7 @@ import numpy as np
 from human_driver_sim.population import (
     DRIVER_FIT_FILE,
     WEIGHT_NAMES,
+    fitted_time_headway_s,
     per_pair_weights,
     sample_population,
 )
@@ -57,15 +58,16 @@ class Case:
 
     Attributes:
         driver: 0 for the human driver of the params file; k >= 1 for the k-th driver of a
-            sampled population (``--drivers K``), whose weights W are ``driver_weights``.
-        driver_weights: (w_a, w_ds, w_rs, w_rd) of that driver; empty for driver 0.
+            sampled population (``--drivers K``), whose parameters are ``driver_params``.
+        driver_params: (name, value) pairs that replace the params file's ``human_driver``
+            values for that driver (its weights W and the fitted tau_H); empty for driver 0.
     """
 
     trace: str
     predictor: str
     alpha: float
     driver: int = 0
-    driver_weights: tuple[float, ...] = ()
+    driver_params: tuple[tuple[str, float], ...] = ()
 
     @property
     def label(self) -> str:
@@ -130,8 +132,8 @@ def run_case(case: Case, params_file: str,
     """Run one case and return its metrics and the series the figures need."""
     overrides: dict[str, dict[str, Any]] = {
         'planner': {'alpha': case.alpha, 'predictor': case.predictor}}
-    if case.driver_weights:
-        overrides['human_driver'] = dict(zip(WEIGHT_NAMES, case.driver_weights, strict=True))
+    if case.driver_params:
+        overrides['human_driver'] = dict(case.driver_params)
     config = load_run_config(params_file, overrides)
     trace = truncate(load_trace(case.trace, config.planner.dt_s, config.trace),
                      settings.max_steps)
@@ -241,7 +243,8 @@ def population_cases(cases: Sequence[Case], drivers: int, seed: int,
     """Each case once per driver of a seeded population of ``drivers`` sampled drivers.
 
     The population is :func:`human_driver_sim.population.sample_population` of the per-pair
-    fitted weights in ``driver_fit``: the same seed gives the same drivers.
+    fitted weights in ``driver_fit`` (the same seed gives the same drivers), each with the
+    fit's time headway tau_H when the fit has one.
 
     Raises:
         TrustAvError: ``drivers`` < 1, or an unreadable driver-fit file.
@@ -250,10 +253,13 @@ def population_cases(cases: Sequence[Case], drivers: int, seed: int,
         raise TrustAvError(f'the number of drivers must be >= 1, got {drivers}')
     try:
         population = sample_population(per_pair_weights(driver_fit), drivers, seed=seed)
+        time_headway_s = fitted_time_headway_s(driver_fit)
     except ValueError as err:
         raise TrustAvError(str(err)) from err
-    return [dataclasses.replace(case, driver=k + 1,
-                                driver_weights=tuple(float(w) for w in population[k]))
+    extra = () if time_headway_s is None else (('time_headway_s', time_headway_s),)
+    params = [tuple(zip(WEIGHT_NAMES, (float(w) for w in weights), strict=True)) + extra
+              for weights in population]
+    return [dataclasses.replace(case, driver=k + 1, driver_params=params[k])
             for case in cases for k in range(drivers)]
 
 
