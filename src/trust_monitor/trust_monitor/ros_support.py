@@ -18,8 +18,9 @@ from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.exceptions import InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -210,6 +211,10 @@ def diagnostic_values(msg: DiagnosticArray) -> dict[str, str]:
     return {kv.key: kv.value for kv in msg.status[0].values}
 
 
+SPIN_TIMEOUT_S = 0.1
+"""Longest wait of one executor spin: bounds how late a node notices a stop request."""
+
+
 def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
               user_errors: tuple[type[BaseException], ...] = (ValueError,)) -> int:
     """Init rclpy, build the node and spin until it is finished or shut down.
@@ -219,33 +224,46 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     exit code 2; anything else propagates with its traceback, so the orchestrator can name
     the node that died. SIGINT ends the node cleanly (exit code 0).
     """
-    # rclpy's own SIGINT handler shuts the context down asynchronously, which races with the
-    # next wait ("the given context is not valid"); Python's KeyboardInterrupt does not. Set
-    # it explicitly: a process started in the background inherits SIGINT as ignored.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    # SIGINT and SIGTERM only *request* a stop; the loop below honours it between spins.
+    # rclpy's own SIGINT handler shuts the context down asynchronously (which raced with the
+    # next wait: "the given context is not valid"), and the EventsExecutor (C++) installs its
+    # own SIGINT/SIGTERM handlers that do the same from inside spin_once. A KeyboardInterrupt
+    # raised inside the executor's C++ code (e.g. while it registers the node's callbacks)
+    # left callbacks registered and aborted the process at teardown ("Destroying callback
+    # manager with callbacks remaining"). So no exception is ever raised into rclpy: the
+    # handlers set a flag, spin_once returns within its timeout, and the finally block tears
+    # down in order while the context is still valid. Set after the executor exists, so its
+    # handlers are replaced; set explicitly, since a background process inherits SIGINT as
+    # ignored.
+    stop = {'requested': False}
+
+    def request_stop(_signum: int, _frame: object) -> None:
+        stop['requested'] = True
+
     rclpy.init(args=args if args is not None else sys.argv,
                signal_handler_options=SignalHandlerOptions.NO)
     node = None
-    # SingleThreadedExecutor, not rclpy.experimental.EventsExecutor: the latter stepped the
-    # graph 1.5x faster but once aborted at shutdown ('Destroying callback manager with
-    # callbacks remaining'), which could cost the recorder its file.
-    executor = SingleThreadedExecutor()
+    executor = EventsExecutor()
+    signal.signal(signal.SIGINT, request_stop)
+    signal.signal(signal.SIGTERM, request_stop)
     try:
         try:
             node = factory()
-        except (*user_errors, InvalidParameterValueException) as err:
+        except (*user_errors, InvalidParameterValueException,
+                ParameterUninitializedException) as err:
             print(f'error: {err}', file=sys.stderr)
             return 2
         executor.add_node(node)
-        while rclpy.ok() and not getattr(node, 'finished', False):
-            executor.spin_once(timeout_sec=0.5)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass  # the documented way to stop a node: clean exit below
+        while not stop['requested'] and rclpy.ok() and not getattr(node, 'finished', False):
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+    except ExternalShutdownException:
+        pass  # the context was shut down from outside: clean exit below
     finally:
         if node is not None:
             close = getattr(node, 'close', None)
             if close is not None:
                 close()
+            executor.remove_node(node)
         executor.shutdown()
         if node is not None:
             node.destroy_node()
