@@ -26,6 +26,7 @@ from trust_monitor.params import (
     require,
 )
 from trust_monitor.trust_model import TrustConfig
+from trust_monitor.wall_clock import WallClockConfig
 
 DEFAULT_PARAMS_FILE = Path(__file__).resolve().parent / 'config' / 'trust_av.yaml'
 """The shipped params file (``config/trust_av.yaml`` of the repository)."""
@@ -44,12 +45,32 @@ class SharedConfig:
         require(self.safety_gap_margin_m >= 0.0, 'safety_gap_margin_m must be >= 0')
 
 
+@dataclass(frozen=True)
+class PlannerTopics:
+    """The planner's input topics: a real vehicle's topics are plugged in here (params file
+    or the orchestrator's per-run file), no code change. An empty ``human_odom_topic`` means
+    there is no follower state (wall mode only: the plan estimator then observes nothing)."""
+
+    lead_odom_topic: str = '/preceding_vehicle/odom'
+    lead_preview_topic: str = '/preceding_vehicle/speed_preview'
+    ego_odom_topic: str = '/ego/odom'
+    human_odom_topic: str = '/human/odom'
+    trust_topic: str = '/trust_monitor/trust'
+
+    def __post_init__(self) -> None:
+        for name in ('lead_odom_topic', 'lead_preview_topic', 'ego_odom_topic', 'trust_topic'):
+            require(getattr(self, name).startswith('/'),
+                    f'{name} must be an absolute topic name, got {getattr(self, name)!r}')
+        require(self.human_odom_topic == '' or self.human_odom_topic.startswith('/'),
+                f'human_odom_topic must be empty or absolute, got {self.human_odom_topic!r}')
+
+
 # Node name -> the configuration classes its section may hold.
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
     'preceding_traffic': (TraceConfig, SharedConfig),
-    'planner': (PlannerConfig, TrustConfig, SharedConfig),
+    'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics),
     'human_driver': (DriverConfig, SharedConfig),
-    'trust_monitor': (TrustConfig,),
+    'trust_monitor': (TrustConfig, WallClockConfig),
 }
 _ALL = tuple({c for comps in NODE_COMPONENTS.values() for c in comps})
 

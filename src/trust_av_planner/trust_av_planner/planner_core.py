@@ -60,17 +60,19 @@ class AvPlanner:
         self._last_accel: float | None = None
 
     def step(self, traffic: VehicleState, preview_mps: np.ndarray, av: VehicleState,
-             human: VehicleState, trust: float) -> PlannerOutput:
+             human: VehicleState | None, trust: float) -> PlannerOutput:
         """Plan from the vehicles' odometry at the start of a step.
 
         Args:
             traffic: preceding vehicle's odometry.
             preview_mps: its speed over the horizon (N values; the first is its speed now).
             av: the AV's odometry.
-            human: the human follower's odometry.
+            human: the human follower's odometry; None when it is not known (wall mode
+                without a follower topic): the plan estimator then observes nothing this
+                step and predicts from what it has seen so far.
             trust: the monitor's trust estimate T(t).
         """
-        if self._last_accel is not None:
+        if self._last_accel is not None and human is not None:
             self.predictor.observe(observe(av, human, self._last_accel, self.vehicle_length_m,
                                            self.config.time_headway_cap_s))
         expected = self.predictor.predict()

@@ -6,11 +6,20 @@ and the monitor's trust; per step (inputs paired by header stamp) it runs
 plan, the expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``)
 and the solver status (``DiagnosticArray``). Parameters: the ``planner`` section of
 ``config/trust_av.yaml``.
+
+``clock_mode: wall`` (real-vehicle mode): a wall-clock timer at ``control_rate_hz`` plans
+from the LATEST inputs instead (input topics from the ``*_topic`` parameters), outputs
+stamped with the current time. The lead odometry, preview and ego odometry must be fresher
+than ``input_timeout_s``; otherwise nothing is commanded and the status (level ERROR,
+``status: inputs_not_ready``) says which input is missing or stale. The human odometry is
+used when fresh; without it the plan estimator observes nothing that tick and predicts from
+what it has seen. Trust: the latest estimate, ``trust_initial`` before the first.
 """
 
 from __future__ import annotations
 
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, Vector3Stamped
@@ -18,7 +27,7 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
 
-from trust_av_planner.config import SharedConfig
+from trust_av_planner.config import PlannerTopics, SharedConfig
 from trust_av_planner.errors import TrustAvError
 from trust_av_planner.nmpc import PlannerConfig
 from trust_av_planner.planner_core import AvPlanner
@@ -26,17 +35,21 @@ from trust_av_planner.plant import VehicleState
 from trust_monitor.graph_interface import StepBuffer
 from trust_monitor.ros_support import (
     QOS,
+    WallLoop,
     declare_config,
     diagnostics,
     header,
     msg_ns,
+    now_ns,
     spin_node,
     trajectory,
     trajectory_values,
 )
 from trust_monitor.trust_model import TrustConfig
+from trust_monitor.wall_clock import LatestInputs, WallClockConfig
 
 STEP_INPUTS = ('traffic', 'preview', 'ego', 'human')
+WALL_REQUIRED = ['traffic', 'preview', 'ego']
 
 
 def vehicle(msg: Odometry) -> VehicleState:
@@ -52,25 +65,68 @@ class PlannerNode(Node):
         self.config = declare_config(self, PlannerConfig)
         trust = declare_config(self, TrustConfig)
         shared = declare_config(self, SharedConfig)
+        self.clock = declare_config(self, WallClockConfig)
+        topics = declare_config(self, PlannerTopics)
         self.planner = AvPlanner(self.config, trust, shared.vehicle_length_m)
         self.trust_initial = trust.trust_initial
         self.previous_ns: int | None = None
         self.buffer = StepBuffer([*STEP_INPUTS, 'trust'])
+        self.latest = LatestInputs([*STEP_INPUTS, 'trust'])
+        self.has_human = bool(topics.human_odom_topic)
+        if not self.has_human and not self.clock.wall:
+            raise ValueError('parameter human_odom_topic: may be empty only with '
+                             'clock_mode wall')
         self.pub_plan = self.create_publisher(JointTrajectory, '/ego/plan', QOS['STEP'])
         self.pub_expected = self.create_publisher(JointTrajectory, '/ego/expected_plan',
                                                   QOS['STEP'])
         self.pub_accel = self.create_publisher(AccelStamped, '/ego/accel_cmd', QOS['STEP'])
         self.pub_status = self.create_publisher(DiagnosticArray, '/ego/planner_status',
                                                 QOS['STEP'])
-        for name, msgtype, topic in (
-                ('traffic', Odometry, '/preceding_vehicle/odom'),
-                ('preview', JointTrajectory, '/preceding_vehicle/speed_preview'),
-                ('ego', Odometry, '/ego/odom'), ('human', Odometry, '/human/odom'),
-                ('trust', Vector3Stamped, '/trust_monitor/trust')):
-            self.create_subscription(msgtype, topic,
-                                     lambda m, n=name: self.on_input(n, m), QOS['STEP'])
-        self.get_logger().info(f'ready: predictor {self.config.predictor}, alpha '
-                               f'{self.config.alpha:g}, horizon {self.config.horizon_steps}')
+        inputs = (('traffic', Odometry, topics.lead_odom_topic),
+                  ('preview', JointTrajectory, topics.lead_preview_topic),
+                  ('ego', Odometry, topics.ego_odom_topic),
+                  ('human', Odometry, topics.human_odom_topic),
+                  ('trust', Vector3Stamped, topics.trust_topic))
+        callback = self.on_latest if self.clock.wall else self.on_input
+        for name, msgtype, topic in inputs:
+            if topic:
+                self.create_subscription(msgtype, topic,
+                                         lambda m, n=name: callback(n, m), QOS['STEP'])
+        self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
+        mode = (f'wall clock at {self.clock.control_rate_hz:g} Hz' if self.clock.wall
+                else 'lock-step')
+        self.get_logger().info(f'ready ({mode}): predictor {self.config.predictor}, alpha '
+                               f'{self.config.alpha:g}, horizon {self.config.horizon_steps}, '
+                               f'inputs {", ".join(t for _, _, t in inputs if t)}')
+
+    def on_latest(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
+        """Wall mode: keep the latest message of each input with its receive time."""
+        self.latest.put(name, time.monotonic_ns(), msg)
+
+    def wall_step(self) -> None:
+        """Wall mode: one planning step from the latest inputs, stamped now."""
+        ns = now_ns(self)
+        why = self.latest.problems(time.monotonic_ns(), self.clock.input_timeout_s,
+                                   WALL_REQUIRED)
+        if why:
+            self.pub_status.publish(diagnostics(
+                ns, 'trust_aware_nmpc', False, 'inputs_not_ready',
+                {'status': 'inputs_not_ready', 'success': 'False', 'fallback': 'True',
+                 'reason': why}))
+            self.get_logger().warning(f'no command: {why}', throttle_duration_sec=5.0)
+            return
+        human_ok = self.has_human and not self.latest.problems(
+            time.monotonic_ns(), self.clock.input_timeout_s, ['human'])
+        trust_msg = self.latest.get('trust')
+        trust = self.trust_initial if trust_msg is None else float(trust_msg.vector.z)
+        items: dict[str, object] = {name: self.latest.get(name) for name in WALL_REQUIRED}
+        items['human'] = self.latest.get('human') if human_ok else None
+        self.plan(ns, items, trust)
+
+    def close(self) -> None:
+        """At shutdown: the wall loop's jitter statistics."""
+        if self.loop is not None:
+            self.loop.close()
 
     def on_input(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Store an input; plan every step whose inputs are complete, in order."""
@@ -93,7 +149,9 @@ class PlannerNode(Node):
         """One planning step and its four outputs."""
         preview = trajectory_values(items['preview'], 'velocities')  # type: ignore[arg-type]
         out = self.planner.step(vehicle(items['traffic']), preview,  # type: ignore[arg-type]
-                                vehicle(items['ego']), vehicle(items['human']),  # type: ignore[arg-type]
+                                vehicle(items['ego']),  # type: ignore[arg-type]
+                                None if items['human'] is None
+                                else vehicle(items['human']),  # type: ignore[arg-type]
                                 trust)
         result, dt = out.result, self.config.dt_s
         self.pub_plan.publish(trajectory(ns, dt, accelerations=result.plan_mps2.tolist()))

@@ -3,11 +3,16 @@
 Subscribes ``/ego/plan`` and ``/ego/expected_plan`` (paired by header stamp), publishes
 ``/trust_monitor/trust`` (``geometry_msgs/Vector3Stamped``: x = E, y = P, z = trust after
 the step), stamped like the plans. Parameters: the trust model's (``config/trust_av.yaml``).
+
+``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` scores the latest plan and
+expected plan once (when both carry the same, new stamp) and stamps the trust with the
+current time; loop jitter as in the planner.
 """
 
 from __future__ import annotations
 
 import sys
+import time
 
 from geometry_msgs.msg import Vector3Stamped
 from rclpy.node import Node
@@ -16,13 +21,16 @@ from trajectory_msgs.msg import JointTrajectory
 from trust_monitor.graph_interface import StepBuffer
 from trust_monitor.ros_support import (
     QOS,
+    WallLoop,
     declare_config,
     header,
     msg_ns,
+    now_ns,
     spin_node,
     trajectory_values,
 )
 from trust_monitor.trust_model import TrustConfig, TrustEstimator
+from trust_monitor.wall_clock import LatestInputs, WallClockConfig
 
 
 class MonitorNode(Node):
@@ -31,13 +39,38 @@ class MonitorNode(Node):
     def __init__(self) -> None:
         super().__init__('trust_monitor')
         self.estimator = TrustEstimator(declare_config(self, TrustConfig))
+        self.clock = declare_config(self, WallClockConfig)
         self.buffer = StepBuffer(['plan', 'expected'])
+        self.latest = LatestInputs(['plan', 'expected'])
+        self.scored_ns: int | None = None
         self.pub = self.create_publisher(Vector3Stamped, '/trust_monitor/trust', QOS['STEP'])
+        callback = self.on_latest if self.clock.wall else self.on_input
         self.create_subscription(JointTrajectory, '/ego/plan',
-                                 lambda m: self.on_input('plan', m), QOS['STEP'])
+                                 lambda m: callback('plan', m), QOS['STEP'])
         self.create_subscription(JointTrajectory, '/ego/expected_plan',
-                                 lambda m: self.on_input('expected', m), QOS['STEP'])
-        self.get_logger().info('ready')
+                                 lambda m: callback('expected', m), QOS['STEP'])
+        self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
+        self.get_logger().info(f'ready ({self.clock.clock_mode})')
+
+    def on_latest(self, name: str, msg: JointTrajectory) -> None:
+        """Wall mode: keep the latest plan of each kind."""
+        self.latest.put(name, time.monotonic_ns(), msg)
+
+    def wall_step(self) -> None:
+        """Wall mode: score the latest plan pair once, stamped now."""
+        plan, expected = self.latest.get('plan'), self.latest.get('expected')
+        if plan is None or expected is None:
+            return
+        ns = msg_ns(plan.header.stamp)
+        if ns != msg_ns(expected.header.stamp) or ns == self.scored_ns:
+            return
+        self.scored_ns = ns
+        self.publish(now_ns(self), plan, expected)
+
+    def close(self) -> None:
+        """At shutdown: the wall loop's jitter statistics."""
+        if self.loop is not None:
+            self.loop.close()
 
     def on_input(self, name: str, msg: JointTrajectory) -> None:
         """Store a plan; when both plans of a step are there, score them."""
@@ -46,9 +79,12 @@ class MonitorNode(Node):
         if not self.buffer.ready(ns):
             return
         items = self.buffer.pop(ns)
-        estimate = self.estimator.step(
-            trajectory_values(items['plan'], 'accelerations'),  # type: ignore[arg-type]
-            trajectory_values(items['expected'], 'accelerations'))  # type: ignore[arg-type]
+        self.publish(ns, items['plan'], items['expected'])  # type: ignore[arg-type]
+
+    def publish(self, ns: int, plan: JointTrajectory, expected: JointTrajectory) -> None:
+        """One trust step from a plan pair, published stamped ``ns``."""
+        estimate = self.estimator.step(trajectory_values(plan, 'accelerations'),
+                                       trajectory_values(expected, 'accelerations'))
         out = Vector3Stamped(header=header(ns, ''))
         out.vector.x = estimate.explicability
         out.vector.y = estimate.performance

@@ -9,6 +9,7 @@ import dataclasses
 import importlib
 import signal
 import sys
+import time
 import typing
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
@@ -30,6 +31,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from trust_monitor.graph_interface import JOINT_NAME, split_ns
 from trust_monitor.params import ParamsError, build_config
+from trust_monitor.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
 
 T = TypeVar('T')
 
@@ -95,6 +97,16 @@ DESCRIPTIONS = {
     'weight_relative_speed': 'driver feature weight: relative speed',
     'weight_relative_distance': 'driver feature weight: relative distance',
     'gap_slack_weight': 'penalty weight on violating the driver gap bound',
+    'clock_mode': 'lockstep (sim time, inputs paired by stamp) or wall (timer, latest inputs)',
+    'control_rate_hz': 'wall mode: control loop rate, Hz',
+    'input_timeout_s': 'wall mode: an input received longer ago than this is stale, s',
+    'jitter_report_path': "wall mode: JSON file for the loop's jitter statistics at shutdown",
+    'jitter_log_period_s': 'wall mode: period of the jitter log line, s',
+    'lead_odom_topic': 'preceding vehicle odometry topic (nav_msgs/msg/Odometry)',
+    'lead_preview_topic': 'preceding vehicle speed preview topic (JointTrajectory)',
+    'ego_odom_topic': 'ego (AV) odometry topic (nav_msgs/msg/Odometry)',
+    'human_odom_topic': "human follower odometry topic ('' = none, wall mode only)",
+    'trust_topic': 'trust estimate topic (geometry_msgs/msg/Vector3Stamped)',
 }
 RANGES: dict[str, tuple[float, float]] = {'alpha': (0.0, 1.0), 'horizon_steps': (1, 50),
                                           'performance_threshold': (0.0, 1.0)}
@@ -209,6 +221,42 @@ def diagnostics(ns: int, name: str, level_ok: bool, message: str,
 def diagnostic_values(msg: DiagnosticArray) -> dict[str, str]:
     """Key/values of the first status."""
     return {kv.key: kv.value for kv in msg.status[0].values}
+
+
+class WallLoop:
+    """A node's wall-clock control loop: a timer at ``control_rate_hz`` whose every tick is
+    timed (:class:`trust_monitor.wall_clock.LoopStats`); p50/p99 are logged every
+    ``jitter_log_period_s`` and written to ``jitter_report_path`` by :meth:`close`."""
+
+    def __init__(self, node: Node, config: WallClockConfig, step: Callable[[], None]) -> None:
+        self.node = node
+        self.config = config
+        self.step = step
+        self.stats = LoopStats(config.period_ns)
+        self._next_log_ns = time.monotonic_ns() + round(config.jitter_log_period_s * NS_PER_S)
+        self.timer = node.create_timer(1.0 / config.control_rate_hz, self._tick)
+
+    def _tick(self) -> None:
+        start = time.monotonic_ns()
+        self.stats.tick(start)
+        self.step()
+        end = time.monotonic_ns()
+        self.stats.done(end - start)
+        if end >= self._next_log_ns:
+            self._next_log_ns = end + round(self.config.jitter_log_period_s * NS_PER_S)
+            self.node.get_logger().info(f'loop: {format_summary(self.stats.summary())}')
+
+    def close(self) -> None:
+        """Log the final statistics and write them to ``jitter_report_path`` if set."""
+        summary = self.stats.summary()
+        self.node.get_logger().info(f'loop at shutdown: {format_summary(summary)}')
+        if self.config.jitter_report_path:
+            self.stats.write(self.config.jitter_report_path, self.node.get_name())
+
+
+def now_ns(node: Node) -> int:
+    """The node clock's time, integer ns (wall time unless use_sim_time)."""
+    return int(node.get_clock().now().nanoseconds)
 
 
 SPIN_TIMEOUT_S = 0.1

@@ -1,0 +1,60 @@
+"""Pure core of the real-vehicle (wall-clock) mode: config, latest inputs, loop statistics."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from trust_monitor.params import ParamsError, build_config
+from trust_monitor.wall_clock import (
+    NS_PER_S,
+    LatestInputs,
+    LoopStats,
+    WallClockConfig,
+    format_summary,
+)
+
+
+def test_config_defaults_and_validation() -> None:
+    config = WallClockConfig()
+    assert config.clock_mode == 'lockstep' and not config.wall
+    assert WallClockConfig(clock_mode='wall', control_rate_hz=10.0).period_ns == 100_000_000
+    with pytest.raises(ValueError, match='clock_mode'):
+        WallClockConfig(clock_mode='realtime')
+    with pytest.raises(ValueError, match='control_rate_hz'):
+        WallClockConfig(control_rate_hz=0.0)
+    with pytest.raises(ParamsError, match='input_timeout_s'):
+        build_config(WallClockConfig, {'input_timeout_s': -1.0})
+
+
+def test_latest_inputs_missing_and_stale() -> None:
+    inputs = LatestInputs(['lead', 'ego'])
+    assert inputs.problems(0, 0.5) == 'missing: lead, ego'
+    inputs.put('lead', 0, 'a')
+    inputs.put('lead', NS_PER_S, 'b')
+    inputs.put('ego', 0, 'c')
+    assert inputs.get('lead') == 'b'
+    assert inputs.problems(NS_PER_S, 0.5) == 'stale: ego (1.000 s old)'
+    assert inputs.problems(NS_PER_S, 0.5, ['lead']) == ''
+    with pytest.raises(KeyError):
+        inputs.put('human', 0, 'd')
+
+
+def test_loop_stats_percentiles(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    stats = LoopStats(100_000_000)
+    assert stats.summary()['jitter_ms']['p99'] is None
+    for k, error_ns in enumerate([0, 1_000_000, -2_000_000, 3_000_000]):
+        stats.tick(k * 100_000_000 + error_ns)
+        stats.done(500_000)
+    summary = stats.summary()
+    # period errors: +1, -3, +5 ms -> |.| = 1, 3, 5
+    assert summary['ticks'] == 4
+    assert summary['jitter_ms']['p50'] == pytest.approx(3.0)
+    assert summary['jitter_ms']['max'] == pytest.approx(5.0)
+    assert summary['compute_ms']['p99'] == pytest.approx(0.5)
+    assert 'p50/p99/max 3.00' in format_summary(summary)
+    stats.write(tmp_path / 'j.json', 'planner')
+    assert json.loads((tmp_path / 'j.json').read_text())['node'] == 'planner'
+    with pytest.raises(ValueError):
+        LoopStats(0)
