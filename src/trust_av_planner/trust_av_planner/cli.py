@@ -22,6 +22,7 @@ from trust_monitor.params import ParamsError
 COMMAND_MODULES = (
     'trust_av_planner.cmd_simulate',
     'trust_av_planner.cmd_run',
+    'trust_av_planner.cmd_shadow',
     'trust_av_planner.cmd_reproduce',
     'trust_av_planner.cmd_bags',
     'trust_av_planner.cmd_train_gru',

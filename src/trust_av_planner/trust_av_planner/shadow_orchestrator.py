@@ -1,0 +1,195 @@
+"""``trust-av shadow``: a recorded bag replayed at real-time speed into the planner and the
+trust monitor running in wall-clock mode; their outputs recorded to MCAP.
+
+Processes: ``planner`` and ``trust_monitor`` (``clock_mode: wall``, started and stopped by
+:class:`trust_av_planner.orchestrator.Graph` on a leased domain). This process is the
+player and the recorder: a wall-clock loop at the same control rate publishes the lead
+vehicle's odometry and speed preview (:class:`~trust_av_planner.shadow_replay.LeadReplay`,
+stamps = now) and the ego odometry, which is *simulated*: the latest ``/ego/accel_cmd``
+integrated over the real elapsed time (:func:`trust_av_planner.plant.integrate`), because
+the commute bags hold only the lead vehicle. There is no human follower: the planner runs
+with ``human_odom_topic: ''`` (its plan estimator observes nothing, DESIGN section 3). Every
+message on the recorded topics is written with log time = its header stamp = the wall time
+it was published (not sim time).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.config import RunConfig
+from trust_av_planner.orchestrator import Graph, GraphError, NodeSpec, lease_domain
+from trust_av_planner.plant import VehicleState, integrate
+from trust_av_planner.recorder import McapBag
+from trust_av_planner.shadow_replay import LeadReplay
+from trust_av_planner.simulate import equilibrium_start
+from trust_monitor.graph_interface import TOPIC
+from trust_monitor.wall_clock import NS_PER_S, LoopStats
+
+RECORDED = ('/preceding_vehicle/odom', '/ego/odom', '/ego/plan', '/ego/expected_plan',
+            '/ego/accel_cmd', '/ego/planner_status', '/trust_monitor/trust')
+"""Topics of a shadow recording: the replayed inputs and every output of the two nodes."""
+SHADOW_NODES = ('planner', 'trust_monitor')
+
+
+@dataclass
+class ShadowRun:
+    """Outcome of a shadow run: the recording and the loop statistics per loop."""
+
+    bag: Path
+    duration_s: float
+    counts: dict[str, int]
+    loops: dict[str, dict[str, Any]]
+
+
+def shadow_specs(config: RunConfig, trace: SpeedTrace, rate_hz: float,
+                 log_dir: Path) -> list[NodeSpec]:
+    """The two node processes of a shadow run, in wall mode."""
+    cfg = config.for_trace(trace)
+    wall = {'clock_mode': 'wall', 'control_rate_hz': rate_hz}
+    return [
+        NodeSpec('trust_monitor', 'trust_monitor.monitor_node',
+                 {**wall, 'jitter_report_path': str(log_dir / 'trust_monitor.jitter.json')}),
+        NodeSpec('planner', 'trust_av_planner.planner_node',
+                 {**wall, 'jitter_report_path': str(log_dir / 'planner.jitter.json'),
+                  'human_odom_topic': '', 'speed_max_mps': cfg.planner.speed_max_mps,
+                  'speed_max_from_trace': False, 'alpha': cfg.planner.alpha,
+                  'predictor': cfg.planner.predictor}),
+    ]
+
+
+def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Path, *,
+               duration_s: float, rate_hz: float, startup_timeout_s: float = 30.0) -> ShadowRun:
+    """Replay ``trace`` for ``duration_s`` of wall time at ``rate_hz`` into the two nodes.
+
+    Raises:
+        GraphError: the nodes did not connect in time or one died.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from trust_monitor.ros_support import QOS, message_class, odometry, trajectory
+
+    cfg = config.for_trace(trace)
+    initial = equilibrium_start(cfg, trace)
+    lead = LeadReplay(trace, initial.traffic.position_m)
+    log_dir = bag.with_suffix('.logs')
+    period_ns = round(NS_PER_S / rate_hz)
+    with lease_domain() as domain:
+        graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), params_file, domain,
+                      log_dir)
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        graph.start()
+        context = Context()
+        rclpy.init(context=context, domain_id=domain,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node('shadow_player', context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        pub_lead = node.create_publisher(message_class(TOPIC['/preceding_vehicle/odom'].msgtype),
+                                         '/preceding_vehicle/odom', QOS['STEP'])
+        pub_preview = node.create_publisher(
+            message_class(TOPIC['/preceding_vehicle/speed_preview'].msgtype),
+            '/preceding_vehicle/speed_preview', QOS['STEP'])
+        pub_ego = node.create_publisher(message_class(TOPIC['/ego/odom'].msgtype), '/ego/odom',
+                                        QOS['STEP'])
+        command = {'accel_mps2': 0.0}
+        stats = LoopStats(period_ns)
+        try:
+            with McapBag(bag) as recording:
+                def on_message(topic: str, data: bytes) -> None:
+                    recording.write(topic, data)
+
+                for name in RECORDED:
+                    topic = TOPIC[name]
+                    recording.add_topic(name, topic.msgtype, topic.qos)
+                    node.create_subscription(message_class(topic.msgtype), name,
+                                             lambda d, t=name: on_message(t, d),
+                                             QOS[topic.qos], raw=True)
+
+                def on_command(msg: Any) -> None:
+                    command['accel_mps2'] = float(msg.accel.linear.x)
+
+                node.create_subscription(message_class(TOPIC['/ego/accel_cmd'].msgtype),
+                                         '/ego/accel_cmd', on_command, QOS['STEP'])
+                _wait_nodes(graph, node, executor, startup_timeout_s)
+                ego = initial.av
+                start = last = time.monotonic_ns()
+                next_tick = start
+                while True:
+                    now = time.monotonic_ns()
+                    if now < next_tick:
+                        executor.spin_once(timeout_sec=(next_tick - now) / NS_PER_S)
+                        continue
+                    stats.tick(now)
+                    elapsed_s = (now - start) / NS_PER_S
+                    if elapsed_s > duration_s:
+                        break
+                    ego = _advance(ego, command['accel_mps2'], (now - last) / NS_PER_S)
+                    last = now
+                    stamp = time.time_ns()
+                    state = lead.state(elapsed_s)
+                    pub_lead.publish(odometry(stamp, state.position_m, state.speed_mps,
+                                              'preceding_vehicle'))
+                    pub_preview.publish(trajectory(
+                        stamp, cfg.planner.dt_s, velocities=lead.preview(
+                            elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
+                    pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
+                    stats.done(time.monotonic_ns() - now)
+                    next_tick += period_ns
+                    graph.check_alive(set())
+                graph.stop(list(SHADOW_NODES))  # the nodes write their statistics on exit
+                drain_until = time.monotonic() + 0.5
+                while time.monotonic() < drain_until:
+                    executor.spin_once(timeout_sec=0.05)
+                counts = dict(recording.counts)
+        finally:
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+            graph.stop()
+        for process in graph.processes:
+            if process.popen.returncode not in (0, None):
+                raise GraphError(f'node {process.spec.name} exited with code '
+                                 f'{process.popen.returncode}; last output:\n{process.tail()}')
+    loops = {'shadow_player': {'node': 'shadow_player', **stats.summary()}}
+    for name in SHADOW_NODES:
+        path = log_dir / f'{name}.jitter.json'
+        if not path.exists():
+            raise GraphError(f'node {name} wrote no loop statistics ({path}); node logs in '
+                             f'{log_dir}')
+        loops[name] = json.loads(path.read_text())
+    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops)
+
+
+def _advance(ego: VehicleState, accel_mps2: float, dt_s: float) -> VehicleState:
+    """The simulated ego over ``dt_s`` of wall time; speed kept >= 0 (no reversing)."""
+    state = integrate(ego, accel_mps2, dt_s)
+    return state if state.speed_mps >= 0.0 else VehicleState(state.position_m, 0.0)
+
+
+def _wait_nodes(graph: Graph, node: Any, executor: Any, timeout_s: float) -> None:
+    """Wait until both nodes publish and subscribe what the player exchanges with them."""
+    needs = {'/preceding_vehicle/odom': (1, 1), '/preceding_vehicle/speed_preview': (1, 1),
+             '/ego/odom': (1, 1), '/ego/plan': (1, 2), '/ego/expected_plan': (1, 2),
+             '/ego/accel_cmd': (1, 2), '/ego/planner_status': (1, 1),
+             '/trust_monitor/trust': (1, 2)}
+    deadline = time.monotonic() + timeout_s
+    missing: list[str] = []
+    while time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+        graph.check_alive(set())
+        missing = [f'{topic} ({node.count_publishers(topic)}/{pubs} publishers, '
+                   f'{node.count_subscribers(topic)}/{subs} subscribers)'
+                   for topic, (pubs, subs) in needs.items()
+                   if node.count_publishers(topic) < pubs or node.count_subscribers(topic) < subs]
+        if not missing:
+            return
+    raise GraphError(f'shadow nodes not connected after {timeout_s:g} s: ' + '; '.join(missing))
