@@ -12,7 +12,7 @@ ruff check src tests benchmarks
 echo '== mypy (pure core, strict)' >&2
 # The ROS adapters (nodes, recorder, orchestrator) talk to untyped rclpy/message modules and
 # are excluded; everything they call is in the checked core.
-mypy --exclude '(_node|ros_support|recorder|orchestrator|cmd_run|bag_records|setup)\.py$' \
+mypy --exclude '(_node|ros_support|recorder|orchestrator|cmd_run|cmd_shadow|bag_records|setup)\.py$' \
   src/preceding_traffic/preceding_traffic src/trust_monitor/trust_monitor \
   src/human_driver_sim/human_driver_sim src/trust_av_planner/trust_av_planner
 echo '== pytest' >&2

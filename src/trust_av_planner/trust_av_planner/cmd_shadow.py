@@ -8,9 +8,10 @@ import json
 from pathlib import Path
 
 from preceding_traffic.traces import load_trace
-from trust_av_planner.cmd_simulate import PREDICTORS, add_params_file_option, alpha_value
-from trust_av_planner.config import load_run_config
+from trust_av_planner.cmd_simulate import add_params_file_option, alpha_value
+from trust_av_planner.config import PlannerTopics, load_run_config
 from trust_av_planner.errors import TrustAvError
+from trust_av_planner.nmpc import PREDICTORS
 from trust_av_planner.shadow_orchestrator import ShadowRun, run_shadow
 from trust_monitor.params import build_config, node_params, read_params_file
 from trust_monitor.wall_clock import WallClockConfig, format_summary
@@ -49,8 +50,9 @@ def run(args: argparse.Namespace) -> int:
         planner['predictor'] = args.predictor
     overrides['planner'] = planner
     config = load_run_config(args.params_file, overrides)
-    clock = build_config(WallClockConfig, node_params(read_params_file(args.params_file),
-                                                      'planner'))
+    planner_section = node_params(read_params_file(args.params_file), 'planner')
+    clock = build_config(WallClockConfig, planner_section)
+    topics = build_config(PlannerTopics, planner_section)
     rate_hz = args.rate_hz if args.rate_hz is not None else clock.control_rate_hz
     trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
     whole_s = trace.steps * trace.dt_s
@@ -62,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
     print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '
           f'planner and trust_monitor at {rate_hz:g} Hz', flush=True)
     result = run_shadow(config, trace, args.params_file, args.out, duration_s=duration_s,
-                        rate_hz=rate_hz, startup_timeout_s=args.startup_timeout_s)
+                        rate_hz=rate_hz, topics=topics,
+                        startup_timeout_s=args.startup_timeout_s)
     print('\n'.join(summary_lines(result)))
     if args.json is not None:
         args.json.write_text(json.dumps({'bag': str(args.bag), 'duration_s': duration_s,

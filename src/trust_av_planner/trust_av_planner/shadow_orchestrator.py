@@ -10,7 +10,9 @@ integrated over the real elapsed time (:func:`trust_av_planner.plant.integrate`)
 the commute bags hold only the lead vehicle. There is no human follower: the planner runs
 with ``human_odom_topic: ''`` (its plan estimator observes nothing, DESIGN section 3). Every
 message on the recorded topics is written with log time = its header stamp = the wall time
-it was published (not sim time).
+it was published (not sim time). The player publishes on the planner's configured input
+topics (``lead_odom_topic``, ``lead_preview_topic``, ``ego_odom_topic``), so a params file
+that remaps them is exercised end to end.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from preceding_traffic.traces import SpeedTrace
-from trust_av_planner.config import RunConfig
+from trust_av_planner.config import PlannerTopics, RunConfig
 from trust_av_planner.orchestrator import Graph, GraphError, NodeSpec, lease_domain
 from trust_av_planner.plant import VehicleState, integrate
 from trust_av_planner.recorder import McapBag
@@ -32,9 +34,9 @@ from trust_av_planner.simulate import equilibrium_start
 from trust_monitor.graph_interface import TOPIC
 from trust_monitor.wall_clock import NS_PER_S, LoopStats
 
-RECORDED = ('/preceding_vehicle/odom', '/ego/odom', '/ego/plan', '/ego/expected_plan',
-            '/ego/accel_cmd', '/ego/planner_status', '/trust_monitor/trust')
-"""Topics of a shadow recording: the replayed inputs and every output of the two nodes."""
+OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_status',
+           '/trust_monitor/trust')
+"""The two nodes' outputs, recorded with the replayed lead and ego odometry."""
 SHADOW_NODES = ('planner', 'trust_monitor')
 
 
@@ -65,7 +67,8 @@ def shadow_specs(config: RunConfig, trace: SpeedTrace, rate_hz: float,
 
 
 def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Path, *,
-               duration_s: float, rate_hz: float, startup_timeout_s: float = 30.0) -> ShadowRun:
+               duration_s: float, rate_hz: float, topics: PlannerTopics | None = None,
+               startup_timeout_s: float = 30.0) -> ShadowRun:
     """Replay ``trace`` for ``duration_s`` of wall time at ``rate_hz`` into the two nodes.
 
     Raises:
@@ -78,6 +81,11 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
 
     from trust_monitor.ros_support import QOS, message_class, odometry, trajectory
 
+    topics = topics if topics is not None else PlannerTopics()
+    # actual topic name -> the topic-table entry it stands for (message type, QoS)
+    recorded = {topics.lead_odom_topic: TOPIC['/preceding_vehicle/odom'],
+                topics.ego_odom_topic: TOPIC['/ego/odom'],
+                **{name: TOPIC[name] for name in OUTPUTS}}
     cfg = config.for_trace(trace)
     initial = equilibrium_start(cfg, trace)
     lead = LeadReplay(trace, initial.traffic.position_m)
@@ -95,12 +103,12 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         pub_lead = node.create_publisher(message_class(TOPIC['/preceding_vehicle/odom'].msgtype),
-                                         '/preceding_vehicle/odom', QOS['STEP'])
+                                         topics.lead_odom_topic, QOS['STEP'])
         pub_preview = node.create_publisher(
             message_class(TOPIC['/preceding_vehicle/speed_preview'].msgtype),
-            '/preceding_vehicle/speed_preview', QOS['STEP'])
-        pub_ego = node.create_publisher(message_class(TOPIC['/ego/odom'].msgtype), '/ego/odom',
-                                        QOS['STEP'])
+            topics.lead_preview_topic, QOS['STEP'])
+        pub_ego = node.create_publisher(message_class(TOPIC['/ego/odom'].msgtype),
+                                        topics.ego_odom_topic, QOS['STEP'])
         command = {'accel_mps2': 0.0}
         stats = LoopStats(period_ns)
         try:
@@ -108,8 +116,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
                 def on_message(topic: str, data: bytes) -> None:
                     recording.write(topic, data)
 
-                for name in RECORDED:
-                    topic = TOPIC[name]
+                for name, topic in recorded.items():
                     recording.add_topic(name, topic.msgtype, topic.qos)
                     node.create_subscription(message_class(topic.msgtype), name,
                                              lambda d, t=name: on_message(t, d),
@@ -120,7 +127,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
 
                 node.create_subscription(message_class(TOPIC['/ego/accel_cmd'].msgtype),
                                          '/ego/accel_cmd', on_command, QOS['STEP'])
-                _wait_nodes(graph, node, executor, startup_timeout_s)
+                _wait_nodes(graph, node, executor, topics, startup_timeout_s)
                 ego = initial.av
                 start = last = time.monotonic_ns()
                 next_tick = start
@@ -175,10 +182,11 @@ def _advance(ego: VehicleState, accel_mps2: float, dt_s: float) -> VehicleState:
     return state if state.speed_mps >= 0.0 else VehicleState(state.position_m, 0.0)
 
 
-def _wait_nodes(graph: Graph, node: Any, executor: Any, timeout_s: float) -> None:
+def _wait_nodes(graph: Graph, node: Any, executor: Any, topics: PlannerTopics,
+                timeout_s: float) -> None:
     """Wait until both nodes publish and subscribe what the player exchanges with them."""
-    needs = {'/preceding_vehicle/odom': (1, 1), '/preceding_vehicle/speed_preview': (1, 1),
-             '/ego/odom': (1, 1), '/ego/plan': (1, 2), '/ego/expected_plan': (1, 2),
+    needs = {topics.lead_odom_topic: (1, 2), topics.lead_preview_topic: (1, 1),
+             topics.ego_odom_topic: (1, 2), '/ego/plan': (1, 2), '/ego/expected_plan': (1, 2),
              '/ego/accel_cmd': (1, 2), '/ego/planner_status': (1, 1),
              '/trust_monitor/trust': (1, 2)}
     deadline = time.monotonic() + timeout_s

@@ -26,7 +26,7 @@ class LeadReplay:
 
     def speed_mps(self, t_s: float | np.ndarray) -> np.ndarray:
         """Speed at elapsed time(s) ``t_s``; held after the end."""
-        return np.interp(t_s, self.times_s, self.trace.speeds_mps)
+        return np.asarray(np.interp(t_s, self.times_s, self.trace.speeds_mps), dtype=float)
 
     def state(self, t_s: float) -> VehicleState:
         """Odometry at elapsed time ``t_s`` (clipped to the trace)."""
