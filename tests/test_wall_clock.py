@@ -58,3 +58,21 @@ def test_loop_stats_percentiles(tmp_path) -> None:  # type: ignore[no-untyped-de
     assert json.loads((tmp_path / 'j.json').read_text())['node'] == 'planner'
     with pytest.raises(ValueError):
         LoopStats(0)
+
+
+def test_planner_core_without_follower_observes_the_av_only(run_config) -> None:  # type: ignore[no-untyped-def]
+    import dataclasses
+
+    from trust_av_planner.planner_core import AvPlanner
+    from trust_av_planner.plant import VehicleState
+
+    planner = AvPlanner(run_config.planner, run_config.trust, 4.5)
+    lead, av = VehicleState(40.0, 10.0), VehicleState(0.0, 5.0)
+    first = planner.step(lead, [10.0, 10.0, 10.0], av, None, 0.0)
+    second = planner.step(lead, [10.0, 10.0, 10.0], av, None, 0.0)
+    # CA: the expected plan is the AV's last executed acceleration, held
+    assert second.expected_mps2 == pytest.approx([first.result.plan_mps2[0]] * 3)
+    gru = AvPlanner(dataclasses.replace(run_config.planner, predictor='gru'),
+                    run_config.trust, 4.5)
+    with pytest.raises(ValueError, match='predictor ca'):
+        gru.step(lead, [10.0, 10.0, 10.0], av, None, 0.0)

@@ -54,6 +54,9 @@ def run(args: argparse.Namespace) -> int:
     clock = build_config(WallClockConfig, planner_section)
     topics = build_config(PlannerTopics, planner_section)
     rate_hz = args.rate_hz if args.rate_hz is not None else clock.control_rate_hz
+    if config.planner.predictor != 'ca':
+        raise TrustAvError('trust-av shadow has no human follower state: it needs predictor ca '
+                           f'(got {config.planner.predictor})')
     trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
     whole_s = trace.steps * trace.dt_s
     duration_s = whole_s if args.duration_s is None else min(args.duration_s, whole_s)

@@ -7,6 +7,7 @@ human expects, and solves the trust-aware NMPC.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,11 +69,21 @@ class AvPlanner:
             preview_mps: its speed over the horizon (N values; the first is its speed now).
             av: the AV's odometry.
             human: the human follower's odometry; None when it is not known (wall mode
-                without a follower topic): the plan estimator then observes nothing this
-                step and predicts from what it has seen so far.
+                without a follower topic): the plan estimator then observes only the AV's
+                acceleration (gap, relative speed and headway NaN), which is all the CA
+                predictor uses; other predictors need the follower.
             trust: the monitor's trust estimate T(t).
+
+        Raises:
+            ValueError: ``human`` is None and the predictor is not the CA predictor.
         """
-        if self._last_accel is not None and human is not None:
+        if human is None and not isinstance(self.predictor, ConstantAccelerationPredictor):
+            raise ValueError('planning without the human follower state needs predictor ca')
+        if self._last_accel is not None and human is None:
+            self.predictor.observe(Observation(gap_m=math.nan, relative_speed_mps=math.nan,
+                                               time_headway_s=math.nan,
+                                               av_accel_mps2=self._last_accel))
+        elif self._last_accel is not None and human is not None:
             self.predictor.observe(observe(av, human, self._last_accel, self.vehicle_length_m,
                                            self.config.time_headway_cap_s))
         expected = self.predictor.predict()

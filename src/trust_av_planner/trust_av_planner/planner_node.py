@@ -10,10 +10,11 @@ and the solver status (``DiagnosticArray``). Parameters: the ``planner`` section
 ``clock_mode: wall`` (real-vehicle mode): a wall-clock timer at ``control_rate_hz`` plans
 from the LATEST inputs instead (input topics from the ``*_topic`` parameters), outputs
 stamped with the current time. The lead odometry, preview and ego odometry must be fresher
-than ``input_timeout_s``; otherwise nothing is commanded and the status (level ERROR,
+than ``input_timeout_s``; otherwise nothing is commanded and the status (level WARN,
 ``status: inputs_not_ready``) says which input is missing or stale. The human odometry is
-used when fresh; without it the plan estimator observes nothing that tick and predicts from
-what it has seen. Trust: the latest estimate, ``trust_initial`` before the first.
+used when fresh; without it the plan estimator observes only the AV's own acceleration
+(enough for the CA predictor; an empty ``human_odom_topic`` requires ``predictor: ca``).
+Trust: the latest estimate, ``trust_initial`` before the first.
 """
 
 from __future__ import annotations
@@ -73,9 +74,9 @@ class PlannerNode(Node):
         self.buffer = StepBuffer([*STEP_INPUTS, 'trust'])
         self.latest = LatestInputs([*STEP_INPUTS, 'trust'])
         self.has_human = bool(topics.human_odom_topic)
-        if not self.has_human and not self.clock.wall:
+        if not self.has_human and (not self.clock.wall or self.config.predictor != 'ca'):
             raise ValueError('parameter human_odom_topic: may be empty only with '
-                             'clock_mode wall')
+                             'clock_mode wall and predictor ca')
         self.pub_plan = self.create_publisher(JointTrajectory, '/ego/plan', QOS['STEP'])
         self.pub_expected = self.create_publisher(JointTrajectory, '/ego/expected_plan',
                                                   QOS['STEP'])

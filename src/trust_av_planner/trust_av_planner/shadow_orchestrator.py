@@ -8,7 +8,8 @@ vehicle's odometry and speed preview (:class:`~trust_av_planner.shadow_replay.Le
 stamps = now) and the ego odometry, which is *simulated*: the latest ``/ego/accel_cmd``
 integrated over the real elapsed time (:func:`trust_av_planner.plant.integrate`), because
 the commute bags hold only the lead vehicle. There is no human follower: the planner runs
-with ``human_odom_topic: ''`` (its plan estimator observes nothing, DESIGN section 3). Every
+with ``human_odom_topic: ''`` (its CA plan estimator observes only the AV's acceleration;
+the GRU needs the follower, so a shadow run requires ``predictor: ca``). Every
 message on the recorded topics is written with log time = its header stamp = the wall time
 it was published (not sim time). The player publishes on the planner's configured input
 topics (``lead_odom_topic``, ``lead_preview_topic``, ``ego_odom_topic``), so a params file
