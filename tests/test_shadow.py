@@ -1,5 +1,6 @@
 """Real-vehicle mode end to end: a short shadow run of a commute bag (planner and monitor in
-wall mode), read back with rosbags; a remapped input topic; the lead replay (pure).
+wall mode), read back with rosbags; a remapped input topic; every node in wall mode; the
+lead replay and the wall-time integrator (pure).
 
 No timing thresholds: loop timings depend on machine load; the p99 figure comes from
 benchmarks/bench_shadow.py."""
@@ -10,6 +11,7 @@ import json
 import math
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -17,8 +19,10 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from preceding_traffic.bags import TYPESTORE
+from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
-from trust_av_planner.shadow_replay import LeadReplay
+from trust_monitor.graph_interface import TOPICS
+from trust_monitor.wall_clock import advance
 
 REPO = Path(__file__).resolve().parents[1]
 PARAMS = REPO / 'config' / 'trust_av.yaml'
@@ -92,3 +96,54 @@ def test_lead_replay_interpolates_and_integrates() -> None:
     assert lead.state(0.5).position_m == pytest.approx(10.25)
     assert lead.state(99.0).position_m == pytest.approx(13.0)
     np.testing.assert_allclose(lead.preview(0.5, 3, 1.0), [1.0, 2.0, 2.0])
+
+
+def test_whole_graph_in_wall_mode_drives_at_real_time(tmp_path: Path) -> None:
+    """Every node in wall mode (``--whole-graph``, GRU predictor): the lead of a constant
+    10 m/s trace advances at 10 m/s of *wall* time, the simulated AV and human follow it
+    without collision, every topic is recorded with log time = header stamp = wall time."""
+    trace = tmp_path / 'steady.csv'
+    trace.write_text('time_s,speed_mps\n' + ''.join(f'{t},10.0\n' for t in range(61)))
+    out, stats = tmp_path / 'wall.mcap', tmp_path / 'wall.json'
+    before_ns = time.time_ns()
+    result = subprocess.run(
+        [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--whole-graph', '--bag',
+         str(trace), '--predictor', 'gru', '--duration-s', SHADOW_S, '--out', str(out),
+         '--json', str(stats)], capture_output=True, text=True, timeout=120, check=False)
+    after_ns = time.time_ns()
+    assert result.returncode == 0, result.stdout + result.stderr
+    stamped: dict[str, list[tuple[int, object]]] = {}
+    with AnyReader([out], default_typestore=TYPESTORE) as reader:
+        for connection, log_ns, raw in reader.messages():
+            msg = reader.deserialize(raw, connection.msgtype)
+            stamp = msg.header.stamp  # type: ignore[attr-defined]
+            assert log_ns == stamp.sec * 1_000_000_000 + stamp.nanosec, connection.topic
+            assert before_ns <= log_ns <= after_ns, connection.topic
+            stamped.setdefault(connection.topic, []).append((log_ns, msg))
+    recorded = {t.name for t in TOPICS} - {'/clock', '/sim/start'}
+    assert recorded <= set(stamped), recorded - set(stamped)
+    lead = stamped['/preceding_vehicle/odom']
+    (t0, first), (t1, last) = lead[0], lead[-1]
+    speed = ((last.pose.pose.position.x - first.pose.pose.position.x)  # type: ignore[attr-defined]
+             / ((t1 - t0) * 1e-9))
+    assert speed == pytest.approx(10.0, rel=0.02)
+    for topic in ('/ego/odom', '/human/odom'):
+        assert stamped[topic][-1][1].twist.twist.linear.x > 5.0, topic  # type: ignore[attr-defined]
+    gaps = [float(next(v.value for v in m.status[0].values if v.key == 'gap_m'))  # type: ignore[attr-defined]
+            for topic in ('/ego/planner_status', '/human/driver_status')
+            for _t, m in stamped[topic]
+            if any(v.key == 'gap_m' for v in m.status[0].values)]  # type: ignore[attr-defined]
+    assert gaps and min(gaps) > 0.0
+    statuses = [m.status[0].message for _t, m in stamped['/ego/planner_status']]  # type: ignore[attr-defined]
+    assert 'Solve_Succeeded' in statuses
+    loops = json.loads(stats.read_text())['loops']
+    assert set(loops) == {'preceding_traffic', 'planner', 'ego_plant', 'human_driver',
+                          'trust_monitor'}
+    assert all(loop['ticks'] > 0 for loop in loops.values())
+
+
+def test_advance_stops_at_zero_speed() -> None:
+    assert advance(10.0, 4.0, 1.0, 0.5) == pytest.approx((12.0, 4.5))
+    assert advance(10.0, 1.0, -3.0, 0.5) == pytest.approx((10.5, 0.0))  # would be -0.5 m/s
+    with pytest.raises(ValueError, match='dt_s'):
+        advance(0.0, 0.0, 0.0, -0.1)

@@ -4,16 +4,26 @@ Per step, on the expected AV plan ``/ego/expected_plan`` and the AV's odometry `
 (paired by stamp), the driver plans against the plan it *expects*, publishes its plan
 (``/human/plan``) and solver status, integrates its own odometry one step and publishes it
 (``/human/odom``, stamped one step later; the initial state at start-up).
+
+``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` plans from the latest
+expected plan and AV odometry (both fresher than ``input_timeout_s``), applies the plan's
+first acceleration over the real time elapsed since the previous tick
+(:func:`trust_monitor.wall_clock.advance`, no reversing) and publishes plan, status and
+odometry stamped now; until ``/sim/start`` it holds its initial state. With a missing or
+stale input it does not plan: the status says ``inputs_not_ready`` with the reason and the
+simulated human coasts (0 m/s^2).
 """
 
 from __future__ import annotations
 
 import sys
+import time
 from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
+from std_msgs.msg import Empty
 from trajectory_msgs.msg import JointTrajectory
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc
@@ -21,14 +31,17 @@ from trust_monitor.graph_interface import StepBuffer, stamp_ns
 from trust_monitor.params import require
 from trust_monitor.ros_support import (
     QOS,
+    WallLoop,
     declare_config,
     diagnostics,
     msg_ns,
+    now_ns,
     odometry,
     spin_node,
     trajectory,
     trajectory_values,
 )
+from trust_monitor.wall_clock import NS_PER_S, LatestInputs, WallClockConfig, advance
 
 
 @dataclass(frozen=True)
@@ -52,21 +65,66 @@ class DriverNode(Node):
         super().__init__('human_driver')
         self.config = declare_config(self, DriverConfig)
         self.follower = declare_config(self, FollowerState)
+        self.clock = declare_config(self, WallClockConfig)
         self.mpc = DriverMpc(self.config)
         self.position_m = self.follower.initial_position_m
         self.speed_mps = self.follower.initial_speed_mps
         self.buffer = StepBuffer(['expected', 'ego'])
+        self.latest = LatestInputs(['expected', 'ego'])
+        self.last_tick_ns = time.monotonic_ns()
         self.pub_odom = self.create_publisher(Odometry, '/human/odom', QOS['STEP'])
         self.pub_plan = self.create_publisher(JointTrajectory, '/human/plan', QOS['STEP'])
         self.pub_status = self.create_publisher(DiagnosticArray, '/human/driver_status',
                                                 QOS['STEP'])
+        callback = self.on_latest if self.clock.wall else self.on_input
         self.create_subscription(JointTrajectory, '/ego/expected_plan',
-                                 lambda m: self.on_input('expected', m), QOS['STEP'])
-        self.create_subscription(Odometry, '/ego/odom', lambda m: self.on_input('ego', m),
+                                 lambda m: callback('expected', m), QOS['STEP'])
+        self.create_subscription(Odometry, '/ego/odom', lambda m: callback('ego', m),
                                  QOS['STEP'])
-        self.pub_odom.publish(odometry(stamp_ns(self.follower.start_time_s), self.position_m,
-                                       self.speed_mps, 'human'))
-        self.get_logger().info(f'ready: weights {self.config.weights.tolist()}')
+        start_ns = now_ns(self) if self.clock.wall else stamp_ns(self.follower.start_time_s)
+        self.pub_odom.publish(odometry(start_ns, self.position_m, self.speed_mps, 'human'))
+        self.started = False
+        if self.clock.wall:
+            self.create_subscription(Empty, '/sim/start', self.on_start, QOS['LATCHED'])
+        self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
+        self.get_logger().info(f'ready ({self.clock.clock_mode}): weights '
+                               f'{self.config.weights.tolist()}')
+
+    def on_start(self, _msg: Empty) -> None:
+        """Wall mode: start driving."""
+        self.started = True
+
+    def on_latest(self, name: str, msg: JointTrajectory | Odometry) -> None:
+        """Wall mode: keep the latest message of each input."""
+        self.latest.put(name, time.monotonic_ns(), msg)
+
+    def wall_step(self) -> None:
+        """Wall mode: plan on the latest inputs (or coast without them), integrate over the
+        elapsed wall time, publish stamped now."""
+        tick = time.monotonic_ns()
+        ns = now_ns(self)
+        if not self.started:
+            self.last_tick_ns = tick
+            self.pub_odom.publish(odometry(ns, self.position_m, self.speed_mps, 'human'))
+            return
+        why = self.latest.problems(tick, self.clock.input_timeout_s)
+        accel = 0.0
+        if why:
+            self.pub_status.publish(diagnostics(
+                ns, 'driver_mpc', False, 'inputs_not_ready',
+                {'status': 'inputs_not_ready', 'success': 'False', 'reason': why}))
+            self.get_logger().warning(f'coasting: {why}', throttle_duration_sec=5.0)
+        else:
+            accel = self.plan(ns, self.latest.get('expected'), self.latest.get('ego'))
+        self.position_m, self.speed_mps = advance(self.position_m, self.speed_mps, accel,
+                                                  (tick - self.last_tick_ns) / NS_PER_S)
+        self.last_tick_ns = tick
+        self.pub_odom.publish(odometry(ns, self.position_m, self.speed_mps, 'human'))
+
+    def close(self) -> None:
+        """At shutdown: the wall loop's jitter statistics."""
+        if self.loop is not None:
+            self.loop.close()
 
     def on_input(self, name: str, msg: JointTrajectory | Odometry) -> None:
         """Store an input; when a step's expected plan and AV odometry are in, drive."""
@@ -77,7 +135,17 @@ class DriverNode(Node):
             self.drive(ns, items['expected'], items['ego'])  # type: ignore[arg-type]
 
     def drive(self, ns: int, expected_msg: JointTrajectory, ego: Odometry) -> None:
-        """Plan, publish, integrate (x += v dt, v += u dt), publish the new odometry."""
+        """Plan, publish, integrate one step (x += v dt, v += u dt), publish the odometry."""
+        accel = self.plan(ns, expected_msg, ego)
+        dt = self.config.dt_s
+        self.position_m, self.speed_mps = (self.position_m + self.speed_mps * dt,
+                                           self.speed_mps + accel * dt)
+        self.pub_odom.publish(odometry(ns + stamp_ns(dt), self.position_m, self.speed_mps,
+                                       'human'))
+
+    def plan(self, ns: int, expected_msg: JointTrajectory, ego: Odometry) -> float:
+        """Solve the driver MPC, publish its plan and status (stamped ``ns``); the first
+        acceleration of the plan, m/s^2."""
         expected = trajectory_values(expected_msg, 'accelerations')
         av_position = float(ego.pose.pose.position.x)
         av_speed = float(ego.twist.twist.linear.x)
@@ -89,11 +157,7 @@ class DriverNode(Node):
             ns, 'driver_mpc', result.success, result.status,
             {'status': result.status, 'success': str(result.success),
              'solve_time_s': repr(result.solve_time_s), 'gap_m': repr(gap)}))
-        accel = float(result.plan_mps2[0])
-        self.position_m, self.speed_mps = (self.position_m + self.speed_mps * dt,
-                                           self.speed_mps + accel * dt)
-        self.pub_odom.publish(odometry(ns + stamp_ns(dt), self.position_m, self.speed_mps,
-                                       'human'))
+        return float(result.plan_mps2[0])
 
 
 def main(args: list[str] | None = None) -> int:

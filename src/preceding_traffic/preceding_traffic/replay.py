@@ -1,4 +1,4 @@
-"""Shadow run, pure part: the recorded lead vehicle replayed at real-time speed.
+"""A trace replayed at real-time speed (wall-clock mode of the traffic node, shadow runs).
 
 :class:`LeadReplay` gives the lead vehicle's odometry and speed preview at any elapsed wall
 time of the run (speed linearly interpolated on the trace's grid, position its exact
@@ -7,10 +7,18 @@ integral), so a player can publish the latest state at its own rate.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from preceding_traffic.traces import SpeedTrace
-from trust_av_planner.plant import VehicleState
+
+
+class LeadState(NamedTuple):
+    """The replayed vehicle's odometry: position (m) and speed (m/s)."""
+
+    position_m: float
+    speed_mps: float
 
 
 class LeadReplay:
@@ -28,15 +36,15 @@ class LeadReplay:
         """Speed at elapsed time(s) ``t_s``; held after the end."""
         return np.asarray(np.interp(t_s, self.times_s, self.trace.speeds_mps), dtype=float)
 
-    def state(self, t_s: float) -> VehicleState:
+    def state(self, t_s: float) -> LeadState:
         """Odometry at elapsed time ``t_s`` (clipped to the trace)."""
         t = min(max(t_s, 0.0), self.duration_s)
         k = min(int(t // self.trace.dt_s), len(self.times_s) - 2)
         tau = t - self.times_s[k]
         v0 = float(self.trace.speeds_mps[k])
         slope = (float(self.trace.speeds_mps[k + 1]) - v0) / self.trace.dt_s
-        return VehicleState(float(self.positions_m[k] + v0 * tau + 0.5 * slope * tau * tau),
-                            float(self.speed_mps(t)))
+        return LeadState(float(self.positions_m[k] + v0 * tau + 0.5 * slope * tau * tau),
+                         float(self.speed_mps(t)))
 
     def preview(self, t_s: float, horizon: int, dt_s: float) -> np.ndarray:
         """Speeds at ``t_s + k dt_s``, k = 0..horizon-1, m/s."""

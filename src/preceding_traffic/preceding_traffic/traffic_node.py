@@ -8,12 +8,19 @@ t + dt, the trust and the planner status stamped t (lock-step, see
 :mod:`trust_monitor.graph_interface`). After the last step it logs ``done`` and keeps its
 publishers alive until it is stopped: a writer that exits takes the samples a slow
 subscriber (the recorder) has not acknowledged yet with it.
+
+``clock_mode: wall``: no ``/clock`` and no stepping; after ``/sim/start`` the trace (or bag)
+is replayed at real-time speed (:class:`preceding_traffic.replay.LeadReplay`: speed
+interpolated, position its integral): a wall-clock timer at ``control_rate_hz`` publishes
+the odometry and the preview of the recorded future, stamped now. At the end of the trace
+it logs ``done`` and stops publishing, so the planner reports its inputs stale.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import sys
+import time
 from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -24,18 +31,22 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Empty
 from trajectory_msgs.msg import JointTrajectory
 
+from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import TraceConfig, load_trace
 from trust_monitor.graph_interface import StepBuffer, stamp_ns
 from trust_monitor.params import require
 from trust_monitor.ros_support import (
     QOS,
+    WallLoop,
     declare_config,
     msg_ns,
+    now_ns,
     odometry,
     spin_node,
     time_msg,
     trajectory,
 )
+from trust_monitor.wall_clock import NS_PER_S, WallClockConfig
 
 
 @dataclass(frozen=True)
@@ -67,6 +78,7 @@ class TrafficNode(Node):
         super().__init__('preceding_traffic')
         self.run = declare_config(self, TrafficRunConfig)
         trace_config = declare_config(self, TraceConfig)
+        self.clock = declare_config(self, WallClockConfig)
         trace = load_trace(trace_config.trace, self.run.dt_s, trace_config)
         if self.run.max_steps:
             trace = dataclasses.replace(
@@ -81,6 +93,14 @@ class TrafficNode(Node):
         self.pub_preview = self.create_publisher(JointTrajectory,
                                                  '/preceding_vehicle/speed_preview', QOS['STEP'])
         self.create_subscription(Empty, '/sim/start', self.on_start, QOS['LATCHED'])
+        self.replay = LeadReplay(trace, self.run.initial_position_m)
+        self.start_ns: int | None = None
+        self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
+        if self.clock.wall:
+            self.get_logger().info(f'trace {trace.name}: {self.replay.duration_s:g} s to replay '
+                                   f'at real time, {self.clock.control_rate_hz:g} Hz; waiting '
+                                   'for /sim/start')
+            return
         self.create_subscription(Odometry, '/ego/odom', lambda m: self.on_done('ego', m, 1),
                                  QOS['STEP'])
         self.create_subscription(Odometry, '/human/odom', lambda m: self.on_done('human', m, 1),
@@ -92,13 +112,38 @@ class TrafficNode(Node):
         self.get_logger().info(f'trace {trace.name}: {trace.steps} steps of {trace.dt_s} s; '
                                'waiting for /sim/start')
 
+    def wall_step(self) -> None:
+        """Wall mode: the trace at the elapsed wall time, stamped now; nothing after its end."""
+        if self.done or self.start_ns is None:
+            return
+        elapsed_s = (time.monotonic_ns() - self.start_ns) / NS_PER_S
+        if elapsed_s > self.replay.duration_s:
+            self.get_logger().info(f'done: {self.replay.duration_s:g} s replayed')
+            self.done = True
+            return
+        ns = now_ns(self)
+        state = self.replay.state(elapsed_s)
+        self.pub_odom.publish(odometry(ns, state.position_m, state.speed_mps,
+                                       'preceding_vehicle'))
+        self.pub_preview.publish(trajectory(
+            ns, self.run.dt_s, velocities=self.replay.preview(
+                elapsed_s, self.run.horizon_steps, self.run.dt_s).tolist()))
+
+    def close(self) -> None:
+        """At shutdown: the wall loop's jitter statistics."""
+        if self.loop is not None:
+            self.loop.close()
+
     def stamp(self, step: int) -> int:
         """Header stamp (ns) of a step."""
         return stamp_ns(self.trace.time_s(step))
 
     def on_start(self, _msg: Empty) -> None:
-        """Go: publish the first step."""
-        if self.step < 0:
+        """Go: publish the first step (wall mode: start the replay clock)."""
+        if self.clock.wall:
+            if self.start_ns is None:
+                self.start_ns = time.monotonic_ns()
+        elif self.step < 0:
             self.publish_step(0)
 
     def publish_step(self, step: int) -> None:

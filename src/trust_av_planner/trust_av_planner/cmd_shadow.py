@@ -1,5 +1,6 @@
 """``trust-av shadow``: replay a real bag at real-time speed into the planner and the trust
-monitor in wall-clock mode; record their outputs; report loop jitter per node."""
+monitor in wall-clock mode (or, with ``--whole-graph``, into every node in wall mode); record
+their outputs; report loop jitter per node."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from trust_av_planner.cmd_simulate import add_params_file_option, alpha_value
 from trust_av_planner.config import PlannerTopics, load_run_config
 from trust_av_planner.errors import TrustAvError
 from trust_av_planner.nmpc import PREDICTORS
-from trust_av_planner.shadow_orchestrator import ShadowRun, run_shadow
+from trust_av_planner.shadow_orchestrator import ShadowRun, run_shadow, run_wall_graph
 from trust_monitor.params import build_config, node_params, read_params_file
 from trust_monitor.wall_clock import WallClockConfig, format_summary
 
@@ -30,7 +31,7 @@ def positive_seconds(text: str) -> float:
 
 def summary_lines(result: ShadowRun) -> list[str]:
     """The run's summary: messages per topic and one jitter line per loop."""
-    lines = [f'shadow run: {result.duration_s:g} s of wall time, recording {result.bag}']
+    lines = [f'wall-clock run: {result.duration_s:g} s of wall time, recording {result.bag}']
     lines += [f'  {topic}: {count} messages' for topic, count in result.counts.items()]
     lines += [f'  {name}: {format_summary(stats)}' for name, stats in result.loops.items()]
     return lines
@@ -54,9 +55,12 @@ def run(args: argparse.Namespace) -> int:
     clock = build_config(WallClockConfig, planner_section)
     topics = build_config(PlannerTopics, planner_section)
     rate_hz = args.rate_hz if args.rate_hz is not None else clock.control_rate_hz
-    if config.planner.predictor != 'ca':
+    if args.whole_graph and topics != PlannerTopics():
+        raise TrustAvError('--whole-graph runs the simulated nodes on the standard topics; the '
+                           f'params file {args.params_file} remaps the planner inputs: {topics}')
+    if not args.whole_graph and config.planner.predictor != 'ca':
         raise TrustAvError('trust-av shadow has no human follower state: it needs predictor ca '
-                           f'(got {config.planner.predictor})')
+                           f'(got {config.planner.predictor}) or --whole-graph')
     trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
     whole_s = trace.steps * trace.dt_s
     duration_s = whole_s if args.duration_s is None else min(args.duration_s, whole_s)
@@ -64,11 +68,17 @@ def run(args: argparse.Namespace) -> int:
         raise TrustAvError(f'{args.out} exists already; pass --overwrite or choose another --out')
     if args.out.exists():
         args.out.unlink()
+    nodes = 'every node' if args.whole_graph else 'planner and trust_monitor'
     print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '
-          f'planner and trust_monitor at {rate_hz:g} Hz', flush=True)
-    result = run_shadow(config, trace, args.params_file, args.out, duration_s=duration_s,
-                        rate_hz=rate_hz, topics=topics,
-                        startup_timeout_s=args.startup_timeout_s)
+          f'{nodes} at {rate_hz:g} Hz', flush=True)
+    if args.whole_graph:
+        result = run_wall_graph(config, str(args.bag), trace, args.params_file, args.out,
+                                duration_s=duration_s, rate_hz=rate_hz,
+                                startup_timeout_s=args.startup_timeout_s)
+    else:
+        result = run_shadow(config, trace, args.params_file, args.out, duration_s=duration_s,
+                            rate_hz=rate_hz, topics=topics,
+                            startup_timeout_s=args.startup_timeout_s)
     print('\n'.join(summary_lines(result)))
     if args.json is not None:
         args.json.write_text(json.dumps({'bag': str(args.bag), 'duration_s': duration_s,
@@ -86,6 +96,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     "real-time speed (stamps = now; the ego is simulated from the planner's "
                     'commands, there is no human follower), record the inputs and outputs to '
                     'MCAP (log time = wall time) and print loop jitter p50/p99/max per node. '
+                    'With --whole-graph every node runs in wall mode instead: the traffic node '
+                    'replays the bag, ego_plant and human_driver simulate the two vehicles '
+                    '(so the GRU predictor works), and every topic is recorded. '
                     'Exit codes: 0 done, 2 bad input or a node failed (named), 130 interrupted.')
     parser.add_argument('--bag', type=Path, required=True,
                         help='rosbag2 bag (MCAP or sqlite3) whose lead vehicle is replayed')
@@ -104,6 +117,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="explicability weight in [0, 1] (default: the params file's)")
     parser.add_argument('--predictor', choices=PREDICTORS, default=None,
                         help="plan estimator (default: the params file's)")
+    parser.add_argument('--whole-graph', action='store_true',
+                        help='run all five nodes in wall mode (simulated ego and human '
+                             'follower) instead of the planner and monitor alone')
     parser.add_argument('--json', type=Path, default=None,
                         help='also write the loop statistics and message counts as JSON')
     parser.add_argument('--startup-timeout-s', type=positive_seconds, default=30.0,

@@ -4,21 +4,40 @@ Kept apart from the planner so that a real vehicle can take its place: it subscr
 ``/ego/accel_cmd`` and publishes ``/ego/odom`` (the first message, the initial state, at
 start-up; then one per command, stamped one step later), exactly what a real drive-by-wire
 vehicle and its odometry would do. Parameters: ``dt_s`` and the initial state.
+
+``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` integrates the latest
+command over the real time elapsed since the previous tick
+(:func:`trust_monitor.wall_clock.advance`, no reversing) and publishes the odometry stamped
+now; until ``/sim/start`` the vehicle holds its initial state (the traffic node starts its
+replay then). A command older than ``input_timeout_s`` (or none yet) is not applied: the
+vehicle coasts (0 m/s^2) and a warning names the reason, as a drive-by-wire unit drops a
+stale set-point.
 """
 
 from __future__ import annotations
 
 import sys
+import time
 from dataclasses import dataclass
 
 from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
+from std_msgs.msg import Empty
 
 from trust_av_planner.plant import VehicleState, integrate
 from trust_monitor.graph_interface import stamp_ns
 from trust_monitor.params import require
-from trust_monitor.ros_support import QOS, declare_config, msg_ns, odometry, spin_node
+from trust_monitor.ros_support import (
+    QOS,
+    WallLoop,
+    declare_config,
+    msg_ns,
+    now_ns,
+    odometry,
+    spin_node,
+)
+from trust_monitor.wall_clock import NS_PER_S, LatestInputs, WallClockConfig, advance
 
 
 @dataclass(frozen=True)
@@ -41,18 +60,58 @@ class EgoPlantNode(Node):
     def __init__(self) -> None:
         super().__init__('ego_plant')
         self.config = declare_config(self, PlantConfig)
+        self.clock = declare_config(self, WallClockConfig)
         self.state = VehicleState(self.config.initial_position_m, self.config.initial_speed_mps)
         self.pub = self.create_publisher(Odometry, '/ego/odom', QOS['STEP'])
-        self.create_subscription(AccelStamped, '/ego/accel_cmd', self.on_command, QOS['STEP'])
-        self.pub.publish(odometry(stamp_ns(self.config.start_time_s), self.state.position_m,
-                                  self.state.speed_mps, 'ego'))
-        self.get_logger().info(f'ready: initial state {self.state}')
+        self.latest = LatestInputs(['command'])
+        self.create_subscription(AccelStamped, '/ego/accel_cmd',
+                                 self.on_latest if self.clock.wall else self.on_command,
+                                 QOS['STEP'])
+        self.last_tick_ns = time.monotonic_ns()
+        start_ns = now_ns(self) if self.clock.wall else stamp_ns(self.config.start_time_s)
+        self.pub.publish(odometry(start_ns, self.state.position_m, self.state.speed_mps, 'ego'))
+        self.started = False
+        if self.clock.wall:
+            self.create_subscription(Empty, '/sim/start', self.on_start, QOS['LATCHED'])
+        self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
+        self.get_logger().info(f'ready ({self.clock.clock_mode}): initial state {self.state}')
+
+    def on_start(self, _msg: Empty) -> None:
+        """Wall mode: start moving."""
+        self.started = True
 
     def on_command(self, msg: AccelStamped) -> None:
         """Apply the command for one step and publish the new odometry."""
         self.state = integrate(self.state, float(msg.accel.linear.x), self.config.dt_s)
         ns = msg_ns(msg.header.stamp) + stamp_ns(self.config.dt_s)
         self.pub.publish(odometry(ns, self.state.position_m, self.state.speed_mps, 'ego'))
+
+    def on_latest(self, msg: AccelStamped) -> None:
+        """Wall mode: keep the latest command."""
+        self.latest.put('command', time.monotonic_ns(), msg)
+
+    def wall_step(self) -> None:
+        """Wall mode: apply the latest fresh command over the elapsed time, publish."""
+        tick = time.monotonic_ns()
+        why = self.latest.problems(tick, self.clock.input_timeout_s)
+        command = self.latest.get('command')
+        accel = 0.0 if why or command is None else float(command.accel.linear.x)
+        if not self.started:
+            self.last_tick_ns = tick
+            self.pub.publish(odometry(now_ns(self), self.state.position_m,
+                                      self.state.speed_mps, 'ego'))
+            return
+        if why:
+            self.get_logger().warning(f'coasting: command {why}', throttle_duration_sec=5.0)
+        position, speed = advance(self.state.position_m, self.state.speed_mps, accel,
+                                  (tick - self.last_tick_ns) / NS_PER_S)
+        self.state, self.last_tick_ns = VehicleState(position, speed), tick
+        self.pub.publish(odometry(now_ns(self), position, speed, 'ego'))
+
+    def close(self) -> None:
+        """At shutdown: the wall loop's jitter statistics."""
+        if self.loop is not None:
+            self.loop.close()
 
 
 def main(args: list[str] | None = None) -> int:

@@ -4,7 +4,7 @@ trust monitor running in wall-clock mode; their outputs recorded to MCAP.
 Processes: ``planner`` and ``trust_monitor`` (``clock_mode: wall``, started and stopped by
 :class:`trust_av_planner.orchestrator.Graph` on a leased domain). This process is the
 player and the recorder: a wall-clock loop at the same control rate publishes the lead
-vehicle's odometry and speed preview (:class:`~trust_av_planner.shadow_replay.LeadReplay`,
+vehicle's odometry and speed preview (:class:`~preceding_traffic.replay.LeadReplay`,
 stamps = now) and the ego odometry, which is *simulated*: the latest ``/ego/accel_cmd``
 integrated over the real elapsed time (:func:`trust_av_planner.plant.integrate`), because
 the commute bags hold only the lead vehicle. There is no human follower: the planner runs
@@ -14,6 +14,11 @@ message on the recorded topics is written with log time = its header stamp = the
 it was published (not sim time). The player publishes on the planner's configured input
 topics (``lead_odom_topic``, ``lead_preview_topic``, ``ego_odom_topic``), so a params file
 that remaps them is exercised end to end.
+
+:func:`run_wall_graph` (``trust-av shadow --whole-graph``) runs every node in wall mode
+instead: ``preceding_traffic`` replays the bag at real time after ``/sim/start``,
+``ego_plant`` and ``human_driver`` simulate the two vehicles over real elapsed time, and this
+process only records every topic. With a follower, the GRU predictor may be used.
 """
 
 from __future__ import annotations
@@ -25,20 +30,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.config import PlannerTopics, RunConfig
-from trust_av_planner.orchestrator import Graph, GraphError, NodeSpec, lease_domain
-from trust_av_planner.plant import VehicleState, integrate
+from trust_av_planner.orchestrator import Graph, GraphError, NodeSpec, lease_domain, node_specs
+from trust_av_planner.plant import VehicleState
 from trust_av_planner.recorder import McapBag
-from trust_av_planner.shadow_replay import LeadReplay
 from trust_av_planner.simulate import equilibrium_start
-from trust_monitor.graph_interface import TOPIC
-from trust_monitor.wall_clock import NS_PER_S, LoopStats
+from trust_monitor.graph_interface import TOPIC, TOPICS
+from trust_monitor.wall_clock import NS_PER_S, LoopStats, advance
 
 OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_status',
            '/trust_monitor/trust')
 """The two nodes' outputs, recorded with the replayed lead and ego odometry."""
 SHADOW_NODES = ('planner', 'trust_monitor')
+WALL_GRAPH_NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_monitor')
+"""The nodes of :func:`run_wall_graph` (this process records in place of ``recorder``)."""
 
 
 @dataclass
@@ -163,24 +170,108 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
             node.destroy_node()
             rclpy.try_shutdown(context=context)
             graph.stop()
-        for process in graph.processes:
-            if process.popen.returncode not in (0, None):
-                raise GraphError(f'node {process.spec.name} exited with code '
-                                 f'{process.popen.returncode}; last output:\n{process.tail()}')
-    loops = {'shadow_player': {'node': 'shadow_player', **stats.summary()}}
-    for name in SHADOW_NODES:
+    loops = {'shadow_player': {'node': 'shadow_player', **stats.summary()},
+             **_node_loops(graph, log_dir, SHADOW_NODES)}
+    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops)
+
+
+def wall_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, rate_hz: float,
+               log_dir: Path) -> list[NodeSpec]:
+    """The five node processes of a whole-graph wall run: the lock-step graph's per-run
+    parameters (initial states, trace) plus wall mode and a jitter report each."""
+    specs = node_specs(config, trace_arg, trace, equilibrium_start(config.for_trace(trace),
+                                                                   trace),
+                       log_dir / 'unused.mcap', 0)
+    return [NodeSpec(spec.name, spec.module,
+                     {**spec.params, 'clock_mode': 'wall', 'control_rate_hz': rate_hz,
+                      'jitter_report_path': str(log_dir / f'{spec.name}.jitter.json')})
+            for spec in specs if spec.name in WALL_GRAPH_NODES]
+
+
+def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
+                   bag: Path, *, duration_s: float, rate_hz: float,
+                   startup_timeout_s: float = 30.0) -> ShadowRun:
+    """Every node in wall mode for ``duration_s`` of wall time after ``/sim/start``; every
+    topic recorded to ``bag`` (log time = header stamp = wall time).
+
+    The nodes use the standard topic names (:data:`trust_monitor.graph_interface.TOPICS`).
+
+    Raises:
+        GraphError: the nodes did not connect in time or one died.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from std_msgs.msg import Empty
+
+    from trust_monitor.ros_support import QOS, message_class
+
+    recorded = [t for t in TOPICS if t.name not in ('/clock', '/sim/start')]
+    # In wall mode the traffic node subscribes nothing but /sim/start (as do the two simulated
+    # vehicles, which hold still until then); this process records.
+    needs = {t.name: (1, len([s for s in t.subscribers if s != 'preceding_traffic']))
+             for t in recorded}
+    needs['/sim/start'] = (1, 3)
+    log_dir = bag.with_suffix('.logs')
+    with lease_domain() as domain:
+        graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), params_file,
+                      domain, log_dir)
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        graph.start()
+        context = Context()
+        rclpy.init(context=context, domain_id=domain,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node('wall_recorder', context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
+        try:
+            with McapBag(bag) as recording:
+                for topic in recorded:
+                    recording.add_topic(topic.name, topic.msgtype, topic.qos)
+                    node.create_subscription(
+                        message_class(topic.msgtype), topic.name,
+                        lambda d, t=topic.name: recording.write(t, d), QOS[topic.qos],
+                        raw=True)
+                _wait_topics(graph, node, executor, needs, startup_timeout_s)
+                start_pub.publish(Empty())
+                end = time.monotonic() + duration_s
+                while time.monotonic() < end:
+                    executor.spin_once(timeout_sec=0.05)
+                    graph.check_alive(set())
+                graph.stop(list(WALL_GRAPH_NODES))  # the nodes write their statistics on exit
+                drain_until = time.monotonic() + 0.5
+                while time.monotonic() < drain_until:
+                    executor.spin_once(timeout_sec=0.05)
+                counts = dict(recording.counts)
+        finally:
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+            graph.stop()
+    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts,
+                     loops=_node_loops(graph, log_dir, WALL_GRAPH_NODES))
+
+
+def _node_loops(graph: Graph, log_dir: Path, names: tuple[str, ...]) -> dict[str, Any]:
+    """After a wall run: every node exited cleanly and wrote its loop statistics."""
+    for process in graph.processes:
+        if process.popen.returncode not in (0, None):
+            raise GraphError(f'node {process.spec.name} exited with code '
+                             f'{process.popen.returncode}; last output:\n{process.tail()}')
+    loops = {}
+    for name in names:
         path = log_dir / f'{name}.jitter.json'
         if not path.exists():
             raise GraphError(f'node {name} wrote no loop statistics ({path}); node logs in '
                              f'{log_dir}')
         loops[name] = json.loads(path.read_text())
-    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops)
+    return loops
 
 
 def _advance(ego: VehicleState, accel_mps2: float, dt_s: float) -> VehicleState:
     """The simulated ego over ``dt_s`` of wall time; speed kept >= 0 (no reversing)."""
-    state = integrate(ego, accel_mps2, dt_s)
-    return state if state.speed_mps >= 0.0 else VehicleState(state.position_m, 0.0)
+    return VehicleState(*advance(ego.position_m, ego.speed_mps, accel_mps2, dt_s))
 
 
 def _wait_nodes(graph: Graph, node: Any, executor: Any, topics: PlannerTopics,
@@ -190,6 +281,12 @@ def _wait_nodes(graph: Graph, node: Any, executor: Any, topics: PlannerTopics,
              topics.ego_odom_topic: (1, 2), '/ego/plan': (1, 2), '/ego/expected_plan': (1, 2),
              '/ego/accel_cmd': (1, 2), '/ego/planner_status': (1, 1),
              '/trust_monitor/trust': (1, 2)}
+    _wait_topics(graph, node, executor, needs, timeout_s)
+
+
+def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[int, int]],
+                 timeout_s: float) -> None:
+    """Wait until every topic has its (publishers, subscribers); name those that do not."""
     deadline = time.monotonic() + timeout_s
     missing: list[str] = []
     while time.monotonic() < deadline:

@@ -58,6 +58,17 @@ class WallClockConfig:
         return round(NS_PER_S / self.control_rate_hz)
 
 
+def advance(position_m: float, speed_mps: float, accel_mps2: float,
+            dt_s: float) -> tuple[float, float]:
+    """A simulated vehicle over ``dt_s`` of wall time (wall mode of ``ego_plant`` and
+    ``human_driver``): explicit Euler like :mod:`human_driver_sim.longitudinal`, x += v dt,
+    v += a dt, except that the speed stops at 0 (a vehicle braking to a stop does not reverse
+    within a long tick). Returns (position_m, speed_mps)."""
+    if dt_s < 0.0:
+        raise ValueError(f'dt_s must be >= 0, got {dt_s}')
+    return position_m + speed_mps * dt_s, max(speed_mps + accel_mps2 * dt_s, 0.0)
+
+
 class LatestInputs:
     """The latest message of each named input and when it was received (wall ns)."""
 
