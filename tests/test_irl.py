@@ -67,3 +67,15 @@ def test_bilevel_refinement_recovers_the_time_headway() -> None:
     assert loss < 0.5   # m, mean replay gap RMSE (starting point: several metres)
     start_loss = float(np.sqrt(np.mean((replay_mpc(CONFIG, demo)[0] - gap) ** 2)))
     assert start_loss > 5 * loss
+
+
+def test_params_file_driver_is_the_pooled_fit() -> None:
+    """Issue 6: the default config's human driver is the shipped IRL fit (W and tau_H)."""
+    import yaml
+
+    from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
+    from trust_av_planner.config import load_run_config
+    pooled = yaml.safe_load(DRIVER_FIT_FILE.read_text())['pooled']
+    driver = load_run_config().driver
+    for name in (*WEIGHT_NAMES, 'time_headway_s'):
+        assert getattr(driver, name) == pooled[name], name
