@@ -23,9 +23,11 @@ process only records every topic. With a follower, the GRU predictor may be used
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -82,11 +84,6 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
     Raises:
         GraphError: the nodes did not connect in time or one died.
     """
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
-
     from trust_monitor.ros_support import QOS, message_class, odometry, trajectory
 
     topics = topics if topics is not None else PlannerTopics()
@@ -99,17 +96,9 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
     lead = LeadReplay(trace, initial.traffic.position_m)
     log_dir = bag.with_suffix('.logs')
     period_ns = round(NS_PER_S / rate_hz)
-    with lease_domain() as domain:
-        graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), params_file, domain,
-                      log_dir)
-        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        graph.start()
-        context = Context()
-        rclpy.init(context=context, domain_id=domain,
-                   signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node('shadow_player', context=context)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
+    with lease_domain() as domain, _session(shadow_specs(config, trace, rate_hz, log_dir),
+                                            params_file, domain, log_dir,
+                                            'shadow_player') as (graph, node, executor):
         pub_lead = node.create_publisher(message_class(TOPIC['/preceding_vehicle/odom'].msgtype),
                                          topics.lead_odom_topic, QOS['STEP'])
         pub_preview = node.create_publisher(
@@ -119,57 +108,49 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
                                         topics.ego_odom_topic, QOS['STEP'])
         command = {'accel_mps2': 0.0}
         stats = LoopStats(period_ns)
-        try:
-            with McapBag(bag) as recording:
-                def on_message(topic: str, data: bytes) -> None:
-                    recording.write(topic, data)
+        with McapBag(bag) as recording:
+            def on_message(topic: str, data: bytes) -> None:
+                recording.write(topic, data)
 
-                for name, topic in recorded.items():
-                    recording.add_topic(name, topic.msgtype, topic.qos)
-                    node.create_subscription(message_class(topic.msgtype), name,
-                                             lambda d, t=name: on_message(t, d),
-                                             QOS[topic.qos], raw=True)
+            for name, topic in recorded.items():
+                recording.add_topic(name, topic.msgtype, topic.qos)
+                node.create_subscription(message_class(topic.msgtype), name,
+                                         lambda d, t=name: on_message(t, d),
+                                         QOS[topic.qos], raw=True)
 
-                def on_command(msg: Any) -> None:
-                    command['accel_mps2'] = float(msg.accel.linear.x)
+            def on_command(msg: Any) -> None:
+                command['accel_mps2'] = float(msg.accel.linear.x)
 
-                node.create_subscription(message_class(TOPIC['/ego/accel_cmd'].msgtype),
-                                         '/ego/accel_cmd', on_command, QOS['STEP'])
-                _wait_nodes(graph, node, executor, topics, startup_timeout_s)
-                ego = initial.av
-                start = last = time.monotonic_ns()
-                next_tick = start
-                while True:
-                    now = time.monotonic_ns()
-                    if now < next_tick:
-                        executor.spin_once(timeout_sec=(next_tick - now) / NS_PER_S)
-                        continue
-                    stats.tick(now)
-                    elapsed_s = (now - start) / NS_PER_S
-                    if elapsed_s > duration_s:
-                        break
-                    ego = _advance(ego, command['accel_mps2'], (now - last) / NS_PER_S)
-                    last = now
-                    stamp = time.time_ns()
-                    state = lead.state(elapsed_s)
-                    pub_lead.publish(odometry(stamp, state.position_m, state.speed_mps,
-                                              'preceding_vehicle'))
-                    pub_preview.publish(trajectory(
-                        stamp, cfg.planner.dt_s, velocities=lead.preview(
-                            elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
-                    pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
-                    stats.done(time.monotonic_ns() - now)
-                    next_tick += period_ns
-                    graph.check_alive(set())
-                graph.stop(list(SHADOW_NODES))  # the nodes write their statistics on exit
-                drain_until = time.monotonic() + 0.5
-                while time.monotonic() < drain_until:
-                    executor.spin_once(timeout_sec=0.05)
-                counts = dict(recording.counts)
-        finally:
-            node.destroy_node()
-            rclpy.try_shutdown(context=context)
-            graph.stop()
+            node.create_subscription(message_class(TOPIC['/ego/accel_cmd'].msgtype),
+                                     '/ego/accel_cmd', on_command, QOS['STEP'])
+            _wait_nodes(graph, node, executor, topics, startup_timeout_s)
+            ego = initial.av
+            start = last = time.monotonic_ns()
+            next_tick = start
+            while True:
+                now = time.monotonic_ns()
+                if now < next_tick:
+                    executor.spin_once(timeout_sec=(next_tick - now) / NS_PER_S)
+                    continue
+                stats.tick(now)
+                elapsed_s = (now - start) / NS_PER_S
+                if elapsed_s > duration_s:
+                    break
+                ego = _advance(ego, command['accel_mps2'], (now - last) / NS_PER_S)
+                last = now
+                stamp = time.time_ns()
+                state = lead.state(elapsed_s)
+                pub_lead.publish(odometry(stamp, state.position_m, state.speed_mps,
+                                          'preceding_vehicle'))
+                pub_preview.publish(trajectory(
+                    stamp, cfg.planner.dt_s, velocities=lead.preview(
+                        elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
+                pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
+                stats.done(time.monotonic_ns() - now)
+                next_tick += period_ns
+                graph.check_alive(set())
+            _stop_and_drain(graph, executor, SHADOW_NODES)
+            counts = dict(recording.counts)
     loops = {'shadow_player': {'node': 'shadow_player', **stats.summary()},
              **_node_loops(graph, log_dir, SHADOW_NODES)}
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops)
@@ -199,10 +180,6 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_
     Raises:
         GraphError: the nodes did not connect in time or one died.
     """
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Empty
 
     from trust_monitor.ros_support import QOS, message_class
@@ -214,43 +191,66 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_
              for t in recorded}
     needs['/sim/start'] = (1, 3)
     log_dir = bag.with_suffix('.logs')
-    with lease_domain() as domain:
-        graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), params_file,
-                      domain, log_dir)
-        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        graph.start()
-        context = Context()
-        rclpy.init(context=context, domain_id=domain,
-                   signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node('wall_recorder', context=context)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
+    with lease_domain() as domain, _session(wall_specs(config, trace_arg, trace, rate_hz,
+                                                       log_dir), params_file, domain, log_dir,
+                                            'wall_recorder') as (graph, node, executor):
         start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
-        try:
-            with McapBag(bag) as recording:
-                for topic in recorded:
-                    recording.add_topic(topic.name, topic.msgtype, topic.qos)
-                    node.create_subscription(
-                        message_class(topic.msgtype), topic.name,
-                        lambda d, t=topic.name: recording.write(t, d), QOS[topic.qos],
-                        raw=True)
-                _wait_topics(graph, node, executor, needs, startup_timeout_s)
-                start_pub.publish(Empty())
-                end = time.monotonic() + duration_s
-                while time.monotonic() < end:
-                    executor.spin_once(timeout_sec=0.05)
-                    graph.check_alive(set())
-                graph.stop(list(WALL_GRAPH_NODES))  # the nodes write their statistics on exit
-                drain_until = time.monotonic() + 0.5
-                while time.monotonic() < drain_until:
-                    executor.spin_once(timeout_sec=0.05)
-                counts = dict(recording.counts)
-        finally:
-            node.destroy_node()
-            rclpy.try_shutdown(context=context)
-            graph.stop()
+        with McapBag(bag) as recording:
+            for topic in recorded:
+                recording.add_topic(topic.name, topic.msgtype, topic.qos)
+                node.create_subscription(
+                    message_class(topic.msgtype), topic.name,
+                    lambda d, t=topic.name: recording.write(t, d), QOS[topic.qos],
+                    raw=True)
+            _wait_topics(graph, node, executor, needs, startup_timeout_s)
+            start_pub.publish(Empty())
+            end = time.monotonic() + duration_s
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+                graph.check_alive(set())
+            _stop_and_drain(graph, executor, WALL_GRAPH_NODES)
+            counts = dict(recording.counts)
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts,
                      loops=_node_loops(graph, log_dir, WALL_GRAPH_NODES))
+
+
+@contextlib.contextmanager
+def _session(specs: list[NodeSpec], params_file: Path, domain: int, log_dir: Path,
+             name: str) -> Iterator[tuple[Graph, Any, Any]]:
+    """Start the node processes and this process's own node ``name`` on ``domain``; on exit
+    destroy the node, shut its context down and stop every process (also on errors)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    graph = Graph(specs, params_file, domain, log_dir)
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    graph.start()
+    context = Context()
+    try:
+        rclpy.init(context=context, domain_id=domain,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node(name, context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        try:
+            yield graph, node, executor
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        graph.stop()
+
+
+def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
+                    drain_s: float = 0.5) -> None:
+    """Stop the nodes (they write their loop statistics on exit), then take in for
+    ``drain_s`` what they published last."""
+    graph.stop(list(names))
+    drain_until = time.monotonic() + drain_s
+    while time.monotonic() < drain_until:
+        executor.spin_once(timeout_sec=0.05)
 
 
 def _node_loops(graph: Graph, log_dir: Path, names: tuple[str, ...]) -> dict[str, Any]:
