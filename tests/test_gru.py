@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import tempfile
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from trust_av_planner.config import load_run_config
 from trust_av_planner.gru_training import (
     TrainingSettings,
     build_dataset,
+    numerics_fingerprint,
     samples_from_run,
     train,
     train_with_dagger,
@@ -134,18 +136,50 @@ def test_reduced_retraining_with_dagger_reproduces_itself(tmp_path: Path) -> Non
         np.testing.assert_array_equal(getattr(first, name), getattr(second, name))
 
 
+# Across CPUs (numerics fingerprint differs) retraining cannot be bit-identical; measured
+# on 2026-11-23: numpy's exp without AVX-512 moved the validation RMSE by 1.1e-5 and the
+# weights by 2e-9 (relative norm), the CI machine moved the RMSE by 2.9e-5; seed 8 instead of
+# 7 moves them by 6.2e-3 and 1.4. The tolerances sit between the two.
+CROSS_CPU_RMSE_ABS = 2e-4
+CROSS_CPU_WEIGHTS_REL = 1e-4
+
+
 @pytest.mark.slow
 def test_retraining_reproduces_the_shipped_model() -> None:
-    """Issue 4, full tier: same seed, same data -> the shipped validation RMSE to 1e-6."""
+    """Issue 4, full tier: same seed, same data -> the shipped model. On a CPU with the
+    card's numerics fingerprint: validation RMSE to 1e-6 and read-out weights to 1e-9; on
+    another CPU: within the cross-CPU tolerances above."""
     card = json.loads(SHIPPED.with_suffix('.json').read_text())
     settings = TrainingSettings(**{k: tuple(v) if isinstance(v, list) else v
                                    for k, v in card['settings'].items()})
     with tempfile.TemporaryDirectory() as work:
         weights, report = train_with_dagger(load_run_config(), settings, Path(work))
+    shipped = load_weights(SHIPPED, 3)
+    if card['numerics_fingerprint'] == numerics_fingerprint():
+        assert report['validation_rmse_gru'] == pytest.approx(
+            card['results']['validation_rmse_gru'], abs=1e-6)
+        np.testing.assert_allclose(weights.out_weight, shipped.out_weight, atol=1e-9)
+        return
     assert report['validation_rmse_gru'] == pytest.approx(
-        card['results']['validation_rmse_gru'], abs=1e-6)
-    np.testing.assert_allclose(weights.out_weight, load_weights(SHIPPED, 3).out_weight,
-                               atol=1e-9)
+        card['results']['validation_rmse_gru'], abs=CROSS_CPU_RMSE_ABS)
+    for name in ('weight_ih', 'weight_hh', 'out_weight'):
+        a, b = getattr(weights, name), getattr(shipped, name)
+        assert np.linalg.norm(a - b) <= CROSS_CPU_WEIGHTS_REL * np.linalg.norm(b), name
+
+
+def test_numerics_fingerprint_is_stable_and_sees_the_cpu_path() -> None:
+    """Same process, same answer; numpy with its AVX-512 kernels switched off (where the CPU
+    has them) or PyTorch forced to its scalar path gives another fingerprint."""
+    import subprocess
+    import sys
+    assert numerics_fingerprint() == numerics_fingerprint()
+    code = ('from trust_av_planner.gru_training import numerics_fingerprint; '
+            'print(numerics_fingerprint())')
+    env = {**os.environ, 'ATEN_CPU_CAPABILITY': 'default'}
+    other = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+                           text=True, check=True).stdout.strip()
+    if str(torch.backends.cpu.get_cpu_capability()) != 'DEFAULT':
+        assert other != numerics_fingerprint()
 
 
 def test_gru_beats_ca_in_closed_loop_on_unseen_us06() -> None:
