@@ -216,6 +216,38 @@ class Graph:
             process.log.close()
 
 
+@contextlib.contextmanager
+def graph_session(graph: Graph, name: str) -> Iterator[tuple[Any, Any]]:
+    """Start ``graph``'s node processes and this process's own rclpy node ``name`` (with a
+    single-threaded executor) on the graph's domain; on exit, also on errors, destroy the
+    node, shut its context down and stop every process.
+
+    No rclpy signal handler is installed: SIGINT must reach the caller as
+    KeyboardInterrupt so that the nodes are stopped and the recording is finished.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    context = Context()
+    try:
+        graph.start()
+        rclpy.init(context=context, domain_id=graph.domain,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node(name, context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        try:
+            yield node, executor
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        graph.stop()
+
+
 def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
               bag: Path, *, max_steps: int = 0, startup_timeout_s: float = 30.0,
               step_timeout_s: float = 30.0,
@@ -225,10 +257,6 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
     Raises:
         GraphError: the graph did not connect in time, a node died, or a step stalled.
     """
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Empty
 
@@ -239,53 +267,45 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
     started = time.monotonic()
     with lease_domain() as domain:
         graph = Graph(specs, params_file, domain, bag.with_suffix('.logs'))
-        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-        graph.start()
-        context = Context()
-        # No rclpy signal handler: SIGINT must reach us as KeyboardInterrupt so that the
-        # finally block below stops the nodes and finishes the recording.
-        rclpy.init(context=context, domain_id=domain,
-                   signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node('orchestrator', context=context)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        progress = {'step': -1}
-
-        def on_clock(msg: Clock) -> None:
-            ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
-            progress['step'] = round((ns * 1e-9 - trace.t0_s) / trace.dt_s)
-            if on_step is not None:
-                on_step(progress['step'] + 1, trace.steps)
-
-        node.create_subscription(Clock, '/clock', on_clock, QOS['CLOCK'])
-        start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
         ok = False
         try:
-            _wait_connected(graph, node, executor, startup_timeout_s)
-            startup = time.monotonic() - started
-            start_pub.publish(Empty())
-            # The run is complete when the recorder holds every message of every step and
-            # exits by itself; the other nodes keep their publishers up until then.
-            last_step, last_change = -1, time.monotonic()
-            recorder = graph.by_name('recorder').popen
-            while recorder.poll() is None:
-                executor.spin_once(timeout_sec=0.05)
+            with graph_session(graph, 'orchestrator') as (node, executor):
+                progress = {'step': -1}
+
+                def on_clock(msg: Clock) -> None:
+                    ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+                    progress['step'] = round((ns * 1e-9 - trace.t0_s) / trace.dt_s)
+                    if on_step is not None:
+                        on_step(progress['step'] + 1, trace.steps)
+
+                node.create_subscription(Clock, '/clock', on_clock, QOS['CLOCK'])
+                start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
+                _wait_connected(graph, node, executor, startup_timeout_s)
+                startup = time.monotonic() - started
+                start_pub.publish(Empty())
+                # The run is complete when the recorder holds every message of every step
+                # and exits by itself; the other nodes keep their publishers up until then.
+                last_step, last_change = -1, time.monotonic()
+                recorder = graph.by_name('recorder').popen
+                while recorder.poll() is None:
+                    executor.spin_once(timeout_sec=0.05)
+                    graph.check_alive({'recorder'})
+                    if progress['step'] != last_step:
+                        last_step, last_change = progress['step'], time.monotonic()
+                    elif time.monotonic() - last_change > step_timeout_s:
+                        what = ('node recorder did not receive every message of the run'
+                                if last_step + 1 >= trace.steps else
+                                f'no progress at step {last_step}')
+                        raise GraphError(f'{what} in {step_timeout_s:g} s; node logs in '
+                                         f'{graph.log_dir}')
                 graph.check_alive({'recorder'})
-                if progress['step'] != last_step:
-                    last_step, last_change = progress['step'], time.monotonic()
-                elif time.monotonic() - last_change > step_timeout_s:
-                    what = ('node recorder did not receive every message of the run'
-                            if last_step + 1 >= trace.steps else
-                            f'no progress at step {last_step}')
-                    raise GraphError(f'{what} in {step_timeout_s:g} s; node logs in '
-                                     f'{graph.log_dir}')
-            graph.check_alive({'recorder'})
-            ok = True
+                ok = True
         finally:
-            node.destroy_node()
-            rclpy.try_shutdown(context=context)
-            graph.stop()
-            if not ok and bag.exists() and graph.by_name('recorder').popen.returncode != 0:
+            # graph_session has stopped every node by now; an unfinished recording is
+            # closed so that what was recorded can still be read.
+            recorder_ran = any(p.spec.name == 'recorder' for p in graph.processes)
+            if (not ok and recorder_ran and bag.exists()
+                    and graph.by_name('recorder').popen.returncode != 0):
                 repair_mcap(bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
                     wall_s=time.monotonic() - started, startup_s=startup)

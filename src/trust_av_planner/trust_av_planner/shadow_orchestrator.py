@@ -23,11 +23,8 @@ process only records every topic. With a follower, the GRU predictor may be used
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,7 +32,14 @@ from typing import Any
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.config import PlannerTopics, RunConfig
-from trust_av_planner.orchestrator import Graph, GraphError, NodeSpec, lease_domain, node_specs
+from trust_av_planner.orchestrator import (
+    Graph,
+    GraphError,
+    NodeSpec,
+    graph_session,
+    lease_domain,
+    node_specs,
+)
 from trust_av_planner.plant import VehicleState
 from trust_av_planner.recorder import McapBag
 from trust_av_planner.simulate import equilibrium_start
@@ -96,61 +100,63 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
     lead = LeadReplay(trace, initial.traffic.position_m)
     log_dir = bag.with_suffix('.logs')
     period_ns = round(NS_PER_S / rate_hz)
-    with lease_domain() as domain, _session(shadow_specs(config, trace, rate_hz, log_dir),
-                                            params_file, domain, log_dir,
-                                            'shadow_player') as (graph, node, executor):
-        pub_lead = node.create_publisher(message_class(TOPIC['/preceding_vehicle/odom'].msgtype),
-                                         topics.lead_odom_topic, QOS['STEP'])
-        pub_preview = node.create_publisher(
-            message_class(TOPIC['/preceding_vehicle/speed_preview'].msgtype),
-            topics.lead_preview_topic, QOS['STEP'])
-        pub_ego = node.create_publisher(message_class(TOPIC['/ego/odom'].msgtype),
-                                        topics.ego_odom_topic, QOS['STEP'])
-        command = {'accel_mps2': 0.0}
-        stats = LoopStats(period_ns)
-        with McapBag(bag) as recording:
-            def on_message(topic: str, data: bytes) -> None:
-                recording.write(topic, data)
+    with lease_domain() as domain:
+        graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), params_file, domain,
+                      log_dir)
+        with graph_session(graph, 'shadow_player') as (node, executor):
+            pub_lead = node.create_publisher(
+                message_class(TOPIC['/preceding_vehicle/odom'].msgtype),
+                topics.lead_odom_topic, QOS['STEP'])
+            pub_preview = node.create_publisher(
+                message_class(TOPIC['/preceding_vehicle/speed_preview'].msgtype),
+                topics.lead_preview_topic, QOS['STEP'])
+            pub_ego = node.create_publisher(message_class(TOPIC['/ego/odom'].msgtype),
+                                            topics.ego_odom_topic, QOS['STEP'])
+            command = {'accel_mps2': 0.0}
+            stats = LoopStats(period_ns)
+            with McapBag(bag) as recording:
+                def on_message(topic: str, data: bytes) -> None:
+                    recording.write(topic, data)
 
-            for name, topic in recorded.items():
-                recording.add_topic(name, topic.msgtype, topic.qos)
-                node.create_subscription(message_class(topic.msgtype), name,
-                                         lambda d, t=name: on_message(t, d),
-                                         QOS[topic.qos], raw=True)
+                for name, topic in recorded.items():
+                    recording.add_topic(name, topic.msgtype, topic.qos)
+                    node.create_subscription(message_class(topic.msgtype), name,
+                                             lambda d, t=name: on_message(t, d),
+                                             QOS[topic.qos], raw=True)
 
-            def on_command(msg: Any) -> None:
-                command['accel_mps2'] = float(msg.accel.linear.x)
+                def on_command(msg: Any) -> None:
+                    command['accel_mps2'] = float(msg.accel.linear.x)
 
-            node.create_subscription(message_class(TOPIC['/ego/accel_cmd'].msgtype),
-                                     '/ego/accel_cmd', on_command, QOS['STEP'])
-            _wait_nodes(graph, node, executor, topics, startup_timeout_s)
-            ego = initial.av
-            start = last = time.monotonic_ns()
-            next_tick = start
-            while True:
-                now = time.monotonic_ns()
-                if now < next_tick:
-                    executor.spin_once(timeout_sec=(next_tick - now) / NS_PER_S)
-                    continue
-                stats.tick(now)
-                elapsed_s = (now - start) / NS_PER_S
-                if elapsed_s > duration_s:
-                    break
-                ego = _advance(ego, command['accel_mps2'], (now - last) / NS_PER_S)
-                last = now
-                stamp = time.time_ns()
-                state = lead.state(elapsed_s)
-                pub_lead.publish(odometry(stamp, state.position_m, state.speed_mps,
-                                          'preceding_vehicle'))
-                pub_preview.publish(trajectory(
-                    stamp, cfg.planner.dt_s, velocities=lead.preview(
-                        elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
-                pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
-                stats.done(time.monotonic_ns() - now)
-                next_tick += period_ns
-                graph.check_alive(set())
-            _stop_and_drain(graph, executor, SHADOW_NODES)
-            counts = dict(recording.counts)
+                node.create_subscription(message_class(TOPIC['/ego/accel_cmd'].msgtype),
+                                         '/ego/accel_cmd', on_command, QOS['STEP'])
+                _wait_nodes(graph, node, executor, topics, startup_timeout_s)
+                ego = initial.av
+                start = last = time.monotonic_ns()
+                next_tick = start
+                while True:
+                    now = time.monotonic_ns()
+                    if now < next_tick:
+                        executor.spin_once(timeout_sec=(next_tick - now) / NS_PER_S)
+                        continue
+                    stats.tick(now)
+                    elapsed_s = (now - start) / NS_PER_S
+                    if elapsed_s > duration_s:
+                        break
+                    ego = _advance(ego, command['accel_mps2'], (now - last) / NS_PER_S)
+                    last = now
+                    stamp = time.time_ns()
+                    state = lead.state(elapsed_s)
+                    pub_lead.publish(odometry(stamp, state.position_m, state.speed_mps,
+                                              'preceding_vehicle'))
+                    pub_preview.publish(trajectory(
+                        stamp, cfg.planner.dt_s, velocities=lead.preview(
+                            elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
+                    pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
+                    stats.done(time.monotonic_ns() - now)
+                    next_tick += period_ns
+                    graph.check_alive(set())
+                _stop_and_drain(graph, executor, SHADOW_NODES)
+                counts = dict(recording.counts)
     loops = {'shadow_player': {'node': 'shadow_player', **stats.summary()},
              **_node_loops(graph, log_dir, SHADOW_NODES)}
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops)
@@ -191,56 +197,28 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_
              for t in recorded}
     needs['/sim/start'] = (1, 3)
     log_dir = bag.with_suffix('.logs')
-    with lease_domain() as domain, _session(wall_specs(config, trace_arg, trace, rate_hz,
-                                                       log_dir), params_file, domain, log_dir,
-                                            'wall_recorder') as (graph, node, executor):
-        start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
-        with McapBag(bag) as recording:
-            for topic in recorded:
-                recording.add_topic(topic.name, topic.msgtype, topic.qos)
-                node.create_subscription(
-                    message_class(topic.msgtype), topic.name,
-                    lambda d, t=topic.name: recording.write(t, d), QOS[topic.qos],
-                    raw=True)
-            _wait_topics(graph, node, executor, needs, startup_timeout_s)
-            start_pub.publish(Empty())
-            end = time.monotonic() + duration_s
-            while time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.05)
-                graph.check_alive(set())
-            _stop_and_drain(graph, executor, WALL_GRAPH_NODES)
-            counts = dict(recording.counts)
+    with lease_domain() as domain:
+        graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), params_file,
+                      domain, log_dir)
+        with graph_session(graph, 'wall_recorder') as (node, executor):
+            start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
+            with McapBag(bag) as recording:
+                for topic in recorded:
+                    recording.add_topic(topic.name, topic.msgtype, topic.qos)
+                    node.create_subscription(
+                        message_class(topic.msgtype), topic.name,
+                        lambda d, t=topic.name: recording.write(t, d), QOS[topic.qos],
+                        raw=True)
+                _wait_topics(graph, node, executor, needs, startup_timeout_s)
+                start_pub.publish(Empty())
+                end = time.monotonic() + duration_s
+                while time.monotonic() < end:
+                    executor.spin_once(timeout_sec=0.05)
+                    graph.check_alive(set())
+                _stop_and_drain(graph, executor, WALL_GRAPH_NODES)
+                counts = dict(recording.counts)
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts,
                      loops=_node_loops(graph, log_dir, WALL_GRAPH_NODES))
-
-
-@contextlib.contextmanager
-def _session(specs: list[NodeSpec], params_file: Path, domain: int, log_dir: Path,
-             name: str) -> Iterator[tuple[Graph, Any, Any]]:
-    """Start the node processes and this process's own node ``name`` on ``domain``; on exit
-    destroy the node, shut its context down and stop every process (also on errors)."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
-
-    graph = Graph(specs, params_file, domain, log_dir)
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    graph.start()
-    context = Context()
-    try:
-        rclpy.init(context=context, domain_id=domain,
-                   signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node(name, context=context)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        try:
-            yield graph, node, executor
-        finally:
-            node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
-        graph.stop()
 
 
 def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
