@@ -170,17 +170,25 @@ def test_retraining_reproduces_the_shipped_model() -> None:
 
 def test_numerics_fingerprint_is_stable_and_sees_the_cpu_path() -> None:
     """Same process, same answer; numpy with its AVX-512 kernels switched off (where the CPU
-    has them) or PyTorch forced to its scalar path gives another fingerprint."""
+    has them) or PyTorch forced to its scalar path (where it has a vector path) gives
+    another fingerprint."""
     import subprocess
     import sys
-    assert numerics_fingerprint() == numerics_fingerprint()
+
+    from numpy._core._multiarray_umath import __cpu_features__
+    mine = numerics_fingerprint()
+    assert numerics_fingerprint() == mine
     code = ('from trust_av_planner.gru_training import numerics_fingerprint; '
             'print(numerics_fingerprint())')
-    env = {**os.environ, 'ATEN_CPU_CAPABILITY': 'default'}
-    other = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
-                           text=True, check=True).stdout.strip()
+    overrides = []
+    if __cpu_features__.get('X86_V4'):
+        overrides.append({'NPY_DISABLE_CPU_FEATURES': 'X86_V4'})
     if str(torch.backends.cpu.get_cpu_capability()) != 'DEFAULT':
-        assert other != numerics_fingerprint()
+        overrides.append({'ATEN_CPU_CAPABILITY': 'default'})
+    for override in overrides:
+        other = subprocess.run([sys.executable, '-c', code], env={**os.environ, **override},
+                               capture_output=True, text=True, check=True).stdout.strip()
+        assert other != mine, override
 
 
 def test_gru_beats_ca_in_closed_loop_on_unseen_us06() -> None:
