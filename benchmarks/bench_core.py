@@ -28,10 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from preceding_traffic.traces import SpeedTrace, load_trace
-from trust_av_planner.config import RunConfig, load_run_config
-from trust_av_planner.nmpc_reference import compare_on_records
-from trust_av_planner.simulate import SimResult, simulate
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.study.nmpc_reference import compare_on_records
+from trust_av_planner.system.closed_loop import SimResult, simulate
+from trust_av_planner.system.config import RunConfig, load_run_config
 
 
 def percentiles_ms(seconds: list[float]) -> dict[str, float]:

@@ -21,11 +21,13 @@ import tempfile
 import time
 from pathlib import Path
 
-from preceding_traffic.traces import load_trace, truncate
-from trust_av_planner.bag_records import records_from_bag
-from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_av_planner.orchestrator import run_graph
-from trust_av_planner.simulate import StepRecord, simulate
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import truncate
+from trust_av_planner.graph.bag_records import records_from_bag
+from trust_av_planner.graph.orchestrator import run_graph
+from trust_av_planner.system.closed_loop import simulate
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.system.metrics import StepRecord
 
 
 def max_difference(recorded: list[StepRecord], reference: list[StepRecord]) -> float:

@@ -19,11 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from preceding_traffic.traces import load_trace, truncate
-from trust_av_planner.config import load_run_config
-from trust_av_planner.planner_core import make_predictor, observe
-from trust_av_planner.plant import VehicleState
-from trust_av_planner.simulate import simulate
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import truncate
+from trust_av_planner.planner import make_predictor, observe
+from trust_av_planner.system.closed_loop import simulate
+from trust_av_planner.system.config import load_run_config
+from trust_monitor.common.kinematics import VehicleState
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,9 +7,8 @@ Runs ``trust-av shadow`` (planner and trust_monitor in wall mode, the bag's lead
 replayed at real-time speed; with ``--whole-graph`` all five nodes in wall mode with the
 GRU predictor and a simulated ego and human), then prints and writes
 ``benchmarks/results_shadow.json``: |tick-to-tick period error| (jitter) and compute time
-p50 / p99 / max per loop, the duration used, the core count and the date. Acceptance
-(issue 6): p99 jitter < 10 ms at 10 Hz. Nothing here asserts it: the figure goes in the
-README.
+p50 / p99 / max per loop, the duration used, the core count and the date. Target: p99
+jitter < 10 ms at 10 Hz. Nothing here asserts it: the figure goes in the README.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Builds a trace of at least ``--duration-s`` (default one hour of sim time) by ch
 two commute trips (am, pm, am, ...; each trip's time shifted to follow the previous one),
 runs the whole graph over it, samples the resident memory (VmRSS) of every node process
 once per simulated minute, and reports each node's RSS at minute 5 and at the end. Writes
-benchmarks/results_soak.json (or --out). Issue 7 asks for growth < 20 MB per node.
+benchmarks/results_soak.json (or --out). The target is growth < 20 MB per node.
 
     python benchmarks/soak.py [--duration-s 3600]
 """
@@ -20,9 +20,10 @@ import tempfile
 import threading
 from pathlib import Path
 
-from preceding_traffic.traces import TraceConfig, load_trace, read_samples, trace_path
-from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_av_planner.orchestrator import run_graph
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import TraceConfig, read_samples, trace_path
+from trust_av_planner.graph.orchestrator import run_graph
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
 
 
 def chained_trace(path: Path, duration_s: float, config: TraceConfig) -> float:

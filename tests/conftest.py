@@ -7,9 +7,10 @@ import functools
 
 import pytest
 
-from preceding_traffic.traces import SpeedTrace, load_trace
-from trust_av_planner.config import RunConfig, load_run_config
-from trust_av_planner.simulate import SimResult, simulate
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.system.closed_loop import SimResult, simulate
+from trust_av_planner.system.config import RunConfig, load_run_config
 
 ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 

@@ -19,7 +19,8 @@ from preceding_traffic.bags import (
     load_bag_trace,
     write_trace_bag,
 )
-from preceding_traffic.traces import TraceConfig, load_trace
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import TraceConfig
 
 REPO = Path(__file__).resolve().parents[1]
 TOPIC = '/preceding_vehicle/odom'

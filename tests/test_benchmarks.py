@@ -26,7 +26,7 @@ def test_benchmark_suite_smoke(tmp_path: Path) -> None:
 
 
 def test_soak_short_version(tmp_path: Path) -> None:
-    """Issue 7's soak, short: every node's RSS grows by < 20 MB from the baseline to the end
+    """The soak, short: every node's RSS grows by < 20 MB from the baseline to the end
     (the full hour: `python benchmarks/soak.py`)."""
     out = tmp_path / 'soak.json'
     proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'soak.py'),

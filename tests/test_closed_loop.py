@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from conftest import ALPHAS, closed_loop, shipped_trace
 
-from human_driver_sim import longitudinal
 from trust_av_planner.nmpc import BOUND_TOLERANCE
+from trust_monitor.common import kinematics
 
 GOLDEN = Path(__file__).parent / 'golden' / 'us06_ca_alpha0.5_metrics.json'
 TRACES = ('us06', 'nycc')
@@ -33,7 +33,7 @@ def test_every_bound_holds_or_step_is_a_counted_fallback(trace: str, alpha: floa
             continue
         plan = np.array(r.av_plan_mps2)
         preview = shipped_trace(trace).preview(round(r.t_s), cfg.horizon_steps)
-        gaps, speeds = longitudinal.rollout(r.av_gap_m, r.av_speed_mps, list(preview),
+        gaps, speeds = kinematics.rollout(r.av_gap_m, r.av_speed_mps, list(preview),
                                             list(plan), cfg.dt_s)
         tol = BOUND_TOLERANCE
         assert np.all(plan >= cfg.accel_min_mps2 - tol)
@@ -79,7 +79,7 @@ def test_explicability_falls_and_trust_rises_with_alpha(trace: str) -> None:
 def test_same_command_same_numbers(run_config) -> None:
     from conftest import with_alpha
 
-    from trust_av_planner.simulate import simulate
+    from trust_av_planner.system.closed_loop import simulate
     trace = shipped_trace('us06')
     first = simulate(with_alpha(run_config, 0.5), trace)
     second = simulate(with_alpha(run_config, 0.5), trace)

@@ -82,7 +82,7 @@ def test_installed_executable_comes_up(install: Path, package: str, executable: 
 ])
 def test_node_rejects_bad_parameters_at_start_up(tmp_path: Path, args: list[str],
                                                  message: str) -> None:
-    """Issue 7: a node started with a bad value stops at once, naming it (exit 2)."""
+    """A node started with a bad value stops at once, naming it (exit 2)."""
     override = tmp_path / 'override.yaml'
     override.write_text('planner:\n  ros__parameters:\n    alpha: 1.5\n')
     args = [str(override) if a == 'OVERRIDE' else a for a in args]

@@ -7,15 +7,15 @@ import dataclasses
 import numpy as np
 import pytest
 
-from human_driver_sim import longitudinal
 from human_driver_sim.driver_mpc import DriverMpc, features
+from trust_monitor.common import kinematics
 
 
 def test_step_and_rollout_by_hand() -> None:
-    assert longitudinal.step(10.0, 5.0, 7.0, -1.0, 0.5) == (11.0, 4.5)
-    gaps, speeds = longitudinal.rollout(10.0, 5.0, [7.0, 7.0], [1.0, 1.0], 1.0)
+    assert kinematics.step(10.0, 5.0, 7.0, -1.0, 0.5) == (11.0, 4.5)
+    gaps, speeds = kinematics.rollout(10.0, 5.0, [7.0, 7.0], [1.0, 1.0], 1.0)
     assert gaps == [12.0, 13.0] and speeds == [6.0, 7.0]
-    assert longitudinal.lead_speeds(4.0, [1.0, 2.0, 3.0], 1.0) == [4.0, 5.0, 7.0]
+    assert kinematics.lead_speeds(4.0, [1.0, 2.0, 3.0], 1.0) == [4.0, 5.0, 7.0]
 
 
 def test_features_by_hand() -> None:
@@ -40,7 +40,7 @@ def test_driver_respects_bounds_and_follows(run_config) -> None:
         gap = 5.0 + 1.5 * speed + rng.uniform(-2, 10)
         av_speed = max(0.0, speed + rng.uniform(-3, 3))
         expected = rng.uniform(-2, 2, 3)
-        result = mpc.solve(gap, speed, av_speed, expected)
+        result = mpc.step(gap, speed, av_speed, expected)
         assert result.success, result.status
         plan = result.plan_mps2
         assert np.all(plan >= cfg.accel_min_mps2 - 1e-9)
@@ -51,20 +51,20 @@ def test_driver_respects_bounds_and_follows(run_config) -> None:
 
 def test_driver_brakes_when_the_av_is_expected_to_brake(run_config) -> None:
     mpc = DriverMpc(dataclasses.replace(run_config.driver, speed_max_mps=30.0))
-    steady = mpc.solve(5.0 + 1.5 * 20.0, 20.0, 20.0, np.zeros(3)).plan_mps2[0]
+    steady = mpc.step(5.0 + 1.5 * 20.0, 20.0, 20.0, np.zeros(3)).plan_mps2[0]
     mpc.reset()
-    braking = mpc.solve(5.0 + 1.5 * 20.0, 20.0, 20.0, np.full(3, -3.0)).plan_mps2[0]
+    braking = mpc.step(5.0 + 1.5 * 20.0, 20.0, 20.0, np.full(3, -3.0)).plan_mps2[0]
     assert abs(steady) < 0.5
     assert braking < steady - 0.5
 
 
 def test_fallback_plan_keeps_bounds() -> None:
-    plan = longitudinal.hold_gap_plan(
+    plan = kinematics.hold_gap_plan(
         6.0, 15.0, [5.0, 5.0, 5.0], dt_s=1.0, standstill_gap_m=5.0, time_headway_s=1.2,
         gap_gain_per_s2=0.3, speed_gain_per_s=0.8, accel_min_mps2=-3.0, accel_max_mps2=3.0,
         speed_min_mps=0.0, speed_max_mps=30.0)
     assert plan == pytest.approx([-3.0, -3.0, -3.0])
-    plan = longitudinal.hold_gap_plan(
+    plan = kinematics.hold_gap_plan(
         50.0, 1.0, [0.0] * 3, dt_s=1.0, standstill_gap_m=5.0, time_headway_s=1.2,
         gap_gain_per_s2=0.3, speed_gain_per_s=0.8, accel_min_mps2=-3.0, accel_max_mps2=3.0,
         speed_min_mps=0.0, speed_max_mps=30.0)

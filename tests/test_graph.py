@@ -17,11 +17,13 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from preceding_traffic.traces import load_trace, truncate
-from trust_av_planner.bag_records import records_from_bag
-from trust_av_planner.config import load_run_config
-from trust_av_planner.simulate import StepRecord, simulate
-from trust_monitor.graph_interface import TOPICS
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import truncate
+from trust_av_planner.graph.bag_records import records_from_bag
+from trust_av_planner.system.closed_loop import simulate
+from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.metrics import StepRecord
+from trust_monitor.common.topics import TOPICS
 
 STEPS = 120
 RECORDED = {t.name for t in TOPICS if 'recorder' in t.subscribers}
@@ -177,7 +179,7 @@ def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
 
 
 def test_readme_topic_table_is_the_code_table() -> None:
-    from trust_monitor.graph_interface import topic_table_markdown
+    from trust_monitor.common.topics import topic_table_markdown
     readme = (Path(__file__).resolve().parents[1] / 'README.md').read_text()
     assert topic_table_markdown() in readme
 
@@ -201,7 +203,7 @@ def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path) -> None:
 
 
 def test_gru_planner_in_the_graph_equals_in_process(tmp_path: Path) -> None:
-    """Issue 4: TAC-GRU through the node graph gives the in-process trajectories."""
+    """TAC-GRU through the node graph gives the in-process trajectories."""
     bag = tmp_path / 'gru.mcap'
     command = run_command(bag, '--max-steps', '60')
     command[command.index('ca')] = 'gru'
@@ -229,7 +231,7 @@ def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize('bag_name', ['commute_am', 'commute_pm'])
 def test_commute_bag_replays_through_the_graph(tmp_path: Path, bag_name: str) -> None:
-    """Issue 6: a real commute bag as the preceding vehicle, graph == in-process."""
+    """A real commute bag as the preceding vehicle, graph == in-process."""
     trace_arg = str(Path(__file__).resolve().parents[1] / 'bags' / bag_name)
     bag = tmp_path / 'replay.mcap'
     command = run_command(bag, '--max-steps', '60')
@@ -244,7 +246,7 @@ def test_commute_bag_replays_through_the_graph(tmp_path: Path, bag_name: str) ->
 
 
 def test_eight_parallel_runs_are_isolated_and_equal(tmp_path: Path) -> None:
-    """Issue 7: 8 graph runs at once (48 node processes on 2 cores): own domains, no
+    """8 graph runs at once (48 node processes on 2 cores): own domains, no
     cross-talk, every one equal to the in-process run."""
     bags = [tmp_path / f'run{k}.mcap' for k in range(8)]
     procs = [subprocess.Popen(run_command(b, '--max-steps', '20', '--startup-timeout-s', '120'),
@@ -269,7 +271,7 @@ def test_eight_parallel_runs_are_isolated_and_equal(tmp_path: Path) -> None:
 
 
 def test_solver_time_out_publishes_the_fallback_and_goes_on(tmp_path: Path) -> None:
-    """Issue 7: a tiny CPU budget makes every NMPC solve overrun: the planner publishes the
+    """A tiny CPU budget makes every NMPC solve overrun: the planner publishes the
     fallback plan with the reason in its status, the run completes, the metrics count it."""
     params = tmp_path / 'tiny_budget.yaml'
     params.write_text((Path(__file__).resolve().parents[1] / 'config' / 'trust_av.yaml')

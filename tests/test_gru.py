@@ -15,16 +15,7 @@ import torch
 from conftest import shipped_trace
 
 from preceding_traffic.traces import truncate
-from trust_av_planner.config import load_run_config
-from trust_av_planner.gru_training import (
-    TrainingSettings,
-    build_dataset,
-    numerics_fingerprint,
-    samples_from_run,
-    train,
-    train_with_dagger,
-)
-from trust_av_planner.planner_core import make_predictor
+from trust_av_planner.planner import make_predictor
 from trust_av_planner.predictors import Observation
 from trust_av_planner.predictors.gru import (
     MODELS_DIR,
@@ -34,7 +25,16 @@ from trust_av_planner.predictors.gru import (
     gru_forward,
     load_weights,
 )
-from trust_av_planner.simulate import simulate
+from trust_av_planner.study.gru_training import (
+    TrainingSettings,
+    build_dataset,
+    numerics_fingerprint,
+    samples_from_run,
+    train,
+    train_with_dagger,
+)
+from trust_av_planner.system.closed_loop import simulate
+from trust_av_planner.system.config import load_run_config
 
 SHIPPED = MODELS_DIR / 'gru_plan_estimator.npz'
 
@@ -123,7 +123,7 @@ def test_shipped_model_loads_and_its_card_is_consistent() -> None:
 
 
 def test_reduced_retraining_with_dagger_reproduces_itself(tmp_path: Path) -> None:
-    """Issue 4, fast tier: the whole pipeline (TAC-CA data, training, a DAgger round with
+    """Fast tier: the whole pipeline (TAC-CA data, training, a DAgger round with
     TAC-GRU runs of the first model, retraining) run twice from scratch with the same seed
     gives the same validation RMSE to 1e-6 and the same weights."""
     settings = TrainingSettings(traces=('hwfet',), alphas=(0.5,), epochs=2, hidden=8)
@@ -147,7 +147,7 @@ CROSS_CPU_WEIGHTS_REL = 1e-4
 
 @pytest.mark.slow
 def test_retraining_reproduces_the_shipped_model() -> None:
-    """Issue 4, full tier: same seed, same data -> the shipped model. On a CPU with the
+    """Full tier: same seed, same data -> the shipped model. On a CPU with the
     card's numerics fingerprint: validation RMSE to 1e-6 and read-out weights to 1e-9; on
     another CPU: within the cross-CPU tolerances above."""
     card = json.loads(SHIPPED.with_suffix('.json').read_text())
@@ -178,7 +178,7 @@ def test_numerics_fingerprint_is_stable_and_sees_the_cpu_path() -> None:
     from numpy._core._multiarray_umath import __cpu_features__
     mine = numerics_fingerprint()
     assert numerics_fingerprint() == mine
-    code = ('from trust_av_planner.gru_training import numerics_fingerprint; '
+    code = ('from trust_av_planner.study.gru_training import numerics_fingerprint; '
             'print(numerics_fingerprint())')
     overrides = []
     if __cpu_features__.get('X86_V4'):

@@ -28,7 +28,7 @@ def test_inverse_kkt_recovers_weights() -> None:
         speed = rng.uniform(10.0, 28.0)
         state = (speed * 1.5 + rng.uniform(-8.0, 8.0) + 5.0, speed, speed + rng.uniform(-3, 3))
         expected = np.full(3, rng.uniform(-1.0, 1.0))
-        result = mpc.solve(*state, expected)
+        result = mpc.step(*state, expected)
         mpc.reset()
         if result.success and np.all(np.abs(result.plan_mps2) < 2.9):
             demos.append(Demonstration(*state, expected, result.plan_mps2))
@@ -70,11 +70,11 @@ def test_bilevel_refinement_recovers_the_time_headway() -> None:
 
 
 def test_params_file_driver_is_the_pooled_fit() -> None:
-    """Issue 6: the default config's human driver is the shipped IRL fit (W and tau_H)."""
+    """The default config's human driver is the shipped IRL fit (W and tau_H)."""
     import yaml
 
     from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
-    from trust_av_planner.config import load_run_config
+    from trust_av_planner.system.config import load_run_config
     pooled = yaml.safe_load(DRIVER_FIT_FILE.read_text())['pooled']
     driver = load_run_config().driver
     for name in (*WEIGHT_NAMES, 'time_headway_s'):

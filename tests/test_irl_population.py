@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from human_driver_sim.population import sample_population
-from trust_av_planner.cli import main
+from trust_av_planner.cli.main import main
 
 PER_PAIR = np.array([[1.0, 0.01, 0.05, 0.001], [1.0, 0.02, 0.06, 0.002]])
 

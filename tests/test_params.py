@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_monitor.params import ParamsError
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_monitor.common.params import ParamsError
 
 REPO = Path(__file__).resolve().parents[1]
 

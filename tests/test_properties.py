@@ -8,8 +8,8 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from trust_av_planner.config import load_run_config
 from trust_av_planner.nmpc import BOUND_TOLERANCE, TrustAwareNmpc
+from trust_av_planner.system.config import load_run_config
 from trust_monitor.trust_model import TrustEstimator, explicability, performance
 
 CONFIG = load_run_config()
@@ -48,7 +48,7 @@ def test_every_plan_is_inside_the_bounds_or_flagged(speed: float, gap_offset: fl
                                                     trust: float) -> None:
     gap = max(0.5, 5.0 + 1.2 * speed + gap_offset)
     NMPC.reset()
-    result = NMPC.solve(gap, speed, np.array(lead), np.array(expected), trust)
+    result = NMPC.step(gap, speed, np.array(lead), np.array(expected), trust)
     plan = result.plan_mps2
     assert plan.shape == (3,) and np.all(np.isfinite(plan))
     cfg = NMPC.config

@@ -9,9 +9,9 @@ from typing import Any
 
 import pytest
 
-from trust_av_planner import reproduce
-from trust_av_planner.config import DEFAULT_PARAMS_FILE
-from trust_av_planner.reproduce import Case
+from trust_av_planner.study import sweep, tables
+from trust_av_planner.study.sweep import Case
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 
 
 class InlineExecutor:
@@ -24,8 +24,8 @@ class InlineExecutor:
             settings=None) -> None:
         for case in cases:
             self.ran.append(case)
-            on_result(case, reproduce.run_case(case, params_file,
-                                               settings or reproduce.RunSettings()))
+            on_result(case, sweep.run_case(case, params_file,
+                                               settings or sweep.RunSettings()))
 
 
 @pytest.fixture
@@ -37,19 +37,19 @@ def short_trace(tmp_path: Path) -> str:
 
 
 def test_improvement_maths() -> None:
-    assert reproduce.improvement_percent('final_trust', 44.36, 53.402) == pytest.approx(20.383,
+    assert tables.improvement_percent('final_trust', 44.36, 53.402) == pytest.approx(20.383,
                                                                                       abs=1e-3)
-    assert reproduce.improvement_percent('rmse_mps2', 0.518, 0.353) == pytest.approx(31.85,
+    assert tables.improvement_percent('rmse_mps2', 0.518, 0.353) == pytest.approx(31.85,
                                                                                     abs=1e-2)
 
 
 def test_cache_resumes_and_reruns_only_changes(tmp_path: Path, short_trace: str) -> None:
-    cases = reproduce.sweep_cases([short_trace], ['ca'], [0.0, 1.0])
+    cases = sweep.sweep_cases([short_trace], ['ca'], [0.0, 1.0])
     first = InlineExecutor()
-    results = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path, first)
+    results = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path, first)
     assert first.ran == cases and set(results) == set(cases)
     again = InlineExecutor()
-    cached = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path, again)
+    cached = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path, again)
     assert again.ran == []
     assert cached[cases[1]]['metrics'] == results[cases[1]]['metrics']
     # A different params file is a different key: everything runs again.
@@ -57,15 +57,15 @@ def test_cache_resumes_and_reruns_only_changes(tmp_path: Path, short_trace: str)
     changed.write_text(DEFAULT_PARAMS_FILE.read_text().replace('explicability_scale: 0.005',
                                                                'explicability_scale: 0.006'))
     third = InlineExecutor()
-    reproduce.run_sweep(cases, changed, tmp_path, third)
+    sweep.run_sweep(cases, changed, tmp_path, third)
     assert third.ran == cases
 
 
 def test_local_executor_equals_inline(tmp_path: Path, short_trace: str) -> None:
-    cases = reproduce.sweep_cases([short_trace], ['ca'], [0.0, 0.5, 1.0])
-    pooled = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'a',
-                                 reproduce.LocalExecutor(2))
-    inline = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'b', InlineExecutor())
+    cases = sweep.sweep_cases([short_trace], ['ca'], [0.0, 0.5, 1.0])
+    pooled = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'a',
+                                 sweep.LocalExecutor(2))
+    inline = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'b', InlineExecutor())
     for case in cases:
         assert pooled[case]['trust'] == inline[case]['trust']
         assert pooled[case]['metrics'] == inline[case]['metrics']
@@ -74,19 +74,19 @@ def test_local_executor_equals_inline(tmp_path: Path, short_trace: str) -> None:
 def test_ray_executor_runs_the_same_sweep(tmp_path: Path, short_trace: str) -> None:
     ray = pytest.importorskip('ray', reason='ray is pinned in requirements.txt; the venv has it')
     assert ray is not None
-    cases = reproduce.sweep_cases([short_trace], ['ca'], [0.0, 1.0])
-    with_ray = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'ray',
-                                   reproduce.RayExecutor(num_cpus=2))
-    inline = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'in', InlineExecutor())
+    cases = sweep.sweep_cases([short_trace], ['ca'], [0.0, 1.0])
+    with_ray = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'ray',
+                                   sweep.RayExecutor(num_cpus=2))
+    inline = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'in', InlineExecutor())
     for case in cases:
         assert with_ray[case]['metrics'] == inline[case]['metrics']
 
 
 def test_failing_case_names_itself(tmp_path: Path) -> None:
-    from trust_av_planner.errors import TrustAvError
-    with pytest.raises(TrustAvError, match=r'case .*missing\.csv/TAC-CA/alpha=0 failed'):
-        reproduce.run_sweep([Case(str(tmp_path / 'missing.csv'), 'ca', 0.0)],
-                            DEFAULT_PARAMS_FILE, tmp_path, reproduce.LocalExecutor(1))
+    from trust_av_planner.errors import TrustAvPlannerError
+    with pytest.raises(TrustAvPlannerError, match=r'case .*missing\.csv/TAC-CA/alpha=0 failed'):
+        sweep.run_sweep([Case(str(tmp_path / 'missing.csv'), 'ca', 0.0)],
+                            DEFAULT_PARAMS_FILE, tmp_path, sweep.LocalExecutor(1))
 
 
 def test_tables_from_results() -> None:
@@ -94,11 +94,11 @@ def test_tables_from_results() -> None:
         return {'metrics': {'final_trust': trust, 'mean_explicability': score,
                             'rmse_mps2': rmse}}
     results = {Case('us06', 'ca', a): fake(40 + 10 * a, 0.06 - 0.03 * a, 0.7 - 0.2 * a)
-               for a in reproduce.ALPHAS}
-    header, rows = reproduce.alpha_table(results, 'us06', 'ca', None)
+               for a in sweep.ALPHAS}
+    header, rows = tables.alpha_table(results, 'us06', 'ca', None)
     assert header[:4] == ['alpha', 'final trust', 'mean E', 'RMSE (m/s^2)']
     assert rows[-1] == ['max improvement', '25.00 %', '50.00 %', '28.57 %']
-    header, rows = reproduce.improvement_table(results, ['us06'], ['ca'])
+    header, rows = tables.improvement_table(results, ['us06'], ['ca'])
     assert rows[0][:3] == ['TAC-CA', 'us06', '25.00 %']
     assert rows[0][-1] == '0.84, 0.89, 0.98'   # ours / paper (29.88, 56.37, 29.22)
 
@@ -132,13 +132,13 @@ def test_graph_sweep_equals_in_process_sweep(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert '5 cases (graph)' in proc.stdout
     bags = {b.name for b in (tmp_path / 'graph' / 'graph_bags').glob('*.mcap')}
-    assert bags == {f'nycc_ca_alpha{a:g}.mcap' for a in reproduce.ALPHAS}
-    cases = reproduce.sweep_cases(['nycc'], ['ca'])
+    assert bags == {f'nycc_ca_alpha{a:g}.mcap' for a in sweep.ALPHAS}
+    cases = sweep.sweep_cases(['nycc'], ['ca'])
     # The same sweep again: read from the graph cache, and in-process with the same steps.
-    graph = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'graph',
+    graph = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'graph',
                                 InlineExecutor(), runner='graph', max_steps=steps)
     inline = InlineExecutor()
-    in_process = reproduce.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'in',
+    in_process = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'in',
                                      inline, max_steps=steps)
     assert inline.ran == cases
     for case in cases:
@@ -150,18 +150,18 @@ def test_graph_sweep_equals_in_process_sweep(tmp_path: Path) -> None:
 
 
 def test_run_settings_are_checked() -> None:
-    from trust_av_planner.errors import TrustAvError
-    with pytest.raises(TrustAvError, match=r"runner must be one of .*'rviz'"):
-        reproduce.RunSettings(runner='rviz')
-    with pytest.raises(TrustAvError, match='max_steps must be >= 0, got -1'):
-        reproduce.RunSettings(max_steps=-1)
+    from trust_av_planner.errors import TrustAvPlannerError
+    with pytest.raises(TrustAvPlannerError, match=r"runner must be one of .*'rviz'"):
+        sweep.RunSettings(runner='rviz')
+    with pytest.raises(TrustAvPlannerError, match='max_steps must be >= 0, got -1'):
+        sweep.RunSettings(max_steps=-1)
 
 
 def test_population_cases_are_seeded_and_named() -> None:
-    cases = reproduce.sweep_cases(['us06'], ['gru'], [0.0, 1.0])
-    first = reproduce.population_cases(cases, 3, seed=4)
-    again = reproduce.population_cases(cases, 3, seed=4)
-    other = reproduce.population_cases(cases, 3, seed=5)
+    cases = sweep.sweep_cases(['us06'], ['gru'], [0.0, 1.0])
+    first = sweep.population_cases(cases, 3, seed=4)
+    again = sweep.population_cases(cases, 3, seed=4)
+    other = sweep.population_cases(cases, 3, seed=5)
     assert first == again and first != other
     assert len(first) == 6 and [c.driver for c in first] == [1, 2, 3, 1, 2, 3]
     # The same driver k for every alpha, so improvements over alpha = 0 are per driver.
@@ -171,9 +171,9 @@ def test_population_cases_are_seeded_and_named() -> None:
     assert params['time_headway_s'] == pytest.approx(0.975, abs=1e-3)   # the shipped fit
     assert first[1].label == 'us06/TAC-GRU/alpha=0/driver=2'
     assert first[4].base == Case('us06', 'gru', 1.0)
-    from trust_av_planner.errors import TrustAvError
-    with pytest.raises(TrustAvError, match='number of drivers must be >= 1, got 0'):
-        reproduce.population_cases(cases, 0, seed=1)
+    from trust_av_planner.errors import TrustAvPlannerError
+    with pytest.raises(TrustAvPlannerError, match='number of drivers must be >= 1, got 0'):
+        sweep.population_cases(cases, 0, seed=1)
 
 
 def test_population_tables_give_mean_and_95_percent_interval() -> None:
@@ -182,17 +182,17 @@ def test_population_tables_give_mean_and_95_percent_interval() -> None:
                             'rmse_mps2': rmse}, 'time_s': [0.0, 1.0], 'trust': [0.0, trust]}
     results = {}
     for driver, offset in ((1, 0.0), (2, 2.0)):
-        for a in reproduce.ALPHAS:
+        for a in sweep.ALPHAS:
             case = Case('us06', 'ca', a, driver, (('weight_relative_distance', 0.01 * driver),))
             results[case] = fake(40 + 10 * a + offset, 0.06 - 0.03 * a, 0.7 - 0.2 * a)
-    _, rows = reproduce.population_alpha_table(results, 'us06', 'ca', None)
+    _, rows = tables.population_alpha_table(results, 'us06', 'ca', None)
     # Trust at alpha = 0: drivers 40 and 42 -> mean 41, half-width t(1) * 1 = 12.706.
     assert rows[0][1] == '41.000 ± 12.706'
     assert rows[0][3] == '0.700 ± 0.000'
     # Max trust improvement per driver: 25 % and 23.81 %; E and RMSE the same for both.
     assert rows[-1][2:] == ['50.00 ± 0.00 %', '28.57 ± 0.00 %']
     assert rows[-1][1].startswith('24.40 ± 7.5')
-    mean = reproduce.population_mean(results)
+    mean = sweep.population_mean(results)
     assert mean[Case('us06', 'ca', 1.0)]['metrics']['final_trust'] == pytest.approx(51.0)
     assert mean[Case('us06', 'ca', 1.0)]['trust'] == pytest.approx([0.0, 51.0])
 

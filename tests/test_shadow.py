@@ -21,8 +21,8 @@ from rosbags.highlevel import AnyReader
 from preceding_traffic.bags import TYPESTORE
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
-from trust_monitor.graph_interface import TOPICS
-from trust_monitor.wall_clock import advance
+from trust_monitor.common.kinematics import advance
+from trust_monitor.common.topics import TOPICS
 
 REPO = Path(__file__).resolve().parents[1]
 PARAMS = REPO / 'config' / 'trust_av.yaml'

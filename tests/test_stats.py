@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from trust_av_planner.stats import mean_ci95, t_quantile_975
+from trust_av_planner.study.stats import mean_ci95, t_quantile_975
 
 
 @pytest.mark.parametrize(('dof', 'quantile'), [(1, 12.706), (2, 4.303), (4, 2.776),

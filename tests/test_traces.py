@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from preceding_traffic.traces import TraceConfig, TraceError, load_trace, resample
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import TraceConfig, TraceError, resample
 
 CONFIG = TraceConfig(trace='us06', max_sample_gap_s=5.0)
 

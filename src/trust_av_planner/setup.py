@@ -21,10 +21,10 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'trust-av = trust_av_planner.cli:main',
+            'trust-av = trust_av_planner.cli.main:main',
             'planner = trust_av_planner.planner_node:main',
             'ego_plant = trust_av_planner.ego_plant_node:main',
-            'recorder = trust_av_planner.recorder:main',
+            'recorder = trust_av_planner.graph.recorder_node:main',
         ],
     },
 )

@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from human_driver_sim.errors import HumanDriverSimError
 
-class CarFollowingDataError(ValueError):
+
+class CarFollowingDataError(HumanDriverSimError):
     """A car-following data file is missing or malformed."""
 
 

@@ -25,9 +25,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from human_driver_sim import longitudinal
-from human_driver_sim.solver import sqp_options
-from trust_monitor.params import require
+from trust_monitor.common import kinematics
+from trust_monitor.common.params import check_fields, param, require
+from trust_monitor.common.solver import sqp_options
 
 LOG = logging.getLogger(__name__)
 
@@ -38,38 +38,37 @@ FEATURE_NAMES = ('acceleration', 'desired_speed', 'relative_speed', 'relative_di
 class DriverConfig:
     """Parameters of the driver MPC."""
 
-    dt_s: float
-    horizon_steps: int
-    standstill_gap_m: float
-    speed_min_mps: float
-    speed_max_mps: float
-    weight_acceleration: float
-    weight_desired_speed: float
-    weight_relative_speed: float
-    weight_relative_distance: float
-    time_headway_s: float
-    accel_min_mps2: float
-    accel_max_mps2: float
-    gap_slack_weight: float
-    solver_max_iter: int
-    fallback_gap_gain_per_s2: float
-    fallback_speed_gain_per_s: float
+    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
+    standstill_gap_m: float = param('standstill gap d_s: the bound d_H >= d_s', unit='m')
+    speed_min_mps: float = param('lower speed bound', unit='m/s', low=0.0)
+    speed_max_mps: float = param('upper speed bound (the orchestrator passes max(v_PT))',
+                                 unit='m/s')
+    weight_acceleration: float = param('driver feature weight: acceleration', low=0.0,
+                                       low_inclusive=False)
+    weight_desired_speed: float = param('driver feature weight: desired speed', low=0.0)
+    weight_relative_speed: float = param('driver feature weight: relative speed', low=0.0)
+    weight_relative_distance: float = param('driver feature weight: relative distance',
+                                            low=0.0)
+    time_headway_s: float = param("human's time headway tau_H in the relative-distance "
+                                  'feature', unit='s')
+    accel_min_mps2: float = param("human's lower acceleration bound", unit='m/s^2', high=0.0,
+                                  high_inclusive=False)
+    accel_max_mps2: float = param("human's upper acceleration bound", unit='m/s^2', low=0.0,
+                                  low_inclusive=False)
+    gap_slack_weight: float = param('penalty weight on violating the driver gap bound', low=0.0,
+                                    low_inclusive=False)
+    solver_max_iter: int = param('SQP iterations before the step falls back', low=1)
+    fallback_gap_gain_per_s2: float = param('gap gain of the fallback controller',
+                                            unit='1/s^2')
+    fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
+                                             unit='1/s')
 
     def __post_init__(self) -> None:
-        require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
-        require(1 <= self.horizon_steps <= 50,
-                f'horizon_steps must be in [1, 50], got {self.horizon_steps}')
-        for name in ('weight_acceleration', 'weight_desired_speed', 'weight_relative_speed',
-                     'weight_relative_distance'):
-            require(getattr(self, name) >= 0.0, f'{name} must be >= 0, got {getattr(self, name)}')
-        require(self.weight_acceleration > 0.0, 'weight_acceleration must be > 0 (regularity)')
-        require(0.0 <= self.speed_min_mps < self.speed_max_mps,
+        check_fields(self)
+        require(self.speed_min_mps < self.speed_max_mps,
                 f'need 0 <= speed_min_mps < speed_max_mps, got {self.speed_min_mps}, '
                 f'{self.speed_max_mps}')
-        require(self.accel_min_mps2 < 0.0 < self.accel_max_mps2,
-                'need accel_min_mps2 < 0 < accel_max_mps2')
-        require(self.gap_slack_weight > 0.0, 'gap_slack_weight must be > 0')
-        require(self.solver_max_iter >= 1, 'solver_max_iter must be >= 1')
 
     @property
     def weights(self) -> np.ndarray:
@@ -90,8 +89,8 @@ def features(gap_m: Any, speed_mps: Any, av_speed_mps: Any, accels_mps2: Sequenc
         accels_mps2: human's plan, N values.
         expected_mps2: the AV plan the human expects, N values.
     """
-    av_speeds = longitudinal.lead_speeds(av_speed_mps, expected_mps2, dt_s)
-    gaps, speeds = longitudinal.rollout(gap_m, speed_mps, av_speeds, accels_mps2, dt_s)
+    av_speeds = kinematics.lead_speeds(av_speed_mps, expected_mps2, dt_s)
+    gaps, speeds = kinematics.rollout(gap_m, speed_mps, av_speeds, accels_mps2, dt_s)
     av_next = [s + a * dt_s for s, a in zip(av_speeds, expected_mps2, strict=True)]
     f_a = sum(a * a for a in accels_mps2)
     f_ds = sum((v - desired_speed_mps) ** 2 for v in speeds)
@@ -103,7 +102,7 @@ def features(gap_m: Any, speed_mps: Any, av_speed_mps: Any, accels_mps2: Sequenc
 
 @dataclass(frozen=True)
 class DriverResult:
-    """Outcome of one driver MPC step (see :class:`trust_av_planner.nmpc.PlanResult`)."""
+    """Outcome of one driver MPC step (the same fields as the AV's ``PlanResult``)."""
 
     plan_mps2: np.ndarray
     status: str
@@ -113,7 +112,7 @@ class DriverResult:
 
 
 class DriverMpc:
-    """The human follower's MPC; build once, call :meth:`solve` every step."""
+    """The human follower's MPC; build once, call :meth:`step` every step."""
 
     def __init__(self, config: DriverConfig) -> None:
         self.config = config
@@ -130,8 +129,8 @@ class DriverMpc:
                          time_headway_s=config.time_headway_s,
                          desired_speed_mps=config.speed_max_mps)
         cost = ca.dot(weights, ca.vertcat(*feats)) + config.gap_slack_weight * ca.sum1(slack)
-        av_speeds = longitudinal.lead_speeds(av_speed0, e_list, config.dt_s)
-        gaps, speeds = longitudinal.rollout(gap0, speed0, av_speeds, u_list, config.dt_s)
+        av_speeds = kinematics.lead_speeds(av_speed0, e_list, config.dt_s)
+        gaps, speeds = kinematics.rollout(gap0, speed0, av_speeds, u_list, config.dt_s)
         g = ca.vertcat(*[gaps[k] + slack[k] for k in range(n)], *speeds)
         self._lbg = np.concatenate([np.full(n, config.standstill_gap_m),
                                     np.full(n, config.speed_min_mps)])
@@ -148,8 +147,8 @@ class DriverMpc:
         """Forget the warm start."""
         self._previous = None
 
-    def solve(self, gap_m: float, speed_mps: float, av_speed_mps: float,
-              expected_mps2: np.ndarray) -> DriverResult:
+    def step(self, gap_m: float, speed_mps: float, av_speed_mps: float,
+             expected_mps2: np.ndarray) -> DriverResult:
         """Plan the human's next N accelerations against the expected AV plan.
 
         Args:
@@ -173,8 +172,8 @@ class DriverMpc:
             plan = np.asarray(sol['x']).ravel()[:n]
             self._previous = plan
             return DriverResult(plan, str(stats['return_status']), True, iterations, elapsed)
-        av_speeds = longitudinal.lead_speeds(av_speed_mps, list(expected_mps2), c.dt_s)
-        plan = np.asarray(longitudinal.hold_gap_plan(
+        av_speeds = kinematics.lead_speeds(av_speed_mps, list(expected_mps2), c.dt_s)
+        plan = np.asarray(kinematics.hold_gap_plan(
             gap_m, speed_mps, av_speeds, dt_s=c.dt_s, standstill_gap_m=c.standstill_gap_m,
             time_headway_s=c.time_headway_s, gap_gain_per_s2=c.fallback_gap_gain_per_s2,
             speed_gain_per_s=c.fallback_speed_gain_per_s, accel_min_mps2=c.accel_min_mps2,

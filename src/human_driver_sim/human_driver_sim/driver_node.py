@@ -8,7 +8,7 @@ Per step, on the expected AV plan ``/ego/expected_plan`` and the AV's odometry `
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` plans from the latest
 expected plan and AV odometry (both fresher than ``input_timeout_s``), applies the plan's
 first acceleration over the real time elapsed since the previous tick
-(:func:`trust_monitor.wall_clock.advance`, no reversing) and publishes plan, status and
+(:func:`trust_monitor.common.kinematics.advance`, no reversing) and publishes plan, status and
 odometry stamped now; until ``/sim/start`` it holds its initial state. With a missing or
 stale input it does not plan: the status says ``inputs_not_ready`` with the reason and the
 simulated human coasts (0 m/s^2).
@@ -27,35 +27,28 @@ from std_msgs.msg import Empty
 from trajectory_msgs.msg import JointTrajectory
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc
-from trust_monitor.graph_interface import StepBuffer, stamp_ns
-from trust_monitor.params import require
-from trust_monitor.ros_support import (
-    QOS,
-    WallLoop,
-    declare_config,
-    diagnostics,
-    msg_ns,
-    now_ns,
-    odometry,
-    spin_node,
-    trajectory,
-    trajectory_values,
-)
-from trust_monitor.wall_clock import NS_PER_S, LatestInputs, WallClockConfig, advance
+from trust_monitor.common.kinematics import advance
+from trust_monitor.common.lockstep import StepBuffer, stamp_ns
+from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+from trust_monitor.ros.messages import diagnostics, msg_ns, odometry, trajectory, trajectory_values
+from trust_monitor.ros.parameters import declare_config
+from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
 @dataclass(frozen=True)
 class FollowerState:
     """The human's initial odometry and the geometry that turns positions into gaps."""
 
-    vehicle_length_m: float
-    initial_position_m: float
-    initial_speed_mps: float
-    start_time_s: float
+    vehicle_length_m: float = param('vehicle length: odometry position to bumper-to-bumper gap',
+                                    unit='m', low=0.0)
+    initial_position_m: float = param("the human's initial position", unit='m')
+    initial_speed_mps: float = param("the human's initial speed", unit='m/s', low=0.0)
+    start_time_s: float = param('time of the initial odometry (the first step)', unit='s')
 
     def __post_init__(self) -> None:
-        require(self.vehicle_length_m >= 0.0, 'vehicle_length_m must be >= 0')
-        require(self.initial_speed_mps >= 0.0, 'initial_speed_mps must be >= 0')
+        check_fields(self)
 
 
 class DriverNode(Node):
@@ -63,6 +56,7 @@ class DriverNode(Node):
 
     def __init__(self) -> None:
         super().__init__('human_driver')
+        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
         self.config = declare_config(self, DriverConfig)
         self.follower = declare_config(self, FollowerState)
         self.clock = declare_config(self, WallClockConfig)
@@ -150,7 +144,7 @@ class DriverNode(Node):
         av_position = float(ego.pose.pose.position.x)
         av_speed = float(ego.twist.twist.linear.x)
         gap = av_position - self.position_m - self.follower.vehicle_length_m
-        result = self.mpc.solve(gap, self.speed_mps, av_speed, expected)  # type: ignore[arg-type]
+        result = self.mpc.step(gap, self.speed_mps, av_speed, expected)  # type: ignore[arg-type]
         dt = self.config.dt_s
         self.pub_plan.publish(trajectory(ns, dt, accelerations=result.plan_mps2.tolist()))
         self.pub_status.publish(diagnostics(

@@ -106,7 +106,7 @@ def replay_mpc(config: DriverConfig, pair: FollowingPair) -> tuple[np.ndarray, n
     gap[0], speed[0] = pair.gap_m[0], pair.follower_speed_mps[0]
     for k in range(count - 1):
         lead_accel = (lead[k] - lead[k - 1]) / dt if k > 0 else 0.0
-        plan = mpc.solve(float(gap[k]), float(speed[k]), float(lead[k]),
+        plan = mpc.step(float(gap[k]), float(speed[k]), float(lead[k]),
                          np.full(config.horizon_steps, lead_accel)).plan_mps2
         new_speed = max(0.0, speed[k] + float(plan[0]) * dt)
         travelled = 0.5 * (speed[k] + new_speed) * dt

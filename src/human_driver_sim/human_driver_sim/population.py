@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from human_driver_sim.errors import HumanDriverSimError
+
 
 def sample_population(per_pair_weights: np.ndarray, count: int, *, seed: int) -> np.ndarray:
     """Sample ``count`` weight vectors from a log-normal fitted to per-pair log-weights.
@@ -40,7 +42,7 @@ WEIGHT_NAMES = ('weight_acceleration', 'weight_desired_speed', 'weight_relative_
 """Driver-MPC parameter names of W, in the order of the weight vectors."""
 
 
-class DriverFitError(ValueError):
+class DriverFitError(HumanDriverSimError):
     """The driver-fit file is missing or malformed; the message names the file and key."""
 
 

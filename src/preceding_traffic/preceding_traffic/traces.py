@@ -17,13 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
+from preceding_traffic.errors import PrecedingTrafficError
+from trust_monitor.common.params import ParamsError, check_fields, param
+
 SHIPPED_TRACES = ('us06', 'nycc', 'commute_am', 'commute_pm')
 """Evaluation traces shipped in ``data/`` (sources and licences in ``data/SOURCES.md``)."""
 TRAINING_TRACES = ('udds', 'hwfet', 'wltc_3b')
 """Traces for training learned models only, in ``data/training/``."""
 
 
-class TraceError(ValueError):
+class TraceError(PrecedingTrafficError):
     """A speed trace is unusable; the message names the file, row and problem."""
 
 
@@ -40,14 +43,20 @@ class TraceConfig:
             ``geometry_msgs/msg/TwistStamped``.
     """
 
-    trace: str
-    max_sample_gap_s: float
-    bag_topic: str = '/preceding_vehicle/odom'
-    bag_message_type: str = 'nav_msgs/msg/Odometry'
+    trace: str = param('shipped trace name, time_s,speed_mps CSV or rosbag2 bag')
+    max_sample_gap_s: float = param('longest hole in a trace that is interpolated', unit='s',
+                                    low=0.0, low_inclusive=False)
+    bag_topic: str = param('topic replayed when trace is a bag',
+                           default='/preceding_vehicle/odom')
+    bag_message_type: str = param('its type: nav_msgs/msg/Odometry or '
+                                  'geometry_msgs/msg/TwistStamped',
+                                  default='nav_msgs/msg/Odometry')
 
     def __post_init__(self) -> None:
-        if not self.max_sample_gap_s > 0.0:
-            raise TraceError(f'max_sample_gap_s must be > 0, got {self.max_sample_gap_s}')
+        try:
+            check_fields(self)
+        except ParamsError as err:
+            raise TraceError(str(err)) from err
 
 
 @dataclass(frozen=True)
@@ -152,32 +161,6 @@ def resample(times_s: np.ndarray, speeds_mps: np.ndarray, dt_s: float) -> np.nda
     grid = times_s[0] + dt_s * np.arange(count)
     speeds: np.ndarray = np.interp(grid, times_s, speeds_mps)
     return speeds
-
-
-def is_bag(path: Path) -> bool:
-    """A rosbag2 bag: a directory with ``metadata.yaml``, or an ``.mcap``/``.db3`` file."""
-    return (path.is_dir() and (path / 'metadata.yaml').exists()) or path.suffix in {'.mcap',
-                                                                                   '.db3'}
-
-
-def load_trace(name_or_path: str, dt_s: float, config: TraceConfig) -> SpeedTrace:
-    """Load a shipped trace by name, a CSV, or a bag's speed topic onto the control grid.
-
-    Args:
-        name_or_path: a name of :data:`SHIPPED_TRACES`, a ``time_s,speed_mps`` CSV, or a
-            rosbag2 bag (read with ``config.bag_topic`` and ``config.bag_message_type``).
-        dt_s: control step, s.
-        config: validation settings.
-    """
-    path = trace_path(name_or_path)
-    if is_bag(path):
-        from preceding_traffic.bags import load_bag_trace  # rosbags only when needed
-        return load_bag_trace(path, config.bag_topic, config.bag_message_type, dt_s, config)
-    times, speeds = read_samples(path, config)
-    shipped = name_or_path.lower() in SHIPPED_TRACES + TRAINING_TRACES
-    name = name_or_path.lower() if shipped else path.stem
-    return SpeedTrace(name=name, dt_s=dt_s, speeds_mps=resample(times, speeds, dt_s),
-                      t0_s=float(times[0]))
 
 
 def truncate(trace: SpeedTrace, max_steps: int) -> SpeedTrace:

@@ -32,21 +32,15 @@ from std_msgs.msg import Empty
 from trajectory_msgs.msg import JointTrajectory
 
 from preceding_traffic.replay import LeadReplay
-from preceding_traffic.traces import TraceConfig, load_trace
-from trust_monitor.graph_interface import StepBuffer, stamp_ns
-from trust_monitor.params import require
-from trust_monitor.ros_support import (
-    QOS,
-    WallLoop,
-    declare_config,
-    msg_ns,
-    now_ns,
-    odometry,
-    spin_node,
-    time_msg,
-    trajectory,
-)
-from trust_monitor.wall_clock import NS_PER_S, WallClockConfig
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import TraceConfig
+from trust_monitor.common.lockstep import StepBuffer, stamp_ns
+from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
+from trust_monitor.ros.messages import msg_ns, odometry, time_msg, trajectory
+from trust_monitor.ros.parameters import declare_config
+from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
 @dataclass(frozen=True)
@@ -60,15 +54,15 @@ class TrafficRunConfig:
         max_steps: stop after this many steps (0: the whole trace).
     """
 
-    dt_s: float
-    horizon_steps: int
-    initial_position_m: float = 0.0
-    max_steps: int = 0
+    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
+    initial_position_m: float = param("the preceding vehicle's position at the first step",
+                                      unit='m', default=0.0)
+    max_steps: int = param('stop after this many steps (0: the whole trace)', low=0,
+                           default=0)
 
     def __post_init__(self) -> None:
-        require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
-        require(self.horizon_steps >= 1, f'horizon_steps must be >= 1, got {self.horizon_steps}')
-        require(self.max_steps >= 0, f'max_steps must be >= 0, got {self.max_steps}')
+        check_fields(self)
 
 
 class TrafficNode(Node):
@@ -76,6 +70,7 @@ class TrafficNode(Node):
 
     def __init__(self) -> None:
         super().__init__('preceding_traffic')
+        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
         self.run = declare_config(self, TrafficRunConfig)
         trace_config = declare_config(self, TraceConfig)
         self.clock = declare_config(self, WallClockConfig)

@@ -7,7 +7,7 @@ vehicle and its odometry would do. Parameters: ``dt_s`` and the initial state.
 
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` integrates the latest
 command over the real time elapsed since the previous tick
-(:func:`trust_monitor.wall_clock.advance`, no reversing) and publishes the odometry stamped
+(:func:`trust_monitor.common.kinematics.advance`, no reversing) and publishes the odometry stamped
 now; until ``/sim/start`` the vehicle holds its initial state (the traffic node starts its
 replay then). A command older than ``input_timeout_s`` (or none yet) is not applied: the
 vehicle coasts (0 m/s^2) and a warning names the reason, as a drive-by-wire unit drops a
@@ -25,40 +25,35 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from std_msgs.msg import Empty
 
-from trust_av_planner.plant import VehicleState, integrate
-from trust_monitor.graph_interface import stamp_ns
-from trust_monitor.params import require
-from trust_monitor.ros_support import (
-    QOS,
-    WallLoop,
-    declare_config,
-    msg_ns,
-    now_ns,
-    odometry,
-    spin_node,
-)
-from trust_monitor.wall_clock import NS_PER_S, LatestInputs, WallClockConfig, advance
+from trust_monitor.common.kinematics import VehicleState, advance, integrate
+from trust_monitor.common.lockstep import stamp_ns
+from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+from trust_monitor.ros.messages import msg_ns, odometry
+from trust_monitor.ros.parameters import declare_config
+from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
 @dataclass(frozen=True)
 class PlantConfig:
     """A simulated vehicle: step and initial odometry (the orchestrator computes these)."""
 
-    dt_s: float
-    initial_position_m: float
-    initial_speed_mps: float
-    start_time_s: float
+    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    initial_position_m: float = param("the AV's initial position", unit='m')
+    initial_speed_mps: float = param("the AV's initial speed", unit='m/s', low=0.0)
+    start_time_s: float = param('time of the initial odometry (the first step)', unit='s')
 
     def __post_init__(self) -> None:
-        require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
-        require(self.initial_speed_mps >= 0.0, 'initial_speed_mps must be >= 0')
+        check_fields(self)
 
 
 class EgoPlantNode(Node):
-    """Explicit-Euler odometry of the AV (:func:`trust_av_planner.plant.integrate`)."""
+    """Explicit-Euler odometry of the AV (:func:`trust_monitor.common.kinematics.integrate`)."""
 
     def __init__(self) -> None:
         super().__init__('ego_plant')
+        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
         self.config = declare_config(self, PlantConfig)
         self.clock = declare_config(self, WallClockConfig)
         self.state = VehicleState(self.config.initial_position_m, self.config.initial_speed_mps)

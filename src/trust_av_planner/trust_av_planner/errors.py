@@ -1,7 +1,9 @@
-"""The planner package's exception class: bad input that a user can fix."""
+"""The trust_av_planner package's exception class."""
 
 from __future__ import annotations
 
 
-class TrustAvError(RuntimeError):
-    """A run cannot proceed; the message names the bad input (file, node, parameter)."""
+class TrustAvPlannerError(ValueError):
+    """A run cannot proceed for a reason the user can act on (bad input such as a file, a node,
+    a parameter or a model file; a graph that did not start or a node that died); the message
+    names it. Every other exception of this package derives from it."""

@@ -8,7 +8,7 @@ the plan influences)::
     s.t. d_min <= d^k <= d_max,  v_min <= v^k <= v_max,  u_min <= u^k <= u_max,
          E(u, u^H) <= E_max(T)                     (the trust constraint T^k >= T_min)
 
-with the dynamics of :mod:`human_driver_sim.longitudinal` and E of
+with the dynamics of :mod:`trust_monitor.common.kinematics` and E of
 :func:`trust_monitor.trust_model.explicability` (each written once). The trust constraint is
 the exact smooth equivalent of propagating eqs. (9)-(11) over the horizon, see
 :func:`trust_monitor.trust_model.explicability_bound`.
@@ -18,7 +18,7 @@ warm-started from the shifted previous plan. A solve that fails, that uses more 
 than ``solver_cpu_budget_s`` (thread CPU time, so that a busy machine does not change the
 answer), or whose plan breaks a bound by more than :data:`BOUND_TOLERANCE`, is replaced by
 the documented fallback plan
-(:func:`human_driver_sim.longitudinal.hold_gap_plan`) and reported in the status.
+(:func:`trust_monitor.common.kinematics.hold_gap_plan`) and reported in the status.
 """
 
 from __future__ import annotations
@@ -30,9 +30,9 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from human_driver_sim import longitudinal
-from human_driver_sim.solver import sqp_options
-from trust_monitor.params import require
+from trust_monitor.common import kinematics
+from trust_monitor.common.params import check_fields, param, require
+from trust_monitor.common.solver import sqp_options
 from trust_monitor.trust_model import TrustConfig, explicability, explicability_bound
 
 LOG = logging.getLogger(__name__)
@@ -53,52 +53,47 @@ the active gap and speed bounds have opposite gradients); otherwise the step fal
 class PlannerConfig:
     """Parameters of the AV's NMPC (Table I and docs/MODEL.md)."""
 
-    dt_s: float
-    horizon_steps: int
-    standstill_gap_m: float
-    time_headway_s: float
-    gap_min_m: float
-    gap_max_m: float
-    speed_min_mps: float
-    speed_max_mps: float
-    accel_min_mps2: float
-    accel_max_mps2: float
-    trust_min: float
-    alpha: float
-    tracking_cost_scale_m2: float
-    explicability_scale: float
-    solver_max_iter: int
-    solver_cpu_budget_s: float
-    fallback_gap_gain_per_s2: float
-    fallback_speed_gain_per_s: float
-    predictor: str
-    time_headway_cap_s: float
-    gru_model: str
+    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
+    standstill_gap_m: float = param('standstill gap d_s', unit='m')
+    time_headway_s: float = param('desired time headway tau_R of the CTH policy', unit='s',
+                                  low=0.0)
+    gap_min_m: float = param('minimum gap to the preceding traffic d_R,min', unit='m', low=0.0)
+    gap_max_m: float = param('maximum gap to the preceding traffic d_R,max', unit='m')
+    speed_min_mps: float = param('lower speed bound', unit='m/s', low=0.0)
+    speed_max_mps: float = param('upper speed bound (the orchestrator passes max(v_PT))',
+                                 unit='m/s')
+    accel_min_mps2: float = param('lower acceleration bound u_R,min', unit='m/s^2', high=0.0,
+                                  high_inclusive=False)
+    accel_max_mps2: float = param('upper acceleration bound u_R,max', unit='m/s^2', low=0.0,
+                                  low_inclusive=False)
+    trust_min: float = param('minimum trust T_min over the horizon, eq. (12)')
+    alpha: float = param('relative weight of explicability in the cost, eq. (4)', low=0.0,
+                         high=1.0)
+    tracking_cost_scale_m2: float = param('scale of the CTH tracking cost', unit='m^2', low=0.0,
+                                          low_inclusive=False)
+    explicability_scale: float = param('scale of the explicability cost', low=0.0,
+                                       low_inclusive=False)
+    solver_max_iter: int = param('SQP iterations before the step falls back', low=1)
+    solver_cpu_budget_s: float = param('CPU time per solve before the step falls back',
+                                       unit='s', low=0.0, low_inclusive=False)
+    fallback_gap_gain_per_s2: float = param('gap gain of the fallback controller',
+                                            unit='1/s^2')
+    fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
+                                             unit='1/s')
+    predictor: str = param('estimator of the plan the human expects', choices=PREDICTORS)
+    time_headway_cap_s: float = param('cap of the time headway d_H / v_H when the human is '
+                                      'stopped', unit='s', low=0.0, low_inclusive=False)
+    gru_model: str = param('GRU weights: a file in trust_av_planner/models/ or a path')
 
     def __post_init__(self) -> None:
-        require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
-        require(1 <= self.horizon_steps <= 50,
-                f'horizon_steps must be in [1, 50], got {self.horizon_steps}')
-        require(0.0 <= self.alpha <= 1.0, f'alpha must be in [0, 1], got {self.alpha}')
-        require(self.time_headway_s >= 0.0,
-                f'time_headway_s must be >= 0, got {self.time_headway_s}')
-        require(0.0 <= self.gap_min_m < self.gap_max_m,
+        check_fields(self)
+        require(self.gap_min_m < self.gap_max_m,
                 f'need 0 <= gap_min_m < gap_max_m, got {self.gap_min_m}, {self.gap_max_m}')
-        require(0.0 <= self.speed_min_mps < self.speed_max_mps,
+        require(self.speed_min_mps < self.speed_max_mps,
                 f'need 0 <= speed_min_mps < speed_max_mps, got {self.speed_min_mps}, '
                 f'{self.speed_max_mps}')
-        require(self.accel_min_mps2 < 0.0 < self.accel_max_mps2,
-                f'need accel_min_mps2 < 0 < accel_max_mps2, got {self.accel_min_mps2}, '
-                f'{self.accel_max_mps2}')
-        require(self.tracking_cost_scale_m2 > 0.0, 'tracking_cost_scale_m2 must be > 0')
-        require(self.explicability_scale > 0.0, 'explicability_scale must be > 0')
-        require(self.solver_max_iter >= 1, 'solver_max_iter must be >= 1')
-        require(self.solver_cpu_budget_s > 0.0,
-                f'solver_cpu_budget_s must be > 0, got {self.solver_cpu_budget_s}')
-        require(self.time_headway_cap_s > 0.0, 'time_headway_cap_s must be > 0')
         require(bool(self.gru_model), 'gru_model must name a weights file')
-        require(self.predictor in PREDICTORS, f'predictor must be one of {list(PREDICTORS)}, got '
-                f'{self.predictor!r}')
 
 
 @dataclass(frozen=True)
@@ -130,7 +125,7 @@ class PlanResult:
 
 
 class TrustAwareNmpc:
-    """The AV's trust-aware NMPC; build once, call :meth:`solve` every step."""
+    """The AV's trust-aware NMPC; build once, call :meth:`step` every step."""
 
     def __init__(self, config: PlannerConfig, trust: TrustConfig) -> None:
         self.config = config
@@ -141,7 +136,7 @@ class TrustAwareNmpc:
         lead = ca.SX.sym('lead', n)
         expected = ca.SX.sym('expected', n)
         alpha = ca.SX.sym('alpha')
-        gaps, speeds = longitudinal.rollout(gap0, speed0, [lead[k] for k in range(n)],
+        gaps, speeds = kinematics.rollout(gap0, speed0, [lead[k] for k in range(n)],
                                             [u[k] for k in range(n)], config.dt_s)
         tracking = sum((config.standstill_gap_m + config.time_headway_s * speeds[k] - gaps[k])
                        ** 2 for k in range(n))
@@ -151,7 +146,7 @@ class TrustAwareNmpc:
                 + alpha * score / config.explicability_scale)
         params = ca.vertcat(gap0, speed0, lead, expected, alpha)
         # d^1 does not depend on the plan: a constant row would break the QP's constraint
-        # qualification, so it is checked before solving instead (:meth:`solve`).
+        # qualification, so it is checked before solving instead (:meth:`step`).
         constraints = ca.vertcat(*gaps[1:], *speeds, score)
         self._solver = ca.nlpsol('trust_aware_nmpc', 'sqpmethod',
                                  {'x': u, 'p': params, 'f': cost, 'g': constraints},
@@ -173,8 +168,8 @@ class TrustAwareNmpc:
         upper[-1] = explicability_max
         return self._lower, upper
 
-    def solve(self, gap_m: float, speed_mps: float, lead_speeds_mps: np.ndarray,
-              expected_mps2: np.ndarray, trust: float) -> PlanResult:
+    def step(self, gap_m: float, speed_mps: float, lead_speeds_mps: np.ndarray,
+             expected_mps2: np.ndarray, trust: float) -> PlanResult:
         """Plan the next N accelerations.
 
         Args:
@@ -247,7 +242,7 @@ class TrustAwareNmpc:
                    upper: np.ndarray) -> float:
         c = self.config
         accels = plan.tolist()
-        gaps, speeds = longitudinal.rollout(gap_m, speed_mps, lead_speeds_mps.tolist(), accels,
+        gaps, speeds = kinematics.rollout(gap_m, speed_mps, lead_speeds_mps.tolist(), accels,
                                             c.dt_s)
         score = explicability(accels, expected_mps2.tolist(), self.trust.epsilon_mps2)
         values = gaps + speeds + [score]
@@ -258,7 +253,7 @@ class TrustAwareNmpc:
     def _fallback(self, gap_m: float, speed_mps: float, lead_speeds_mps: np.ndarray, reason: str,
                   e_max: float, iterations: int, elapsed: float) -> PlanResult:
         c = self.config
-        plan = np.asarray(longitudinal.hold_gap_plan(
+        plan = np.asarray(kinematics.hold_gap_plan(
             gap_m, speed_mps, list(lead_speeds_mps), dt_s=c.dt_s,
             standstill_gap_m=c.standstill_gap_m, time_headway_s=c.time_headway_s,
             gap_gain_per_s2=c.fallback_gap_gain_per_s2,

@@ -2,7 +2,7 @@
 
 Subscribes the preceding vehicle's odometry and speed preview, the ego and human odometry
 and the monitor's trust; per step (inputs paired by header stamp) it runs
-:class:`trust_av_planner.planner_core.AvPlanner` (plan estimator + NMPC) and publishes the
+:class:`trust_av_planner.planner.AvPlanner` (plan estimator + NMPC) and publishes the
 plan, the expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``)
 and the solver status (``DiagnosticArray``). Parameters: the ``planner`` section of
 ``config/trust_av.yaml``.
@@ -28,26 +28,24 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
 
-from trust_av_planner.config import PlannerTopics, SharedConfig
-from trust_av_planner.errors import TrustAvError
+from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PlannerConfig
-from trust_av_planner.planner_core import AvPlanner
-from trust_av_planner.plant import VehicleState
-from trust_monitor.graph_interface import StepBuffer
-from trust_monitor.ros_support import (
-    QOS,
-    WallLoop,
-    declare_config,
+from trust_av_planner.planner import AvPlanner
+from trust_av_planner.system.config import PlannerTopics, SharedConfig
+from trust_monitor.common.kinematics import VehicleState
+from trust_monitor.common.lockstep import StepBuffer
+from trust_monitor.common.wall_clock import LatestInputs, WallClockConfig
+from trust_monitor.ros.messages import (
     diagnostics,
     header,
     msg_ns,
-    now_ns,
-    spin_node,
     trajectory,
     trajectory_values,
 )
+from trust_monitor.ros.parameters import declare_config
+from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 from trust_monitor.trust_model import TrustConfig
-from trust_monitor.wall_clock import LatestInputs, WallClockConfig
 
 STEP_INPUTS = ('traffic', 'preview', 'ego', 'human')
 WALL_REQUIRED = ['traffic', 'preview', 'ego']
@@ -59,10 +57,11 @@ def vehicle(msg: Odometry) -> VehicleState:
 
 
 class PlannerNode(Node):
-    """Thin adapter over :class:`~trust_av_planner.planner_core.AvPlanner`."""
+    """Thin adapter over :class:`~trust_av_planner.planner.AvPlanner`."""
 
     def __init__(self) -> None:
         super().__init__('planner')
+        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
         self.config = declare_config(self, PlannerConfig)
         trust = declare_config(self, TrustConfig)
         shared = declare_config(self, SharedConfig)
@@ -175,7 +174,7 @@ class PlannerNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``ros2 run trust_av_planner planner``."""
-    return spin_node(PlannerNode, args, user_errors=(ValueError, TrustAvError))
+    return spin_node(PlannerNode, args, user_errors=(ValueError, TrustAvPlannerError))
 
 
 if __name__ == '__main__':

@@ -14,13 +14,14 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from trust_monitor.params import ParamsError, build_config, node_params, read_params_file
+from trust_monitor.common.params import build_config, node_params, read_params_file
+from trust_monitor.errors import TrustMonitorError
 from trust_monitor.trust_model import TrustConfig, TrustEstimator
 
 DEFAULT_PARAMS = Path(__file__).resolve().parent / 'config' / 'trust_av.yaml'
 
 
-class EstimateError(ValueError):
+class EstimateError(TrustMonitorError):
     """The plans CSV is malformed; the message names the file, row and problem."""
 
 
@@ -87,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         config = build_config(TrustConfig,
                               node_params(read_params_file(args.params_file), 'trust_monitor'))
         count = estimate_csv(args.input, args.output, config)
-    except (ParamsError, EstimateError) as err:
+    except TrustMonitorError as err:
         print(f'trust-monitor-estimate: error: {err}', file=sys.stderr)
         return 2
     print(f'wrote {count} rows to {args.output}')

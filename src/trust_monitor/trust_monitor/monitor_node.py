@@ -18,19 +18,13 @@ from geometry_msgs.msg import Vector3Stamped
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
 
-from trust_monitor.graph_interface import StepBuffer
-from trust_monitor.ros_support import (
-    QOS,
-    WallLoop,
-    declare_config,
-    header,
-    msg_ns,
-    now_ns,
-    spin_node,
-    trajectory_values,
-)
+from trust_monitor.common.lockstep import StepBuffer
+from trust_monitor.common.wall_clock import LatestInputs, WallClockConfig
+from trust_monitor.ros.messages import header, msg_ns, trajectory_values
+from trust_monitor.ros.parameters import declare_config
+from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 from trust_monitor.trust_model import TrustConfig, TrustEstimator
-from trust_monitor.wall_clock import LatestInputs, WallClockConfig
 
 
 class MonitorNode(Node):
@@ -38,6 +32,7 @@ class MonitorNode(Node):
 
     def __init__(self) -> None:
         super().__init__('trust_monitor')
+        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
         self.estimator = TrustEstimator(declare_config(self, TrustConfig))
         self.clock = declare_config(self, WallClockConfig)
         self.buffer = StepBuffer(['plan', 'expected'])

@@ -17,7 +17,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from trust_monitor.params import require
+from trust_monitor.common.params import check_fields, param
 
 
 @dataclass(frozen=True)
@@ -31,17 +31,16 @@ class TrustConfig:
         trust_initial: T(0), trust units.
     """
 
-    epsilon_mps2: float
-    trust_growth_rate: float
-    performance_threshold: float
-    trust_initial: float
+    epsilon_mps2: float = param('acceleration offset eps of eq. (8)', unit='m/s^2', low=0.0,
+                                low_inclusive=False)
+    trust_growth_rate: float = param('trust growth rate delta of eq. (10)', low=0.0,
+                                     low_inclusive=False)
+    performance_threshold: float = param('performance threshold P_thre of eq. (11)', low=0.0,
+                                         high=1.0, low_inclusive=False, high_inclusive=False)
+    trust_initial: float = param('initial trust T(0)')
 
     def __post_init__(self) -> None:
-        require(self.epsilon_mps2 > 0.0, f'epsilon_mps2 must be > 0, got {self.epsilon_mps2}')
-        require(self.trust_growth_rate > 0.0,
-                f'trust_growth_rate must be > 0, got {self.trust_growth_rate}')
-        require(0.0 < self.performance_threshold < 1.0,
-                f'performance_threshold must be in (0, 1), got {self.performance_threshold}')
+        check_fields(self)
 
 
 def explicability(plan: Sequence[Any], expected: Sequence[Any], epsilon_mps2: float) -> Any:

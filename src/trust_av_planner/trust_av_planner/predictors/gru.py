@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from trust_av_planner.errors import TrustAvError
+from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors import Observation
 
 MODELS_DIR = Path(__file__).resolve().parents[1] / 'models'
@@ -30,7 +30,7 @@ ARRAYS = ('weight_ih', 'weight_hh', 'bias_ih', 'bias_hh', 'out_weight', 'out_bia
           'feature_mean', 'feature_std')
 
 
-class ModelError(TrustAvError):
+class ModelError(TrustAvPlannerError):
     """A GRU weights file is missing or does not fit; the message names file and problem."""
 
 

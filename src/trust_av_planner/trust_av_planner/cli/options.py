@@ -1,0 +1,140 @@
+"""Options and output shared by the ``trust-av`` commands: the run options (trace or bag,
+alpha, predictor, params file), their translation into params-file overrides, the metrics
+table, and the progress bar (tqdm)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from types import TracebackType
+
+from tqdm import tqdm
+
+from preceding_traffic.traces import SHIPPED_TRACES
+from trust_av_planner.nmpc import PREDICTORS, PlannerConfig
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+from trust_av_planner.system.metrics import Metrics
+from trust_monitor.common.params import field_spec
+
+
+def alpha_value(text: str) -> float:
+    """argparse type for alpha: a number in the range of ``PlannerConfig.alpha``."""
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'alpha must be a number, got {text!r}') from err
+    spec = field_spec(PlannerConfig, 'alpha')
+    problem = spec.problem('alpha', value) if spec is not None else ''
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
+    return value
+
+
+def add_params_file_option(parser: argparse.ArgumentParser) -> None:
+    """``--params-file``, defaulting to the shipped config/trust_av.yaml."""
+    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
+                        help='ROS 2 params file (default: %(default)s)')
+
+
+def add_run_options(parser: argparse.ArgumentParser) -> None:
+    """Options shared by the commands that run one closed loop."""
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument('--trace', default=None,
+                        help=f'preceding-traffic trace: one of {", ".join(SHIPPED_TRACES)}, a '
+                             'time_s,speed_mps CSV or a rosbag2 bag '
+                             "(default: the params file's preceding_traffic.trace)")
+    source.add_argument('--bag-in', type=Path, default=None, metavar='BAG',
+                        help='replay a rosbag2 bag (MCAP or sqlite3 directory or file) as the '
+                             'preceding vehicle; the same as --trace BAG')
+    parser.add_argument('--bag-topic', default=None,
+                        help="the preceding vehicle's topic in the bag (default: the params "
+                             "file's preceding_traffic.bag_topic)")
+    parser.add_argument('--bag-type', default=None,
+                        choices=('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'),
+                        help='its message type (default: preceding_traffic.bag_message_type)')
+    parser.add_argument('--alpha', type=alpha_value, default=None,
+                        help="explicability weight in [0, 1] (default: the params file's)")
+    parser.add_argument('--predictor', choices=PREDICTORS, default=None,
+                        help='estimator of the plan the human expects (default: params file)')
+    add_params_file_option(parser)
+    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+
+
+def run_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
+    """Params-file overrides from the command-line options."""
+    planner: dict[str, object] = {}
+    if args.alpha is not None:
+        planner['alpha'] = args.alpha
+    if args.predictor is not None:
+        planner['predictor'] = args.predictor
+    traffic: dict[str, object] = {}
+    if args.trace is not None:
+        traffic['trace'] = args.trace
+    if args.bag_in is not None:
+        traffic['trace'] = str(args.bag_in)
+    if args.bag_topic is not None:
+        traffic['bag_topic'] = args.bag_topic
+    if args.bag_type is not None:
+        traffic['bag_message_type'] = args.bag_type
+    return {'planner': planner, 'preceding_traffic': traffic}
+
+
+def format_metrics(metrics: Metrics, title: str) -> str:
+    """The metrics table printed at the end of a run."""
+    rows = [('steps', f'{metrics.steps}'),
+            ('final trust', f'{metrics.final_trust:.3f}'),
+            ('mean explicability E', f'{metrics.mean_explicability:.5f}'),
+            ('prediction RMSE (m/s^2)', f'{metrics.rmse_mps2:.4f}'),
+            ('min AV gap (m)', f'{metrics.min_av_gap_m:.3f}'),
+            ('min human gap (m)', f'{metrics.min_human_gap_m:.3f}'),
+            ('NMPC fallback steps', f'{metrics.fallback_steps}'),
+            ('driver fallback steps', f'{metrics.driver_fallback_steps}'),
+            ('unsafe steps (gap < d_s - margin)', f'{metrics.unsafe_steps}')]
+    width = max(len(k) for k, _ in rows)
+    lines = [title, '-' * (width + 14)]
+    lines += [f'{k:<{width}}  {v:>12}' for k, v in rows]
+    return '\n'.join(lines)
+
+
+class Progress:
+    """A progress bar on stderr (tqdm) fed with absolute counts (``update(done, total)``, the
+    ``on_step`` callback of the runners). On a terminal it is redrawn at most every 0.1 s;
+    when stderr is not a terminal (CI logs) only one final line is written.
+
+    Args:
+        label: what is counted, e.g. ``simulate us06``.
+        total: the expected count.
+    """
+
+    def __init__(self, label: str, total: int) -> None:
+        self.label = label
+        self.interactive = sys.stderr.isatty()
+        self._start = time.monotonic()
+        self._bar = tqdm(total=max(total, 1), desc=label, unit='step', mininterval=0.1,
+                         disable=not self.interactive, leave=True)
+        self.done = 0
+        self.total = max(total, 1)
+
+    def update(self, done: int, total: int | None = None) -> None:
+        """Report ``done`` of ``total`` items."""
+        self.done = done
+        if total is not None and total != self.total:
+            self.total = max(total, 1)
+            self._bar.total = self.total
+        self._bar.update(done - self._bar.n)
+
+    def close(self) -> None:
+        """Finish the bar (a final line when stderr is not a terminal)."""
+        self._bar.close()
+        if not self.interactive:
+            elapsed = time.monotonic() - self._start
+            print(f'{self.label}: {self.done}/{self.total} in {elapsed:.1f} s', file=sys.stderr)
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        self.close()

@@ -1,0 +1,131 @@
+"""``trust-av shadow``: replay a real bag at real-time speed into the planner and the trust
+monitor in wall-clock mode (or, with ``--whole-graph``, into every node in wall mode); record
+their outputs; report loop jitter per node."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from preceding_traffic.sources import load_trace
+from trust_av_planner.cli.options import add_params_file_option, alpha_value
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph.shadow import ShadowRun, run_shadow, run_wall_graph
+from trust_av_planner.nmpc import PREDICTORS
+from trust_av_planner.system.config import PlannerTopics, load_run_config
+from trust_monitor.common.params import build_config, node_params, read_params_file
+from trust_monitor.common.wall_clock import WallClockConfig, format_summary
+
+
+def positive_seconds(text: str) -> float:
+    """argparse type: a number > 0."""
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'expected a number of seconds, got {text!r}') from err
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f'must be > 0, got {text!r}')
+    return value
+
+
+def summary_lines(result: ShadowRun) -> list[str]:
+    """The run's summary: messages per topic and one jitter line per loop."""
+    lines = [f'wall-clock run: {result.duration_s:g} s of wall time, recording {result.bag}']
+    lines += [f'  {topic}: {count} messages' for topic, count in result.counts.items()]
+    lines += [f'  {name}: {format_summary(stats)}' for name, stats in result.loops.items()]
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``trust-av shadow``."""
+    overrides: dict[str, dict[str, object]] = {'preceding_traffic': {'trace': str(args.bag)}}
+    if args.bag_topic is not None:
+        overrides['preceding_traffic']['bag_topic'] = args.bag_topic
+    if args.bag_type is not None:
+        overrides['preceding_traffic']['bag_message_type'] = args.bag_type
+    planner: dict[str, object] = {}
+    if args.alpha is not None:
+        planner['alpha'] = args.alpha
+    if args.predictor is not None:
+        planner['predictor'] = args.predictor
+    overrides['planner'] = planner
+    config = load_run_config(args.params_file, overrides)
+    planner_section = node_params(read_params_file(args.params_file), 'planner')
+    clock = build_config(WallClockConfig, planner_section)
+    topics = build_config(PlannerTopics, planner_section)
+    rate_hz = args.rate_hz if args.rate_hz is not None else clock.control_rate_hz
+    if args.whole_graph and topics != PlannerTopics():
+        raise TrustAvPlannerError('--whole-graph runs the simulated nodes on the standard topics; '
+                                  f'the params file {args.params_file} remaps the planner '
+                                  f'inputs: {topics}')
+    if not args.whole_graph and config.planner.predictor != 'ca':
+        raise TrustAvPlannerError('trust-av shadow has no human follower state: it needs '
+                                  f'predictor ca (got {config.planner.predictor}) or '
+                                  '--whole-graph')
+    trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
+    whole_s = trace.steps * trace.dt_s
+    duration_s = whole_s if args.duration_s is None else min(args.duration_s, whole_s)
+    if args.out.exists() and not args.overwrite:
+        raise TrustAvPlannerError(f'{args.out} exists already; pass --overwrite or choose '
+                                  'another --out')
+    if args.out.exists():
+        args.out.unlink()
+    nodes = 'every node' if args.whole_graph else 'planner and trust_monitor'
+    print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '
+          f'{nodes} at {rate_hz:g} Hz', flush=True)
+    if args.whole_graph:
+        result = run_wall_graph(config, str(args.bag), trace, args.params_file, args.out,
+                                duration_s=duration_s, rate_hz=rate_hz,
+                                startup_timeout_s=args.startup_timeout_s)
+    else:
+        result = run_shadow(config, trace, args.params_file, args.out, duration_s=duration_s,
+                            rate_hz=rate_hz, topics=topics,
+                            startup_timeout_s=args.startup_timeout_s)
+    print('\n'.join(summary_lines(result)))
+    if args.json is not None:
+        args.json.write_text(json.dumps({'bag': str(args.bag), 'duration_s': duration_s,
+                                         'rate_hz': rate_hz, 'counts': result.counts,
+                                         'loops': result.loops}, indent=1) + '\n')
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``shadow`` to ``trust-av``."""
+    parser = subparsers.add_parser(
+        'shadow', help='replay a bag at real time into the planner and monitor in wall mode',
+        description='Start the planner and trust_monitor in wall-clock mode (clock_mode: wall) '
+                    'on a private ROS domain, replay the lead vehicle of a rosbag2 bag at '
+                    "real-time speed (stamps = now; the ego is simulated from the planner's "
+                    'commands, there is no human follower), record the inputs and outputs to '
+                    'MCAP (log time = wall time) and print loop jitter p50/p99/max per node. '
+                    'With --whole-graph every node runs in wall mode instead: the traffic node '
+                    'replays the bag, ego_plant and human_driver simulate the two vehicles '
+                    '(so the GRU predictor works), and every topic is recorded. '
+                    'Exit codes: 0 done, 2 bad input or a node failed (named), 130 interrupted.')
+    parser.add_argument('--bag', type=Path, required=True,
+                        help='rosbag2 bag (MCAP or sqlite3) whose lead vehicle is replayed')
+    parser.add_argument('--bag-topic', default=None,
+                        help="the lead vehicle's topic (default: preceding_traffic.bag_topic)")
+    parser.add_argument('--bag-type', default=None,
+                        choices=('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'),
+                        help='its message type (default: preceding_traffic.bag_message_type)')
+    parser.add_argument('--out', type=Path, required=True, help='MCAP file to write')
+    parser.add_argument('--overwrite', action='store_true', help='replace an existing --out')
+    parser.add_argument('--duration-s', type=positive_seconds, default=None,
+                        help='wall time to replay, s (default: the whole bag)')
+    parser.add_argument('--rate-hz', type=positive_seconds, default=None,
+                        help="control rate, Hz (default: the params file's control_rate_hz)")
+    parser.add_argument('--alpha', type=alpha_value, default=None,
+                        help="explicability weight in [0, 1] (default: the params file's)")
+    parser.add_argument('--predictor', choices=PREDICTORS, default=None,
+                        help="plan estimator (default: the params file's)")
+    parser.add_argument('--whole-graph', action='store_true',
+                        help='run all five nodes in wall mode (simulated ego and human '
+                             'follower) instead of the planner and monitor alone')
+    parser.add_argument('--json', type=Path, default=None,
+                        help='also write the loop statistics and message counts as JSON')
+    parser.add_argument('--startup-timeout-s', type=positive_seconds, default=30.0,
+                        help='how long to wait for the nodes to connect (default: %(default)s)')
+    add_params_file_option(parser)
+    parser.set_defaults(func=run)

@@ -1,0 +1,87 @@
+"""Read a graph recording back into the simulator's per-step records (with rosbags).
+
+The in-process loop and the node graph are compared, and graph runs are summarised, through
+the same :class:`~trust_av_planner.system.metrics.StepRecord`. Reading uses ``rosbags``
+(``AnyReader``), a reader independent of the recorder's ``mcap`` writer.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.system.metrics import StepRecord
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+
+
+def _ns(stamp: Any) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def read_topics(path: Path) -> dict[str, dict[int, Any]]:
+    """Topic -> stamp (ns) -> deserialised message."""
+    out: dict[str, dict[int, Any]] = defaultdict(dict)
+    try:
+        with AnyReader([path], default_typestore=TYPESTORE) as reader:
+            for connection, _log_time, raw in reader.messages():
+                msg = reader.deserialize(raw, connection.msgtype)
+                stamp = msg.clock if connection.topic == '/clock' else msg.header.stamp
+                out[connection.topic][_ns(stamp)] = msg
+    except Exception as err:  # rosbags raises several unrelated types for a bad file
+        raise TrustAvPlannerError(f'{path}: cannot read the recording ({err})') from err
+    return out
+
+
+def _accels(msg: Any) -> tuple[float, ...]:
+    return tuple(float(p.accelerations[0]) for p in msg.points)
+
+
+def records_from_bag(path: Path) -> list[StepRecord]:
+    """One :class:`StepRecord` per complete step of a graph recording, in time order.
+
+    A step is complete when the planner's, driver's and monitor's outputs for its stamp are
+    all in the bag; a recording cut short by a fault yields the steps before the fault.
+    """
+    topics = read_topics(path)
+    records = []
+    for ns in sorted(topics['/ego/planner_status']):
+        try:
+            traffic = topics['/preceding_vehicle/odom'][ns]
+            ego = topics['/ego/odom'][ns]
+            human = topics['/human/odom'][ns]
+            plan = topics['/ego/plan'][ns]
+            expected = topics['/ego/expected_plan'][ns]
+            human_plan = topics['/human/plan'][ns]
+            trust = topics['/trust_monitor/trust'][ns]
+            status = {kv.key: kv.value
+                      for kv in topics['/ego/planner_status'][ns].status[0].values}
+            driver = {kv.key: kv.value
+                      for kv in topics['/human/driver_status'][ns].status[0].values}
+        except KeyError:
+            break  # the first incomplete step: the recording ends here
+        ego_x, ego_v = ego.pose.pose.position.x, ego.twist.twist.linear.x
+        human_x, human_v = human.pose.pose.position.x, human.twist.twist.linear.x
+        traffic_x = traffic.pose.pose.position.x
+        records.append(StepRecord(
+            t_s=ns * 1e-9, traffic_position_m=traffic_x,
+            traffic_speed_mps=traffic.twist.twist.linear.x,
+            av_position_m=ego_x, av_speed_mps=ego_v,
+            av_gap_m=float(status['gap_m']), human_position_m=human_x,
+            human_speed_mps=human_v, human_gap_m=float(driver['gap_m']),
+            av_accel_mps2=_accels(plan)[0], human_accel_mps2=_accels(human_plan)[0],
+            av_plan_mps2=_accels(plan), expected_plan_mps2=_accels(expected),
+            human_plan_mps2=_accels(human_plan), explicability=trust.vector.x,
+            performance=trust.vector.y, trust=trust.vector.z,
+            explicability_max=float(status['explicability_max']),
+            solver_status=status['status'], solver_success=status['success'] == 'True',
+            solver_iterations=int(status['iterations']),
+            solve_time_s=float(status['solve_time_s']), driver_status=driver['status'],
+            driver_success=driver['success'] == 'True',
+            driver_solve_time_s=float(driver['solve_time_s'])))
+    return records

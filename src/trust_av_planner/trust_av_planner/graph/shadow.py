@@ -1,0 +1,276 @@
+"""``trust-av shadow``: a recorded bag replayed at real-time speed into the planner and the
+trust monitor running in wall-clock mode; their outputs recorded to MCAP.
+
+Processes: ``planner`` and ``trust_monitor`` (``clock_mode: wall``, started and stopped by
+:class:`trust_av_planner.graph.processes.Graph` on a leased domain). This process is the
+player and the recorder: a wall-clock loop at the same control rate publishes the lead
+vehicle's odometry and speed preview (:class:`~preceding_traffic.replay.LeadReplay`,
+stamps = now) and the ego odometry, which is *simulated*: the latest ``/ego/accel_cmd``
+integrated over the real elapsed time (:func:`trust_monitor.common.kinematics.integrate`), because
+the commute bags hold only the lead vehicle. There is no human follower: the planner runs
+with ``human_odom_topic: ''`` (its CA plan estimator observes only the AV's acceleration;
+the GRU needs the follower, so a shadow run requires ``predictor: ca``). Every
+message on the recorded topics is written with log time = its header stamp = the wall time
+it was published (not sim time). The player publishes on the planner's configured input
+topics (``lead_odom_topic``, ``lead_preview_topic``, ``ego_odom_topic``), so a params file
+that remaps them is exercised end to end.
+
+:func:`run_wall_graph` (``trust-av shadow --whole-graph``) runs every node in wall mode
+instead: ``preceding_traffic`` replays the bag at real time after ``/sim/start``,
+``ego_plant`` and ``human_driver`` simulate the two vehicles over real elapsed time, and this
+process only records every topic. With a follower, the GRU predictor may be used.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from preceding_traffic.replay import LeadReplay
+from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.graph.domains import lease_domain
+from trust_av_planner.graph.orchestrator import graph_session, node_specs
+from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
+from trust_av_planner.graph.recorder import McapBag
+from trust_av_planner.system.closed_loop import equilibrium_start
+from trust_av_planner.system.config import PlannerTopics, RunConfig
+from trust_monitor.common.kinematics import VehicleState, advance
+from trust_monitor.common.topics import TOPIC, TOPICS
+from trust_monitor.common.wall_clock import NS_PER_S, LoopStats
+
+OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_status',
+           '/trust_monitor/trust')
+"""The two nodes' outputs, recorded with the replayed lead and ego odometry."""
+SHADOW_NODES = ('planner', 'trust_monitor')
+WALL_GRAPH_NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_monitor')
+"""The nodes of :func:`run_wall_graph` (this process records in place of ``recorder``)."""
+
+
+@dataclass
+class ShadowRun:
+    """Outcome of a shadow run: the recording and the loop statistics per loop."""
+
+    bag: Path
+    duration_s: float
+    counts: dict[str, int]
+    loops: dict[str, dict[str, Any]]
+
+
+def shadow_specs(config: RunConfig, trace: SpeedTrace, rate_hz: float,
+                 log_dir: Path) -> list[NodeSpec]:
+    """The two node processes of a shadow run, in wall mode."""
+    cfg = config.for_trace(trace)
+    wall = {'clock_mode': 'wall', 'control_rate_hz': rate_hz}
+    return [
+        NodeSpec('trust_monitor', 'trust_monitor.monitor_node',
+                 {**wall, 'jitter_report_path': str(log_dir / 'trust_monitor.jitter.json')}),
+        NodeSpec('planner', 'trust_av_planner.planner_node',
+                 {**wall, 'jitter_report_path': str(log_dir / 'planner.jitter.json'),
+                  'human_odom_topic': '', 'speed_max_mps': cfg.planner.speed_max_mps,
+                  'speed_max_from_trace': False, 'alpha': cfg.planner.alpha,
+                  'predictor': cfg.planner.predictor}),
+    ]
+
+
+def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Path, *,
+               duration_s: float, rate_hz: float, topics: PlannerTopics | None = None,
+               startup_timeout_s: float = 30.0) -> ShadowRun:
+    """Replay ``trace`` for ``duration_s`` of wall time at ``rate_hz`` into the two nodes.
+
+    Raises:
+        GraphError: the nodes did not connect in time or one died.
+    """
+    from trust_monitor.ros.messages import message_class, odometry, trajectory
+    from trust_monitor.ros.qos import QOS
+
+    topics = topics if topics is not None else PlannerTopics()
+    # actual topic name -> the topic-table entry it stands for (message type, QoS)
+    recorded = {topics.lead_odom_topic: TOPIC['/preceding_vehicle/odom'],
+                topics.ego_odom_topic: TOPIC['/ego/odom'],
+                **{name: TOPIC[name] for name in OUTPUTS}}
+    cfg = config.for_trace(trace)
+    initial = equilibrium_start(cfg, trace)
+    lead = LeadReplay(trace, initial.traffic.position_m)
+    log_dir = bag.with_suffix('.logs')
+    period_ns = round(NS_PER_S / rate_hz)
+    with lease_domain() as domain:
+        graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), params_file, domain,
+                      log_dir)
+        with graph_session(graph, 'shadow_player') as (node, executor):
+            pub_lead = node.create_publisher(
+                message_class(TOPIC['/preceding_vehicle/odom'].msgtype),
+                topics.lead_odom_topic, QOS['STEP'])
+            pub_preview = node.create_publisher(
+                message_class(TOPIC['/preceding_vehicle/speed_preview'].msgtype),
+                topics.lead_preview_topic, QOS['STEP'])
+            pub_ego = node.create_publisher(message_class(TOPIC['/ego/odom'].msgtype),
+                                            topics.ego_odom_topic, QOS['STEP'])
+            command = {'accel_mps2': 0.0}
+            stats = LoopStats(period_ns)
+            with McapBag(bag) as recording:
+                def on_message(topic: str, data: bytes) -> None:
+                    recording.write(topic, data)
+
+                for name, topic in recorded.items():
+                    recording.add_topic(name, topic.msgtype, topic.qos)
+                    node.create_subscription(message_class(topic.msgtype), name,
+                                             lambda d, t=name: on_message(t, d),
+                                             QOS[topic.qos], raw=True)
+
+                def on_command(msg: Any) -> None:
+                    command['accel_mps2'] = float(msg.accel.linear.x)
+
+                node.create_subscription(message_class(TOPIC['/ego/accel_cmd'].msgtype),
+                                         '/ego/accel_cmd', on_command, QOS['STEP'])
+                _wait_nodes(graph, node, executor, topics, startup_timeout_s)
+                ego = initial.av
+                start = last = time.monotonic_ns()
+                next_tick = start
+                while True:
+                    now = time.monotonic_ns()
+                    if now < next_tick:
+                        executor.spin_once(timeout_sec=(next_tick - now) / NS_PER_S)
+                        continue
+                    stats.tick(now)
+                    elapsed_s = (now - start) / NS_PER_S
+                    if elapsed_s > duration_s:
+                        break
+                    ego = _advance(ego, command['accel_mps2'], (now - last) / NS_PER_S)
+                    last = now
+                    stamp = time.time_ns()
+                    state = lead.state(elapsed_s)
+                    pub_lead.publish(odometry(stamp, state.position_m, state.speed_mps,
+                                              'preceding_vehicle'))
+                    pub_preview.publish(trajectory(
+                        stamp, cfg.planner.dt_s, velocities=lead.preview(
+                            elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
+                    pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
+                    stats.done(time.monotonic_ns() - now)
+                    next_tick += period_ns
+                    graph.check_alive(set())
+                _stop_and_drain(graph, executor, SHADOW_NODES)
+                counts = dict(recording.counts)
+    loops = {'shadow_player': {'node': 'shadow_player', **stats.summary()},
+             **_node_loops(graph, log_dir, SHADOW_NODES)}
+    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops)
+
+
+def wall_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, rate_hz: float,
+               log_dir: Path) -> list[NodeSpec]:
+    """The five node processes of a whole-graph wall run: the lock-step graph's per-run
+    parameters (initial states, trace) plus wall mode and a jitter report each."""
+    specs = node_specs(config, trace_arg, trace, equilibrium_start(config.for_trace(trace),
+                                                                   trace),
+                       log_dir / 'unused.mcap', 0)
+    return [NodeSpec(spec.name, spec.module,
+                     {**spec.params, 'clock_mode': 'wall', 'control_rate_hz': rate_hz,
+                      'jitter_report_path': str(log_dir / f'{spec.name}.jitter.json')})
+            for spec in specs if spec.name in WALL_GRAPH_NODES]
+
+
+def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
+                   bag: Path, *, duration_s: float, rate_hz: float,
+                   startup_timeout_s: float = 30.0) -> ShadowRun:
+    """Every node in wall mode for ``duration_s`` of wall time after ``/sim/start``; every
+    topic recorded to ``bag`` (log time = header stamp = wall time).
+
+    The nodes use the standard topic names (:data:`trust_monitor.graph_interface.TOPICS`).
+
+    Raises:
+        GraphError: the nodes did not connect in time or one died.
+    """
+    from std_msgs.msg import Empty
+
+    from trust_monitor.ros.messages import message_class
+    from trust_monitor.ros.qos import QOS
+
+    recorded = [t for t in TOPICS if t.name not in ('/clock', '/sim/start')]
+    # In wall mode the traffic node subscribes nothing but /sim/start (as do the two simulated
+    # vehicles, which hold still until then); this process records.
+    needs = {t.name: (1, len([s for s in t.subscribers if s != 'preceding_traffic']))
+             for t in recorded}
+    needs['/sim/start'] = (1, 3)
+    log_dir = bag.with_suffix('.logs')
+    with lease_domain() as domain:
+        graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), params_file,
+                      domain, log_dir)
+        with graph_session(graph, 'wall_recorder') as (node, executor):
+            start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
+            with McapBag(bag) as recording:
+                for topic in recorded:
+                    recording.add_topic(topic.name, topic.msgtype, topic.qos)
+                    node.create_subscription(
+                        message_class(topic.msgtype), topic.name,
+                        lambda d, t=topic.name: recording.write(t, d), QOS[topic.qos],
+                        raw=True)
+                _wait_topics(graph, node, executor, needs, startup_timeout_s)
+                start_pub.publish(Empty())
+                end = time.monotonic() + duration_s
+                while time.monotonic() < end:
+                    executor.spin_once(timeout_sec=0.05)
+                    graph.check_alive(set())
+                _stop_and_drain(graph, executor, WALL_GRAPH_NODES)
+                counts = dict(recording.counts)
+    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts,
+                     loops=_node_loops(graph, log_dir, WALL_GRAPH_NODES))
+
+
+def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
+                    drain_s: float = 0.5) -> None:
+    """Stop the nodes (they write their loop statistics on exit), then take in for
+    ``drain_s`` what they published last."""
+    graph.stop(list(names))
+    drain_until = time.monotonic() + drain_s
+    while time.monotonic() < drain_until:
+        executor.spin_once(timeout_sec=0.05)
+
+
+def _node_loops(graph: Graph, log_dir: Path, names: tuple[str, ...]) -> dict[str, Any]:
+    """After a wall run: every node exited cleanly and wrote its loop statistics."""
+    for process in graph.processes:
+        if process.popen.returncode not in (0, None):
+            raise GraphError(f'node {process.spec.name} exited with code '
+                             f'{process.popen.returncode}; last output:\n{process.tail()}')
+    loops = {}
+    for name in names:
+        path = log_dir / f'{name}.jitter.json'
+        if not path.exists():
+            raise GraphError(f'node {name} wrote no loop statistics ({path}); node logs in '
+                             f'{log_dir}')
+        loops[name] = json.loads(path.read_text())
+    return loops
+
+
+def _advance(ego: VehicleState, accel_mps2: float, dt_s: float) -> VehicleState:
+    """The simulated ego over ``dt_s`` of wall time; speed kept >= 0 (no reversing)."""
+    return VehicleState(*advance(ego.position_m, ego.speed_mps, accel_mps2, dt_s))
+
+
+def _wait_nodes(graph: Graph, node: Any, executor: Any, topics: PlannerTopics,
+                timeout_s: float) -> None:
+    """Wait until both nodes publish and subscribe what the player exchanges with them."""
+    needs = {topics.lead_odom_topic: (1, 2), topics.lead_preview_topic: (1, 1),
+             topics.ego_odom_topic: (1, 2), '/ego/plan': (1, 2), '/ego/expected_plan': (1, 2),
+             '/ego/accel_cmd': (1, 2), '/ego/planner_status': (1, 1),
+             '/trust_monitor/trust': (1, 2)}
+    _wait_topics(graph, node, executor, needs, timeout_s)
+
+
+def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[int, int]],
+                 timeout_s: float) -> None:
+    """Wait until every topic has its (publishers, subscribers); name those that do not."""
+    deadline = time.monotonic() + timeout_s
+    missing: list[str] = []
+    while time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+        graph.check_alive(set())
+        missing = [f'{topic} ({node.count_publishers(topic)}/{pubs} publishers, '
+                   f'{node.count_subscribers(topic)}/{subs} subscribers)'
+                   for topic, (pubs, subs) in needs.items()
+                   if node.count_publishers(topic) < pubs or node.count_subscribers(topic) < subs]
+        if not missing:
+            return
+    raise GraphError(f'shadow nodes not connected after {timeout_s:g} s: ' + '; '.join(missing))

@@ -1,0 +1,314 @@
+"""Training data and seeded, deterministic training of the GRU plan estimator.
+
+Data: closed-loop TAC-CA runs of the in-process simulator on the *training*
+traces (UDDS, HWFET, WLTC 3b; never the evaluation traces) for several alphas. A sample at
+step t pairs the H observations the predictor had (steps t-H .. t-1: gap, relative speed,
+headway, executed AV acceleration; computed by the planner's own ``observe``) with the N
+accelerations the AV then executed (t .. t+N-1). Validation is a contiguous block at the
+end of every trace (the same block for every alpha, so no road segment is in both splits).
+Normalisation statistics come from the training split only and are stored with the model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import hashlib
+import json
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import TRAINING_TRACES
+from trust_av_planner.planner import observe
+from trust_av_planner.predictors.gru import FEATURES, GruWeights, gru_forward
+from trust_av_planner.system.closed_loop import simulate
+from trust_av_planner.system.config import RunConfig
+from trust_av_planner.system.metrics import StepRecord
+from trust_monitor.common.kinematics import VehicleState
+
+
+@dataclass(frozen=True)
+class TrainingSettings:
+    """Hyper-parameters (documented in docs/GRU.md)."""
+
+    traces: tuple[str, ...] = TRAINING_TRACES
+    alphas: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
+    history_steps: int = 10
+    hidden: int = 16
+    epochs: int = 40
+    batch_size: int = 128
+    learning_rate: float = 3e-3
+    validation_fraction: float = 0.2
+    seed: int = 7
+    dagger_rounds: int = 2
+
+
+@dataclass
+class Dataset:
+    """Samples: inputs (samples, H, 4), targets (samples, N), and which split they are in."""
+
+    inputs: np.ndarray
+    targets: np.ndarray
+    validation: np.ndarray
+    ca_predictions: np.ndarray
+    dt_s: float  # control step of the runs
+
+
+ARRAY_FIELDS = ('inputs', 'targets', 'validation', 'ca_predictions')
+
+
+def samples_from_run(records: Sequence[StepRecord], history: int, horizon: int,
+                     length_m: float, headway_cap_s: float) -> tuple[np.ndarray, np.ndarray,
+                                                                     np.ndarray, np.ndarray]:
+    """(inputs, targets, step index, CA prediction) of one closed-loop run."""
+    obs = []
+    for k in range(len(records) - 1):
+        after = records[k + 1]
+        o = observe(VehicleState(after.av_position_m, after.av_speed_mps),
+                    VehicleState(after.human_position_m, after.human_speed_mps),
+                    records[k].av_accel_mps2, length_m, headway_cap_s)
+        obs.append([o.gap_m, o.relative_speed_mps, o.time_headway_s, o.av_accel_mps2])
+    observations = np.array(obs)
+    executed = np.array([r.av_accel_mps2 for r in records])
+    xs, ys, steps, ca = [], [], [], []
+    for t in range(history, len(records) - horizon + 1):
+        xs.append(observations[t - history:t])
+        ys.append(executed[t:t + horizon])
+        steps.append(t)
+        ca.append(np.full(horizon, executed[t - 1]))
+    return np.array(xs), np.array(ys), np.array(steps), np.array(ca)
+
+
+def build_dataset(config: RunConfig, settings: TrainingSettings,
+                  on_run: Callable[[int, int], None] | None = None,
+                  predictor: str = 'ca', gru_model: str | None = None) -> Dataset:
+    """Run TAC-CA (or TAC-GRU with ``gru_model``) on every training trace and alpha; split
+    by trace segment."""
+    parts: list[tuple[np.ndarray, ...]] = []
+    total = len(settings.traces) * len(settings.alphas)
+    done = 0
+    for name in settings.traces:
+        trace = load_trace(name, config.planner.dt_s, config.trace)
+        cut = int(trace.steps * (1.0 - settings.validation_fraction))
+        for alpha in settings.alphas:
+            run_config = dataclasses.replace(config, planner=dataclasses.replace(
+                config.planner, alpha=alpha, predictor=predictor,
+                gru_model=gru_model or config.planner.gru_model))
+            records = simulate(run_config, trace).records
+            x, y, steps, ca = samples_from_run(records, settings.history_steps,
+                                               config.planner.horizon_steps,
+                                               config.shared.vehicle_length_m,
+                                               config.planner.time_headway_cap_s)
+            # Train: every step a sample touches (t-H .. t+N-1) is before the cut;
+            # validation: every step after it; samples across the cut are dropped.
+            horizon = config.planner.horizon_steps
+            validation = steps - settings.history_steps >= cut
+            keep = validation | (steps + horizon - 1 < cut)
+            parts.append((x[keep], y[keep], validation[keep], ca[keep]))
+            done += 1
+            if on_run is not None:
+                on_run(done, total)
+    arrays = {name: np.concatenate([p[i] for p in parts])
+              for i, name in enumerate(ARRAY_FIELDS)}
+    return Dataset(**arrays, dt_s=config.planner.dt_s)
+
+
+def merge(a: Dataset, b: Dataset) -> Dataset:
+    """Both datasets' samples (runs at the same control step)."""
+    if a.dt_s != b.dt_s:
+        raise ValueError(f'cannot merge datasets at dt_s {a.dt_s} and {b.dt_s} s')
+    arrays = {name: np.concatenate([getattr(a, name), getattr(b, name)])
+              for name in ARRAY_FIELDS}
+    return Dataset(**arrays, dt_s=a.dt_s)
+
+
+def train_with_dagger(config: RunConfig, settings: TrainingSettings, work_dir: Path,
+                      on_stage: Callable[[str], None] | None = None,
+                      on_epoch: Callable[[int, int], None] | None = None
+                      ) -> tuple[GruWeights, dict[str, Any]]:
+    """TAC-CA data, then ``dagger_rounds`` rounds of aggregation (Ross et al., 2011).
+
+    A GRU trained on TAC-CA runs only is used in a loop it has never seen: with alpha > 0
+    the AV leans towards the GRU's prediction, and the prediction is made from the AV's own
+    past, so errors feed back. Each round runs TAC-GRU with the current model on the same
+    *training* traces, adds those samples and retrains from scratch with the same seed.
+    """
+    def stage(name: str) -> None:
+        if on_stage is not None:
+            on_stage(name)
+
+    stage('TAC-CA runs on the training traces')
+    dataset = build_dataset(config, settings)
+    stage('training on TAC-CA data')
+    weights, report = train(dataset, settings, on_epoch)
+    for round_index in range(settings.dagger_rounds):
+        path = work_dir / f'dagger_{round_index}.npz'
+        save_arrays(weights, path)
+        stage(f'DAgger round {round_index + 1}: TAC-GRU runs on the training traces')
+        dataset = merge(dataset, build_dataset(config, settings, predictor='gru',
+                                               gru_model=str(path)))
+        stage(f'DAgger round {round_index + 1}: training on {len(dataset.targets)} samples')
+        weights, report = train(dataset, settings, on_epoch)
+    report['dagger_rounds'] = settings.dagger_rounds
+    return weights, report
+
+
+def save_arrays(weights: GruWeights, path: Path) -> None:
+    """Write the weights as an ``.npz`` (the format :func:`~.predictors.gru.load_weights`
+    reads)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open('wb') as handle:
+        np.savez(handle, **{f.name: getattr(weights, f.name)
+                            for f in dataclasses.fields(weights)})
+
+
+def rmse(a: np.ndarray, b: np.ndarray) -> float:
+    """Root mean square of a - b over every element."""
+    return float(math.sqrt(np.mean(np.square(a - b))))
+
+
+def train(dataset: Dataset, settings: TrainingSettings,
+          on_epoch: Callable[[int, int], None] | None = None
+          ) -> tuple[GruWeights, dict[str, Any]]:
+    """Train the GRU (seeded, deterministic, one CPU thread); return weights and a report."""
+    import torch
+
+    torch.manual_seed(settings.seed)
+    torch.use_deterministic_algorithms(True)
+    torch.set_num_threads(1)
+    generator = torch.Generator().manual_seed(settings.seed)
+    train_mask = ~dataset.validation
+    mean = dataset.inputs[train_mask].reshape(-1, len(FEATURES)).mean(axis=0)
+    std = dataset.inputs[train_mask].reshape(-1, len(FEATURES)).std(axis=0)
+    std = np.where(std > 1e-9, std, 1.0)
+
+    def tensor(a: np.ndarray) -> Any:
+        return torch.tensor(a, dtype=torch.float64)
+
+    x_train = tensor((dataset.inputs[train_mask] - mean) / std)
+    y_train = tensor(dataset.targets[train_mask])
+    x_val = tensor((dataset.inputs[~train_mask] - mean) / std)
+    y_val = dataset.targets[~train_mask]
+    horizon = dataset.targets.shape[1]
+    gru: Any = torch.nn.GRU(len(FEATURES), settings.hidden, batch_first=True).double()
+    head: Any = torch.nn.Linear(settings.hidden, horizon).double()
+    params = list(gru.parameters()) + list(head.parameters())
+    optimiser = torch.optim.Adam(params, lr=settings.learning_rate)
+
+    def forward(x: Any) -> Any:
+        _, h = gru(x)
+        return head(h[-1])
+
+    curve: list[dict[str, float]] = []
+    best: tuple[float, int, GruWeights] | None = None
+    for epoch in range(settings.epochs):
+        order = torch.randperm(len(x_train), generator=generator)
+        losses = []
+        for start in range(0, len(order), settings.batch_size):
+            idx = order[start:start + settings.batch_size]
+            optimiser.zero_grad()
+            loss = torch.mean((forward(x_train[idx]) - y_train[idx]) ** 2)
+            loss.backward()  # type: ignore[no-untyped-call]
+            optimiser.step()
+            losses.append(loss.item())
+        with torch.no_grad():
+            val_pred = forward(x_val).numpy()
+        curve.append({'epoch': epoch + 1, 'train_mse': float(np.mean(losses)),
+                      'validation_rmse': rmse(val_pred, y_val)})
+        if best is None or curve[-1]['validation_rmse'] < best[0]:
+            # Early stopping: keep the weights of the best validation epoch.
+            best = (curve[-1]['validation_rmse'], epoch + 1, GruWeights(
+                weight_ih=gru.weight_ih_l0.detach().numpy().copy(),
+                weight_hh=gru.weight_hh_l0.detach().numpy().copy(),
+                bias_ih=gru.bias_ih_l0.detach().numpy().copy(),
+                bias_hh=gru.bias_hh_l0.detach().numpy().copy(),
+                out_weight=head.weight.detach().numpy().copy(),
+                out_bias=head.bias.detach().numpy().copy(),
+                feature_mean=mean, feature_std=std, history_steps=settings.history_steps,
+                dt_s=dataset.dt_s))
+        if on_epoch is not None:
+            on_epoch(epoch + 1, settings.epochs)
+    assert best is not None
+    weights = best[2]
+    numpy_val = np.array([gru_forward(weights, x) for x in x_val.numpy()])
+    report = {
+        'samples_train': int(train_mask.sum()), 'samples_validation': int((~train_mask).sum()),
+        'validation_rmse_gru': rmse(numpy_val, y_val),
+        'validation_rmse_ca': rmse(dataset.ca_predictions[~train_mask], y_val),
+        'best_epoch': best[1], 'curve': curve,
+    }
+    return weights, report
+
+
+def numerics_fingerprint() -> str:
+    """A hash of the last bits of the floating-point kernels the training pipeline runs on.
+
+    Retraining is bit-for-bit reproducible on one machine, but not across CPUs: numpy picks
+    its ``exp`` kernel by instruction set (with and without AVX-512 they differ by one ulp
+    on about 5 % of inputs; seen here), OpenBLAS its matrix-vector kernel, PyTorch its
+    vectorised CPU path. The GRU's numpy forward pass feeds the DAgger closed loops, so such
+    ulps move the trained model slightly. The model card stores this fingerprint; the
+    retraining test demands bit equality only where the fingerprint matches.
+    """
+    import torch
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(0.0, 3.0, 4096)
+    matrix = rng.normal(0.0, 1.0, (48, 16))
+    digest = hashlib.sha256()
+    for array in (np.exp(x), np.tanh(x), matrix @ x[:16], matrix.T @ x[:48]):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    digest.update(str(torch.backends.cpu.get_cpu_capability()).encode())
+    return digest.hexdigest()[:16]
+
+
+def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSettings,
+               out: Path) -> None:
+    """Write the ``.npz`` weights, a JSON model card and a loss-curve PNG beside it."""
+    save_arrays(weights, out)
+    card = {
+        'model': 'one-layer GRU + linear read-out (Ozkan & Ma, eqs. 6-7)',
+        'features': list(FEATURES), 'history_steps': weights.history_steps,
+        'hidden': weights.hidden, 'horizon_steps': weights.horizon_steps, 'dt_s': weights.dt_s,
+        'data': {'traces': list(settings.traces), 'alphas': list(settings.alphas),
+                 'runs': 'in-process TAC-CA closed loops with the shipped config/trust_av.yaml, '
+                         f'then {settings.dagger_rounds} DAgger round(s): TAC-GRU closed loops '
+                         'with the model so far, on the same training traces',
+                 'split': f'last {settings.validation_fraction:.0%} of every trace '
+                          '(contiguous) is validation'},
+        'settings': dataclasses.asdict(settings),
+        'results': {k: v for k, v in report.items() if k != 'curve'},
+        'trained': datetime.datetime.now(datetime.UTC).date().isoformat(),
+        'numerics_fingerprint': numerics_fingerprint(),
+        'reproduce': 'trust-av train-gru',
+    }
+    out.with_suffix('.json').write_text(json.dumps(card, indent=2) + '\n')
+    plot_curve(report['curve'], report['validation_rmse_ca'], out.with_suffix('.png'))
+
+
+def plot_curve(curve: list[dict[str, float]], ca_rmse: float, path: Path) -> None:
+    """Train MSE and validation RMSE per epoch, with the CA baseline."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    epochs = [c['epoch'] for c in curve]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.plot(epochs, [math.sqrt(c['train_mse']) for c in curve], label='train RMSE')
+    ax.plot(epochs, [c['validation_rmse'] for c in curve], label='validation RMSE')
+    ax.axhline(ca_rmse, color='grey', linestyle='--', label='CA on validation')
+    ax.set_xlabel('epoch')
+    ax.set_ylabel('RMSE of the predicted plan (m/s²)')
+    ax.grid(alpha=0.3)
+    ax.legend()
+    ax.set_title('GRU plan estimator training')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,105 @@
+"""Figures (matplotlib, Agg backend, PNG): the paper's Figures 2 and 3, and one run's traces."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt
+import numpy as np
+
+from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.study.paper_results import TRACE_LABELS
+
+
+def speed_profiles(traces: Sequence[SpeedTrace], path: Path) -> None:
+    """Figure 2: the preceding traffic's speed profile of each trace."""
+    fig, axes = plt.subplots(len(traces), 1, figsize=(8, 2.2 * len(traces)), squeeze=False)
+    for ax, trace in zip(axes[:, 0], traces, strict=True):
+        t = trace.t0_s + trace.dt_s * np.arange(len(trace.speeds_mps))
+        ax.plot(t, trace.speeds_mps, color='tab:blue', linewidth=1.0)
+        ax.set_title(TRACE_LABELS.get(trace.name, trace.name), fontsize=10)
+        ax.set_ylabel('speed (m/s)')
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel('time (s)')
+    fig.suptitle('Figure 2: speed profiles of the preceding traffic')
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
+                                                                Sequence[float]]]],
+                    trace: str, path: Path, growth_per_step: float) -> None:
+    """Figure 3: trust over time for every alpha, one column per predictor.
+
+    The top row is the trust level itself (the paper's figure). The bottom row shows the
+    trust lost against the ceiling ``growth_per_step * step`` (what a perfectly explicable AV
+    would earn, P = 1 every step), which makes small differences between alphas visible.
+
+    Args:
+        series: predictor label -> alpha -> (time_s, trust after each step).
+        trace: trace name for the title.
+        path: PNG to write.
+        growth_per_step: delta of eq. (10).
+    """
+    fig, axes = plt.subplots(2, len(series), figsize=(6 * len(series), 7), squeeze=False,
+                             sharex=True, sharey='row', height_ratios=[2, 1])
+    colors = plt.get_cmap('viridis')
+    for col, (label, by_alpha) in enumerate(series.items()):
+        top, bottom = axes[0, col], axes[1, col]
+        for i, (alpha, (time_s, trust)) in enumerate(sorted(by_alpha.items())):
+            color = colors(i / max(len(by_alpha) - 1, 1))
+            ceiling = growth_per_step * np.arange(1, len(trust) + 1)
+            top.plot(time_s, trust, color=color, label=f'alpha = {alpha:g}', linewidth=1.2)
+            bottom.plot(time_s, ceiling - np.asarray(trust), color=color, linewidth=1.2)
+        top.set_title(f'{label} on {TRACE_LABELS.get(trace, trace)}')
+        top.legend(loc='upper left', fontsize=8)
+        bottom.set_xlabel('time (s)')
+        for ax in (top, bottom):
+            ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel('trust level T')
+    axes[1, 0].set_ylabel('trust lost vs. ceiling δ·t')
+    fig.suptitle('Figure 3: trust level of the human driver during the trip')
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run_overview(records: Sequence[Any], title: str, path: Path) -> None:
+    """One run: speeds, gaps, accelerations, explicability and trust against time.
+
+    ``records`` are :class:`trust_av_planner.system.metrics.StepRecord` (or objects with the same
+    attributes).
+    """
+    t = [r.t_s for r in records]
+    fig, axes = plt.subplots(5, 1, figsize=(9, 11), sharex=True)
+    axes[0].plot(t, [r.traffic_speed_mps for r in records], label='preceding traffic')
+    axes[0].plot(t, [r.av_speed_mps for r in records], label='AV')
+    axes[0].plot(t, [r.human_speed_mps for r in records], label='human', linestyle='--')
+    axes[0].set_ylabel('speed (m/s)')
+    axes[1].plot(t, [r.av_gap_m for r in records], label='AV to traffic')
+    axes[1].plot(t, [r.human_gap_m for r in records], label='human to AV')
+    axes[1].set_ylabel('gap (m)')
+    axes[2].plot(t, [r.av_accel_mps2 for r in records], label='AV')
+    axes[2].plot(t, [r.human_accel_mps2 for r in records], label='human', linestyle='--')
+    axes[2].plot(t, [r.expected_plan_mps2[0] for r in records], label='expected (u_R^H)',
+                 linestyle=':')
+    axes[2].set_ylabel('acceleration (m/s²)')
+    axes[3].plot(t, [r.explicability for r in records], color='tab:red')
+    axes[3].set_ylabel('explicability E')
+    axes[4].plot(t, [r.trust for r in records], color='tab:green')
+    axes[4].set_ylabel('trust T')
+    axes[4].set_xlabel('time (s)')
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc='upper right', fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

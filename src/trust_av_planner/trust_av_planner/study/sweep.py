@@ -1,0 +1,325 @@
+"""Reproduce the paper's sweep: traces x predictors x alpha, cached, on a pluggable executor.
+
+Every case is one closed loop: in-process by default, or through the ROS 2 node graph
+(:class:`RunSettings`, ``--graph``; each case then leaves its MCAP recording in
+``<results>/graph_bags/``). A finished case is cached as JSON under
+``<results>/cache/<key>.json``; the key hashes the case, the run settings, the whole params
+file and the source of the four packages (so a code or parameter change re-runs what it
+affects and an unchanged rerun is read back). Cases run on an :class:`Executor`: local
+processes by default (one per core), or Ray (optional extra, ``--executor ray``).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import hashlib
+import json
+import logging
+import multiprocessing
+import os
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from human_driver_sim.population import (
+    DRIVER_FIT_FILE,
+    WEIGHT_NAMES,
+    fitted_time_headway_s,
+    per_pair_weights,
+    sample_population,
+)
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import truncate
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.system.closed_loop import simulate
+from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.metrics import StepRecord, compute_metrics
+
+LOG = logging.getLogger(__name__)
+
+TRACES = ('us06', 'nycc', 'commute_am', 'commute_pm')
+PREDICTORS = ('gru', 'ca')
+ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
+METRICS = ('final_trust', 'mean_explicability', 'rmse_mps2')
+PACKAGES = ('preceding_traffic', 'trust_monitor', 'human_driver_sim', 'trust_av_planner')
+RUNNERS = ('in-process', 'graph')
+PRESENTATION_MODULES = ('plots.py', 'paper_results.py', 'tables.py')
+"""Files that cannot change a run's numbers: left out of the cache key (so is ``cli/``)."""
+
+
+@dataclass(frozen=True)
+class Case:
+    """One closed loop of the sweep.
+
+    Attributes:
+        driver: 0 for the human driver of the params file; k >= 1 for the k-th driver of a
+            sampled population (``--drivers K``), whose parameters are ``driver_params``.
+        driver_params: (name, value) pairs that replace the params file's ``human_driver``
+            values for that driver (its weights W and the fitted tau_H); empty for driver 0.
+    """
+
+    trace: str
+    predictor: str
+    alpha: float
+    driver: int = 0
+    driver_params: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def label(self) -> str:
+        """``us06/TAC-CA/alpha=0.5`` (``.../driver=3`` for a population member)."""
+        label = f'{self.trace}/TAC-{self.predictor.upper()}/alpha={self.alpha:g}'
+        return label + (f'/driver={self.driver}' if self.driver else '')
+
+    @property
+    def base(self) -> Case:
+        """The same trace, predictor and alpha with the params file's driver."""
+        return Case(self.trace, self.predictor, self.alpha)
+
+
+def code_fingerprint() -> str:
+    """Hash of the source and data files of the four packages that results depend on."""
+    digest = hashlib.sha256()
+    for package in PACKAGES:
+        module = __import__(package)
+        root = Path(next(iter(module.__path__)))
+        for path in sorted(root.rglob('*')):
+            relative = path.relative_to(root)
+            if path.name in PRESENTATION_MODULES or relative.parts[0] == 'cli':
+                continue
+            if path.is_file() and path.suffix in {'.py', '.csv', '.npz', '.json', '.pt'}:
+                digest.update(str(path.relative_to(root)).encode())
+                digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """How every case of a sweep runs.
+
+    Attributes:
+        runner: ``in-process`` (the simulator) or ``graph`` (the six ROS 2 node processes in
+            lock-step, recorded to MCAP and read back; same numbers, about 100x slower).
+        max_steps: stop each case after this many control steps (0: the whole trace).
+        bags_dir: where graph runs write ``<trace>_<predictor>_alpha<alpha>.mcap``.
+    """
+
+    runner: str = 'in-process'
+    max_steps: int = 0
+    bags_dir: str = 'graph_bags'
+
+    def __post_init__(self) -> None:
+        if self.runner not in RUNNERS:
+            raise TrustAvPlannerError(f'runner must be one of {list(RUNNERS)}, got '
+                                      f'{self.runner!r}')
+        if self.max_steps < 0:
+            raise TrustAvPlannerError(f'max_steps must be >= 0, got {self.max_steps}')
+
+
+def case_key(case: Case, params_text: str, fingerprint: str,
+             settings: RunSettings = RunSettings()) -> str:
+    """Cache key of a case: its fields, how it runs, the params file's text and the code."""
+    blob = json.dumps({'case': dataclasses.asdict(case), 'params': params_text,
+                       'code': fingerprint, 'runner': settings.runner,
+                       'max_steps': settings.max_steps}, sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:24]
+
+
+def run_case(case: Case, params_file: str,
+             settings: RunSettings = RunSettings()) -> dict[str, Any]:
+    """Run one case and return its metrics and the series the figures need."""
+    overrides: dict[str, dict[str, Any]] = {
+        'planner': {'alpha': case.alpha, 'predictor': case.predictor}}
+    if case.driver_params:
+        overrides['human_driver'] = dict(case.driver_params)
+    config = load_run_config(params_file, overrides)
+    trace = truncate(load_trace(case.trace, config.planner.dt_s, config.trace),
+                     settings.max_steps)
+    records: list[StepRecord]
+    if settings.runner == 'graph':
+        # Imported here: the in-process sweep never loads rclpy.
+        from trust_av_planner.graph.orchestrator import run_graph_records
+        bag = Path(settings.bags_dir) / (f'{Path(case.trace).stem}_{case.predictor}_'
+                                         f'alpha{case.alpha:g}.mcap')
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        bag.unlink(missing_ok=True)  # left by an interrupted sweep; its case is not cached
+        _, records = run_graph_records(config, case.trace, trace, Path(params_file), bag,
+                                       max_steps=settings.max_steps)
+    else:
+        records = simulate(config, trace).records
+    metrics = compute_metrics(records, config.min_safe_gap_m)
+    return {
+        'case': dataclasses.asdict(case),
+        'runner': settings.runner,
+        'metrics': dataclasses.asdict(metrics),
+        'time_s': [r.t_s for r in records],
+        'trust': [r.trust for r in records],
+        'explicability': [r.explicability for r in records],
+    }
+
+
+class Executor(Protocol):
+    """Runs cases somewhere and reports each result as it arrives."""
+
+    def run(self, cases: Sequence[Case], params_file: str,
+            on_result: Callable[[Case, dict[str, Any]], None],
+            settings: RunSettings = RunSettings()) -> None:
+        """Run every case (:func:`run_case`); call ``on_result`` in the calling process."""
+
+
+class LocalExecutor:
+    """A process pool on this machine (spawned workers, one per core by default)."""
+
+    def __init__(self, workers: int | None = None) -> None:
+        self.workers = workers or os.cpu_count() or 1
+
+    def run(self, cases: Sequence[Case], params_file: str,
+            on_result: Callable[[Case, dict[str, Any]], None],
+            settings: RunSettings = RunSettings()) -> None:
+        """Run the cases on the pool; the first failure stops the sweep with its case."""
+        if not cases:
+            return
+        context = multiprocessing.get_context('spawn')
+        with concurrent.futures.ProcessPoolExecutor(min(self.workers, len(cases)),
+                                                    mp_context=context) as pool:
+            futures = {pool.submit(run_case, case, params_file, settings): case for case in cases}
+            for future in concurrent.futures.as_completed(futures):
+                case = futures[future]
+                try:
+                    result = future.result()
+                except Exception as err:
+                    for other in futures:
+                        other.cancel()
+                    raise TrustAvPlannerError(f'case {case.label} failed: {err}') from err
+                on_result(case, result)
+
+
+class RayExecutor:
+    """The same cases as Ray tasks (``pip install ray``; local cluster unless ``address``)."""
+
+    def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
+        self.address = address
+        self.num_cpus = num_cpus
+
+    def run(self, cases: Sequence[Case], params_file: str,
+            on_result: Callable[[Case, dict[str, Any]], None],
+            settings: RunSettings = RunSettings()) -> None:
+        """Submit one Ray task per case and collect them as they finish."""
+        try:
+            import ray
+        except ImportError as err:
+            raise TrustAvPlannerError('--executor ray needs the optional dependency ray '
+                               '(pip install ray)') from err
+        started = not ray.is_initialized()
+        if started:
+            ray.init(address=self.address, num_cpus=self.num_cpus, include_dashboard=False,
+                     log_to_driver=False)
+        try:
+            remote = ray.remote(run_case)
+            pending = {remote.remote(case, params_file, settings): case for case in cases}
+            while pending:
+                done, _ = ray.wait(list(pending), num_returns=1)
+                case = pending.pop(done[0])
+                try:
+                    result = ray.get(done[0])
+                except Exception as err:
+                    raise TrustAvPlannerError(f'case {case.label} failed: {err}') from err
+                on_result(case, result)
+        finally:
+            if started:
+                ray.shutdown()
+
+
+def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PREDICTORS,
+                alphas: Iterable[float] = ALPHAS) -> list[Case]:
+    """Every combination, in table order."""
+    return [Case(t, p, a) for t in traces for p in predictors for a in alphas]
+
+
+def population_cases(cases: Sequence[Case], drivers: int, seed: int,
+                     driver_fit: Path = DRIVER_FIT_FILE) -> list[Case]:
+    """Each case once per driver of a seeded population of ``drivers`` sampled drivers.
+
+    The population is :func:`human_driver_sim.population.sample_population` of the per-pair
+    fitted weights in ``driver_fit`` (the same seed gives the same drivers), each with the
+    fit's time headway tau_H when the fit has one.
+
+    Raises:
+        TrustAvPlannerError: ``drivers`` < 1, or an unreadable driver-fit file.
+    """
+    if drivers < 1:
+        raise TrustAvPlannerError(f'the number of drivers must be >= 1, got {drivers}')
+    try:
+        population = sample_population(per_pair_weights(driver_fit), drivers, seed=seed)
+        time_headway_s = fitted_time_headway_s(driver_fit)
+    except ValueError as err:
+        raise TrustAvPlannerError(str(err)) from err
+    extra = () if time_headway_s is None else (('time_headway_s', time_headway_s),)
+    params = [tuple(zip(WEIGHT_NAMES, (float(w) for w in weights), strict=True)) + extra
+              for weights in population]
+    return [dataclasses.replace(case, driver=k + 1, driver_params=params[k])
+            for case in cases for k in range(drivers)]
+
+
+def by_driver(results: dict[Case, dict[str, Any]]) -> dict[int, dict[Case, dict[str, Any]]]:
+    """Results split per driver, each keyed by the base case (trace, predictor, alpha)."""
+    out: dict[int, dict[Case, dict[str, Any]]] = {}
+    for case, result in results.items():
+        out.setdefault(case.driver, {})[case.base] = result
+    return out
+
+
+def population_mean(results: dict[Case, dict[str, Any]]) -> dict[Case, dict[str, Any]]:
+    """Per base case, the mean over drivers of every metric and of the trust series."""
+    groups: dict[Case, list[dict[str, Any]]] = {}
+    for case, result in results.items():
+        groups.setdefault(case.base, []).append(result)
+    out = {}
+    for case, members in groups.items():
+        out[case] = {
+            'metrics': {name: float(np.mean([m['metrics'][name] for m in members]))
+                        for name in members[0]['metrics']},
+            'time_s': members[0]['time_s'],
+            'trust': np.mean([m['trust'] for m in members], axis=0).tolist(),
+            'drivers': len(members)}
+    return out
+
+
+def run_sweep(cases: Sequence[Case], params_file: Path, results_dir: Path, executor: Executor,
+              on_progress: Callable[[int, int], None] | None = None, *,
+              runner: str = 'in-process', max_steps: int = 0) -> dict[Case, dict[str, Any]]:
+    """Run the cases that are not cached, read the others back; return every result.
+
+    A result is written to the cache as soon as it arrives, so an interrupted sweep resumes
+    where it stopped. ``runner`` and ``max_steps`` are :class:`RunSettings`'; graph runs
+    record to ``<results_dir>/graph_bags/``.
+    """
+    settings = RunSettings(runner, max_steps, str(Path(results_dir).resolve() / 'graph_bags'))
+    cache = results_dir / 'cache'
+    cache.mkdir(parents=True, exist_ok=True)
+    params_text = Path(params_file).read_text()
+    fingerprint = code_fingerprint()
+    keys = {case: case_key(case, params_text, fingerprint, settings) for case in cases}
+    results: dict[Case, dict[str, Any]] = {}
+    for case, key in keys.items():
+        path = cache / f'{key}.json'
+        if path.exists():
+            results[case] = json.loads(path.read_text())
+    todo = [c for c in cases if c not in results]
+    LOG.info('%d cases cached, %d to run', len(results), len(todo))
+    if on_progress is not None:
+        on_progress(len(results), len(cases))
+
+    def store(case: Case, result: dict[str, Any]) -> None:
+        tmp = cache / f'{keys[case]}.json.tmp'
+        tmp.write_text(json.dumps(result))
+        tmp.replace(cache / f'{keys[case]}.json')
+        results[case] = result
+        if on_progress is not None:
+            on_progress(len(results), len(cases))
+
+    executor.run(todo, str(params_file), store, settings)
+    return results

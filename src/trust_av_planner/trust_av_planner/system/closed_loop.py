@@ -1,0 +1,178 @@
+"""In-process closed loop: traffic -> predictor -> AV NMPC -> trust -> human -> integrate.
+
+One step follows do-mpc's ``make_step`` idiom (here, as for every model of the project,
+called ``step``) and calls exactly the core the ROS nodes call, so the node graph reproduces
+these trajectories (a test checks it). Per step ``t``:
+
+1. the preceding traffic gives v_PT(t) and the preview v_PT(t .. t+N-1);
+2. the AV's planner (:class:`~trust_av_planner.planner.AvPlanner`) lets its
+   predictor observe what the human saw after step t-1, predicts the expected plan
+   u_R^H(t), and plans u_R(t) with the NMPC from its gap, speed, the preview, u_R^H(t), T(t);
+3. the trust monitor scores E(t) = dist(u_R(t), u_R^H(t)) and updates T(t+1), eqs. 8-11;
+4. the human's MPC plans u_H(t) against u_R^H(t);
+5. every vehicle's odometry is integrated one step with its first planned acceleration.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from human_driver_sim.driver_mpc import DriverMpc
+from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.planner import AvPlanner
+from trust_av_planner.system.config import RunConfig
+from trust_av_planner.system.metrics import Metrics, StepRecord, compute_metrics
+from trust_monitor.common.kinematics import VehicleState, gap_m, integrate
+from trust_monitor.trust_model import TrustEstimator
+
+LOG = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Initial odometry of the three vehicles (front-bumper positions, m; speeds, m/s)."""
+
+    traffic: VehicleState
+    av: VehicleState
+    human: VehicleState
+
+
+def equilibrium_start(config: RunConfig, trace: SpeedTrace) -> InitialState:
+    """Every vehicle at the traffic's first speed, each at its own desired gap.
+
+    The AV starts at its CTH gap ``d_s + tau_R v``, the human at ``d_s + tau_H v``; the human's
+    front bumper is at 0 m.
+    """
+    speed = float(trace.speeds_mps[0])
+    length = config.shared.vehicle_length_m
+    human_gap = config.driver.standstill_gap_m + config.driver.time_headway_s * speed
+    av_gap = config.planner.standstill_gap_m + config.planner.time_headway_s * speed
+    av_position = human_gap + length
+    return InitialState(traffic=VehicleState(av_position + av_gap + length, speed),
+                        av=VehicleState(av_position, speed), human=VehicleState(0.0, speed))
+
+
+@dataclass
+class SimResult:
+    """Records of a run and its metrics."""
+
+    trace: str
+    alpha: float
+    predictor: str
+    min_safe_gap_m: float
+    records: list[StepRecord] = field(default_factory=list)
+
+    @property
+    def metrics(self) -> Metrics:
+        """Final trust, mean E, prediction RMSE, minimum gaps, fallback and unsafe counts."""
+        return compute_metrics(self.records, self.min_safe_gap_m)
+
+    def write_csv(self, path: Path) -> None:
+        """One row per step; plans are spread over ``<name>_0 .. <name>_{N-1}`` columns."""
+        rows = [_flatten(r) for r in self.records]
+        with path.open('w', newline='') as handle:
+            writer = csv.DictWriter(handle, fieldnames=list(rows[0]) if rows else [])
+            writer.writeheader()
+            writer.writerows(rows)
+
+
+def _flatten(record: StepRecord) -> dict[str, object]:
+    out: dict[str, object] = {}
+    for key, value in asdict(record).items():
+        if isinstance(value, tuple):
+            out.update({f'{key}_{k}': v for k, v in enumerate(value)})
+        else:
+            out[key] = value
+    return out
+
+
+class ClosedLoop:
+    """The in-process closed loop over one trace; :meth:`step` advances one step."""
+
+    def __init__(self, config: RunConfig, trace: SpeedTrace,
+                 initial: InitialState | None = None) -> None:
+        if abs(trace.dt_s - config.planner.dt_s) > 1e-12:
+            raise ValueError(f'trace step {trace.dt_s} s differs from dt_s '
+                             f'{config.planner.dt_s} s')
+        self.config = config.for_trace(trace)
+        self.trace = trace
+        state = initial or equilibrium_start(self.config, trace)
+        self.traffic, self.av, self.human = state.traffic, state.av, state.human
+        self.planner = AvPlanner(self.config.planner, self.config.trust,
+                                 self.config.shared.vehicle_length_m)
+        self.driver = DriverMpc(self.config.driver)
+        self.monitor = TrustEstimator(self.config.trust)
+        self.step_index = 0
+
+    @property
+    def done(self) -> bool:
+        """True after the last step of the trace."""
+        return self.step_index >= self.trace.steps
+
+    def step(self) -> StepRecord:
+        """Advance the closed loop by one control step and return its record."""
+        c = self.config
+        n, dt, length = c.planner.horizon_steps, c.planner.dt_s, c.shared.vehicle_length_m
+        t = self.step_index
+        self.traffic = VehicleState(self.traffic.position_m, float(self.trace.speeds_mps[t]))
+        preview = self.trace.preview(t, n)
+        out = self.planner.step(self.traffic, preview, self.av, self.human, self.monitor.trust)
+        plan, expected = out.result, out.expected_mps2
+        estimate = self.monitor.step(plan.plan_mps2, expected)
+        human_gap = gap_m(self.av, self.human, length)
+        human = self.driver.step(human_gap, self.human.speed_mps, self.av.speed_mps, expected)
+        record = StepRecord(
+            t_s=self.trace.time_s(t),
+            traffic_position_m=self.traffic.position_m, traffic_speed_mps=self.traffic.speed_mps,
+            av_position_m=self.av.position_m, av_speed_mps=self.av.speed_mps, av_gap_m=out.gap_m,
+            human_position_m=self.human.position_m, human_speed_mps=self.human.speed_mps,
+            human_gap_m=human_gap, av_accel_mps2=float(plan.plan_mps2[0]),
+            human_accel_mps2=float(human.plan_mps2[0]),
+            av_plan_mps2=tuple(float(x) for x in plan.plan_mps2),
+            expected_plan_mps2=tuple(float(x) for x in expected),
+            human_plan_mps2=tuple(float(x) for x in human.plan_mps2),
+            explicability=estimate.explicability, performance=estimate.performance,
+            trust=estimate.trust, explicability_max=plan.explicability_max,
+            solver_status=plan.status, solver_success=plan.success,
+            solver_iterations=plan.iterations, solve_time_s=plan.solve_time_s,
+            driver_status=human.status, driver_success=human.success,
+            driver_solve_time_s=human.solve_time_s)
+        self.traffic = integrate(self.traffic, 0.0, dt)
+        self.av = integrate(self.av, record.av_accel_mps2, dt)
+        self.human = integrate(self.human, record.human_accel_mps2, dt)
+        self.step_index += 1
+        return record
+
+    def steps(self) -> Iterator[StepRecord]:
+        """Run the remaining steps, yielding each record."""
+        while not self.done:
+            yield self.step()
+
+
+def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | None = None,
+             on_step: Callable[[int, int], None] | None = None) -> SimResult:
+    """Run the closed loop over the whole trace.
+
+    Args:
+        config: run configuration.
+        trace: preceding-traffic speeds on the control grid.
+        initial: initial odometry; default :func:`equilibrium_start`.
+        on_step: called with (steps done, total steps) after each step (progress).
+    """
+    loop = ClosedLoop(config, trace, initial)
+    result = SimResult(trace=trace.name, alpha=config.planner.alpha,
+                       predictor=config.planner.predictor,
+                       min_safe_gap_m=config.min_safe_gap_m)
+    for record in loop.steps():
+        result.records.append(record)
+        if min(record.av_gap_m, record.human_gap_m) < config.min_safe_gap_m:
+            LOG.warning('t = %.1f s: gap below the safety minimum %.2f m (AV %.3f m, human '
+                        '%.3f m)', record.t_s, config.min_safe_gap_m, record.av_gap_m,
+                        record.human_gap_m)
+        if on_step is not None:
+            on_step(len(result.records), trace.steps)
+    return result

@@ -1,0 +1,83 @@
+"""What a closed-loop run produced: one :class:`StepRecord` per control step, and the
+:class:`Metrics` that summarise a run (DESIGN section 1). Shared by the in-process loop, the
+graph's recordings (read back into the same records) and the study."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """Everything that happened in one control step (states at the step's start)."""
+
+    t_s: float
+    traffic_position_m: float
+    traffic_speed_mps: float
+    av_position_m: float
+    av_speed_mps: float
+    av_gap_m: float
+    human_position_m: float
+    human_speed_mps: float
+    human_gap_m: float
+    av_accel_mps2: float
+    human_accel_mps2: float
+    av_plan_mps2: tuple[float, ...]
+    expected_plan_mps2: tuple[float, ...]
+    human_plan_mps2: tuple[float, ...]
+    explicability: float
+    performance: float
+    trust: float
+    explicability_max: float
+    solver_status: str
+    solver_success: bool
+    solver_iterations: int
+    solve_time_s: float
+    driver_status: str
+    driver_success: bool
+    driver_solve_time_s: float
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Summary of a run (DESIGN section 1)."""
+
+    steps: int
+    final_trust: float
+    mean_explicability: float
+    rmse_mps2: float
+    min_av_gap_m: float
+    min_human_gap_m: float
+    fallback_steps: int
+    driver_fallback_steps: int
+    unsafe_steps: int = 0
+
+
+def compute_metrics(records: list[StepRecord], min_safe_gap_m: float) -> Metrics:
+    """Metrics of DESIGN section 1; RMSE compares u_R^H(t) with the executed u_R(t..t+N-1).
+
+    ``unsafe_steps`` counts steps where either gap is below ``min_safe_gap_m`` (a collision
+    margin, ``standstill_gap_m - safety_gap_margin_m``); every shipped run must have none.
+    """
+    if not records:
+        raise ValueError('no steps to summarise')
+    executed = np.array([r.av_accel_mps2 for r in records])
+    errors = []
+    for t, r in enumerate(records):
+        for k, predicted in enumerate(r.expected_plan_mps2):
+            if t + k < len(executed):
+                errors.append(predicted - executed[t + k])
+    return Metrics(
+        steps=len(records),
+        final_trust=records[-1].trust,
+        mean_explicability=float(np.mean([r.explicability for r in records])),
+        rmse_mps2=float(math.sqrt(np.mean(np.square(errors)))),
+        min_av_gap_m=min(r.av_gap_m for r in records),
+        min_human_gap_m=min(r.human_gap_m for r in records),
+        fallback_steps=sum(not r.solver_success for r in records),
+        driver_fallback_steps=sum(not r.driver_success for r in records),
+        unsafe_steps=sum(min(r.av_gap_m, r.human_gap_m) < min_safe_gap_m for r in records),
+    )

@@ -1,0 +1,113 @@
+"""Longitudinal point-mass dynamics shared by every vehicle model (explicit time step).
+
+Paper eq. (5) written with an explicit step (docs/DESIGN.md section 1)::
+
+    d[k+1] = d[k] + (v_lead[k] - v[k]) * dt
+    v[k+1] = v[k] + u[k] * dt
+
+The functions use plain arithmetic, so they accept floats or CasADi symbols: the NMPCs (the
+AV's and the human's) build their predictions and the simulator integrates the plants with
+the same lines. A vehicle's odometry is :class:`VehicleState` (what a real vehicle
+publishes: position along the road and speed); :func:`integrate` advances it with the same
+explicit Euler step, so the gap ``x_lead - x - length`` evolves exactly as
+``d += (v_lead - v) dt``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """Odometry of one vehicle: front-bumper position along the road (m) and speed (m/s)."""
+
+    position_m: float
+    speed_mps: float
+
+
+def integrate(state: VehicleState, accel_mps2: float, dt_s: float) -> VehicleState:
+    """One explicit Euler step: x += v dt, v += a dt."""
+    return VehicleState(state.position_m + state.speed_mps * dt_s,
+                        state.speed_mps + accel_mps2 * dt_s)
+
+
+def gap_m(lead: VehicleState, follower: VehicleState, vehicle_length_m: float) -> float:
+    """Bumper-to-bumper gap from the follower's front to the leader's rear, m."""
+    return lead.position_m - follower.position_m - vehicle_length_m
+
+
+def advance(position_m: float, speed_mps: float, accel_mps2: float,
+            dt_s: float) -> tuple[float, float]:
+    """A simulated vehicle over ``dt_s`` of wall time (wall mode of ``ego_plant`` and
+    ``human_driver``): explicit Euler like :func:`integrate`, x += v dt, v += a dt, except
+    that the speed stops at 0 (a vehicle braking to a stop does not reverse within a long
+    tick). Returns (position_m, speed_mps).
+
+    Raises:
+        ValueError: ``dt_s`` is negative.
+    """
+    if dt_s < 0.0:
+        raise ValueError(f'dt_s must be >= 0, got {dt_s}')
+    return position_m + speed_mps * dt_s, max(speed_mps + accel_mps2 * dt_s, 0.0)
+
+
+def step(gap_m: Any, speed_mps: Any, lead_speed_mps: Any, accel_mps2: Any,
+         dt_s: float) -> tuple[Any, Any]:
+    """Advance (gap, speed) by one step; the gap is bumper to bumper to the leader."""
+    return gap_m + (lead_speed_mps - speed_mps) * dt_s, speed_mps + accel_mps2 * dt_s
+
+
+def rollout(gap_m: Any, speed_mps: Any, lead_speeds_mps: Sequence[Any],
+            accels_mps2: Sequence[Any], dt_s: float) -> tuple[list[Any], list[Any]]:
+    """Predicted gaps and speeds at steps 1..N for a plan of N accelerations.
+
+    Returns:
+        (gaps, speeds), each of length N: the states the plan leads to.
+    """
+    gaps: list[Any] = []
+    speeds: list[Any] = []
+    for lead, accel in zip(lead_speeds_mps, accels_mps2, strict=True):
+        gap_m, speed_mps = step(gap_m, speed_mps, lead, accel, dt_s)
+        gaps.append(gap_m)
+        speeds.append(speed_mps)
+    return gaps, speeds
+
+
+def lead_speeds(speed_mps: Any, accels_mps2: Sequence[Any], dt_s: float) -> list[Any]:
+    """Speeds of a vehicle at steps 0..N-1 when it applies ``accels_mps2`` from ``speed_mps``."""
+    out = [speed_mps]
+    for accel in accels_mps2[:-1]:
+        out.append(out[-1] + accel * dt_s)
+    return out
+
+
+def hold_gap_plan(gap_m: float, speed_mps: float, lead_speeds_mps: Sequence[float], *,
+                  dt_s: float, standstill_gap_m: float, time_headway_s: float,
+                  gap_gain_per_s2: float, speed_gain_per_s: float, accel_min_mps2: float,
+                  accel_max_mps2: float, speed_min_mps: float,
+                  speed_max_mps: float) -> list[float]:
+    """Safe fallback plan: a saturated constant-time-headway controller, rolled out.
+
+    ``u = k_d (d - d_s - tau v) + k_v (v_lead - v)``, then limited so that the gap two steps
+    ahead (the first one an acceleration can change) stays >= d_s if the leader keeps its
+    previewed speed, then clipped to the acceleration bounds and to what keeps the next speed
+    within [speed_min, speed_max] (never reversing). Used when an MPC has no solution.
+    """
+    plan: list[float] = []
+    leads = list(lead_speeds_mps)
+    for k, lead in enumerate(leads):
+        next_lead = leads[min(k + 1, len(leads) - 1)]
+        next_gap = gap_m + (lead - speed_mps) * dt_s
+        accel = (gap_gain_per_s2 * (gap_m - standstill_gap_m - time_headway_s * speed_mps)
+                 + speed_gain_per_s * (lead - speed_mps))
+        # d[k+2] = d[k+1] + (v_lead[k+1] - v[k] - u dt) dt >= d_s
+        accel = min(accel, ((next_gap - standstill_gap_m) / dt_s + next_lead - speed_mps) / dt_s)
+        accel = min(max(accel, accel_min_mps2), accel_max_mps2)
+        accel = min(max(accel, (speed_min_mps - speed_mps) / dt_s),
+                    (speed_max_mps - speed_mps) / dt_s)
+        plan.append(accel)
+        gap_m, speed_mps = step(gap_m, speed_mps, lead, accel, dt_s)
+    return plan

@@ -1,0 +1,146 @@
+"""Real-vehicle ("wall") mode, pure part: its configuration, the latest-input store and the
+control-loop jitter statistics. No rclpy: the nodes pass times in (nanoseconds of the wall
+clock they read), so everything here is testable without ROS.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trust_monitor.common.params import check_fields, param
+
+CLOCK_MODES = ('lockstep', 'wall')
+NS_PER_S = 1_000_000_000
+PERCENTILES = (50.0, 99.0)
+
+
+@dataclass(frozen=True)
+class WallClockConfig:
+    """How a node runs: lock-step on sim time (default) or on a wall-clock timer.
+
+    Attributes:
+        clock_mode: ``lockstep`` (inputs paired by header stamp, today's graph) or ``wall``
+            (a timer at ``control_rate_hz`` acting on the latest inputs).
+        control_rate_hz: wall-mode loop rate, Hz (> 0).
+        input_timeout_s: wall mode: an input received longer ago than this is stale, s (> 0).
+        jitter_report_path: wall mode: JSON file the loop statistics are written to at
+            shutdown ('' = only the node log).
+        jitter_log_period_s: wall mode: how often p50/p99 are logged, s (> 0).
+    """
+
+    clock_mode: str = param('lockstep (sim time, inputs paired by stamp) or wall (timer, '
+                            'latest inputs)', choices=CLOCK_MODES, default='lockstep')
+    control_rate_hz: float = param('wall mode: control loop rate', unit='Hz', low=0.0,
+                                   low_inclusive=False, default=10.0)
+    input_timeout_s: float = param('wall mode: an input received longer ago than this is '
+                                   'stale', unit='s', low=0.0, low_inclusive=False, default=0.5)
+    jitter_report_path: str = param("wall mode: JSON file for the loop's jitter statistics at "
+                                    "shutdown ('' = log only)", default='')
+    jitter_log_period_s: float = param('wall mode: period of the jitter log line', unit='s',
+                                       low=0.0, low_inclusive=False, default=10.0)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    @property
+    def wall(self) -> bool:
+        """True in wall-clock mode."""
+        return self.clock_mode == 'wall'
+
+    @property
+    def period_ns(self) -> int:
+        """Nominal loop period, ns."""
+        return round(NS_PER_S / self.control_rate_hz)
+
+
+class LatestInputs:
+    """The latest message of each named input and when it was received (wall ns)."""
+
+    def __init__(self, names: list[str]) -> None:
+        self.names = list(names)
+        self._latest: dict[str, tuple[int, Any]] = {}
+
+    def put(self, name: str, received_ns: int, msg: Any) -> None:
+        """Keep ``msg`` as the latest ``name``, received at ``received_ns``."""
+        if name not in self.names:
+            raise KeyError(f'unknown input {name!r}')
+        self._latest[name] = (received_ns, msg)
+
+    def get(self, name: str) -> Any | None:
+        """The latest message of ``name`` or None."""
+        item = self._latest.get(name)
+        return None if item is None else item[1]
+
+    def problems(self, now_ns: int, timeout_s: float, names: list[str] | None = None) -> str:
+        """Why the inputs cannot be used now: '' when every one is present and fresh.
+
+        Args:
+            now_ns: the current wall time, ns.
+            timeout_s: an input older than this is stale, s.
+            names: the inputs to check (default: all).
+        """
+        missing, stale = [], []
+        for name in names if names is not None else self.names:
+            item = self._latest.get(name)
+            if item is None:
+                missing.append(name)
+            elif now_ns - item[0] > timeout_s * NS_PER_S:
+                stale.append(f'{name} ({(now_ns - item[0]) / NS_PER_S:.3f} s old)')
+        parts = ([f'missing: {", ".join(missing)}'] if missing else []) + \
+            ([f'stale: {", ".join(stale)}'] if stale else [])
+        return '; '.join(parts)
+
+
+class LoopStats:
+    """Tick-to-tick period error (actual period - nominal) and compute time of a loop."""
+
+    def __init__(self, period_ns: int) -> None:
+        if period_ns <= 0:
+            raise ValueError(f'loop period must be > 0 ns, got {period_ns}')
+        self.period_ns = period_ns
+        self._last_tick_ns: int | None = None
+        self.jitter_ns: list[int] = []
+        self.compute_ns: list[int] = []
+
+    def tick(self, now_ns: int) -> None:
+        """A loop iteration starts at ``now_ns``."""
+        if self._last_tick_ns is not None:
+            self.jitter_ns.append(now_ns - self._last_tick_ns - self.period_ns)
+        self._last_tick_ns = now_ns
+
+    def done(self, compute_ns: int) -> None:
+        """The iteration took ``compute_ns`` of wall time."""
+        self.compute_ns.append(compute_ns)
+
+    def summary(self) -> dict[str, Any]:
+        """p50/p99/max of |period error| and of compute time, ms, and the tick count."""
+        return {'ticks': len(self.compute_ns), 'period_ms': self.period_ns / 1e6,
+                'jitter_ms': _percentiles(np.abs(np.asarray(self.jitter_ns, dtype=float))),
+                'compute_ms': _percentiles(np.asarray(self.compute_ns, dtype=float))}
+
+    def write(self, path: str | Path, node: str) -> None:
+        """Write :meth:`summary` (with the node name) as JSON."""
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps({'node': node, **self.summary()}, indent=1) + '\n')
+
+
+def _percentiles(values_ns: np.ndarray) -> dict[str, float | None]:
+    if values_ns.size == 0:
+        return {'p50': None, 'p99': None, 'max': None}
+    p50, p99 = np.percentile(values_ns, PERCENTILES)
+    return {'p50': float(p50) / 1e6, 'p99': float(p99) / 1e6,
+            'max': float(values_ns.max()) / 1e6}
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """One line: ticks, jitter and compute p50/p99/max in ms."""
+    def fmt(stats: dict[str, float | None]) -> str:
+        return ' / '.join('n/a' if stats[k] is None else f'{stats[k]:.2f}'
+                          for k in ('p50', 'p99', 'max'))
+    return (f'{summary["ticks"]} ticks, |period error| p50/p99/max {fmt(summary["jitter_ms"])} '
+            f'ms, compute p50/p99/max {fmt(summary["compute_ms"])} ms')

@@ -1,0 +1,142 @@
+"""A node's main loop (:func:`spin_node`: init, build, spin, shut down) and the wall-clock
+control loop of real-vehicle mode (:class:`WallLoop`)."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+from collections.abc import Callable
+from typing import Protocol
+
+import rclpy
+from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
+
+
+class WallLoop:
+    """A node's wall-clock control loop: a timer at ``control_rate_hz`` whose every tick is
+    timed (:class:`trust_monitor.wall_clock.LoopStats`); p50/p99 are logged every
+    ``jitter_log_period_s`` and written to ``jitter_report_path`` by :meth:`close`."""
+
+    def __init__(self, node: Node, config: WallClockConfig, step: Callable[[], None]) -> None:
+        self.node = node
+        self.config = config
+        self.step = step
+        self.stats = LoopStats(config.period_ns)
+        self._next_log_ns = time.monotonic_ns() + round(config.jitter_log_period_s * NS_PER_S)
+        self.timer = node.create_timer(1.0 / config.control_rate_hz, self._tick)
+
+    def _tick(self) -> None:
+        start = time.monotonic_ns()
+        self.stats.tick(start)
+        self.step()
+        end = time.monotonic_ns()
+        self.stats.done(end - start)
+        if end >= self._next_log_ns:
+            self._next_log_ns = end + round(self.config.jitter_log_period_s * NS_PER_S)
+            self.node.get_logger().info(f'loop: {format_summary(self.stats.summary())}')
+
+    def close(self) -> None:
+        """Log the final statistics and write them to ``jitter_report_path`` if set."""
+        summary = self.stats.summary()
+        self.node.get_logger().info(f'loop at shutdown: {format_summary(summary)}')
+        if self.config.jitter_report_path:
+            self.stats.write(self.config.jitter_report_path, self.node.get_name())
+
+
+def now_ns(node: Node) -> int:
+    """The node clock's time, integer ns (wall time unless use_sim_time)."""
+    return int(node.get_clock().now().nanoseconds)
+
+
+SPIN_TIMEOUT_S = 0.1
+"""Longest wait of one executor spin: bounds how late a node notices a stop request."""
+
+
+class GraphNode(Protocol):
+    """What :func:`spin_node` needs of a node besides ``rclpy.node.Node``.
+
+    Attributes:
+        finished: set to True by a node that ends by itself (the recorder, once it holds
+            every step); the loop then stops.
+    """
+
+    finished: bool
+
+    def close(self) -> None:
+        """Called once before the node is destroyed (finish files, write statistics)."""
+
+
+def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
+              user_errors: tuple[type[BaseException], ...] = (ValueError,)) -> int:
+    """A node's whole life, the three steps of ros2/examples with a safe stop::
+
+        rclpy.init(args)                        # 1. init (no rclpy signal handler)
+        node = factory()                        #    bad parameters -> one line, exit 2
+        while not (stop requested or node.finished):
+            executor.spin_once(0.1 s)           # 2. spin (EventsExecutor)
+        node.close(); node.destroy_node(); rclpy.try_shutdown()   # 3. shut down
+
+    ``factory`` builds a node that is also a :class:`GraphNode`. Start-up errors of the kinds
+    in ``user_errors`` (bad parameters, an unreadable trace) are printed as one line and give
+    exit code 2; anything else propagates with its traceback, so the orchestrator can name
+    the node that died. SIGINT and SIGTERM end the node cleanly (exit code 0).
+
+    Args:
+        factory: builds the node (its constructor).
+        args: command-line arguments for rclpy (default: ``sys.argv``).
+        user_errors: exception types that mean bad input.
+
+    Returns:
+        The process exit code.
+    """
+    # SIGINT and SIGTERM only *request* a stop; the loop below honours it between spins.
+    # rclpy's own SIGINT handler shuts the context down asynchronously (which raced with the
+    # next wait: "the given context is not valid"), and the EventsExecutor (C++) installs its
+    # own SIGINT/SIGTERM handlers that do the same from inside spin_once. A KeyboardInterrupt
+    # raised inside the executor's C++ code (e.g. while it registers the node's callbacks)
+    # left callbacks registered and aborted the process at teardown ("Destroying callback
+    # manager with callbacks remaining"). So no exception is ever raised into rclpy: the
+    # handlers set a flag, spin_once returns within its timeout, and the finally block tears
+    # down in order while the context is still valid. Set after the executor exists, so its
+    # handlers are replaced; set explicitly, since a background process inherits SIGINT as
+    # ignored.
+    stop = {'requested': False}
+
+    def request_stop(_signum: int, _frame: object) -> None:
+        stop['requested'] = True
+
+    rclpy.init(args=args if args is not None else sys.argv,
+               signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    executor = EventsExecutor()
+    signal.signal(signal.SIGINT, request_stop)
+    signal.signal(signal.SIGTERM, request_stop)
+    try:
+        try:
+            node = factory()
+        except (*user_errors, InvalidParameterValueException,
+                ParameterUninitializedException) as err:
+            print(f'error: {err}', file=sys.stderr)
+            return 2
+        executor.add_node(node)
+        graph_node: GraphNode = node  # type: ignore[assignment]
+        while not stop['requested'] and rclpy.ok() and not graph_node.finished:
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+    except ExternalShutdownException:
+        pass  # the context was shut down from outside: clean exit below
+    finally:
+        if node is not None:
+            node.close()  # type: ignore[attr-defined]
+            executor.remove_node(node)
+        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
