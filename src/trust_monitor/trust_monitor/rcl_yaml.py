@@ -393,7 +393,10 @@ def _events(text: str) -> Iterable[yaml.Event]:
 def _yaml_problem(err: yaml.YAMLError) -> str:
     """A YAML syntax error as one line without file content."""
     problem = getattr(err, 'problem', None) or 'syntax error'
-    problem = re.sub(r"'[^']*'|\"[^\"]*\"", '(...)', str(problem)).replace('\n', ' ')
+    # Keep quoted punctuation (',' or ']'), drop anything that could be file content.
+    problem = re.sub(r"'[^']*'|\"[^\"]*\"",
+                     lambda m: '(...)' if re.search(r'[A-Za-z0-9\\]', m.group()) else m.group(),
+                     str(problem)).replace('\n', ' ')
     mark = getattr(err, 'problem_mark', None)
     line = f'line {mark.line + 1}: ' if mark is not None else ''
     return f'{line}not valid YAML ({problem})'
@@ -463,8 +466,10 @@ def parse_params_into(params: RclParams, text: str, where: str) -> None:
                 is_key = False
             else:
                 if map_level < _PARAMS_LEVEL or entry is None or not entry.names:
-                    raise ParamsError(f'{where}: line {line}: a value above {PARAMS_KEY} (every '
-                                      f'section needs <node>: {PARAMS_KEY}: <name>: <value>)')
+                    above = f' under {_name(tracker.node_ns)}' if tracker.node_ns else ''
+                    raise ParamsError(f'{where}: line {line}: a value{above} above '
+                                      f'{PARAMS_KEY} (every section needs <node>: '
+                                      f'{PARAMS_KEY}: <name>: <value>)')
                 parameter = entry.names[parameter_index]
                 quoted = event.style in ("'", '"')
                 if not quoted and len(event.value) == 0:
@@ -500,8 +505,11 @@ def parse_params_into(params: RclParams, text: str, where: str) -> None:
                 tracker.remove(node=True)
             map_depth -= 1
         elif isinstance(event, yaml.AliasEvent):
-            raise ParamsError(f'{where}: line {line}: YAML alias (*name): rcl will not support '
-                              'aliasing; write the value out')
+            key = ''
+            if map_level == _PARAMS_LEVEL and entry is not None and not is_key:
+                key = f'parameter {_name(entry.names[parameter_index])}: '
+            raise ParamsError(f'{where}: line {line}: {key}YAML alias (*name): rcl will not '
+                              'support aliasing; write the value out')
         # Stream and document start/end events: rcl ignores them (parse_file_events).
 
 
