@@ -79,6 +79,21 @@ def shortfall(score: float, performance_threshold: float) -> float:
     return 1.0 - trust_input(performance(score), performance_threshold)
 
 
+def max_shortfall(score_max: float, performance_threshold: float) -> float:
+    """sup of s(E) over 0 <= E <= score_max (s is increasing on each branch).
+
+    Args:
+        score_max: the largest E allowed, > 0 (``math.inf`` for none).
+        performance_threshold: P_thre.
+
+    Returns:
+        ``1 + tanh(score_max)`` above E* (2 for no limit), ``tanh(score_max)`` otherwise.
+    """
+    if math.isinf(score_max):
+        return SHORTFALL_SUP
+    return shortfall(score_max, performance_threshold)
+
+
 def shortfall_constant(performance_threshold: float) -> float:
     """c(P_thre) = sup_{E>0} s(E)/E = max(1, (2 - P_thre) / atanh(1 - P_thre)).
 
@@ -268,14 +283,15 @@ class LenientBound:
 
 
 def warmup_bounds(mean_score: float, steps: int, warmup_steps: int, trust_growth_rate: float,
-                  performance_threshold: float,
-                  trust_initial: float = 0.0) -> dict[str, float]:
+                  performance_threshold: float, trust_initial: float = 0.0,
+                  warmup_score_max: float = math.inf) -> dict[str, float]:
     """The bound under each reading of a W-step warm-up (the GRU's first 10 s).
 
     * ``none``: trust and mean E both over all M steps.
     * ``outside``: neither trust nor mean E counts the W warm-up steps (M - W updates).
-    * ``trust_only``: trust over M steps, mean E printed over the last M - W; each warm-up
-      step loses less than ``SHORTFALL_SUP`` = 2, whatever its E.
+    * ``trust_only``: trust over M steps, mean E printed over the last M - W; the E of a
+      warm-up step is then unknown: it loses at most ``max_shortfall(warmup_score_max)``
+      (< 2 for any E; 1 + tanh 1 = 1.76 if E <= 1, as for the Tanimoto distance).
     * ``score_only``: mean E over all M steps, trust over the last M - W only; the E mass
       of those M - W steps is at most M mean E.
 
@@ -286,6 +302,7 @@ def warmup_bounds(mean_score: float, steps: int, warmup_steps: int, trust_growth
         trust_growth_rate: delta.
         performance_threshold: P_thre.
         trust_initial: T_0.
+        warmup_score_max: the largest E a warm-up step may have (``trust_only`` only).
 
     Returns:
         Variant name to its bound, trust units.
@@ -300,8 +317,8 @@ def warmup_bounds(mean_score: float, steps: int, warmup_steps: int, trust_growth
         return bounds
     bounds['outside'] = trust_lower_bound(mean_score, after, delta, performance_threshold,
                                           trust_initial)
-    bounds['trust_only'] = (bounds['outside']
-                            + delta * warmup_steps * (1.0 - SHORTFALL_SUP))
+    bounds['trust_only'] = (bounds['outside'] + delta * warmup_steps
+                            * (1.0 - max_shortfall(warmup_score_max, performance_threshold)))
     # The last M - W steps hold E mass <= M m, i.e. a mean <= M m / (M - W) over them.
     bounds['score_only'] = trust_lower_bound(mean_score * steps / after, after, delta,
                                              performance_threshold, trust_initial)
@@ -311,7 +328,8 @@ def warmup_bounds(mean_score: float, steps: int, warmup_steps: int, trust_growth
 def lenient_row_bound(final_trust: float, mean_score: float, steps_options: Iterable[int],
                       trust_growth_rate: float, performance_threshold: float, *,
                       round_up: float = 0.0, warmup_steps: int = 0,
-                      trust_initial: float = 0.0) -> LenientBound:
+                      trust_initial: float = 0.0,
+                      warmup_score_max: float = math.inf) -> LenientBound:
     """The smallest bound for a row over step counts, rounding and warm-up readings.
 
     Args:
@@ -323,6 +341,7 @@ def lenient_row_bound(final_trust: float, mean_score: float, steps_options: Iter
         round_up: added to the printed mean E (0.0005 for a value printed to 3 decimals).
         warmup_steps: W; 0 for no warm-up.
         trust_initial: T_0.
+        warmup_score_max: the largest E of a warm-up step left out of the printed mean.
 
     Returns:
         The :class:`LenientBound` of the most lenient combination.
@@ -330,8 +349,9 @@ def lenient_row_bound(final_trust: float, mean_score: float, steps_options: Iter
     best: LenientBound | None = None
     score = mean_score + round_up
     for steps in steps_options:
-        for variant, bound in warmup_bounds(score, steps, warmup_steps, trust_growth_rate,
-                                            performance_threshold, trust_initial).items():
+        bounds = warmup_bounds(score, steps, warmup_steps, trust_growth_rate,
+                               performance_threshold, trust_initial, warmup_score_max)
+        for variant, bound in bounds.items():
             if best is None or bound < best.bound:
                 best = LenientBound(bound, steps, score, variant, final_trust >= bound)
     if best is None:
