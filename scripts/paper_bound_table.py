@@ -69,12 +69,12 @@ def main() -> None:
         e_le_1 = warmup_bounds(score, STEPS_LENIENT, WARMUP, DELTA, P_THRE,
                                warmup_score_max=1.0)
         # Trust-only reading: the W warm-up steps must lose this much each on average.
-        needed = 1.0 + (any_e['outside'] - trust) / (DELTA * WARMUP)
+        per_step = 1.0 + (any_e['outside'] - trust) / (DELTA * WARMUP)
         cells = [f'{b:.3f} ({verdict(trust, b)})' for b in
                  (any_e['outside'], any_e['score_only'], e_le_1['trust_only'],
                   any_e['trust_only'])]
         print(f'| {alpha:g} | {trust:.3f} | ' + ' | '.join(cells)
-              + f' | {max(needed, 0.0):.2f} |')
+              + f' | {max(per_step, 0.0):.2f} |')
     outside = [row_bound(t, e + ROUND_UP, STEPS_LENIENT - WARMUP, DELTA, P_THRE)
                for t, e, _ in TABLE_II_TAC_GRU_US06.values()]
     print('\nOutside-warm-up reading, attainable rows need (E mass above E*, steps): '

@@ -1,9 +1,9 @@
 """A lower bound on the final trust that eqs. (9)-(11) allow for a given mean E.
 
-Pure (standard library only). Everything here follows from the trust update alone, so it
+Pure (no ROS, no wall clock). Everything here follows from the trust update alone, so it
 holds for any epsilon and any definition of the explicability score E >= 0.
 
-Derivation (Ozkan & Ma, eqs. 9-11; docs/MODEL.md, "What the trust model allows"):
+Derivation (Ozkan & Ma, eqs. 9-11; docs/MODEL.md, "What eqs. (9)-(11) allow"):
 
 * Per-step shortfall. With ``P = 1 - tanh E`` and ``u_T = P`` if ``P >= P_thre`` else
   ``-(1 - P)``, a step adds ``delta * u_T = delta * (1 - s(E))`` to the trust, where
@@ -167,12 +167,12 @@ def extremal_scores(mean_score: float, steps: int, performance_threshold: float,
                     above: float = 1e-9) -> list[float]:
     """A sequence of E with the given mean whose final trust comes within delta of the bound.
 
-    For mean E <= E*: ``k = floor(M m / (E* + above))`` steps at ``E* + above`` (each
-    loses ``1 + tanh E*`` = c E*), the remaining E mass spread evenly over the other
-    ``M - k`` steps (each loses about its E, ``tanh x ~ x``). The loss against the bound
-    is at most the remainder's ``(c - 1) r + tanh``-curvature, below ``1 + tanh E* - E*``
-    <= 1 shortfall unit, i.e. delta in trust. For mean E > E*: every step at the mean
-    (exactly the envelope).
+    For a mean m <= E*: ``k = floor(M m / (E* + above))`` steps at ``E* + above`` (each
+    loses ``1 + tanh E*`` = c E*, the most per unit of E), the remaining mass r < E* + above
+    spread evenly over the other ``M - k`` steps (each loses about its E, ``tanh x ~ x``).
+    Against the bound this gives away at most ``(c - 1) r``, below
+    ``1 + tanh E* - E*`` <= 1 shortfall unit: delta in trust. For m > E*: every step at m,
+    which is exactly the envelope.
 
     Args:
         mean_score: target mean E, >= 0.
@@ -182,19 +182,22 @@ def extremal_scores(mean_score: float, steps: int, performance_threshold: float,
 
     Returns:
         M scores whose mean is ``mean_score`` up to rounding.
+
+    Raises:
+        ValueError: a step count below 1 or a bad mean E or P_thre.
     """
     if steps < 1:
         raise ValueError(f'steps must be >= 1, got {steps}')
+    if not (math.isfinite(mean_score) and mean_score >= 0.0):
+        raise ValueError(f'mean explicability score must be finite and >= 0, got {mean_score}')
     e_star = score_threshold(performance_threshold)
     if mean_score > e_star:
         return [mean_score] * steps
     total = mean_score * steps
     fail = e_star + above
-    k = min(int(total // fail), steps)
+    k = int(total // fail)  # < M, since total <= M E* < M fail
     rest = steps - k
     remainder = total - k * fail
-    if rest == 0:
-        return [fail] * k
     return [fail] * k + [remainder / rest] * rest
 
 
