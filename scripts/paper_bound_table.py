@@ -38,6 +38,20 @@ def corner(trust: float, mean_score: float, steps: int) -> str:
     return f'{100 * row.failing_mass_fraction:.1f} % on {row.failing_steps:.0f} steps'
 
 
+def threshold_needed(trust: float, mean_score: float) -> float:
+    """Smallest P_thre (bisection, >= the paper's) at which the row becomes attainable."""
+    low, high = P_THRE, 0.999
+    if trust >= row_bound(trust, mean_score, STEPS, DELTA, low).bound:
+        return low
+    for _ in range(60):
+        middle = 0.5 * (low + high)
+        if trust >= row_bound(trust, mean_score, STEPS, DELTA, middle).bound:
+            high = middle
+        else:
+            low = middle
+    return high
+
+
 def main() -> None:
     e_star = score_threshold(P_THRE)
     c = shortfall_constant(P_THRE)
@@ -58,6 +72,12 @@ def main() -> None:
                   f'| {verdict(trust, exact.bound)} | {exact.trust_initial_needed:+.2f} '
                   f'| {lenient.bound:.3f} | {verdict(trust, lenient.bound)} '
                   f'| {needed} |')
+    rows = TABLE_II_TAC_GRU_US06.values()
+    print('\nTable II at M = 600 would need P_thre >= '
+          + ', '.join(f'{threshold_needed(t, e):.4f}' for t, e, _ in rows)
+          + ' or at most M = '
+          + ', '.join(f'{math.floor(t / (DELTA * (1.0 - c * e)))}' for t, e, _ in rows)
+          + ' steps (alpha = 0 ... 1)')
     print('\nTable II with the GRU warm-up of 10 steps (M = 596, mean E + 0.0005):\n')
     print('| alpha | paper T | warm-up outside trust and mean E | in mean E, not in trust '
           '| in trust, not in mean E, E <= 1 | in trust, not in mean E, any E '
