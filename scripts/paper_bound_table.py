@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from trust_av_planner.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
+from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_monitor.trust_bound import (
     row_bound,
     score_threshold,

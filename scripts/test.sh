@@ -8,7 +8,7 @@ cd "$root"
 source scripts/bootstrap.sh
 
 echo '== ruff' >&2
-ruff check src tests benchmarks
+ruff check src tests benchmarks scripts
 echo '== mypy (pure core, strict)' >&2
 # The ROS adapters (nodes, trust_monitor/ros/, the graph, the commands that start it) talk to
 # untyped rclpy/message modules and are excluded; everything they call is in the checked core.

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from trust_av_planner.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_monitor.params import read_params_file
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_monitor.common.params import read_params_file
 
 AS_REPORTED = Path(__file__).resolve().parents[1] / 'config' / 'paper_as_reported.yaml'
 

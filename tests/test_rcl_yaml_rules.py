@@ -1,4 +1,4 @@
-"""trust_monitor.rcl_yaml against the real rcl params-file parser (the oracle).
+"""trust_monitor.common.rcl_yaml against the real rcl params-file parser (the oracle).
 
 For each case of the corpus below, one subprocess (for the whole corpus) runs what a node
 started with ``--ros-args --params-file F [--params-file G]`` runs: ``rclpy.init`` with those
@@ -24,8 +24,8 @@ from typing import Any
 
 import pytest
 
-from trust_monitor.params import ParamsError
-from trust_monitor.rcl_yaml import node_matches, params_for_node, parse_params_text
+from trust_monitor.common.params import ParamsError
+from trust_monitor.common.rcl_yaml import node_matches, params_for_node, parse_params_text
 
 NODES = ('/planner', '/car1/planner')
 

@@ -243,7 +243,7 @@ def test_counts_and_times_must_match_the_mcap(good_bag: Path, tmp_path: Path) ->
 
 def test_recorder_bare_mcap_fails_with_the_reason(tmp_path: Path) -> None:
     """The project's recorder (McapBag) writes one .mcap with a hand-written rosbag2 record."""
-    from trust_av_planner.recorder import McapBag
+    from trust_av_planner.graph.recorder import McapBag
 
     path = tmp_path / 'run.mcap'
     with McapBag(path) as bag:

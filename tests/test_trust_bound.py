@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trust_av_planner.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
+from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_monitor.trust_bound import (
     extremal_scores,
     lenient_row_bound,
