@@ -79,9 +79,9 @@ def template(topic: str, msgtype: str, horizon: int, dt_s: float) -> tuple[Any, 
     elif msgtype == 'trajectory_msgs/msg/JointTrajectory':
         msg = trajectory(0, dt_s, accelerations=[0.25] * horizon)
     elif msgtype == 'diagnostic_msgs/msg/DiagnosticArray':
-        msg = diagnostics(0, 'floor', True, 'Solve_Succeeded',
-                          {f'key_{k}': repr(0.1 + k) for k in range(DIAGNOSTIC_VALUES.get(
-                              topic, 4))})
+        count = DIAGNOSTIC_VALUES.get(topic, 4)
+        msg = diagnostics(0, 'floor_status', True, 'Solve_Succeeded',
+                          {f'value_{k:02d}': repr(1 / 3) for k in range(count)})
     else:
         msg = message_class(msgtype)()
     return msg, (msg.clock if msgtype == 'rosgraph_msgs/msg/Clock' else msg.header.stamp)

@@ -129,6 +129,8 @@ def main(argv: list[str] | None = None) -> int:
     ratio = graph['steady_ms_per_step']['median'] / floor['steady_ms_per_step']['median']
     pairs = [g['steady_ms_per_step'] / f['steady_ms_per_step']
              for g, f in zip(graph_runs, floor_runs, strict=True)]
+    cpu_ratio = (graph['cpu_ms_per_step']['total'] / floor['cpu_ms_per_step']['total']
+                 if graph['cpu_ms_per_step'] and floor['cpu_ms_per_step'] else math.nan)
     steady_ms = graph['steady_ms_per_step']['median']
     stepping_s = first.wall_s - first.startup_s
     sim_s = trace.steps * trace.dt_s
@@ -137,6 +139,7 @@ def main(argv: list[str] | None = None) -> int:
         'cpu_count': os.cpu_count(), 'trace': trace.name, 'steps': trace.steps,
         'repeats': repeats, 'load_average': load(),
         'ratio_graph_to_floor': ratio, 'ratio_per_pair': summary(pairs),
+        'cpu_ratio_graph_to_floor': cpu_ratio,
         'graph': graph, 'floor': floor,
         'steady_real_time_factor': 1e3 * trace.dt_s / steady_ms,
         'startup_s': first.startup_s, 'stepping_s': stepping_s,
@@ -153,9 +156,12 @@ def main(argv: list[str] | None = None) -> int:
               f"{s['min']:.2f}-{s['max']:.2f}), start-up {st['median']:.2f} s, shutdown "
               f"{sh['median']:.2f} s, CPU {v['cpu_ms_per_step'].get('total', math.nan):.2f} "
               'ms/step')
+    print('CPU ms per step (median), graph / floor: ' + ', '.join(
+        f"{k} {graph['cpu_ms_per_step'][k]:.2f} / {floor['cpu_ms_per_step'].get(k, math.nan):.2f}"
+        for k in graph['cpu_ms_per_step']))
     print(f"graph / floor: {ratio:.2f}x (per pair {figures['ratio_per_pair']['min']:.2f}-"
-          f"{figures['ratio_per_pair']['max']:.2f}); {os.cpu_count()} cores, load "
-          f"{figures['load_average']}")
+          f"{figures['ratio_per_pair']['max']:.2f}), CPU {cpu_ratio:.2f}x; "
+          f"{os.cpu_count()} cores, load {figures['load_average']}")
     print(f"graph on {trace.name}: {steady_ms:.2f} ms per step steady "
           f"({figures['steady_real_time_factor']:.0f}x real time) against "
           f"{figures['in_process_step_ms']:.2f} ms in-process "
