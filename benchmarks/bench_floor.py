@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import itertools
 import json
 import os
 import statistics
@@ -292,7 +293,11 @@ class StepClock:
             before, after = self.cpu
             cpu = {k: 1e3 * (after[k] - before[k]) / intervals for k in after if k in before}
             cpu['total'] = sum(cpu.values())
+        times = [self.received[k] for k in sorted(self.received)]
+        gaps = sorted(1e3 * (b - a) for a, b in itertools.pairwise(times)) or [0.0]
         return {'steps': self.steps, 'clocks_seen': len(self.received),
+                'step_ms': {'p50': gaps[len(gaps) // 2], 'p99': gaps[int(0.99 * (len(gaps) - 1))],
+                            'max': gaps[-1]},
                 'startup_s': t_first - self.started,
                 'steady_ms_per_step': 1e3 * (t_last - t_first) / intervals,
                 'shutdown_s': self.ended - t_last, 'cpu_ms_per_step': cpu}
@@ -319,8 +324,12 @@ def _wait_connected(graph: Any, node: Any, executor: Any, nodes: tuple[str, ...]
 
 
 def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str = 'zstd',
-              startup_timeout_s: float = 30.0, step_timeout_s: float = 30.0) -> dict[str, Any]:
+              project_recorder: bool = False, startup_timeout_s: float = 30.0,
+              step_timeout_s: float = 30.0) -> dict[str, Any]:
     """Run the floor for ``steps`` steps with logs and the bag under ``work``.
+
+    ``project_recorder``: the project's recorder node instead of the raw one (an ablation:
+    the difference is the recorder's own cost over the floor's).
 
     The sequence of :func:`trust_av_planner.orchestrator.run_graph`: start the processes,
     wait until connected, publish ``/sim/start``, spin the orchestrator's node until the
@@ -355,6 +364,9 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
     params = {'steps': steps, 'recorder': recorder, 'bag_path': str(bag),
               'compression': compression}
     specs = [NodeSpec(name, MODULE, dict(params)) for name in names]  # no YAML aliases
+    if recorder and project_recorder:
+        specs[0] = NodeSpec(RECORDER, 'trust_av_planner.recorder',
+                            {'bag_path': str(bag), 'expected_steps': steps})
     clock = StepClock(steps)
     with lease_domain() as domain:
         graph = Graph(specs, DEFAULT_PARAMS_FILE, domain, work / 'logs')
@@ -414,6 +426,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--no-recorder', action='store_true',
                         help='without the recorder (the source ends the run)')
     parser.add_argument('--compression', choices=('zstd', 'none'), default='zstd')
+    parser.add_argument('--project-recorder', action='store_true',
+                        help="the project's recorder node instead of the raw one (ablation)")
     parser.add_argument('--keep', type=Path, help='keep logs and bag in this directory')
     parser.add_argument('--out', type=Path, help='results JSON')
     args = parser.parse_args(argv)
@@ -428,7 +442,8 @@ def main(argv: list[str] | None = None) -> int:
             work.mkdir(parents=True, exist_ok=True)
             load_before = load()
             figures = run_floor(args.steps, work, recorder=not args.no_recorder,
-                                compression=args.compression)
+                                compression=args.compression,
+                                project_recorder=args.project_recorder)
             figures['load_before'], figures['load_after'] = load_before, load()
             runs.append(figures)
             print(describe(f'floor run {repeat + 1}', figures) + f' (load {load_before})',
@@ -436,7 +451,8 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
         'cpu_count': os.cpu_count(), 'steps': args.steps, 'recorder': not args.no_recorder,
-        'compression': args.compression, 'runs': runs,
+        'compression': args.compression, 'project_recorder': args.project_recorder,
+        'runs': runs,
         'steady_ms_per_step': summary([r['steady_ms_per_step'] for r in runs]),
     }
     if args.out:
