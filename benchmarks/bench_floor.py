@@ -127,7 +127,6 @@ def _make_step_node(name: str) -> Any:
                 topic = TOPIC[start]
                 self.create_subscription(message_class(topic.msgtype), topic.name,
                                          self.on_start, QOS[topic.qos])
-            self.split_ns = split_ns
 
         def on_start(self, _msg: Any) -> None:
             if not self.started:
@@ -147,7 +146,7 @@ def _make_step_node(name: str) -> Any:
 
         def publish_step(self, step: int) -> None:
             for pub, msg, stamp, offset in self.outputs:
-                stamp.sec, stamp.nanosec = self.split_ns((step + offset) * self.dt_ns)
+                stamp.sec, stamp.nanosec = split_ns((step + offset) * self.dt_ns)
                 pub.publish(msg)
 
     return FloorNode()
@@ -231,7 +230,7 @@ def task_cpu_s(pid: int) -> float:
     for task in os.listdir(f'/proc/{pid}/task'):
         try:
             total += int(Path(f'/proc/{pid}/task/{task}/schedstat').read_text().split()[0])
-        except (OSError, IndexError, ValueError):
+        except (FileNotFoundError, ProcessLookupError):
             continue  # the thread ended meanwhile
     return total * 1e-9
 
@@ -252,7 +251,7 @@ def cpu_seconds() -> dict[str, float]:
             name = next((a.split(b':=', 1)[1].decode() for a in cmdline
                          if a.startswith(b'__node:=')), f'pid {entry}')
             out[name] = task_cpu_s(int(entry))
-        except OSError:
+        except (FileNotFoundError, ProcessLookupError):
             continue  # the process ended meanwhile
     return out
 
