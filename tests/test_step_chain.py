@@ -132,7 +132,7 @@ def test_chain_follows_the_table() -> None:
 def test_bad_tables_are_refused() -> None:
     with pytest.raises(StepChainError, match='one /clock'):
         step_chain(t for t in TOPICS if t.name != '/clock')
-    with pytest.raises(StepChainError, match='not reached.*ego_plant'):
+    with pytest.raises(StepChainError, match=r'not reached.*ego_plant'):
         step_chain(replace('/ego/accel_cmd', subscribers=('recorder',)))
     both_ways = (Topic('/a', 'std_msgs/msg/Empty', 'human_driver', ('trust_monitor',), 'STEP',
                        'once per step', ''),
