@@ -2,7 +2,7 @@
 
 The replica has the graph's nodes as separate processes on a leased ROS domain, started,
 connected, observed and stopped by the orchestrator's own machinery (its ``Graph`` and
-``graph_session``, :mod:`trust_av_planner.orchestrator`), each node spun by
+``graph_session``, :mod:`trust_av_planner.graph.session`), each node spun by
 :func:`trust_monitor.ros_support.spin_node` (the same executor). Built from the topic table
 (:data:`trust_monitor.graph_interface.TOPICS`): the same topics, message types and QoS
 profiles (:data:`trust_monitor.ros_support.QOS`), one message per topic and step plus the
@@ -110,6 +110,7 @@ def _make_step_node(name: str) -> Any:
             self.dt_ns = stamp_ns(self.config.dt_s)
             self.gate = StepGate(me, 0, self.dt_ns)
             self.finished = False
+            self.exit_code = 0
             self.started = False
             self.outputs = []
             for port in me.outputs:
@@ -182,6 +183,7 @@ def _make_recorder() -> Any:
             self.count = 0
             self.total = 0
             self.finished = False
+            self.exit_code = 0
             schemas: dict[str, int] = {}
             for topic in TOPICS:
                 if RECORDER not in topic.subscribers:
@@ -335,7 +337,7 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
     ``project_recorder``: the project's recorder node instead of the raw one (an ablation:
     the difference is the recorder's own cost over the floor's).
 
-    The sequence of :func:`trust_av_planner.orchestrator.run_graph`: start the processes,
+    The sequence of :func:`trust_av_planner.graph.orchestrator.run_graph`: start the processes,
     wait until connected, publish ``/sim/start``, spin the orchestrator's node until the
     recorder (or, without one, the source) exits, stop everything.
 
@@ -349,8 +351,8 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
     from std_msgs.msg import Empty
 
     from trust_av_planner.graph.domains import lease_domain
-    from trust_av_planner.graph.orchestrator import graph_session
     from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
+    from trust_av_planner.graph.session import graph_session
     from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
     from trust_monitor.common.lockstep import stamp_ns
     from trust_monitor.common.step_chain import RECORDER, step_chain
@@ -366,14 +368,16 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
               'compression': compression}
     specs = [NodeSpec(name, MODULE, dict(params)) for name in names]  # no YAML aliases
     if recorder and project_recorder:
-        specs[0] = NodeSpec(RECORDER, 'trust_av_planner.recorder',
+        bag = work / 'project_bag'
+        specs[0] = NodeSpec(RECORDER, 'trust_av_planner.graph.recorder_node',
                             {'bag_path': str(bag), 'expected_steps': steps})
     clock = StepClock(steps)
     with lease_domain() as domain:
         graph = Graph(specs, DEFAULT_PARAMS_FILE, domain, work / 'logs')
         graph.env['PYTHONPATH'] = os.pathsep.join(
             [str(HERE), *filter(None, [graph.env.get('PYTHONPATH')])])
-        with graph_session(graph, 'orchestrator') as (node, executor):
+        with graph_session(graph, 'orchestrator') as session:
+            node, executor = session.node, session.executor
             node.create_subscription(
                 Clock, '/clock', lambda msg: clock.on_step(msg_ns(msg.clock) // dt_ns + 1),
                 QOS['CLOCK'])
@@ -393,7 +397,8 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
             graph.check_alive({ender})
     clock.end()
     figures = clock.figures()
-    figures['bag_bytes'] = bag.stat().st_size if recorder else 0
+    figures['bag_bytes'] = (sum(f.stat().st_size for f in bag.rglob('*')) if bag.is_dir()
+                            else bag.stat().st_size) if recorder else 0
     return figures
 
 

@@ -64,8 +64,8 @@ def time_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, work: Path,
                max_steps: int) -> tuple[dict[str, Any], GraphRun]:
     """One graph run, timed as :func:`bench_floor.run_floor` times the floor."""
     clock = StepClock(trace.steps)
-    run = run_graph(config, trace_arg, trace, DEFAULT_PARAMS_FILE, work / 'b.mcap',
-                    max_steps=max_steps, on_step=clock.on_step)
+    run = run_graph(config, trace_arg, trace, DEFAULT_PARAMS_FILE, work / 'b',
+                    max_steps=max_steps, on_clock=clock.on_step)
     clock.end()
     figures = clock.figures()
     figures['bench_graph_stepping_ms_per_step'] = 1e3 * (run.wall_s - run.startup_s) / \

@@ -43,7 +43,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         stats = Path(tmp) / 'shadow.json'
         command = [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
-                   str(args.bag), '--out', str(Path(tmp) / 'shadow.mcap'), '--json', str(stats),
+                   str(args.bag), '--out', str(Path(tmp) / 'shadow'), '--json', str(stats),
                    '--rate-hz', str(args.rate_hz)]
         if not args.whole:
             command += ['--duration-s', str(args.duration_s)]

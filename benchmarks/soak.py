@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
                 with lock:
                     samples[done] = node_rss_mb()
 
-        run = run_graph(config, str(csv), trace, DEFAULT_PARAMS_FILE, Path(tmp) / 'soak.mcap',
+        run = run_graph(config, str(csv), trace, DEFAULT_PARAMS_FILE, Path(tmp) / 'soak',
                         on_step=on_step)
     steps = sorted(samples)
     base = min(steps, key=lambda s: abs(s - baseline_step))

@@ -159,8 +159,9 @@ def test_graph_sweep_equals_in_process_sweep(tmp_path: Path) -> None:
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert '5 cases (graph)' in proc.stdout
-    bags = {b.name for b in (tmp_path / 'graph' / 'graph_bags').glob('*.mcap')}
-    assert bags == {f'nycc_ca_alpha{a:g}.mcap' for a in sweep.ALPHAS}
+    bags = {b.name for b in (tmp_path / 'graph' / 'graph_bags').glob('*/metadata.yaml')
+            for b in [b.parent]}
+    assert bags == {f'nycc_ca_alpha{a:g}' for a in sweep.ALPHAS}
     cases = sweep.sweep_cases(['nycc'], ['ca'])
     # The same sweep again: read from the graph cache, and in-process with the same steps.
     graph = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'graph',

@@ -57,6 +57,7 @@ class DriverNode(Node):
     def __init__(self) -> None:
         super().__init__('human_driver')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.config = declare_config(self, DriverConfig)
         self.follower = declare_config(self, FollowerState)
         self.clock = declare_config(self, WallClockConfig)

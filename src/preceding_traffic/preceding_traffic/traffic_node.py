@@ -71,6 +71,7 @@ class TrafficNode(Node):
     def __init__(self) -> None:
         super().__init__('preceding_traffic')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.run = declare_config(self, TrafficRunConfig)
         trace_config = declare_config(self, TraceConfig)
         self.clock = declare_config(self, WallClockConfig)

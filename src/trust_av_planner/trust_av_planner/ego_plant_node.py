@@ -54,6 +54,7 @@ class EgoPlantNode(Node):
     def __init__(self) -> None:
         super().__init__('ego_plant')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.config = declare_config(self, PlantConfig)
         self.clock = declare_config(self, WallClockConfig)
         self.state = VehicleState(self.config.initial_position_m, self.config.initial_speed_mps)

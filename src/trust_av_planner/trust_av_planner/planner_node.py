@@ -62,6 +62,7 @@ class PlannerNode(Node):
     def __init__(self) -> None:
         super().__init__('planner')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.config = declare_config(self, PlannerConfig)
         trust = declare_config(self, TrustConfig)
         shared = declare_config(self, SharedConfig)

@@ -33,6 +33,7 @@ class MonitorNode(Node):
     def __init__(self) -> None:
         super().__init__('trust_monitor')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.estimator = TrustEstimator(declare_config(self, TrustConfig))
         self.clock = declare_config(self, WallClockConfig)
         self.buffer = StepBuffer(['plan', 'expected'])

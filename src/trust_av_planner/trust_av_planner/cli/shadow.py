@@ -10,6 +10,7 @@ from pathlib import Path
 
 from preceding_traffic.sources import load_trace
 from trust_av_planner.cli.options import add_params_file_option, alpha_value
+from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.shadow import ShadowRun, run_shadow, run_wall_graph
 from trust_av_planner.nmpc import PREDICTORS
@@ -66,20 +67,16 @@ def run(args: argparse.Namespace) -> int:
     trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
     whole_s = trace.steps * trace.dt_s
     duration_s = whole_s if args.duration_s is None else min(args.duration_s, whole_s)
-    if args.out.exists() and not args.overwrite:
-        raise TrustAvPlannerError(f'{args.out} exists already; pass --overwrite or choose '
-                                  'another --out')
-    if args.out.exists():
-        args.out.unlink()
+    outputs = prepare_outputs(args.out, overwrite=args.overwrite, option='--out')
     nodes = 'every node' if args.whole_graph else 'planner and trust_monitor'
     print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '
           f'{nodes} at {rate_hz:g} Hz', flush=True)
     if args.whole_graph:
-        result = run_wall_graph(config, str(args.bag), trace, args.params_file, args.out,
+        result = run_wall_graph(config, str(args.bag), trace, args.params_file, outputs.bag,
                                 duration_s=duration_s, rate_hz=rate_hz,
                                 startup_timeout_s=args.startup_timeout_s)
     else:
-        result = run_shadow(config, trace, args.params_file, args.out, duration_s=duration_s,
+        result = run_shadow(config, trace, args.params_file, outputs.bag, duration_s=duration_s,
                             rate_hz=rate_hz, topics=topics,
                             startup_timeout_s=args.startup_timeout_s)
     print('\n'.join(summary_lines(result)))
@@ -110,8 +107,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--bag-type', default=None,
                         choices=('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'),
                         help='its message type (default: preceding_traffic.bag_message_type)')
-    parser.add_argument('--out', type=Path, required=True, help='MCAP file to write')
-    parser.add_argument('--overwrite', action='store_true', help='replace an existing --out')
+    parser.add_argument('--out', type=Path, required=True,
+                        help='bag directory to write (rosbag2: metadata.yaml + MCAP)')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='replace an existing --out bag directory')
     parser.add_argument('--duration-s', type=positive_seconds, default=None,
                         help='wall time to replay, s (default: the whole bag)')
     parser.add_argument('--rate-hz', type=positive_seconds, default=None,

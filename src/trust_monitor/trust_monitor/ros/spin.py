@@ -3,6 +3,7 @@ control loop of real-vehicle mode (:class:`WallLoop`)."""
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import time
@@ -10,6 +11,7 @@ from collections.abc import Callable
 from typing import Protocol
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
@@ -59,15 +61,29 @@ SPIN_TIMEOUT_S = 0.1
 """Longest wait of one executor spin: bounds how late a node notices a stop request."""
 
 
+PARENT_ENV = 'TRUST_AV_PARENT_PID'
+"""Set by the orchestrator to its pid: a node started with it stops (cleanly, like on
+SIGTERM) when that process is gone, so that a killed orchestrator leaves no node behind and
+the recorder still finishes its bag."""
+DRAIN_S = 0.3
+"""On a stop request a node keeps taking what is already queued for this long."""
+ACK_TIMEOUT_S = 1.0
+"""Then it waits at most this long, over all its reliable publishers, until every matched
+subscriber (the recorder) has acknowledged what it published."""
+
+
 class GraphNode(Protocol):
     """What :func:`spin_node` needs of a node besides ``rclpy.node.Node``.
 
     Attributes:
         finished: set to True by a node that ends by itself (the recorder, once it holds
             every step); the loop then stops.
+        exit_code: the process exit code once it ends (0, or e.g. the recorder's 3 for a
+            full disk).
     """
 
     finished: bool
+    exit_code: int
 
     def close(self) -> None:
         """Called once before the node is destroyed (finish files, write statistics)."""
@@ -86,7 +102,10 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     ``factory`` builds a node that is also a :class:`GraphNode`. Start-up errors of the kinds
     in ``user_errors`` (bad parameters, an unreadable trace) are printed as one line and give
     exit code 2; anything else propagates with its traceback, so the orchestrator can name
-    the node that died. SIGINT and SIGTERM end the node cleanly (exit code 0).
+    the node that died. SIGINT and SIGTERM end the node cleanly (its ``exit_code``), as does
+    the death of the process named by :data:`PARENT_ENV`: the node first takes what is
+    queued for :data:`DRAIN_S` and waits until its messages are acknowledged, so a recorder
+    stopped after it holds them.
 
     Args:
         factory: builds the node (its constructor).
@@ -127,8 +146,13 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
             return 2
         executor.add_node(node)
         graph_node: GraphNode = node  # type: ignore[assignment]
+        parent = int(os.environ.get(PARENT_ENV, '0') or 0)
         while not stop['requested'] and rclpy.ok() and not graph_node.finished:
             executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+            if parent and os.getppid() != parent:
+                stop['requested'] = True
+        if not graph_node.finished and rclpy.ok():
+            _drain(executor, node)
     except ExternalShutdownException:
         pass  # the context was shut down from outside: clean exit below
     finally:
@@ -139,4 +163,18 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return 0 if node is None else int(node.exit_code)  # type: ignore[attr-defined]
+
+
+def _drain(executor: EventsExecutor, node: Node) -> None:
+    """Take what is queued (:data:`DRAIN_S`), then wait for the acknowledgements of what
+    this node published (:data:`ACK_TIMEOUT_S` over all publishers)."""
+    end = time.monotonic() + DRAIN_S
+    while time.monotonic() < end and rclpy.ok():
+        executor.spin_once(timeout_sec=0.02)
+    deadline = time.monotonic() + ACK_TIMEOUT_S
+    for publisher in node.publishers:
+        left = deadline - time.monotonic()
+        if left <= 0.0:
+            break
+        publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
