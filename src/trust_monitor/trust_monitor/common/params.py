@@ -145,7 +145,11 @@ def check_fields(config: object) -> None:
 
 
 def read_params_file(path: str | Path) -> dict[str, dict[str, Any]]:
-    """Read a ROS 2 params file.
+    """Read a ROS 2 params file with PyYAML (plain sections by exact name).
+
+    Not rcl's rules: runs read their params files with
+    :func:`trust_monitor.common.param_layers.read_layer` and
+    :func:`~trust_monitor.common.param_layers.layered_params`.
 
     Args:
         path: YAML file in ROS 2 params-file format.
@@ -186,7 +190,12 @@ def node_params(sections: Mapping[str, Mapping[str, Any]], node: str) -> dict[st
     return merged
 
 
-def _check_type(name: str, value: Any, hint: Any) -> Any:
+def check_type(name: str, value: Any, hint: Any) -> Any:
+    """``value`` as the type ``hint`` of field ``name`` (an integer is a valid double).
+
+    Raises:
+        ParamsError: another type, or a non-finite number.
+    """
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ParamsError(f'parameter {name}: expected a number, got {value!r}')
@@ -227,7 +236,7 @@ def build_config(cls: type[T], params: Mapping[str, Any]) -> T:
             if field.default is not dataclasses.MISSING:
                 continue
             raise ParamsError(f'parameter {field.name} is missing ({cls.__name__})')
-        kwargs[field.name] = _check_type(field.name, params[field.name], hints[field.name])
+        kwargs[field.name] = check_type(field.name, params[field.name], hints[field.name])
     try:
         return cls(**kwargs)
     except ParamsError:

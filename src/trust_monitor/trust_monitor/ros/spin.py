@@ -16,7 +16,9 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from trust_monitor.common.params import ParamsError
 from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
+from trust_monitor.ros.parameters import check_overrides
 
 
 class WallLoop:
@@ -78,14 +80,16 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     """A node's whole life, the three steps of ros2/examples with a safe stop::
 
         rclpy.init(args)                        # 1. init (no rclpy signal handler)
-        node = factory()                        #    bad parameters -> one line, exit 2
+        node = factory()                        #    bad or unknown parameters -> one line,
+                                                #    exit 2
         while not (stop requested or node.finished):
             executor.spin_once(0.1 s)           # 2. spin (EventsExecutor)
         node.close(); node.destroy_node(); rclpy.try_shutdown()   # 3. shut down
 
     ``factory`` builds a node that is also a :class:`GraphNode`. Start-up errors of the kinds
-    in ``user_errors`` (bad parameters, an unreadable trace) are printed as one line and give
-    exit code 2; anything else propagates with its traceback, so the orchestrator can name
+    in ``user_errors`` (bad parameters, an unreadable trace), and a parameter override that
+    neither the node nor any node of the graph has (:func:`check_overrides`), are printed as
+    one line and give exit code 2; anything else propagates with its traceback, so the orchestrator can name
     the node that died. SIGINT and SIGTERM end the node cleanly (exit code 0).
 
     Args:
@@ -121,7 +125,8 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     try:
         try:
             node = factory()
-        except (*user_errors, InvalidParameterValueException,
+            check_overrides(node)
+        except (*user_errors, ParamsError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
             print(f'error: {err}', file=sys.stderr)
             return 2
