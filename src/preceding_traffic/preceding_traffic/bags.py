@@ -18,7 +18,6 @@ This module is I/O, not a model: it imports rosbags (pure Python), never rclpy.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 from pathlib import Path
 

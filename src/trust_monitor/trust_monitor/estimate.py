@@ -177,19 +177,20 @@ def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig) -> int:
         except csv.Error as err:
             raise EstimateError(f'{in_path}: not CSV text ({err})') from err
     try:
-        out = tempfile.NamedTemporaryFile('w', newline='', dir=out_path.parent, delete=False,
-                                          prefix=f'.{out_path.name}.', suffix='.tmp')
+        handle_no, temporary = tempfile.mkstemp(dir=out_path.parent, prefix=f'.{out_path.name}.',
+                                                suffix='.tmp')
     except OSError as err:
         raise EstimateError(f'{out_path}: cannot write ({err.strerror})') from err
     try:
-        with out:
+        with os.fdopen(handle_no, 'w', newline='') as out:
             writer = csv.writer(out)
             writer.writerow(['t', 'E', 'P', 'trust'])
             writer.writerows([[repr(v) for v in r] for r in rows])
-        os.replace(out.name, out_path)
+        os.replace(temporary, out_path)
     except OSError as err:
-        Path(out.name).unlink(missing_ok=True)
         raise EstimateError(f'{out_path}: cannot write ({err.strerror})') from err
+    finally:
+        Path(temporary).unlink(missing_ok=True)
     return len(rows)
 
 

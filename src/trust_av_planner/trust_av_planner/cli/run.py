@@ -7,7 +7,13 @@ from pathlib import Path
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.cli.options import Progress, add_run_options, format_metrics, run_overrides
+from trust_av_planner.cli.options import (
+    Progress,
+    add_run_options,
+    format_metrics,
+    run_overrides,
+    steps_value,
+)
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.orchestrator import run_graph_records
 from trust_av_planner.study.plots import run_overview
@@ -63,7 +69,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='MCAP file to write (default: bags/run_<trace>_<predictor>_'
                              'alpha<alpha>.mcap)')
     parser.add_argument('--overwrite', action='store_true', help='replace an existing bag')
-    parser.add_argument('--max-steps', type=int, default=0,
+    parser.add_argument('--max-steps', type=steps_value, default=0,
                         help='stop after this many steps (default: the whole trace)')
     parser.add_argument('--startup-timeout-s', type=float, default=30.0,
                         help='how long to wait for the graph to connect (default: %(default)s)')

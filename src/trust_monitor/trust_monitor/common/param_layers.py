@@ -37,6 +37,8 @@ SHARE_PACKAGE = 'trust_monitor'
 MAX_PARAMS_BYTES = 1 << 20
 """Largest params file read (1 MiB; the shipped one is 5 kB)."""
 WILDCARD_TOKENS = ('*', '**')
+_KINDS = {bool: 'a boolean', int: 'an integer', float: 'a double', str: 'a string',
+          list: 'a list'}
 
 
 def shipped_params_file(name: str = SHIPPED_PARAMS) -> Path:
@@ -61,7 +63,7 @@ def shipped_params_file(name: str = SHIPPED_PARAMS) -> Path:
         pass  # not a colcon install of this package: use the source tree below
     source = here.parents[1] / 'config' / name
     if source.exists():
-        return source
+        return source.resolve()
     raise ParamsError(f'cannot find the shipped params file {name}: neither share/'
                       f'{SHARE_PACKAGE}/config/ of a colcon install nor the source tree '
                       f'({source.parent}) has it')
@@ -203,8 +205,8 @@ def layered_params(layers: Sequence[ParsedParams], fqn: str) -> dict[str, Any]:
         if _same(got, value):
             continue
         if type(got) is not type(value):
-            why = (f'rcl keeps the {type(got).__name__} written for it in an earlier file; '
-                   f'write a {type(got).__name__} here')
+            kind = _KINDS.get(type(got), type(got).__name__)
+            why = f'rcl keeps the {kind} written for it in an earlier file; write {kind} here'
         else:
             why = ('a section of an earlier file that applies to this node is applied after '
                    'this one (rcl applies sections in the order they first appear); write it '

@@ -113,6 +113,17 @@ def param(description: str, *, unit: str = '', low: float | None = None,
     return dataclasses.field(default=default, metadata={PARAM_METADATA_KEY: spec})
 
 
+CONTROL_STEP_RANGE_S = (0.01, 10.0)
+"""Allowed control step dt_s, s: 100 Hz to one step per 10 s (the paper's is 1 s). Together
+with ``preceding_traffic.traces.MAX_TRACE_STEPS`` it bounds a run's length in steps."""
+
+
+def control_step_param() -> Any:
+    """The ``dt_s`` field every component that steps declares (one range for all)."""
+    low, high = CONTROL_STEP_RANGE_S
+    return param('control step', unit='s', low=low, high=high)
+
+
 def field_spec(cls: type, name: str) -> ParamSpec | None:
     """The :class:`ParamSpec` of field ``name`` of dataclass ``cls`` (None if it has none).
 

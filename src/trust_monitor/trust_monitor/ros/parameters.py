@@ -78,7 +78,7 @@ def node_overrides(node: Node) -> dict[str, Any]:
     ``Node.__init__`` from rcl's merged ``--params-file``/``-p`` values for this node); it
     has no public accessor, and both the coercion and the unknown-name check need them.
     """
-    overrides: dict[str, Parameter] = node._parameter_overrides  # noqa: SLF001
+    overrides: dict[str, Parameter] = node._parameter_overrides
     return {name: param.value for name, param in overrides.items()}
 
 
@@ -131,9 +131,10 @@ def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None
         elif name in shipped:
             values[name] = check_type(name, shipped[name], hints[name])
         elif field.default is dataclasses.MISSING:
-            where = shipped_path or 'config/trust_av.yaml of the trust-av sources'
-            raise ParamsError(f'parameter {name} is missing ({cls.__name__}): pass '
-                              f'--ros-args -p {name}:=VALUE or --params-file {where}')
+            hint = (f'pass --ros-args -p {name}:=VALUE' if shipped_path else
+                    'the shipped params file was not found: pass --ros-args --params-file '
+                    'config/trust_av.yaml of the trust-av sources')
+            raise ParamsError(f'parameter {name} is missing ({cls.__name__}): {hint}')
     config = build_config(cls, values)
     for field in dataclasses.fields(cls):  # type: ignore[arg-type]
         name = field.name

@@ -75,6 +75,24 @@ class GraphNode(Protocol):
         """Called once before the node is destroyed (finish files, write statistics)."""
 
 
+def start_node(factory: Callable[[], Node]) -> Node:
+    """Build a node and refuse it if it got a parameter override that neither it nor any node
+    of the graph has (:func:`trust_monitor.ros.parameters.check_overrides`); needs
+    ``rclpy.init`` first.
+
+    Raises:
+        ParamsError: a bad or unknown parameter (the node is closed and destroyed).
+    """
+    node = factory()
+    try:
+        check_overrides(node)
+    except ParamsError:
+        node.close()  # type: ignore[attr-defined]
+        node.destroy_node()
+        raise
+    return node
+
+
 def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
               user_errors: tuple[type[BaseException], ...] = (ValueError,)) -> int:
     """A node's whole life, the three steps of ros2/examples with a safe stop::
@@ -89,8 +107,9 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     ``factory`` builds a node that is also a :class:`GraphNode`. Start-up errors of the kinds
     in ``user_errors`` (bad parameters, an unreadable trace), and a parameter override that
     neither the node nor any node of the graph has (:func:`check_overrides`), are printed as
-    one line and give exit code 2; anything else propagates with its traceback, so the orchestrator can name
-    the node that died. SIGINT and SIGTERM end the node cleanly (exit code 0).
+    one line and give exit code 2; anything else propagates with its traceback, so the
+    orchestrator can name the node that died. SIGINT and SIGTERM end the node cleanly (exit
+    code 0).
 
     Args:
         factory: builds the node (its constructor).
@@ -124,8 +143,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     signal.signal(signal.SIGTERM, request_stop)
     try:
         try:
-            node = factory()
-            check_overrides(node)
+            node = start_node(factory)
         except (*user_errors, ParamsError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
             print(f'error: {err}', file=sys.stderr)
