@@ -187,7 +187,7 @@ def read_samples(path: Path, config: TraceConfig) -> tuple[np.ndarray, np.ndarra
     with handle:
         if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
             raise TraceError(f'{path}: not a regular file (expected a time_s,speed_mps CSV)')
-        reader = csv.reader(_lines(handle, path))
+        reader = csv.reader(_lines(handle, path), strict=True)
         try:
             return _parse(path, reader, config)
         except UnicodeDecodeError as err:

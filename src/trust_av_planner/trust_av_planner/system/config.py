@@ -11,15 +11,17 @@ the component's frozen dataclass, exactly as the nodes check them.
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from human_driver_sim.driver_mpc import DriverConfig
 from preceding_traffic.traces import SpeedTrace, TraceConfig
 from trust_av_planner.nmpc import PlannerConfig
 from trust_monitor.common.param_layers import (
+    Layered,
     layer_files,
     layered_params,
     node_fqn,
@@ -84,6 +86,8 @@ class PlannerTopics:
         require(self.human_odom_topic == '' or self.human_odom_topic.startswith('/'),
                 f'human_odom_topic must be empty or absolute, got {self.human_odom_topic!r}')
 
+
+T = TypeVar('T')
 
 # Node name -> the configuration classes its section may hold.
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
@@ -183,13 +187,24 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
     traffic = layered_params(layers, node_fqn(namespace, 'preceding_traffic'))
     planner = layered_params(layers, node_fqn(namespace, 'planner'))
     return RunConfig(
-        shared=build_config(SharedConfig, traffic),
-        trace=build_config(TraceConfig, traffic),
-        planner=build_config(PlannerConfig, planner),
-        driver=build_config(DriverConfig,
-                            layered_params(layers, node_fqn(namespace, 'human_driver'))),
-        trust=build_config(TrustConfig,
-                           layered_params(layers, node_fqn(namespace, 'trust_monitor'))),
+        shared=_build(SharedConfig, traffic),
+        trace=_build(TraceConfig, traffic),
+        planner=_build(PlannerConfig, planner),
+        driver=_build(DriverConfig, layered_params(layers, node_fqn(namespace, 'human_driver'))),
+        trust=_build(TrustConfig, layered_params(layers, node_fqn(namespace, 'trust_monitor'))),
         params_files=paths,
         namespace=namespace,
     )
+
+
+def _build(cls: type[T], params: Layered) -> T:
+    """:func:`build_config`, its error prefixed with the file(s) that set the named values."""
+    try:
+        return build_config(cls, params)
+    except ParamsError as err:
+        named = [f.name for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+                 if re.search(rf'\b{f.name}\b', str(err)) and f.name in params.sources]
+        where = sorted({params.sources[name] for name in named})
+        if not where:
+            raise
+        raise ParamsError(f'{", ".join(where)}: {err}') from err

@@ -37,8 +37,9 @@ SHARE_PACKAGE = 'trust_monitor'
 MAX_PARAMS_BYTES = 1 << 20
 """Largest params file read (1 MiB; the shipped one is 5 kB)."""
 WILDCARD_TOKENS = ('*', '**')
-_KINDS = {bool: 'a boolean', int: 'an integer', float: 'a double', str: 'a string',
-          list: 'a list'}
+_KINDS = {bool: 'boolean', int: 'integer', float: 'double', str: 'string', list: 'list'}
+_ARTICLES = {'integer': 'an'}
+_DBL_MIN = 2.2250738585072014e-308  # smallest normal double: strtod gives ERANGE below
 
 
 def shipped_params_file(name: str = SHIPPED_PARAMS) -> Path:
@@ -144,6 +145,9 @@ def _scalar_text(value: Any) -> str:
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
+        if value != 0.0 and abs(value) < _DBL_MIN:
+            raise ParamsError(f'cannot pass {value!r} in a params file: rcl reads a subnormal '
+                              'double as a string')
         text = repr(value)
         return text if any(c in text for c in '.en') else text + '.0'
     if isinstance(value, str):
@@ -175,7 +179,15 @@ def _same(a: Any, b: Any) -> bool:
     return type(a) is type(b) and repr(a) == repr(b)
 
 
-def layered_params(layers: Sequence[ParsedParams], fqn: str) -> dict[str, Any]:
+class Layered(dict):  # type: ignore[type-arg]
+    """A node's parameters (name to value) with the file each came from (:attr:`sources`)."""
+
+    def __init__(self, values: Mapping[str, Any], sources: Mapping[str, str]) -> None:
+        super().__init__(values)
+        self.sources = dict(sources)
+
+
+def layered_params(layers: Sequence[ParsedParams], fqn: str) -> Layered:
     """The parameters node ``fqn`` gets from ``--params-file`` once per layer, in order.
 
     Exactly rcl's and rclpy's result (:func:`rcl_yaml.params_for_node`), refused where that
@@ -186,32 +198,35 @@ def layered_params(layers: Sequence[ParsedParams], fqn: str) -> dict[str, Any]:
         fqn: the node's fully qualified name, e.g. ``/planner`` or ``/car1/planner``.
 
     Returns:
-        Parameter name to value.
+        Parameter name to value; ``sources`` names the file each value came from.
 
     Raises:
         ParamsError: a parameter without a value, or a value of a later file that would not
             reach the node (one line naming the file, the parameter and what the node would
             get instead).
     """
-    merged = params_for_node(layers, fqn)
-    if len(layers) < 2:
-        return merged
     written: dict[str, tuple[Any, str]] = {}
     for layer in layers:
-        for name, value in params_for_node([layer], fqn).items():
+        try:
+            values = params_for_node([layer], fqn)
+        except ParamsError as err:
+            raise ParamsError(f'{layer.where}: {err}') from err
+        for name, value in values.items():
             written[name] = (value, layer.where)
+    merged = params_for_node(layers, fqn)
     for name, (value, where) in written.items():
         got = merged[name]
         if _same(got, value):
             continue
         if type(got) is not type(value):
             kind = _KINDS.get(type(got), type(got).__name__)
-            why = f'rcl keeps the {kind} written for it in an earlier file; write {kind} here'
+            why = (f'rcl keeps the {kind} written for it in an earlier file; write '
+                   f'{_ARTICLES.get(kind, "a")} {kind} here')
         else:
             why = ('a section of an earlier file that applies to this node is applied after '
                    'this one (rcl applies sections in the order they first appear); write it '
-                   f'in a section that first appears in this file, e.g. '
+                   'in a section that first appears in this file, e.g. '
                    f'/**/{fqn.rsplit("/", 1)[-1]}')
         raise ParamsError(f'{where}: parameter {name} = {value!r} would not reach {fqn}, which '
                           f'would get {got!r}: {why}')
-    return merged
+    return Layered(merged, {name: where for name, (_, where) in written.items()})
