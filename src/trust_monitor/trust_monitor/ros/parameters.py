@@ -127,6 +127,8 @@ def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None
         if node.has_parameter(name):
             values[name] = node.get_parameter(name).value
         elif name in overrides:
+            if overrides[name] is None:  # rcl holds the name without a value (e.g. [])
+                raise ParamsError(f'parameter {name} has no value (e.g. [] or {{}})')
             values[name] = check_type(name, overrides[name], hints[name])
         elif name in shipped:
             values[name] = check_type(name, shipped[name], hints[name])

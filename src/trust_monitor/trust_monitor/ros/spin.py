@@ -13,6 +13,7 @@ import rclpy
 from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
@@ -75,6 +76,22 @@ class GraphNode(Protocol):
         """Called once before the node is destroyed (finish files, write statistics)."""
 
 
+def init_rclpy(args: list[str]) -> None:
+    """``rclpy.init`` without rclpy's signal handlers; a command line rcl refuses (a params
+    file it cannot parse, a bad ``-p``) becomes one line.
+
+    Raises:
+        ParamsError: rcl refused the arguments; the message is rcl's first line.
+    """
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except _rclpy.RCLError as err:
+        # e.g. "failed to initialize rcl: Couldn't parse params file: '--params-file F'.
+        # Error: Will not support aliasing at line 4\n, at .../parse.c:893, at ..."
+        first = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ParamsError(f'rcl refused the command line: {first.rstrip(", ")}') from err
+
+
 def start_node(factory: Callable[[], Node]) -> Node:
     """Build a node and refuse it if it got a parameter override that neither it nor any node
     of the graph has (:func:`trust_monitor.ros.parameters.check_overrides`); needs
@@ -135,8 +152,11 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     def request_stop(_signum: int, _frame: object) -> None:
         stop['requested'] = True
 
-    rclpy.init(args=args if args is not None else sys.argv,
-               signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        init_rclpy(args if args is not None else sys.argv)
+    except ParamsError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
     node = None
     executor = EventsExecutor()
     signal.signal(signal.SIGINT, request_stop)
