@@ -73,7 +73,6 @@ def test_twist_stamped_source(tmp_path: Path) -> None:
 def odometry_bag(path: Path, stamps_ns: list[int], log_times_ns: list[int],
                  speeds: list[float]) -> Path:
     """A bag of Odometry whose header stamps and log times differ (a sim-time recording)."""
-    types = TYPESTORE.types
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conn = writer.add_connection(TOPIC, 'nav_msgs/msg/Odometry', typestore=TYPESTORE)
         for (ns, msg), log_ns in zip(odometry_messages(np.array(stamps_ns) * 1e-9,
@@ -110,7 +109,7 @@ def test_impossible_speed_in_a_bag(tmp_path: Path) -> None:
 
 def test_bag_shorter_than_one_step(tmp_path: Path) -> None:
     bag = odometry_bag(tmp_path / 'short', [0, 5 * 10**8], [0, 5 * 10**8], [1.0, 2.0])
-    with pytest.raises(BagError, match='spans 0.5 s, shorter than one control step'):
+    with pytest.raises(BagError, match=r'spans 0\.5 s, shorter than one control step'):
         load_bag_trace(bag, TOPIC, 'nav_msgs/msg/Odometry', 1.0, CONFIG)
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import stat
+import sys
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -45,7 +46,8 @@ _DBL_MIN = 2.2250738585072014e-308  # smallest normal double: strtod gives ERANG
 def shipped_params_file(name: str = SHIPPED_PARAMS) -> Path:
     """A shipped params file: ``share/trust_monitor/config/<name>`` when this package was
     installed by colcon (found through ament_index_python), else the source tree's
-    ``config/<name>``.
+    ``config/<name>`` (an editable install), else ``<sys.prefix>/share/trust_monitor/config``
+    (a wheel).
 
     Raises:
         ParamsError: neither place has the file.
@@ -65,9 +67,12 @@ def shipped_params_file(name: str = SHIPPED_PARAMS) -> Path:
     source = here.parents[1] / 'config' / name
     if source.exists():
         return source.resolve()
+    installed = Path(sys.prefix) / 'share' / SHARE_PACKAGE / 'config' / name  # pip install
+    if installed.exists():
+        return installed
     raise ParamsError(f'cannot find the shipped params file {name}: neither share/'
-                      f'{SHARE_PACKAGE}/config/ of a colcon install nor the source tree '
-                      f'({source.parent}) has it')
+                      f'{SHARE_PACKAGE}/config/ of a colcon or pip install nor the source '
+                      f'tree ({source.parent}) has it')
 
 
 def layer_files(files: str | Path | Iterable[str | Path] = (),
