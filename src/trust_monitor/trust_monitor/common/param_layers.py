@@ -53,17 +53,9 @@ def shipped_params_file(name: str = SHIPPED_PARAMS) -> Path:
         ParamsError: neither place has the file.
     """
     here = Path(__file__).resolve()
-    try:
-        from ament_index_python.packages import (  # a ROS install; absent in a bare venv
-            PackageNotFoundError,
-            get_package_prefix,
-            get_package_share_directory,
-        )
-        prefix = Path(get_package_prefix(SHARE_PACKAGE)).resolve()
-        if prefix in here.parents:  # this module is the installed copy
-            return Path(get_package_share_directory(SHARE_PACKAGE)) / 'config' / name
-    except (ImportError, PackageNotFoundError, OSError, ValueError):
-        pass  # not a colcon install of this package: use the source tree below
+    installed_by_colcon = _colcon_share(here)
+    if installed_by_colcon is not None:
+        return installed_by_colcon / 'config' / name
     source = here.parents[1] / 'config' / name
     if source.exists():
         return source.resolve()
@@ -73,6 +65,26 @@ def shipped_params_file(name: str = SHIPPED_PARAMS) -> Path:
     raise ParamsError(f'cannot find the shipped params file {name}: neither share/'
                       f'{SHARE_PACKAGE}/config/ of a colcon or pip install nor the source '
                       f'tree ({source.parent}) has it')
+
+
+def _colcon_share(module: Path) -> Path | None:
+    """``share/trust_monitor`` of the colcon install ``module`` belongs to (None: the module
+    is not an installed copy, or there is no ament index at all, as in a bare venv)."""
+    try:
+        from ament_index_python.packages import (
+            PackageNotFoundError,
+            get_package_prefix,
+            get_package_share_directory,
+        )
+    except ImportError:
+        return None
+    try:
+        prefix = Path(get_package_prefix(SHARE_PACKAGE)).resolve()
+    except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH is not set
+        return None
+    if prefix not in module.parents:  # another install: this module is the source tree
+        return None
+    return Path(get_package_share_directory(SHARE_PACKAGE))
 
 
 def layer_files(files: str | Path | Iterable[str | Path] = (),
