@@ -373,7 +373,7 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
                             {'bag_path': str(bag), 'expected_steps': steps})
     clock = StepClock(steps)
     with lease_domain() as domain:
-        graph = Graph(specs, DEFAULT_PARAMS_FILE, domain, work / 'logs')
+        graph = Graph(specs, (DEFAULT_PARAMS_FILE,), domain, work / 'logs')
         graph.env['PYTHONPATH'] = os.pathsep.join(
             [str(HERE), *filter(None, [graph.env.get('PYTHONPATH')])])
         with graph_session(graph, 'orchestrator') as session:

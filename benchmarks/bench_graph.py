@@ -36,7 +36,7 @@ from preceding_traffic.traces import SpeedTrace, truncate
 from trust_av_planner.graph.bag_records import records_from_bag
 from trust_av_planner.graph.orchestrator import GraphRun, run_graph
 from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, RunConfig, load_run_config
+from trust_av_planner.system.config import RunConfig, load_run_config
 from trust_av_planner.system.metrics import StepRecord
 
 
@@ -64,7 +64,7 @@ def time_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, work: Path,
                max_steps: int) -> tuple[dict[str, Any], GraphRun]:
     """One graph run, timed as :func:`bench_floor.run_floor` times the floor."""
     clock = StepClock(trace.steps)
-    run = run_graph(config, trace_arg, trace, DEFAULT_PARAMS_FILE, work / 'b',
+    run = run_graph(config, trace_arg, trace, work / 'b',
                     max_steps=max_steps, on_clock=clock.on_step)
     clock.end()
     figures = clock.figures()

@@ -18,7 +18,6 @@ it logs ``done`` and stops publishing, so the planner reports its inputs stale.
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import time
 from dataclasses import dataclass
@@ -33,9 +32,9 @@ from trajectory_msgs.msg import JointTrajectory
 
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.sources import load_trace
-from preceding_traffic.traces import TraceConfig
+from preceding_traffic.traces import TraceConfig, truncate
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
-from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.params import check_fields, control_step_param, param
 from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
 from trust_monitor.ros.messages import msg_ns, odometry, time_msg, trajectory
 from trust_monitor.ros.parameters import declare_config
@@ -54,7 +53,7 @@ class TrafficRunConfig:
         max_steps: stop after this many steps (0: the whole trace).
     """
 
-    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    dt_s: float = control_step_param()
     horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
     initial_position_m: float = param("the preceding vehicle's position at the first step",
                                       unit='m', default=0.0)
@@ -76,10 +75,7 @@ class TrafficNode(Node):
         trace_config = declare_config(self, TraceConfig)
         self.clock = declare_config(self, WallClockConfig)
         trace = load_trace(trace_config.trace, self.run.dt_s, trace_config)
-        if self.run.max_steps:
-            trace = dataclasses.replace(
-                trace, speeds_mps=trace.speeds_mps[:self.run.max_steps + 1])
-        self.trace = trace
+        self.trace = truncate(trace, self.run.max_steps)  # the length only: same preview
         self.position_m = self.run.initial_position_m
         self.step = -1
         self.done = False

@@ -27,7 +27,7 @@ from std_msgs.msg import Empty
 
 from trust_monitor.common.kinematics import VehicleState, advance, integrate
 from trust_monitor.common.lockstep import stamp_ns
-from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.params import check_fields, control_step_param, param
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import msg_ns, odometry
 from trust_monitor.ros.parameters import declare_config
@@ -39,7 +39,7 @@ from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 class PlantConfig:
     """A simulated vehicle: step and initial odometry (the orchestrator computes these)."""
 
-    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    dt_s: float = control_step_param()
     initial_position_m: float = param("the AV's initial position", unit='m')
     initial_speed_mps: float = param("the AV's initial speed", unit='m/s', low=0.0)
     start_time_s: float = param('time of the initial odometry (the first step)', unit='s')

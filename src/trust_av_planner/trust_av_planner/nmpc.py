@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from trust_monitor.common import kinematics
-from trust_monitor.common.params import check_fields, param, require
+from trust_monitor.common.params import check_fields, control_step_param, param, require
 from trust_monitor.common.solver import sqp_options
 from trust_monitor.trust_model import TrustConfig, explicability, explicability_bound
 
@@ -53,7 +53,7 @@ the active gap and speed bounds have opposite gradients); otherwise the step fal
 class PlannerConfig:
     """Parameters of the AV's NMPC (Table I and docs/MODEL.md)."""
 
-    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    dt_s: float = control_step_param()
     horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
     standstill_gap_m: float = param('standstill gap d_s', unit='m')
     time_headway_s: float = param('desired time headway tau_R of the CTH policy', unit='s',

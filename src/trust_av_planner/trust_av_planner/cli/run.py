@@ -7,7 +7,13 @@ from pathlib import Path
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.cli.options import Progress, add_run_options, format_metrics, run_overrides
+from trust_av_planner.cli.options import (
+    Progress,
+    add_run_options,
+    format_metrics,
+    run_overrides,
+    steps_value,
+)
 from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.graph.orchestrator import run_graph_records
 from trust_av_planner.study.plots import run_overview
@@ -17,7 +23,7 @@ from trust_av_planner.system.metrics import compute_metrics
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av run``."""
-    config = load_run_config(args.params_file, run_overrides(args))
+    config = load_run_config(args.params_files, run_overrides(args))
     trace = truncate(load_trace(config.trace.trace, config.planner.dt_s, config.trace),
                      args.max_steps)
     bag: Path = args.bag or Path('bags') / (
@@ -26,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
     bar = None if args.no_progress else Progress(f'graph {trace.name}', trace.steps)
     try:
         result, records = run_graph_records(
-            config, config.trace.trace, trace, args.params_file, outputs.bag,
+            config, config.trace.trace, trace, outputs.bag,
             max_steps=args.max_steps, startup_timeout_s=args.startup_timeout_s,
             log_dir=outputs.logs, on_step=None if bar is None else bar.update)
     finally:
@@ -62,7 +68,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                              'alpha<alpha>)')
     parser.add_argument('--overwrite', action='store_true',
                         help='replace an existing bag directory, plot and logs')
-    parser.add_argument('--max-steps', type=int, default=0,
+    parser.add_argument('--max-steps', type=steps_value, default=0,
                         help='stop after this many steps (default: the whole trace)')
     parser.add_argument('--startup-timeout-s', type=float, default=30.0,
                         help='how long to wait for the graph to connect (default: %(default)s)')

@@ -15,7 +15,8 @@ from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.shadow import ShadowRun, run_shadow, run_wall_graph
 from trust_av_planner.nmpc import PREDICTORS
 from trust_av_planner.system.config import PlannerTopics, load_run_config
-from trust_monitor.common.params import build_config, node_params, read_params_file
+from trust_monitor.common.param_layers import layered_params, node_fqn, read_layers
+from trust_monitor.common.params import build_config
 from trust_monitor.common.wall_clock import WallClockConfig, format_summary
 
 
@@ -51,15 +52,16 @@ def run(args: argparse.Namespace) -> int:
     if args.predictor is not None:
         planner['predictor'] = args.predictor
     overrides['planner'] = planner
-    config = load_run_config(args.params_file, overrides)
-    planner_section = node_params(read_params_file(args.params_file), 'planner')
+    config = load_run_config(args.params_files, overrides)
+    planner_section = layered_params(read_layers(config.params_files), node_fqn('/', 'planner'))
     clock = build_config(WallClockConfig, planner_section)
     topics = build_config(PlannerTopics, planner_section)
     rate_hz = args.rate_hz if args.rate_hz is not None else clock.control_rate_hz
     if args.whole_graph and topics != PlannerTopics():
+        files = ', '.join(str(p) for p in config.params_files)
         raise TrustAvPlannerError('--whole-graph runs the simulated nodes on the standard topics; '
-                                  f'the params file {args.params_file} remaps the planner '
-                                  f'inputs: {topics}')
+                                  f'the params files ({files}) remap the planner inputs: '
+                                  f'{topics}')
     if not args.whole_graph and config.planner.predictor != 'ca':
         raise TrustAvPlannerError('trust-av shadow has no human follower state: it needs '
                                   f'predictor ca (got {config.planner.predictor}) or '
@@ -72,11 +74,11 @@ def run(args: argparse.Namespace) -> int:
     print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '
           f'{nodes} at {rate_hz:g} Hz', flush=True)
     if args.whole_graph:
-        result = run_wall_graph(config, str(args.bag), trace, args.params_file, outputs.bag,
+        result = run_wall_graph(config, str(args.bag), trace, outputs.bag,
                                 duration_s=duration_s, rate_hz=rate_hz,
                                 startup_timeout_s=args.startup_timeout_s)
     else:
-        result = run_shadow(config, trace, args.params_file, outputs.bag, duration_s=duration_s,
+        result = run_shadow(config, trace, outputs.bag, duration_s=duration_s,
                             rate_hz=rate_hz, topics=topics,
                             startup_timeout_s=args.startup_timeout_s)
     print('\n'.join(summary_lines(result)))

@@ -79,8 +79,8 @@ class GraphRun:
     startup_s: float
 
 
-def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
-              bag: Path, *, max_steps: int = 0, startup_timeout_s: float = 30.0,
+def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *,
+              max_steps: int = 0, startup_timeout_s: float = 30.0,
               step_timeout_s: float = 30.0, log_dir: Path | None = None,
               on_step: Callable[[int, int], None] | None = None,
               on_clock: Callable[[int], None] | None = None) -> GraphRun:
@@ -88,10 +88,10 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
     directory ``bag`` (it must not exist).
 
     Args:
-        config: the run configuration (the params file's, with the command's overrides).
+        config: the run configuration (its params files, in order, are what every node
+            gets; the command's overrides become per-run values).
         trace_arg: the trace as the traffic node gets it (name, CSV or bag path).
         trace: the loaded trace (its steps decide when the run is complete).
-        params_file: the params file every node gets.
         bag: the bag directory to record to.
         max_steps: stop after this many steps (0: the whole trace).
         startup_timeout_s: how long the graph may take to connect, s.
@@ -117,7 +117,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
     started = time.monotonic()
     logs = log_dir if log_dir is not None else bag.with_name(bag.name + '.logs')
     with lease_domain(foreign_participants) as domain:
-        graph = Graph(specs, params_file, domain, logs)
+        graph = Graph(specs, config.params_files, domain, logs)
         try:
             with graph_session(graph, 'orchestrator') as session:
                 node = session.node
@@ -176,15 +176,15 @@ def _finish_recording(graph: Graph, bag: Path) -> None:
         repair_bag(bag)
 
 
-def run_graph_records(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
-                      bag: Path, **options: Any) -> tuple[GraphRun, list[StepRecord]]:
+def run_graph_records(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path,
+                      **options: Any) -> tuple[GraphRun, list[StepRecord]]:
     """:func:`run_graph`, then the recording read back (rosbags) as one record per step.
 
     Raises:
         GraphError: as :func:`run_graph`.
         TrustAvPlannerError: the recording does not hold every step of the run.
     """
-    result = run_graph(config, trace_arg, trace, params_file, bag, **options)
+    result = run_graph(config, trace_arg, trace, bag, **options)
     records = records_from_bag(bag)
     if len(records) != trace.steps:
         raise TrustAvPlannerError(f'{bag}: {len(records)} complete steps recorded, expected '

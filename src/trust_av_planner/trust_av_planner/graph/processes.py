@@ -15,13 +15,13 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-import yaml
-
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_monitor.common.param_layers import node_fqn, to_params_text
 from trust_monitor.ros.spin import PARENT_ENV
 
 GRACE_S = {'SIGINT': 5.0, 'SIGTERM': 3.0}
@@ -78,10 +78,10 @@ class Process:
 class Graph:
     """The processes of one run."""
 
-    def __init__(self, specs: list[NodeSpec], params_file: Path, domain: int,
+    def __init__(self, specs: list[NodeSpec], params_files: Sequence[Path], domain: int,
                  log_dir: Path, namespace: str = '/') -> None:
         self.specs = specs
-        self.params_file = params_file
+        self.params_files = tuple(params_files)
         self.domain = domain
         self.log_dir = log_dir
         self.namespace = namespace
@@ -94,19 +94,23 @@ class Graph:
     def start(self) -> None:
         """Start every node process.
 
-        Per-run values go into a second params file with one section per node, after the
-        user's file: a node-specific entry there beats the same key in the user's file
-        (``-p`` would not: rcl lets a node's own section win over a command-line ``-p``).
+        Every node gets the run's params files in the same order (layers: the shipped file
+        first), then one more file with the per-run values, one section per node under its
+        fully qualified name: written after everything else, it wins over the same key in
+        the user's files (``-p`` would not: rcl lets a node's own section win over a
+        command-line ``-p``); written by :func:`~trust_monitor.common.param_layers.
+        to_params_text`, so rcl reads back exactly these values and types.
         """
         self.log_dir.mkdir(parents=True, exist_ok=True)
         run_params = self.log_dir / 'run_params.yaml'
-        run_params.write_text(yaml.safe_dump(
-            {spec.name: {'ros__parameters': spec.params} for spec in self.specs if spec.params},
-            sort_keys=True))
+        run_params.write_text(to_params_text(
+            {node_fqn(self.namespace, spec.name): spec.params
+             for spec in self.specs if spec.params}))
+        layers = [arg for path in self.params_files for arg in ('--params-file', str(path))]
         for spec in self.specs:
             command = [sys.executable, '-m', spec.module, '--ros-args', '-r',
-                       f'__node:={spec.name}', '-r', f'__ns:={self.namespace}',
-                       '--params-file', str(self.params_file), '--params-file', str(run_params)]
+                       f'__node:={spec.name}', '-r', f'__ns:={self.namespace}', *layers,
+                       '--params-file', str(run_params)]
             log_path = self.log_dir / f'{spec.name}.log'
             log = log_path.open('wb')
             popen = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,

@@ -76,7 +76,7 @@ def shadow_specs(config: RunConfig, trace: SpeedTrace, rate_hz: float,
     ]
 
 
-def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Path, *,
+def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                duration_s: float, rate_hz: float, topics: PlannerTopics | None = None,
                startup_timeout_s: float = 30.0) -> ShadowRun:
     """Replay ``trace`` for ``duration_s`` of wall time at ``rate_hz`` into the two nodes.
@@ -99,7 +99,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
     log_dir = bag.with_name(bag.name + '.logs')
     period_ns = round(NS_PER_S / rate_hz)
     with lease_domain() as domain:
-        graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), params_file, domain,
+        graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), config.params_files, domain,
                       log_dir)
         with graph_session(graph, 'shadow_player') as session:
             node, executor = session.node, session.executor
@@ -177,8 +177,8 @@ def wall_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, rate_hz: fl
             for spec in specs if spec.name in WALL_GRAPH_NODES]
 
 
-def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
-                   bag: Path, *, duration_s: float, rate_hz: float,
+def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *,
+                   duration_s: float, rate_hz: float,
                    startup_timeout_s: float = 30.0) -> ShadowRun:
     """Every node in wall mode for ``duration_s`` of wall time after ``/sim/start``; every
     topic recorded to the bag directory ``bag`` (log time = header stamp = wall time).
@@ -202,7 +202,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_
     needs['/sim/start'] = (1, 3)
     log_dir = bag.with_name(bag.name + '.logs')
     with lease_domain() as domain:
-        graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), params_file,
+        graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), config.params_files,
                       domain, log_dir)
         with graph_session(graph, 'wall_recorder') as session:
             node, executor = session.node, session.executor

@@ -150,7 +150,7 @@ def run_case(case: Case, params_file: str,
         # Left by an interrupted sweep (its case is not cached): the bag, its logs.
         for stale in (bag, bag.with_name(bag.name + '.logs')):
             shutil.rmtree(stale, ignore_errors=True)
-        _, records = run_graph_records(config, case.trace, trace, Path(params_file), bag,
+        _, records = run_graph_records(config, case.trace, trace, bag,
                                        max_steps=settings.max_steps)
     else:
         records = simulate(config, trace).records

@@ -113,6 +113,17 @@ def param(description: str, *, unit: str = '', low: float | None = None,
     return dataclasses.field(default=default, metadata={PARAM_METADATA_KEY: spec})
 
 
+CONTROL_STEP_RANGE_S = (0.01, 10.0)
+"""Allowed control step dt_s, s: 100 Hz to one step per 10 s (the paper's is 1 s). Together
+with ``preceding_traffic.traces.MAX_TRACE_STEPS`` it bounds a run's length in steps."""
+
+
+def control_step_param() -> Any:
+    """The ``dt_s`` field every component that steps declares (one range for all)."""
+    low, high = CONTROL_STEP_RANGE_S
+    return param('control step', unit='s', low=low, high=high)
+
+
 def field_spec(cls: type, name: str) -> ParamSpec | None:
     """The :class:`ParamSpec` of field ``name`` of dataclass ``cls`` (None if it has none).
 
@@ -145,7 +156,11 @@ def check_fields(config: object) -> None:
 
 
 def read_params_file(path: str | Path) -> dict[str, dict[str, Any]]:
-    """Read a ROS 2 params file.
+    """Read a ROS 2 params file with PyYAML (plain sections by exact name).
+
+    Not rcl's rules: runs read their params files with
+    :func:`trust_monitor.common.param_layers.read_layer` and
+    :func:`~trust_monitor.common.param_layers.layered_params`.
 
     Args:
         path: YAML file in ROS 2 params-file format.
@@ -186,7 +201,12 @@ def node_params(sections: Mapping[str, Mapping[str, Any]], node: str) -> dict[st
     return merged
 
 
-def _check_type(name: str, value: Any, hint: Any) -> Any:
+def check_type(name: str, value: Any, hint: Any) -> Any:
+    """``value`` as the type ``hint`` of field ``name`` (an integer is a valid double).
+
+    Raises:
+        ParamsError: another type, or a non-finite number.
+    """
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ParamsError(f'parameter {name}: expected a number, got {value!r}')
@@ -227,7 +247,7 @@ def build_config(cls: type[T], params: Mapping[str, Any]) -> T:
             if field.default is not dataclasses.MISSING:
                 continue
             raise ParamsError(f'parameter {field.name} is missing ({cls.__name__})')
-        kwargs[field.name] = _check_type(field.name, params[field.name], hints[field.name])
+        kwargs[field.name] = check_type(field.name, params[field.name], hints[field.name])
     try:
         return cls(**kwargs)
     except ParamsError:

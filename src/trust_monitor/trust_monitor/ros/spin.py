@@ -15,10 +15,13 @@ from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from trust_monitor.common.params import ParamsError
 from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
+from trust_monitor.ros.parameters import check_overrides
 
 
 class WallLoop:
@@ -89,23 +92,59 @@ class GraphNode(Protocol):
         """Called once before the node is destroyed (finish files, write statistics)."""
 
 
+def init_rclpy(args: list[str]) -> None:
+    """``rclpy.init`` without rclpy's signal handlers; a command line rcl refuses (a params
+    file it cannot parse, a bad ``-p``) becomes one line.
+
+    Raises:
+        ParamsError: rcl refused the arguments; the message is rcl's first line.
+    """
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except _rclpy.RCLError as err:
+        # e.g. "failed to initialize rcl: Couldn't parse params file: '--params-file F'.
+        # Error: Will not support aliasing at line 4\n, at .../parse.c:893, at ..."
+        first = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ParamsError(f'rcl refused the command line: {first.rstrip(", ")}') from err
+
+
+def start_node(factory: Callable[[], Node]) -> Node:
+    """Build a node and refuse it if it got a parameter override that neither it nor any node
+    of the graph has (:func:`trust_monitor.ros.parameters.check_overrides`); needs
+    ``rclpy.init`` first.
+
+    Raises:
+        ParamsError: a bad or unknown parameter (the node is closed and destroyed).
+    """
+    node = factory()
+    try:
+        check_overrides(node)
+    except ParamsError:
+        node.close()  # type: ignore[attr-defined]
+        node.destroy_node()
+        raise
+    return node
+
+
 def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
               user_errors: tuple[type[BaseException], ...] = (ValueError,)) -> int:
     """A node's whole life, the three steps of ros2/examples with a safe stop::
 
         rclpy.init(args)                        # 1. init (no rclpy signal handler)
-        node = factory()                        #    bad parameters -> one line, exit 2
+        node = factory()                        #    bad or unknown parameters -> one line,
+                                                #    exit 2
         while not (stop requested or node.finished):
             executor.spin_once(0.1 s)           # 2. spin (EventsExecutor)
         node.close(); node.destroy_node(); rclpy.try_shutdown()   # 3. shut down
 
     ``factory`` builds a node that is also a :class:`GraphNode`. Start-up errors of the kinds
-    in ``user_errors`` (bad parameters, an unreadable trace) are printed as one line and give
-    exit code 2; anything else propagates with its traceback, so the orchestrator can name
-    the node that died. SIGINT and SIGTERM end the node cleanly (its ``exit_code``), as does
-    the death of the process named by :data:`PARENT_ENV`: the node first takes what is
-    queued for :data:`DRAIN_S` and waits until its messages are acknowledged, so a recorder
-    stopped after it holds them.
+    in ``user_errors`` (bad parameters, an unreadable trace), and a parameter override that
+    neither the node nor any node of the graph has (:func:`check_overrides`), are printed as
+    one line and give exit code 2; anything else propagates with its traceback, so the
+    orchestrator can name the node that died. SIGINT and SIGTERM end the node cleanly (its
+    ``exit_code``), as does the death of the process named by :data:`PARENT_ENV`: the node
+    first takes what is queued for :data:`DRAIN_S` and waits until its messages are
+    acknowledged, so a recorder stopped after it holds them.
 
     Args:
         factory: builds the node (its constructor).
@@ -131,16 +170,19 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     def request_stop(_signum: int, _frame: object) -> None:
         stop['requested'] = True
 
-    rclpy.init(args=args if args is not None else sys.argv,
-               signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        init_rclpy(args if args is not None else sys.argv)
+    except ParamsError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
     node = None
     executor = EventsExecutor()
     signal.signal(signal.SIGINT, request_stop)
     signal.signal(signal.SIGTERM, request_stop)
     try:
         try:
-            node = factory()
-        except (*user_errors, InvalidParameterValueException,
+            node = start_node(factory)
+        except (*user_errors, ParamsError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
             print(f'error: {err}', file=sys.stderr)
             return 2
