@@ -25,6 +25,8 @@ from typing import Any
 
 from trust_monitor.common.params import check_fields, param
 
+SAME_MODEL = 'the planner and the monitor must run the same trust model'
+
 
 @dataclass(frozen=True)
 class TrustConfig:
@@ -39,12 +41,14 @@ class TrustConfig:
     """
 
     epsilon_mps2: float = param('acceleration offset eps of eq. (8)', unit='m/s^2', low=0.0,
-                                low_inclusive=False)
+                                low_inclusive=False, reason=SAME_MODEL)
     trust_growth_rate: float = param('trust growth rate delta of eq. (10), per second',
-                                     unit='1/s', low=0.0, low_inclusive=False)
+                                     unit='1/s', low=0.0, low_inclusive=False,
+                                     reason=SAME_MODEL)
     performance_threshold: float = param('performance threshold P_thre of eq. (11)', low=0.0,
-                                         high=1.0, low_inclusive=False, high_inclusive=False)
-    trust_initial: float = param('initial trust T(0)')
+                                         high=1.0, low_inclusive=False, high_inclusive=False,
+                                         reason=SAME_MODEL)
+    trust_initial: float = param('initial trust T(0)', reason=SAME_MODEL)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -156,6 +160,22 @@ def explicability_bound(trust: float, trust_min: float, config: TrustConfig,
     if required <= -1.0:
         return math.inf
     return max(math.atanh(-required), score_threshold)  # -tanh(E) >= required
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    """The trust monitor's time step in lock-step (each update covers ``dt_s`` seconds).
+
+    Attributes:
+        dt_s: control step of the lock-step graph, s.
+    """
+
+    dt_s: float = param('control step: the time each scored plan is applied for in '
+                        'lock-step', unit='s', low=0.0, low_inclusive=False,
+                        reason='the step of a deterministic run')
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 @dataclass(frozen=True)
