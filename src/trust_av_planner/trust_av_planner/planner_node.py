@@ -47,6 +47,7 @@ from trust_monitor.ros.messages import (
     header,
     msg_ns,
     trajectory,
+    trajectory_times,
     trajectory_values,
 )
 from trust_monitor.ros.parameters import declare_config
@@ -64,12 +65,6 @@ TABLE_TOPIC = {'traffic': '/preceding_vehicle/odom', 'preview': '/preceding_vehi
 def vehicle(msg: Odometry) -> VehicleState:
     """Odometry to the core's vehicle state."""
     return VehicleState(float(msg.pose.pose.position.x), float(msg.twist.twist.linear.x))
-
-
-def point_times_s(msg: JointTrajectory) -> np.ndarray:
-    """``time_from_start`` of every point, s."""
-    return np.array([p.time_from_start.sec + p.time_from_start.nanosec / NS_PER_S
-                     for p in msg.points])
 
 
 class PlannerNode(Node):
@@ -233,8 +228,8 @@ class PlannerNode(Node):
         preview = None
         if items['preview'] is not None:
             msg: JointTrajectory = items['preview']  # type: ignore[assignment]
-            preview = interp_at(point_times_s(msg), np.array(trajectory_values(msg, 'velocities')),
-                                step_s, steps)
+            preview = interp_at(np.array(trajectory_times(msg)),
+                                np.array(trajectory_values(msg, 'velocities')), step_s, steps)
         out = self.planner.step(vehicle(items['traffic']), preview,  # type: ignore[arg-type]
                                 vehicle(items['ego']),  # type: ignore[arg-type]
                                 None if items['human'] is None

@@ -26,17 +26,11 @@ from trajectory_msgs.msg import JointTrajectory
 from trust_monitor.common.grids import hold_at
 from trust_monitor.common.lockstep import StepBuffer
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
-from trust_monitor.ros.messages import header, msg_ns, trajectory_values
+from trust_monitor.ros.messages import header, msg_ns, trajectory_times, trajectory_values
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 from trust_monitor.trust_model import MonitorConfig, TrustConfig, TrustEstimator
-
-
-def point_times_s(msg: JointTrajectory) -> np.ndarray:
-    """``time_from_start`` of every point, s."""
-    return np.array([p.time_from_start.sec + p.time_from_start.nanosec / NS_PER_S
-                     for p in msg.points])
 
 
 class MonitorNode(Node):
@@ -100,9 +94,9 @@ class MonitorNode(Node):
         """One trust step (the plan applied for ``dt_s`` seconds) from a plan pair, published
         stamped ``ns``; the expected plan is read on the plan's times."""
         values = trajectory_values(plan, 'accelerations')
-        times = point_times_s(plan)
+        times = trajectory_times(plan)
         step_s = float(times[1] - times[0]) if len(times) > 1 else self.step_s
-        held = hold_at(point_times_s(expected),
+        held = hold_at(np.array(trajectory_times(expected)),
                        np.array(trajectory_values(expected, 'accelerations')), step_s,
                        len(values))
         estimate = self.estimator.step(values, held.tolist(), dt_s)

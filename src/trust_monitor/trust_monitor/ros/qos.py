@@ -58,19 +58,29 @@ def command_deadline_s(clock: WallClockConfig) -> float:
     return 2.0 / clock.control_rate_hz
 
 
-def wall_qos(kind: str, clock: WallClockConfig) -> QoSProfile:
+def sensor_deadline_s(clock: WallClockConfig, publisher: bool) -> float:
+    """Deadline of a vehicle input: requested ``input_timeout_s`` by a subscription, offered
+    two control periods (at most ``input_timeout_s``) by a publisher, s."""
+    requested = clock.input_timeout_s
+    return min(command_deadline_s(clock), requested) if publisher else requested
+
+
+def wall_qos(kind: str, clock: WallClockConfig, publisher: bool = False) -> QoSProfile:
     """The wall-mode profile of a topic kind (the ``wall_qos`` column of the topic table).
 
-    Deadlines are offered by publishers and requested by subscriptions with the same period
-    (DDS matches a subscription only with publishers that offer a deadline at least as short:
-    a publisher without one does not match a subscription that requests one).
+    DDS matches a subscription that requests a deadline only with publishers that offer one
+    at least as short (a publisher without a deadline does not match): vehicle inputs are
+    requested with ``input_timeout_s`` and offered by this project's publishers with two
+    control periods; the command is offered and requested with two control periods.
 
     Args:
-        kind: ``SENSOR`` (vehicle inputs: best effort, volatile, keep last 1, deadline
-            ``input_timeout_s`` unless ``input_deadline_qos`` is false), ``COMMAND``
-            (reliable, volatile, keep last 1, deadline two control periods), ``STATE``
-            (reliable, volatile, keep last :data:`STATE_DEPTH`) or ``LATCHED``.
+        kind: ``SENSOR`` (vehicle inputs: best effort, volatile, keep last 1, a deadline
+            unless ``input_deadline_qos`` is false), ``COMMAND`` (reliable, volatile, keep
+            last 1, deadline two control periods), ``STATE`` (reliable, volatile, keep last
+            :data:`STATE_DEPTH`) or ``LATCHED``.
         clock: the node's wall-clock settings (rate, input timeout).
+        publisher: the profile of a publisher (the offered deadline) rather than of a
+            subscription (the requested one).
 
     Raises:
         KeyError: an unknown kind.
@@ -80,7 +90,7 @@ def wall_qos(kind: str, clock: WallClockConfig) -> QoSProfile:
                              reliability=ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.VOLATILE)
         if clock.input_deadline_qos:
-            profile.deadline = Duration(seconds=clock.input_timeout_s)
+            profile.deadline = Duration(seconds=sensor_deadline_s(clock, publisher))
         return profile
     if kind == 'COMMAND':
         return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -96,8 +106,8 @@ def wall_qos(kind: str, clock: WallClockConfig) -> QoSProfile:
     raise KeyError(f'unknown wall-mode QoS kind {kind!r}')
 
 
-def topic_qos(topic: str, clock: WallClockConfig) -> QoSProfile:
+def topic_qos(topic: str, clock: WallClockConfig, publisher: bool = False) -> QoSProfile:
     """The profile of a topic of the table in the node's clock mode: the lock-step profile
-    (``qos`` column) or the wall-mode one (``wall_qos`` column)."""
+    (``qos`` column) or the wall-mode one (``wall_qos`` column, :func:`wall_qos`)."""
     row = TOPIC[topic]
-    return wall_qos(row.wall_qos, clock) if clock.wall else QOS[row.qos]
+    return wall_qos(row.wall_qos, clock, publisher) if clock.wall else QOS[row.qos]
