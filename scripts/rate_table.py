@@ -28,9 +28,9 @@ def main() -> None:
     parser.add_argument('--max-steps-s', type=float, default=0.0,
                         help='only the first S seconds of each trace (0: all)')
     args = parser.parse_args()
-    print('| trace | predictor | alpha | final trust 1 / 10 Hz | mean E 1 / 10 Hz | RMSE 1 / 10 Hz '
-          '(m/s^2) | min AV gap 10 Hz (m) | unsafe / fallback / standstill fallback 10 Hz | '
-          'wall 10 Hz (s) |')
+    print('| trace | predictor | alpha | final trust 1 / 10 Hz | mean E 1 / 10 Hz | '
+          'RMSE 1 / 10 Hz (m/s^2) | min AV gap 10 Hz (m) | unsafe / fallback / standstill '
+          'fallback 10 Hz | wall 10 Hz (s) |')
     print('|---|---|---|---|---|---|---|---|---|')
     for trace in args.traces.split(','):
         for predictor in args.predictors.split(','):

@@ -4,6 +4,7 @@ jitter is measured by ``benchmarks/bench_shadow.py --vehicle``."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -136,7 +137,8 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
 
     params = tmp_path / 'run.yaml'
     params.write_text('planner:\n  ros__parameters:\n    clock_mode: wall\n'
-                      "    human_odom_topic: ''\n    predictor: ca\n    lead_preview: constant_speed\n"
+                      "    human_odom_topic: ''\n    predictor: ca\n"
+                      '    lead_preview: constant_speed\n'
                       '    speed_max_from_trace: false\n')
     clock = WallClockConfig(clock_mode='wall')
     with lease_domain() as domain:
@@ -269,3 +271,23 @@ def test_vehicle_in_the_loop_outage_decelerates_then_recovers(
     trust = vehicle_run['trust']
     late = [t for t in trust if t['t_s'] > 32.0]
     assert len(late) >= 200 and late[-1]['trust'] > late[0]['trust'] > 0.0  # trust goes on
+
+
+def test_reproduce_with_lead_preview_derives_the_params_file(tmp_path: Path) -> None:
+    from trust_av_planner.cli.reproduce import with_lead_preview
+
+    path = with_lead_preview(DEFAULT_PARAMS_FILE, 'constant_speed', tmp_path)
+    derived, shipped = load_run_config(path), load_run_config()
+    assert derived.planner.lead_preview == 'constant_speed'
+    assert shipped.planner.lead_preview == 'recorded'
+    assert derived.planner == dataclasses.replace(shipped.planner, lead_preview='constant_speed')
+    assert derived.trust == shipped.trust and derived.driver == shipped.driver
+
+
+@pytest.mark.parametrize(('option', 'value', 'message'), [
+    ('--control-rate-hz', '0', 'must be a finite rate > 0 Hz'),
+    ('--lead-preview', 'v2v', "invalid choice: 'v2v'")])
+def test_simulate_rejects_bad_rate_and_preview(option: str, value: str, message: str) -> None:
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'simulate', option,
+                           value], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and message in proc.stderr
