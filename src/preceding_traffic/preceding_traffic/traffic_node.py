@@ -38,7 +38,7 @@ from trust_monitor.common.params import check_fields, control_step_param, param
 from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
 from trust_monitor.ros.messages import msg_ns, odometry, time_msg, trajectory
 from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.qos import QOS, topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
@@ -81,9 +81,12 @@ class TrafficNode(Node):
         self.done = False
         self.buffer = StepBuffer(['ego', 'human', 'trust', 'status'])
         self.pub_clock = self.create_publisher(Clock, '/clock', QOS['CLOCK'])
-        self.pub_odom = self.create_publisher(Odometry, '/preceding_vehicle/odom', QOS['STEP'])
-        self.pub_preview = self.create_publisher(JointTrajectory,
-                                                 '/preceding_vehicle/speed_preview', QOS['STEP'])
+        self.pub_odom = self.create_publisher(
+            Odometry, '/preceding_vehicle/odom',
+            topic_qos('/preceding_vehicle/odom', self.clock, publisher=True))
+        self.pub_preview = self.create_publisher(
+            JointTrajectory, '/preceding_vehicle/speed_preview',
+            topic_qos('/preceding_vehicle/speed_preview', self.clock, publisher=True))
         self.create_subscription(Empty, '/sim/start', self.on_start, QOS['LATCHED'])
         self.replay = LeadReplay(trace, self.run.initial_position_m)
         self.start_ns: int | None = None

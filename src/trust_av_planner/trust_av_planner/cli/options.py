@@ -15,7 +15,7 @@ from tqdm import tqdm
 
 from preceding_traffic.traces import SHIPPED_TRACES
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.nmpc import PREDICTORS, PlannerConfig
+from trust_av_planner.nmpc import LEAD_PREVIEWS, PREDICTORS, PlannerConfig
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 from trust_av_planner.system.metrics import Metrics
 from trust_monitor.common.params import field_spec
@@ -107,13 +107,34 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="explicability weight in [0, 1] (default: the params file's)")
     parser.add_argument('--predictor', choices=PREDICTORS, default=None,
                         help='estimator of the plan the human expects (default: params file)')
+    add_lead_preview_option(parser)
     add_params_file_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+
+
+def add_lead_preview_option(parser: argparse.ArgumentParser) -> None:
+    """``--lead-preview``: the planner parameter ``lead_preview``."""
+    parser.add_argument('--lead-preview', choices=LEAD_PREVIEWS, default=None,
+                        help="the lead's speed over the horizon: the recorded preview, or "
+                             "built from the lead's odometry (default: the params file's)")
+
+
+def positive_hz(text: str) -> float:
+    """argparse type: a rate in Hz, > 0."""
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'expected a rate in Hz, got {text!r}') from err
+    if not value > 0.0 or value == float('inf'):
+        raise argparse.ArgumentTypeError(f'must be a finite rate > 0 Hz, got {text!r}')
+    return value
 
 
 def run_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
     """Params-file overrides from the command-line options."""
     planner: dict[str, object] = {}
+    if getattr(args, 'lead_preview', None) is not None:
+        planner['lead_preview'] = args.lead_preview
     if args.alpha is not None:
         planner['alpha'] = args.alpha
     if args.predictor is not None:

@@ -9,9 +9,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
-from trust_av_planner.cli.options import Progress
+from trust_av_planner.cli.options import Progress, add_lead_preview_option
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PREDICTORS as KNOWN_PREDICTORS
 from trust_av_planner.study import sweep, tables
@@ -19,12 +21,24 @@ from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_II
 from trust_av_planner.study.plots import speed_profiles, trust_over_time
 from trust_av_planner.study.sweep import Case
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_monitor.common.params import read_params_file
 
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
             'as_reported': DEFAULT_PARAMS_FILE.with_name('paper_as_reported.yaml')}
 """Parameter profiles: the paper's Table I, and the reading its printed mean E imply."""
 DEFAULT_RESULTS = {'table_i': Path('results/paper'),
                    'as_reported': Path('results/paper_as_reported')}
+
+
+def with_lead_preview(params_file: Path, lead_preview: str, out: Path) -> Path:
+    """A copy of ``params_file`` in ``out`` whose planner has ``lead_preview`` (the sweep's
+    cache keys on the params text, so each preview has its own cases)."""
+    sections = read_params_file(params_file)
+    sections.setdefault('planner', {})['lead_preview'] = lead_preview
+    path = out / f'params_lead_preview_{lead_preview}.yaml'
+    path.write_text(yaml.safe_dump({node: {'ros__parameters': values}
+                                    for node, values in sections.items()}, sort_keys=False))
+    return path
 
 
 def csv_list(text: str) -> list[str]:
@@ -78,9 +92,13 @@ def run(args: argparse.Namespace) -> int:
         raise TrustAvPlannerError('--profile and --params-file both choose the parameters: give '
                                   'one of them')
     params_file = args.params_file or PROFILES[args.profile]
-    config = load_run_config(params_file)  # validate before starting workers
     out: Path = args.results_dir or DEFAULT_RESULTS[args.profile]
+    if args.lead_preview is not None and args.lead_preview != 'recorded':
+        out = args.results_dir or out.with_name(f'{out.name}_{args.lead_preview}')
     out.mkdir(parents=True, exist_ok=True)
+    if args.lead_preview is not None:
+        params_file = with_lead_preview(params_file, args.lead_preview, out)
+    config = load_run_config(params_file)  # validate before starting workers
     cases = sweep.sweep_cases(args.traces, args.predictors, sweep.ALPHAS)
     if args.drivers:
         cases = sweep.population_cases(cases, args.drivers, args.drivers_seed,
@@ -208,5 +226,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--params-file', type=Path, default=None,
                         help="ROS 2 params file instead of a profile's (default: the "
                              "profile's)")
+    add_lead_preview_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(func=run)

@@ -7,16 +7,16 @@ import os
 import tempfile
 from pathlib import Path
 
-from preceding_traffic.sources import load_trace
 from trust_av_planner.cli.options import (
     Progress,
     add_run_options,
     format_metrics,
     output_file,
+    positive_hz,
     run_overrides,
 )
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.system.closed_loop import SimResult, simulate
+from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import load_run_config
 
 
@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         output_file(args.out)
     config = load_run_config(args.params_files, run_overrides(args))
-    trace = load_trace(config.trace.trace, config.planner.dt_s, config.trace)
+    trace = control_trace(config, args.control_rate_hz)
     bar = None if args.no_progress else Progress(f'simulate {trace.name}', trace.steps)
     result = simulate(config, trace, on_step=None if bar is None else bar.update)
     if bar is not None:
@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         write_table(result, args.out)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
-             f'alpha = {config.planner.alpha:g} (in-process)')
+             f'alpha = {config.planner.alpha:g} (in-process, {1.0 / trace.dt_s:g} Hz)')
     print(format_metrics(result.metrics, title))
     if args.out is not None:
         print(f'per-step table: {args.out}')
@@ -70,6 +70,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'integrate) in one process and print final trust, mean explicability, '
                     'prediction RMSE, minimum gaps and fallback counts.')
     add_run_options(parser)
+    parser.add_argument('--control-rate-hz', type=positive_hz, default=None,
+                        help='control rate: the trace is interpolated to it, the NMPC predicts '
+                             'on its period, trust is per second (default: 1 / dt_s, the '
+                             "paper's 1 Hz)")
     parser.add_argument('--out', type=Path, default=None,
                         help='write the per-step table (CSV) here')
     parser.set_defaults(func=run)

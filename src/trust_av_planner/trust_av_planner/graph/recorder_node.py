@@ -24,6 +24,7 @@ from pathlib import Path
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.interfaces import Qos
 
 from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
 from trust_monitor.common.params import check_fields, param
@@ -55,11 +56,12 @@ class RecorderConfig:
         check_fields(self)
 
 
-def offered_qos(profile: QoSProfile) -> object:
-    """The bag's record of a topic's offered QoS (keep-last, the profile's depth)."""
+def offered_qos(profile: QoSProfile) -> Qos:
+    """The bag's record of a topic's offered QoS (keep-last, the profile's depth and
+    deadline)."""
     return qos_profile(reliable=profile.reliability == ReliabilityPolicy.RELIABLE,
                        transient_local=profile.durability == DurabilityPolicy.TRANSIENT_LOCAL,
-                       depth=profile.depth)
+                       depth=profile.depth, deadline_ns=int(profile.deadline.nanoseconds))
 
 
 class RecorderNode(Node):

@@ -40,7 +40,7 @@ from trust_av_planner.system.closed_loop import equilibrium_start
 from trust_av_planner.system.config import PlannerTopics, RunConfig
 from trust_monitor.common.kinematics import VehicleState, advance
 from trust_monitor.common.topics import TOPIC, TOPICS
-from trust_monitor.common.wall_clock import NS_PER_S, LoopStats
+from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig
 
 OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_status',
            '/trust_monitor/trust')
@@ -86,7 +86,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
     """
     from trust_av_planner.graph.recorder_node import offered_qos
     from trust_monitor.ros.messages import message_class, odometry, trajectory
-    from trust_monitor.ros.qos import QOS
+    from trust_monitor.ros.qos import RECORD_QOS, wall_qos
 
     topics = topics if topics is not None else PlannerTopics()
     # actual topic name -> the topic-table entry it stands for (message type, QoS)
@@ -103,14 +103,16 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                       log_dir)
         with graph_session(graph, 'shadow_player') as session:
             node, executor = session.node, session.executor
+            wall = WallClockConfig(clock_mode='wall', control_rate_hz=rate_hz)
+            sensor = wall_qos('SENSOR', wall, publisher=True)
             pub_lead = node.create_publisher(
                 message_class(TOPIC['/preceding_vehicle/odom'].msgtype),
-                topics.lead_odom_topic, QOS['STEP'])
+                topics.lead_odom_topic, sensor)
             pub_preview = node.create_publisher(
                 message_class(TOPIC['/preceding_vehicle/speed_preview'].msgtype),
-                topics.lead_preview_topic, QOS['STEP'])
+                topics.lead_preview_topic, sensor)
             pub_ego = node.create_publisher(message_class(TOPIC['/ego/odom'].msgtype),
-                                            topics.ego_odom_topic, QOS['STEP'])
+                                            topics.ego_odom_topic, sensor)
             command = {'accel_mps2': 0.0}
             stats = LoopStats(period_ns)
             with BagWriter(bag) as recording:
@@ -118,16 +120,17 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                     recording.write(topic, data)
 
                 for name, topic in recorded.items():
-                    recording.add_topic(name, topic.msgtype, offered_qos(QOS[topic.qos]))
+                    offered = wall_qos(topic.wall_qos, wall, publisher=True)
+                    recording.add_topic(name, topic.msgtype, offered_qos(offered))
                     node.create_subscription(message_class(topic.msgtype), name,
                                              lambda d, t=name: on_message(t, d),
-                                             QOS[topic.qos], raw=True)
+                                             RECORD_QOS, raw=True)
 
                 def on_command(msg: Any) -> None:
                     command['accel_mps2'] = float(msg.accel.linear.x)
 
                 node.create_subscription(message_class(TOPIC['/ego/accel_cmd'].msgtype),
-                                         '/ego/accel_cmd', on_command, QOS['STEP'])
+                                         '/ego/accel_cmd', on_command, RECORD_QOS)
                 _wait_nodes(graph, node, executor, topics, startup_timeout_s)
                 ego = initial.av
                 start = last = time.monotonic_ns()
@@ -192,7 +195,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
 
     from trust_av_planner.graph.recorder_node import offered_qos
     from trust_monitor.ros.messages import message_class
-    from trust_monitor.ros.qos import QOS
+    from trust_monitor.ros.qos import QOS, RECORD_QOS
 
     recorded = [t for t in TOPICS if t.name not in ('/clock', '/sim/start')]
     # In wall mode the traffic node subscribes nothing but /sim/start (as do the two simulated
@@ -212,8 +215,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                     recording.add_topic(topic.name, topic.msgtype, offered_qos(QOS[topic.qos]))
                     node.create_subscription(
                         message_class(topic.msgtype), topic.name,
-                        lambda d, t=topic.name: recording.write(t, d), QOS[topic.qos],
-                        raw=True)
+                        lambda d, t=topic.name: recording.write(t, d), RECORD_QOS, raw=True)
                 _wait_topics(graph, node, executor, needs, startup_timeout_s)
                 start_pub.publish(Empty())
                 end = time.monotonic() + duration_s

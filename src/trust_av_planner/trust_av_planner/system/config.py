@@ -40,7 +40,7 @@ from trust_monitor.common.params import (
 )
 from trust_monitor.common.rcl_values import ParsedParams
 from trust_monitor.common.wall_clock import WallClockConfig
-from trust_monitor.trust_model import TrustConfig
+from trust_monitor.trust_model import MonitorConfig, TrustConfig
 
 DEFAULT_PARAMS_FILE = shipped_params_file()
 """The shipped params file (``config/trust_av.yaml``; ``share/trust_monitor/config/`` when
@@ -94,7 +94,7 @@ NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
     'preceding_traffic': (TraceConfig, SharedConfig),
     'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics),
     'human_driver': (DriverConfig, SharedConfig),
-    'trust_monitor': (TrustConfig, WallClockConfig),
+    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig),
 }
 _ALL = tuple({c for comps in NODE_COMPONENTS.values() for c in comps})
 

@@ -49,6 +49,7 @@ class ParamSpec:
         high_inclusive: ``high`` itself is allowed.
         choices: the allowed strings (empty: any).
         read_only: the parameter cannot change while a node runs.
+        reason: why it is read-only (shown in its ROS descriptor), '' if not said.
     """
 
     description: str
@@ -59,10 +60,12 @@ class ParamSpec:
     high_inclusive: bool = True
     choices: tuple[str, ...] = ()
     read_only: bool = True
+    reason: str = ''
 
     def text(self) -> str:
-        """Description with its unit, e.g. ``control step (s)``."""
-        return f'{self.description} ({self.unit})' if self.unit else self.description
+        """Description with its unit, e.g. ``control step (s)``, and why it is read-only."""
+        text = f'{self.description} ({self.unit})' if self.unit else self.description
+        return f'{text}; read-only: {self.reason}' if self.read_only and self.reason else text
 
     def problem(self, name: str, value: Any) -> str:
         """Why ``value`` is not allowed for parameter ``name`` ('' when it is)."""
@@ -90,7 +93,7 @@ class ParamSpec:
 
 def param(description: str, *, unit: str = '', low: float | None = None,
           high: float | None = None, low_inclusive: bool = True, high_inclusive: bool = True,
-          choices: tuple[str, ...] = (), read_only: bool = True,
+          choices: tuple[str, ...] = (), read_only: bool = True, reason: str = '',
           default: Any = dataclasses.MISSING) -> Any:
     """A configuration dataclass field that carries its :class:`ParamSpec`.
 
@@ -103,13 +106,14 @@ def param(description: str, *, unit: str = '', low: float | None = None,
         high_inclusive: whether ``high`` itself is allowed.
         choices: allowed strings, or () for any.
         read_only: whether a running node refuses to change it.
+        reason: why it is read-only (for the ROS descriptor).
         default: the default value (none: the parameter is required).
 
     Returns:
         A ``dataclasses.field`` to assign to the annotated attribute.
     """
     spec = ParamSpec(description, unit, low, high, low_inclusive, high_inclusive, choices,
-                     read_only)
+                     read_only, reason)
     return dataclasses.field(default=default, metadata={PARAM_METADATA_KEY: spec})
 
 
@@ -118,10 +122,15 @@ CONTROL_STEP_RANGE_S = (0.01, 10.0)
 with ``preceding_traffic.traces.MAX_TRACE_STEPS`` it bounds a run's length in steps."""
 
 
-def control_step_param() -> Any:
-    """The ``dt_s`` field every component that steps declares (one range for all)."""
+def control_step_param(description: str = 'control step', reason: str = '') -> Any:
+    """The ``dt_s`` field every component that steps declares (one range for all).
+
+    Args:
+        description: what the step is in this component.
+        reason: why it is read-only in a running node ('' if not said).
+    """
     low, high = CONTROL_STEP_RANGE_S
-    return param('control step', unit='s', low=low, high=high)
+    return param(description, unit='s', low=low, high=high, reason=reason)
 
 
 def field_spec(cls: type, name: str) -> ParamSpec | None:

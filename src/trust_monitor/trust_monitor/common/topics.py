@@ -38,6 +38,7 @@ class Topic:
     qos: str
     rate: str
     units: str
+    wall_qos: str = 'STATE'
 
 
 NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_monitor',
@@ -48,13 +49,13 @@ TOPICS: tuple[Topic, ...] = (
           'CLOCK', 'once per step', 'sim time, s'),
     Topic('/preceding_vehicle/odom', 'nav_msgs/msg/Odometry', 'preceding_traffic',
           ('planner', 'recorder'), 'STEP', 'once per step',
-          'pose.position.x: m along the road; twist.linear.x: m/s'),
+          'pose.position.x: m along the road; twist.linear.x: m/s', wall_qos='SENSOR'),
     Topic('/preceding_vehicle/speed_preview', 'trajectory_msgs/msg/JointTrajectory',
           'preceding_traffic', ('planner', 'recorder'), 'STEP', 'once per step',
-          'N points, velocities[0]: m/s, time_from_start k*dt'),
+          'N points, velocities[0]: m/s, time_from_start k*dt', wall_qos='SENSOR'),
     Topic('/ego/odom', 'nav_msgs/msg/Odometry', 'ego_plant',
           ('planner', 'human_driver', 'preceding_traffic', 'recorder'), 'STEP',
-          'once per step (+ the initial state)', 'as above'),
+          'once per step (+ the initial state)', 'as above', wall_qos='SENSOR'),
     Topic('/ego/plan', 'trajectory_msgs/msg/JointTrajectory', 'planner',
           ('trust_monitor', 'recorder'), 'STEP', 'once per step',
           'N points, accelerations[0]: m/s^2'),
@@ -62,13 +63,14 @@ TOPICS: tuple[Topic, ...] = (
           ('trust_monitor', 'human_driver', 'recorder'), 'STEP', 'once per step',
           'u_R^H: N points, accelerations[0]: m/s^2'),
     Topic('/ego/accel_cmd', 'geometry_msgs/msg/AccelStamped', 'planner',
-          ('ego_plant', 'recorder'), 'STEP', 'once per step', 'accel.linear.x: m/s^2'),
+          ('ego_plant', 'recorder'), 'STEP', 'once per step', 'accel.linear.x: m/s^2',
+          wall_qos='COMMAND'),
     Topic('/ego/planner_status', 'diagnostic_msgs/msg/DiagnosticArray', 'planner',
           ('preceding_traffic', 'recorder'), 'STEP', 'once per step',
           'solver status, iterations, solve time (s), fallback, E_max'),
     Topic('/human/odom', 'nav_msgs/msg/Odometry', 'human_driver',
           ('planner', 'preceding_traffic', 'recorder'), 'STEP',
-          'once per step (+ the initial state)', 'as above'),
+          'once per step (+ the initial state)', 'as above', wall_qos='SENSOR'),
     Topic('/human/plan', 'trajectory_msgs/msg/JointTrajectory', 'human_driver',
           ('recorder',), 'STEP', 'once per step', 'N points, accelerations[0]: m/s^2'),
     Topic('/human/driver_status', 'diagnostic_msgs/msg/DiagnosticArray', 'human_driver',
@@ -77,7 +79,8 @@ TOPICS: tuple[Topic, ...] = (
           ('planner', 'preceding_traffic', 'recorder'), 'STEP', 'once per step',
           'vector.x: E, vector.y: P, vector.z: trust after the step (dimensionless)'),
     Topic('/sim/start', 'std_msgs/msg/Empty', 'orchestrator', ('preceding_traffic',),
-          'LATCHED', 'once', 'none: the go signal after the graph is connected'),
+          'LATCHED', 'once', 'none: the go signal after the graph is connected',
+          wall_qos='LATCHED'),
 )
 TOPIC = {t.name: t for t in TOPICS}
 
@@ -85,16 +88,32 @@ JOINT_NAME = 'longitudinal'
 """The one joint of every longitudinal JointTrajectory."""
 
 
+LOCKSTEP_QOS_TEXT = {'STEP': 'reliable, transient local, keep last 1000',
+                     'CLOCK': 'reliable, transient local, keep last 1000',
+                     'LATCHED': 'reliable, transient local, keep last 1'}
+"""The lock-step profiles (``qos`` column): nothing lost, late joiners served (determinism)."""
+
+WALL_QOS_TEXT = {
+    'SENSOR': 'best effort, volatile, keep last 1, deadline input_timeout_s (sensor data: only '
+              'the newest sample counts; the deadline tells the planner an input stopped)',
+    'COMMAND': 'reliable, volatile, keep last 1, deadline 2 control periods (a command: the '
+               'newest or none, never a backlog or an old one to a late joiner)',
+    'STATE': 'reliable, volatile, keep last 10',
+    'LATCHED': 'reliable, transient local, keep last 1',
+}
+"""The wall-mode profiles (``wall_qos`` column) and why (``trust_monitor.ros.qos.wall_qos``)."""
+
+
 def topic_table_markdown() -> str:
     """The README's topic table, generated from :data:`TOPICS` (a test keeps them equal)."""
-    qos = {'STEP': 'reliable, transient local, keep last 1000',
-           'CLOCK': 'reliable, transient local, keep last 1000',
-           'LATCHED': 'reliable, transient local, keep last 1'}
-    lines = ['| topic | type | publisher | subscribers | QoS | rate | units |',
-             '|---|---|---|---|---|---|---|']
+    lines = ['| topic | type | publisher | subscribers | QoS (lock-step) | QoS (wall mode) | '
+             'rate | units |',
+             '|---|---|---|---|---|---|---|---|']
     for t in TOPICS:
+        wall = 'not published' if t.name == '/clock' else WALL_QOS_TEXT[t.wall_qos]
         lines.append(f'| `{t.name}` | `{t.msgtype}` | {t.publisher} | '
-                     f'{", ".join(t.subscribers)} | {qos[t.qos]} | {t.rate} | {t.units} |')
+                     f'{", ".join(t.subscribers)} | {LOCKSTEP_QOS_TEXT[t.qos]} | {wall} | '
+                     f'{t.rate} | {t.units} |')
     return '\n'.join(lines) + '\n'
 
 

@@ -73,6 +73,11 @@ def trajectory_values(msg: JointTrajectory, field: str) -> list[float]:
     return [float(getattr(p, field)[0]) for p in msg.points]
 
 
+def trajectory_times(msg: JointTrajectory) -> list[float]:
+    """The points' ``time_from_start``, s (a plan's own grid)."""
+    return [p.time_from_start.sec + p.time_from_start.nanosec / 1e9 for p in msg.points]
+
+
 def diagnostics(ns: int, name: str, level_ok: bool, message: str,
                 values: dict[str, str]) -> DiagnosticArray:
     """One DiagnosticStatus with key/values (floats as repr: exact round trip)."""
