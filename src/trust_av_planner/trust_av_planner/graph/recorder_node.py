@@ -129,7 +129,7 @@ class RecorderNode(Node):
             return
         self.bag.write(topic, data)
         needed = self.needed.get(topic)
-        if needed is not None and self.bag.counts[topic] == needed:
+        if needed is not None and self.bag.count(topic) == needed:
             self.incomplete -= 1
             if self.incomplete == 0:
                 self.complete()
