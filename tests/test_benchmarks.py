@@ -31,8 +31,8 @@ def test_floor_benchmark_smoke(tmp_path: Path) -> None:
     (no timing threshold)."""
     from mcap.reader import make_reader
 
-    from trust_monitor.graph_interface import TOPICS
-    from trust_monitor.step_chain import step_chain
+    from trust_monitor.common.topics import TOPICS
+    from trust_monitor.common.step_chain import step_chain
 
     out = tmp_path / 'floor.json'
     proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'bench_floor.py'),
