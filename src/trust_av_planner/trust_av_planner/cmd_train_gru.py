@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import tempfile
 import time
@@ -13,12 +14,40 @@ from trust_av_planner.cmd_simulate import add_params_file_option
 from trust_av_planner.config import load_run_config
 from trust_av_planner.errors import TrustAvError
 from trust_av_planner.gru_training import TrainingSettings, save_model, train_with_dagger
+from trust_av_planner.pinned_numerics import (
+    check_pinned,
+    in_pinned_child,
+    run_pinned,
+    unsupported_reason,
+)
 from trust_av_planner.predictors.gru import MODELS_DIR
 from trust_av_planner.progress import ProgressBar
 
 
+def child_arguments(args: argparse.Namespace) -> list[str]:
+    """The ``trust-av train-gru`` arguments that repeat ``args`` in the pinned child."""
+    argv = ['-m', 'trust_av_planner.cli', *(['-v'] if args.verbose else []), 'train-gru',
+            '--out', os.path.abspath(args.out),
+            '--params-file', os.path.abspath(args.params_file)]
+    for option in ('epochs', 'seed', 'dagger_rounds'):
+        value = getattr(args, option)
+        if value is not None:
+            argv += [f'--{option.replace("_", "-")}', str(value)]
+    return argv
+
+
 def run(args: argparse.Namespace) -> int:
-    """Run ``trust-av train-gru``."""
+    """Run ``trust-av train-gru``: in a fresh process with pinned numerics (module
+    :mod:`~.pinned_numerics`), which is this function again in the child."""
+    if not in_pinned_child():
+        load_run_config(args.params_file)  # bad input: one line here, not in the child
+        reason = unsupported_reason()
+        if reason is not None:
+            print(f'trust-av train-gru: warning: {reason}; training without the pinned CPU '
+                  'kernels, so the model is not bit-comparable with the shipped one',
+                  file=sys.stderr)
+        return run_pinned(child_arguments(args)).returncode
+    check_pinned()
     config = load_run_config(args.params_file)
     settings = TrainingSettings()
     if args.epochs is not None:

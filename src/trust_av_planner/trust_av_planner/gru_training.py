@@ -244,31 +244,84 @@ def train(dataset: Dataset, settings: TrainingSettings,
     return weights, report
 
 
-def numerics_fingerprint() -> str:
-    """A hash of the last bits of the floating-point kernels the training pipeline runs on.
+def _digest(*arrays: Any) -> str:
+    digest = hashlib.sha256()
+    for array in arrays:
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()[:16]
 
-    Retraining is bit-for-bit reproducible on one machine, but not across CPUs: numpy picks
-    its ``exp`` kernel by instruction set (with and without AVX-512 they differ by one ulp
-    on about 5 % of inputs; seen here), OpenBLAS its matrix-vector kernel, PyTorch its
-    vectorised CPU path. The GRU's numpy forward pass feeds the DAgger closed loops, so such
-    ulps move the trained model slightly. The model card stores this fingerprint; the
-    retraining test demands bit equality only where the fingerprint matches.
+
+def numerics_report() -> dict[str, Any]:
+    """The bits of the floating-point kernels the training pipeline runs on, per library,
+    and what this process's libraries chose (:func:`~.pinned_numerics.live_numerics`).
+
+    Kernels: numpy ``exp``/``tanh``, matrix-vector products (OpenBLAS) and reductions; glibc
+    libm through Python's ``math`` (``exp``, ``tanh``, ``atanh``, ``log``, ``pow``; the trust
+    model and CasADi call the same functions); PyTorch's float64 matrix product (MKL),
+    sigmoid/tanh and one GRU forward, backward and Adam step (ATen). Library versions
+    and the live settings are part of the fingerprint, the CPU model is not: in the pinned
+    training process (:mod:`~.pinned_numerics`) it is the same on every x86-64 CPU with AVX2.
     """
     import torch
+
+    from trust_av_planner.pinned_numerics import live_numerics
 
     rng = np.random.default_rng(0)
     x = rng.normal(0.0, 3.0, 4096)
     matrix = rng.normal(0.0, 1.0, (48, 16))
-    digest = hashlib.sha256()
-    for array in (np.exp(x), np.tanh(x), matrix @ x[:16], matrix.T @ x[:48]):
-        digest.update(np.ascontiguousarray(array).tobytes())
-    digest.update(str(torch.backends.cpu.get_cpu_capability()).encode())
-    return digest.hexdigest()[:16]
+    kernels = {
+        'numpy': _digest(np.exp(x), np.tanh(x), 1.0 / (1.0 + np.exp(-x)), matrix @ x[:16],
+                         matrix.T @ x[:48], np.array([x.mean(), x.std()])),
+        'libm': _digest(np.array([[math.exp(v), math.tanh(v), math.atanh(math.tanh(v) * 0.999),
+                                   math.log(abs(v) + 1e-3), math.pow(abs(v) + 0.5, 1.7)]
+                                  for v in x[:1024]])),
+    }
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            gru = torch.nn.GRU(len(FEATURES), 16, batch_first=True).double()
+            head = torch.nn.Linear(16, 3).double()
+            params = list(gru.parameters()) + list(head.parameters())
+            optimiser = torch.optim.Adam(params, lr=3e-3)
+            inputs = torch.randn(64, 10, len(FEATURES), dtype=torch.float64)
+            target = torch.randn(64, 3, dtype=torch.float64)
+            loss = torch.mean((head(gru(inputs)[1][-1]) - target) ** 2)
+            loss.backward()  # type: ignore[no-untyped-call]
+            optimiser.step()
+            a = torch.tensor(matrix)
+            kernels['torch'] = _digest(
+                (a.T @ a).numpy(), torch.sigmoid(torch.tensor(x)).numpy(),
+                torch.tanh(torch.tensor(x)).numpy(),
+                *[p.detach().numpy() for p in params])
+        finally:
+            torch.set_num_threads(threads)
+    live = live_numerics()
+    fingerprint = _digest(np.frombuffer(json.dumps([kernels, live], sort_keys=True).encode(),
+                                        dtype=np.uint8))
+    return {'fingerprint': fingerprint, 'kernels': kernels, 'live': live}
+
+
+def numerics_fingerprint() -> str:
+    """A hash of :func:`numerics_report`: kernel bits, library versions and live settings.
+
+    Retraining is bit-for-bit reproducible only with the same numerics: numpy picks its
+    ``exp`` kernel by instruction set (with and without AVX-512 they differ by one ulp on
+    about 5 % of inputs), OpenBLAS and MKL their matrix kernels, PyTorch its vectorised
+    path, and the GRU's numpy forward pass feeds the DAgger closed loops, so such ulps move
+    the trained model. ``trust-av train-gru`` therefore trains in a process with pinned
+    numerics (:mod:`~.pinned_numerics`); the model card stores that process's fingerprint
+    and the retraining test demands bit equality when its own pinned process gives the
+    same one.
+    """
+    return str(numerics_report()['fingerprint'])
 
 
 def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSettings,
                out: Path) -> None:
     """Write the ``.npz`` weights, a JSON model card and a loss-curve PNG beside it."""
+    numerics = numerics_report()
     save_arrays(weights, out)
     card = {
         'model': 'one-layer GRU + linear read-out (Ozkan & Ma, eqs. 6-7)',
@@ -283,7 +336,8 @@ def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSe
         'settings': dataclasses.asdict(settings),
         'results': {k: v for k, v in report.items() if k != 'curve'},
         'trained': datetime.datetime.now(datetime.UTC).date().isoformat(),
-        'numerics_fingerprint': numerics_fingerprint(),
+        'numerics_fingerprint': numerics['fingerprint'],
+        'numerics': numerics['live'],
         'reproduce': 'trust-av train-gru',
     }
     out.with_suffix('.json').write_text(json.dumps(card, indent=2) + '\n')
