@@ -24,23 +24,47 @@ from trust_av_planner.predictors.gru import MODELS_DIR
 from trust_av_planner.progress import ProgressBar
 
 
+def default_jobs() -> int:
+    """Worker processes for the closed loops: the CPUs this process may use."""
+    return len(os.sched_getaffinity(0))
+
+
 def child_arguments(args: argparse.Namespace) -> list[str]:
     """The ``trust-av train-gru`` arguments that repeat ``args`` in the pinned child."""
     argv = ['-m', 'trust_av_planner.cli', *(['-v'] if args.verbose else []), 'train-gru',
             '--out', os.path.abspath(args.out),
             '--params-file', os.path.abspath(args.params_file)]
-    for option in ('epochs', 'seed', 'dagger_rounds'):
+    for option in ('epochs', 'seed', 'dagger_rounds', 'jobs'):
         value = getattr(args, option)
         if value is not None:
             argv += [f'--{option.replace("_", "-")}', str(value)]
     return argv
 
 
+def settings_from_args(args: argparse.Namespace) -> TrainingSettings:
+    """The shipped settings with the command line's overrides (checked)."""
+    settings = TrainingSettings()
+    if args.epochs is not None:
+        if args.epochs < 1:
+            raise TrustAvError(f'--epochs must be >= 1, got {args.epochs}')
+        settings = dataclasses.replace(settings, epochs=args.epochs)
+    if args.seed is not None:
+        settings = dataclasses.replace(settings, seed=args.seed)
+    if args.jobs is not None and args.jobs < 1:
+        raise TrustAvError(f'--jobs must be >= 1, got {args.jobs}')
+    if args.dagger_rounds is not None:
+        if args.dagger_rounds < 0:
+            raise TrustAvError(f'--dagger-rounds must be >= 0, got {args.dagger_rounds}')
+        settings = dataclasses.replace(settings, dagger_rounds=args.dagger_rounds)
+    return settings
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av train-gru``: in a fresh process with pinned numerics (module
     :mod:`~.pinned_numerics`), which is this function again in the child."""
+    config = load_run_config(args.params_file)
+    settings = settings_from_args(args)
     if not in_pinned_child():
-        load_run_config(args.params_file)  # bad input: one line here, not in the child
         reason = unsupported_reason()
         if reason is not None:
             print(f'trust-av train-gru: warning: {reason}; training without the pinned CPU '
@@ -48,16 +72,6 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
         return run_pinned(child_arguments(args)).returncode
     check_pinned()
-    config = load_run_config(args.params_file)
-    settings = TrainingSettings()
-    if args.epochs is not None:
-        settings = dataclasses.replace(settings, epochs=args.epochs)
-    if args.seed is not None:
-        settings = dataclasses.replace(settings, seed=args.seed)
-    if args.dagger_rounds is not None:
-        if args.dagger_rounds < 0:
-            raise TrustAvError(f'--dagger-rounds must be >= 0, got {args.dagger_rounds}')
-        settings = dataclasses.replace(settings, dagger_rounds=args.dagger_rounds)
     start = time.monotonic()
     bar: ProgressBar | None = None
 
@@ -75,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
             bar.update(done, total)
 
     with tempfile.TemporaryDirectory() as work:
-        weights, report = train_with_dagger(config, settings, Path(work), stage, epoch)
+        weights, report = train_with_dagger(config, settings, Path(work), stage, epoch,
+                                            jobs=args.jobs or default_jobs())
     if bar is not None:
         bar.close()
     save_model(weights, report, settings, args.out)
@@ -106,5 +121,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--dagger-rounds', type=int, default=None,
                         help='override the number of DAgger rounds (default: '
                              f'{TrainingSettings().dagger_rounds})')
+    parser.add_argument('--jobs', type=int, default=None,
+                        help='processes for the closed-loop runs (default: the usable CPUs; '
+                             'the result does not depend on it)')
     add_params_file_option(parser)
     parser.set_defaults(func=run)
