@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -40,6 +42,7 @@ def test_soak_short_version(tmp_path: Path) -> None:
     assert all(mb < 20.0 for mb in figures['growth_mb'].values()), figures['growth_mb']
 
 
+@pytest.mark.wall_clock
 def test_shadow_benchmark_smoke(tmp_path: Path) -> None:
     """bench_shadow.py, 2 s of every node in wall mode: per-loop figures are written (no
     timing threshold; the 10 ms acceptance figure is reported, not asserted)."""
