@@ -48,7 +48,7 @@ class TrainingSettings:
     validation_fraction: float = 0.2
     seed: int = 7
     dagger_rounds: int = 2
-    patience: int = 0  # stop after this many epochs without a better validation RMSE; 0: never
+    patience: int = 5  # stop after this many epochs without a better validation RMSE; 0: never
 
 
 @dataclass
