@@ -1,4 +1,8 @@
-"""``trust-av train-gru``: build the TAC-CA dataset and train the GRU plan estimator."""
+"""``trust-av train-gru``: build the TAC-CA dataset and train the GRU plan estimator.
+
+The command re-runs itself in a child process with pinned numerics
+(:mod:`~trust_av_planner.pinned_numerics`); the training happens there.
+"""
 
 from __future__ import annotations
 
@@ -112,8 +116,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'accelerations, train the GRU (seeded, deterministic, CPU), then two DAgger '
                     'rounds (TAC-GRU runs of the current model on the same traces are added '
                     'and the model retrained), then write the weights, a JSON model card and '
-                    'the loss curve. The default output replaces the shipped model (about '
-                    '2 min on 2 cores).')
+                    'the loss curve. Training runs in a child process with pinned CPU numerics, '
+                    'so any x86-64 CPU with AVX2 gives the same weights bit for bit '
+                    '(docs/GRU.md). The default output replaces the shipped model.')
     parser.add_argument('--out', type=Path, default=MODELS_DIR / 'gru_plan_estimator.npz',
                         help='weights file to write (default: the shipped model)')
     parser.add_argument('--epochs', type=int, default=None, help='override the epochs')
