@@ -342,7 +342,9 @@ def numerics_report() -> dict[str, Any]:
             loss.backward()  # type: ignore[no-untyped-call]
             with torch.no_grad():  # an Adam-like step (torch.optim would import the compiler)
                 for p in params:
-                    p -= 3e-3 * p.grad / (torch.sqrt(p.grad * p.grad) + 1e-8)
+                    grad = p.grad
+                    assert grad is not None
+                    p.sub_(3e-3 * grad / (torch.sqrt(grad * grad) + 1e-8))
             a = torch.tensor(matrix)
             kernels['torch'] = _digest(
                 (a.T @ a).numpy(), torch.sigmoid(torch.tensor(x)).numpy(),
