@@ -58,6 +58,8 @@ RESERVE_PER_CHUNK_BYTES = 256
 RESERVE_STEP_CHUNKS = 64
 """The reserve grows by this many chunks' worth at a time (one fallocate per 64 steps)."""
 RESERVE_NAME = '.reserve'
+EXIT_DISK_FULL = 3
+"""Exit code of a recorder that stopped because the disk was full (the bag is finished)."""
 MAX_INFINITE = QosTime(2147483647, 4294967295)
 """rmw's "infinite" duration as rosbag2 writes it in offered_qos_profiles."""
 
