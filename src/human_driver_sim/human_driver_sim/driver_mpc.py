@@ -9,9 +9,13 @@ Features (our definitions, docs/MODEL.md), summed over the predicted steps k = 1
     f_rs = (v_R^k - v_H^k)^2                    relative speed to the AV, (m/s)^2
     f_rd = (d_H^k - d_s - tau_H v_H^k)^2        relative distance to the desired gap, m^2
 
-subject to ``v_min <= v_H^k <= v_max``, ``u_min <= u_H <= u_max`` and ``d_H^k >= d_s``; the
-gap bound is softened by an exact L1 penalty (``gap_slack_weight``) so that the problem is
-always feasible even when the AV brakes harder than expected.
+subject to ``v_min <= v_H^k <= v_max``, ``u_min <= u_H <= u_max`` and the HARD gap bound
+``d_H^k >= d_s`` (eq. 13) for k = 2..N: the next gap d_H^1 follows from today's speeds and
+no plan can change it, so the bound applies from the first step the plan acts on. For the
+gap bound (only) the human predicts the AV more cautiously than it expects: the expected
+plan minus ``av_brake_margin_mps2`` at every step, the AV's speed never below 0. When no
+plan meets the bound (even the hardest braking plan does not), the human brakes as hard as
+it can and the step counts as a driver fallback (docs/MODEL.md, "The human's safety gap").
 """
 
 from __future__ import annotations
@@ -32,11 +36,19 @@ from trust_monitor.params import require
 LOG = logging.getLogger(__name__)
 
 FEATURE_NAMES = ('acceleration', 'desired_speed', 'relative_speed', 'relative_distance')
+BOUND_FEASIBILITY_TOLERANCE_M = 1e-9
+"""The gap bound counts as feasible when the hardest braking plan misses it by at most this."""
 
 
 @dataclass(frozen=True)
 class DriverConfig:
-    """Parameters of the driver MPC."""
+    """Parameters of the driver MPC.
+
+    Attributes:
+        av_brake_margin_mps2: for the gap bound d_H^k >= d_s the human predicts the AV with
+            the plan it expects minus this much at every step (the AV may brake harder than
+            expected), m/s^2; 0 plans the bound against the expected plan itself.
+    """
 
     dt_s: float
     horizon_steps: int
@@ -50,10 +62,10 @@ class DriverConfig:
     time_headway_s: float
     accel_min_mps2: float
     accel_max_mps2: float
-    gap_slack_weight: float
     solver_max_iter: int
     fallback_gap_gain_per_s2: float
     fallback_speed_gain_per_s: float
+    av_brake_margin_mps2: float = 2.0
 
     def __post_init__(self) -> None:
         require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
@@ -68,7 +80,8 @@ class DriverConfig:
                 f'{self.speed_max_mps}')
         require(self.accel_min_mps2 < 0.0 < self.accel_max_mps2,
                 'need accel_min_mps2 < 0 < accel_max_mps2')
-        require(self.gap_slack_weight > 0.0, 'gap_slack_weight must be > 0')
+        require(self.av_brake_margin_mps2 >= 0.0,
+                f'av_brake_margin_mps2 must be >= 0, got {self.av_brake_margin_mps2}')
         require(self.solver_max_iter >= 1, 'solver_max_iter must be >= 1')
 
     @property
@@ -119,28 +132,30 @@ class DriverMpc:
         self.config = config
         n = config.horizon_steps
         u = ca.SX.sym('u', n)
-        slack = ca.SX.sym('slack', n)
         gap0, speed0, av_speed0 = ca.SX.sym('gap0'), ca.SX.sym('speed0'), ca.SX.sym('av_speed0')
         expected = ca.SX.sym('expected', n)
         weights = ca.SX.sym('weights', len(FEATURE_NAMES))
+        cautious = ca.SX.sym('cautious_av_speeds', n)
         u_list = [u[k] for k in range(n)]
         e_list = [expected[k] for k in range(n)]
         feats = features(gap0, speed0, av_speed0, u_list, e_list, dt_s=config.dt_s,
                          standstill_gap_m=config.standstill_gap_m,
                          time_headway_s=config.time_headway_s,
                          desired_speed_mps=config.speed_max_mps)
-        cost = ca.dot(weights, ca.vertcat(*feats)) + config.gap_slack_weight * ca.sum1(slack)
-        av_speeds = longitudinal.lead_speeds(av_speed0, e_list, config.dt_s)
-        gaps, speeds = longitudinal.rollout(gap0, speed0, av_speeds, u_list, config.dt_s)
-        g = ca.vertcat(*[gaps[k] + slack[k] for k in range(n)], *speeds)
-        self._lbg = np.concatenate([np.full(n, config.standstill_gap_m),
+        cost = ca.dot(weights, ca.vertcat(*feats))
+        # The gap bound against the cautious AV prediction; d^1 is fixed, so k = 2..N.
+        gaps, speeds = longitudinal.rollout(gap0, speed0, [cautious[k] for k in range(n)],
+                                            u_list, config.dt_s)
+        g = ca.vertcat(*gaps[1:], *speeds)
+        self._lbg = np.concatenate([np.full(n - 1, config.standstill_gap_m),
                                     np.full(n, config.speed_min_mps)])
-        self._ubg = np.concatenate([np.full(n, np.inf), np.full(n, config.speed_max_mps)])
-        self._lbx = np.concatenate([np.full(n, config.accel_min_mps2), np.zeros(n)])
-        self._ubx = np.concatenate([np.full(n, config.accel_max_mps2), np.full(n, np.inf)])
+        self._ubg = np.concatenate([np.full(n - 1, np.inf), np.full(n, config.speed_max_mps)])
+        self._lbx = np.full(n, config.accel_min_mps2)
+        self._ubx = np.full(n, config.accel_max_mps2)
         self._solver = ca.nlpsol('driver_mpc', 'sqpmethod',
-                                 {'x': ca.vertcat(u, slack), 'f': cost, 'g': g,
-                                  'p': ca.vertcat(gap0, speed0, av_speed0, expected, weights)},
+                                 {'x': u, 'f': cost, 'g': g,
+                                  'p': ca.vertcat(gap0, speed0, av_speed0, expected, weights,
+                                                  cautious)},
                                  sqp_options(config.solver_max_iter))
         self._previous: np.ndarray | None = None
 
@@ -148,9 +163,42 @@ class DriverMpc:
         """Forget the warm start."""
         self._previous = None
 
+    def cautious_av_speeds(self, av_speed_mps: float,
+                           expected_mps2: Sequence[float]) -> np.ndarray:
+        """AV speeds at steps 0..N-1 that the gap bound is planned against, m/s.
+
+        The expected plan minus ``av_brake_margin_mps2`` at every step; the AV never reverses.
+        """
+        c = self.config
+        speeds = [max(float(av_speed_mps), 0.0)]
+        for accel in list(expected_mps2)[:-1]:
+            speeds.append(max(speeds[-1] + (float(accel) - c.av_brake_margin_mps2) * c.dt_s,
+                              0.0))
+        return np.array(speeds)
+
+    def braking_plan(self, speed_mps: float) -> np.ndarray:
+        """The hardest braking plan: u_min at every step, never below ``speed_min_mps``.
+
+        It gives the largest gap at every step against any AV plan, so the gap bound is
+        feasible exactly when this plan meets it.
+        """
+        c = self.config
+        plan = []
+        for _ in range(c.horizon_steps):
+            accel = min(max(c.accel_min_mps2, (c.speed_min_mps - speed_mps) / c.dt_s),
+                        c.accel_max_mps2)
+            plan.append(accel)
+            speed_mps += accel * c.dt_s
+        return np.array(plan)
+
     def solve(self, gap_m: float, speed_mps: float, av_speed_mps: float,
               expected_mps2: np.ndarray) -> DriverResult:
         """Plan the human's next N accelerations against the expected AV plan.
+
+        When the gap bound cannot be met (:meth:`braking_plan` misses it), the result is the
+        braking plan with status ``fallback: gap_bound_infeasible``; when the solver fails,
+        the fallback controller :func:`longitudinal.hold_gap_plan` against the cautious AV
+        prediction. Both have ``success`` False (counted as driver fallbacks).
 
         Args:
             gap_m: gap from the human's front bumper to the AV's rear bumper, m.
@@ -159,23 +207,31 @@ class DriverMpc:
             expected_mps2: the AV plan the human expects, N values, m/s^2.
         """
         c, n = self.config, self.config.horizon_steps
-        guess = np.zeros(2 * n)
-        if self._previous is not None:
-            guess[:n] = np.concatenate([self._previous[1:], self._previous[-1:]])
-        params = np.concatenate([[gap_m, speed_mps, av_speed_mps], expected_mps2, c.weights])
+        cautious = self.cautious_av_speeds(av_speed_mps, expected_mps2)
         start = time.perf_counter()
+        braking = self.braking_plan(speed_mps)
+        gaps, _ = longitudinal.rollout(gap_m, speed_mps, list(cautious), list(braking), c.dt_s)
+        if min(gaps[1:], default=np.inf) < c.standstill_gap_m - BOUND_FEASIBILITY_TOLERANCE_M:
+            LOG.debug('driver gap bound infeasible: braking plan reaches %.3f m', min(gaps[1:]))
+            self._previous = None
+            return DriverResult(braking, 'fallback: gap_bound_infeasible', False, 0,
+                                time.perf_counter() - start)
+        guess = np.zeros(n)
+        if self._previous is not None:
+            guess = np.concatenate([self._previous[1:], self._previous[-1:]])
+        params = np.concatenate([[gap_m, speed_mps, av_speed_mps], expected_mps2, c.weights,
+                                 cautious])
         sol = self._solver(x0=guess, p=params, lbx=self._lbx, ubx=self._ubx, lbg=self._lbg,
                            ubg=self._ubg)
         elapsed = time.perf_counter() - start
         stats = self._solver.stats()
         iterations = int(stats.get('iter_count', 0))
         if stats['success']:
-            plan = np.asarray(sol['x']).ravel()[:n]
+            plan = np.asarray(sol['x']).ravel()
             self._previous = plan
             return DriverResult(plan, str(stats['return_status']), True, iterations, elapsed)
-        av_speeds = longitudinal.lead_speeds(av_speed_mps, list(expected_mps2), c.dt_s)
         plan = np.asarray(longitudinal.hold_gap_plan(
-            gap_m, speed_mps, av_speeds, dt_s=c.dt_s, standstill_gap_m=c.standstill_gap_m,
+            gap_m, speed_mps, list(cautious), dt_s=c.dt_s, standstill_gap_m=c.standstill_gap_m,
             time_headway_s=c.time_headway_s, gap_gain_per_s2=c.fallback_gap_gain_per_s2,
             speed_gain_per_s=c.fallback_speed_gain_per_s, accel_min_mps2=c.accel_min_mps2,
             accel_max_mps2=c.accel_max_mps2, speed_min_mps=c.speed_min_mps,
