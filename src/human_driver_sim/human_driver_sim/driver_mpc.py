@@ -12,10 +12,12 @@ Features (our definitions, docs/MODEL.md), summed over the predicted steps k = 1
 subject to ``v_min <= v_H^k <= v_max``, ``u_min <= u_H <= u_max`` and the HARD gap bound
 ``d_H^k >= d_s`` (eq. 13) for k = 2..N: the next gap d_H^1 follows from today's speeds and
 no plan can change it, so the bound applies from the first step the plan acts on. For the
-gap bound (only) the human predicts the AV more cautiously than it expects: the expected
-plan minus ``av_brake_margin_mps2`` at every step, the AV's speed never below 0. When no
-plan meets the bound (even the hardest braking plan does not), the human brakes as hard as
-it can and the step counts as a driver fallback (docs/MODEL.md, "The human's safety gap").
+gap bound (only; the cost keeps the expected plan) the human allows for the AV braking
+harder than expected: it predicts the AV at min(u_R^H,k, ``assumed_av_accel_min_mps2``)
+at every step (the AV's braking bound, as in Gipps' 1981 car-following model), the AV's
+speed never below 0. When no plan meets the bound (even the hardest braking plan does
+not), the human brakes as hard as it can and the step counts as a driver fallback
+(docs/MODEL.md, "The human's safety gap").
 """
 
 from __future__ import annotations
@@ -45,9 +47,9 @@ class DriverConfig:
     """Parameters of the driver MPC.
 
     Attributes:
-        av_brake_margin_mps2: for the gap bound d_H^k >= d_s the human predicts the AV with
-            the plan it expects minus this much at every step (the AV may brake harder than
-            expected), m/s^2; 0 plans the bound against the expected plan itself.
+        assumed_av_accel_min_mps2: for the gap bound d_H^k >= d_s the human predicts the AV
+            at min(expected acceleration, this) at every step: the AV may brake this hard
+            whatever the human expects, m/s^2 (<= 0; Table I's u_R,min = -3 by default).
     """
 
     dt_s: float
@@ -65,7 +67,7 @@ class DriverConfig:
     solver_max_iter: int
     fallback_gap_gain_per_s2: float
     fallback_speed_gain_per_s: float
-    av_brake_margin_mps2: float = 2.0
+    assumed_av_accel_min_mps2: float = -3.0
 
     def __post_init__(self) -> None:
         require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
@@ -80,8 +82,8 @@ class DriverConfig:
                 f'{self.speed_max_mps}')
         require(self.accel_min_mps2 < 0.0 < self.accel_max_mps2,
                 'need accel_min_mps2 < 0 < accel_max_mps2')
-        require(self.av_brake_margin_mps2 >= 0.0,
-                f'av_brake_margin_mps2 must be >= 0, got {self.av_brake_margin_mps2}')
+        require(self.assumed_av_accel_min_mps2 <= 0.0,
+                f'assumed_av_accel_min_mps2 must be <= 0, got {self.assumed_av_accel_min_mps2}')
         require(self.solver_max_iter >= 1, 'solver_max_iter must be >= 1')
 
     @property
@@ -167,13 +169,14 @@ class DriverMpc:
                            expected_mps2: Sequence[float]) -> np.ndarray:
         """AV speeds at steps 0..N-1 that the gap bound is planned against, m/s.
 
-        The expected plan minus ``av_brake_margin_mps2`` at every step; the AV never reverses.
+        The AV accelerates at min(expected, ``assumed_av_accel_min_mps2``) at every step and
+        never reverses.
         """
         c = self.config
         speeds = [max(float(av_speed_mps), 0.0)]
         for accel in list(expected_mps2)[:-1]:
-            speeds.append(max(speeds[-1] + (float(accel) - c.av_brake_margin_mps2) * c.dt_s,
-                              0.0))
+            speeds.append(max(speeds[-1] + min(float(accel), c.assumed_av_accel_min_mps2)
+                              * c.dt_s, 0.0))
         return np.array(speeds)
 
     def braking_plan(self, speed_mps: float) -> np.ndarray:

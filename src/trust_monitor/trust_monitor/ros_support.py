@@ -96,8 +96,8 @@ DESCRIPTIONS = {
     'weight_desired_speed': 'driver feature weight: desired speed',
     'weight_relative_speed': 'driver feature weight: relative speed',
     'weight_relative_distance': 'driver feature weight: relative distance',
-    'av_brake_margin_mps2': ('driver: its hard gap bound assumes the AV brakes this much harder '
-                             'than expected, m/s^2'),
+    'assumed_av_accel_min_mps2': ('driver: its hard gap bound d_H >= d_s assumes the AV may '
+                                  'brake this hard whatever it expects, m/s^2'),
     'clock_mode': 'lockstep (sim time, inputs paired by stamp) or wall (timer, latest inputs)',
     'control_rate_hz': 'wall mode: control loop rate, Hz',
     'input_timeout_s': 'wall mode: an input received longer ago than this is stale, s',
