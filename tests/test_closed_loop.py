@@ -75,6 +75,24 @@ def test_human_keeps_the_safety_line_behind_tac_gru(alpha: float, run_config) ->
     assert metrics.driver_fallback_steps <= MAX_FALLBACK_STEPS
 
 
+def test_a_driver_stopped_behind_the_av_does_not_creep_below_d_s(run_config) -> None:
+    """NYCC's long stops behind TAC-CA (alpha = 0.75) with a driver who hardly wants speed
+    (driver 9 of ``--drivers 20``, seed 1, at 9af173a's fit): the QP met its gap bound only to
+    its tolerance, so the stopped human crept ~5e-8 m per step below d_s and then fell back
+    (65 steps). The plan is now corrected to meet the bound exactly."""
+    from trust_av_planner.config import load_run_config
+    from trust_av_planner.simulate import simulate
+    driver = {'weight_acceleration': 1.0, 'weight_desired_speed': 3.992764167065127e-09,
+              'weight_relative_speed': 0.033816528119931986,
+              'weight_relative_distance': 0.0007407111453434325,
+              'time_headway_s': 0.9751187838091812}
+    config = load_run_config(overrides={'planner': {'alpha': 0.75, 'predictor': 'ca'},
+                                        'human_driver': driver})
+    metrics = simulate(config, shipped_trace('nycc')).metrics
+    assert metrics.min_human_gap_m >= run_config.planner.standstill_gap_m - 1e-9
+    assert metrics.driver_fallback_steps == 0
+
+
 @pytest.mark.parametrize('trace', TRACES)
 def test_explicability_falls_and_trust_rises_with_alpha(trace: str) -> None:
     metrics = [closed_loop(trace, a).metrics for a in ALPHAS]

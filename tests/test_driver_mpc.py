@@ -158,3 +158,17 @@ def test_infeasible_gap_bound_brakes_hardest_and_is_a_fallback(run_config) -> No
     assert stopping.plan_mps2 == pytest.approx([-6.0, -1.0, 0.0])
     # The same states with room to brake are solved normally.
     assert mpc.solve(30.0, 20.0, 14.0, np.zeros(3)).success
+
+
+def test_stopped_a_hair_below_d_s_is_solved_not_a_fallback(run_config) -> None:
+    # Rounding may leave a stopped human a hair below d_s behind a stopped AV: the bound then
+    # holds at what braking reaches (standing still), not a fallback at every standstill step.
+    cfg = safety_config(run_config)
+    mpc = DriverMpc(cfg)
+    result = mpc.solve(cfg.standstill_gap_m - 1.4e-7, 0.0, 0.0, np.zeros(3))
+    assert result.success, result.status
+    assert result.plan_mps2[:2] == pytest.approx([0.0, 0.0], abs=1e-12)  # it stays put
+    # A real shortfall is still a fallback.
+    assert mpc.solve(cfg.standstill_gap_m - 1e-3, 0.0, 0.0, np.zeros(3)).status == (
+        'fallback: gap_bound_infeasible')
+

@@ -38,8 +38,9 @@ from trust_monitor.params import require
 LOG = logging.getLogger(__name__)
 
 FEATURE_NAMES = ('acceleration', 'desired_speed', 'relative_speed', 'relative_distance')
-BOUND_FEASIBILITY_TOLERANCE_M = 1e-9
-"""The gap bound counts as feasible when the hardest braking plan misses it by at most this."""
+BOUND_FEASIBILITY_TOLERANCE_M = 1e-6
+"""The gap bound counts as feasible when the hardest braking plan misses it by at most this, m
+(rounding); within it the bound is lowered to what braking reaches."""
 
 
 @dataclass(frozen=True)
@@ -194,14 +195,34 @@ class DriverMpc:
             speed_mps += accel * c.dt_s
         return np.array(plan)
 
+    def _meet_bound(self, plan_mps2: np.ndarray, gap_m: float, speed_mps: float,
+                    cautious_mps: np.ndarray, bounds_m: np.ndarray) -> np.ndarray:
+        """The QP's plan with each acceleration lowered just enough that the gaps d^2..d^N
+        meet ``bounds_m`` exactly.
+
+        The QP meets its constraints only to its tolerance (measured: 5e-8 m/s^2 of creep per
+        step while stopped behind a stopped AV, 1e-6 m below d_s after 20 s); u^k first acts
+        on d^{k+2}, and lowering it raises every later gap.
+        """
+        dt = self.config.dt_s
+        plan = plan_mps2.copy()
+        for k in range(len(plan) - 1):
+            gaps, _ = longitudinal.rollout(gap_m, speed_mps, list(cautious_mps), list(plan), dt)
+            shortfall = bounds_m[k] - gaps[k + 1]
+            if shortfall > 0.0:
+                plan[k] -= shortfall / dt ** 2
+        return plan
+
     def solve(self, gap_m: float, speed_mps: float, av_speed_mps: float,
               expected_mps2: np.ndarray) -> DriverResult:
         """Plan the human's next N accelerations against the expected AV plan.
 
-        When the gap bound cannot be met (:meth:`braking_plan` misses it), the result is the
-        braking plan with status ``fallback: gap_bound_infeasible``; when the solver fails,
-        the fallback controller :func:`longitudinal.hold_gap_plan` against the cautious AV
-        prediction. Both have ``success`` False (counted as driver fallbacks).
+        When the gap bound cannot be met (:meth:`braking_plan` misses it by more than
+        :data:`BOUND_FEASIBILITY_TOLERANCE_M`), the result is the braking plan with status
+        ``fallback: gap_bound_infeasible``; when the solver fails, the fallback controller
+        :func:`longitudinal.hold_gap_plan` against the cautious AV prediction. Both have
+        ``success`` False (counted as driver fallbacks). A solved plan is corrected to meet
+        the bound exactly (:meth:`_meet_bound`).
 
         Args:
             gap_m: gap from the human's front bumper to the AV's rear bumper, m.
@@ -213,24 +234,27 @@ class DriverMpc:
         cautious = self.cautious_av_speeds(av_speed_mps, expected_mps2)
         start = time.perf_counter()
         braking = self.braking_plan(speed_mps)
-        gaps, _ = longitudinal.rollout(gap_m, speed_mps, list(cautious), list(braking), c.dt_s)
-        if min(gaps[1:], default=np.inf) < c.standstill_gap_m - BOUND_FEASIBILITY_TOLERANCE_M:
-            LOG.debug('driver gap bound infeasible: braking plan reaches %.3f m', min(gaps[1:]))
+        reach, _ = longitudinal.rollout(gap_m, speed_mps, list(cautious), list(braking), c.dt_s)
+        if min(reach[1:], default=np.inf) < c.standstill_gap_m - BOUND_FEASIBILITY_TOLERANCE_M:
+            LOG.debug('driver gap bound infeasible: braking plan reaches %.3f m', min(reach[1:]))
             self._previous = None
             return DriverResult(braking, 'fallback: gap_bound_infeasible', False, 0,
                                 time.perf_counter() - start)
+        lbg = self._lbg.copy()
+        lbg[:n - 1] = np.minimum(lbg[:n - 1], reach[1:])
         guess = np.zeros(n)
         if self._previous is not None:
             guess = np.concatenate([self._previous[1:], self._previous[-1:]])
         params = np.concatenate([[gap_m, speed_mps, av_speed_mps], expected_mps2, c.weights,
                                  cautious])
-        sol = self._solver(x0=guess, p=params, lbx=self._lbx, ubx=self._ubx, lbg=self._lbg,
+        sol = self._solver(x0=guess, p=params, lbx=self._lbx, ubx=self._ubx, lbg=lbg,
                            ubg=self._ubg)
         elapsed = time.perf_counter() - start
         stats = self._solver.stats()
         iterations = int(stats.get('iter_count', 0))
         if stats['success']:
-            plan = np.asarray(sol['x']).ravel()
+            plan = self._meet_bound(np.asarray(sol['x']).ravel(), gap_m, speed_mps, cautious,
+                                    lbg[:n - 1])
             self._previous = plan
             return DriverResult(plan, str(stats['return_status']), True, iterations, elapsed)
         plan = np.asarray(longitudinal.hold_gap_plan(
