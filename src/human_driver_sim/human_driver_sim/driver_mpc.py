@@ -167,7 +167,7 @@ class DriverMpc:
         self._previous = None
 
     def cautious_av_speeds(self, av_speed_mps: float,
-                           expected_mps2: Sequence[float]) -> np.ndarray:
+                           expected_mps2: Sequence[float] | np.ndarray) -> np.ndarray:
         """AV speeds at steps 0..N-1 that the gap bound is planned against, m/s.
 
         The AV accelerates at min(expected, ``assumed_av_accel_min_mps2``) at every step and
