@@ -80,8 +80,8 @@ def test_a_driver_stopped_behind_the_av_does_not_creep_below_d_s(run_config) -> 
     (driver 9 of ``--drivers 20``, seed 1, at 9af173a's fit): the QP met its gap bound only to
     its tolerance, so the stopped human crept ~5e-8 m per step below d_s and then fell back
     (65 steps). The plan is now corrected to meet the bound exactly."""
-    from trust_av_planner.config import load_run_config
-    from trust_av_planner.simulate import simulate
+    from trust_av_planner.system.closed_loop import simulate
+    from trust_av_planner.system.config import load_run_config
     driver = {'weight_acceleration': 1.0, 'weight_desired_speed': 3.992764167065127e-09,
               'weight_relative_speed': 0.033816528119931986,
               'weight_relative_distance': 0.0007407111453434325,
