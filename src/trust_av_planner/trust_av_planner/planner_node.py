@@ -3,8 +3,10 @@
 Subscribes the preceding vehicle's odometry and speed preview, the ego and human odometry
 and the monitor's trust; per step (inputs paired by header stamp) it runs
 :class:`trust_av_planner.planner.AvPlanner` (plan estimator + NMPC) and publishes the
-plan, the expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``)
-and the solver status (``DiagnosticArray``). Parameters: the ``planner`` section of
+plan, the expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``),
+all three in the AV's frame ``ego``, the solver status (``DiagnosticArray``) and the three
+vehicles' markers (``vehicle_markers``, each in its vehicle's frame). Topic names are
+relative (the node's namespace). Parameters: the ``planner`` section of
 ``config/trust_av.yaml``.
 
 ``clock_mode: wall`` (real-vehicle mode): a wall-clock timer at ``control_rate_hz`` plans
@@ -27,6 +29,7 @@ from geometry_msgs.msg import AccelStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
 
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PlannerConfig
@@ -34,8 +37,10 @@ from trust_av_planner.planner import AvPlanner
 from trust_av_planner.system.config import PlannerTopics, SharedConfig
 from trust_monitor.common.kinematics import VehicleState
 from trust_monitor.common.lockstep import StepBuffer
+from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import (
+    VehicleMarkers,
     diagnostics,
     header,
     msg_ns,
@@ -76,12 +81,15 @@ class PlannerNode(Node):
         if not self.has_human and (not self.clock.wall or self.config.predictor != 'ca'):
             raise ValueError('parameter human_odom_topic: may be empty only with '
                              'clock_mode wall and predictor ca')
-        self.pub_plan = self.create_publisher(JointTrajectory, '/ego/plan', QOS['STEP'])
-        self.pub_expected = self.create_publisher(JointTrajectory, '/ego/expected_plan',
+        self.frame = VEHICLE_FRAMES['ego_plant']
+        self.markers = VehicleMarkers(shared.vehicle_length_m)
+        self.pub_plan = self.create_publisher(JointTrajectory, 'ego/plan', QOS['STEP'])
+        self.pub_expected = self.create_publisher(JointTrajectory, 'ego/expected_plan',
                                                   QOS['STEP'])
-        self.pub_accel = self.create_publisher(AccelStamped, '/ego/accel_cmd', QOS['STEP'])
-        self.pub_status = self.create_publisher(DiagnosticArray, '/ego/planner_status',
+        self.pub_accel = self.create_publisher(AccelStamped, 'ego/accel_cmd', QOS['STEP'])
+        self.pub_status = self.create_publisher(DiagnosticArray, 'ego/planner_status',
                                                 QOS['STEP'])
+        self.pub_markers = self.create_publisher(MarkerArray, 'vehicle_markers', QOS['STEP'])
         inputs = (('traffic', Odometry, topics.lead_odom_topic),
                   ('preview', JointTrajectory, topics.lead_preview_topic),
                   ('ego', Odometry, topics.ego_odom_topic),
@@ -154,10 +162,11 @@ class PlannerNode(Node):
                                 else vehicle(items['human']),  # type: ignore[arg-type]
                                 trust)
         result, dt = out.result, self.config.dt_s
-        self.pub_plan.publish(trajectory(ns, dt, accelerations=result.plan_mps2.tolist()))
-        self.pub_expected.publish(trajectory(ns, dt,
+        self.pub_plan.publish(trajectory(ns, dt, frame_id=self.frame,
+                                         accelerations=result.plan_mps2.tolist()))
+        self.pub_expected.publish(trajectory(ns, dt, frame_id=self.frame,
                                              accelerations=out.expected_mps2.tolist()))
-        accel = AccelStamped(header=header(ns, 'base_link'))
+        accel = AccelStamped(header=header(ns, self.frame))
         accel.accel.linear.x = float(result.plan_mps2[0])
         self.pub_accel.publish(accel)
         self.pub_status.publish(diagnostics(
@@ -167,6 +176,7 @@ class PlannerNode(Node):
              'solve_time_s': repr(result.solve_time_s),
              'explicability_max': repr(result.explicability_max),
              'gap_m': repr(out.gap_m), 'trust': repr(trust)}))
+        self.pub_markers.publish(self.markers.update(ns))
         if result.fallback:
             self.get_logger().warning(f'NMPC fallback: {result.status}',
                                       throttle_duration_sec=5.0)

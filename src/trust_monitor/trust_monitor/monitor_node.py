@@ -1,8 +1,9 @@
 """``trust_monitor`` node: E, P and trust from the observed plan and the expected plan.
 
-Subscribes ``/ego/plan`` and ``/ego/expected_plan`` (paired by header stamp), publishes
-``/trust_monitor/trust`` (``geometry_msgs/Vector3Stamped``: x = E, y = P, z = trust after
-the step), stamped like the plans. Parameters: the trust model's (``config/trust_av.yaml``).
+Subscribes ``ego/plan`` and ``ego/expected_plan`` (paired by header stamp), publishes
+``trust_monitor/trust`` (``geometry_msgs/Vector3Stamped``: x = E, y = P, z = trust after
+the step; ``frame_id`` empty, the three numbers are not a spatial vector), stamped like the
+plans. Parameters: the trust model's (``config/trust_av.yaml``).
 
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` scores the latest plan and
 expected plan once (when both carry the same, new stamp) and stamps the trust with the
@@ -19,6 +20,7 @@ from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
 
 from trust_monitor.common.lockstep import StepBuffer
+from trust_monitor.common.topics import NO_FRAME
 from trust_monitor.common.wall_clock import LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import header, msg_ns, trajectory_values
 from trust_monitor.ros.parameters import declare_config
@@ -38,11 +40,11 @@ class MonitorNode(Node):
         self.buffer = StepBuffer(['plan', 'expected'])
         self.latest = LatestInputs(['plan', 'expected'])
         self.scored_ns: int | None = None
-        self.pub = self.create_publisher(Vector3Stamped, '/trust_monitor/trust', QOS['STEP'])
+        self.pub = self.create_publisher(Vector3Stamped, 'trust_monitor/trust', QOS['STEP'])
         callback = self.on_latest if self.clock.wall else self.on_input
-        self.create_subscription(JointTrajectory, '/ego/plan',
+        self.create_subscription(JointTrajectory, 'ego/plan',
                                  lambda m: callback('plan', m), QOS['STEP'])
-        self.create_subscription(JointTrajectory, '/ego/expected_plan',
+        self.create_subscription(JointTrajectory, 'ego/expected_plan',
                                  lambda m: callback('expected', m), QOS['STEP'])
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
         self.get_logger().info(f'ready ({self.clock.clock_mode})')
@@ -80,7 +82,7 @@ class MonitorNode(Node):
         """One trust step from a plan pair, published stamped ``ns``."""
         estimate = self.estimator.step(trajectory_values(plan, 'accelerations'),
                                        trajectory_values(expected, 'accelerations'))
-        out = Vector3Stamped(header=header(ns, ''))
+        out = Vector3Stamped(header=header(ns, NO_FRAME))
         out.vector.x = estimate.explicability
         out.vector.y = estimate.performance
         out.vector.z = estimate.trust

@@ -135,8 +135,8 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
                     if on_step is not None:
                         on_step(progress['step'] + 1, trace.steps)
 
-                node.create_subscription(Clock, '/clock', on_clock, QOS['CLOCK'])
-                start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
+                node.create_subscription(Clock, 'clock', on_clock, QOS['CLOCK'])
+                start_pub = node.create_publisher(Empty, 'sim/start', QOS['LATCHED'])
                 _wait_connected(graph, node, executor, startup_timeout_s)
                 startup = time.monotonic() - started
                 start_pub.publish(Empty())
@@ -197,7 +197,7 @@ def _wait_connected(graph: Graph, node: Any, executor: Any, timeout_s: float) ->
             pubs, subs = expected[topic.name]
             have_pubs = node.count_publishers(topic.name)
             have_subs = node.count_subscribers(topic.name)
-            if topic.name == '/clock':
+            if topic.name == 'clock':
                 have_subs -= 1  # the orchestrator's own progress subscription
             if have_pubs < pubs or have_subs < subs:
                 missing.append(f'{topic.name} ({have_pubs}/{pubs} publishers, '

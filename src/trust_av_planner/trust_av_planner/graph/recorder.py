@@ -42,11 +42,18 @@ QOS_YAML = {'STEP': _qos_yaml(1000, 1), 'CLOCK': _qos_yaml(1000, 1)}
 reliable, durability 1 transient-local), matching :mod:`trust_monitor.ros.qos`."""
 
 
-def header_stamp_ns(data: bytes) -> int:
-    """Stamp of a CDR message that starts with a Time or a Header (after the 4-byte
-    encapsulation header: int32 sec, uint32 nanosec, little or big endian)."""
+STAMP_IN_FIRST_ELEMENT = frozenset({'tf2_msgs/msg/TFMessage',
+                                    'visualization_msgs/msg/MarkerArray'})
+"""Types that start with a sequence of stamped messages: the stamp is the first
+element's (after the uint32 sequence length)."""
+
+
+def header_stamp_ns(data: bytes, offset: int = 4) -> int:
+    """Stamp of a CDR message that starts with a Time or a Header at ``offset`` (4: after
+    the 4-byte encapsulation header; 8: in the first element of a leading sequence): int32
+    sec, uint32 nanosec, little or big endian."""
     little = data[1] == 1
-    sec, nanosec = struct.unpack('<iI' if little else '>iI', data[4:12])
+    sec, nanosec = struct.unpack('<iI' if little else '>iI', data[offset:offset + 8])
     return sec * 1_000_000_000 + nanosec
 
 
@@ -60,6 +67,7 @@ class McapBag:
         self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
         self._writer.start(profile='ros2', library='trust_av_planner recorder')
         self._channels: dict[str, int] = {}
+        self._offsets: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
         self.counts: dict[str, int] = {}
         self._first_ns: int | None = None
@@ -75,11 +83,12 @@ class McapBag:
         self._channels[topic] = self._writer.register_channel(
             topic=topic, message_encoding='cdr', schema_id=self._schemas[msgtype],
             metadata={'offered_qos_profiles': QOS_YAML[qos]})
+        self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
         self.counts[topic] = 0
 
     def write(self, topic: str, data: bytes) -> int:
         """Write one raw message, log time = its stamp; returns the stamp."""
-        ns = header_stamp_ns(data)
+        ns = header_stamp_ns(data, self._offsets[topic])
         self._writer.add_message(self._channels[topic], log_time=ns, data=data,
                                  publish_time=ns, sequence=self.counts[topic])
         self.counts[topic] += 1

@@ -45,12 +45,13 @@ class RecorderNode(Node):
         for topic in TOPICS:
             if 'recorder' not in topic.subscribers:
                 continue
-            self.bag.add_topic(topic.name, topic.msgtype, topic.qos)
-            self.expected[topic.name] = steps + 1 if topic.name.endswith('/odom') and \
-                topic.publisher != 'preceding_traffic' else steps
+            name = self.resolve_topic_name(topic.name)  # the bag holds full names
+            self.bag.add_topic(name, topic.msgtype, topic.qos)
+            self.expected[name] = topic.messages(steps)
             self.create_subscription(message_class(topic.msgtype), topic.name,
-                                     lambda data, t=topic.name: self.on_message(t, data),
+                                     lambda data, t=name: self.on_message(t, data),
                                      QOS[topic.qos], raw=True)
+        self.clock_topic = self.resolve_topic_name('clock')
         self.get_logger().info(f'ready: recording {len(self.expected)} topics to '
                                f'{self.bag.path}')
 
@@ -59,7 +60,7 @@ class RecorderNode(Node):
         if self.finished:
             return
         self.bag.write(topic, data)
-        if topic == '/clock':
+        if topic == self.clock_topic:
             self.bag.flush()
         if all(self.bag.counts[t] >= n for t, n in self.expected.items()):
             self.get_logger().info(f'recorded {sum(self.bag.counts.values())} messages '

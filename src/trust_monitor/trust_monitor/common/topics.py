@@ -37,6 +37,7 @@ time t (odometry after a step: t + dt):
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -148,6 +149,16 @@ TOPICS: tuple[Topic, ...] = (
           'none (no header)', per_step=0, initial=1),
 )
 TOPIC = {t.name: t for t in TOPICS}
+
+
+_TOPIC_NAME = re.compile(r'(~|~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*', re.ASCII)
+
+
+def is_topic_name(name: str) -> bool:
+    """Whether ``name`` is a valid ROS 2 topic name, absolute or relative (rcl
+    ``rcl_validate_topic_name``, without ``{}`` substitutions): tokens of letters, digits and
+    underscores separated by ``/``, none starting with a digit, no empty token."""
+    return _TOPIC_NAME.fullmatch(name) is not None
 
 
 def qualified(name: str, namespace: str = '/') -> str:
