@@ -58,7 +58,7 @@ def test_bad_yaml_files(tmp_path: Path) -> None:
 
 def test_missing_parameter_is_named(tmp_path: Path) -> None:
     data = yaml.safe_load(DEFAULT_PARAMS_FILE.read_text())
-    del data['planner']['ros__parameters']['gap_max_m']
+    del data['/**/planner']['ros__parameters']['gap_max_m']
     path = tmp_path / 'p.yaml'
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(ParamsError, match='parameter gap_max_m is missing'):

@@ -14,8 +14,8 @@ subscriber (the recorder) has not acknowledged yet with it.
 ``clock_mode: wall``: no ``clock`` and no stepping; after ``sim/start`` the trace (or bag)
 is replayed at real-time speed (:class:`preceding_traffic.replay.LeadReplay`: speed
 interpolated, position its integral): a wall-clock timer at ``control_rate_hz`` publishes
-the odometry, its transform and the preview of the recorded future, stamped now. At the end of the trace
-it logs ``done`` and stops publishing, so the planner reports its inputs stale.
+the odometry, its transform and the preview of the recorded future, stamped now. At the end
+of the trace it logs ``done`` and stops publishing, so the planner reports its inputs stale.
 """
 
 from __future__ import annotations

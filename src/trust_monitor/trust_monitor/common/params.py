@@ -175,8 +175,19 @@ def read_params_file(path: str | Path) -> dict[str, dict[str, Any]]:
         params = body['ros__parameters']
         if not isinstance(params, dict):
             raise ParamsError(f'{path}: {node}.ros__parameters must be a mapping')
-        sections[str(node)] = dict(params)
+        name = _section_node(str(node))
+        sections[name] = {**sections.get(name, {}), **params}
     return sections
+
+
+def _section_node(section: str) -> str:
+    """The node a section stands for in the in-process configuration, which has no
+    namespaces: ``/**/planner``, ``/planner`` and ``planner`` are the node ``planner`` (rcl
+    matches ``/**/planner`` in any namespace); ``/**`` stays the wildcard."""
+    for prefix in ('/**/', '/'):
+        if section != WILDCARD and section.startswith(prefix):
+            return section[len(prefix):]
+    return section
 
 
 def node_params(sections: Mapping[str, Mapping[str, Any]], node: str) -> dict[str, Any]:

@@ -41,7 +41,6 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-
 ODOM_FRAME = 'odom'
 """The world-fixed frame (REP-105 ``odom``): x along the road in the direction of travel,
 y to the left, z up (REP-103), origin where the preceding vehicle's front bumper starts."""
@@ -143,7 +142,7 @@ TOPICS: tuple[Topic, ...] = (
     Topic('vehicle_markers', 'visualization_msgs/msg/MarkerArray', ('planner',),
           ('recorder',), 'STEP', 'once per step',
           'per vehicle a box (x from -vehicle_length_m to 0, 1.8 m wide, 1.5 m high) and a '
-          'label', 'each vehicle\'s own frame, frame_locked'),
+          'label', "each vehicle's own frame, frame_locked"),
     Topic('sim/start', 'std_msgs/msg/Empty', ('orchestrator',), ('preceding_traffic',),
           'LATCHED', 'once', 'none: the go signal after the graph is connected',
           'none (no header)', per_step=0, initial=1),
