@@ -226,7 +226,7 @@ def read_series(bag: Path, paths: Iterable[MessagePath]) -> dict[str, tuple[list
 
 def render_plots(bag: Path, png: Path, layout: Layout | None = None) -> None:
     """Draw the layout's plot panels from a recording into one PNG, one axis per panel,
-    every line (shown or hidden by default in the layout) with its label."""
+    every line with its label (dotted and marked: a line the layout leaves switched off)."""
     import matplotlib
 
     matplotlib.use('Agg')
@@ -239,7 +239,8 @@ def render_plots(bag: Path, png: Path, layout: Layout | None = None) -> None:
     for ax, panel in zip(axes[:, 0], layout.plots, strict=True):
         for line in panel.series:
             times, values = series[line.path.text]
-            ax.plot(times, values, linewidth=1.0, label=line.label,
+            label = line.label if line.enabled else f'{line.label} [off by default]'
+            ax.plot(times, values, linewidth=1.0, label=label,
                     linestyle='-' if line.enabled else ':')
         ax.set_title(panel.title, fontsize=9)
         ax.grid(alpha=0.3)
