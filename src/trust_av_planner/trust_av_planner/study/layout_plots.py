@@ -11,8 +11,10 @@ as Foxglove's Plot panel does (the diagnostics' ``gap_m`` values are ``repr`` of
 
 from __future__ import annotations
 
+import argparse
 import json
 import re
+import sys
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -206,7 +208,12 @@ def read_series(bag: Path, paths: Iterable[MessagePath]) -> dict[str, tuple[list
 
     wanted = list(paths)
     out: dict[str, tuple[list[float], list[float]]] = {p.text: ([], []) for p in wanted}
-    with AnyReader([bag], default_typestore=TYPESTORE) as reader:
+    try:
+        reader = AnyReader([bag], default_typestore=TYPESTORE)
+        reader.open()
+    except Exception as err:  # rosbags raises several unrelated types for a bad file
+        raise LayoutError(f'{bag}: cannot read the recording ({err})') from err
+    try:
         present = {c.topic for c in reader.connections}
         missing = sorted({p.topic for p in wanted} - present)
         if missing:
@@ -221,10 +228,12 @@ def read_series(bag: Path, paths: Iterable[MessagePath]) -> dict[str, tuple[list
                     times, values = out[path.text]
                     times.append((log_time - start) * 1e-9)
                     values.append(path.number(msg))
+    finally:
+        reader.close()
     return out
 
 
-def render_plots(bag: Path, png: Path, layout: Layout | None = None) -> None:
+def render_plots(bag: Path, png: Path, layout: Layout | None = None, dpi: int = 110) -> None:
     """Draw the layout's plot panels from a recording into one PNG, one axis per panel,
     every line with its label (dotted and marked: a line the layout leaves switched off)."""
     import matplotlib
@@ -249,5 +258,28 @@ def render_plots(bag: Path, png: Path, layout: Layout | None = None) -> None:
     fig.suptitle(f'Foxglove layout plot panels: {bag.name}', fontsize=10)
     fig.tight_layout()
     png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=110)
+    fig.savefig(png, dpi=dpi)
     plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m trust_av_planner.study.layout_plots BAG PNG``: the layout's plot panels
+    of a recording as one PNG; a bad recording or layout gives one line and exit code 2."""
+    parser = argparse.ArgumentParser(
+        prog='python -m trust_av_planner.study.layout_plots',
+        description="Draw the Foxglove layout's plot panels from a recording into a PNG.")
+    parser.add_argument('bag', type=Path, help='recording (rosbag2 bag directory or MCAP)')
+    parser.add_argument('png', type=Path, help='PNG to write')
+    parser.add_argument('--layout', type=Path, default=LAYOUT_FILE, help='Foxglove layout')
+    parser.add_argument('--dpi', type=int, default=110, help='resolution of the PNG')
+    args = parser.parse_args(argv)
+    try:
+        render_plots(args.bag, args.png, load_layout(args.layout), args.dpi)
+    except TrustAvPlannerError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

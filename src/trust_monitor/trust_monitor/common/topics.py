@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 ODOM_FRAME = 'odom'
 """The world-fixed frame (REP-105 ``odom``): x along the road in the direction of travel,
-y to the left, z up (REP-103), origin where the preceding vehicle's front bumper starts."""
+y to the left, z up (REP-103); a simulated run starts the human driver's front bumper at 0."""
 
 VEHICLE_FRAMES = {'preceding_traffic': 'preceding_vehicle', 'ego_plant': 'ego',
                   'human_driver': 'human'}
