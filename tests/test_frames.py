@@ -1,10 +1,15 @@
 """REP-105 frames: one convention in the topic table, and the messages the nodes build follow
 it (odometry and tf in ``odom`` with the vehicle's body frame as child, the vehicles' markers
-in their own frames, built once with only the stamp and values changing)."""
+in their own frames, serialised once with only the stamp and values written in)."""
 
 from __future__ import annotations
 
 import pytest
+from nav_msgs.msg import Odometry
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import Header
+from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import MarkerArray
 
 from trust_monitor.common.topics import (
     NO_FRAME,
@@ -16,12 +21,14 @@ from trust_monitor.common.topics import (
     qualified,
 )
 from trust_monitor.ros.messages import (
+    SerializedTemplate,
     VehicleMarkers,
     VehicleOdometry,
     diagnostics,
     message_class,
     trajectory,
 )
+from trust_monitor.ros.messages import odometry as plain_odometry
 
 
 def test_every_row_is_relative_and_names_its_frames() -> None:
@@ -55,26 +62,27 @@ def test_qualified_names_and_topic_name_rules() -> None:
 
 def test_vehicle_odometry_and_its_transform_share_stamp_and_position() -> None:
     vehicle = VehicleOdometry('human')
-    odometry, tf = vehicle.odometry, vehicle.tf
-    vehicle.update(12_500_000_000, 103.25, 9.5)
-    assert vehicle.odometry is odometry and vehicle.tf is tf   # built once
-    (transform,) = tf.transforms
-    for header in (odometry.header, transform.header):
-        assert header.frame_id == ODOM_FRAME
-        assert (header.stamp.sec, header.stamp.nanosec) == (12, 500_000_000)
-    assert odometry.child_frame_id == transform.child_frame_id == 'human'
-    assert odometry.pose.pose.position.x == transform.transform.translation.x == 103.25
-    assert odometry.twist.twist.linear.x == 9.5
-    assert odometry.pose.pose.orientation.w == transform.transform.rotation.w == 1.0
-    vehicle.update(13_000_000_000, 112.75, 9.0)
-    assert (transform.header.stamp.sec, transform.header.stamp.nanosec) == (13, 0)
-    assert transform.transform.translation.x == 112.75
+    for ns, x, v in ((12_500_000_000, 103.25, 9.5), (13_000_000_000, 112.75, 0.0),
+                     (-1_000_000_001, -0.5, 31.0)):
+        odometry_bytes, tf_bytes = vehicle.update(ns, x, v)
+        odometry = deserialize_message(odometry_bytes, Odometry)
+        (transform,) = deserialize_message(tf_bytes, TFMessage).transforms
+        for header in (odometry.header, transform.header):
+            assert header.frame_id == ODOM_FRAME
+            assert header.stamp.sec * 10**9 + header.stamp.nanosec == ns
+        assert odometry.child_frame_id == transform.child_frame_id == 'human'
+        assert odometry.pose.pose.position.x == transform.transform.translation.x == x
+        assert odometry.twist.twist.linear.x == v
+        assert odometry.pose.pose.orientation.w == transform.transform.rotation.w == 1.0
+        # every other field as the plain builder makes it (CDR padding bytes may differ)
+        assert odometry == plain_odometry(ns, x, v, 'human')
 
 
 def test_markers_box_each_vehicle_in_its_own_frame() -> None:
     markers = VehicleMarkers(4.5)
-    msg = markers.update(7_000_000_001)
-    assert markers.update(8_000_000_000) is msg                # only the stamp changes
+    markers.update(7_000_000_001)
+    data = markers.update(8_000_000_000)
+    msg = deserialize_message(data, MarkerArray)
     boxes = [m for m in msg.markers if m.type == m.CUBE]
     labels = [m for m in msg.markers if m.type == m.TEXT_VIEW_FACING]
     assert sorted(m.header.frame_id for m in boxes) == sorted(VEHICLE_FRAMES.values())
@@ -88,6 +96,12 @@ def test_markers_box_each_vehicle_in_its_own_frame() -> None:
         assert box.frame_locked and box.color.a > 0
     assert all(label.text for label in labels)
     assert all((m.header.stamp.sec, m.header.stamp.nanosec) == (8, 0) for m in msg.markers)
+
+
+def test_template_refuses_a_sentinel_it_cannot_place() -> None:
+    header = Header(frame_id='odom')
+    with pytest.raises(ValueError, match=r'found 1 times.*expected 2'):
+        SerializedTemplate(header, [header.stamp, header.stamp])
 
 
 def test_plans_diagnostics_and_trust_frames() -> None:

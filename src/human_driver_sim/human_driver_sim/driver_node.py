@@ -98,9 +98,9 @@ class DriverNode(Node):
 
     def publish_odometry(self, ns: int) -> None:
         """The current state as odometry, then its transform, stamped ``ns``."""
-        self.vehicle.update(ns, self.position_m, self.speed_mps)
-        self.pub_odom.publish(self.vehicle.odometry)
-        self.pub_tf.publish(self.vehicle.tf)
+        odom, tf = self.vehicle.update(ns, self.position_m, self.speed_mps)
+        self.pub_odom.publish(odom)
+        self.pub_tf.publish(tf)
 
     def on_start(self, _msg: Empty) -> None:
         """Wall mode: start driving."""

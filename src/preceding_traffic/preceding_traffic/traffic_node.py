@@ -125,12 +125,12 @@ class TrafficNode(Node):
             return
         ns = now_ns(self)
         state = self.replay.state(elapsed_s)
-        self.vehicle.update(ns, state.position_m, state.speed_mps)
-        self.pub_odom.publish(self.vehicle.odometry)
+        odom, tf = self.vehicle.update(ns, state.position_m, state.speed_mps)
+        self.pub_odom.publish(odom)
         self.pub_preview.publish(trajectory(
             ns, self.run.dt_s, frame_id=self.frame, velocities=self.replay.preview(
                 elapsed_s, self.run.horizon_steps, self.run.dt_s).tolist()))
-        self.pub_tf.publish(self.vehicle.tf)
+        self.pub_tf.publish(tf)
 
     def close(self) -> None:
         """At shutdown: the wall loop's jitter statistics."""
@@ -154,13 +154,13 @@ class TrafficNode(Node):
         self.step = step
         ns = self.stamp(step)
         speed = float(self.trace.speeds_mps[step])
-        self.vehicle.update(ns, self.position_m, speed)
+        odom, tf = self.vehicle.update(ns, self.position_m, speed)
         self.pub_clock.publish(Clock(clock=time_msg(ns)))
-        self.pub_odom.publish(self.vehicle.odometry)
+        self.pub_odom.publish(odom)
         self.pub_preview.publish(trajectory(
             ns, self.run.dt_s, frame_id=self.frame,
             velocities=self.trace.preview(step, self.run.horizon_steps).tolist()))
-        self.pub_tf.publish(self.vehicle.tf)  # after the planner's inputs: not on the chain
+        self.pub_tf.publish(tf)  # after the planner's inputs: not on the chain
 
     def on_done(self, name: str, msg: Odometry | Vector3Stamped | DiagnosticArray,
                 offset: int) -> None:

@@ -78,9 +78,9 @@ class EgoPlantNode(Node):
 
     def publish(self, ns: int) -> None:
         """The current state as odometry, then its transform, stamped ``ns``."""
-        self.vehicle.update(ns, self.state.position_m, self.state.speed_mps)
-        self.pub.publish(self.vehicle.odometry)
-        self.pub_tf.publish(self.vehicle.tf)
+        odom, tf = self.vehicle.update(ns, self.state.position_m, self.state.speed_mps)
+        self.pub.publish(odom)
+        self.pub_tf.publish(tf)
 
     def on_start(self, _msg: Empty) -> None:
         """Wall mode: start moving."""
