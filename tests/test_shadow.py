@@ -76,9 +76,9 @@ def test_shadow_run_records_bounded_outputs_and_jitter(tmp_path: Path) -> None:
 
 def test_remapped_input_topics_are_honoured(tmp_path: Path) -> None:
     params = tmp_path / 'remapped.yaml'
-    text = PARAMS.read_text().replace('lead_odom_topic: /preceding_vehicle/odom',
+    text = PARAMS.read_text().replace('lead_odom_topic: preceding_vehicle/odom',
                                       'lead_odom_topic: /vehicle/lead/odom')
-    text = text.replace('ego_odom_topic: /ego/odom', 'ego_odom_topic: /vehicle/ego/odom')
+    text = text.replace('ego_odom_topic: ego/odom', 'ego_odom_topic: /vehicle/ego/odom')
     assert '/vehicle/lead/odom' in text and '/vehicle/ego/odom' in text
     params.write_text(text)
     _result, out, _stats = shadow(tmp_path, '--params-file', str(params))

@@ -101,7 +101,7 @@ class TrafficNode(Node):
         if self.clock.wall:
             self.get_logger().info(f'trace {trace.name}: {self.replay.duration_s:g} s to replay '
                                    f'at real time, {self.clock.control_rate_hz:g} Hz; waiting '
-                                   'for sim/start')
+                                   f'for {self.resolve_topic_name("sim/start")}')
             return
         self.create_subscription(Odometry, 'ego/odom', lambda m: self.on_done('ego', m, 1),
                                  QOS['STEP'])
@@ -112,7 +112,7 @@ class TrafficNode(Node):
         self.create_subscription(DiagnosticArray, 'ego/planner_status',
                                  lambda m: self.on_done('status', m, 0), QOS['STEP'])
         self.get_logger().info(f'trace {trace.name}: {trace.steps} steps of {trace.dt_s} s; '
-                               'waiting for sim/start')
+                               f'waiting for {self.resolve_topic_name("sim/start")}')
 
     def wall_step(self) -> None:
         """Wall mode: the trace at the elapsed wall time, stamped now; nothing after its end."""
