@@ -7,10 +7,13 @@
    CasADi ``Opti`` + IPOPT with default options (``nmpc_reference.ReferenceNmpc``). Reports
    both solve-time distributions, the speed-up at p99, and the largest plan difference.
 
+3. Runs the loop once more at ``--rate-hz`` (default 10 Hz: the NMPC on the 0.1 s grid, 30
+   steps, DAQP) and reports its solve times, the figure real-vehicle mode needs.
+
 Prints the figures and writes them to benchmarks/results_core.json (or --out). Not a test:
 timings are noisy, so nothing here asserts a speed.
 
-    python benchmarks/bench_core.py [--repeats 3] [--trace us06] [--alpha 0.5]
+    python benchmarks/bench_core.py [--repeats 3] [--trace us06] [--alpha 0.5] [--rate-hz 10]
 """
 
 from __future__ import annotations
@@ -29,9 +32,9 @@ from typing import Any
 import numpy as np
 
 from preceding_traffic.sources import load_trace
-from preceding_traffic.traces import SpeedTrace
+from preceding_traffic.traces import SpeedTrace, truncate
 from trust_av_planner.study.nmpc_reference import compare_on_records
-from trust_av_planner.system.closed_loop import SimResult, simulate
+from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import RunConfig, load_run_config
 
 
@@ -63,6 +66,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--alpha', type=float, default=0.5)
     parser.add_argument('--repeats', type=int, default=3, help='closed loops to time')
     parser.add_argument('--steps', type=int, default=0, help='limit steps (0: whole trace)')
+    parser.add_argument('--rate-hz', type=float, default=10.0,
+                        help='control rate of the extra loop timed at it (default: %(default)s)')
     parser.add_argument('--out', type=Path, default=Path(__file__).parent / 'results_core.json')
     args = parser.parse_args(argv)
 
@@ -81,6 +86,11 @@ def main(argv: list[str] | None = None) -> int:
         solve_times += [r.solve_time_s for r in result.records]
         driver_times += [r.driver_solve_time_s for r in result.records]
     baseline = replay_against_baseline(config, trace, result)
+    on_trace = dataclasses.replace(config, trace=dataclasses.replace(config.trace,
+                                                                     trace=args.trace))
+    rate_trace = truncate(control_trace(on_trace, args.rate_hz),
+                          round(trace.steps * trace.dt_s * args.rate_hz))
+    at_rate = simulate(config, rate_trace)
     figures = {
         'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
         'cpu_count': os.cpu_count(),
@@ -91,6 +101,9 @@ def main(argv: list[str] | None = None) -> int:
         'closed_loop_steps_per_s': {'median': float(np.median(rates)),
                                     'min': float(np.min(rates))},
         'baseline': baseline,
+        'rate_hz': args.rate_hz,
+        'nmpc_solve_ms_at_rate': percentiles_ms([r.solve_time_s for r in at_rate.records]),
+        'fallback_steps_at_rate': at_rate.metrics.fallback_steps,
         'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         'metrics': vars(result.metrics),
     }
@@ -103,6 +116,10 @@ def main(argv: list[str] | None = None) -> int:
           f"p99 {b['baseline_ipopt_ms']['p99']:.3f} ms; speed-up at p99 {b['speedup_p99']:.1f}x")
     print(f"largest plan difference to the baseline: {b['max_plan_difference_mps2']:.2e} m/s^2 "
           f"over {b['steps_compared']} steps")
+    nr = figures['nmpc_solve_ms_at_rate']
+    print(f"NMPC solve time at {args.rate_hz:g} Hz ({len(at_rate.records)} ticks, "
+          f"{figures['fallback_steps_at_rate']} fallbacks): p50 {nr['p50']:.3f} ms, "
+          f"p99 {nr['p99']:.3f} ms, max {nr['max']:.3f} ms")
     print(f"driver MPC solve time: p50 {figures['driver_solve_ms']['p50']:.3f} ms, "
           f"p99 {figures['driver_solve_ms']['p99']:.3f} ms")
     print(f"in-process closed loop: {figures['closed_loop_steps_per_s']['median']:.0f} steps/s "

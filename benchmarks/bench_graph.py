@@ -1,11 +1,17 @@
-"""Benchmark of the ROS 2 node graph: real-time factor and per-step overhead.
+"""Benchmark of the ROS 2 node graph: against its floor, real-time factor, per-step overhead.
 
-Runs the whole graph (six processes, lock-step) on a trace and the in-process loop on the
-same trace, and reports: start-up time, stepping wall time, real-time factor (sim seconds
-per wall second while stepping), per-step overhead of the graph over the in-process loop,
-and the whole command's wall time. Writes benchmarks/results_graph.json (or --out).
+Runs the whole graph (six processes, lock-step) on a trace and its floor
+(``bench_floor.py``: the same processes, topics, QoS, chain and executor, no computation)
+for as many steps, interleaved (floor, graph, floor, graph, ...; ``--repeats`` each), both
+timed the same way from the ``/clock`` of every step as the orchestrator's node receives it:
+steady-state ms per step (first to last ``/clock``), start-up (launch to the first) and
+shutdown (last ``/clock`` until every process has stopped) apart, and CPU ms per step of
+every process over the steady state. Reports medians and ranges and the ratio graph /
+floor of the medians. Also the in-process loop on the same trace: per-step overhead, and
+the largest difference of the first graph run's recording to it. Writes
+benchmarks/results_graph.json (or --out) with the core count, date and load averages.
 
-    python benchmarks/bench_graph.py [--trace us06] [--quick]
+    python benchmarks/bench_graph.py [--trace us06] [--repeats 3] [--quick]
 """
 
 from __future__ import annotations
@@ -16,17 +22,21 @@ import datetime
 import json
 import math
 import os
+import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
+
+from bench_floor import StepClock, describe, load, run_floor, summary
 
 from preceding_traffic.sources import load_trace
-from preceding_traffic.traces import truncate
+from preceding_traffic.traces import SpeedTrace, truncate
 from trust_av_planner.graph.bag_records import records_from_bag
-from trust_av_planner.graph.orchestrator import run_graph
+from trust_av_planner.graph.orchestrator import GraphRun, run_graph
 from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.system.config import RunConfig, load_run_config
 from trust_av_planner.system.metrics import StepRecord
 
 
@@ -50,14 +60,44 @@ def max_difference(recorded: list[StepRecord], reference: list[StepRecord]) -> f
     return worst
 
 
+def time_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, work: Path,
+               max_steps: int) -> tuple[dict[str, Any], GraphRun]:
+    """One graph run, timed as :func:`bench_floor.run_floor` times the floor."""
+    clock = StepClock(trace.steps)
+    run = run_graph(config, trace_arg, trace, work / 'b',
+                    max_steps=max_steps, on_clock=clock.on_step)
+    clock.end()
+    figures = clock.figures()
+    figures['bench_graph_stepping_ms_per_step'] = 1e3 * (run.wall_s - run.startup_s) / \
+        trace.steps
+    return figures, run
+
+
+def variant(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Medians and ranges of one variant's runs."""
+    cpu = [r['cpu_ms_per_step'] for r in runs if r['cpu_ms_per_step']]
+    return {'steady_ms_per_step': summary([r['steady_ms_per_step'] for r in runs]),
+            'startup_s': summary([r['startup_s'] for r in runs]),
+            'shutdown_s': summary([r['shutdown_s'] for r in runs]),
+            'cpu_ms_per_step': {k: statistics.median(c[k] for c in cpu) for k in cpu[0]}
+            if cpu else {},
+            'runs': runs}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--trace', default='us06')
-    parser.add_argument('--quick', action='store_true', help='60 steps only (smoke run)')
+    parser.add_argument('--quick', action='store_true',
+                        help='60 steps, one run each unless --repeats (smoke run)')
+    parser.add_argument('--repeats', type=int, help='runs of each, interleaved (default 3)')
     parser.add_argument('--out', type=Path,
                         default=Path(__file__).parent / 'results_graph.json')
     args = parser.parse_args(argv)
+    repeats = args.repeats if args.repeats is not None else 1 if args.quick else 3
+    if repeats < 1:
+        print(f'error: --repeats must be >= 1, got {repeats}', file=sys.stderr)
+        return 2
     config = load_run_config()
     trace = load_trace(args.trace, config.planner.dt_s, config.trace)
     max_steps = 60 if args.quick else 0
@@ -65,34 +105,71 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     reference = simulate(config, trace).records
     in_process_s = time.perf_counter() - start
-    with tempfile.TemporaryDirectory() as tmp:
-        start = time.perf_counter()
-        run = run_graph(config, args.trace, trace, DEFAULT_PARAMS_FILE, Path(tmp) / 'b.mcap',
-                        max_steps=max_steps)
-        total_s = time.perf_counter() - start
-        recorded = records_from_bag(run.bag)
-    difference = max_difference(recorded, reference)
-    stepping_s = run.wall_s - run.startup_s
+    floor_runs: list[dict[str, Any]] = []
+    graph_runs: list[dict[str, Any]] = []
+    difference, recorded = math.nan, 0
+    first: GraphRun | None = None
+    for repeat in range(repeats):
+        for name in ('floor', 'graph'):
+            with tempfile.TemporaryDirectory() as tmp:
+                before = load()
+                if name == 'floor':
+                    figures = run_floor(trace.steps, Path(tmp))
+                    floor_runs.append(figures)
+                else:
+                    figures, run = time_graph(config, args.trace, trace, Path(tmp), max_steps)
+                    graph_runs.append(figures)
+                    if first is None:
+                        first = run
+                        records = records_from_bag(run.bag)
+                        difference, recorded = max_difference(records, reference), len(records)
+                figures['load_before'], figures['load_after'] = before, load()
+                print(describe(f'{name} run {repeat + 1}', figures) + f' (load {before})',
+                      flush=True)
+    assert first is not None
+    floor, graph = variant(floor_runs), variant(graph_runs)
+    ratio = graph['steady_ms_per_step']['median'] / floor['steady_ms_per_step']['median']
+    pairs = [g['steady_ms_per_step'] / f['steady_ms_per_step']
+             for g, f in zip(graph_runs, floor_runs, strict=True)]
+    cpu_ratio = (graph['cpu_ms_per_step']['total'] / floor['cpu_ms_per_step']['total']
+                 if graph['cpu_ms_per_step'] and floor['cpu_ms_per_step'] else math.nan)
+    steady_ms = graph['steady_ms_per_step']['median']
+    stepping_s = first.wall_s - first.startup_s
     sim_s = trace.steps * trace.dt_s
     figures = {
         'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
         'cpu_count': os.cpu_count(), 'trace': trace.name, 'steps': trace.steps,
-        'startup_s': run.startup_s, 'stepping_s': stepping_s, 'total_s': total_s,
+        'repeats': repeats, 'load_average': load(),
+        'ratio_graph_to_floor': ratio, 'ratio_per_pair': summary(pairs),
+        'cpu_ratio_graph_to_floor': cpu_ratio,
+        'graph': graph, 'floor': floor,
+        'steady_real_time_factor': 1e3 * trace.dt_s / steady_ms,
+        'startup_s': first.startup_s, 'stepping_s': stepping_s,
         'real_time_factor': sim_s / stepping_s,
         'graph_step_ms': 1e3 * stepping_s / trace.steps,
         'in_process_step_ms': 1e3 * in_process_s / trace.steps,
-        'overhead_per_step_ms': 1e3 * (stepping_s - in_process_s) / trace.steps,
-        'steps_recorded': len(recorded),
+        'overhead_per_step_ms': steady_ms - 1e3 * in_process_s / trace.steps,
+        'steps_recorded': recorded,
         'max_difference_to_in_process': difference,
     }
-    print(f'graph on {trace.name} ({trace.steps} steps): start-up {run.startup_s:.1f} s, '
-          f'stepping {stepping_s:.2f} s, total {total_s:.1f} s')
-    print(f"real-time factor {figures['real_time_factor']:.0f}x while stepping; "
-          f"{figures['graph_step_ms']:.2f} ms per step against "
+    for name, v in (('floor', floor), ('graph', graph)):
+        s, st, sh = v['steady_ms_per_step'], v['startup_s'], v['shutdown_s']
+        print(f"{name}: {s['median']:.2f} ms/step steady (median of {repeats}, range "
+              f"{s['min']:.2f}-{s['max']:.2f}), start-up {st['median']:.2f} s, shutdown "
+              f"{sh['median']:.2f} s, CPU {v['cpu_ms_per_step'].get('total', math.nan):.2f} "
+              'ms/step')
+    print('CPU ms per step (median), graph / floor: ' + ', '.join(
+        f"{k} {graph['cpu_ms_per_step'][k]:.2f} / {floor['cpu_ms_per_step'].get(k, math.nan):.2f}"
+        for k in graph['cpu_ms_per_step']))
+    print(f"graph / floor: {ratio:.2f}x (per pair {figures['ratio_per_pair']['min']:.2f}-"
+          f"{figures['ratio_per_pair']['max']:.2f}), CPU {cpu_ratio:.2f}x; "
+          f"{os.cpu_count()} cores, load {figures['load_average']}")
+    print(f"graph on {trace.name}: {steady_ms:.2f} ms per step steady "
+          f"({figures['steady_real_time_factor']:.0f}x real time) against "
           f"{figures['in_process_step_ms']:.2f} ms in-process "
           f"(overhead {figures['overhead_per_step_ms']:.2f} ms per step)")
-    print(f'graph == in-process over all {len(recorded)} steps: largest difference of any '
-          f'recorded state, plan, E or trust {difference:.1e}')
+    print(f'graph == in-process over all {recorded} steps (first run): largest difference of '
+          f'any recorded state, plan, E or trust {difference:.1e}')
     args.out.write_text(json.dumps(figures, indent=2) + '\n')
     print(f'wrote {args.out}')
     return 0

@@ -7,7 +7,8 @@ Each part runs as its own process, so its peak memory (max RSS, from ``wait4``) 
 - ``core``: bench_core.py, NMPC solve times against the Opti + IPOPT baseline, closed-loop
   steps per second;
 - ``gru``: bench_gru.py, GRU inference per control step (when the GRU predictor exists);
-- ``graph``: bench_graph.py, the ROS 2 graph's real-time factor (when the graph exists);
+- ``graph``: bench_graph.py, the ROS 2 graph against its floor (ms per step of both, the
+  ratio) and its real-time factor (when the graph exists);
 - ``sweep``: ``trust-av reproduce`` from an empty cache, then again from the cache.
 
 Nothing here asserts a speed: timings are noisy. The numbers go in the issue notes.
@@ -79,6 +80,13 @@ def markdown(results: dict[str, Any]) -> str:
     if sweep is not None:
         lines.append(f"| reproduce sweep ({sweep['cases']} runs): fresh / cached | "
                      f"{sweep['wall_s']:.1f} s / {sweep['cached_wall_s']:.1f} s |")
+    graph = results['parts'].get('graph', {}).get('figures')
+    if graph and 'ratio_graph_to_floor' in graph:
+        g, f = graph['graph']['steady_ms_per_step'], graph['floor']['steady_ms_per_step']
+        lines.append(f"| graph / floor, steady ms per step (median of {graph['repeats']} each, "
+                     f"{graph['steps']} steps) | {graph['ratio_graph_to_floor']:.2f}x: "
+                     f"{g['median']:.2f} ({g['min']:.2f}-{g['max']:.2f}) / {f['median']:.2f} "
+                     f"({f['min']:.2f}-{f['max']:.2f}) ms |")
     for name in ('gru', 'graph'):
         figures = results['parts'].get(name, {}).get('figures')
         if figures:

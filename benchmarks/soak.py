@@ -23,7 +23,7 @@ from pathlib import Path
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig, read_samples, trace_path
 from trust_av_planner.graph.orchestrator import run_graph
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.system.config import load_run_config
 
 
 def chained_trace(path: Path, duration_s: float, config: TraceConfig) -> float:
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
                 with lock:
                     samples[done] = node_rss_mb()
 
-        run = run_graph(config, str(csv), trace, DEFAULT_PARAMS_FILE, Path(tmp) / 'soak.mcap',
+        run = run_graph(config, str(csv), trace, Path(tmp) / 'soak',
                         on_step=on_step)
     steps = sorted(samples)
     base = min(steps, key=lambda s: abs(s - baseline_step))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from pathlib import Path
 
 import pytest
 
@@ -38,3 +39,21 @@ def shipped_trace(name: str) -> SpeedTrace:
 def closed_loop(trace: str, alpha: float, predictor: str = 'ca') -> SimResult:
     """One whole-trace in-process run with the shipped configuration (cached)."""
     return simulate(with_alpha(load_run_config(), alpha, predictor), shipped_trace(trace))
+
+
+def assert_every_topic_complete(bag: Path) -> int:
+    """Every recorded topic of the table holds every complete step, the topics within one
+    step of each other (a topic absent from the bag holds none); returns the number of
+    complete steps."""
+    from trust_av_planner.graph.bag_records import read_topics, records_from_bag  # rosbags
+    from trust_monitor.common.topics import TOPICS
+    topics = read_topics(bag)
+    complete = len(records_from_bag(bag))
+    steps = {}
+    for row in TOPICS:
+        if 'recorder' in row.subscribers:
+            name = row.name if row.name.startswith('/') else f'/{row.name}'
+            initial = 1 if name in ('/ego/odom', '/human/odom') else 0
+            steps[name] = max(len(topics.get(name, {})) - initial, 0)
+    assert min(steps.values()) >= complete and max(steps.values()) <= complete + 1, steps
+    return complete

@@ -17,6 +17,7 @@ from preceding_traffic.bags import (
     TYPESTORE,
     BagError,
     load_bag_trace,
+    odometry_messages,
     write_trace_bag,
 )
 from preceding_traffic.sources import load_trace
@@ -69,6 +70,49 @@ def test_twist_stamped_source(tmp_path: Path) -> None:
     assert trace.t0_s == 10.0 and trace.speeds_mps.tolist() == [3.0, 4.0, 5.0]
 
 
+def odometry_bag(path: Path, stamps_ns: list[int], log_times_ns: list[int],
+                 speeds: list[float]) -> Path:
+    """A bag of Odometry whose header stamps and log times differ (a sim-time recording)."""
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection(TOPIC, 'nav_msgs/msg/Odometry', typestore=TYPESTORE)
+        for (ns, msg), log_ns in zip(odometry_messages(np.array(stamps_ns) * 1e-9,
+                                                       np.array(speeds), 'odom', 'lead'),
+                                     log_times_ns, strict=True):
+            assert ns == msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            writer.write(conn, log_ns, TYPESTORE.serialize_cdr(msg, 'nav_msgs/msg/Odometry'))
+    return path
+
+
+def test_header_stamps_from_zero_are_the_time_base(tmp_path: Path) -> None:
+    """A simulation recorded on sim time: stamps 0, 1, 2, 3 s, logged at wall time."""
+    wall = 1_790_000_000 * 10**9
+    bag = odometry_bag(tmp_path / 'sim', [0, 10**9, 2 * 10**9, 3 * 10**9],
+                       [wall + k * 10**6 for k in range(4)], [1.0, 2.0, 3.0, 4.0])
+    trace = load_bag_trace(bag, TOPIC, 'nav_msgs/msg/Odometry', 1.0, CONFIG)
+    assert trace.t0_s == 0.0 and trace.speeds_mps.tolist() == [1.0, 2.0, 3.0, 4.0]
+
+
+def test_all_zero_stamps_use_the_log_times(tmp_path: Path) -> None:
+    bag = odometry_bag(tmp_path / 'nostamp', [0, 0, 0], [5 * 10**9, 6 * 10**9, 7 * 10**9],
+                       [1.0, 2.0, 3.0])
+    trace = load_bag_trace(bag, TOPIC, 'nav_msgs/msg/Odometry', 1.0, CONFIG)
+    assert trace.t0_s == 5.0 and trace.speeds_mps.tolist() == [1.0, 2.0, 3.0]
+
+
+def test_impossible_speed_in_a_bag(tmp_path: Path) -> None:
+    bag = odometry_bag(tmp_path / 'fast', [0, 10**9, 2 * 10**9], [0, 10**9, 2 * 10**9],
+                       [1.0, 1e9, 2.0])
+    with pytest.raises(BagError, match=r'message 1 at t = 1\.000 s: speed 1e\+09 m/s is above '
+                                       r'100 m/s'):
+        load_bag_trace(bag, TOPIC, 'nav_msgs/msg/Odometry', 1.0, CONFIG)
+
+
+def test_bag_shorter_than_one_step(tmp_path: Path) -> None:
+    bag = odometry_bag(tmp_path / 'short', [0, 5 * 10**8], [0, 5 * 10**8], [1.0, 2.0])
+    with pytest.raises(BagError, match=r'spans 0\.5 s, shorter than one control step'):
+        load_bag_trace(bag, TOPIC, 'nav_msgs/msg/Odometry', 1.0, CONFIG)
+
+
 @pytest.fixture
 def good_bag(tmp_path: Path) -> Path:
     bag = tmp_path / 'good'
@@ -79,7 +123,8 @@ def good_bag(tmp_path: Path) -> Path:
 def test_gap_over_limit_names_time(tmp_path: Path) -> None:
     bag = tmp_path / 'holey'
     write_trace_bag(np.array([0.0, 1.0, 9.0]), np.array([1.0, 1.0, 1.0]), bag, TOPIC)
-    with pytest.raises(BagError, match=r'message 2 at t = 9\.000 s: gap of 8 s exceeds'):
+    with pytest.raises(BagError, match=r'message 2 at t = 9\.000 s: gap of 8 s before t = 9 s '
+                                       r'exceeds'):
         load_bag_trace(bag, TOPIC, 'nav_msgs/msg/Odometry', 1.0, CONFIG)
 
 

@@ -25,6 +25,39 @@ def test_benchmark_suite_smoke(tmp_path: Path) -> None:
     assert 'speed-up at p99' in out.with_suffix('.md').read_text()
 
 
+def test_floor_benchmark_smoke(tmp_path: Path) -> None:
+    """bench_floor.py, 20 steps: every step's /clock is observed and the raw recorder holds
+    one message per topic and step of the table (plus the initial states), each stamp once
+    (no timing threshold)."""
+    from mcap.reader import make_reader
+
+    from trust_monitor.common.step_chain import step_chain
+    from trust_monitor.common.topics import TOPICS
+
+    out = tmp_path / 'floor.json'
+    proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'bench_floor.py'),
+                           '--steps', '20', '--keep', str(tmp_path), '--out', str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    run = json.loads(out.read_text())['runs'][0]
+    assert run['steps'] == run['clocks_seen'] == 20
+    assert run['steady_ms_per_step'] > 0 and run['startup_s'] > 0 and run['shutdown_s'] > 0
+    assert {'preceding_traffic', 'planner', 'recorder', 'orchestrator'} <= set(
+        run['cpu_ms_per_step'])
+    stamps: dict[str, list[int]] = {}
+    with (tmp_path / 'floor_0' / 'floor.mcap').open('rb') as handle:
+        for _, channel, message in make_reader(handle).iter_messages():
+            stamps.setdefault(channel.topic, []).append(message.log_time)
+    state = step_chain().state_topics
+    recorded = [t for t in TOPICS if 'recorder' in t.subscribers]
+    assert set(stamps) == {t.name for t in recorded}
+    for topic in recorded:
+        extra = 1 if topic.name in state else 0
+        # every publisher once per step (tf: three), the states also at start-up
+        assert sorted(stamps[topic.name]) == [k * 1_000_000_000 for k in range(20 + extra)
+                                              for _ in range(topic.per_step)], topic.name
+
+
 def test_soak_short_version(tmp_path: Path) -> None:
     """The soak, short: every node's RSS grows by < 20 MB from the baseline to the end
     (the full hour: `python benchmarks/soak.py`)."""

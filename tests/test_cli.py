@@ -3,12 +3,25 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
+import math
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 from conftest import closed_loop
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import truncate
+from trust_av_planner.system.closed_loop import simulate
+from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.metrics import StepRecord
+from trust_monitor.estimate import EstimateError, estimate_csv
+
+CONFIG = load_run_config()
 
 
 def trust_av(*args: str) -> subprocess.CompletedProcess[str]:
@@ -90,7 +103,7 @@ def test_offline_estimator_names_bad_row(tmp_path: Path) -> None:
     ('', 'header needs t, plan_0.., expected_0..'),
     ('t,a,b\n0,1,2\n', 'header needs t, plan_0.., expected_0..'),
     ('t,plan_0,expected_0\n1,0.1,0.2\n1,0.1,0.2\n', ':3: time 1.0 does not increase'),
-    ('t,plan_0,expected_0\n0,fast,0.2\n', ':2: not a number'),
+    ('t,plan_0,expected_0\n0,fast,0.2\n', ':2: plan_0 is not a number'),
 ])
 def test_offline_estimator_rejects_bad_files(tmp_path: Path, body: str, message: str) -> None:
     plans = tmp_path / 'plans.csv'
@@ -100,3 +113,137 @@ def test_offline_estimator_rejects_bad_files(tmp_path: Path, body: str, message:
                            str(out)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and message in proc.stderr
     assert proc.stderr.count('\n') == 1 and not out.exists()
+
+
+def estimate(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, '-m', 'trust_monitor.estimate', *args],
+                          capture_output=True, text=True, timeout=60)
+
+
+@pytest.mark.parametrize(('data', 'message'), [
+    (bytes(range(256)) * 2, 'not UTF-8 text'),
+    (b't,plan_a,expected_a\n0,1,2\n', "column 'plan_a' is not plan_<k>"),
+    (b't,plan_0,plan_2,expected_0,expected_2\n0,1,2,3,4\n', 'plan columns must be plan_0..'),
+    (b't,plan_0,plan_1,expected_0,expected_1,expected_2\n0,1,2,3,4,5\n',
+     '2 plan columns but 3 expected columns'),
+    (b't,plan_0,expected_0\n0,1e308,-1e308\n', ':2: plan_0 = 1e+308 m/s^2 is outside +-100'),
+    (b't,plan_0,expected_0\n0,0.1,0.2\n1,0.1\n', ':3: expected 3 values, got 2'),
+    (b't,plan_0,expected_0\n0,0.1,hunter2\n', ':2: expected_0 is not a number'),
+])
+def test_offline_estimator_refuses_in_one_line(tmp_path: Path, data: bytes,
+                                               message: str) -> None:
+    plans = tmp_path / 'plans.csv'
+    plans.write_bytes(data)
+    out = tmp_path / 'o.csv'
+    proc = estimate(str(plans), '-o', str(out))
+    assert proc.returncode == 2 and message in proc.stderr, proc.stderr
+    assert proc.stderr.count('\n') == 1 and 'hunter2' not in proc.stderr
+    assert list(tmp_path.iterdir()) == [plans]   # no output, no temporary file
+
+
+def test_offline_estimator_checks_its_output_first(tmp_path: Path) -> None:
+    plans = tmp_path / 'plans.csv'
+    plans.write_bytes(bytes(range(256)))   # would fail too, later
+    for out, message in ((tmp_path / 'no' / 'o.csv', 'no such directory'),
+                         (tmp_path, 'is a directory; -o needs a file name')):
+        proc = estimate(str(plans), '-o', str(out))
+        assert proc.returncode == 2 and message in proc.stderr
+        assert proc.stderr.count('\n') == 1
+    assert not (tmp_path / 'no').exists()
+
+
+def test_offline_estimator_largest_inputs_are_finite(tmp_path: Path) -> None:
+    """At the acceleration limit the estimate is finite (eq. 8 does not overflow)."""
+    plans = tmp_path / 'plans.csv'
+    plans.write_text('t,plan_0,plan_1,expected_0,expected_1\n0,100,-100,-100,100\n'
+                     '1e308,-100,100,100,-100\n')
+    out = tmp_path / 'o.csv'
+    proc = estimate(str(plans), '-o', str(out))
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader(out.open()))
+    assert len(rows) == 2
+    assert all(math.isfinite(float(v)) for row in rows for v in row.values())
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                   HealthCheck.function_scoped_fixture])
+@given(header=st.lists(st.sampled_from(['t', 'plan_0', 'plan_1', 'expected_0', 'expected_1',
+                                        'plan_x', 'expected_01', 'note', '']),
+                       min_size=1, max_size=6),
+       rows=st.lists(st.lists(st.one_of(st.floats(), st.integers(), st.text(max_size=6)),
+                              max_size=7), max_size=6),
+       raw=st.binary(max_size=200))
+def test_fuzzed_plans_give_rows_or_one_line(tmp_path: Path, header: list[str],
+                                            rows: list[list[object]], raw: bytes) -> None:
+    """Random headers, numbers, text and bytes: finite rows or one EstimateError line."""
+    plans = tmp_path / 'fuzz.csv'
+    body = ','.join(header) + '\n' + ''.join(','.join(map(str, r)) + '\n' for r in rows)
+    for data in (body.encode('utf-8', 'surrogatepass'), raw):
+        plans.write_bytes(data)
+        out = tmp_path / 'fuzz_out.csv'
+        out.unlink(missing_ok=True)
+        try:
+            count = estimate_csv(plans, out, CONFIG.trust)
+        except EstimateError as err:
+            assert str(err).startswith(str(plans)) and '\n' not in str(err)
+            assert not out.exists()
+        else:
+            values = [float(v) for row in csv.reader(out.open()) for v in row
+                      if v not in ('t', 'E', 'P', 'trust')]
+            assert all(math.isfinite(v) for v in values) and count >= 0
+
+
+@pytest.mark.parametrize(('setup', 'args', 'message'), [
+    ('latin1', ['--trace', 'TRACE'], 'not UTF-8 text'),
+    ('short', ['--trace', 'TRACE', '--out', 'OUT'], 'shorter than one control step'),
+    ('fast', ['--trace', 'TRACE'], 'is above 100 m/s'),
+    ('dt', ['--params-file', 'PARAMS'], r'dt_s must be in [0.01, 10]'),
+    ('passwd', ['--params-file', 'PARAMS'], '/etc/passwd:1: expected the header'),
+    ('dir', ['--trace', 'nycc', '--out', 'DIR'], 'is a directory; --out needs a file name'),
+    ('dir', ['--trace', 'TRACE', '--out', 'DIR'], 'is a directory; --out needs a file name'),
+])
+def test_simulate_bad_inputs_one_line(tmp_path: Path, setup: str, args: list[str],
+                                      message: str) -> None:
+    """Each refused in one line with exit 2, before any output is written; --out is checked
+    before the trace is read or the loop runs."""
+    trace = tmp_path / 'trace.csv'
+    body = {'latin1': b'time_s,speed_mps\n0,1\n1,\xe9\n',
+            'short': b'time_s,speed_mps\n0,1\n0.5,2\n',
+            'fast': b'time_s,speed_mps\n0,1\n1,1e9\n2,1\n'}.get(setup, bytes(range(256)))
+    trace.write_bytes(body)
+    params = tmp_path / 'p.yaml'
+    params.write_text({'dt': '/**:\n  ros__parameters:\n    dt_s: 1.0e-9\n',
+                       'passwd': 'preceding_traffic:\n  ros__parameters:\n    trace: /etc/passwd\n'
+                       }.get(setup, ''))
+    (tmp_path / 'adir').mkdir()
+    subs = {'TRACE': str(trace), 'OUT': str(tmp_path / 'out.csv'), 'PARAMS': str(params),
+            'DIR': str(tmp_path / 'adir')}
+    proc = trust_av('simulate', '--no-progress', *[subs.get(a, a) for a in args])
+    assert proc.returncode == 2 and message in proc.stderr, proc.stderr
+    assert proc.stderr.count('\n') == 1 and 'root:' not in proc.stderr
+    assert not (tmp_path / 'out.csv').exists() and not list((tmp_path / 'adir').iterdir())
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith('.')]
+
+
+def test_run_refuses_negative_max_steps() -> None:
+    proc = trust_av('run', '--max-steps', '-5', '--no-progress')
+    assert proc.returncode == 2
+    assert '--max-steps must be >= 0 (0: the whole trace), got -5' in proc.stderr
+    assert 'Traceback' not in proc.stderr
+
+
+def test_max_steps_changes_the_length_only() -> None:
+    """A run limited to 200 steps is the first 200 steps of the whole run (the speed limit
+    and the preview come from the whole trace); 5 steps work (the limit of the first 5 s of
+    US06 would be 0 m/s)."""
+    def untimed(records: list[StepRecord]) -> list[StepRecord]:
+        return [dataclasses.replace(r, solve_time_s=0.0, driver_solve_time_s=0.0)
+                for r in records]
+
+    config = load_run_config()
+    whole = load_trace('us06', config.planner.dt_s, config.trace)
+    full = untimed(simulate(config.for_trace(whole), whole).records)
+    for steps in (5, 200):
+        short = truncate(whole, steps)
+        part = simulate(config.for_trace(short), short).records
+        assert untimed(part) == full[:steps]

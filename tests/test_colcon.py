@@ -1,5 +1,7 @@
-"""`ros2 run` compatibility: colcon builds the four ament_python packages, and every
-installed executable (what `ros2 run <pkg> <exe>` starts) comes up and stops cleanly."""
+"""`ros2 run` compatibility: colcon builds the four ament_python packages; every installed
+executable (what `ros2 run <pkg> <exe>` starts) comes up with no params file, on the shipped
+values installed in share/trust_monitor/config (found through ament_index_python), and stops
+cleanly; trust-monitor-estimate runs from the install."""
 
 from __future__ import annotations
 
@@ -38,7 +40,31 @@ def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
                           cwd=work, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert 'Summary: 4 packages finished' in proc.stdout
-    return work / 'install'
+    install = work / 'install'
+    for package in ('trust_monitor', 'trust_av_planner'):
+        assert (install / package / 'share' / package / 'config' / 'trust_av.yaml').read_text() \
+            == PARAMS.read_text()
+    return install
+
+
+def in_install(install: Path, command: str, tmp_path: Path, domain: str = '232',
+               timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    """Run a shell command with the install sourced (as a ROS user would), outside the repo."""
+    env = dict(os.environ, ROS_DOMAIN_ID=domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_LOG_DIR=str(tmp_path / 'ros_log'), PYTHONUNBUFFERED='1')
+    return subprocess.run(['bash', '-c', f'source {install / "setup.bash"} && {command}'],
+                          capture_output=True, text=True, env=env, cwd=tmp_path,
+                          timeout=timeout)
+
+
+def test_installed_copy_finds_its_share(install: Path, tmp_path: Path) -> None:
+    proc = in_install(install, 'python3 -c "import trust_monitor.common.param_layers as m; '
+                               'print(m.__file__); print(m.shipped_params_file())"', tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    module, shipped = proc.stdout.split()
+    assert Path(module).is_relative_to(install / 'trust_monitor')
+    assert Path(shipped) == install / 'trust_monitor' / 'share' / 'trust_monitor' / 'config' / \
+        'trust_av.yaml'
 
 
 @pytest.mark.parametrize(('package', 'executable'), sorted(EXECUTABLES))
@@ -49,8 +75,8 @@ def test_installed_executable_comes_up(install: Path, package: str, executable: 
     extra = list(EXECUTABLES[(package, executable)])
     if executable == 'recorder':
         extra += ['-p', f'bag_path:={tmp_path / "r.mcap"}']
-    script = (f'source {install / "setup.bash"} && exec {exe} --ros-args --params-file '
-              f'{PARAMS} ' + ' '.join(extra))
+    # no --params-file: a node started alone runs on the installed shipped values
+    script = f'source {install / "setup.bash"} && exec {exe} --ros-args ' + ' '.join(extra)
     env = dict(os.environ, ROS_DOMAIN_ID='231', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_LOG_DIR=str(tmp_path / 'ros_log'), PYTHONUNBUFFERED='1')
     proc = subprocess.Popen(['bash', '-c', script], stdout=subprocess.PIPE,
@@ -67,7 +93,6 @@ def test_installed_executable_comes_up(install: Path, package: str, executable: 
         if 'ready' in line or 'waiting for /sim/start' in line:
             break
     assert proc.poll() is None, ''.join(lines)
-    # it imports the installed copy, not the source tree
     os.killpg(proc.pid, signal.SIGINT)
     rest, _ = proc.communicate(timeout=30)
     assert proc.returncode == 0, ''.join(lines) + rest
@@ -75,10 +100,33 @@ def test_installed_executable_comes_up(install: Path, package: str, executable: 
     shutil.rmtree(tmp_path / 'ros_log', ignore_errors=True)
 
 
+def test_installed_node_names_what_it_misses(install: Path, tmp_path: Path) -> None:
+    """ego_plant has per-run values and no shipped default for them: one line naming the
+    parameter and how to pass it, exit 2."""
+    exe = install / 'trust_av_planner' / 'lib' / 'trust_av_planner' / 'ego_plant'
+    proc = in_install(install, f'{exe} --ros-args -p initial_speed_mps:=0.0', tmp_path)
+    assert proc.returncode == 2
+    errors = [line for line in proc.stderr.splitlines() if line.startswith('error:')]
+    assert errors == ['error: parameter initial_position_m is missing (PlantConfig): pass '
+                      '--ros-args -p initial_position_m:=VALUE'], proc.stderr
+
+
+def test_installed_trust_monitor_estimate(install: Path, tmp_path: Path) -> None:
+    plans = tmp_path / 'plans.csv'
+    plans.write_text('t,plan_0,expected_0\n0,0.5,0.4\n1,0.2,0.2\n')
+    exe = install / 'trust_monitor' / 'lib' / 'trust_monitor' / 'trust-monitor-estimate'
+    proc = in_install(install, f'{exe} {plans} -o {tmp_path / "trust.csv"}', tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == f'wrote 2 rows to {tmp_path / "trust.csv"}'
+    rows = (tmp_path / 'trust.csv').read_text().splitlines()
+    assert rows[0] == 't,E,P,trust' and len(rows) == 3
+
+
 @pytest.mark.parametrize(('args', 'message'), [
-    (['-p', 'horizon_steps:=-3'], 'horizon_steps out of range. Min: 1, Max: 50'),
-    (['--params-file', 'OVERRIDE'], 'alpha out of range Min: 0.0, Max: 1.0'),
+    (['-p', 'horizon_steps:=-3'], 'horizon_steps must be in [1, 50], got -3'),
+    (['--params-file', 'OVERRIDE'], 'alpha must be in [0, 1], got 1.5'),
     (['-p', 'speed_min_mps:=50.0'], 'need 0 <= speed_min_mps < speed_max_mps'),
+    (['-p', 'alhpa:=0.5'], 'unknown parameter(s) alhpa'),
 ])
 def test_node_rejects_bad_parameters_at_start_up(tmp_path: Path, args: list[str],
                                                  message: str) -> None:

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import assert_every_topic_complete
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
@@ -24,6 +25,9 @@ from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import StepRecord
 from trust_monitor.common.topics import TOPICS, qualified
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from rosbag2_rules import check_bag_directory  # the test-side oracle module
 
 STEPS = 120
 RECORDED = {qualified(t.name): t.messages(STEPS) for t in TOPICS if 'recorder' in t.subscribers}
@@ -57,7 +61,7 @@ def assert_records_equal(graph: list[StepRecord], ref: list[StepRecord]) -> None
 
 @pytest.fixture(scope='module')
 def graph_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
-    bag = tmp_path_factory.mktemp('graph') / 'us06.mcap'
+    bag = tmp_path_factory.mktemp('graph') / 'us06'
     proc = subprocess.run(run_command(bag), capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return bag, proc.stdout
@@ -66,7 +70,20 @@ def graph_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
 def test_graph_equals_in_process(graph_run: tuple[Path, str]) -> None:
     bag, stdout = graph_run
     assert_records_equal(records_from_bag(bag), in_process())
-    assert 'final trust' in stdout and bag.with_suffix('.png').stat().st_size > 10_000
+    assert 'final trust' in stdout and bag.with_name('us06.png').stat().st_size > 10_000
+
+
+def test_recording_is_a_rosbag2_bag_by_rosbag2s_rules(graph_run: tuple[Path, str]) -> None:
+    """metadata.yaml and the MCAP pass the rules of rosbag2 Jazzy's reader
+    (tests/rosbag2_rules.py, derived from rosbag2_storage yaml.hpp and the MCAP plugin), and
+    rosbags' own rosbag2 reader opens the directory."""
+    from rosbags.rosbag2 import Reader
+    bag, _ = graph_run
+    assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'us06.mcap']
+    assert check_bag_directory(bag) == []
+    with Reader(bag) as reader:
+        assert reader.message_count == STEPS * len(RECORDED) + 2
+        assert {c.topic for c in reader.connections} == RECORDED
 
 
 def test_bag_reads_back_with_rosbags(graph_run: tuple[Path, str]) -> None:
@@ -81,7 +98,7 @@ def test_bag_reads_back_with_rosbags(graph_run: tuple[Path, str]) -> None:
 
 def test_bag_decodes_with_mcap_ros2(graph_run: tuple[Path, str]) -> None:
     bag, _ = graph_run
-    with bag.open('rb') as handle:
+    with (bag / f'{bag.name}.mcap').open('rb') as handle:
         reader = make_reader(handle, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == 'ros2'
         summary = reader.get_summary()
@@ -101,7 +118,7 @@ def test_bag_decodes_with_mcap_ros2(graph_run: tuple[Path, str]) -> None:
 
 
 def test_parallel_runs_do_not_hear_each_other(tmp_path: Path) -> None:
-    bags = [tmp_path / 'a.mcap', tmp_path / 'b.mcap']
+    bags = [tmp_path / 'a', tmp_path / 'b']
     procs = [subprocess.Popen(run_command(b, '--max-steps', '40'), stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True) for b in bags]
     outputs = [p.communicate(timeout=300) for p in procs]
@@ -144,9 +161,10 @@ def node_pid(orchestrator: int, node: str) -> int:
 
 
 def wait_for_bag(bag: Path, size: int = 20_000) -> None:
-    """Wait until the recording has some steps in it."""
+    """Wait until the recording (the MCAP in the bag directory) has some steps in it."""
+    mcap = bag / f'{bag.name}.mcap'
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (bag.exists() and bag.stat().st_size > size):
+    while time.monotonic() < deadline and not (mcap.exists() and mcap.stat().st_size > size):
         time.sleep(0.2)
 
 
@@ -158,7 +176,7 @@ def assert_gone(pids: list[int]) -> None:
 
 
 def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
-    bag = tmp_path / 'killed.mcap'
+    bag = tmp_path / 'killed'
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     planner = node_pid(proc.pid, 'planner')
@@ -181,11 +199,16 @@ def test_readme_topic_table_is_the_code_table() -> None:
     assert topic_table_markdown() in readme
 
 
-def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path) -> None:
-    bag = tmp_path / 'interrupted.mcap'
+@pytest.mark.parametrize('moment', ['at the first steps', 'mid-run'])
+def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path, moment: str) -> None:
+    """Ctrl-C at any moment: exit 130, one line, every topic holds every complete step."""
+    bag = tmp_path / 'interrupted'
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    wait_for_bag(bag)
+    if moment == 'mid-run':
+        wait_for_bag(bag, size=90_000)
+    else:
+        wait_for_bag(bag, size=1)
     children = children_of(proc.pid)
     proc.send_signal(signal.SIGINT)
     _out, err = proc.communicate(timeout=120)
@@ -193,15 +216,17 @@ def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path) -> None:
     assert 'interrupted' in err and 'Traceback' not in err
     assert_gone(children)
     with AnyReader([bag]) as reader:                # finished normally: it has a summary
-        assert reader.message_count > 0
+        assert reader.message_count > (100 if moment == 'mid-run' else -1)
+    assert err.count('\n') == 1
+    assert check_bag_directory(bag) == []
     records = records_from_bag(bag)
-    assert 0 < len(records) < 600
+    assert len(records) == assert_every_topic_complete(bag) < 600
     assert_records_equal(records, in_process(600)[:len(records)])
 
 
 def test_gru_planner_in_the_graph_equals_in_process(tmp_path: Path) -> None:
     """TAC-GRU through the node graph gives the in-process trajectories."""
-    bag = tmp_path / 'gru.mcap'
+    bag = tmp_path / 'gru'
     command = run_command(bag, '--max-steps', '60')
     command[command.index('ca')] = 'gru'
     proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
@@ -213,7 +238,7 @@ def test_gru_planner_in_the_graph_equals_in_process(tmp_path: Path) -> None:
 
 def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
     """The recorder killed mid-run: exit 2 naming it, and the truncated MCAP is repaired."""
-    bag = tmp_path / 'cut.mcap'
+    bag = tmp_path / 'cut'
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     wait_for_bag(bag)
@@ -230,7 +255,7 @@ def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
 def test_commute_bag_replays_through_the_graph(tmp_path: Path, bag_name: str) -> None:
     """A real commute bag as the preceding vehicle, graph == in-process."""
     trace_arg = str(Path(__file__).resolve().parents[1] / 'bags' / bag_name)
-    bag = tmp_path / 'replay.mcap'
+    bag = tmp_path / 'replay'
     command = run_command(bag, '--max-steps', '60')
     at = command.index('--trace')
     command[at:at + 2] = ['--bag-in', trace_arg]   # the issue's spelling; --trace BAG is alike
@@ -245,7 +270,7 @@ def test_commute_bag_replays_through_the_graph(tmp_path: Path, bag_name: str) ->
 def test_eight_parallel_runs_are_isolated_and_equal(tmp_path: Path) -> None:
     """8 graph runs at once (48 node processes on 2 cores): own domains, no
     cross-talk, every one equal to the in-process run."""
-    bags = [tmp_path / f'run{k}.mcap' for k in range(8)]
+    bags = [tmp_path / f'run{k}' for k in range(8)]
     procs = [subprocess.Popen(run_command(b, '--max-steps', '20', '--startup-timeout-s', '120'),
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for b in bags]
@@ -256,8 +281,8 @@ def test_eight_parallel_runs_are_isolated_and_equal(tmp_path: Path) -> None:
     # fresh-clone CI run: 7 domains for 8 runs); runs that overlap in time must not share one.
     # Each run's [params written, bag finished] lies inside the time it held its lease.
     domains = [out.split('domain ')[1].split(')')[0] for out, _ in outputs]
-    spans = [((bag.with_suffix('.logs') / 'run_params.yaml').stat().st_mtime,
-              bag.stat().st_mtime) for bag in bags]
+    spans = [((bag.with_name(bag.name + '.logs') / 'run_params.yaml').stat().st_mtime,
+              (bag / 'metadata.yaml').stat().st_mtime) for bag in bags]
     for i, j in itertools.combinations(range(len(bags)), 2):
         overlap = spans[i][0] < spans[j][1] and spans[j][0] < spans[i][1]
         assert not (overlap and domains[i] == domains[j]), (domains, spans)
@@ -274,7 +299,7 @@ def test_solver_time_out_publishes_the_fallback_and_goes_on(tmp_path: Path) -> N
     params.write_text((Path(__file__).resolve().parents[1] / 'config' / 'trust_av.yaml')
                       .read_text().replace('solver_cpu_budget_s: 0.02',
                                            'solver_cpu_budget_s: 0.000000001'))
-    bag = tmp_path / 'fallback.mcap'
+    bag = tmp_path / 'fallback'
     proc = subprocess.run(run_command(bag, '--max-steps', '30', '--params-file', str(params)),
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -309,7 +334,7 @@ def test_twist_stamped_bag_on_a_remapped_topic_replays_through_the_graph(tmp_pat
                     linear=types['geometry_msgs/msg/Vector3'](x=v, y=0.0, z=0.0),
                     angular=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0)))
             writer.write(conn, (100 + i) * 10**9, TYPESTORE.serialize_cdr(msg, TWIST_STAMPED))
-    bag = tmp_path / 'replay.mcap'
+    bag = tmp_path / 'replay'
     command = run_command(bag, '--max-steps', '30', '--bag-topic', '/vehicle/lead/twist',
                           '--bag-type', TWIST_STAMPED)
     at = command.index('--trace')

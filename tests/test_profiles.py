@@ -18,7 +18,7 @@ def test_as_reported_changes_only_epsilon_and_the_explicability_scale() -> None:
                for node in default for key in set(default[node]) | set(reported[node])
                if default[node].get(key) != reported[node].get(key)}
     assert changed == {('/**', 'epsilon_mps2'): (6.0, 3.0),
-                       ('planner', 'explicability_scale'): (0.005, 0.02)}
+                       ('/**/planner', 'explicability_scale'): (0.005, 0.02)}
 
 
 def test_as_reported_loads() -> None:

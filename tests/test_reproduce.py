@@ -10,8 +10,9 @@ from typing import Any
 import pytest
 
 from trust_av_planner.study import sweep, tables
+from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_av_planner.study.sweep import Case
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
 
 
 class InlineExecutor:
@@ -103,6 +104,33 @@ def test_tables_from_results() -> None:
     assert rows[0][-1] == '0.84, 0.89, 0.98'   # ours / paper (29.88, 56.37, 29.22)
 
 
+def test_paper_rows_carry_their_trust_bound() -> None:
+    """Beside each paper row: T_M >= delta M (1 - 5.919 mean E); Table II at alpha = 0 (mean
+    E 0.038 over 600 steps) needs 46.50 but prints 44.36; Table III at alpha = 0 (0.065)
+    allows 36.92 and prints 38.141."""
+    results = {Case('us06', p, a): {'metrics': {'final_trust': 50.0, 'mean_explicability': 0.01,
+                                                'rmse_mps2': 0.5 - 0.1 * a}}
+               for p in ('gru', 'ca') for a in sweep.ALPHAS}
+    trust = load_run_config().trust
+    header, rows = tables.alpha_table(results, 'us06', 'gru', TABLE_II_TAC_GRU_US06,
+                                      (600, trust))
+    assert header[-1] == tables.BOUND_HEADER
+    assert rows[0][-1] == '46.50 (44.36 unattainable)'
+    assert all('unattainable' in row[-1] for row in rows[:-1])
+    _, rows = tables.alpha_table(results, 'us06', 'ca', TABLE_III_TAC_CA_US06, (600, trust))
+    assert rows[0][-1] == '36.92 (38.141 attainable)'
+    assert rows[-1][-1] == ''
+
+
+def test_profile_and_params_file_exclude_each_other(tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+                           '--profile', 'as_reported', '--params-file',
+                           str(DEFAULT_PARAMS_FILE), '--results-dir', str(tmp_path)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert '--profile and --params-file both choose the parameters' in proc.stderr
+
+
 def test_reproduce_command_writes_tables_and_figures(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
                            '--traces', 'nycc', '--predictors', 'ca', '--results-dir',
@@ -131,8 +159,9 @@ def test_graph_sweep_equals_in_process_sweep(tmp_path: Path) -> None:
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert '5 cases (graph)' in proc.stdout
-    bags = {b.name for b in (tmp_path / 'graph' / 'graph_bags').glob('*.mcap')}
-    assert bags == {f'nycc_ca_alpha{a:g}.mcap' for a in sweep.ALPHAS}
+    bags = {b.name for b in (tmp_path / 'graph' / 'graph_bags').glob('*/metadata.yaml')
+            for b in [b.parent]}
+    assert bags == {f'nycc_ca_alpha{a:g}' for a in sweep.ALPHAS}
     cases = sweep.sweep_cases(['nycc'], ['ca'])
     # The same sweep again: read from the graph cache, and in-process with the same steps.
     graph = sweep.run_sweep(cases, DEFAULT_PARAMS_FILE, tmp_path / 'graph',

@@ -32,7 +32,7 @@ ACCEL_MIN, ACCEL_MAX = -3.0, 3.0
 
 
 def shadow(tmp_path: Path, *extra: str) -> tuple[subprocess.CompletedProcess[str], Path, Path]:
-    out, stats = tmp_path / 'shadow.mcap', tmp_path / 'shadow.json'
+    out, stats = tmp_path / 'shadow', tmp_path / 'shadow.json'
     result = subprocess.run(
         [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
          str(REPO / 'bags' / 'commute_am'), '--duration-s', SHADOW_S, '--out', str(out),
@@ -105,7 +105,7 @@ def test_whole_graph_in_wall_mode_drives_at_real_time(tmp_path: Path) -> None:
     without collision, every topic is recorded with log time = header stamp = wall time."""
     trace = tmp_path / 'steady.csv'
     trace.write_text('time_s,speed_mps\n' + ''.join(f'{t},10.0\n' for t in range(61)))
-    out, stats = tmp_path / 'wall.mcap', tmp_path / 'wall.json'
+    out, stats = tmp_path / 'wall', tmp_path / 'wall.json'
     before_ns = time.time_ns()
     result = subprocess.run(
         [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--whole-graph', '--bag',

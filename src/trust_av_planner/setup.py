@@ -1,3 +1,5 @@
+from glob import glob
+
 from setuptools import find_packages, setup
 
 package_name = 'trust_av_planner'
@@ -6,11 +8,15 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={package_name: ['py.typed', 'config/*.yaml', 'models/*.npz', 'models/*.json',
+    package_data={package_name: ['py.typed', 'models/*.npz', 'models/*.json',
                                  'models/*.md', 'models/*.png']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        # the shipped params files and the Foxglove layout (package_name/config links to the
+        # repository's config/)
+        ('share/' + package_name + '/config', sorted(glob(package_name + '/config/*.yaml')
+                                                     + glob(package_name + '/config/*.json'))),
     ],
     install_requires=['setuptools'],
     extras_require={'ray': ['ray==2.60.0']},

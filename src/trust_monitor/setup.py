@@ -1,3 +1,5 @@
+from glob import glob
+
 from setuptools import find_packages, setup
 
 package_name = 'trust_monitor'
@@ -10,6 +12,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
+        # the shipped params files (package_name/config links to the repository's config/)
+        ('share/' + package_name + '/config', sorted(glob(package_name + '/config/*.yaml'))),
     ],
     install_requires=['setuptools'],
     zip_safe=False,

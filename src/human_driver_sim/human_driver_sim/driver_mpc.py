@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 
 from trust_monitor.common import kinematics
-from trust_monitor.common.params import check_fields, param, require
+from trust_monitor.common.params import check_fields, control_step_param, param, require
 from trust_monitor.common.solver import sqp_options
 
 LOG = logging.getLogger(__name__)
@@ -38,7 +38,7 @@ FEATURE_NAMES = ('acceleration', 'desired_speed', 'relative_speed', 'relative_di
 class DriverConfig:
     """Parameters of the driver MPC."""
 
-    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    dt_s: float = control_step_param()
     horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
     standstill_gap_m: float = param('standstill gap d_s: the bound d_H >= d_s', unit='m')
     speed_min_mps: float = param('lower speed bound', unit='m/s', low=0.0)

@@ -21,6 +21,7 @@ import sys
 import time
 from dataclasses import dataclass
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
@@ -29,6 +30,7 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc
+from trust_monitor.common.grids import hold_at
 from trust_monitor.common.kinematics import advance
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
 from trust_monitor.common.params import check_fields, param
@@ -39,10 +41,11 @@ from trust_monitor.ros.messages import (
     diagnostics,
     msg_ns,
     trajectory,
+    trajectory_times,
     trajectory_values,
 )
 from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.qos import QOS, topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
@@ -66,6 +69,7 @@ class DriverNode(Node):
     def __init__(self) -> None:
         super().__init__('human_driver')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.config = declare_config(self, DriverConfig)
         self.follower = declare_config(self, FollowerState)
         self.clock = declare_config(self, WallClockConfig)
@@ -77,16 +81,20 @@ class DriverNode(Node):
         self.last_tick_ns = time.monotonic_ns()
         self.frame = VEHICLE_FRAMES['human_driver']
         self.vehicle = VehicleOdometry(self.frame)
-        self.pub_odom = self.create_publisher(Odometry, 'human/odom', QOS['STEP'])
-        self.pub_tf = self.create_publisher(TFMessage, 'tf', QOS['STEP'])
-        self.pub_plan = self.create_publisher(JointTrajectory, 'human/plan', QOS['STEP'])
+        self.pub_odom = self.create_publisher(
+            Odometry, 'human/odom', topic_qos('human/odom', self.clock, publisher=True))
+        self.pub_tf = self.create_publisher(TFMessage, 'tf',
+                                            topic_qos('tf', self.clock, publisher=True))
+        self.pub_plan = self.create_publisher(JointTrajectory, 'human/plan',
+                                              topic_qos('human/plan', self.clock))
         self.pub_status = self.create_publisher(DiagnosticArray, 'human/driver_status',
-                                                QOS['STEP'])
+                                                topic_qos('human/driver_status', self.clock))
         callback = self.on_latest if self.clock.wall else self.on_input
         self.create_subscription(JointTrajectory, 'ego/expected_plan',
-                                 lambda m: callback('expected', m), QOS['STEP'])
+                                 lambda m: callback('expected', m),
+                                 topic_qos('ego/expected_plan', self.clock))
         self.create_subscription(Odometry, 'ego/odom', lambda m: callback('ego', m),
-                                 QOS['STEP'])
+                                 topic_qos('ego/odom', self.clock))
         start_ns = now_ns(self) if self.clock.wall else stamp_ns(self.follower.start_time_s)
         self.publish_odometry(start_ns)
         self.started = False
@@ -157,11 +165,14 @@ class DriverNode(Node):
     def plan(self, ns: int, expected_msg: JointTrajectory, ego: Odometry) -> float:
         """Solve the driver MPC, publish its plan and status (stamped ``ns``); the first
         acceleration of the plan, m/s^2."""
-        expected = trajectory_values(expected_msg, 'accelerations')
+        # The planner's expected plan is on its prediction grid: read it on this model's.
+        expected = hold_at(np.array(trajectory_times(expected_msg)),
+                           np.array(trajectory_values(expected_msg, 'accelerations')),
+                           self.config.dt_s, self.config.horizon_steps)
         av_position = float(ego.pose.pose.position.x)
         av_speed = float(ego.twist.twist.linear.x)
         gap = av_position - self.position_m - self.follower.vehicle_length_m
-        result = self.mpc.step(gap, self.speed_mps, av_speed, expected)  # type: ignore[arg-type]
+        result = self.mpc.step(gap, self.speed_mps, av_speed, expected)
         dt = self.config.dt_s
         self.pub_plan.publish(trajectory(ns, dt, frame_id=self.frame,
                                          accelerations=result.plan_mps2.tolist()))

@@ -2,8 +2,9 @@
 
 Reading: the preceding vehicle's speed comes from one topic of a recorded bag, as
 ``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``) or ``geometry_msgs/msg/TwistStamped``
-(``twist.linear.x``), stamped by the message header (the recording's log time when the
-header stamp is zero). The samples go through the same validation and resampling as a CSV
+(``twist.linear.x``), timed by the message header stamps (which may start at 0, as in a
+simulation on sim time); only a topic whose header stamps are all zero is timed by the
+recording's log times. The samples go through the same validation and resampling as a CSV
 trace (:func:`preceding_traffic.traces.read_samples` rules), so irregular sampling and
 short holes are interpolated and a hole longer than ``max_sample_gap_s`` is rejected with
 its time. The preview is the recorded future.
@@ -17,7 +18,6 @@ This module is I/O, not a model: it imports rosbags (pure Python), never rclpy.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -26,7 +26,13 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
-from preceding_traffic.traces import SpeedTrace, TraceConfig, TraceError, resample
+from preceding_traffic.traces import (
+    SpeedTrace,
+    TraceConfig,
+    TraceError,
+    check_sample,
+    resample,
+)
 
 ODOMETRY = 'nav_msgs/msg/Odometry'
 TWIST_STAMPED = 'geometry_msgs/msg/TwistStamped'
@@ -46,10 +52,9 @@ def _speed(msg: object, msgtype: str) -> float:
     return float(msg.twist.linear.x)  # type: ignore[attr-defined]
 
 
-def _stamp_s(msg: object, log_time_ns: int) -> float:
+def _stamp_ns(msg: object) -> int:
     stamp = msg.header.stamp  # type: ignore[attr-defined]
-    ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-    return (ns if ns > 0 else log_time_ns) * 1e-9
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 def read_bag_samples(path: Path, topic: str, msgtype: str,
@@ -83,14 +88,20 @@ def read_bag_samples(path: Path, topic: str, msgtype: str,
             wrong = [c.msgtype for c in connections if c.msgtype != msgtype]
             if wrong:
                 raise BagError(f'{path}: topic {topic} has type {wrong[0]}, expected {msgtype}')
+            stamps: list[int] = []
+            log_times: list[int] = []
             for connection, log_time, raw in reader.messages(connections=connections):
                 msg = reader.deserialize(raw, connection.msgtype)
-                times.append(_stamp_s(msg, log_time))
+                stamps.append(_stamp_ns(msg))
+                log_times.append(log_time)
                 speeds.append(_speed(msg, connection.msgtype))
     except (AnyReaderError, WriterError) as err:
         raise BagError(f'{path}: cannot read bag ({err})') from err
-    if not times:
+    if not speeds:
         raise BagError(f'{path}: topic {topic} has no messages')
+    # Header stamps are the time base when the messages carry them (a simulation's stamps
+    # start at 0); only a topic whose stamps are all zero is timed by its log times.
+    times = [ns * 1e-9 for ns in (stamps if any(stamps) else log_times)]
     return _validated(path, topic, times, speeds, config)
 
 
@@ -98,15 +109,10 @@ def _validated(path: Path, topic: str, times: list[float], speeds: list[float],
                config: TraceConfig) -> tuple[np.ndarray, np.ndarray]:
     for i, (t, v) in enumerate(zip(times, speeds, strict=True)):
         where = f'{path}: {topic} message {i} at t = {t:.3f} s'
-        if not (math.isfinite(t) and math.isfinite(v)):
-            raise BagError(f'{where}: NaN or infinite value')
-        if v < 0.0:
-            raise BagError(f'{where}: negative speed {v} m/s')
-        if i and t <= times[i - 1]:
-            raise BagError(f'{where}: time does not increase')
-        if i and t - times[i - 1] > config.max_sample_gap_s:
-            raise BagError(f'{where}: gap of {t - times[i - 1]:g} s exceeds '
-                           f'max_sample_gap_s = {config.max_sample_gap_s:g} s')
+        try:
+            check_sample(where, t, v, times[i - 1] if i else None, config)
+        except TraceError as err:
+            raise BagError(str(err)) from err
     if len(times) < 2:
         raise BagError(f'{path}: topic {topic} needs at least 2 messages, got {len(times)}')
     return np.asarray(times), np.asarray(speeds)
@@ -117,7 +123,11 @@ def load_bag_trace(path: str | Path, topic: str, msgtype: str, dt_s: float,
     """A bag's speed topic on the control grid, as a :class:`SpeedTrace`."""
     path = Path(path)
     times, speeds = read_bag_samples(path, topic, msgtype, config)
-    return SpeedTrace(name=path.stem, dt_s=dt_s, speeds_mps=resample(times, speeds, dt_s),
+    try:
+        grid = resample(times, speeds, dt_s, f'{path}: {topic}')
+    except TraceError as err:
+        raise BagError(str(err)) from err
+    return SpeedTrace(name=path.stem, dt_s=dt_s, speeds_mps=grid,
                       t0_s=float(times[0]))
 
 

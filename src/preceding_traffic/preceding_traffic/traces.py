@@ -11,14 +11,27 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
+import os
+import stat
+from collections.abc import Iterator
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
 from preceding_traffic.errors import PrecedingTrafficError
 from trust_monitor.common.params import ParamsError, check_fields, param
+
+MAX_SPEED_MPS = 100.0
+"""Fastest speed a trace may hold, m/s (360 km/h: above any road vehicle; a faster sample is
+a unit or column mistake)."""
+MAX_TRACE_STEPS = 200_000
+"""Most control steps a trace may have (55 h at 1 s, 5.5 h at 0.1 s): the in-process loop
+keeps one record per step (2.9 kB measured on US06), so this bounds it to about 0.6 GB."""
+MAX_LINE_CHARS = 4096
+"""Longest line of a trace CSV (a binary file has no line ends)."""
 
 SHIPPED_TRACES = ('us06', 'nycc', 'commute_am', 'commute_pm')
 """Evaluation traces shipped in ``data/`` (sources and licences in ``data/SOURCES.md``)."""
@@ -66,23 +79,28 @@ class SpeedTrace:
     Attributes:
         name: trace name or file stem.
         dt_s: control step, s.
-        speeds_mps: preceding-traffic speed at t0 + k*dt_s, m/s.
+        speeds_mps: preceding-traffic speed at t0 + k*dt_s, m/s (the whole trace).
         t0_s: time of the first sample, s.
+        step_limit: run only this many steps (0: all); the preview past it is the
+            recorded future, as in the whole run.
     """
 
     name: str
     dt_s: float
     speeds_mps: np.ndarray
     t0_s: float = 0.0
+    step_limit: int = 0
 
     @property
     def steps(self) -> int:
-        """Number of control steps (one fewer than grid points)."""
-        return len(self.speeds_mps) - 1
+        """Number of control steps: one fewer than grid points, at most ``step_limit``."""
+        whole = len(self.speeds_mps) - 1
+        return min(whole, self.step_limit) if self.step_limit else whole
 
     @property
     def max_speed_mps(self) -> float:
-        """max(v_PT): Table I's speed limit for both vehicles."""
+        """max(v_PT) over the whole trace: Table I's speed limit for both vehicles (the same
+        for a run limited to its first steps)."""
         return float(np.max(self.speeds_mps))
 
     def time_s(self, step: int) -> float:
@@ -106,67 +124,148 @@ def trace_path(name_or_path: str) -> Path:
     return Path(name_or_path)
 
 
+def _lines(handle: TextIO, path: Path) -> Iterator[str]:
+    """The text lines of an open trace, each at most :data:`MAX_LINE_CHARS` long."""
+    number = 0
+    while True:
+        line = handle.readline(MAX_LINE_CHARS + 1)
+        if not line:
+            return
+        number += 1
+        if len(line) > MAX_LINE_CHARS:
+            raise TraceError(f'{path}:{number}: line longer than {MAX_LINE_CHARS} characters '
+                             '(not a time_s,speed_mps CSV)')
+        yield line
+
+
+def check_sample(where: str, t: float, v: float, previous_t: float | None,
+                 config: TraceConfig) -> None:
+    """The rules every speed sample obeys, CSV or bag.
+
+    Args:
+        where: the sample's place for messages (``file:line`` or ``bag: topic message i``).
+        t: its time, s.
+        v: its speed, m/s.
+        previous_t: the time of the sample before it (None for the first), s.
+        config: ``max_sample_gap_s``.
+
+    Raises:
+        TraceError: NaN or infinite value, negative speed, a speed above
+            :data:`MAX_SPEED_MPS`, time not increasing, or a hole longer than
+            ``max_sample_gap_s``.
+    """
+    if not (math.isfinite(t) and math.isfinite(v)):
+        raise TraceError(f'{where}: NaN or infinite value')
+    if v < 0.0:
+        raise TraceError(f'{where}: negative speed {v:g} m/s')
+    if v > MAX_SPEED_MPS:
+        raise TraceError(f'{where}: speed {v:g} m/s is above {MAX_SPEED_MPS:g} m/s '
+                         f'({MAX_SPEED_MPS * 3.6:g} km/h), faster than any road vehicle '
+                         '(wrong unit or column?)')
+    if previous_t is not None and t <= previous_t:
+        raise TraceError(f'{where}: time {t:g} s does not increase (previous {previous_t:g} s)')
+    if previous_t is not None and t - previous_t > config.max_sample_gap_s:
+        raise TraceError(f'{where}: gap of {t - previous_t:g} s before t = {t:g} s exceeds '
+                         f'max_sample_gap_s = {config.max_sample_gap_s:g} s')
+
+
 def read_samples(path: Path, config: TraceConfig) -> tuple[np.ndarray, np.ndarray]:
     """Read and validate raw ``(time_s, speed_mps)`` samples.
 
+    The file must be a regular file of UTF-8 text (a byte-order mark is allowed). Messages
+    name the file, the line and the problem, never the file's content (a ``trace:`` path in
+    a params file may point anywhere).
+
     Raises:
-        TraceError: missing file, wrong columns, empty, non-numeric, NaN/inf, negative speed,
-            non-increasing time, or a sample gap longer than ``config.max_sample_gap_s``.
+        TraceError: missing or unreadable file, not a regular file, not UTF-8 text, not CSV,
+            wrong columns, empty, non-numeric, or a sample that breaks :func:`check_sample`.
     """
     try:
-        handle = path.open(newline='')
+        handle = path.open(newline='', encoding='utf-8-sig')
     except OSError as err:
         raise TraceError(f'{path}: cannot open trace ({err.strerror})') from err
+    with handle:
+        if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+            raise TraceError(f'{path}: not a regular file (expected a time_s,speed_mps CSV)')
+        reader = csv.reader(_lines(handle, path), strict=True)
+        try:
+            return _parse(path, reader, config)
+        except UnicodeDecodeError as err:
+            raise TraceError(f'{path}: not UTF-8 text (expected a time_s,speed_mps CSV)') \
+                from err
+        except csv.Error as err:
+            raise TraceError(f'{path}:{reader.line_num}: not CSV text ({err})') from err
+
+
+def _parse(path: Path, reader: Iterator[list[str]],
+           config: TraceConfig) -> tuple[np.ndarray, np.ndarray]:
+    header = next(reader, None)
+    if header is None:
+        raise TraceError(f'{path}: empty file (expected header time_s,speed_mps)')
+    if [h.strip() for h in header] != ['time_s', 'speed_mps']:
+        raise TraceError(f'{path}:1: expected the header time_s,speed_mps (a CSV with these '
+                         'two columns)')
     times: list[float] = []
     speeds: list[float] = []
-    with handle:
-        reader = csv.reader(handle)
-        header = next(reader, None)
-        if header is None:
-            raise TraceError(f'{path}: empty file (expected header time_s,speed_mps)')
-        if [h.strip() for h in header] != ['time_s', 'speed_mps']:
-            raise TraceError(f'{path}:1: expected columns time_s,speed_mps, '
-                             f'got {",".join(header)}')
-        for line, row in enumerate(reader, start=2):
-            if not row:
-                continue
-            if len(row) != 2:
-                raise TraceError(f'{path}:{line}: expected 2 values, got {len(row)}')
+    for line, row in enumerate(reader, start=2):
+        if not row:
+            continue
+        if len(row) != 2:
+            raise TraceError(f'{path}:{line}: expected 2 values, got {len(row)}')
+        for column, text in zip(('time_s', 'speed_mps'), row, strict=True):
             try:
-                t, v = float(row[0]), float(row[1])
+                float(text)
             except ValueError as err:
-                raise TraceError(f'{path}:{line}: not a number ({err})') from err
-            if not (math.isfinite(t) and math.isfinite(v)):
-                raise TraceError(f'{path}:{line}: NaN or infinite value ({row[0]}, {row[1]})')
-            if v < 0.0:
-                raise TraceError(f'{path}:{line}: negative speed {v} m/s')
-            if times and t <= times[-1]:
-                raise TraceError(f'{path}:{line}: time {t} s does not increase '
-                                 f'(previous {times[-1]} s)')
-            if times and t - times[-1] > config.max_sample_gap_s:
-                raise TraceError(f'{path}:{line}: gap of {t - times[-1]:g} s before t = {t:g} s '
-                                 f'exceeds max_sample_gap_s = {config.max_sample_gap_s:g} s')
-            times.append(t)
-            speeds.append(v)
+                raise TraceError(f'{path}:{line}: {column} is not a number') from err
+        t, v = float(row[0]), float(row[1])
+        check_sample(f'{path}:{line}', t, v, times[-1] if times else None, config)
+        times.append(t)
+        speeds.append(v)
     if len(times) < 2:
         raise TraceError(f'{path}: needs at least 2 samples, got {len(times)}')
     return np.asarray(times), np.asarray(speeds)
 
 
-def resample(times_s: np.ndarray, speeds_mps: np.ndarray, dt_s: float) -> np.ndarray:
-    """Linear interpolation onto ``times_s[0] + k*dt_s`` up to the last sample."""
+def resample(times_s: np.ndarray, speeds_mps: np.ndarray, dt_s: float,
+             where: str = 'trace') -> np.ndarray:
+    """Linear interpolation onto ``times_s[0] + k*dt_s`` up to the last sample.
+
+    Args:
+        times_s: sample times, increasing, s.
+        speeds_mps: speeds at those times, m/s.
+        dt_s: control step, s.
+        where: the source's name for messages.
+
+    Raises:
+        TraceError: the trace is shorter than one control step, or longer than
+            :data:`MAX_TRACE_STEPS` steps (checked before anything is allocated).
+    """
     if not dt_s > 0.0:
         raise TraceError(f'dt_s must be > 0, got {dt_s}')
-    count = math.floor((times_s[-1] - times_s[0]) / dt_s + 1e-9) + 1
-    grid = times_s[0] + dt_s * np.arange(count)
+    span = float(times_s[-1] - times_s[0])
+    steps = math.floor(span / dt_s + 1e-9)
+    if steps < 1:
+        raise TraceError(f'{where}: spans {span:g} s, shorter than one control step '
+                         f'(dt_s = {dt_s:g} s)')
+    if steps > MAX_TRACE_STEPS:
+        raise TraceError(f'{where}: {span:g} s at dt_s = {dt_s:g} s is {steps} steps, more than '
+                         f'the {MAX_TRACE_STEPS} a trace may have')
+    grid = times_s[0] + dt_s * np.arange(steps + 1)
     speeds: np.ndarray = np.interp(grid, times_s, speeds_mps)
     return speeds
 
 
 def truncate(trace: SpeedTrace, max_steps: int) -> SpeedTrace:
-    """The first ``max_steps`` control steps of ``trace`` (all of it for 0)."""
+    """``trace`` limited to its first ``max_steps`` control steps (all of it for 0).
+
+    Only the length changes: the speed limit (:attr:`SpeedTrace.max_speed_mps`) and the
+    preview still see the whole trace, so a shortened run equals the start of the full run.
+
+    Raises:
+        TraceError: ``max_steps`` is negative.
+    """
     if max_steps < 0:
-        raise ValueError(f'max_steps must be >= 0, got {max_steps}')
-    if not max_steps:
+        raise TraceError(f'max_steps must be >= 0, got {max_steps}')
+    if not max_steps or max_steps >= trace.steps:
         return trace
-    return dataclasses.replace(trace, speeds_mps=trace.speeds_mps[:max_steps + 1])
+    return dataclasses.replace(trace, step_limit=max_steps)

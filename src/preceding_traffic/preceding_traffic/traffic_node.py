@@ -20,7 +20,6 @@ of the trace it logs ``done`` and stops publishing, so the planner reports its i
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import time
 from dataclasses import dataclass
@@ -36,14 +35,14 @@ from trajectory_msgs.msg import JointTrajectory
 
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.sources import load_trace
-from preceding_traffic.traces import TraceConfig
+from preceding_traffic.traces import TraceConfig, truncate
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
-from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.params import check_fields, control_step_param, param
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
 from trust_monitor.ros.messages import VehicleOdometry, msg_ns, time_msg, trajectory
 from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.qos import QOS, topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
@@ -58,7 +57,7 @@ class TrafficRunConfig:
         max_steps: stop after this many steps (0: the whole trace).
     """
 
-    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    dt_s: float = control_step_param()
     horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
     initial_position_m: float = param("the preceding vehicle's position at the first step",
                                       unit='m', default=0.0)
@@ -75,14 +74,12 @@ class TrafficNode(Node):
     def __init__(self) -> None:
         super().__init__('preceding_traffic')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.run = declare_config(self, TrafficRunConfig)
         trace_config = declare_config(self, TraceConfig)
         self.clock = declare_config(self, WallClockConfig)
         trace = load_trace(trace_config.trace, self.run.dt_s, trace_config)
-        if self.run.max_steps:
-            trace = dataclasses.replace(
-                trace, speeds_mps=trace.speeds_mps[:self.run.max_steps + 1])
-        self.trace = trace
+        self.trace = truncate(trace, self.run.max_steps)  # the length only: same preview
         self.position_m = self.run.initial_position_m
         self.step = -1
         self.done = False
@@ -90,10 +87,14 @@ class TrafficNode(Node):
         self.frame = VEHICLE_FRAMES['preceding_traffic']
         self.vehicle = VehicleOdometry(self.frame)
         self.pub_clock = self.create_publisher(Clock, 'clock', QOS['CLOCK'])
-        self.pub_odom = self.create_publisher(Odometry, 'preceding_vehicle/odom', QOS['STEP'])
-        self.pub_tf = self.create_publisher(TFMessage, 'tf', QOS['STEP'])
-        self.pub_preview = self.create_publisher(JointTrajectory,
-                                                 'preceding_vehicle/speed_preview', QOS['STEP'])
+        self.pub_odom = self.create_publisher(
+            Odometry, 'preceding_vehicle/odom',
+            topic_qos('preceding_vehicle/odom', self.clock, publisher=True))
+        self.pub_tf = self.create_publisher(TFMessage, 'tf',
+                                            topic_qos('tf', self.clock, publisher=True))
+        self.pub_preview = self.create_publisher(
+            JointTrajectory, 'preceding_vehicle/speed_preview',
+            topic_qos('preceding_vehicle/speed_preview', self.clock, publisher=True))
         self.create_subscription(Empty, 'sim/start', self.on_start, QOS['LATCHED'])
         self.replay = LeadReplay(trace, self.run.initial_position_m)
         self.start_ns: int | None = None

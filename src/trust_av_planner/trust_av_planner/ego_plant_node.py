@@ -9,10 +9,11 @@ Parameters: ``dt_s`` and the initial state.
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` integrates the latest
 command over the real time elapsed since the previous tick
 (:func:`trust_monitor.common.kinematics.advance`, no reversing) and publishes the odometry stamped
-now; until ``sim/start`` the vehicle holds its initial state (the traffic node starts its
-replay then). A command older than ``input_timeout_s`` (or none yet) is not applied: the
-vehicle coasts (0 m/s^2) and a warning names the reason, as a drive-by-wire unit drops a
-stale set-point.
+now (sensor-data QoS) with its transform; until ``sim/start`` the vehicle holds its initial
+state (the traffic node starts its replay then). A command older than its deadline (two
+control periods, by its stamp; the command QoS carries the same deadline) or none yet is not
+applied: the vehicle coasts (0 m/s^2) and a warning names the reason, as a drive-by-wire unit
+drops a stale set-point.
 """
 
 from __future__ import annotations
@@ -29,12 +30,12 @@ from tf2_msgs.msg import TFMessage
 
 from trust_monitor.common.kinematics import VehicleState, advance, integrate
 from trust_monitor.common.lockstep import stamp_ns
-from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.params import check_fields, control_step_param, param
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import VehicleOdometry, msg_ns
 from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.qos import QOS, command_deadline_s, topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
@@ -42,7 +43,7 @@ from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 class PlantConfig:
     """A simulated vehicle: step and initial odometry (the orchestrator computes these)."""
 
-    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
+    dt_s: float = control_step_param()
     initial_position_m: float = param("the AV's initial position", unit='m')
     initial_speed_mps: float = param("the AV's initial speed", unit='m/s', low=0.0)
     start_time_s: float = param('time of the initial odometry (the first step)', unit='s')
@@ -51,22 +52,34 @@ class PlantConfig:
         check_fields(self)
 
 
+def command_problem(command: AccelStamped | None, now_ns: int, deadline_s: float) -> str:
+    """Why a command must not be applied now ('' when it may): none yet, or older than its
+    deadline by its stamp."""
+    if command is None:
+        return 'none received'
+    age_s = (now_ns - msg_ns(command.header.stamp)) / NS_PER_S
+    return f'{age_s:.3f} s old (deadline {deadline_s:g} s)' if age_s > deadline_s else ''
+
+
 class EgoPlantNode(Node):
     """Explicit-Euler odometry of the AV (:func:`trust_monitor.common.kinematics.integrate`)."""
 
     def __init__(self) -> None:
         super().__init__('ego_plant')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.config = declare_config(self, PlantConfig)
         self.clock = declare_config(self, WallClockConfig)
         self.state = VehicleState(self.config.initial_position_m, self.config.initial_speed_mps)
         self.vehicle = VehicleOdometry(VEHICLE_FRAMES['ego_plant'])
-        self.pub = self.create_publisher(Odometry, 'ego/odom', QOS['STEP'])
-        self.pub_tf = self.create_publisher(TFMessage, 'tf', QOS['STEP'])
+        self.pub = self.create_publisher(Odometry, 'ego/odom',
+                                         topic_qos('ego/odom', self.clock, publisher=True))
+        self.pub_tf = self.create_publisher(TFMessage, 'tf',
+                                            topic_qos('tf', self.clock, publisher=True))
         self.latest = LatestInputs(['command'])
         self.create_subscription(AccelStamped, 'ego/accel_cmd',
                                  self.on_latest if self.clock.wall else self.on_command,
-                                 QOS['STEP'])
+                                 topic_qos('ego/accel_cmd', self.clock))
         self.last_tick_ns = time.monotonic_ns()
         start_ns = now_ns(self) if self.clock.wall else stamp_ns(self.config.start_time_s)
         self.publish(start_ns)
@@ -98,8 +111,8 @@ class EgoPlantNode(Node):
     def wall_step(self) -> None:
         """Wall mode: apply the latest fresh command over the elapsed time, publish."""
         tick = time.monotonic_ns()
-        why = self.latest.problems(tick, self.clock.input_timeout_s)
         command = self.latest.get('command')
+        why = command_problem(command, now_ns(self), command_deadline_s(self.clock))
         accel = 0.0 if why or command is None else float(command.accel.linear.x)
         if not self.started:
             self.last_tick_ns = tick

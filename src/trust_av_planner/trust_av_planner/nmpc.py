@@ -23,15 +23,23 @@ the documented fallback plan
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from trust_monitor.common import kinematics
-from trust_monitor.common.params import check_fields, param, require
+from trust_monitor.common.params import (
+    PARAM_METADATA_KEY,
+    check_fields,
+    control_step_param,
+    param,
+    require,
+)
 from trust_monitor.common.solver import sqp_options
 from trust_monitor.trust_model import TrustConfig, explicability, explicability_bound
 
@@ -39,6 +47,32 @@ LOG = logging.getLogger(__name__)
 
 PREDICTORS = ('ca', 'gru')
 """Names of the plan estimators (parameter ``predictor``)."""
+
+LEAD_PREVIEWS = ('recorded', 'constant_speed', 'constant_acceleration')
+"""Where the lead's speed over the horizon comes from (parameter ``lead_preview``)."""
+
+PREDICTION_GRIDS = ('control_period', 'model_step')
+"""The NMPC's prediction grid (parameter ``prediction_grid``, :func:`prediction_grid`)."""
+
+MAX_GRID_STEPS = 300
+"""Largest prediction grid (steps) the NMPC is built with."""
+
+QRQP_MAX_STEPS = 10
+"""Largest grid solved with ``qrqp``; finer grids use qpOASES. At a standstill behind a
+stopped lead each step's gap and speed bounds pin u^k = 0 from both sides; with N = 30
+``qrqp`` stalled there for 20-300 ms or returned a plan off the bounds (fallbacks on US06 at
+10 Hz); the dual active-set solver DAQP solves the same inputs in about 1 ms (qpOASES and
+proxQP too, in 1-10 ms; docs/MODEL.md, "Time consistency")."""
+
+
+def nmpc_solver_options(max_iter: int, steps: int) -> dict[str, Any]:
+    """SQP options of the NMPC: the shared ``qrqp`` settings up to :data:`QRQP_MAX_STEPS`
+    steps (the paper's grid), DAQP for finer grids."""
+    options = sqp_options(max_iter)
+    if steps > QRQP_MAX_STEPS:
+        options['qpsol'] = 'daqp'
+        options['qpsol_options'] = {'error_on_fail': False}
+    return options
 
 BOUND_TOLERANCE = 1e-6
 """Largest bound violation (m, m/s, m/s^2 or E) accepted from the solver."""
@@ -49,42 +83,76 @@ bound check (it happens at standstill at d_min, where the feasible set shrinks t
 the active gap and speed bounds have opposite gradients); otherwise the step falls back."""
 
 
+BUILT = 'built into the NMPC at start-up'
+SAFETY = 'a safety bound: fixed while the vehicle drives'
+ESTIMATOR = 'the plan estimator and its history are built at start-up'
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
-    """Parameters of the AV's NMPC (Table I and docs/MODEL.md)."""
+    """Parameters of the AV's NMPC (Table I and docs/MODEL.md).
 
-    dt_s: float = param('control step', unit='s', low=0.0, low_inclusive=False)
-    horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
-    standstill_gap_m: float = param('standstill gap d_s', unit='m')
+    ``read_only=False`` marks the parameters a running node (wall mode) lets a test driver
+    change with ``set_parameters``; every other one says why it is fixed.
+    """
+
+    dt_s: float = control_step_param("model step: the paper's 1 s grid of the plan estimator "
+                                     'and the horizon',
+                                     reason='the prediction grid and the estimator are built at '
+                                            'start-up')
+    horizon_steps: int = param('prediction horizon N in model steps (horizon = N dt_s)',
+                               unit='steps', low=1, high=50, reason=BUILT)
+    standstill_gap_m: float = param('standstill gap d_s', unit='m', reason=BUILT)
     time_headway_s: float = param('desired time headway tau_R of the CTH policy', unit='s',
-                                  low=0.0)
-    gap_min_m: float = param('minimum gap to the preceding traffic d_R,min', unit='m', low=0.0)
-    gap_max_m: float = param('maximum gap to the preceding traffic d_R,max', unit='m')
-    speed_min_mps: float = param('lower speed bound', unit='m/s', low=0.0)
+                                  low=0.0, reason=BUILT)
+    gap_min_m: float = param('minimum gap to the preceding traffic d_R,min', unit='m', low=0.0,
+                             reason=SAFETY)
+    gap_max_m: float = param('maximum gap to the preceding traffic d_R,max', unit='m',
+                             reason=SAFETY)
+    speed_min_mps: float = param('lower speed bound', unit='m/s', low=0.0, reason=SAFETY)
     speed_max_mps: float = param('upper speed bound (the orchestrator passes max(v_PT))',
-                                 unit='m/s')
+                                 unit='m/s', reason=SAFETY)
     accel_min_mps2: float = param('lower acceleration bound u_R,min', unit='m/s^2', high=0.0,
-                                  high_inclusive=False)
+                                  high_inclusive=False, reason=SAFETY)
     accel_max_mps2: float = param('upper acceleration bound u_R,max', unit='m/s^2', low=0.0,
-                                  low_inclusive=False)
-    trust_min: float = param('minimum trust T_min over the horizon, eq. (12)')
+                                  low_inclusive=False, reason=SAFETY)
+    trust_min: float = param('minimum trust T_min over the horizon, eq. (12)', read_only=False)
     alpha: float = param('relative weight of explicability in the cost, eq. (4)', low=0.0,
-                         high=1.0)
+                         high=1.0, read_only=False)
     tracking_cost_scale_m2: float = param('scale of the CTH tracking cost', unit='m^2', low=0.0,
-                                          low_inclusive=False)
+                                          low_inclusive=False, reason=BUILT)
     explicability_scale: float = param('scale of the explicability cost', low=0.0,
-                                       low_inclusive=False)
-    solver_max_iter: int = param('SQP iterations before the step falls back', low=1)
+                                       low_inclusive=False, reason=BUILT)
+    solver_max_iter: int = param('SQP iterations before the step falls back', low=1,
+                                 reason=BUILT)
     solver_cpu_budget_s: float = param('CPU time per solve before the step falls back',
-                                       unit='s', low=0.0, low_inclusive=False)
+                                       unit='s', low=0.0, low_inclusive=False, read_only=False)
     fallback_gap_gain_per_s2: float = param('gap gain of the fallback controller',
-                                            unit='1/s^2')
+                                            unit='1/s^2', reason=SAFETY)
     fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
-                                             unit='1/s')
-    predictor: str = param('estimator of the plan the human expects', choices=PREDICTORS)
+                                             unit='1/s', reason=SAFETY)
+    predictor: str = param('estimator of the plan the human expects', choices=PREDICTORS,
+                           reason=ESTIMATOR)
     time_headway_cap_s: float = param('cap of the time headway d_H / v_H when the human is '
-                                      'stopped', unit='s', low=0.0, low_inclusive=False)
-    gru_model: str = param('GRU weights: a file in trust_av_planner/models/ or a path')
+                                      'stopped', unit='s', low=0.0, low_inclusive=False,
+                                      reason=ESTIMATOR)
+    gru_model: str = param('GRU weights: a file in trust_av_planner/models/ or a path',
+                           reason=ESTIMATOR)
+    lead_preview: str = param("the lead's speed over the horizon: the recorded preview topic, "
+                              'or built from its odometry (constant speed or constant '
+                              'acceleration)', choices=LEAD_PREVIEWS, default='recorded',
+                              reason='selects the input topics at start-up')
+    lead_accel_window_s: float = param("constant_acceleration: the lead's acceleration is its "
+                                       'speed change over this window', unit='s', low=0.0,
+                                       low_inclusive=False, default=1.0, reason=SAFETY)
+    prediction_grid: str = param('NMPC grid: control_period (N = horizon / period) or '
+                                 'model_step (dt_s, sampled-data control)',
+                                 choices=PREDICTION_GRIDS, default='control_period',
+                                 reason=BUILT)
+    stale_decel_mps2: float = param('wall mode: acceleration commanded while an input is '
+                                    'missing or stale (>= accel_min_mps2)', unit='m/s^2',
+                                    high=0.0, high_inclusive=False, default=-2.0,
+                                    reason=SAFETY)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -94,6 +162,44 @@ class PlannerConfig:
                 f'need 0 <= speed_min_mps < speed_max_mps, got {self.speed_min_mps}, '
                 f'{self.speed_max_mps}')
         require(bool(self.gru_model), 'gru_model must name a weights file')
+        require(self.stale_decel_mps2 >= self.accel_min_mps2,
+                f'stale_decel_mps2 must be >= accel_min_mps2 = {self.accel_min_mps2:g}, got '
+                f'{self.stale_decel_mps2:g}')
+
+    @property
+    def horizon_s(self) -> float:
+        """Length of the prediction horizon, s."""
+        return self.horizon_steps * self.dt_s
+
+
+def prediction_grid(config: PlannerConfig, period_s: float | None = None) -> tuple[float, int]:
+    """The NMPC's prediction grid (step in s, number of steps) at a control period.
+
+    ``control_period``: the plan is predicted on the control period's grid over the same
+    horizon in seconds, N = round(horizon_s / period) (at the paper's 1 s period exactly
+    ``dt_s`` and ``horizon_steps``). ``model_step``: sampled-data control over the 1 s grid
+    whatever the period.
+
+    Args:
+        config: the planner's parameters.
+        period_s: the control period, s; None = ``dt_s`` (lock-step).
+
+    Raises:
+        ValueError: the period is not > 0, or the grid would have more than
+            :data:`MAX_GRID_STEPS` steps.
+    """
+    if period_s is None or config.prediction_grid == 'model_step':
+        return config.dt_s, config.horizon_steps
+    if not period_s > 0.0:
+        raise ValueError(f'control period must be > 0 s, got {period_s}')
+    if abs(period_s - config.dt_s) <= 1e-12 * config.dt_s:
+        return config.dt_s, config.horizon_steps
+    steps = max(1, round(config.horizon_s / period_s))
+    if steps > MAX_GRID_STEPS:
+        raise ValueError(f'a {config.horizon_s:g} s horizon at a {period_s:g} s period needs '
+                         f'{steps} steps (at most {MAX_GRID_STEPS}); lower the control rate '
+                         'or use prediction_grid model_step')
+    return period_s, steps
 
 
 @dataclass(frozen=True)
@@ -125,21 +231,38 @@ class PlanResult:
 
 
 class TrustAwareNmpc:
-    """The AV's trust-aware NMPC; build once, call :meth:`step` every step."""
+    """The AV's trust-aware NMPC; build once, call :meth:`step` every step.
 
-    def __init__(self, config: PlannerConfig, trust: TrustConfig) -> None:
+    Args:
+        config: the planner's parameters.
+        trust: the trust model (its per-second rule bounds E over the horizon).
+        period_s: the control period, s (None = ``dt_s``): the prediction grid is
+            :func:`prediction_grid`.
+
+    Attributes:
+        grid_step_s: step of the prediction grid, s.
+        steps: number of predicted steps N on that grid.
+    """
+
+    def __init__(self, config: PlannerConfig, trust: TrustConfig,
+                 period_s: float | None = None) -> None:
         self.config = config
         self.trust = trust
-        n = config.horizon_steps
+        self.grid_step_s, self.steps = prediction_grid(config, period_s)
+        n, dt = self.steps, self.grid_step_s
         u = ca.SX.sym('u', n)
         gap0, speed0 = ca.SX.sym('gap0'), ca.SX.sym('speed0')
         lead = ca.SX.sym('lead', n)
         expected = ca.SX.sym('expected', n)
         alpha = ca.SX.sym('alpha')
         gaps, speeds = kinematics.rollout(gap0, speed0, [lead[k] for k in range(n)],
-                                            [u[k] for k in range(n)], config.dt_s)
+                                            [u[k] for k in range(n)], dt)
         tracking = sum((config.standstill_gap_m + config.time_headway_s * speeds[k] - gaps[k])
                        ** 2 for k in range(n))
+        if n != config.horizon_steps:
+            # The same cost per second of horizon on a finer grid (a Riemann sum of the gap
+            # error over the horizon): the trade-off against E does not depend on the rate.
+            tracking = tracking * (config.horizon_steps / n)
         score = explicability([u[k] for k in range(n)], [expected[k] for k in range(n)],
                               trust.epsilon_mps2)
         cost = (tracking / config.tracking_cost_scale_m2
@@ -150,13 +273,26 @@ class TrustAwareNmpc:
         constraints = ca.vertcat(*gaps[1:], *speeds, score)
         self._solver = ca.nlpsol('trust_aware_nmpc', 'sqpmethod',
                                  {'x': u, 'p': params, 'f': cost, 'g': constraints},
-                                 sqp_options(config.solver_max_iter))
-        n_ = config.horizon_steps
-        self._lower = np.concatenate([np.full(n_, config.gap_min_m),
-                                      np.full(n_, config.speed_min_mps), [-np.inf]])
-        self._upper = np.concatenate([np.full(n_, config.gap_max_m),
-                                      np.full(n_, config.speed_max_mps), [np.inf]])
+                                 nmpc_solver_options(config.solver_max_iter, n))
+        self._lower = np.concatenate([np.full(n, config.gap_min_m),
+                                      np.full(n, config.speed_min_mps), [-np.inf]])
+        self._upper = np.concatenate([np.full(n, config.gap_max_m),
+                                      np.full(n, config.speed_max_mps), [np.inf]])
         self._previous: np.ndarray | None = None
+
+    def retune(self, config: PlannerConfig) -> None:
+        """Take new values of the run-time parameters (``read_only=False``) from the next
+        step on.
+
+        Raises:
+            ValueError: ``config`` differs in a parameter the NMPC was built with.
+        """
+        fixed = [f.name for f in dataclasses.fields(PlannerConfig)
+                 if f.metadata[PARAM_METADATA_KEY].read_only
+                 and getattr(config, f.name) != getattr(self.config, f.name)]
+        if fixed:
+            raise ValueError(f'read-only parameter(s) changed: {", ".join(fixed)}')
+        self.config = config
 
     def reset(self) -> None:
         """Forget the warm start."""
@@ -175,15 +311,17 @@ class TrustAwareNmpc:
         Args:
             gap_m: gap to the preceding traffic, m.
             speed_mps: AV speed, m/s.
-            lead_speeds_mps: preview of the preceding traffic's speed, N values, m/s.
-            expected_mps2: the plan the human expects u_R^H, N values, m/s^2.
+            lead_speeds_mps: preview of the preceding traffic's speed on the prediction
+                grid, N values, m/s.
+            expected_mps2: the plan the human expects u_R^H on the prediction grid, N
+                values, m/s^2.
             trust: current trust T(t).
 
         Returns:
             The plan and the solver's report; never raises for an infeasible problem.
         """
-        c, n = self.config, self.config.horizon_steps
-        e_max = explicability_bound(trust, c.trust_min, self.trust, n)
+        c, n, dt = self.config, self.steps, self.grid_step_s
+        e_max = explicability_bound(trust, c.trust_min, self.trust, n, dt)
         params = np.concatenate([[gap_m, speed_mps], lead_speeds_mps, expected_mps2, [c.alpha]])
         if e_max is None:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps, 'trust below T_min',
@@ -194,7 +332,7 @@ class TrustAwareNmpc:
         else:
             guess = np.concatenate([self._previous[1:], self._previous[-1:]])
         lbg, ubg = self.bounds(e_max)
-        first_gap = gap_m + (lead_speeds_mps[0] - speed_mps) * c.dt_s
+        first_gap = gap_m + (lead_speeds_mps[0] - speed_mps) * dt
         if not lbg[0] - BOUND_TOLERANCE <= first_gap <= ubg[0] + BOUND_TOLERANCE:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps,
                                   f'gap {first_gap:.3f} m at k=1 is outside [{c.gap_min_m}, '
@@ -243,7 +381,7 @@ class TrustAwareNmpc:
         c = self.config
         accels = plan.tolist()
         gaps, speeds = kinematics.rollout(gap_m, speed_mps, lead_speeds_mps.tolist(), accels,
-                                            c.dt_s)
+                                            self.grid_step_s)
         score = explicability(accels, expected_mps2.tolist(), self.trust.epsilon_mps2)
         values = gaps + speeds + [score]
         worst = max(max(lo - x, x - up) for lo, x, up in zip(lower, values, upper, strict=True))
@@ -254,7 +392,7 @@ class TrustAwareNmpc:
                   e_max: float, iterations: int, elapsed: float) -> PlanResult:
         c = self.config
         plan = np.asarray(kinematics.hold_gap_plan(
-            gap_m, speed_mps, list(lead_speeds_mps), dt_s=c.dt_s,
+            gap_m, speed_mps, list(lead_speeds_mps), dt_s=self.grid_step_s,
             standstill_gap_m=c.standstill_gap_m, time_headway_s=c.time_headway_s,
             gap_gain_per_s2=c.fallback_gap_gain_per_s2,
             speed_gain_per_s=c.fallback_speed_gain_per_s, accel_min_mps2=c.accel_min_mps2,

@@ -2,7 +2,10 @@
 
 :class:`AvPlanner` turns odometry (what a real vehicle publishes) into a plan: it updates
 the plan estimator with what the human saw after the previous step, predicts the plan the
-human expects, and solves the trust-aware NMPC.
+human expects, takes or builds the lead's preview (:mod:`trust_av_planner.preview`), and
+solves the trust-aware NMPC. At any control period: the NMPC predicts on its grid
+(:func:`~trust_av_planner.nmpc.prediction_grid`), the estimator sees 1 s samples
+(:mod:`trust_av_planner.predictors.sampling`).
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ from trust_av_planner.nmpc import PlannerConfig, PlanResult, TrustAwareNmpc
 from trust_av_planner.predictors import Observation, Predictor
 from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
 from trust_av_planner.predictors.gru import GruPredictor, resolve_model
+from trust_av_planner.predictors.sampling import ModelGridPredictor
+from trust_av_planner.preview import LeadPreview, hold_on_grid
 from trust_monitor.common.kinematics import VehicleState, gap_m
 from trust_monitor.trust_model import TrustConfig
 
@@ -42,53 +47,154 @@ def observe(av: VehicleState, human: VehicleState, av_accel_mps2: float, length_
 
 @dataclass(frozen=True)
 class PlannerOutput:
-    """One planning step: the NMPC's result, the expected plan and the gap it planned from."""
+    """One planning step.
+
+    Attributes:
+        result: the NMPC's result (its plan on the prediction grid).
+        expected_mps2: the plan the human expects, held onto the prediction grid.
+        expected_model_mps2: the same plan on the model grid (``dt_s``), as the estimator
+            gave it (what the human driver model receives).
+        preview_mps: the lead's speed on the prediction grid the NMPC used.
+        gap_m: the gap it planned from, m.
+    """
 
     result: PlanResult
     expected_mps2: np.ndarray
+    expected_model_mps2: np.ndarray
+    preview_mps: np.ndarray
     gap_m: float
 
 
 class AvPlanner:
-    """Predictor + trust-aware NMPC with the state they carry between steps."""
+    """Predictor + trust-aware NMPC with the state they carry between steps.
+
+    Args:
+        config: the planner's parameters.
+        trust: the trust model.
+        vehicle_length_m: odometry position to bumper-to-bumper gap, m.
+        predictor: the plan estimator on the model grid (default: :func:`make_predictor`).
+        period_s: the control period, s (None = ``dt_s``, the paper's loop). At another
+            period the NMPC predicts on :func:`~trust_av_planner.nmpc.prediction_grid` and
+            the estimator is fed 1 s samples (:class:`ModelGridPredictor`).
+    """
 
     def __init__(self, config: PlannerConfig, trust: TrustConfig, vehicle_length_m: float,
-                 predictor: Predictor | None = None) -> None:
+                 predictor: Predictor | None = None, period_s: float | None = None) -> None:
         self.config = config
         self.vehicle_length_m = vehicle_length_m
-        self.nmpc = TrustAwareNmpc(config, trust)
+        self.period_s = config.dt_s if period_s is None else period_s
+        self.nmpc = TrustAwareNmpc(config, trust, self.period_s)
         self.predictor = predictor if predictor is not None else make_predictor(config)
+        self.same_grid = abs(self.period_s - config.dt_s) <= 1e-12 * config.dt_s
+        history = getattr(getattr(self.predictor, 'weights', None), 'history_steps', 1)
+        self.sampler = None if self.same_grid else ModelGridPredictor(
+            self.predictor, config.dt_s, history)
+        self.lead = (None if config.lead_preview == 'recorded'
+                     else LeadPreview(config.lead_preview, config.lead_accel_window_s))
         self._last_accel: float | None = None
+        self._last_t_s: float | None = None
+        self._t_s = 0.0
 
-    def step(self, traffic: VehicleState, preview_mps: np.ndarray, av: VehicleState,
-             human: VehicleState | None, trust: float) -> PlannerOutput:
+    @property
+    def grid(self) -> tuple[float, int]:
+        """The NMPC's prediction grid: (step in s, steps)."""
+        return self.nmpc.grid_step_s, self.nmpc.steps
+
+    def retune(self, config: PlannerConfig) -> None:
+        """New values of the run-time parameters from the next step on (see
+        :meth:`TrustAwareNmpc.retune`)."""
+        self.nmpc.retune(config)
+        self.config = config
+
+    def step(self, traffic: VehicleState, preview_mps: np.ndarray | None, av: VehicleState,
+             human: VehicleState | None, trust: float, t_s: float | None = None) -> PlannerOutput:
         """Plan from the vehicles' odometry at the start of a step.
 
         Args:
             traffic: preceding vehicle's odometry.
-            preview_mps: its speed over the horizon (N values; the first is its speed now).
+            preview_mps: its speed on the prediction grid (:attr:`grid`; the first value is
+                its speed now) when ``lead_preview`` is ``recorded``; otherwise None and the
+                preview is built from ``traffic``.
             av: the AV's odometry.
             human: the human follower's odometry; None when it is not known (wall mode
                 without a follower topic): the plan estimator then observes only the AV's
                 acceleration (gap, relative speed and headway NaN), which is all the CA
                 predictor uses; other predictors need the follower.
             trust: the monitor's trust estimate T(t).
+            t_s: time of this step, s (default: one control period after the previous).
 
         Raises:
-            ValueError: ``human`` is None and the predictor is not the CA predictor.
+            ValueError: ``human`` is None and the predictor is not the CA predictor; a
+                recorded preview is missing, or given while the planner builds its own.
         """
+        t_s = self._t_s if t_s is None else t_s
         if human is None and not isinstance(self.predictor, ConstantAccelerationPredictor):
             raise ValueError('planning without the human follower state needs predictor ca')
-        if self._last_accel is not None and human is None:
-            self.predictor.observe(Observation(gap_m=math.nan, relative_speed_mps=math.nan,
-                                               time_headway_s=math.nan,
-                                               av_accel_mps2=self._last_accel))
-        elif self._last_accel is not None and human is not None:
-            self.predictor.observe(observe(av, human, self._last_accel, self.vehicle_length_m,
-                                           self.config.time_headway_cap_s))
-        expected = self.predictor.predict()
+        expected_model, age_s = self.expect(av, human, t_s)
+        step_s, steps = self.grid
+        expected = hold_on_grid(expected_model, self.config.dt_s, step_s, steps, age_s)
+        preview = self.lead_preview(traffic, preview_mps, t_s)
         gap = gap_m(traffic, av, self.vehicle_length_m)
-        result = self.nmpc.step(gap, av.speed_mps, np.asarray(preview_mps, dtype=float),
-                                 expected, trust)
-        self._last_accel = float(result.plan_mps2[0])
-        return PlannerOutput(result, expected, gap)
+        result = self.nmpc.step(gap, av.speed_mps, preview, expected, trust)
+        self.commanded(float(result.plan_mps2[0]), t_s)
+        return PlannerOutput(result, expected, expected_model, preview, gap)
+
+    def hold(self, accel_mps2: float, av: VehicleState | None, human: VehicleState | None,
+             t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """A step without the NMPC (an input is stale): ``accel_mps2`` is commanded; the
+        estimator still observes what it can (nothing without the AV's odometry, nothing
+        without the follower's unless it is the CA predictor).
+
+        Returns:
+            The plan (``accel_mps2`` over the prediction grid) and the expected plan on the
+            prediction grid.
+        """
+        usable = av is not None and (human is not None
+                                     or isinstance(self.predictor, ConstantAccelerationPredictor))
+        expected_model, age_s = self.expect(av if usable else None, human, t_s)
+        step_s, steps = self.grid
+        self.commanded(accel_mps2, t_s)
+        return (np.full(steps, accel_mps2),
+                hold_on_grid(expected_model, self.config.dt_s, step_s, steps, age_s))
+
+    def expect(self, av: VehicleState | None, human: VehicleState | None,
+               t_s: float) -> tuple[np.ndarray, float]:
+        """The plan the human expects (model grid), after observing the last step (not when
+        ``av`` is None), and how long ago that plan began (s; 0 at the paper's period)."""
+        applied = self._last_accel
+        if applied is not None and av is not None and (self._last_t_s is None
+                                                       or t_s > self._last_t_s):
+            if human is None:
+                seen = Observation(gap_m=math.nan, relative_speed_mps=math.nan,
+                                   time_headway_s=math.nan, av_accel_mps2=applied)
+            else:
+                seen = observe(av, human, applied, self.vehicle_length_m,
+                               self.config.time_headway_cap_s)
+            if self.sampler is None:
+                self.predictor.observe(seen)
+            else:
+                last = t_s - self.period_s if self._last_t_s is None else self._last_t_s
+                self.sampler.observe(seen, t_s, t_s - last)
+        if self.sampler is None:
+            return self.predictor.predict(), 0.0
+        return self.sampler.predict(t_s)
+
+    def lead_preview(self, traffic: VehicleState, preview_mps: np.ndarray | None,
+                     t_s: float) -> np.ndarray:
+        """The lead's speed on the prediction grid: the recorded preview, or one built from
+        its odometry (``lead_preview``)."""
+        if self.lead is None:
+            if preview_mps is None:
+                raise ValueError('lead_preview is recorded but no preview was given')
+            return np.asarray(preview_mps, dtype=float)
+        if preview_mps is not None:
+            raise ValueError(f'lead_preview is {self.config.lead_preview}: the planner builds '
+                             'the preview, none may be given')
+        self.lead.observe(t_s, traffic.speed_mps)
+        return self.lead.preview(*self.grid)
+
+    def commanded(self, accel_mps2: float, t_s: float) -> None:
+        """Record the command of the step at ``t_s`` (what the estimator sees applied next)."""
+        self._last_accel = accel_mps2
+        self._last_t_s = t_s
+        self._t_s = t_s + self.period_s

@@ -9,14 +9,18 @@ vehicles' markers (``vehicle_markers``, each in its vehicle's frame). Topic name
 relative (the node's namespace). Parameters: the ``planner`` section of
 ``config/trust_av.yaml``.
 
-``clock_mode: wall`` (real-vehicle mode): a wall-clock timer at ``control_rate_hz`` plans
-from the LATEST inputs instead (input topics from the ``*_topic`` parameters), outputs
-stamped with the current time. The lead odometry, preview and ego odometry must be fresher
-than ``input_timeout_s``; otherwise nothing is commanded and the status (level WARN,
-``status: inputs_not_ready``) says which input is missing or stale. The human odometry is
-used when fresh; without it the plan estimator observes only the AV's own acceleration
+``clock_mode: wall`` (real-vehicle mode, README "Real-vehicle mode"): a wall-clock timer at
+``control_rate_hz`` plans from the LATEST inputs (topics from the ``*_topic`` parameters or
+remapping), the NMPC predicting on the control period's grid; outputs are stamped with the
+current time. Inputs use the sensor-data QoS with a deadline of ``input_timeout_s``: a missed
+deadline is reported by DDS (a QoS event) and marks the input stale at once; an input never
+received or received longer ago than ``input_timeout_s`` is stale too. While the lead or ego
+odometry (or a recorded preview) is stale the planner commands ``stale_decel_mps2`` with
+status ERROR naming the input; it plans again as soon as they are fresh. The human odometry
+is used when fresh; without it the plan estimator observes only the AV's own acceleration
 (enough for the CA predictor; an empty ``human_odom_topic`` requires ``predictor: ca``).
-Trust: the latest estimate, ``trust_initial`` before the first.
+Trust: the latest estimate, ``trust_initial`` before the first. ``alpha``, ``trust_min`` and
+``solver_cpu_budget_s`` can be changed with ``ros2 param set`` (from the next tick).
 """
 
 from __future__ import annotations
@@ -24,9 +28,11 @@ from __future__ import annotations
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import AccelStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
@@ -35,25 +41,30 @@ from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PlannerConfig
 from trust_av_planner.planner import AvPlanner
 from trust_av_planner.system.config import PlannerTopics, SharedConfig
+from trust_monitor.common.grids import interp_at
 from trust_monitor.common.kinematics import VehicleState
 from trust_monitor.common.lockstep import StepBuffer
 from trust_monitor.common.topics import VEHICLE_FRAMES
-from trust_monitor.common.wall_clock import LatestInputs, WallClockConfig
+from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import (
     VehicleMarkers,
     diagnostics,
     header,
     msg_ns,
     trajectory,
+    trajectory_times,
     trajectory_values,
 )
 from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
+from trust_monitor.ros.tuning import Tunable, enable_tuning
 from trust_monitor.trust_model import TrustConfig
 
 STEP_INPUTS = ('traffic', 'preview', 'ego', 'human')
-WALL_REQUIRED = ['traffic', 'preview', 'ego']
+TABLE_TOPIC = {'traffic': 'preceding_vehicle/odom', 'preview': 'preceding_vehicle/speed_preview',
+               'ego': 'ego/odom', 'human': 'human/odom', 'trust': 'trust_monitor/trust'}
+"""Input -> the topic-table row whose QoS it uses (its actual name may be remapped)."""
 
 
 def vehicle(msg: Odometry) -> VehicleState:
@@ -67,69 +78,135 @@ class PlannerNode(Node):
     def __init__(self) -> None:
         super().__init__('planner')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.config = declare_config(self, PlannerConfig)
         trust = declare_config(self, TrustConfig)
         shared = declare_config(self, SharedConfig)
         self.clock = declare_config(self, WallClockConfig)
         topics = declare_config(self, PlannerTopics)
-        self.planner = AvPlanner(self.config, trust, shared.vehicle_length_m)
+        wall = self.clock.wall
+        self.planner = AvPlanner(self.config, trust, shared.vehicle_length_m,
+                                 period_s=1.0 / self.clock.control_rate_hz if wall else None)
         self.trust_initial = trust.trust_initial
         self.previous_ns: int | None = None
         self.buffer = StepBuffer([*STEP_INPUTS, 'trust'])
         self.latest = LatestInputs([*STEP_INPUTS, 'trust'])
         self.has_human = bool(topics.human_odom_topic)
-        if not self.has_human and (not self.clock.wall or self.config.predictor != 'ca'):
+        if not self.has_human and (not wall or self.config.predictor != 'ca'):
             raise ValueError('parameter human_odom_topic: may be empty only with '
                              'clock_mode wall and predictor ca')
+        recorded = self.config.lead_preview == 'recorded'
+        self.required = ['traffic', 'preview', 'ego'] if recorded else ['traffic', 'ego']
+        self.missed: dict[str, int] = {}  # input -> deadline events since its last message
+        self.stale_reason = ''
         self.frame = VEHICLE_FRAMES['ego_plant']
         self.markers = VehicleMarkers(shared.vehicle_length_m)
-        self.pub_plan = self.create_publisher(JointTrajectory, 'ego/plan', QOS['STEP'])
+        self.pub_plan = self.create_publisher(JointTrajectory, 'ego/plan',
+                                              topic_qos('ego/plan', self.clock))
         self.pub_expected = self.create_publisher(JointTrajectory, 'ego/expected_plan',
-                                                  QOS['STEP'])
-        self.pub_accel = self.create_publisher(AccelStamped, 'ego/accel_cmd', QOS['STEP'])
+                                                  topic_qos('ego/expected_plan', self.clock))
+        self.pub_accel = self.create_publisher(AccelStamped, 'ego/accel_cmd',
+                                               topic_qos('ego/accel_cmd', self.clock))
         self.pub_status = self.create_publisher(DiagnosticArray, 'ego/planner_status',
-                                                QOS['STEP'])
-        self.pub_markers = self.create_publisher(MarkerArray, 'vehicle_markers', QOS['STEP'])
+                                                topic_qos('ego/planner_status', self.clock))
+        self.pub_markers = self.create_publisher(MarkerArray, 'vehicle_markers',
+                                                 topic_qos('vehicle_markers', self.clock))
         inputs = (('traffic', Odometry, topics.lead_odom_topic),
-                  ('preview', JointTrajectory, topics.lead_preview_topic),
+                  ('preview', JointTrajectory,
+                   topics.lead_preview_topic if recorded or not wall else ''),
                   ('ego', Odometry, topics.ego_odom_topic),
                   ('human', Odometry, topics.human_odom_topic),
                   ('trust', Vector3Stamped, topics.trust_topic))
-        callback = self.on_latest if self.clock.wall else self.on_input
+        callback = self.on_latest if wall else self.on_input
         for name, msgtype, topic in inputs:
             if topic:
-                self.create_subscription(msgtype, topic,
-                                         lambda m, n=name: callback(n, m), QOS['STEP'])
-        self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
-        mode = (f'wall clock at {self.clock.control_rate_hz:g} Hz' if self.clock.wall
-                else 'lock-step')
+                self.create_subscription(
+                    msgtype, topic, lambda m, n=name: callback(n, m),
+                    topic_qos(TABLE_TOPIC[name], self.clock),
+                    event_callbacks=self.event_callbacks(name) if wall else None)
+        self.loop = WallLoop(self, self.clock, self.wall_step) if wall else None
+        enable_tuning(self, [Tunable(PlannerConfig, lambda: self.config, self.retune)], wall)
+        mode = f'wall clock at {self.clock.control_rate_hz:g} Hz' if wall else 'lock-step'
+        step_s, steps = self.planner.grid
         self.get_logger().info(f'ready ({mode}): predictor {self.config.predictor}, alpha '
-                               f'{self.config.alpha:g}, horizon {self.config.horizon_steps}, '
-                               f'inputs {", ".join(t for _, _, t in inputs if t)}')
+                               f'{self.config.alpha:g}, prediction grid {steps} x {step_s:g} s, '
+                               f'lead preview {self.config.lead_preview}, inputs '
+                               f'{", ".join(t for _, _, t in inputs if t)}')
+
+    def retune(self, config: PlannerConfig) -> None:
+        """A validated run-time parameter change: effective at the next tick."""
+        self.planner.retune(config)
+        self.config = config
+
+    def event_callbacks(self, name: str) -> SubscriptionEventCallbacks:
+        """QoS events of an input: a missed deadline marks it stale; an incompatible
+        publisher (e.g. one without a deadline) is logged with the policy."""
+        def on_deadline(info: object, n: str = name) -> None:
+            self.missed[n] = self.missed.get(n, 0) + 1
+            self.get_logger().warning(f'input {n}: QoS deadline missed (no message for '
+                                      f'{self.clock.input_timeout_s:g} s)',
+                                      throttle_duration_sec=1.0)
+
+        def on_incompatible(info: object, n: str = name) -> None:
+            policy = getattr(info, 'last_policy_kind', '?')
+            self.get_logger().error(f'input {n}: a publisher with incompatible QoS ({policy}) '
+                                    'is not connected; vehicle inputs need a deadline <= '
+                                    'input_timeout_s (or set input_deadline_qos false)',
+                                    throttle_duration_sec=5.0)
+
+        return SubscriptionEventCallbacks(deadline=on_deadline, incompatible_qos=on_incompatible)
 
     def on_latest(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Wall mode: keep the latest message of each input with its receive time."""
         self.latest.put(name, time.monotonic_ns(), msg)
+        self.missed.pop(name, None)
+
+    def problems(self, now_mono_ns: int) -> str:
+        """Wall mode: why the required inputs cannot be used ('' when they can)."""
+        missed = [n for n in self.required if n in self.missed]
+        polled = self.latest.problems(now_mono_ns, self.clock.input_timeout_s, self.required)
+        event = f'deadline missed (QoS event): {", ".join(missed)}' if missed else ''
+        return '; '.join(p for p in (event, polled) if p)
 
     def wall_step(self) -> None:
-        """Wall mode: one planning step from the latest inputs, stamped now."""
-        ns = now_ns(self)
-        why = self.latest.problems(time.monotonic_ns(), self.clock.input_timeout_s,
-                                   WALL_REQUIRED)
-        if why:
-            self.pub_status.publish(diagnostics(
-                ns, 'trust_aware_nmpc', False, 'inputs_not_ready',
-                {'status': 'inputs_not_ready', 'success': 'False', 'fallback': 'True',
-                 'reason': why}))
-            self.get_logger().warning(f'no command: {why}', throttle_duration_sec=5.0)
-            return
+        """Wall mode: one planning step from the latest inputs, stamped now; the stale-input
+        deceleration while a required input is missing or stale."""
+        ns, mono = now_ns(self), time.monotonic_ns()
+        t_s = mono / NS_PER_S
+        why = self.problems(mono)
         human_ok = self.has_human and not self.latest.problems(
-            time.monotonic_ns(), self.clock.input_timeout_s, ['human'])
+            mono, self.clock.input_timeout_s, ['human'])
+        human = self.latest.get('human') if human_ok else None
         trust_msg = self.latest.get('trust')
         trust = self.trust_initial if trust_msg is None else float(trust_msg.vector.z)
-        items: dict[str, object] = {name: self.latest.get(name) for name in WALL_REQUIRED}
-        items['human'] = self.latest.get('human') if human_ok else None
-        self.plan(ns, items, trust)
+        if why:
+            self.hold(ns, t_s, why, human, trust)
+            return
+        if self.stale_reason:
+            self.get_logger().info('inputs fresh again: planning resumed')
+            self.stale_reason = ''
+        items: dict[str, object] = {name: self.latest.get(name) for name in self.required}
+        items.setdefault('preview', None)
+        items['human'] = human
+        self.plan(ns, items, trust, t_s)
+
+    def hold(self, ns: int, t_s: float, why: str, human: Odometry | None, trust: float) -> None:
+        """The stale-input policy: command ``stale_decel_mps2``, status ERROR with the reason;
+        the plan estimator keeps observing and the plans are published (the monitor scores
+        them: trust goes on)."""
+        ego_fresh = not self.latest.problems(time.monotonic_ns(), self.clock.input_timeout_s,
+                                             ['ego']) and 'ego' not in self.missed
+        ego = self.latest.get('ego') if ego_fresh else None
+        accel = self.config.stale_decel_mps2
+        plan, expected = self.planner.hold(accel, None if ego is None else vehicle(ego),
+                                           None if human is None else vehicle(human), t_s)
+        if why != self.stale_reason:
+            self.get_logger().error(f'stale inputs ({why}): commanding {accel:g} m/s^2 until '
+                                    'they are fresh')
+            self.stale_reason = why
+        self.publish(ns, plan, expected, accel, trust, status='stale_inputs', ok=False,
+                     extra={'reason': why, 'fallback': 'True', 'success': 'False'},
+                     error=True)
 
     def close(self) -> None:
         """At shutdown: the wall loop's jitter statistics."""
@@ -150,36 +227,56 @@ class PlannerNode(Node):
             trust = (self.trust_initial if self.previous_ns is None
                      else self.buffer.take('trust', self.previous_ns).vector.z)  # type: ignore[attr-defined]
             items = self.buffer.pop(ns)
-            self.plan(ns, items, float(trust))
+            if self.config.lead_preview != 'recorded':
+                items['preview'] = None
+            self.plan(ns, items, float(trust), None)
             self.previous_ns = ns
 
-    def plan(self, ns: int, items: dict[str, object], trust: float) -> None:
+    def plan(self, ns: int, items: dict[str, object], trust: float, t_s: float | None) -> None:
         """One planning step and its four outputs."""
-        preview = trajectory_values(items['preview'], 'velocities')  # type: ignore[arg-type]
+        step_s, steps = self.planner.grid
+        preview = None
+        if items['preview'] is not None:
+            msg: JointTrajectory = items['preview']  # type: ignore[assignment]
+            preview = interp_at(np.array(trajectory_times(msg)),
+                                np.array(trajectory_values(msg, 'velocities')), step_s, steps)
         out = self.planner.step(vehicle(items['traffic']), preview,  # type: ignore[arg-type]
                                 vehicle(items['ego']),  # type: ignore[arg-type]
                                 None if items['human'] is None
                                 else vehicle(items['human']),  # type: ignore[arg-type]
-                                trust)
-        result, dt = out.result, self.config.dt_s
-        self.pub_plan.publish(trajectory(ns, dt, frame_id=self.frame,
-                                         accelerations=result.plan_mps2.tolist()))
-        self.pub_expected.publish(trajectory(ns, dt, frame_id=self.frame,
-                                             accelerations=out.expected_mps2.tolist()))
-        accel = AccelStamped(header=header(ns, self.frame))
-        accel.accel.linear.x = float(result.plan_mps2[0])
-        self.pub_accel.publish(accel)
-        self.pub_status.publish(diagnostics(
-            ns, 'trust_aware_nmpc', result.success, result.status,
-            {'status': result.status, 'success': str(result.success),
-             'fallback': str(result.fallback), 'iterations': str(result.iterations),
-             'solve_time_s': repr(result.solve_time_s),
-             'explicability_max': repr(result.explicability_max),
-             'gap_m': repr(out.gap_m), 'trust': repr(trust)}))
-        self.pub_markers.publish(self.markers.update(ns))
+                                trust, t_s)
+        result = out.result
+        self.publish(ns, result.plan_mps2, out.expected_mps2, float(result.plan_mps2[0]), trust,
+                     status=result.status, ok=result.success,
+                     extra={'success': str(result.success), 'fallback': str(result.fallback),
+                            'iterations': str(result.iterations),
+                            'solve_time_s': repr(result.solve_time_s),
+                            'explicability_max': repr(result.explicability_max),
+                            'gap_m': repr(out.gap_m)})
         if result.fallback:
             self.get_logger().warning(f'NMPC fallback: {result.status}',
                                       throttle_duration_sec=5.0)
+
+    def publish(self, ns: int, plan: np.ndarray, expected: np.ndarray, accel_mps2: float,
+                trust: float, *, status: str, ok: bool, extra: dict[str, str],
+                error: bool = False) -> None:
+        """The four outputs of a step, stamped ``ns`` (plans on the prediction grid, in the
+        AV's frame), then the vehicles' markers."""
+        step_s = self.planner.grid[0]
+        self.pub_plan.publish(trajectory(ns, step_s, frame_id=self.frame,
+                                         accelerations=plan.tolist()))
+        self.pub_expected.publish(trajectory(ns, step_s, frame_id=self.frame,
+                                             accelerations=expected.tolist()))
+        command = AccelStamped(header=header(ns, self.frame))
+        command.accel.linear.x = accel_mps2
+        self.pub_accel.publish(command)
+        report = diagnostics(ns, 'trust_aware_nmpc', ok, status,
+                             {'status': status, **extra, 'trust': repr(trust),
+                              'command_mps2': repr(accel_mps2)})
+        if error:
+            report.status[0].level = DiagnosticStatus.ERROR
+        self.pub_status.publish(report)
+        self.pub_markers.publish(self.markers.update(ns))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,8 +1,14 @@
 """Offline trust estimation: a CSV of observed plans in, a CSV of E, P and trust out.
 
-Input columns: ``t`` (s), ``plan_0 .. plan_{N-1}`` (the AV's plan, m/s^2) and
-``expected_0 .. expected_{N-1}`` (the plan the human expects, m/s^2), one row per control
-step in time order. Output columns: ``t, E, P, trust`` (trust after the step's update).
+Input: UTF-8 CSV with columns ``t`` (s), ``plan_0 .. plan_{N-1}`` (the AV's plan, m/s^2)
+and ``expected_0 .. expected_{N-1}`` (the plan the human expects, m/s^2), one row per
+control step in time order; other columns are ignored. Plans are accelerations: a value
+outside +-:data:`MAX_ACCEL_MPS2` is refused (no vehicle accelerates at 10 g; far larger
+values would overflow eq. (8)). Output: ``t, E, P, trust`` (trust after the step's update),
+written only when every row is valid and every estimate finite.
+
+Parameters: the trust monitor's, from the shipped params file with every ``--params-file``
+layered over it, read by rcl's rules as the ``trust_monitor`` node reads them.
 """
 
 from __future__ import annotations
@@ -10,66 +16,194 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
+import re
+import stat
 import sys
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import TextIO
 
-from trust_monitor.common.params import build_config, node_params, read_params_file
+from trust_monitor.common.param_layers import layer_files, layered_params, read_layers
+from trust_monitor.common.params import build_config, check_known
+from trust_monitor.common.rcl_values import ParsedParams
+from trust_monitor.common.wall_clock import WallClockConfig
 from trust_monitor.errors import TrustMonitorError
 from trust_monitor.trust_model import TrustConfig, TrustEstimator
 
-DEFAULT_PARAMS = Path(__file__).resolve().parent / 'config' / 'trust_av.yaml'
+MAX_ACCEL_MPS2 = 100.0
+"""Largest plan acceleration magnitude accepted, m/s^2 (about 10 g)."""
+MAX_LINE_CHARS = 65536
+"""Longest line of a plans CSV."""
+_COLUMN = re.compile(r'(plan|expected)_(\d+)')
 
 
 class EstimateError(TrustMonitorError):
     """The plans CSV is malformed; the message names the file, row and problem."""
 
 
+def _lines(handle: TextIO, path: Path) -> Iterator[str]:
+    number = 0
+    while True:
+        line = handle.readline(MAX_LINE_CHARS + 1)
+        if not line:
+            return
+        number += 1
+        if len(line) > MAX_LINE_CHARS:
+            raise EstimateError(f'{path}:{number}: line longer than {MAX_LINE_CHARS} characters')
+        yield line
+
+
+def plan_columns(path: Path, header: Sequence[str]) -> tuple[list[str], list[str]]:
+    """The plan and expected-plan columns of a header, in horizon order.
+
+    Raises:
+        EstimateError: no ``t``, no ``plan_0``, a ``plan_``/``expected_`` column whose suffix
+            is not an index, indices that are not 0..N-1, or a different number of plan and
+            expected columns.
+    """
+    found: dict[str, dict[int, str]] = {'plan': {}, 'expected': {}}
+    for name in header:
+        if not name.startswith(('plan_', 'expected_')):
+            continue
+        match = _COLUMN.fullmatch(name)
+        if match is None or (len(match.group(2)) > 1 and match.group(2).startswith('0')):
+            shown = name if len(name) <= 40 else name[:37] + '...'
+            raise EstimateError(f'{path}:1: column {shown!r} is not plan_<k> or expected_<k> '
+                                'with k = 0, 1, ...')
+        found[match.group(1)][int(match.group(2))] = name
+    plans, expected = found['plan'], found['expected']
+    if 't' not in header or not plans:
+        raise EstimateError(f'{path}: header needs t, plan_0.., expected_0..; missing '
+                            f'{"t" if "t" not in header else "plan_0"}')
+    for kind, columns in found.items():
+        if sorted(columns) != list(range(len(columns))):
+            raise EstimateError(f'{path}:1: {kind} columns must be {kind}_0..{kind}_'
+                                f'{len(columns) - 1} without gaps')
+    if len(plans) != len(expected):
+        raise EstimateError(f'{path}:1: {len(plans)} plan columns but {len(expected)} expected '
+                            'columns (both are the same horizon)')
+    return [plans[k] for k in range(len(plans))], [expected[k] for k in range(len(expected))]
+
+
+def _rows(path: Path, handle: TextIO,
+          config: TrustConfig) -> list[tuple[float, float, float, float]]:
+    reader = csv.reader(_lines(handle, path))
+    header = next(reader, None)
+    if header is None:
+        raise EstimateError(f'{path}: header needs t, plan_0.., expected_0..; the file is empty')
+    if len(set(header)) != len(header):
+        raise EstimateError(f'{path}:1: a column name appears twice')
+    plan_cols, exp_cols = plan_columns(path, header)
+    index = {name: i for i, name in enumerate(header)}
+    wanted = [index[c] for c in ['t', *plan_cols, *exp_cols]]
+    n = len(plan_cols)
+    estimator = TrustEstimator(config)
+    rows: list[tuple[float, float, float, float]] = []
+    last_t = -math.inf
+    for line, row in enumerate(reader, start=2):
+        if not row:
+            continue
+        if len(row) != len(header):
+            raise EstimateError(f'{path}:{line}: expected {len(header)} values, got {len(row)}')
+        values = []
+        for i in wanted:
+            try:
+                values.append(float(row[i]))
+            except ValueError as err:
+                raise EstimateError(f'{path}:{line}: {header[i]} is not a number') from err
+        if not all(math.isfinite(v) for v in values):
+            raise EstimateError(f'{path}:{line}: NaN or infinite value')
+        for name, value in zip([*plan_cols, *exp_cols], values[1:], strict=True):
+            if abs(value) > MAX_ACCEL_MPS2:
+                raise EstimateError(f'{path}:{line}: {name} = {value:g} m/s^2 is outside '
+                                    f'+-{MAX_ACCEL_MPS2:g} m/s^2')
+        t = values[0]
+        if t <= last_t:
+            raise EstimateError(f'{path}:{line}: time {t} does not increase')
+        last_t = t
+        est = estimator.step(values[1:1 + n], values[1 + n:])
+        row_out = (t, est.explicability, est.performance, est.trust)
+        if not all(math.isfinite(v) for v in row_out):
+            raise EstimateError(f'{path}:{line}: the estimate is not finite (E, P, trust = '
+                                f'{row_out[1]}, {row_out[2]}, {row_out[3]}); check the trust '
+                                'parameters')
+        rows.append(row_out)
+    return rows
+
+
+def check_output(out_path: Path) -> None:
+    """Refuse an output path that cannot be written, before any work.
+
+    Raises:
+        EstimateError: a directory, or a parent that is missing or not a directory.
+    """
+    if out_path.is_dir():
+        raise EstimateError(f'{out_path}: is a directory; -o needs a file name')
+    parent = out_path.parent
+    if not parent.is_dir():
+        raise EstimateError(f'{out_path}: no such directory {parent}')
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise EstimateError(f'{out_path}: directory {parent} is not writable')
+
+
 def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig) -> int:
     """Run the trust estimator over a plans CSV and write the estimates.
+
+    The output is written to a temporary file beside ``out_path`` and renamed, so a failure
+    leaves no partial file.
 
     Returns:
         The number of rows written.
 
     Raises:
-        EstimateError: missing columns, non-numeric or non-finite values, time not increasing.
+        EstimateError: unreadable, not UTF-8 or not CSV, bad columns, non-numeric,
+            non-finite or out-of-range values, time not increasing, a non-finite estimate,
+            or an output that cannot be written.
     """
+    check_output(out_path)
     try:
-        handle = in_path.open(newline='')
+        handle = in_path.open(newline='', encoding='utf-8-sig')
     except OSError as err:
         raise EstimateError(f'{in_path}: cannot open ({err.strerror})') from err
     with handle:
-        reader = csv.DictReader(handle)
-        header = reader.fieldnames or []
-        plan_cols = sorted((c for c in header if c.startswith('plan_')),
-                           key=lambda c: int(c.split('_')[1]))
-        exp_cols = [c.replace('plan_', 'expected_') for c in plan_cols]
-        missing = [c for c in ['t', *exp_cols] if c not in header]
-        if not plan_cols or missing:
-            raise EstimateError(f'{in_path}: header needs t, plan_0.., expected_0..; '
-                                f'missing {missing or ["plan_0"]}')
-        estimator = TrustEstimator(config)
-        rows_out: list[Sequence[float]] = []
-        last_t = -math.inf
-        for line, row in enumerate(reader, start=2):
-            try:
-                values = [float(row[c]) for c in ['t', *plan_cols, *exp_cols]]
-            except (TypeError, ValueError) as err:
-                raise EstimateError(f'{in_path}:{line}: not a number ({err})') from err
-            if not all(math.isfinite(v) for v in values):
-                raise EstimateError(f'{in_path}:{line}: NaN or infinite value')
-            t = values[0]
-            if t <= last_t:
-                raise EstimateError(f'{in_path}:{line}: time {t} does not increase')
-            last_t = t
-            n = len(plan_cols)
-            est = estimator.step(values[1:1 + n], values[1 + n:])
-            rows_out.append((t, est.explicability, est.performance, est.trust))
-    with out_path.open('w', newline='') as out:
-        writer = csv.writer(out)
-        writer.writerow(['t', 'E', 'P', 'trust'])
-        writer.writerows([[repr(v) for v in r] for r in rows_out])
-    return len(rows_out)
+        if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+            raise EstimateError(f'{in_path}: not a regular file')
+        try:
+            rows = _rows(in_path, handle, config)
+        except UnicodeDecodeError as err:
+            raise EstimateError(f'{in_path}: not UTF-8 text (expected a CSV)') from err
+        except csv.Error as err:
+            raise EstimateError(f'{in_path}: not CSV text ({err})') from err
+    try:
+        handle_no, temporary = tempfile.mkstemp(dir=out_path.parent, prefix=f'.{out_path.name}.',
+                                                suffix='.tmp')
+    except OSError as err:
+        raise EstimateError(f'{out_path}: cannot write ({err.strerror})') from err
+    try:
+        with os.fdopen(handle_no, 'w', newline='') as out:
+            writer = csv.writer(out)
+            writer.writerow(['t', 'E', 'P', 'trust'])
+            writer.writerows([[repr(v) for v in r] for r in rows])
+        os.replace(temporary, out_path)
+    except OSError as err:
+        raise EstimateError(f'{out_path}: cannot write ({err.strerror})') from err
+    finally:
+        Path(temporary).unlink(missing_ok=True)
+    return len(rows)
+
+
+def trust_config(params_files: Sequence[Path]) -> TrustConfig:
+    """The trust monitor's configuration from the shipped file and ``params_files`` over it,
+    as the ``trust_monitor`` node in namespace ``/`` gets it."""
+    layers: list[ParsedParams] = read_layers(layer_files(params_files))
+    for layer in layers:
+        for section, values in layer.items():
+            if section.rstrip('/').rsplit('/', 1)[-1] == 'trust_monitor':
+                check_known(values, TrustConfig, WallClockConfig,
+                            where=f'{layer.where}: section {section}')
+    return build_config(TrustConfig, layered_params(layers, '/trust_monitor'))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,16 +212,16 @@ def main(argv: list[str] | None = None) -> int:
         prog='trust-monitor-estimate',
         description="Estimate the human follower's trust from observed AV plans and expected "
                     'plans (Ozkan & Ma, eqs. 8-11). Input CSV columns: t, plan_0..plan_{N-1}, '
-                    'expected_0..expected_{N-1}; output CSV columns: t, E, P, trust.')
+                    'expected_0..expected_{N-1} (m/s^2, within +-100); output CSV columns: t, '
+                    'E, P, trust. Exit codes: 0 done, 2 bad input (one line).')
     parser.add_argument('input', type=Path, help='CSV of observed plans')
     parser.add_argument('-o', '--output', type=Path, required=True, help='CSV to write')
-    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS,
-                        help='ROS 2 params file with the trust parameters (default: %(default)s)')
+    parser.add_argument('--params-file', type=Path, action='append', default=[],
+                        help='ROS 2 params file over the shipped config/trust_av.yaml '
+                             '(repeatable: later files over earlier ones)')
     args = parser.parse_args(argv)
     try:
-        config = build_config(TrustConfig,
-                              node_params(read_params_file(args.params_file), 'trust_monitor'))
-        count = estimate_csv(args.input, args.output, config)
+        count = estimate_csv(args.input, args.output, trust_config(args.params_file))
     except TrustMonitorError as err:
         print(f'trust-monitor-estimate: error: {err}', file=sys.stderr)
         return 2

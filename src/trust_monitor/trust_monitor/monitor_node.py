@@ -3,11 +3,15 @@
 Subscribes ``ego/plan`` and ``ego/expected_plan`` (paired by header stamp), publishes
 ``trust_monitor/trust`` (``geometry_msgs/Vector3Stamped``: x = E, y = P, z = trust after
 the step; ``frame_id`` empty, the three numbers are not a spatial vector), stamped like the
-plans. Parameters: the trust model's (``config/trust_av.yaml``).
+plans. Topic names are relative (the node's namespace). Parameters: the trust model's
+(``config/trust_av.yaml``) and ``dt_s``. Trust is per second: each plan's update is scaled by
+the time it is applied for, ``dt_s`` in lock-step (one step = eq. 10 exactly). The expected
+plan is read on the plan's times (both carry ``time_from_start``).
 
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` scores the latest plan and
 expected plan once (when both carry the same, new stamp) and stamps the trust with the
-current time; loop jitter as in the planner.
+current time; the update is scaled by the time since the previously scored plan (at most
+``input_timeout_s``; one control period for the first). Loop jitter as in the planner.
 """
 
 from __future__ import annotations
@@ -15,18 +19,20 @@ from __future__ import annotations
 import sys
 import time
 
+import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
 
+from trust_monitor.common.grids import hold_at
 from trust_monitor.common.lockstep import StepBuffer
 from trust_monitor.common.topics import NO_FRAME
-from trust_monitor.common.wall_clock import LatestInputs, WallClockConfig
-from trust_monitor.ros.messages import header, msg_ns, trajectory_values
+from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+from trust_monitor.ros.messages import header, msg_ns, trajectory_times, trajectory_values
 from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import QOS
+from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
-from trust_monitor.trust_model import TrustConfig, TrustEstimator
+from trust_monitor.trust_model import MonitorConfig, TrustConfig, TrustEstimator
 
 
 class MonitorNode(Node):
@@ -35,17 +41,21 @@ class MonitorNode(Node):
     def __init__(self) -> None:
         super().__init__('trust_monitor')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.exit_code = 0
         self.estimator = TrustEstimator(declare_config(self, TrustConfig))
+        self.step_s = declare_config(self, MonitorConfig).dt_s
         self.clock = declare_config(self, WallClockConfig)
         self.buffer = StepBuffer(['plan', 'expected'])
         self.latest = LatestInputs(['plan', 'expected'])
         self.scored_ns: int | None = None
-        self.pub = self.create_publisher(Vector3Stamped, 'trust_monitor/trust', QOS['STEP'])
+        self.pub = self.create_publisher(Vector3Stamped, 'trust_monitor/trust',
+                                         topic_qos('trust_monitor/trust', self.clock))
         callback = self.on_latest if self.clock.wall else self.on_input
-        self.create_subscription(JointTrajectory, 'ego/plan',
-                                 lambda m: callback('plan', m), QOS['STEP'])
+        self.create_subscription(JointTrajectory, 'ego/plan', lambda m: callback('plan', m),
+                                 topic_qos('ego/plan', self.clock))
         self.create_subscription(JointTrajectory, 'ego/expected_plan',
-                                 lambda m: callback('expected', m), QOS['STEP'])
+                                 lambda m: callback('expected', m),
+                                 topic_qos('ego/expected_plan', self.clock))
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
         self.get_logger().info(f'ready ({self.clock.clock_mode})')
 
@@ -61,8 +71,12 @@ class MonitorNode(Node):
         ns = msg_ns(plan.header.stamp)
         if ns != msg_ns(expected.header.stamp) or ns == self.scored_ns:
             return
+        if self.scored_ns is None:
+            dt_s = 1.0 / self.clock.control_rate_hz
+        else:
+            dt_s = min(max(ns - self.scored_ns, 0) / NS_PER_S, self.clock.input_timeout_s)
         self.scored_ns = ns
-        self.publish(now_ns(self), plan, expected)
+        self.publish(now_ns(self), plan, expected, dt_s)
 
     def close(self) -> None:
         """At shutdown: the wall loop's jitter statistics."""
@@ -76,12 +90,19 @@ class MonitorNode(Node):
         if not self.buffer.ready(ns):
             return
         items = self.buffer.pop(ns)
-        self.publish(ns, items['plan'], items['expected'])  # type: ignore[arg-type]
+        self.publish(ns, items['plan'], items['expected'], self.step_s)  # type: ignore[arg-type]
 
-    def publish(self, ns: int, plan: JointTrajectory, expected: JointTrajectory) -> None:
-        """One trust step from a plan pair, published stamped ``ns``."""
-        estimate = self.estimator.step(trajectory_values(plan, 'accelerations'),
-                                       trajectory_values(expected, 'accelerations'))
+    def publish(self, ns: int, plan: JointTrajectory, expected: JointTrajectory,
+                dt_s: float) -> None:
+        """One trust step (the plan applied for ``dt_s`` seconds) from a plan pair, published
+        stamped ``ns``; the expected plan is read on the plan's times."""
+        values = trajectory_values(plan, 'accelerations')
+        times = trajectory_times(plan)
+        step_s = float(times[1] - times[0]) if len(times) > 1 else self.step_s
+        held = hold_at(np.array(trajectory_times(expected)),
+                       np.array(trajectory_values(expected, 'accelerations')), step_s,
+                       len(values))
+        estimate = self.estimator.step(values, held.tolist(), dt_s)
         out = Vector3Stamped(header=header(ns, NO_FRAME))
         out.vector.x = estimate.explicability
         out.vector.y = estimate.performance

@@ -8,6 +8,12 @@ Reading of the paper (docs/DESIGN.md, section 1): E is the Tanimoto (extended Ja
 *distance* of the offset plans ``a = u_R + eps`` and ``b = u_R^H + eps``,
 ``E = 1 - sum(a*b) / sum(a*a + b*b - a*b)``, so that E = 0 for equal plans and E is in
 [0, 1] whenever ``a, b > 0`` (accelerations above ``-eps``).
+
+Time (DESIGN section 1, "time step outside lock-step"): trust is defined per second. The
+growth rate delta is in trust units per second and an update over an elapsed time dt is
+``T += delta * dt * u_T``; one 1 s step is exactly eq. (10), so the paper's 1 Hz loop is
+unchanged and the same drive gives the same trust at any control rate (docs/MODEL.md,
+"Time consistency").
 """
 
 from __future__ import annotations
@@ -19,6 +25,8 @@ from typing import Any
 
 from trust_monitor.common.params import check_fields, param
 
+SAME_MODEL = 'the planner and the monitor must run the same trust model'
+
 
 @dataclass(frozen=True)
 class TrustConfig:
@@ -26,18 +34,21 @@ class TrustConfig:
 
     Attributes:
         epsilon_mps2: acceleration offset eps of eq. (8), m/s^2 (paper: 6).
-        trust_growth_rate: delta of eq. (10), trust units per step (paper: 0.1).
+        trust_growth_rate: delta of eq. (10), trust units per second (paper: 0.1 per 1 s
+            step).
         performance_threshold: P_thre of eq. (11), dimensionless in (0, 1) (paper: 0.8).
         trust_initial: T(0), trust units.
     """
 
     epsilon_mps2: float = param('acceleration offset eps of eq. (8)', unit='m/s^2', low=0.0,
-                                low_inclusive=False)
-    trust_growth_rate: float = param('trust growth rate delta of eq. (10)', low=0.0,
-                                     low_inclusive=False)
+                                low_inclusive=False, reason=SAME_MODEL)
+    trust_growth_rate: float = param('trust growth rate delta of eq. (10), per second',
+                                     unit='1/s', low=0.0, low_inclusive=False,
+                                     reason=SAME_MODEL)
     performance_threshold: float = param('performance threshold P_thre of eq. (11)', low=0.0,
-                                         high=1.0, low_inclusive=False, high_inclusive=False)
-    trust_initial: float = param('initial trust T(0)')
+                                         high=1.0, low_inclusive=False, high_inclusive=False,
+                                         reason=SAME_MODEL)
+    trust_initial: float = param('initial trust T(0)', reason=SAME_MODEL)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -84,26 +95,36 @@ def trust_input(perf: float, threshold: float) -> float:
     return perf if perf >= threshold else -(1.0 - perf)
 
 
-def trust_step(trust: float, score: float, config: TrustConfig) -> float:
-    """One trust update, eq. (10): T(t+1) = T(t) + delta * u_T(t)."""
-    return trust + config.trust_growth_rate * trust_input(performance(score),
-                                                          config.performance_threshold)
+def trust_step(trust: float, score: float, config: TrustConfig, dt_s: float = 1.0) -> float:
+    """One trust update over ``dt_s`` seconds: T += delta * dt * u_T (eq. 10 for dt = 1 s).
+
+    Args:
+        trust: trust before the update.
+        score: explicability E of the plan applied over the interval.
+        config: trust model parameters (delta per second).
+        dt_s: elapsed time the plan is applied for, s (>= 0).
+    """
+    return trust + config.trust_growth_rate * dt_s * trust_input(performance(score),
+                                                                 config.performance_threshold)
 
 
-def propagate_trust(trust: float, score: float, config: TrustConfig, steps: int) -> list[float]:
-    """Trust over a horizon if the plan with score E were kept: T^1..T^steps."""
+def propagate_trust(trust: float, score: float, config: TrustConfig, steps: int,
+                    dt_s: float = 1.0) -> list[float]:
+    """Trust over a horizon of ``steps`` steps of ``dt_s`` if the plan with score E were
+    kept: T^1..T^steps."""
     out = []
     for _ in range(steps):
-        trust = trust_step(trust, score, config)
+        trust = trust_step(trust, score, config, dt_s)
         out.append(trust)
     return out
 
 
 def explicability_bound(trust: float, trust_min: float, config: TrustConfig,
-                        steps: int) -> float | None:
+                        steps: int, dt_s: float = 1.0) -> float | None:
     """Largest E whose propagated trust stays >= trust_min over the horizon (eq. 12).
 
-    The constraint ``T^k >= T_min`` for k = 1..N, with ``T^k = T + k * delta * u_T(E)``,
+    The constraint ``T^k >= T_min`` for k = 1..N, with ``T^k = T + k * delta * dt * u_T(E)``
+    (the per-second rule of :func:`trust_step` on the NMPC's grid of step ``dt_s``),
     depends on the plan only through E, and u_T(E) is non-increasing in E. So the set of
     admissible plans is exactly ``E <= E_max`` with E_max computed here. The NMPC uses this
     smooth inequality instead of the discontinuous if-else of eq. (11): the same feasible
@@ -115,12 +136,13 @@ def explicability_bound(trust: float, trust_min: float, config: TrustConfig,
         trust_min: T_min of eq. (12).
         config: trust model parameters.
         steps: horizon length N in steps.
+        dt_s: the horizon's step, s (the NMPC's prediction grid).
 
     Returns:
         E_max (>= 1 means no restriction, since E < 1 always), or None when no plan can
         satisfy the constraint (trust cannot climb back to T_min in one step).
     """
-    delta = config.trust_growth_rate
+    delta = config.trust_growth_rate * dt_s  # trust units per step of the grid
     p_thr = config.performance_threshold
     if trust >= trust_min:
         # u_T >= 0 keeps every T^k >= T >= T_min; u_T < 0 is worst at k = N.
@@ -141,6 +163,22 @@ def explicability_bound(trust: float, trust_min: float, config: TrustConfig,
 
 
 @dataclass(frozen=True)
+class MonitorConfig:
+    """The trust monitor's time step in lock-step (each update covers ``dt_s`` seconds).
+
+    Attributes:
+        dt_s: control step of the lock-step graph, s.
+    """
+
+    dt_s: float = param('control step: the time each scored plan is applied for in '
+                        'lock-step', unit='s', low=0.0, low_inclusive=False,
+                        reason='the step of a deterministic run')
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class TrustEstimate:
     """One step of the monitor: E, P and the trust *after* the update of eq. (10)."""
 
@@ -150,20 +188,28 @@ class TrustEstimate:
 
 
 class TrustEstimator:
-    """Trust state of the human follower, updated once per control step from observed plans."""
+    """Trust state of the human follower, updated once per control step from observed plans
+    (each update scaled by the time the plan is applied for)."""
 
     def __init__(self, config: TrustConfig) -> None:
         self.config = config
         self.trust = config.trust_initial
 
-    def step(self, plan: Iterable[float], expected: Iterable[float]) -> TrustEstimate:
+    def step(self, plan: Iterable[float], expected: Iterable[float],
+             dt_s: float = 1.0) -> TrustEstimate:
         """Score the AV's plan against the expected plan and update the trust.
 
         Args:
             plan: the AV's plan u_R(t), m/s^2.
             expected: the plan the human expects, u_R^H(t), m/s^2.
+            dt_s: time the plan is applied for (the control period), s.
+
+        Raises:
+            ValueError: ``dt_s`` is negative or not finite.
         """
+        if not (math.isfinite(dt_s) and dt_s >= 0.0):
+            raise ValueError(f'dt_s must be finite and >= 0, got {dt_s}')
         score = float(explicability(list(plan), list(expected), self.config.epsilon_mps2))
         perf = performance(score)
-        self.trust = trust_step(self.trust, score, self.config)
+        self.trust = trust_step(self.trust, score, self.config, dt_s)
         return TrustEstimate(score, perf, self.trust)

@@ -13,7 +13,7 @@ from trust_av_planner.system.config import load_run_config
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av trace-to-bag``."""
-    config = load_run_config(args.params_file)
+    config = load_run_config(args.params_files)
     topic = args.topic or config.trace.bag_topic
     times, speeds = read_samples(trace_path(args.trace), TraceConfig(
         trace=args.trace, max_sample_gap_s=config.trace.max_sample_gap_s))

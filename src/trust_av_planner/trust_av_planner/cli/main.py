@@ -28,6 +28,7 @@ COMMAND_MODULES = (
     'trust_av_planner.cli.shadow',
     'trust_av_planner.cli.reproduce',
     'trust_av_planner.cli.bags',
+    'trust_av_planner.cli.repair_bag',
     'trust_av_planner.cli.train_gru',
     'trust_av_planner.cli.fit_driver',
 )
@@ -48,13 +49,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Stopped(KeyboardInterrupt):
+    """A stop signal other than SIGINT (SIGTERM, as ``timeout``, ``docker stop`` and systemd
+    send it): raised like Ctrl-C so that every command takes the same way out."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _stop(signum: int, _frame: object) -> None:
+    raise Stopped(signum)
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``trust-av``."""
+    """Entry point of ``trust-av``.
+
+    Returns:
+        0 done; 2 bad input or a failed run (one line on stderr); 128 + the signal number
+        when stopped by SIGINT (130) or SIGTERM (143), after everything started was
+        stopped and every recording finished.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
-    # Ctrl-C must always reach us (a background start inherits SIGINT as ignored): long
-    # commands stop what they started and finish their files on the way out.
+    # Ctrl-C must always reach us (a background start inherits SIGINT as ignored), and
+    # SIGTERM takes the same way: long commands stop what they started and finish their
+    # files on the way out.
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _stop)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format='%(levelname)s %(name)s: %(message)s')
     try:
@@ -63,10 +85,14 @@ def main(argv: list[str] | None = None) -> int:
             TrustAvPlannerError) as err:
         print(f'trust-av {args.command}: error: {err}', file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
         # Everything started has been stopped and every recording finished on the way out.
-        print(f'trust-av {args.command}: interrupted', file=sys.stderr)
-        return 130
+        signum = err.signum if isinstance(err, Stopped) else signal.SIGINT
+        what = 'interrupted' if signum == signal.SIGINT else \
+            f'stopped by {signal.Signals(signum).name}'
+        print(f'trust-av {args.command}: {what}; everything it started was stopped and its '
+              'recordings finished', file=sys.stderr)
+        return 128 + int(signum)
 
 
 if __name__ == '__main__':

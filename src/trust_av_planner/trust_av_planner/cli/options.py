@@ -5,6 +5,7 @@ table, and the progress bar (tqdm)."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -13,7 +14,8 @@ from types import TracebackType
 from tqdm import tqdm
 
 from preceding_traffic.traces import SHIPPED_TRACES
-from trust_av_planner.nmpc import PREDICTORS, PlannerConfig
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.nmpc import LEAD_PREVIEWS, PREDICTORS, PlannerConfig
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 from trust_av_planner.system.metrics import Metrics
 from trust_monitor.common.params import field_spec
@@ -32,10 +34,57 @@ def alpha_value(text: str) -> float:
     return value
 
 
+class _ParamsFiles(argparse.Action):
+    """``--params-file F``, repeatable: ``args.params_files`` is every file in order and
+    ``args.params_file`` the last one (the shipped file when none is given)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> None:
+        files = [*getattr(namespace, 'params_files', []), Path(str(values))]
+        namespace.params_files = files
+        namespace.params_file = files[-1]
+
+
 def add_params_file_option(parser: argparse.ArgumentParser) -> None:
-    """``--params-file``, defaulting to the shipped config/trust_av.yaml."""
-    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
-                        help='ROS 2 params file (default: %(default)s)')
+    """``--params-file``, repeatable, layered over the shipped config/trust_av.yaml."""
+    parser.add_argument('--params-file', action=_ParamsFiles, metavar='FILE',
+                        help='ROS 2 params file layered over the shipped '
+                             f'{DEFAULT_PARAMS_FILE.name}; repeat for more layers, later over '
+                             "earlier, as a node's --ros-args --params-file layers them "
+                             '(a file may hold only the keys it changes)')
+    parser.set_defaults(params_files=[], params_file=DEFAULT_PARAMS_FILE)
+
+
+def steps_value(text: str) -> int:
+    """argparse type for ``--max-steps``: a whole number >= 0."""
+    try:
+        value = int(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'--max-steps must be a whole number, got {text!r}') \
+            from err
+    if value < 0:
+        raise argparse.ArgumentTypeError(f'--max-steps must be >= 0 (0: the whole trace), got '
+                                         f'{value}')
+    return value
+
+
+def output_file(path: Path) -> Path:
+    """Check, before any work, that ``path`` can be written as a file.
+
+    Raises:
+        TrustAvPlannerError: ``path`` is a directory, or its nearest existing ancestor is not
+            a writable directory.
+    """
+    if path.is_dir():
+        raise TrustAvPlannerError(f'{path}: is a directory; --out needs a file name')
+    ancestor = path.parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise TrustAvPlannerError(f'{path}: {ancestor} is not a directory')
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise TrustAvPlannerError(f'{path}: directory {ancestor} is not writable')
+    return path
 
 
 def add_run_options(parser: argparse.ArgumentParser) -> None:
@@ -58,13 +107,34 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="explicability weight in [0, 1] (default: the params file's)")
     parser.add_argument('--predictor', choices=PREDICTORS, default=None,
                         help='estimator of the plan the human expects (default: params file)')
+    add_lead_preview_option(parser)
     add_params_file_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+
+
+def add_lead_preview_option(parser: argparse.ArgumentParser) -> None:
+    """``--lead-preview``: the planner parameter ``lead_preview``."""
+    parser.add_argument('--lead-preview', choices=LEAD_PREVIEWS, default=None,
+                        help="the lead's speed over the horizon: the recorded preview, or "
+                             "built from the lead's odometry (default: the params file's)")
+
+
+def positive_hz(text: str) -> float:
+    """argparse type: a rate in Hz, > 0."""
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'expected a rate in Hz, got {text!r}') from err
+    if not value > 0.0 or value == float('inf'):
+        raise argparse.ArgumentTypeError(f'must be a finite rate > 0 Hz, got {text!r}')
+    return value
 
 
 def run_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
     """Params-file overrides from the command-line options."""
     planner: dict[str, object] = {}
+    if getattr(args, 'lead_preview', None) is not None:
+        planner['lead_preview'] = args.lead_preview
     if args.alpha is not None:
         planner['alpha'] = args.alpha
     if args.predictor is not None:

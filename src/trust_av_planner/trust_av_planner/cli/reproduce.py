@@ -9,16 +9,36 @@ import time
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
-from trust_av_planner.cli.options import Progress, add_params_file_option
+from trust_av_planner.cli.options import Progress, add_lead_preview_option
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PREDICTORS as KNOWN_PREDICTORS
 from trust_av_planner.study import sweep, tables
 from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_av_planner.study.plots import speed_profiles, trust_over_time
 from trust_av_planner.study.sweep import Case
-from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_monitor.common.params import read_params_file
+
+PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
+            'as_reported': DEFAULT_PARAMS_FILE.with_name('paper_as_reported.yaml')}
+"""Parameter profiles: the paper's Table I, and the reading its printed mean E imply."""
+DEFAULT_RESULTS = {'table_i': Path('results/paper'),
+                   'as_reported': Path('results/paper_as_reported')}
+
+
+def with_lead_preview(params_file: Path, lead_preview: str, out: Path) -> Path:
+    """A copy of ``params_file`` in ``out`` whose planner has ``lead_preview`` (the sweep's
+    cache keys on the params text, so each preview has its own cases)."""
+    sections = read_params_file(params_file)
+    sections.setdefault('planner', {})['lead_preview'] = lead_preview
+    path = out / f'params_lead_preview_{lead_preview}.yaml'
+    path.write_text(yaml.safe_dump({node: {'ros__parameters': values}
+                                    for node, values in sections.items()}, sort_keys=False))
+    return path
 
 
 def csv_list(text: str) -> list[str]:
@@ -68,13 +88,21 @@ def run(args: argparse.Namespace) -> int:
         raise TrustAvPlannerError(f'--max-steps must be >= 0, got {args.max_steps}')
     if args.drivers < 0:
         raise TrustAvPlannerError(f'--drivers must be >= 0, got {args.drivers}')
-    config = load_run_config(args.params_file)  # validate before starting workers
-    out: Path = args.results_dir
+    if args.profile != 'table_i' and args.params_file is not None:
+        raise TrustAvPlannerError('--profile and --params-file both choose the parameters: give '
+                                  'one of them')
+    params_file = args.params_file or PROFILES[args.profile]
+    out: Path = args.results_dir or DEFAULT_RESULTS[args.profile]
+    if args.lead_preview is not None and args.lead_preview != 'recorded':
+        out = args.results_dir or out.with_name(f'{out.name}_{args.lead_preview}')
     out.mkdir(parents=True, exist_ok=True)
+    if args.lead_preview is not None:
+        params_file = with_lead_preview(params_file, args.lead_preview, out)
+    config = load_run_config(params_file)  # validate before starting workers
     cases = sweep.sweep_cases(args.traces, args.predictors, sweep.ALPHAS)
     if args.drivers:
         cases = sweep.population_cases(cases, args.drivers, args.drivers_seed,
-                                           args.driver_fit)
+                                       args.driver_fit)
     executor: sweep.Executor
     if args.executor == 'ray':
         executor = sweep.RayExecutor(args.ray_address, args.workers)
@@ -83,9 +111,9 @@ def run(args: argparse.Namespace) -> int:
     bar = None if args.no_progress else Progress('reproduce', len(cases))
     start = time.monotonic()
     runner = 'graph' if args.graph else 'in-process'
-    results = sweep.run_sweep(cases, args.params_file, out, executor,
-                                  None if bar is None else bar.update, runner=runner,
-                                  max_steps=args.max_steps)
+    results = sweep.run_sweep(cases, params_file, out, executor,
+                              None if bar is None else bar.update, runner=runner,
+                              max_steps=args.max_steps)
     if bar is not None:
         bar.close()
     elapsed = time.monotonic() - start
@@ -113,7 +141,9 @@ def run(args: argparse.Namespace) -> int:
         for predictor, name, paper in (('gru', 'table_II_tac_gru_us06', TABLE_II_TAC_GRU_US06),
                                        ('ca', 'table_III_tac_ca_us06', TABLE_III_TAC_CA_US06)):
             if predictor in args.predictors:
-                tables.write_rows(out / name, *alpha_table(results, 'us06', predictor, paper))
+                us06_steps = load_trace('us06', config.planner.dt_s, config.trace).steps
+                tables.write_rows(out / name, *alpha_table(results, 'us06', predictor, paper,
+                                                           (us06_steps, config.trust)))
                 written.append(f'{name}.md')
     tables.write_rows(out / 'table_IV_max_improvements',
                          *improvement_table(results, args.traces, args.predictors))
@@ -139,7 +169,11 @@ def run(args: argparse.Namespace) -> int:
               'mean ± 95 % CI over drivers; trends and Figure 3 use the means)')
     for line in trend_checks(summary, args.traces, args.predictors):
         print(f'  {line}')
-    print(f'\n{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; outputs in {out}/: '
+    print(f'\nProfile {args.profile} ({params_file}): epsilon_mps2 = '
+          f'{config.trust.epsilon_mps2:g}, explicability_scale = '
+          f'{config.planner.explicability_scale:g}; TAC-GRU uses {config.planner.gru_model} '
+          '(trained behind the default profile)')
+    print(f'{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; outputs in {out}/: '
           + ', '.join(written))
     if args.graph:
         print(f'graph recordings (MCAP, one per case): {out / "graph_bags"}/')
@@ -181,8 +215,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--driver-fit', type=Path, default=DRIVER_FIT_FILE,
                         help='driver-fit file with per-pair weights (default: the shipped fit, '
                              'human_driver_sim/models/driver_fit.yaml)')
-    parser.add_argument('--results-dir', type=Path, default=Path('results/paper'),
-                        help='where tables, figures and the cache go (default: %(default)s)')
-    add_params_file_option(parser)
+    parser.add_argument('--profile', choices=tuple(PROFILES), default='table_i',
+                        help="which parameters: table_i = the paper's Table I (epsilon 6, "
+                             "config/trust_av.yaml), as_reported = what the paper's printed "
+                             'mean E imply (epsilon 3, config/paper_as_reported.yaml; '
+                             'docs/RESULTS.md); default: %(default)s')
+    parser.add_argument('--results-dir', type=Path, default=None,
+                        help='where tables, figures and the cache go (default: results/paper '
+                             'for table_i, results/paper_as_reported for as_reported)')
+    parser.add_argument('--params-file', type=Path, default=None,
+                        help="ROS 2 params file instead of a profile's (default: the "
+                             "profile's)")
+    add_lead_preview_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(func=run)

@@ -7,8 +7,14 @@ from pathlib import Path
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.cli.options import Progress, add_run_options, format_metrics, run_overrides
-from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.cli.options import (
+    Progress,
+    add_run_options,
+    format_metrics,
+    run_overrides,
+    steps_value,
+)
+from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.graph.orchestrator import run_graph_records
 from trust_av_planner.study.plots import run_overview
 from trust_av_planner.system.config import load_run_config
@@ -17,53 +23,52 @@ from trust_av_planner.system.metrics import compute_metrics
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av run``."""
-    config = load_run_config(args.params_file, run_overrides(args))
+    config = load_run_config(args.params_files, run_overrides(args))
     trace = truncate(load_trace(config.trace.trace, config.planner.dt_s, config.trace),
                      args.max_steps)
     bag: Path = args.bag or Path('bags') / (
-        f'run_{trace.name}_{config.planner.predictor}_alpha{config.planner.alpha:g}.mcap')
-    if bag.exists() and not args.overwrite:
-        raise TrustAvPlannerError(f'{bag} exists already; pass --overwrite or choose another '
-                                  '--bag')
-    if bag.exists():
-        bag.unlink()
+        f'run_{trace.name}_{config.planner.predictor}_alpha{config.planner.alpha:g}')
+    outputs = prepare_outputs(bag, overwrite=args.overwrite)
     bar = None if args.no_progress else Progress(f'graph {trace.name}', trace.steps)
     try:
         result, records = run_graph_records(
-            config, config.trace.trace, trace, args.params_file, bag, max_steps=args.max_steps,
-            startup_timeout_s=args.startup_timeout_s,
-            on_step=None if bar is None else bar.update)
+            config, config.trace.trace, trace, outputs.bag,
+            max_steps=args.max_steps, startup_timeout_s=args.startup_timeout_s,
+            log_dir=outputs.logs, on_step=None if bar is None else bar.update)
     finally:
         if bar is not None:
             bar.close()
     metrics = compute_metrics(records, config.min_safe_gap_m)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
              f'alpha = {config.planner.alpha:g} (ROS 2 graph, domain {result.domain_id})')
-    plot = bag.with_suffix('.png')
-    run_overview(records, title, plot)
+    run_overview(records, title, outputs.plot)
     print(format_metrics(metrics, title))
     print(f'wall time {result.wall_s:.1f} s (start-up {result.startup_s:.1f} s), '
           f'{trace.steps * trace.dt_s / max(result.wall_s - result.startup_s, 1e-9):.0f}x '
           'real time while stepping')
-    print(f'recording: {bag}\nplot: {plot}\nnode logs: {bag.with_suffix(".logs")}')
+    print(f'recording (rosbag2): {outputs.bag}\nplot: {outputs.plot}\nnode logs: {outputs.logs}')
     return 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``run`` to ``trust-av``."""
     parser = subparsers.add_parser(
-        'run', help='the ROS 2 node graph on one trace, recorded to MCAP',
+        'run', help='the ROS 2 node graph on one trace, recorded to a rosbag2 bag',
         description='Start the six nodes (preceding_traffic, planner, ego_plant, human_driver, '
                     'trust_monitor, recorder) as separate processes on a private ROS domain, '
                     'step them in lock-step on sim time to the end of the trace, record every '
-                    'topic to MCAP, then print the metrics and write a plot beside the bag. '
-                    'Exit codes: 0 done, 2 bad input or a node failed (named), 130 interrupted.')
+                    'topic to a rosbag2 bag directory (metadata.yaml + MCAP), then print the '
+                    'metrics and write a plot (BAG.png) and the node logs (BAG.logs/) beside '
+                    'it. However the run ends the bag is finished and readable. Exit codes: 0 '
+                    'done, 2 bad input, a node failed (named) or the disk is full, 130 '
+                    'interrupted (SIGINT), 143 terminated (SIGTERM).')
     add_run_options(parser)
     parser.add_argument('--bag', type=Path, default=None,
-                        help='MCAP file to write (default: bags/run_<trace>_<predictor>_'
-                             'alpha<alpha>.mcap)')
-    parser.add_argument('--overwrite', action='store_true', help='replace an existing bag')
-    parser.add_argument('--max-steps', type=int, default=0,
+                        help='bag directory to write (default: bags/run_<trace>_<predictor>_'
+                             'alpha<alpha>)')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='replace an existing bag directory, plot and logs')
+    parser.add_argument('--max-steps', type=steps_value, default=0,
                         help='stop after this many steps (default: the whole trace)')
     parser.add_argument('--startup-timeout-s', type=float, default=30.0,
                         help='how long to wait for the graph to connect (default: %(default)s)')

@@ -10,11 +10,13 @@ from pathlib import Path
 
 from preceding_traffic.sources import load_trace
 from trust_av_planner.cli.options import add_params_file_option, alpha_value
+from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.shadow import ShadowRun, run_shadow, run_wall_graph
 from trust_av_planner.nmpc import PREDICTORS
 from trust_av_planner.system.config import PlannerTopics, load_run_config
-from trust_monitor.common.params import build_config, node_params, read_params_file
+from trust_monitor.common.param_layers import layered_params, node_fqn, read_layers
+from trust_monitor.common.params import build_config
 from trust_monitor.common.wall_clock import WallClockConfig, format_summary
 
 
@@ -50,15 +52,16 @@ def run(args: argparse.Namespace) -> int:
     if args.predictor is not None:
         planner['predictor'] = args.predictor
     overrides['planner'] = planner
-    config = load_run_config(args.params_file, overrides)
-    planner_section = node_params(read_params_file(args.params_file), 'planner')
+    config = load_run_config(args.params_files, overrides)
+    planner_section = layered_params(read_layers(config.params_files), node_fqn('/', 'planner'))
     clock = build_config(WallClockConfig, planner_section)
     topics = build_config(PlannerTopics, planner_section)
     rate_hz = args.rate_hz if args.rate_hz is not None else clock.control_rate_hz
     if args.whole_graph and topics != PlannerTopics():
+        files = ', '.join(str(p) for p in config.params_files)
         raise TrustAvPlannerError('--whole-graph runs the simulated nodes on the standard topics; '
-                                  f'the params file {args.params_file} remaps the planner '
-                                  f'inputs: {topics}')
+                                  f'the params files ({files}) remap the planner inputs: '
+                                  f'{topics}')
     if not args.whole_graph and config.planner.predictor != 'ca':
         raise TrustAvPlannerError('trust-av shadow has no human follower state: it needs '
                                   f'predictor ca (got {config.planner.predictor}) or '
@@ -66,20 +69,16 @@ def run(args: argparse.Namespace) -> int:
     trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
     whole_s = trace.steps * trace.dt_s
     duration_s = whole_s if args.duration_s is None else min(args.duration_s, whole_s)
-    if args.out.exists() and not args.overwrite:
-        raise TrustAvPlannerError(f'{args.out} exists already; pass --overwrite or choose '
-                                  'another --out')
-    if args.out.exists():
-        args.out.unlink()
+    outputs = prepare_outputs(args.out, overwrite=args.overwrite, option='--out')
     nodes = 'every node' if args.whole_graph else 'planner and trust_monitor'
     print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '
           f'{nodes} at {rate_hz:g} Hz', flush=True)
     if args.whole_graph:
-        result = run_wall_graph(config, str(args.bag), trace, args.params_file, args.out,
+        result = run_wall_graph(config, str(args.bag), trace, outputs.bag,
                                 duration_s=duration_s, rate_hz=rate_hz,
                                 startup_timeout_s=args.startup_timeout_s)
     else:
-        result = run_shadow(config, trace, args.params_file, args.out, duration_s=duration_s,
+        result = run_shadow(config, trace, outputs.bag, duration_s=duration_s,
                             rate_hz=rate_hz, topics=topics,
                             startup_timeout_s=args.startup_timeout_s)
     print('\n'.join(summary_lines(result)))
@@ -110,8 +109,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--bag-type', default=None,
                         choices=('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'),
                         help='its message type (default: preceding_traffic.bag_message_type)')
-    parser.add_argument('--out', type=Path, required=True, help='MCAP file to write')
-    parser.add_argument('--overwrite', action='store_true', help='replace an existing --out')
+    parser.add_argument('--out', type=Path, required=True,
+                        help='bag directory to write (rosbag2: metadata.yaml + MCAP)')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='replace an existing --out bag directory')
     parser.add_argument('--duration-s', type=positive_seconds, default=None,
                         help='wall time to replay, s (default: the whole bag)')
     parser.add_argument('--rate-hz', type=positive_seconds, default=None,

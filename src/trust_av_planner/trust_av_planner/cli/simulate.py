@@ -3,31 +3,63 @@
 from __future__ import annotations
 
 import argparse
+import os
+import tempfile
 from pathlib import Path
 
-from preceding_traffic.sources import load_trace
-from trust_av_planner.cli.options import Progress, add_run_options, format_metrics, run_overrides
-from trust_av_planner.system.closed_loop import simulate
+from trust_av_planner.cli.options import (
+    Progress,
+    add_run_options,
+    format_metrics,
+    output_file,
+    positive_hz,
+    run_overrides,
+)
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import load_run_config
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av simulate``."""
-    config = load_run_config(args.params_file, run_overrides(args))
-    trace = load_trace(config.trace.trace, config.planner.dt_s, config.trace)
+    if args.out is not None:
+        output_file(args.out)
+    config = load_run_config(args.params_files, run_overrides(args))
+    trace = control_trace(config, args.control_rate_hz)
     bar = None if args.no_progress else Progress(f'simulate {trace.name}', trace.steps)
     result = simulate(config, trace, on_step=None if bar is None else bar.update)
     if bar is not None:
         bar.close()
     if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        result.write_csv(args.out)
+        write_table(result, args.out)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
-             f'alpha = {config.planner.alpha:g} (in-process)')
+             f'alpha = {config.planner.alpha:g} (in-process, {1.0 / trace.dt_s:g} Hz)')
     print(format_metrics(result.metrics, title))
     if args.out is not None:
         print(f'per-step table: {args.out}')
     return 0
+
+
+def write_table(result: SimResult, out: Path) -> None:
+    """Write the per-step table through a temporary file beside ``out`` (no partial file).
+
+    Raises:
+        TrustAvPlannerError: the file cannot be written.
+    """
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        handle, temporary = tempfile.mkstemp(dir=out.parent, prefix=f'.{out.name}.',
+                                             suffix='.tmp')
+        os.close(handle)
+    except OSError as err:
+        raise TrustAvPlannerError(f'{out}: cannot write ({err.strerror})') from err
+    try:
+        result.write_csv(Path(temporary))
+        os.replace(temporary, out)
+    except OSError as err:
+        raise TrustAvPlannerError(f'{out}: cannot write ({err.strerror})') from err
+    finally:
+        Path(temporary).unlink(missing_ok=True)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -38,6 +70,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'integrate) in one process and print final trust, mean explicability, '
                     'prediction RMSE, minimum gaps and fallback counts.')
     add_run_options(parser)
+    parser.add_argument('--control-rate-hz', type=positive_hz, default=None,
+                        help='control rate: the trace is interpolated to it, the NMPC predicts '
+                             'on its period, trust is per second (default: 1 / dt_s, the '
+                             "paper's 1 Hz)")
     parser.add_argument('--out', type=Path, default=None,
                         help='write the per-step table (CSV) here')
     parser.set_defaults(func=run)

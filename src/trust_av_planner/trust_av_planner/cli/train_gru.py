@@ -18,7 +18,7 @@ from trust_av_planner.system.config import load_run_config
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av train-gru``."""
-    config = load_run_config(args.params_file)
+    config = load_run_config(args.params_files)
     settings = TrainingSettings()
     if args.epochs is not None:
         settings = dataclasses.replace(settings, epochs=args.epochs)

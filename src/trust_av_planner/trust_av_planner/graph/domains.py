@@ -1,36 +1,140 @@
-"""A private ROS domain per run: each run leases a free ``ROS_DOMAIN_ID`` with a lock file,
-so parallel runs, tests and CI never hear each other."""
+"""A private ROS domain per run.
+
+Each run leases a free ``ROS_DOMAIN_ID`` with an exclusive lock file, so parallel runs,
+tests and CI of one user never share a domain; before it is used, the domain is checked for
+participants that are not ours (another user's run, any other ROS 2 process on this
+machine: discovery is localhost-only) and skipped if it has any.
+
+The lock files live in a per-user directory (``$XDG_RUNTIME_DIR`` or the temporary
+directory, ``trust_av_domains-<uid>``, mode 0700), opened without following symbolic links:
+no other user can take every lock, and a planted link cannot make a run write through it.
+A directory that is a link, or owned by someone else, is refused with one line.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
+import os
+import random
+import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from trust_av_planner.graph.processes import GraphError
 
 DOMAIN_RANGE = range(1, 102)
 """ROS domain ids leased to runs (Fast DDS: 0-232 are valid; 1-101 avoid the defaults)."""
-LOCK_DIR = Path(tempfile.gettempdir()) / 'trust_av_domains'
+RANGE_ENV = 'TRUST_AV_DOMAIN_RANGE'
+"""``first-last`` (e.g. ``120-130``): lease only from these domain ids instead."""
+
+
+def domain_range() -> range:
+    """The domain ids runs may lease: :data:`RANGE_ENV` if set, else :data:`DOMAIN_RANGE`.
+
+    Raises:
+        GraphError: the variable is not ``first-last`` with 0 <= first <= last <= 232.
+    """
+    text = os.environ.get(RANGE_ENV, '')
+    if not text:
+        return DOMAIN_RANGE
+    first, _, last = text.partition('-')
+    try:
+        low, high = int(first), int(last or first)
+    except ValueError:
+        low = high = -1
+    if not 0 <= low <= high <= 232:
+        raise GraphError(f'{RANGE_ENV}={text!r}: expected first-last domain ids in 0..232')
+    return range(low, high + 1)
+
+
+def lock_dir() -> Path:
+    """This user's lease directory: ``$XDG_RUNTIME_DIR/trust_av_domains-<uid>`` when that
+    runtime directory exists and is the user's own, else in the temporary directory."""
+    runtime = os.environ.get('XDG_RUNTIME_DIR', '')
+    base = Path(tempfile.gettempdir())
+    if runtime:
+        with contextlib.suppress(OSError):
+            info = os.stat(runtime)
+            if stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid():
+                base = Path(runtime)
+    return base / f'trust_av_domains-{os.getuid()}'
+
+
+def secure_lock_dir(path: Path) -> Path:
+    """Create ``path`` (mode 0700) or check an existing one: a real directory, owned by the
+    current user, not readable or writable by others (tightened to 0700 if it is).
+
+    Raises:
+        GraphError: ``path`` is a link or not a directory, or belongs to another user.
+    """
+    with contextlib.suppress(FileExistsError):
+        os.mkdir(path, 0o700)
+    info = os.lstat(path)
+    if stat.S_ISLNK(info.st_mode) or not stat.S_ISDIR(info.st_mode):
+        raise GraphError(f'{path}: the domain lease directory is not a directory (a symbolic '
+                         'link?); remove it')
+    if info.st_uid != os.getuid():
+        raise GraphError(f'{path}: the domain lease directory belongs to uid {info.st_uid}, '
+                         f'not to you (uid {os.getuid()}); remove it or set TMPDIR')
+    if info.st_mode & 0o077:
+        os.chmod(path, 0o700)
+    return path
+
+
+def _open_lock(path: Path) -> int:
+    """Open (create) a lock file without following a link; never truncates.
+
+    Raises:
+        GraphError: the lock file is a symbolic link or cannot be opened.
+    """
+    try:
+        return os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            raise GraphError(f'{path}: a lease file is a symbolic link; refusing to write '
+                             'through it (remove it)') from err
+        raise GraphError(f'{path}: cannot open the lease file ({err.strerror})') from err
 
 
 @contextlib.contextmanager
-def lease_domain() -> Iterator[int]:
-    """Hold an exclusive lock on a free ROS domain id for the duration of a run."""
-    LOCK_DIR.mkdir(parents=True, exist_ok=True)
-    for domain in DOMAIN_RANGE:
-        handle = (LOCK_DIR / f'{domain}.lock').open('w')
+def lease_domain(foreign: Callable[[int], str] | None = None,
+                 directory: Path | None = None) -> Iterator[int]:
+    """Hold an exclusive lease on a free, private ROS domain id for the duration of a run.
+
+    Args:
+        foreign: called with a leased domain id before it is used; returns '' when the
+            domain has no participants of others, else a description of them (the domain
+            is then skipped).
+        directory: the lease directory (default :func:`lock_dir`).
+
+    Raises:
+        GraphError: the lease directory is unsafe, or no domain is free and private.
+    """
+    root = secure_lock_dir(directory or lock_dir())
+    skipped: list[str] = []
+    domains = domain_range()
+    # Start at a random place: runs of other users (other lease directories) then rarely
+    # probe the same domain at the same moment.
+    start = random.randrange(len(domains))
+    for domain in [*domains[start:], *domains[:start]]:
+        fd = _open_lock(root / f'{domain}.lock')
         try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            handle.close()
+            os.close(fd)
             continue
         try:
+            others = foreign(domain) if foreign is not None else ''
+            if others:
+                skipped.append(f'{domain} ({others})')
+                continue
             yield domain
+            return
         finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
-            handle.close()
-        return
-    raise GraphError(f'no free ROS domain id in {DOMAIN_RANGE.start}..{DOMAIN_RANGE.stop - 1}')
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+    detail = f'; not private: {", ".join(skipped[:3])}' if skipped else ''
+    raise GraphError(f'no free ROS domain id in {domains.start}..{domains.stop - 1}{detail}')

@@ -1,25 +1,30 @@
 """Start the node graph as separate processes, step it in lock-step, stop it cleanly.
 
 ROS 2 launch is not available here, so this module does its job: every node is its own
-process (:mod:`trust_av_planner.graph.processes`), and each run leases a free
-``ROS_DOMAIN_ID`` (:mod:`trust_av_planner.graph.domains`) with localhost-only discovery.
+process (:mod:`trust_av_planner.graph.processes`), each run leases a free, private
+``ROS_DOMAIN_ID`` (:mod:`trust_av_planner.graph.domains`) with localhost-only discovery,
+and this process follows the run through its own node (:mod:`trust_av_planner.graph.session`).
 
-Sequence: start the nodes; wait until every topic of the table has its publishers and
-subscribers (timeout: a clear error naming what is missing); publish ``/sim/start``; follow
-``/clock`` for progress; the run is complete when the recorder, holding every message of
-every step, finishes its file and exits (until then every publisher stays up, so nothing
-unacknowledged is lost); stop the rest in order (SIGINT, then SIGTERM, then SIGKILL
-after grace periods). If any node dies, everything is stopped the same way, the recording
-is finished (or repaired if the recorder itself died) and :class:`GraphError` names the
-node and its last log lines.
+Sequence: lease a domain that holds no one else's participants; start the nodes; wait until
+every topic of the table has its publishers and subscribers and the recorder has matched
+every publisher; publish ``sim/start``; follow the recorder's status for progress (no
+per-step subscriber of our own), the nodes' health and the domain's privacy; the run is
+complete when the recorder, holding every message of every step, finishes its bag and exits
+(until then every publisher stays up); then stop the rest.
+
+However it ends, the recording is a finished rosbag2 bag directory: on an interrupt
+(SIGINT, SIGTERM) or an error the nodes are stopped step authority first and recorder last
+(:meth:`~trust_av_planner.graph.processes.Graph.stop`); if the recorder itself died it is
+repaired from its chunks (:func:`~trust_av_planner.graph.bag_writer.repair_bag`); a full
+disk finishes it with every complete step
+(:class:`~trust_av_planner.graph.bag_writer.DiskFullError`).
+If this process is killed, the nodes stop by themselves and the recorder finishes the bag.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,13 +32,14 @@ from typing import Any
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.bag_records import records_from_bag
+from trust_av_planner.graph.bag_writer import DiskFullError, repair_bag
 from trust_av_planner.graph.domains import lease_domain
-from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
-from trust_av_planner.graph.recorder import repair_mcap
+from trust_av_planner.graph.processes import RECORDER, Graph, GraphError, NodeSpec
+from trust_av_planner.graph.recorder_node import EXIT_DISK_FULL
+from trust_av_planner.graph.session import foreign_participants, graph_session
 from trust_av_planner.system.closed_loop import InitialState, equilibrium_start
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
-from trust_monitor.common.topics import TOPICS, expected_endpoints
 
 
 def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: InitialState,
@@ -53,7 +59,8 @@ def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: In
                  {**shared, 'initial_position_m': initial.human.position_m,
                   'initial_speed_mps': initial.human.speed_mps, 'start_time_s': start}),
         NodeSpec('planner', 'trust_av_planner.planner_node',
-                 {**shared, 'alpha': cfg.planner.alpha, 'predictor': cfg.planner.predictor}),
+                 {**shared, 'alpha': cfg.planner.alpha, 'predictor': cfg.planner.predictor,
+                  'lead_preview': cfg.planner.lead_preview}),
         NodeSpec('preceding_traffic', 'preceding_traffic.traffic_node',
                  {'trace': trace_arg, 'initial_position_m': initial.traffic.position_m,
                   'max_steps': max_steps, 'bag_topic': config.trace.bag_topic,
@@ -73,46 +80,33 @@ class GraphRun:
     startup_s: float
 
 
-@contextlib.contextmanager
-def graph_session(graph: Graph, name: str) -> Iterator[tuple[Any, Any]]:
-    """Start ``graph``'s node processes and this process's own rclpy node ``name`` (with a
-    single-threaded executor) on the graph's domain; on exit, also on errors, destroy the
-    node, shut its context down and stop every process.
+def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *,
+              max_steps: int = 0, startup_timeout_s: float = 30.0,
+              step_timeout_s: float = 30.0, log_dir: Path | None = None,
+              on_step: Callable[[int, int], None] | None = None,
+              on_clock: Callable[[int], None] | None = None) -> GraphRun:
+    """Run the whole graph over ``trace`` (already truncated to ``max_steps``) into the bag
+    directory ``bag`` (it must not exist).
 
-    No rclpy signal handler is installed: SIGINT must reach the caller as
-    KeyboardInterrupt so that the nodes are stopped and the recording is finished.
-    """
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
-
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = Context()
-    try:
-        graph.start()
-        rclpy.init(context=context, domain_id=graph.domain,
-                   signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node(name, context=context)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        try:
-            yield node, executor
-        finally:
-            node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
-        graph.stop()
-
-
-def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
-              bag: Path, *, max_steps: int = 0, startup_timeout_s: float = 30.0,
-              step_timeout_s: float = 30.0,
-              on_step: Callable[[int, int], None] | None = None) -> GraphRun:
-    """Run the whole graph over ``trace`` (already truncated to ``max_steps``) into ``bag``.
+    Args:
+        config: the run configuration (its params files, in order, are what every node
+            gets; the command's overrides become per-run values).
+        trace_arg: the trace as the traffic node gets it (name, CSV or bag path).
+        trace: the loaded trace (its steps decide when the run is complete).
+        bag: the bag directory to record to.
+        max_steps: stop after this many steps (0: the whole trace).
+        startup_timeout_s: how long the graph may take to connect, s.
+        step_timeout_s: how long a step may take, s.
+        log_dir: where the node logs and the per-run params file go (default:
+            ``<bag>.logs`` beside the bag).
+        on_step: progress: called with (steps recorded, total steps), at most twice a second.
+        on_clock: benchmarks: called with every step's 1-based index as this process
+            receives the step clock (adds a per-step subscriber).
 
     Raises:
-        GraphError: the graph did not connect in time, a node died, or a step stalled.
+        GraphError: the graph did not connect in time, a node died, a step stalled, or a
+            foreign publisher appeared.
+        DiskFullError: the disk filled up; the bag is finished with every complete step.
     """
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Empty
@@ -122,87 +116,78 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file:
     initial = equilibrium_start(config.for_trace(trace), trace)
     specs = node_specs(config, trace_arg, trace, initial, bag, max_steps)
     started = time.monotonic()
-    with lease_domain() as domain:
-        graph = Graph(specs, params_file, domain, bag.with_suffix('.logs'))
-        ok = False
+    logs = log_dir if log_dir is not None else bag.with_name(bag.name + '.logs')
+    with lease_domain(foreign_participants) as domain:
+        graph = Graph(specs, config.params_files, domain, logs)
         try:
-            with graph_session(graph, 'orchestrator') as (node, executor):
-                progress = {'step': -1}
-
-                def on_clock(msg: Clock) -> None:
-                    ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
-                    progress['step'] = round((ns * 1e-9 - trace.t0_s) / trace.dt_s)
-                    if on_step is not None:
-                        on_step(progress['step'] + 1, trace.steps)
-
-                node.create_subscription(Clock, 'clock', on_clock, QOS['CLOCK'])
-                start_pub = node.create_publisher(Empty, 'sim/start', QOS['LATCHED'])
-                _wait_connected(graph, node, executor, startup_timeout_s)
+            with graph_session(graph, 'orchestrator') as session:
+                node = session.node
+                if on_clock is not None:
+                    node.create_subscription(
+                        Clock, session.topic('clock'),
+                        lambda msg: on_clock(round((msg.clock.sec + msg.clock.nanosec * 1e-9
+                                                    - trace.t0_s) / trace.dt_s) + 1),
+                        QOS['CLOCK'])
+                start_pub = node.create_publisher(Empty, session.topic('sim/start'),
+                                                  QOS['LATCHED'])
+                session.wait_connected(startup_timeout_s)
                 startup = time.monotonic() - started
                 start_pub.publish(Empty())
-                # The run is complete when the recorder holds every message of every step
-                # and exits by itself; the other nodes keep their publishers up until then.
-                last_step, last_change = -1, time.monotonic()
-                recorder = graph.by_name('recorder').popen
-                while recorder.poll() is None:
-                    executor.spin_once(timeout_sec=0.05)
-                    graph.check_alive({'recorder'})
-                    if progress['step'] != last_step:
-                        last_step, last_change = progress['step'], time.monotonic()
-                    elif time.monotonic() - last_change > step_timeout_s:
-                        what = ('node recorder did not receive every message of the run'
-                                if last_step + 1 >= trace.steps else
-                                f'no progress at step {last_step}')
-                        raise GraphError(f'{what} in {step_timeout_s:g} s; node logs in '
-                                         f'{graph.log_dir}')
-                graph.check_alive({'recorder'})
-                ok = True
+                _follow(session, trace.steps, step_timeout_s, on_step)
         finally:
-            # graph_session has stopped every node by now; an unfinished recording is
-            # closed so that what was recorded can still be read.
-            recorder_ran = any(p.spec.name == 'recorder' for p in graph.processes)
-            if (not ok and recorder_ran and bag.exists()
-                    and graph.by_name('recorder').popen.returncode != 0):
-                repair_mcap(bag)
+            _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
                     wall_s=time.monotonic() - started, startup_s=startup)
 
 
-def run_graph_records(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
-                      bag: Path, **options: Any) -> tuple[GraphRun, list[StepRecord]]:
+def _follow(session: Any, steps: int, step_timeout_s: float,
+            on_step: Callable[[int, int], None] | None) -> None:
+    """Until the recorder has every step and exits: health, privacy, progress, stalls."""
+    recorder = session.graph.by_name(RECORDER).popen
+    last, last_change = -1, time.monotonic()
+    while recorder.poll() is None:
+        session.spin(0.05)
+        session.check({RECORDER})
+        if session.recorder_steps != last:
+            last, last_change = session.recorder_steps, time.monotonic()
+            if on_step is not None:
+                on_step(min(last, steps), steps)
+        elif time.monotonic() - last_change > step_timeout_s:
+            what = ('node recorder did not receive every message of the run'
+                    if last >= steps else f'no progress after {last} steps')
+            raise GraphError(f'{what} in {step_timeout_s:g} s; node logs in '
+                             f'{session.graph.log_dir}')
+    if recorder.returncode == EXIT_DISK_FULL:
+        return
+    session.check({RECORDER})
+    if on_step is not None:
+        on_step(steps, steps)
+
+
+def _finish_recording(graph: Graph, bag: Path) -> None:
+    """After the nodes are stopped: a full disk is reported, a recording whose recorder
+    died is repaired (every complete chunk kept)."""
+    if not any(p.spec.name == RECORDER for p in graph.processes):
+        return
+    recorder = graph.by_name(RECORDER)
+    code = recorder.popen.returncode
+    if code == EXIT_DISK_FULL:
+        raise DiskFullError(recorder.error_line() or f'{bag}: the disk filled up')
+    if code not in (0, None) and bag.exists():
+        repair_bag(bag)
+
+
+def run_graph_records(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path,
+                      **options: Any) -> tuple[GraphRun, list[StepRecord]]:
     """:func:`run_graph`, then the recording read back (rosbags) as one record per step.
 
     Raises:
         GraphError: as :func:`run_graph`.
         TrustAvPlannerError: the recording does not hold every step of the run.
     """
-    result = run_graph(config, trace_arg, trace, params_file, bag, **options)
+    result = run_graph(config, trace_arg, trace, bag, **options)
     records = records_from_bag(bag)
     if len(records) != trace.steps:
         raise TrustAvPlannerError(f'{bag}: {len(records)} complete steps recorded, expected '
-                           f'{trace.steps}')
+                                  f'{trace.steps}')
     return result, records
-
-
-def _wait_connected(graph: Graph, node: Any, executor: Any, timeout_s: float) -> None:
-    """Wait until every topic has its expected publishers and subscribers."""
-    expected = expected_endpoints()
-    deadline = time.monotonic() + timeout_s
-    missing: list[str] = []
-    while time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-        graph.check_alive(set())
-        missing = []
-        for topic in TOPICS:
-            pubs, subs = expected[topic.name]
-            have_pubs = node.count_publishers(topic.name)
-            have_subs = node.count_subscribers(topic.name)
-            if topic.name == 'clock':
-                have_subs -= 1  # the orchestrator's own progress subscription
-            if have_pubs < pubs or have_subs < subs:
-                missing.append(f'{topic.name} ({have_pubs}/{pubs} publishers, '
-                               f'{have_subs}/{subs} subscribers)')
-        if not missing:
-            return
-    raise GraphError(f'graph not connected after {timeout_s:g} s: ' + '; '.join(missing))
-

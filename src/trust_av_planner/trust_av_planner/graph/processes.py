@@ -1,7 +1,10 @@
 """The node processes of one run: started as ``python -m <node module> --ros-args ...``
-(exactly what ``ros2 run`` would start), each in its own process group and killed with the
-orchestrator if it dies (``PR_SET_PDEATHSIG``); stopped in order (SIGINT, then SIGTERM, then
-SIGKILL after grace periods)."""
+(exactly what ``ros2 run`` would start), each in its own process group. When the
+orchestrator dies, even by SIGKILL, its nodes stop as on SIGTERM (``PR_SET_PDEATHSIG`` and
+the parent check of :func:`trust_monitor.ros.spin.spin_node`), so the recorder still
+finishes its bag and no process is left. They are stopped in the order that keeps the
+recording complete (the step authority first, the recorder last), each with SIGINT, then
+SIGTERM, then SIGKILL after grace periods."""
 
 from __future__ import annotations
 
@@ -12,13 +15,14 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-import yaml
-
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_monitor.common.param_layers import node_fqn, to_params_text
+from trust_monitor.ros.spin import PARENT_ENV
 
 GRACE_S = {'SIGINT': 5.0, 'SIGTERM': 3.0}
 
@@ -36,10 +40,14 @@ class NodeSpec:
     params: dict[str, Any]
 
 
-def _die_with_parent() -> None:
-    """In the child: get SIGKILL when the orchestrator dies (no orphans)."""
+STEP_AUTHORITY = 'preceding_traffic'
+RECORDER = 'recorder'
+
+
+def _stop_with_parent() -> None:
+    """In the child: get SIGTERM (a clean stop) when the orchestrator dies."""
     libc = ctypes.CDLL('libc.so.6', use_errno=True)
-    libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
 
 @dataclass
@@ -53,47 +61,61 @@ class Process:
 
     def tail(self, lines: int = 6) -> str:
         """The last lines of the node's output."""
-        self.log.flush()
+        if not self.log.closed:
+            self.log.flush()
         text = self.log_path.read_text(errors='replace').strip().splitlines()
         return '\n'.join(text[-lines:])
+
+    def error_line(self) -> str:
+        """The node's last ``error: ...`` line ('' if none)."""
+        if not self.log.closed:
+            self.log.flush()
+        lines = self.log_path.read_text(errors='replace').splitlines()
+        return next((line[len('error: '):] for line in reversed(lines)
+                     if line.startswith('error: ')), '')
 
 
 class Graph:
     """The processes of one run."""
 
-    def __init__(self, specs: list[NodeSpec], params_file: Path, domain: int,
-                 log_dir: Path) -> None:
+    def __init__(self, specs: list[NodeSpec], params_files: Sequence[Path], domain: int,
+                 log_dir: Path, namespace: str = '/') -> None:
         self.specs = specs
-        self.params_file = params_file
+        self.params_files = tuple(params_files)
         self.domain = domain
         self.log_dir = log_dir
+        self.namespace = namespace
         self.processes: list[Process] = []
         self.env = dict(os.environ, ROS_DOMAIN_ID=str(domain),
                         ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                         RMW_IMPLEMENTATION='rmw_fastrtps_cpp', PYTHONUNBUFFERED='1',
-                        ROS_LOG_DIR=str(log_dir / 'ros'))
+                        ROS_LOG_DIR=str(log_dir / 'ros'), **{PARENT_ENV: str(os.getpid())})
 
     def start(self) -> None:
         """Start every node process.
 
-        Per-run values go into a second params file with one section per node, after the
-        user's file: a node-specific entry there beats the same key in the user's file
-        (``-p`` would not: rcl lets a node's own section win over a command-line ``-p``).
+        Every node gets the run's params files in the same order (layers: the shipped file
+        first), then one more file with the per-run values, one section per node under its
+        fully qualified name: written after everything else, it wins over the same key in
+        the user's files (``-p`` would not: rcl lets a node's own section win over a
+        command-line ``-p``); written by :func:`~trust_monitor.common.param_layers.
+        to_params_text`, so rcl reads back exactly these values and types.
         """
         self.log_dir.mkdir(parents=True, exist_ok=True)
         run_params = self.log_dir / 'run_params.yaml'
-        run_params.write_text(yaml.safe_dump(
-            {spec.name: {'ros__parameters': spec.params} for spec in self.specs if spec.params},
-            sort_keys=True))
+        run_params.write_text(to_params_text(
+            {node_fqn(self.namespace, spec.name): spec.params
+             for spec in self.specs if spec.params}))
+        layers = [arg for path in self.params_files for arg in ('--params-file', str(path))]
         for spec in self.specs:
             command = [sys.executable, '-m', spec.module, '--ros-args', '-r',
-                       f'__node:={spec.name}', '--params-file', str(self.params_file),
+                       f'__node:={spec.name}', '-r', f'__ns:={self.namespace}', *layers,
                        '--params-file', str(run_params)]
             log_path = self.log_dir / f'{spec.name}.log'
             log = log_path.open('wb')
             popen = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
                                      stdin=subprocess.DEVNULL, env=self.env,
-                                     start_new_session=True, preexec_fn=_die_with_parent)
+                                     start_new_session=True, preexec_fn=_stop_with_parent)
             self.processes.append(Process(spec, popen, log_path, log))
 
     def by_name(self, name: str) -> Process:
@@ -113,22 +135,39 @@ class Graph:
                              f'last output:\n{process.tail()}')
 
     def stop(self, names: list[str] | None = None) -> None:
-        """Stop nodes in order: SIGINT, then SIGTERM, then SIGKILL after grace periods."""
+        """Stop nodes: while the recorder still runs, first the step authority (no new step
+        starts), then the other nodes (each takes what is queued and waits until the recorder
+        has acknowledged its messages), then the recorder (it finishes the bag); once the
+        recorder is gone, all at once. Each group: SIGINT, then SIGTERM, then SIGKILL after
+        grace periods."""
         targets = [p for p in self.processes if names is None or p.spec.name in names]
-        for sig, grace in ((signal.SIGINT, GRACE_S['SIGINT']),
-                           (signal.SIGTERM, GRACE_S['SIGTERM']), (signal.SIGKILL, 5.0)):
-            alive = [p for p in targets if p.popen.poll() is None]
-            if not alive:
-                break
-            for process in alive:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(process.popen.pid, sig)
-            deadline = time.monotonic() + grace
-            while time.monotonic() < deadline and any(p.popen.poll() is None for p in alive):
-                time.sleep(0.02)
+        recorder = [p for p in targets if p.spec.name == RECORDER and p.popen.poll() is None]
+        if recorder:
+            first = [p for p in targets if p.spec.name == STEP_AUTHORITY]
+            rest = [p for p in targets if p not in first and p not in recorder]
+            groups = [first, rest, recorder]
+        else:
+            groups = [targets]
+        for group in groups:
+            _stop_group(group)
         for process in targets:
-            if process.popen.poll() is None:
-                process.popen.wait()
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(process.popen.pid, signal.SIGKILL)  # stray children of the group
             process.log.close()
+
+
+def _stop_group(group: list[Process]) -> None:
+    for sig, grace in ((signal.SIGINT, GRACE_S['SIGINT']),
+                       (signal.SIGTERM, GRACE_S['SIGTERM']), (signal.SIGKILL, 5.0)):
+        alive = [p for p in group if p.popen.poll() is None]
+        if not alive:
+            break
+        for process in alive:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(process.popen.pid, sig)
+        deadline = time.monotonic() + grace
+        while time.monotonic() < deadline and any(p.popen.poll() is None for p in alive):
+            time.sleep(0.02)
+    for process in group:
+        if process.popen.poll() is None:
+            process.popen.wait()

@@ -1,76 +1,171 @@
-"""``recorder`` node (``ros2 run trust_av_planner recorder``): raw subscriptions to every
-topic of the graph that lists it as a subscriber, written as they came over DDS into one MCAP
-(:class:`trust_av_planner.graph.recorder.McapBag`); it ends by itself once it holds every
-message of ``expected_steps`` steps.
+"""``recorder`` node (``ros2 run trust_av_planner recorder``): every topic of the graph that
+lists it as a subscriber, raw as it came over DDS, into one rosbag2 bag directory
+(:class:`trust_av_planner.graph.bag_writer.BagWriter`: metadata.yaml + MCAP, one chunk per
+step).
+
+- **Ready**: it publishes ``recorder/status`` (latched) with ``state: ready`` only once every
+  subscription has matched its publishers, so a run started after that loses nothing.
+- **Steps**: in lock-step a chunk is written at every ``clock`` (the step authority's tick);
+  in wall mode every ``flush_period_s``. The status carries the steps written (at most
+  twice a second): the orchestrator's progress, without a per-step subscriber of its own.
+- **End**: it finishes the bag and exits by itself once it holds every message of
+  ``expected_steps`` steps (0: record until stopped); on SIGINT/SIGTERM, or when the
+  orchestrator that started it dies, it takes what is still queued and finishes the bag.
+  A full disk finishes the bag with every complete step, one line on stderr, exit code 3.
 """
 
 from __future__ import annotations
 
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.interfaces import Qos
 
-from trust_av_planner.graph.recorder import McapBag
+from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
 from trust_monitor.common.params import check_fields, param
 from trust_monitor.common.topics import TOPICS
-from trust_monitor.ros.messages import message_class
+from trust_monitor.common.wall_clock import WallClockConfig
+from trust_monitor.ros.messages import diagnostics, message_class
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS
 from trust_monitor.ros.spin import spin_node
+
+EXIT_DISK_FULL = 3
+"""Exit code of a recorder that stopped because the disk was full (the bag is finished)."""
+STATUS_TOPIC = 'recorder/status'
+STATUS_PERIOD_S = 0.5
+READY_CHECK_PERIOD_S = 0.05
 
 
 @dataclass(frozen=True)
 class RecorderConfig:
     """Where to record and when the run is complete."""
 
-    bag_path: str = param('MCAP file to write')
-    expected_steps: int = param('the run is complete after this many steps', low=0)
+    bag_path: str = param('rosbag2 bag directory to create (it must not exist)')
+    expected_steps: int = param('the run is complete after this many steps (0: record until '
+                                'stopped)', low=0, default=0)
+    flush_period_s: float = param('wall mode: a chunk is written at least this often',
+                                  unit='s', low=0.0, low_inclusive=False, default=1.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
 
 
+def offered_qos(profile: QoSProfile) -> Qos:
+    """The bag's record of a topic's offered QoS (keep-last, the profile's depth and
+    deadline)."""
+    return qos_profile(reliable=profile.reliability == ReliabilityPolicy.RELIABLE,
+                       transient_local=profile.durability == DurabilityPolicy.TRANSIENT_LOCAL,
+                       depth=profile.depth, deadline_ns=int(profile.deadline.nanoseconds))
+
+
 class RecorderNode(Node):
-    """Raw subscriptions to every topic of the table; one MCAP file."""
+    """Raw subscriptions to every recorded topic of the table; one bag directory."""
 
     def __init__(self) -> None:
         super().__init__('recorder')
-        self.config = declare_config(self, RecorderConfig)
-        self.bag = McapBag(Path(self.config.bag_path))
         self.finished = False
-        self.expected: dict[str, int] = {}
+        self.exit_code = 0
+        self.config = declare_config(self, RecorderConfig)
+        self.clock = declare_config(self, WallClockConfig)
+        self.bag = BagWriter(Path(self.config.bag_path))
+        self.needed: dict[str, int] = {}
+        self.publishers_needed: dict[str, int] = {}
+        self.subscriptions_by_topic = {}
+        self.incomplete = 0
         steps = self.config.expected_steps
         for topic in TOPICS:
             if 'recorder' not in topic.subscribers:
                 continue
             name = self.resolve_topic_name(topic.name)  # the bag holds full names
-            self.bag.add_topic(name, topic.msgtype, topic.qos)
-            self.expected[name] = topic.messages(steps)
-            self.create_subscription(message_class(topic.msgtype), topic.name,
-                                     lambda data, t=name: self.on_message(t, data),
-                                     QOS[topic.qos], raw=True)
-        self.clock_topic = self.resolve_topic_name('clock')
-        self.get_logger().info(f'ready: recording {len(self.expected)} topics to '
-                               f'{self.bag.path}')
+            self.bag.add_topic(name, topic.msgtype, offered_qos(QOS[topic.qos]))
+            self.publishers_needed[name] = len(topic.publishers)
+            if steps:
+                self.needed[name] = topic.messages(steps)
+                self.incomplete += 1
+            self.subscriptions_by_topic[name] = self.create_subscription(
+                message_class(topic.msgtype), topic.name,
+                lambda data, t=name: self.on_message(t, data), QOS[topic.qos], raw=True)
+        self.step_topic = self.resolve_topic_name(
+            next(t.name for t in TOPICS if t.msgtype == 'rosgraph_msgs/msg/Clock'))
+        self.pub_status = self.create_publisher(DiagnosticArray, STATUS_TOPIC, QOS['LATCHED'])
+        self.ready = False
+        self.last_status_s = 0.0
+        self.ready_timer = self.create_timer(READY_CHECK_PERIOD_S, self.check_ready)
+        self.flush_timer = (self.create_timer(self.config.flush_period_s, self.flush)
+                            if self.clock.wall else None)
+        self.get_logger().info(f'recording {len(self.subscriptions_by_topic)} topics to '
+                               f'{self.bag.path}; waiting for their publishers')
+
+    def check_ready(self) -> None:
+        """Say ``ready`` once every subscription has matched its publishers."""
+        missing = [name for name, sub in self.subscriptions_by_topic.items()
+                   if sub.get_publisher_count() < self.publishers_needed[name]]
+        if missing or self.ready:
+            return
+        self.ready = True
+        self.ready_timer.cancel()
+        self.publish_status('ready')
+        self.get_logger().info('ready: every recorded topic has its publishers')
+
+    def publish_status(self, state: str) -> None:
+        """``recorder/status``: the state and the steps written so far."""
+        self.last_status_s = time.monotonic()
+        self.pub_status.publish(diagnostics(
+            0, 'recorder', self.exit_code == 0, state,
+            {'state': state, 'steps': str(self.bag.steps), 'bag': str(self.bag.path)}))
 
     def on_message(self, topic: str, data: bytes) -> None:
-        """Write one raw message; finish when every topic holds every step."""
+        """Write one raw message; a ``clock`` tick closes the step before it."""
         if self.finished:
             return
+        if topic == self.step_topic and not self.bag.end_step():
+            self.stop_disk_full()
+            return
         self.bag.write(topic, data)
-        if topic == self.clock_topic:
-            self.bag.flush()
-        if all(self.bag.counts[t] >= n for t, n in self.expected.items()):
-            self.get_logger().info(f'recorded {sum(self.bag.counts.values())} messages '
-                                   f'to {self.bag.path}')
-            self.close()
-            self.finished = True
+        needed = self.needed.get(topic)
+        if needed is not None and self.bag.counts[topic] == needed:
+            self.incomplete -= 1
+            if self.incomplete == 0:
+                self.complete()
+                return
+        if time.monotonic() - self.last_status_s >= STATUS_PERIOD_S and self.ready:
+            self.publish_status('recording')
+
+    def flush(self) -> None:
+        """Wall mode: write what arrived since the last chunk."""
+        if not self.finished and not self.bag.end_step():
+            self.stop_disk_full()
+
+    def complete(self) -> None:
+        """Every message of every expected step is in: finish the bag and end."""
+        self.bag.finish()
+        if self.bag.disk_full:
+            self.stop_disk_full()
+            return
+        self.get_logger().info(f'recorded {sum(self.bag.counts.values())} messages '
+                               f'({self.bag.steps} chunks) to {self.bag.path}')
+        self.publish_status('finished')
+        self.finished = True
+
+    def stop_disk_full(self) -> None:
+        """The disk is full: the bag was finished with the complete steps; end with code 3."""
+        self.exit_code = EXIT_DISK_FULL
+        print(f'error: {self.bag.disk_full}', file=sys.stderr, flush=True)
+        self.publish_status('disk_full')
+        self.finished = True
 
     def close(self) -> None:
-        """Finish the MCAP file (also on a stop request)."""
+        """Finish the bag (also on a stop request, with what arrived until then)."""
         self.bag.finish()
+        if self.bag.disk_full and self.exit_code == 0:
+            self.exit_code = EXIT_DISK_FULL
+            print(f'error: {self.bag.disk_full}', file=sys.stderr, flush=True)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -31,15 +31,16 @@ from typing import Any
 
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.graph.bag_writer import BagWriter
 from trust_av_planner.graph.domains import lease_domain
-from trust_av_planner.graph.orchestrator import graph_session, node_specs
+from trust_av_planner.graph.orchestrator import node_specs
 from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
-from trust_av_planner.graph.recorder import McapBag
+from trust_av_planner.graph.session import graph_session
 from trust_av_planner.system.closed_loop import equilibrium_start
 from trust_av_planner.system.config import PlannerTopics, RunConfig
 from trust_monitor.common.kinematics import VehicleState, advance
 from trust_monitor.common.topics import TOPIC, TOPICS, qualified
-from trust_monitor.common.wall_clock import NS_PER_S, LoopStats
+from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig
 
 OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_status',
            '/trust_monitor/trust')
@@ -75,7 +76,7 @@ def shadow_specs(config: RunConfig, trace: SpeedTrace, rate_hz: float,
     ]
 
 
-def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Path, *,
+def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                duration_s: float, rate_hz: float, topics: PlannerTopics | None = None,
                startup_timeout_s: float = 30.0) -> ShadowRun:
     """Replay ``trace`` for ``duration_s`` of wall time at ``rate_hz`` into the two nodes.
@@ -83,8 +84,9 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
     Raises:
         GraphError: the nodes did not connect in time or one died.
     """
+    from trust_av_planner.graph.recorder_node import offered_qos
     from trust_monitor.ros.messages import message_class, odometry, trajectory
-    from trust_monitor.ros.qos import QOS
+    from trust_monitor.ros.qos import RECORD_QOS, wall_qos
 
     topics = topics if topics is not None else PlannerTopics()
     # actual topic name -> the topic-table entry it stands for (message type, QoS)
@@ -94,41 +96,45 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
     cfg = config.for_trace(trace)
     initial = equilibrium_start(cfg, trace)
     lead = LeadReplay(trace, initial.traffic.position_m)
-    log_dir = bag.with_suffix('.logs')
+    log_dir = bag.with_name(bag.name + '.logs')
     period_ns = round(NS_PER_S / rate_hz)
     with lease_domain() as domain:
-        graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), params_file, domain,
+        graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), config.params_files, domain,
                       log_dir)
-        with graph_session(graph, 'shadow_player') as (node, executor):
+        with graph_session(graph, 'shadow_player') as session:
+            node, executor = session.node, session.executor
+            wall = WallClockConfig(clock_mode='wall', control_rate_hz=rate_hz)
+            sensor = wall_qos('SENSOR', wall, publisher=True)
             pub_lead = node.create_publisher(
                 message_class(TOPIC['preceding_vehicle/odom'].msgtype),
-                topics.lead_odom_topic, QOS['STEP'])
+                topics.lead_odom_topic, sensor)
             pub_preview = node.create_publisher(
                 message_class(TOPIC['preceding_vehicle/speed_preview'].msgtype),
-                topics.lead_preview_topic, QOS['STEP'])
+                topics.lead_preview_topic, sensor)
             pub_ego = node.create_publisher(message_class(TOPIC['ego/odom'].msgtype),
-                                            topics.ego_odom_topic, QOS['STEP'])
+                                            topics.ego_odom_topic, sensor)
             command = {'accel_mps2': 0.0}
             stats = LoopStats(period_ns)
-            with McapBag(bag) as recording:
+            with BagWriter(bag) as recording:
                 def on_message(topic: str, data: bytes) -> None:
                     recording.write(topic, data)
 
                 for name, topic in recorded.items():
-                    recording.add_topic(name, topic.msgtype, topic.qos)
+                    offered = wall_qos(topic.wall_qos, wall, publisher=True)
+                    recording.add_topic(name, topic.msgtype, offered_qos(offered))
                     node.create_subscription(message_class(topic.msgtype), name,
                                              lambda d, t=name: on_message(t, d),
-                                             QOS[topic.qos], raw=True)
+                                             RECORD_QOS, raw=True)
 
                 def on_command(msg: Any) -> None:
                     command['accel_mps2'] = float(msg.accel.linear.x)
 
                 node.create_subscription(message_class(TOPIC['ego/accel_cmd'].msgtype),
-                                         '/ego/accel_cmd', on_command, QOS['STEP'])
+                                         '/ego/accel_cmd', on_command, RECORD_QOS)
                 _wait_nodes(graph, node, executor, topics, startup_timeout_s)
                 ego = initial.av
                 start = last = time.monotonic_ns()
-                next_tick = start
+                next_tick = next_chunk = start
                 while True:
                     now = time.monotonic_ns()
                     if now < next_tick:
@@ -149,6 +155,9 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, params_file: Path, bag: Pat
                         velocities=lead.preview(
                             elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
                     pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
+                    if now >= next_chunk:
+                        recording.end_step()
+                        next_chunk = now + NS_PER_S
                     stats.done(time.monotonic_ns() - now)
                     next_tick += period_ns
                     graph.check_alive(set())
@@ -172,21 +181,22 @@ def wall_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, rate_hz: fl
             for spec in specs if spec.name in WALL_GRAPH_NODES]
 
 
-def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_file: Path,
-                   bag: Path, *, duration_s: float, rate_hz: float,
+def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *,
+                   duration_s: float, rate_hz: float,
                    startup_timeout_s: float = 30.0) -> ShadowRun:
     """Every node in wall mode for ``duration_s`` of wall time after ``/sim/start``; every
-    topic recorded to ``bag`` (log time = header stamp = wall time).
+    topic recorded to the bag directory ``bag`` (log time = header stamp = wall time).
 
-    The nodes use the standard topic names (:data:`trust_monitor.graph_interface.TOPICS`).
+    The nodes use the standard topic names (:data:`trust_monitor.common.topics.TOPICS`).
 
     Raises:
         GraphError: the nodes did not connect in time or one died.
     """
     from std_msgs.msg import Empty
 
+    from trust_av_planner.graph.recorder_node import offered_qos
     from trust_monitor.ros.messages import message_class
-    from trust_monitor.ros.qos import QOS
+    from trust_monitor.ros.qos import QOS, RECORD_QOS
 
     recorded = [t for t in TOPICS if t.name not in ('clock', 'sim/start')]
     # In wall mode the traffic node subscribes nothing but /sim/start (as do the two simulated
@@ -195,25 +205,30 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, params_
                                  len([s for s in t.subscribers if s != 'preceding_traffic']))
              for t in recorded}
     needs['/sim/start'] = (1, 3)
-    log_dir = bag.with_suffix('.logs')
+    log_dir = bag.with_name(bag.name + '.logs')
     with lease_domain() as domain:
-        graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), params_file,
+        graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), config.params_files,
                       domain, log_dir)
-        with graph_session(graph, 'wall_recorder') as (node, executor):
+        with graph_session(graph, 'wall_recorder') as session:
+            node, executor = session.node, session.executor
             start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
-            with McapBag(bag) as recording:
+            with BagWriter(bag) as recording:
                 for topic in recorded:
                     name = qualified(topic.name)
-                    recording.add_topic(name, topic.msgtype, topic.qos)
+                    recording.add_topic(name, topic.msgtype, offered_qos(QOS[topic.qos]))
                     node.create_subscription(
                         message_class(topic.msgtype), name,
-                        lambda d, t=name: recording.write(t, d), QOS[topic.qos], raw=True)
+                        lambda d, t=name: recording.write(t, d), RECORD_QOS, raw=True)
                 _wait_topics(graph, node, executor, needs, startup_timeout_s)
                 start_pub.publish(Empty())
                 end = time.monotonic() + duration_s
+                next_chunk = time.monotonic() + 1.0
                 while time.monotonic() < end:
                     executor.spin_once(timeout_sec=0.05)
                     graph.check_alive(set())
+                    if time.monotonic() >= next_chunk:
+                        recording.end_step()
+                        next_chunk += 1.0
                 _stop_and_drain(graph, executor, WALL_GRAPH_NODES)
                 counts = dict(recording.counts)
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts,

@@ -21,10 +21,10 @@ from pathlib import Path
 from typing import Any
 
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 
-LAYOUT_FILE = DEFAULT_PARAMS_FILE.parent / 'foxglove_layout.json'
-"""The shipped layout, beside the params file."""
+LAYOUT_FILE = Path(__file__).resolve().parents[1] / 'config' / 'foxglove_layout.json'
+"""The shipped layout (the repository's ``config/``; ``share/trust_av_planner/config/`` holds
+a copy when installed by colcon)."""
 
 _SEGMENT = re.compile(
     r'\.(?P<field>[A-Za-z_][A-Za-z0-9_]*)'

@@ -18,6 +18,7 @@ import json
 import logging
 import multiprocessing
 import os
+import shutil
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -104,7 +105,8 @@ class RunSettings:
         runner: ``in-process`` (the simulator) or ``graph`` (the six ROS 2 node processes in
             lock-step, recorded to MCAP and read back; same numbers, about 100x slower).
         max_steps: stop each case after this many control steps (0: the whole trace).
-        bags_dir: where graph runs write ``<trace>_<predictor>_alpha<alpha>.mcap``.
+        bags_dir: where graph runs write their bag directories
+            ``<trace>_<predictor>_alpha<alpha>/``.
     """
 
     runner: str = 'in-process'
@@ -143,10 +145,12 @@ def run_case(case: Case, params_file: str,
         # Imported here: the in-process sweep never loads rclpy.
         from trust_av_planner.graph.orchestrator import run_graph_records
         bag = Path(settings.bags_dir) / (f'{Path(case.trace).stem}_{case.predictor}_'
-                                         f'alpha{case.alpha:g}.mcap')
+                                         f'alpha{case.alpha:g}')
         bag.parent.mkdir(parents=True, exist_ok=True)
-        bag.unlink(missing_ok=True)  # left by an interrupted sweep; its case is not cached
-        _, records = run_graph_records(config, case.trace, trace, Path(params_file), bag,
+        # Left by an interrupted sweep (its case is not cached): the bag, its logs.
+        for stale in (bag, bag.with_name(bag.name + '.logs')):
+            shutil.rmtree(stale, ignore_errors=True)
+        _, records = run_graph_records(config, case.trace, trace, bag,
                                        max_steps=settings.max_steps)
     else:
         records = simulate(config, trace).records

@@ -14,6 +14,28 @@ import numpy as np
 from trust_av_planner.study.paper_results import MAX_IMPROVEMENT_PERCENT
 from trust_av_planner.study.stats import mean_ci95
 from trust_av_planner.study.sweep import ALPHAS, METRICS, Case, by_driver
+from trust_monitor.trust_bound import row_bound
+from trust_monitor.trust_model import TrustConfig
+
+BOUND_HEADER = 'least final trust eqs. 9-11 allow for the paper mean E'
+"""Column beside each paper row: the bound T_M >= T_0 + delta M (1 - c mean E) of
+:func:`trust_monitor.trust_bound.row_bound`, and whether the printed final trust reaches it."""
+
+
+def paper_bound_cell(final_trust: float, mean_score: float, steps: int,
+                     trust: TrustConfig) -> str:
+    """The bound for one printed paper row, e.g. ``46.50 (44.36 unattainable)``.
+
+    Args:
+        final_trust: the paper's printed final trust.
+        mean_score: the paper's printed mean E.
+        steps: trust updates over the trace (M).
+        trust: the trust model's parameters (delta, P_thre, T(0)).
+    """
+    bound = row_bound(final_trust, mean_score, steps, trust.trust_growth_rate,
+                      trust.performance_threshold, trust.trust_initial)
+    verdict = 'attainable' if bound.attainable else 'unattainable'
+    return f'{bound.bound:.2f} ({final_trust:g} {verdict})'
 
 
 def improvement_percent(metric: str, base: float, value: float) -> float:
@@ -48,12 +70,24 @@ def write_rows(path: Path, header: Sequence[str], rows: Sequence[Sequence[object
 
 
 def alpha_table(results: dict[Case, dict[str, Any]], trace: str, predictor: str,
-                paper: dict[float, tuple[float, float, float]] | None
+                paper: dict[float, tuple[float, float, float]] | None,
+                bound: tuple[int, TrustConfig] | None = None
                 ) -> tuple[list[str], list[list[object]]]:
-    """Table II/III layout: per alpha our three metrics (and the paper's), then max improvement."""
+    """Table II/III layout: per alpha our three metrics (and the paper's), then max improvement.
+
+    Args:
+        results: the sweep's results.
+        trace: the trace of the table.
+        predictor: the predictor of the table.
+        paper: the paper's rows by alpha (final trust, mean E, RMSE), or None.
+        bound: (steps, trust parameters) to print beside each paper row the least final
+            trust eqs. (9)-(11) allow for its mean E (:func:`paper_bound_cell`), or None.
+    """
     header = ['alpha', 'final trust', 'mean E', 'RMSE (m/s^2)']
     if paper is not None:
         header += ['paper final trust', 'paper mean E', 'paper RMSE (m/s^2)']
+        if bound is not None:
+            header.append(BOUND_HEADER)
     rows: list[list[object]] = []
     for alpha in ALPHAS:
         m = results[Case(trace, predictor, alpha)]['metrics']
@@ -61,11 +95,15 @@ def alpha_table(results: dict[Case, dict[str, Any]], trace: str, predictor: str,
                              f"{m['mean_explicability']:.4f}", f"{m['rmse_mps2']:.3f}"]
         if paper is not None:
             row += [f'{v:g}' for v in paper[alpha]]
+            if bound is not None:
+                row.append(paper_bound_cell(paper[alpha][0], paper[alpha][1], *bound))
         rows.append(row)
     ours = max_improvements(results, trace, predictor)
     summary: list[object] = ['max improvement', *(f'{v:.2f} %' for v in ours)]
     if paper is not None:
         summary += [f'{v:.2f} %' for v in MAX_IMPROVEMENT_PERCENT[(predictor, trace)]]
+        if bound is not None:
+            summary.append('')
     rows.append(summary)
     return header, rows
 
@@ -92,17 +130,20 @@ def _cell(values: Sequence[float], digits: int, suffix: str = '') -> str:
 
 
 def population_alpha_table(results: dict[Case, dict[str, Any]], trace: str, predictor: str,
-                           paper: dict[float, tuple[float, float, float]] | None
+                           paper: dict[float, tuple[float, float, float]] | None,
+                           bound: tuple[int, TrustConfig] | None = None
                            ) -> tuple[list[str], list[list[object]]]:
     """Table II/III with a driver population: mean ± 95 % CI over drivers in every cell.
 
     The maximum improvement is computed per driver (against that driver's alpha = 0), then
-    summarised the same way.
+    summarised the same way. ``bound`` as in :func:`alpha_table`.
     """
     drivers = by_driver(results)
     header = ['alpha', 'final trust', 'mean E', 'RMSE (m/s^2)']
     if paper is not None:
         header += ['paper final trust', 'paper mean E', 'paper RMSE (m/s^2)']
+        if bound is not None:
+            header.append(BOUND_HEADER)
     rows: list[list[object]] = []
     for alpha in ALPHAS:
         per = [d[Case(trace, predictor, alpha)]['metrics'] for d in drivers.values()]
@@ -111,12 +152,16 @@ def population_alpha_table(results: dict[Case, dict[str, Any]], trace: str, pred
                              _cell([m['rmse_mps2'] for m in per], 3)]
         if paper is not None:
             row += [f'{v:g}' for v in paper[alpha]]
+            if bound is not None:
+                row.append(paper_bound_cell(paper[alpha][0], paper[alpha][1], *bound))
         rows.append(row)
     improvements = [max_improvements(d, trace, predictor) for d in drivers.values()]
     summary: list[object] = ['max improvement', *(_cell([imp[i] for imp in improvements], 2,
                                                         ' %') for i in range(3))]
     if paper is not None:
         summary += [f'{v:.2f} %' for v in MAX_IMPROVEMENT_PERCENT[(predictor, trace)]]
+        if bound is not None:
+            summary.append('')
     rows.append(summary)
     return header, rows
 

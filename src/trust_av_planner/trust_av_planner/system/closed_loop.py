@@ -11,6 +11,14 @@ these trajectories (a test checks it). Per step ``t``:
 3. the trust monitor scores E(t) = dist(u_R(t), u_R^H(t)) and updates T(t+1), eqs. 8-11;
 4. the human's MPC plans u_H(t) against u_R^H(t);
 5. every vehicle's odometry is integrated one step with its first planned acceleration.
+
+The control period is the trace's step (:func:`control_trace` interpolates a trace to a
+control rate; 1 Hz is the paper's loop). At another period the planner predicts on its own
+grid and feeds its estimator 1 s samples (:class:`~trust_av_planner.planner.AvPlanner`), the
+trust update is scaled by the period (trust per second), and the human driver model keeps its
+1 s grid and replans every period (sampled-data, as a person does), fed the expected plan
+read on that grid (:func:`trust_monitor.common.grids.hold_at`, as the driver node reads the
+expected-plan message by its times).
 """
 
 from __future__ import annotations
@@ -21,11 +29,15 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from human_driver_sim.driver_mpc import DriverMpc
+from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.planner import AvPlanner
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import Metrics, StepRecord, compute_metrics
+from trust_monitor.common.grids import grid_times, hold_at
 from trust_monitor.common.kinematics import VehicleState, gap_m, integrate
 from trust_monitor.trust_model import TrustEstimator
 
@@ -90,20 +102,43 @@ def _flatten(record: StepRecord) -> dict[str, object]:
     return out
 
 
+def control_trace(config: RunConfig, rate_hz: float | None = None) -> SpeedTrace:
+    """The params file's trace on the control grid: its samples interpolated to ``rate_hz``
+    (default: one per ``dt_s``, the paper's 1 Hz).
+
+    Raises:
+        ValueError: ``rate_hz`` is not > 0.
+    """
+    if rate_hz is not None and not rate_hz > 0.0:
+        raise ValueError(f'control rate must be > 0 Hz, got {rate_hz}')
+    period = config.planner.dt_s if rate_hz is None else 1.0 / rate_hz
+    return load_trace(config.trace.trace, period, config.trace)
+
+
+def trace_preview(trace: SpeedTrace, step: int, grid_step_s: float, steps: int) -> np.ndarray:
+    """The recorded future of the trace from control step ``step`` on the prediction grid
+    (k * grid_step_s, k = 0..steps-1; the last speed held past the end)."""
+    if abs(grid_step_s - trace.dt_s) <= 1e-12 * trace.dt_s:
+        return trace.preview(step, steps)
+    times = step * trace.dt_s + np.arange(steps) * grid_step_s
+    preview: np.ndarray = np.interp(times, np.arange(len(trace.speeds_mps)) * trace.dt_s,
+                                    trace.speeds_mps)
+    return preview
+
+
 class ClosedLoop:
-    """The in-process closed loop over one trace; :meth:`step` advances one step."""
+    """The in-process closed loop over one trace; :meth:`step` advances one control period
+    (the trace's step)."""
 
     def __init__(self, config: RunConfig, trace: SpeedTrace,
                  initial: InitialState | None = None) -> None:
-        if abs(trace.dt_s - config.planner.dt_s) > 1e-12:
-            raise ValueError(f'trace step {trace.dt_s} s differs from dt_s '
-                             f'{config.planner.dt_s} s')
         self.config = config.for_trace(trace)
         self.trace = trace
         state = initial or equilibrium_start(self.config, trace)
         self.traffic, self.av, self.human = state.traffic, state.av, state.human
+        self.period_s = trace.dt_s
         self.planner = AvPlanner(self.config.planner, self.config.trust,
-                                 self.config.shared.vehicle_length_m)
+                                 self.config.shared.vehicle_length_m, period_s=self.period_s)
         self.driver = DriverMpc(self.config.driver)
         self.monitor = TrustEstimator(self.config.trust)
         self.step_index = 0
@@ -116,15 +151,20 @@ class ClosedLoop:
     def step(self) -> StepRecord:
         """Advance the closed loop by one control step and return its record."""
         c = self.config
-        n, dt, length = c.planner.horizon_steps, c.planner.dt_s, c.shared.vehicle_length_m
+        dt, length = self.period_s, c.shared.vehicle_length_m
         t = self.step_index
         self.traffic = VehicleState(self.traffic.position_m, float(self.trace.speeds_mps[t]))
-        preview = self.trace.preview(t, n)
-        out = self.planner.step(self.traffic, preview, self.av, self.human, self.monitor.trust)
+        preview = (trace_preview(self.trace, t, *self.planner.grid)
+                   if c.planner.lead_preview == 'recorded' else None)
+        out = self.planner.step(self.traffic, preview, self.av, self.human, self.monitor.trust,
+                                t_s=t * dt)
         plan, expected = out.result, out.expected_mps2
-        estimate = self.monitor.step(plan.plan_mps2, expected)
+        estimate = self.monitor.step(plan.plan_mps2, expected, dt)
         human_gap = gap_m(self.av, self.human, length)
-        human = self.driver.step(human_gap, self.human.speed_mps, self.av.speed_mps, expected)
+        step_s, steps = self.planner.grid
+        human = self.driver.step(human_gap, self.human.speed_mps, self.av.speed_mps,
+                                 hold_at(grid_times(step_s, steps), expected,
+                                         c.driver.dt_s, c.driver.horizon_steps))
         record = StepRecord(
             t_s=self.trace.time_s(t),
             traffic_position_m=self.traffic.position_m, traffic_speed_mps=self.traffic.speed_mps,

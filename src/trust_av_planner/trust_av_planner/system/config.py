@@ -1,38 +1,51 @@
-"""Load the whole run configuration from one ROS 2 params file (``config/trust_av.yaml``).
+"""Load the whole run configuration from ROS 2 params files in layers.
 
-The in-process simulator and the node graph read the same file; every key must belong to
-a known component (typos are errors), every value is type- and range-checked by the
-component's frozen dataclass.
+The shipped ``config/trust_av.yaml`` is always the bottom layer; every ``--params-file``
+goes over it in order, by rcl's rules (:mod:`trust_monitor.common.param_layers`), and the
+nodes of the graph get the same files in the same order (:attr:`RunConfig.params_files`).
+Every section must name a node of the graph or be a wildcard, every key must belong to a
+component of that node (typos are errors), and every value is type- and range-checked by
+the component's frozen dataclass, exactly as the nodes check them.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
-from dataclasses import dataclass
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from human_driver_sim.driver_mpc import DriverConfig
 from preceding_traffic.traces import SpeedTrace, TraceConfig
 from trust_av_planner.nmpc import PlannerConfig
+from trust_monitor.common.param_layers import (
+    Layered,
+    layer_files,
+    layered_params,
+    node_fqn,
+    read_layers,
+    section_target,
+    shipped_params_file,
+    text_layer,
+)
 from trust_monitor.common.params import (
-    WILDCARD,
     ParamsError,
     build_config,
     check_fields,
     check_known,
-    node_params,
     param,
-    read_params_file,
     require,
 )
+from trust_monitor.common.rcl_values import ParsedParams
 from trust_monitor.common.topics import is_topic_name
 from trust_monitor.common.wall_clock import WallClockConfig
-from trust_monitor.trust_model import TrustConfig
+from trust_monitor.trust_model import MonitorConfig, TrustConfig
 
-DEFAULT_PARAMS_FILE = Path(__file__).resolve().parents[1] / 'config' / 'trust_av.yaml'
-"""The shipped params file (``config/trust_av.yaml`` of the repository)."""
+DEFAULT_PARAMS_FILE = shipped_params_file()
+"""The shipped params file (``config/trust_av.yaml``; ``share/trust_monitor/config/`` when
+installed by colcon): the bottom layer of every run."""
 
 
 @dataclass(frozen=True)
@@ -76,25 +89,35 @@ class PlannerTopics:
                     f"node's namespace), got {value!r}")
 
 
+T = TypeVar('T')
+
 # Node name -> the configuration classes its section may hold.
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
     'preceding_traffic': (TraceConfig, SharedConfig),
     'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics),
     'human_driver': (DriverConfig, SharedConfig),
-    'trust_monitor': (TrustConfig, WallClockConfig),
+    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig),
 }
 _ALL = tuple({c for comps in NODE_COMPONENTS.values() for c in comps})
 
 
 @dataclass(frozen=True)
 class RunConfig:
-    """Everything one closed-loop run needs."""
+    """Everything one closed-loop run needs.
+
+    Attributes:
+        params_files: the params files it was read from, bottom (the shipped file) first:
+            hand them to every node in this order (``--params-file`` once each).
+        namespace: the namespace its node names were matched in.
+    """
 
     shared: SharedConfig
     trace: TraceConfig
     planner: PlannerConfig
     driver: DriverConfig
     trust: TrustConfig
+    params_files: tuple[Path, ...] = field(default=(), compare=False)
+    namespace: str = '/'
 
     @property
     def min_safe_gap_m(self) -> float:
@@ -111,33 +134,79 @@ class RunConfig:
             driver=dataclasses.replace(self.driver, speed_max_mps=vmax))
 
 
-def load_run_config(path: str | Path = DEFAULT_PARAMS_FILE,
-                    overrides: Mapping[str, Mapping[str, Any]] | None = None) -> RunConfig:
-    """Read and validate the params file, with optional per-node overrides.
+OVERRIDES_WHERE = 'command-line options'
 
-    Args:
-        path: ROS 2 params file.
-        overrides: node name (or ``/**``) to parameter values that replace the file's.
+
+def check_sections(layers: Sequence[ParsedParams]) -> None:
+    """Every section names a node of the graph (or is a wildcard) and holds only parameters
+    of that node's components (a wildcard: of any component).
 
     Raises:
-        ParamsError: unknown node or parameter, wrong type, or a value out of range.
+        ParamsError: one line naming the file, the section and the unknown name.
     """
-    sections = read_params_file(path)
-    for node, values in (overrides or {}).items():
-        sections.setdefault(node, {}).update(values)
-    for node, values in sections.items():
-        if node == WILDCARD:
-            check_known(values, *_ALL, where=f'{path}: section {node}')
-        elif node in NODE_COMPONENTS:
-            check_known(values, *NODE_COMPONENTS[node], where=f'{path}: section {node}')
-        else:
-            raise ParamsError(f'{path}: unknown node section {node!r} (known: '
-                              f'{", ".join(NODE_COMPONENTS)})')
-    traffic = node_params(sections, 'preceding_traffic')
+    for layer in layers:
+        for section, values in layer.items():
+            target = section_target(section)
+            if target is None:
+                check_known(values, *_ALL, where=f'{layer.where}: section {section}')
+            elif target in NODE_COMPONENTS:
+                check_known(values, *NODE_COMPONENTS[target],
+                            where=f'{layer.where}: section {section}')
+            else:
+                raise ParamsError(f'{layer.where}: unknown node section {section!r} (known: '
+                                  f'{", ".join(NODE_COMPONENTS)}, or a wildcard such as /** '
+                                  'or /**/planner)')
+
+
+def load_run_config(files: str | Path | Iterable[str | Path] = (),
+                    overrides: Mapping[str, Mapping[str, Any]] | None = None, *,
+                    namespace: str = '/') -> RunConfig:
+    """Read and validate the run configuration: the shipped params file, then ``files``.
+
+    Args:
+        files: params files over the shipped one, in command-line order (one path or
+            several; the shipped file itself may be given first, it is not read twice).
+        overrides: node name (or ``/**``) to values given on the command line; they go over
+            every file, as the section ``<namespace>/<node>`` of one more layer.
+        namespace: the nodes' namespace; sections are matched against
+            ``<namespace>/<node>`` as rclpy matches them.
+
+    Returns:
+        The configuration; its ``params_files`` are the files read, bottom first.
+
+    Raises:
+        ParamsError: an unreadable file, what rcl would refuse, an unknown node section or
+            parameter, a later value that would not reach a node, a wrong type, a value out
+            of range (one line naming the file, node or parameter).
+    """
+    paths = layer_files(files)
+    layers = read_layers(paths)
+    if overrides:
+        layers.append(text_layer(
+            {(name if section_target(name) is None else node_fqn(namespace, name)): values
+             for name, values in overrides.items() if values}, OVERRIDES_WHERE))
+    check_sections(layers)
+    traffic = layered_params(layers, node_fqn(namespace, 'preceding_traffic'))
+    planner = layered_params(layers, node_fqn(namespace, 'planner'))
     return RunConfig(
-        shared=build_config(SharedConfig, traffic),
-        trace=build_config(TraceConfig, traffic),
-        planner=build_config(PlannerConfig, node_params(sections, 'planner')),
-        driver=build_config(DriverConfig, node_params(sections, 'human_driver')),
-        trust=build_config(TrustConfig, node_params(sections, 'trust_monitor')),
+        shared=_build(SharedConfig, traffic),
+        trace=_build(TraceConfig, traffic),
+        planner=_build(PlannerConfig, planner),
+        driver=_build(DriverConfig, layered_params(layers, node_fqn(namespace, 'human_driver'))),
+        trust=_build(TrustConfig, layered_params(layers, node_fqn(namespace, 'trust_monitor'))),
+        params_files=paths,
+        namespace=namespace,
     )
+
+
+def _build(cls: type[T], params: Layered) -> T:
+    """:func:`build_config`, its error prefixed with the file(s) that set the named values."""
+    try:
+        return build_config(cls, params)
+    except ParamsError as err:
+        named = [f.name for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+                 if re.search(rf'\b{f.name}\b', str(err)) and f.name in params.sources]
+        where = sorted({params.sources[name] for name in named})
+        if not where:
+            raise
+        raise ParamsError(f'{", ".join(where)}: {err}') from err

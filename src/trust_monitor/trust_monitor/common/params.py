@@ -49,6 +49,7 @@ class ParamSpec:
         high_inclusive: ``high`` itself is allowed.
         choices: the allowed strings (empty: any).
         read_only: the parameter cannot change while a node runs.
+        reason: why it is read-only (shown in its ROS descriptor), '' if not said.
     """
 
     description: str
@@ -59,10 +60,12 @@ class ParamSpec:
     high_inclusive: bool = True
     choices: tuple[str, ...] = ()
     read_only: bool = True
+    reason: str = ''
 
     def text(self) -> str:
-        """Description with its unit, e.g. ``control step (s)``."""
-        return f'{self.description} ({self.unit})' if self.unit else self.description
+        """Description with its unit, e.g. ``control step (s)``, and why it is read-only."""
+        text = f'{self.description} ({self.unit})' if self.unit else self.description
+        return f'{text}; read-only: {self.reason}' if self.read_only and self.reason else text
 
     def problem(self, name: str, value: Any) -> str:
         """Why ``value`` is not allowed for parameter ``name`` ('' when it is)."""
@@ -90,7 +93,7 @@ class ParamSpec:
 
 def param(description: str, *, unit: str = '', low: float | None = None,
           high: float | None = None, low_inclusive: bool = True, high_inclusive: bool = True,
-          choices: tuple[str, ...] = (), read_only: bool = True,
+          choices: tuple[str, ...] = (), read_only: bool = True, reason: str = '',
           default: Any = dataclasses.MISSING) -> Any:
     """A configuration dataclass field that carries its :class:`ParamSpec`.
 
@@ -103,14 +106,31 @@ def param(description: str, *, unit: str = '', low: float | None = None,
         high_inclusive: whether ``high`` itself is allowed.
         choices: allowed strings, or () for any.
         read_only: whether a running node refuses to change it.
+        reason: why it is read-only (for the ROS descriptor).
         default: the default value (none: the parameter is required).
 
     Returns:
         A ``dataclasses.field`` to assign to the annotated attribute.
     """
     spec = ParamSpec(description, unit, low, high, low_inclusive, high_inclusive, choices,
-                     read_only)
+                     read_only, reason)
     return dataclasses.field(default=default, metadata={PARAM_METADATA_KEY: spec})
+
+
+CONTROL_STEP_RANGE_S = (0.01, 10.0)
+"""Allowed control step dt_s, s: 100 Hz to one step per 10 s (the paper's is 1 s). Together
+with ``preceding_traffic.traces.MAX_TRACE_STEPS`` it bounds a run's length in steps."""
+
+
+def control_step_param(description: str = 'control step', reason: str = '') -> Any:
+    """The ``dt_s`` field every component that steps declares (one range for all).
+
+    Args:
+        description: what the step is in this component.
+        reason: why it is read-only in a running node ('' if not said).
+    """
+    low, high = CONTROL_STEP_RANGE_S
+    return param(description, unit='s', low=low, high=high, reason=reason)
 
 
 def field_spec(cls: type, name: str) -> ParamSpec | None:
@@ -145,7 +165,11 @@ def check_fields(config: object) -> None:
 
 
 def read_params_file(path: str | Path) -> dict[str, dict[str, Any]]:
-    """Read a ROS 2 params file.
+    """Read a ROS 2 params file with PyYAML (plain sections by exact name).
+
+    Not rcl's rules: runs read their params files with
+    :func:`trust_monitor.common.param_layers.read_layer` and
+    :func:`~trust_monitor.common.param_layers.layered_params`.
 
     Args:
         path: YAML file in ROS 2 params-file format.
@@ -175,19 +199,8 @@ def read_params_file(path: str | Path) -> dict[str, dict[str, Any]]:
         params = body['ros__parameters']
         if not isinstance(params, dict):
             raise ParamsError(f'{path}: {node}.ros__parameters must be a mapping')
-        name = _section_node(str(node))
-        sections[name] = {**sections.get(name, {}), **params}
+        sections[str(node)] = dict(params)
     return sections
-
-
-def _section_node(section: str) -> str:
-    """The node a section stands for in the in-process configuration, which has no
-    namespaces: ``/**/planner``, ``/planner`` and ``planner`` are the node ``planner`` (rcl
-    matches ``/**/planner`` in any namespace); ``/**`` stays the wildcard."""
-    for prefix in ('/**/', '/'):
-        if section != WILDCARD and section.startswith(prefix):
-            return section[len(prefix):]
-    return section
 
 
 def node_params(sections: Mapping[str, Mapping[str, Any]], node: str) -> dict[str, Any]:
@@ -197,7 +210,12 @@ def node_params(sections: Mapping[str, Mapping[str, Any]], node: str) -> dict[st
     return merged
 
 
-def _check_type(name: str, value: Any, hint: Any) -> Any:
+def check_type(name: str, value: Any, hint: Any) -> Any:
+    """``value`` as the type ``hint`` of field ``name`` (an integer is a valid double).
+
+    Raises:
+        ParamsError: another type, or a non-finite number.
+    """
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ParamsError(f'parameter {name}: expected a number, got {value!r}')
@@ -238,7 +256,7 @@ def build_config(cls: type[T], params: Mapping[str, Any]) -> T:
             if field.default is not dataclasses.MISSING:
                 continue
             raise ParamsError(f'parameter {field.name} is missing ({cls.__name__})')
-        kwargs[field.name] = _check_type(field.name, params[field.name], hints[field.name])
+        kwargs[field.name] = check_type(field.name, params[field.name], hints[field.name])
     try:
         return cls(**kwargs)
     except ParamsError:

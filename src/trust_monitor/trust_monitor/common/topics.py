@@ -71,6 +71,7 @@ class Topic:
         frames: ``header.frame_id`` (and ``child_frame_id``) of its messages.
         per_step: messages per lock-step step, all publishers together.
         initial: messages published before the first step (the initial states).
+        wall_qos: profile name in wall mode (:func:`trust_monitor.ros.qos.wall_qos`).
     """
 
     name: str
@@ -83,6 +84,7 @@ class Topic:
     frames: str
     per_step: int = 1
     initial: int = 0
+    wall_qos: str = 'STATE'
 
     def messages(self, steps: int) -> int:
         """Messages of a lock-step run of ``steps`` steps (what the recorder must hold)."""
@@ -100,14 +102,15 @@ TOPICS: tuple[Topic, ...] = (
           'CLOCK', 'once per step', 'sim time, s', 'none (no header)'),
     Topic('preceding_vehicle/odom', 'nav_msgs/msg/Odometry', ('preceding_traffic',),
           ('planner', 'recorder'), 'STEP', 'once per step', _ODOM_UNITS,
-          '`odom`, child `preceding_vehicle`'),
+          '`odom`, child `preceding_vehicle`', wall_qos='SENSOR'),
     Topic('preceding_vehicle/speed_preview', 'trajectory_msgs/msg/JointTrajectory',
           ('preceding_traffic',), ('planner', 'recorder'), 'STEP', 'once per step',
-          'N points, velocities[0]: m/s, time_from_start k*dt', '`preceding_vehicle`'),
+          'N points, velocities[0]: m/s, time_from_start k*dt', '`preceding_vehicle`',
+          wall_qos='SENSOR'),
     Topic('ego/odom', 'nav_msgs/msg/Odometry', ('ego_plant',),
           ('planner', 'human_driver', 'preceding_traffic', 'recorder'), 'STEP',
           'once per step (+ the initial state)', _ODOM_UNITS, '`odom`, child `ego`',
-          initial=1),
+          initial=1, wall_qos='SENSOR'),
     Topic('ego/plan', 'trajectory_msgs/msg/JointTrajectory', ('planner',),
           ('trust_monitor', 'recorder'), 'STEP', 'once per step',
           'N points, accelerations[0]: m/s^2', '`ego`'),
@@ -116,14 +119,14 @@ TOPICS: tuple[Topic, ...] = (
           'u_R^H: N points, accelerations[0]: m/s^2', '`ego`'),
     Topic('ego/accel_cmd', 'geometry_msgs/msg/AccelStamped', ('planner',),
           ('ego_plant', 'recorder'), 'STEP', 'once per step', 'accel.linear.x: m/s^2',
-          '`ego`'),
+          '`ego`', wall_qos='COMMAND'),
     Topic('ego/planner_status', 'diagnostic_msgs/msg/DiagnosticArray', ('planner',),
           ('preceding_traffic', 'recorder'), 'STEP', 'once per step',
           'solver status, iterations, solve time (s), fallback, E_max', _STATUS_FRAMES),
     Topic('human/odom', 'nav_msgs/msg/Odometry', ('human_driver',),
           ('planner', 'preceding_traffic', 'recorder'), 'STEP',
           'once per step (+ the initial state)', _ODOM_UNITS, '`odom`, child `human`',
-          initial=1),
+          initial=1, wall_qos='SENSOR'),
     Topic('human/plan', 'trajectory_msgs/msg/JointTrajectory', ('human_driver',),
           ('recorder',), 'STEP', 'once per step', 'N points, accelerations[0]: m/s^2',
           '`human`'),
@@ -145,7 +148,7 @@ TOPICS: tuple[Topic, ...] = (
           'label', "each vehicle's own frame, frame_locked"),
     Topic('sim/start', 'std_msgs/msg/Empty', ('orchestrator',), ('preceding_traffic',),
           'LATCHED', 'once', 'none: the go signal after the graph is connected',
-          'none (no header)', per_step=0, initial=1),
+          'none (no header)', per_step=0, initial=1, wall_qos='LATCHED'),
 )
 TOPIC = {t.name: t for t in TOPICS}
 
@@ -172,17 +175,32 @@ JOINT_NAME = 'longitudinal'
 """The one joint of every longitudinal JointTrajectory."""
 
 
+LOCKSTEP_QOS_TEXT = {'STEP': 'reliable, transient local, keep last 1000',
+                     'CLOCK': 'reliable, transient local, keep last 1000',
+                     'LATCHED': 'reliable, transient local, keep last 1'}
+"""The lock-step profiles (``qos`` column): nothing lost, late joiners served (determinism)."""
+
+WALL_QOS_TEXT = {
+    'SENSOR': 'best effort, volatile, keep last 1, deadline input_timeout_s (sensor data: only '
+              'the newest sample counts; the deadline tells the planner an input stopped)',
+    'COMMAND': 'reliable, volatile, keep last 1, deadline 2 control periods (a command: the '
+               'newest or none, never a backlog or an old one to a late joiner)',
+    'STATE': 'reliable, volatile, keep last 10',
+    'LATCHED': 'reliable, transient local, keep last 1',
+}
+"""The wall-mode profiles (``wall_qos`` column) and why (``trust_monitor.ros.qos.wall_qos``)."""
+
+
 def topic_table_markdown() -> str:
     """The README's topic table, generated from :data:`TOPICS` (a test keeps them equal)."""
-    qos = {'STEP': 'reliable, transient local, keep last 1000',
-           'CLOCK': 'reliable, transient local, keep last 1000',
-           'LATCHED': 'reliable, transient local, keep last 1'}
-    lines = ['| topic | type | publishers | subscribers | QoS | rate | units | frames |',
-             '|---|---|---|---|---|---|---|---|']
+    lines = ['| topic | type | publishers | subscribers | QoS (lock-step) | QoS (wall mode) | '
+             'rate | units | frames |',
+             '|---|---|---|---|---|---|---|---|---|']
     for t in TOPICS:
+        wall = 'not published' if t.name == 'clock' else WALL_QOS_TEXT[t.wall_qos]
         lines.append(f'| `{t.name}` | `{t.msgtype}` | {", ".join(t.publishers)} | '
-                     f'{", ".join(t.subscribers)} | {qos[t.qos]} | {t.rate} | {t.units} | '
-                     f'{t.frames} |')
+                     f'{", ".join(t.subscribers)} | {LOCKSTEP_QOS_TEXT[t.qos]} | {wall} | '
+                     f'{t.rate} | {t.units} | {t.frames} |')
     return '\n'.join(lines) + '\n'
 
 

@@ -15,6 +15,7 @@ import numpy as np
 from trust_monitor.common.params import check_fields, param
 
 CLOCK_MODES = ('lockstep', 'wall')
+STARTUP = 'the timer, the QoS profiles and the subscriptions are made at start-up'
 NS_PER_S = 1_000_000_000
 PERCENTILES = (50.0, 99.0)
 
@@ -31,18 +32,27 @@ class WallClockConfig:
         jitter_report_path: wall mode: JSON file the loop statistics are written to at
             shutdown ('' = only the node log).
         jitter_log_period_s: wall mode: how often p50/p99 are logged, s (> 0).
+        input_deadline_qos: wall mode: vehicle inputs carry a QoS deadline of
+            ``input_timeout_s`` (publishers must offer one at least as short); false for
+            publishers that cannot, then staleness is found by the receive times alone.
     """
 
     clock_mode: str = param('lockstep (sim time, inputs paired by stamp) or wall (timer, '
-                            'latest inputs)', choices=CLOCK_MODES, default='lockstep')
+                            'latest inputs)', choices=CLOCK_MODES, default='lockstep',
+                            reason=STARTUP)
     control_rate_hz: float = param('wall mode: control loop rate', unit='Hz', low=0.0,
-                                   low_inclusive=False, default=10.0)
+                                   low_inclusive=False, default=10.0, reason=STARTUP)
     input_timeout_s: float = param('wall mode: an input received longer ago than this is '
-                                   'stale', unit='s', low=0.0, low_inclusive=False, default=0.5)
+                                   'stale', unit='s', low=0.0, low_inclusive=False, default=0.5,
+                                   reason=STARTUP)
     jitter_report_path: str = param("wall mode: JSON file for the loop's jitter statistics at "
-                                    "shutdown ('' = log only)", default='')
+                                    "shutdown ('' = log only)", default='', reason=STARTUP)
     jitter_log_period_s: float = param('wall mode: period of the jitter log line', unit='s',
-                                       low=0.0, low_inclusive=False, default=10.0)
+                                       low=0.0, low_inclusive=False, default=10.0,
+                                       reason=STARTUP)
+    input_deadline_qos: bool = param('wall mode: vehicle inputs request a QoS deadline of '
+                                     'input_timeout_s (their publishers must offer one)',
+                                     default=True, reason=STARTUP)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -157,38 +157,47 @@ _COLOURS = {'preceding_vehicle': (0.6, 0.6, 0.6), 'ego': (0.1, 0.5, 0.9),
             'human': (0.95, 0.55, 0.1)}
 
 
+def vehicle_markers(vehicle_length_m: float) -> MarkerArray:
+    """The three vehicles as markers: per vehicle a box (x from -length to 0 in its body
+    frame: the frame origin is the front bumper) and a text label above it, each frame-locked
+    in its vehicle's frame (a 3D view places them through ``tf``); stamps 0.
+
+    Args:
+        vehicle_length_m: box length, m.
+    """
+    markers = []
+    for index, (frame, label) in enumerate(VEHICLE_LABELS.items()):
+        red, green, blue = _COLOURS[frame]
+        box = Marker(header=header(0, frame), ns='vehicles', id=index, type=Marker.CUBE,
+                     action=Marker.ADD, frame_locked=True,
+                     color=ColorRGBA(r=red, g=green, b=blue, a=0.9))
+        box.pose.position.x = -0.5 * vehicle_length_m
+        box.pose.position.z = 0.5 * MARKER_HEIGHT_M
+        box.pose.orientation.w = 1.0
+        box.scale.x, box.scale.y, box.scale.z = (float(vehicle_length_m), MARKER_WIDTH_M,
+                                                 MARKER_HEIGHT_M)
+        text = Marker(header=header(0, frame), ns='labels', id=index,
+                      type=Marker.TEXT_VIEW_FACING, action=Marker.ADD, frame_locked=True,
+                      text=label, color=ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0))
+        text.pose.position.x = -0.5 * vehicle_length_m
+        text.pose.position.z = MARKER_HEIGHT_M + 0.8
+        text.pose.orientation.w = 1.0
+        text.scale.z = 0.8
+        markers += [box, text]
+    return MarkerArray(markers=markers)
+
+
 class VehicleMarkers:
-    """A ``MarkerArray`` of the three vehicles, serialised once: per vehicle a box (x from
-    -length to 0 in its body frame: the frame origin is the front bumper) and a text label
-    above it. Every marker is frame-locked in its vehicle's frame, so only the stamp changes
-    from message to message (:meth:`update`); a 3D view places them through ``tf``.
+    """:func:`vehicle_markers` serialised once; only the stamp changes from message to
+    message (:meth:`update`).
 
     Args:
         vehicle_length_m: box length, m.
     """
 
     def __init__(self, vehicle_length_m: float) -> None:
-        markers = []
-        for index, (frame, label) in enumerate(VEHICLE_LABELS.items()):
-            red, green, blue = _COLOURS[frame]
-            box = Marker(header=header(0, frame), ns='vehicles', id=index, type=Marker.CUBE,
-                         action=Marker.ADD, frame_locked=True,
-                         color=ColorRGBA(r=red, g=green, b=blue, a=0.9))
-            box.pose.position.x = -0.5 * vehicle_length_m
-            box.pose.position.z = 0.5 * MARKER_HEIGHT_M
-            box.pose.orientation.w = 1.0
-            box.scale.x, box.scale.y, box.scale.z = (float(vehicle_length_m), MARKER_WIDTH_M,
-                                                     MARKER_HEIGHT_M)
-            text = Marker(header=header(0, frame), ns='labels', id=index,
-                          type=Marker.TEXT_VIEW_FACING, action=Marker.ADD, frame_locked=True,
-                          text=label, color=ColorRGBA(r=1.0, g=1.0, b=1.0, a=1.0))
-            text.pose.position.x = -0.5 * vehicle_length_m
-            text.pose.position.z = MARKER_HEIGHT_M + 0.8
-            text.pose.orientation.w = 1.0
-            text.scale.z = 0.8
-            markers += [box, text]
-        self._template = SerializedTemplate(MarkerArray(markers=markers),
-                                            [marker.header.stamp for marker in markers])
+        msg = vehicle_markers(vehicle_length_m)
+        self._template = SerializedTemplate(msg, [marker.header.stamp for marker in msg.markers])
 
     def update(self, ns: int) -> bytes:
         """The array (serialised) stamped ``ns`` (integer ns)."""
@@ -219,6 +228,11 @@ def trajectory(ns: int, dt_s: float, *, frame_id: str,
 def trajectory_values(msg: JointTrajectory, field: str) -> list[float]:
     """The joint's ``accelerations`` or ``velocities`` over the points."""
     return [float(getattr(p, field)[0]) for p in msg.points]
+
+
+def trajectory_times(msg: JointTrajectory) -> list[float]:
+    """The points' ``time_from_start``, s (a plan's own grid)."""
+    return [p.time_from_start.sec + p.time_from_start.nanosec / 1e9 for p in msg.points]
 
 
 def diagnostics(ns: int, name: str, level_ok: bool, message: str,

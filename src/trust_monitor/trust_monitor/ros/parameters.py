@@ -1,14 +1,32 @@
-"""Declare a configuration dataclass as ROS parameters and build it validated.
+"""Declare a configuration dataclass as ROS parameters and build it validated, with the same
+validator as ``trust-av`` (:func:`trust_monitor.common.params.build_config`).
 
-Each field's description, unit and range come from its
-:class:`~trust_monitor.common.params.ParamSpec` (one place per parameter); the values from
-``--ros-args --params-file`` / ``-p``; the dataclass validates them exactly as the CLI does
-(:func:`trust_monitor.common.params.build_config`).
+Where a node's values come from, first wins:
+
+1. its parameter overrides (``--ros-args --params-file F ... -p name:=value``, merged by rcl
+   and rclpy);
+2. the shipped params file (``share/trust_monitor/config/trust_av.yaml`` of a colcon
+   install, else the source tree's ``config/``), matched against the node's fully qualified
+   name: so a node started alone, without a params file, runs on the shipped values, and a
+   params file holding one key is enough;
+3. the dataclass default.
+
+The values are checked by the dataclass (types, ranges, cross-field rules) before anything
+is declared, so a node refuses exactly what ``trust-av`` refuses, with the same one line.
+A double field accepts an integer (``dt_s: 1`` in a params file; rcl types it INTEGER):
+the value is converted and the parameter declared as DOUBLE 1.0, so ``ros2 param get``
+shows the type the field has. Every parameter is declared read-only with its description,
+unit and (closed) range from the field's :class:`~trust_monitor.common.params.ParamSpec`.
+
+:func:`check_overrides` refuses an override that neither the node declares nor the shipped
+file holds (a typo, or a parameter of no node of the graph); the shipped file's names stay
+allowed because a ``/**`` section feeds every node, each taking the keys it declares.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import typing
 from typing import Any, TypeVar
 
@@ -16,7 +34,14 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from trust_monitor.common.params import PARAM_METADATA_KEY, ParamsError, ParamSpec, build_config
+from trust_monitor.common.param_layers import layered_params, read_layer, shipped_params_file
+from trust_monitor.common.params import (
+    PARAM_METADATA_KEY,
+    ParamsError,
+    ParamSpec,
+    build_config,
+    check_type,
+)
 
 T = TypeVar('T')
 
@@ -46,28 +71,93 @@ def descriptor(field: dataclasses.Field[Any], hint: Any) -> ParameterDescriptor:
     return result
 
 
-def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None) -> T:
-    """Declare every field of ``cls`` as a read-only parameter and build the validated config.
+def node_overrides(node: Node) -> dict[str, Any]:
+    """The parameter overrides rclpy gave ``node`` (params files and ``-p``), name to value.
 
-    Values come from ``--ros-args --params-file`` / ``-p``; a field without a value and
-    without a dataclass default makes start-up fail naming it.
+    rclpy keeps them in ``Node._parameter_overrides`` (``rclpy/node.py``, filled in
+    ``Node.__init__`` from rcl's merged ``--params-file``/``-p`` values for this node); it
+    has no public accessor, and both the coercion and the unknown-name check need them.
+    """
+    overrides: dict[str, Parameter] = node._parameter_overrides
+    return {name: param.value for name, param in overrides.items()}
+
+
+@functools.cache
+def _shipped(fqn: str) -> tuple[dict[str, Any], str]:
+    """The shipped file's values for node ``fqn`` and the file's path ('' if not found)."""
+    try:
+        path = shipped_params_file()
+    except ParamsError:
+        return {}, ''
+    return layered_params([read_layer(path)], fqn), str(path)
+
+
+@functools.cache
+def shipped_names() -> frozenset[str]:
+    """Every parameter name of the shipped params file (any section)."""
+    try:
+        layer = read_layer(shipped_params_file())
+    except ParamsError:
+        return frozenset()
+    return frozenset(name for values in layer.values() for name in values)
+
+
+def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None) -> T:
+    """Build the validated config ``cls`` for ``node`` and declare its fields as read-only
+    parameters (fields already declared by an earlier config of the node are shared).
+
+    Args:
+        node: the node.
+        cls: a configuration dataclass whose fields are declared with ``param``.
+        extra: values for fields that the node computes itself (not declared).
 
     Raises:
-        ParamsError: missing parameter or a value the dataclass rejects.
+        ParamsError: a value of the wrong type, out of range, or a field with no value in
+            the overrides, the shipped file or the dataclass (the message says which file to
+            pass).
     """
     hints = typing.get_type_hints(cls)
+    overrides = node_overrides(node)
+    shipped, shipped_path = _shipped(node.get_fully_qualified_name())
     values: dict[str, Any] = dict(extra or {})
     for field in dataclasses.fields(cls):  # type: ignore[arg-type]
-        if field.name in values:
+        name = field.name
+        if name in values:
             continue
-        described = descriptor(field, hints[field.name])
-        if not node.has_parameter(field.name):
-            if field.default is not dataclasses.MISSING:
-                node.declare_parameter(field.name, field.default, described)
-            else:
-                node.declare_parameter(field.name, Parameter.Type(described.type), described)
-        param = node.get_parameter(field.name)
-        if param.type_ == Parameter.Type.NOT_SET:
-            raise ParamsError(f'parameter {field.name} is missing ({cls.__name__})')
-        values[field.name] = param.value
-    return build_config(cls, values)
+        if node.has_parameter(name):
+            values[name] = node.get_parameter(name).value
+        elif name in overrides:
+            if overrides[name] is None:  # rcl holds the name without a value (e.g. [])
+                raise ParamsError(f'parameter {name} has no value (e.g. [] or {{}})')
+            values[name] = check_type(name, overrides[name], hints[name])
+        elif name in shipped:
+            values[name] = check_type(name, shipped[name], hints[name])
+        elif field.default is dataclasses.MISSING:
+            hint = (f'pass --ros-args -p {name}:=VALUE' if shipped_path else
+                    'the shipped params file was not found: pass --ros-args --params-file '
+                    'config/trust_av.yaml of the trust-av sources')
+            raise ParamsError(f'parameter {name} is missing ({cls.__name__}): {hint}')
+    config = build_config(cls, values)
+    for field in dataclasses.fields(cls):  # type: ignore[arg-type]
+        name = field.name
+        if (extra and name in extra) or node.has_parameter(name):
+            continue
+        value = values.get(name, field.default)
+        node.declare_parameter(name, value, descriptor(field, hints[name]),
+                               ignore_override=True)
+    return config
+
+
+def check_overrides(node: Node) -> None:
+    """Refuse a parameter override that ``node`` does not declare and that no section of the
+    shipped params file holds (a typo, from any params file or ``-p``).
+
+    Raises:
+        ParamsError: one line naming the parameter(s).
+    """
+    declared = set(node.list_parameters([], 0).names)  # depth 0: every declared name
+    unknown = sorted(set(node_overrides(node)) - declared - shipped_names())
+    if unknown:
+        raise ParamsError(f'{node.get_fully_qualified_name()}: unknown parameter(s) '
+                          f'{", ".join(unknown)} (not a parameter of this node or of any node '
+                          'of the graph)')

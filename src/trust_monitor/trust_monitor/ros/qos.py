@@ -1,10 +1,21 @@
 """The graph's named QoS profiles: every publisher and subscription takes its profile from here
-(by the name in :data:`trust_monitor.common.topics.TOPICS`), never a bare depth in node code.
+(by the names in :data:`trust_monitor.common.topics.TOPICS`), never a bare depth in node code.
+
+Lock-step (sim time) keeps what determinism needs: every per-step topic reliable, transient
+local and deep (:data:`STEP_QOS`). Wall mode (real-vehicle mode) uses :func:`wall_qos`: the
+vehicle's inputs as sensor data (best effort, volatile, keep last 1, a deadline the planner is
+told about when it is missed), the acceleration command reliable, volatile, keep last 1 with a
+deadline of two control periods, everything else reliable and volatile. The reasons are in the
+README's topic table (:func:`trust_monitor.common.topics.topic_table_markdown`).
 """
 
 from __future__ import annotations
 
+from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from trust_monitor.common.topics import TOPIC
+from trust_monitor.common.wall_clock import WallClockConfig
 
 HISTORY_DEPTH = 1000
 """Samples kept per topic on both sides. The recorder is not part of the lock-step, so it may
@@ -30,3 +41,73 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 """One-off signals (/sim/start) that a node started later must still receive."""
 
 QOS = {'STEP': STEP_QOS, 'CLOCK': CLOCK_QOS, 'LATCHED': LATCHED_QOS}
+
+STATE_DEPTH = 10
+"""Wall mode, plans, status and trust: a few samples of slack for a reader that is briefly
+late (the recorder), none for a late joiner (volatile)."""
+
+RECORD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH,
+                        reliability=ReliabilityPolicy.BEST_EFFORT,
+                        durability=DurabilityPolicy.VOLATILE)
+"""A wall-mode recorder's subscriptions: compatible with every publisher (best effort, no
+deadline), deep enough not to drop while the recorder writes."""
+
+
+def command_deadline_s(clock: WallClockConfig) -> float:
+    """Deadline of the acceleration command: two control periods, s."""
+    return 2.0 / clock.control_rate_hz
+
+
+def sensor_deadline_s(clock: WallClockConfig, publisher: bool) -> float:
+    """Deadline of a vehicle input: requested ``input_timeout_s`` by a subscription, offered
+    two control periods (at most ``input_timeout_s``) by a publisher, s."""
+    requested = clock.input_timeout_s
+    return min(command_deadline_s(clock), requested) if publisher else requested
+
+
+def wall_qos(kind: str, clock: WallClockConfig, publisher: bool = False) -> QoSProfile:
+    """The wall-mode profile of a topic kind (the ``wall_qos`` column of the topic table).
+
+    DDS matches a subscription that requests a deadline only with publishers that offer one
+    at least as short (a publisher without a deadline does not match): vehicle inputs are
+    requested with ``input_timeout_s`` and offered by this project's publishers with two
+    control periods; the command is offered and requested with two control periods.
+
+    Args:
+        kind: ``SENSOR`` (vehicle inputs: best effort, volatile, keep last 1, a deadline
+            unless ``input_deadline_qos`` is false), ``COMMAND`` (reliable, volatile, keep
+            last 1, deadline two control periods), ``STATE`` (reliable, volatile, keep last
+            :data:`STATE_DEPTH`) or ``LATCHED``.
+        clock: the node's wall-clock settings (rate, input timeout).
+        publisher: the profile of a publisher (the offered deadline) rather than of a
+            subscription (the requested one).
+
+    Raises:
+        KeyError: an unknown kind.
+    """
+    if kind == 'SENSOR':
+        profile = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                             reliability=ReliabilityPolicy.BEST_EFFORT,
+                             durability=DurabilityPolicy.VOLATILE)
+        if clock.input_deadline_qos:
+            profile.deadline = Duration(seconds=sensor_deadline_s(clock, publisher))
+        return profile
+    if kind == 'COMMAND':
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE,
+                          deadline=Duration(seconds=command_deadline_s(clock)))
+    if kind == 'STATE':
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STATE_DEPTH,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE)
+    if kind == 'LATCHED':
+        return LATCHED_QOS
+    raise KeyError(f'unknown wall-mode QoS kind {kind!r}')
+
+
+def topic_qos(topic: str, clock: WallClockConfig, publisher: bool = False) -> QoSProfile:
+    """The profile of a topic of the table in the node's clock mode: the lock-step profile
+    (``qos`` column) or the wall-mode one (``wall_qos`` column, :func:`wall_qos`)."""
+    row = TOPIC[topic]
+    return wall_qos(row.wall_qos, clock, publisher) if clock.wall else QOS[row.qos]

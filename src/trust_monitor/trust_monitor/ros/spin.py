@@ -3,6 +3,7 @@ control loop of real-vehicle mode (:class:`WallLoop`)."""
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import time
@@ -10,13 +11,17 @@ from collections.abc import Callable
 from typing import Protocol
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from trust_monitor.common.params import ParamsError
 from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
+from trust_monitor.ros.parameters import check_overrides
 
 
 class WallLoop:
@@ -59,18 +64,66 @@ SPIN_TIMEOUT_S = 0.1
 """Longest wait of one executor spin: bounds how late a node notices a stop request."""
 
 
+PARENT_ENV = 'TRUST_AV_PARENT_PID'
+"""Set by the orchestrator to its pid: a node started with it stops (cleanly, like on
+SIGTERM) when that process is gone, so that a killed orchestrator leaves no node behind and
+the recorder still finishes its bag."""
+DRAIN_S = 0.3
+"""On a stop request a node keeps taking what is already queued for this long."""
+ACK_TIMEOUT_S = 1.0
+"""Then it waits at most this long, over all its reliable publishers, until every matched
+subscriber (the recorder) has acknowledged what it published."""
+
+
 class GraphNode(Protocol):
     """What :func:`spin_node` needs of a node besides ``rclpy.node.Node``.
 
     Attributes:
         finished: set to True by a node that ends by itself (the recorder, once it holds
             every step); the loop then stops.
+        exit_code: the process exit code once it ends (0, or e.g. the recorder's 3 for a
+            full disk).
     """
 
     finished: bool
+    exit_code: int
 
     def close(self) -> None:
         """Called once before the node is destroyed (finish files, write statistics)."""
+
+
+def init_rclpy(args: list[str]) -> None:
+    """``rclpy.init`` without rclpy's signal handlers; a command line rcl refuses (a params
+    file it cannot parse, a bad ``-p``) becomes one line.
+
+    Raises:
+        ParamsError: rcl refused the arguments; the message is rcl's first line.
+    """
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except _rclpy.RCLError as err:
+        # e.g. "failed to initialize rcl: Couldn't parse params file: '--params-file F'.
+        # Error: Will not support aliasing at line 4\n, at .../parse.c:893, at ..."
+        first = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ParamsError(f'rcl refused the command line: {first.rstrip(", ")}') from err
+
+
+def start_node(factory: Callable[[], Node]) -> Node:
+    """Build a node and refuse it if it got a parameter override that neither it nor any node
+    of the graph has (:func:`trust_monitor.ros.parameters.check_overrides`); needs
+    ``rclpy.init`` first.
+
+    Raises:
+        ParamsError: a bad or unknown parameter (the node is closed and destroyed).
+    """
+    node = factory()
+    try:
+        check_overrides(node)
+    except ParamsError:
+        node.close()  # type: ignore[attr-defined]
+        node.destroy_node()
+        raise
+    return node
 
 
 def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
@@ -78,15 +131,20 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     """A node's whole life, the three steps of ros2/examples with a safe stop::
 
         rclpy.init(args)                        # 1. init (no rclpy signal handler)
-        node = factory()                        #    bad parameters -> one line, exit 2
+        node = factory()                        #    bad or unknown parameters -> one line,
+                                                #    exit 2
         while not (stop requested or node.finished):
             executor.spin_once(0.1 s)           # 2. spin (EventsExecutor)
         node.close(); node.destroy_node(); rclpy.try_shutdown()   # 3. shut down
 
     ``factory`` builds a node that is also a :class:`GraphNode`. Start-up errors of the kinds
-    in ``user_errors`` (bad parameters, an unreadable trace) are printed as one line and give
-    exit code 2; anything else propagates with its traceback, so the orchestrator can name
-    the node that died. SIGINT and SIGTERM end the node cleanly (exit code 0).
+    in ``user_errors`` (bad parameters, an unreadable trace), and a parameter override that
+    neither the node nor any node of the graph has (:func:`check_overrides`), are printed as
+    one line and give exit code 2; anything else propagates with its traceback, so the
+    orchestrator can name the node that died. SIGINT and SIGTERM end the node cleanly (its
+    ``exit_code``), as does the death of the process named by :data:`PARENT_ENV`: the node
+    first takes what is queued for :data:`DRAIN_S` and waits until its messages are
+    acknowledged, so a recorder stopped after it holds them.
 
     Args:
         factory: builds the node (its constructor).
@@ -112,23 +170,31 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     def request_stop(_signum: int, _frame: object) -> None:
         stop['requested'] = True
 
-    rclpy.init(args=args if args is not None else sys.argv,
-               signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        init_rclpy(args if args is not None else sys.argv)
+    except ParamsError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
     node = None
     executor = EventsExecutor()
     signal.signal(signal.SIGINT, request_stop)
     signal.signal(signal.SIGTERM, request_stop)
     try:
         try:
-            node = factory()
-        except (*user_errors, InvalidParameterValueException,
+            node = start_node(factory)
+        except (*user_errors, ParamsError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
             print(f'error: {err}', file=sys.stderr)
             return 2
         executor.add_node(node)
         graph_node: GraphNode = node  # type: ignore[assignment]
+        parent = int(os.environ.get(PARENT_ENV, '0') or 0)
         while not stop['requested'] and rclpy.ok() and not graph_node.finished:
             executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+            if parent and os.getppid() != parent:
+                stop['requested'] = True
+        if not graph_node.finished and rclpy.ok():
+            _drain(executor, node)
     except ExternalShutdownException:
         pass  # the context was shut down from outside: clean exit below
     finally:
@@ -139,4 +205,18 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return 0 if node is None else int(node.exit_code)  # type: ignore[attr-defined]
+
+
+def _drain(executor: EventsExecutor, node: Node) -> None:
+    """Take what is queued (:data:`DRAIN_S`), then wait for the acknowledgements of what
+    this node published (:data:`ACK_TIMEOUT_S` over all publishers)."""
+    end = time.monotonic() + DRAIN_S
+    while time.monotonic() < end and rclpy.ok():
+        executor.spin_once(timeout_sec=0.02)
+    deadline = time.monotonic() + ACK_TIMEOUT_S
+    for publisher in node.publishers:
+        left = deadline - time.monotonic()
+        if left <= 0.0:
+            break
+        publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))

@@ -1,0 +1,63 @@
+"""The 1 Hz vs 10 Hz table of docs/RESULTS.md ("Control rate"): the in-process closed loop on
+US06 and commute_am, TAC-CA and TAC-GRU, alpha 0 and 1, at the paper's 1 Hz and at 10 Hz
+(``trust-av simulate --control-rate-hz``). Prints one Markdown row per case.
+
+Usage: python scripts/rate_table.py [--max-steps-s S] [--traces us06,commute_am]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from preceding_traffic.traces import truncate
+from trust_av_planner.system.closed_loop import control_trace, simulate
+from trust_av_planner.system.config import load_run_config
+
+
+def rel(a: float, b: float) -> str:
+    """(b - a) / a in percent."""
+    return f'{100.0 * (b - a) / a:+.1f} %'
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--traces', default='us06,commute_am')
+    parser.add_argument('--predictors', default='ca,gru')
+    parser.add_argument('--alphas', default='0,1')
+    parser.add_argument('--max-steps-s', type=float, default=0.0,
+                        help='only the first S seconds of each trace (0: all)')
+    args = parser.parse_args()
+    print('| trace | predictor | alpha | final trust 1 / 10 Hz | mean E 1 / 10 Hz | '
+          'RMSE 1 / 10 Hz (m/s^2) | min AV gap 10 Hz (m) | unsafe / fallback / standstill '
+          'fallback 10 Hz | wall 10 Hz (s) |')
+    print('|---|---|---|---|---|---|---|---|---|')
+    for trace in args.traces.split(','):
+        for predictor in args.predictors.split(','):
+            for alpha in (float(a) for a in args.alphas.split(',')):
+                config = load_run_config(overrides={
+                    'planner': {'alpha': alpha, 'predictor': predictor},
+                    'preceding_traffic': {'trace': trace}})
+                metrics = {}
+                for rate in (1.0, 10.0):
+                    loop_trace = control_trace(config, rate)
+                    if args.max_steps_s:
+                        loop_trace = truncate(loop_trace, round(args.max_steps_s * rate))
+                    start = time.perf_counter()
+                    result = simulate(config, loop_trace)
+                    metrics[rate] = (result.metrics, time.perf_counter() - start,
+                                     sum(1 for r in result.records
+                                         if not r.solver_success and r.av_speed_mps < 0.1))
+                (one, _, _), (ten, wall, still) = metrics[1.0], metrics[10.0]
+                print(f'| {trace} | {predictor} | {alpha:g} | {one.final_trust:.3f} / '
+                      f'{ten.final_trust:.3f} ({rel(one.final_trust, ten.final_trust)}) | '
+                      f'{one.mean_explicability:.5f} / {ten.mean_explicability:.5f} '
+                      f'({rel(one.mean_explicability, ten.mean_explicability)}) | '
+                      f'{one.rmse_mps2:.4f} / {ten.rmse_mps2:.4f} '
+                      f'({rel(one.rmse_mps2, ten.rmse_mps2)}) | {ten.min_av_gap_m:.3f} | '
+                      f'{ten.unsafe_steps} / {ten.fallback_steps} / {still} | {wall:.0f} |',
+                      flush=True)
+
+
+if __name__ == '__main__':
+    main()

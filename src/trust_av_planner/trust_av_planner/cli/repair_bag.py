@@ -1,0 +1,35 @@
+"""``trust-av repair-bag``: finish a recording left unfinished (a machine crash, a killed
+recorder): every message of every complete chunk is kept, metadata.yaml is written."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph.bag_writer import repair_bag
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``trust-av repair-bag``."""
+    path: Path = args.path
+    if not path.exists():
+        raise TrustAvPlannerError(f'{path}: no such bag directory or .mcap file')
+    kept = repair_bag(path)
+    target = path if path.is_dir() else path.with_suffix('')
+    print(f'{target}: repaired, {kept} messages kept')
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``repair-bag`` to ``trust-av``."""
+    parser = subparsers.add_parser(
+        'repair-bag', help='finish a recording left unfinished by a crash',
+        description='Rewrite a recording whose writer did not finish (a machine crash, a '
+                    'killed recorder) into a complete rosbag2 bag directory, in place: every '
+                    'message of every complete MCAP chunk is kept (the graph writes one chunk '
+                    'per step) and metadata.yaml is written. PATH is a bag directory, or a '
+                    'lone .mcap file (it becomes a bag directory of the same stem). Exit '
+                    'codes: 0 repaired, 2 nothing readable.')
+    parser.add_argument('path', type=Path, metavar='PATH', help='bag directory or .mcap file')
+    parser.set_defaults(func=run)

@@ -1,0 +1,417 @@
+"""Crash-safe rosbag2 bag directories: the graph's recordings.
+
+A recording is a rosbag2 bag directory (``metadata.yaml`` + one MCAP file) written by
+rosbags' ``Writer`` (version 9, MCAP storage, typestore ``ROS2_JAZZY``): the metadata, the
+MCAP's own ``rosbag2`` record, the channels' ``offered_qos_profiles`` and the type hashes
+are rosbags' (the format owner's reader rules are checked by ``tests/rosbag2_rules.py``).
+On top of it, :class:`BagWriter` adds what a recording that must survive any end needs:
+
+- **a chunk per step**: :meth:`BagWriter.end_step` closes the MCAP chunk and writes it
+  through to the file (unbuffered), so a killed process leaves every step up to the kill
+  on disk; :func:`repair_bag` turns such a directory into a complete bag.
+- **a full disk**: a reserve file inside the bag directory holds, at all times, room for
+  the MCAP summary and ``metadata.yaml``; when a write fails with ``ENOSPC`` the partial
+  step is cut off, the reserve is released, the bag is finished with every complete step,
+  and :class:`DiskFullError` says so. The reserve never outlives the writer.
+
+Messages are raw CDR as they came over DDS; log time = publish time = the header stamp
+(sim time in lock-step, wall time in wall mode).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import struct
+from collections import defaultdict
+from dataclasses import dataclass
+from io import BytesIO
+from pathlib import Path
+from typing import Any
+
+from mcap.exceptions import McapError
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.rosbag2.metadata import parse_qos
+from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
+from rosbags.typesys import Stores, get_typestore
+
+from trust_av_planner.errors import TrustAvPlannerError
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+RESERVE_BASE_BYTES = 48 * 1024
+"""Room kept for finishing a bag besides the chunk indexes: the rosbag2 metadata record,
+schemas, channels with their QoS, statistics, footer and metadata.yaml (measured: about
+30 kB for the graph's 12 recorded topics)."""
+RESERVE_PER_CHUNK_BYTES = 256
+"""Summary bytes per chunk written (a chunk index: about 70 bytes + 10 per channel in it)."""
+RESERVE_STEP_CHUNKS = 64
+"""The reserve grows by this many chunks' worth at a time (one fallocate per 64 steps)."""
+RESERVE_NAME = '.reserve'
+MAX_INFINITE = QosTime(2147483647, 4294967295)
+"""rmw's "infinite" duration as rosbag2 writes it in offered_qos_profiles."""
+
+
+class BagWriteError(TrustAvPlannerError):
+    """A recording cannot be written or read back; the message names the bag."""
+
+
+class DiskFullError(BagWriteError):
+    """The disk filled up while recording; the bag was finished with the complete steps."""
+
+
+STAMP_IN_FIRST_ELEMENT = frozenset({'tf2_msgs/msg/TFMessage',
+                                    'visualization_msgs/msg/MarkerArray'})
+"""Types that start with a sequence of stamped messages: the stamp is the first element's
+(after the uint32 sequence length)."""
+
+
+def header_stamp_ns(data: bytes | memoryview, offset: int = 4) -> int:
+    """Stamp of a CDR message that starts with a Time or a Header at ``offset`` (4: after
+    the 4-byte encapsulation header; 8: in the first element of a leading sequence): int32
+    sec, uint32 nanosec, little or big endian."""
+    little = data[1] == 1
+    sec, nanosec = struct.unpack_from('<iI' if little else '>iI', data, offset)
+    return int(sec) * 1_000_000_000 + int(nanosec)
+
+
+def qos_profile(*, reliable: bool, transient_local: bool, depth: int,
+                deadline_ns: int = 0) -> Qos:
+    """An offered QoS profile as rosbag2 stores it (keep-last history, automatic
+    liveliness, infinite lifespan; ``deadline_ns`` 0 = infinite)."""
+    deadline = (MAX_INFINITE if deadline_ns <= 0
+                else QosTime(deadline_ns // 1_000_000_000, deadline_ns % 1_000_000_000))
+    return Qos(QosHistory.KEEP_LAST, depth,
+               QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
+               QosDurability.TRANSIENT_LOCAL if transient_local else QosDurability.VOLATILE,
+               deadline, MAX_INFINITE, QosLiveliness.AUTOMATIC, MAX_INFINITE, False)
+
+
+class _WholeWrites:
+    """An unbuffered file whose ``write`` writes everything or raises ``OSError`` (no silent
+    short writes: rosbags' writer ignores ``write``'s return value)."""
+
+    def __init__(self, path: Path, offset: int) -> None:
+        self.fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC)
+        os.lseek(self.fd, offset, os.SEEK_SET)
+        self.position = offset
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        view = memoryview(data)
+        while view:
+            written = os.write(self.fd, view)
+            self.position += written
+            view = view[written:]
+        return len(data)
+
+    def tell(self) -> int:
+        return self.position
+
+    def truncate(self, size: int) -> None:
+        """Cut the file at ``size`` and continue writing there."""
+        os.ftruncate(self.fd, size)
+        os.lseek(self.fd, size, os.SEEK_SET)
+        self.position = size
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+
+class _StepStorage(McapWriter):
+    """rosbags' MCAP storage, writing through an unbuffered file (so a closed chunk is on
+    disk) and able to cut off a chunk that failed half-written."""
+
+    def __init__(self, path: Path, compression: Any) -> None:
+        super().__init__(path, compression)
+        self.bio.flush()
+        offset = self.bio.tell()
+        self.bio.close()
+        self.bio = _WholeWrites(self.path, offset)
+
+    def close_step_chunk(self) -> None:
+        """Write the pending chunk to the file; on an error cut the file back to where the
+        chunk began, drop the chunk and re-raise."""
+        if not self.chunk.bio.tell():
+            return
+        start = self.bio.tell()
+        try:
+            self.close_chunk()
+        except OSError:
+            self.bio.truncate(start)
+            raise
+
+
+@dataclass
+class _Topic:
+    connection: Any
+    count: int = 0
+    step_count: int = 0
+
+
+class BagWriter:
+    """A rosbag2 bag directory being recorded, one MCAP chunk per step (context manager).
+
+    Args:
+        path: the bag directory to create (it must not exist).
+
+    Raises:
+        BagWriteError: the directory exists or cannot be created.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        try:
+            self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            self._writer.STORAGE_PLUGINS = {**Writer.STORAGE_PLUGINS,  # type: ignore[misc]
+                                            StoragePlugin.MCAP: _StepStorage}
+            self._writer.set_custom_data('trust_av.recorder', 'one MCAP chunk per step')
+            self._writer.open()
+        except (WriterError, OSError) as err:
+            raise BagWriteError(f'{self.path}: cannot create the bag directory ({err})') from err
+        self._topics: dict[str, _Topic] = {}
+        self._offsets: dict[str, int] = {}
+        self._reserve = self.path / RESERVE_NAME
+        self._reserved = 0
+        self._chunks = 0
+        self._step_stamps: list[int] = []
+        self._times = (2**63 - 1, 0)
+        self.finished = False
+        self.disk_full: str = ''
+        self.steps = 0
+        try:
+            self._grow_reserve()
+        except OSError as err:
+            self._writer.abort()
+            shutil.rmtree(self.path, ignore_errors=True)
+            raise DiskFullError(f'{self.path}: no room to start a recording '
+                                f'({os.strerror(err.errno or errno.ENOSPC)})') from err
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Messages per topic written so far (complete steps and the pending one)."""
+        return {name: t.count + t.step_count for name, t in self._topics.items()}
+
+    def add_topic(self, topic: str, msgtype: str, qos: Qos) -> None:
+        """Register a topic with its type and the QoS its publisher offers."""
+        connection = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
+                                                 offered_qos_profiles=[qos])
+        self._topics[topic] = _Topic(connection)
+        self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
+
+    def write(self, topic: str, data: bytes | memoryview) -> int:
+        """Append one raw CDR message to the current step; returns its stamp (ns)."""
+        entry = self._topics[topic]
+        stamp = header_stamp_ns(data, self._offsets[topic])
+        self._writer.storage.write(entry.connection, stamp, data)  # type: ignore[union-attr]
+        entry.step_count += 1
+        self._step_stamps.append(stamp)
+        return stamp
+
+    def end_step(self) -> bool:
+        """Write the current step to disk as one chunk.
+
+        Returns:
+            True while recording goes on; False once the disk is full: the partial step (if
+            any) was cut off and the bag was finished with every complete step (see
+            :attr:`disk_full`).
+        """
+        if self.finished:
+            return False
+        try:
+            self._storage.close_step_chunk()
+        except OSError as err:
+            if err.errno not in (errno.ENOSPC, errno.EDQUOT):
+                raise
+            for entry in self._topics.values():
+                entry.step_count = 0
+            self._step_stamps = []
+            self._storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+            self._finish_after_disk_full(err)
+            return False
+        self._chunks += 1
+        for entry in self._topics.values():
+            entry.count += entry.step_count
+            entry.step_count = 0
+        if self._step_stamps:
+            self._times = (min(self._times[0], *self._step_stamps),
+                           max(self._times[1], *self._step_stamps))
+        self._step_stamps = []
+        self.steps += 1
+        if self._reserved < self._needed_reserve():
+            try:
+                self._grow_reserve()
+            except OSError as err:
+                if err.errno not in (errno.ENOSPC, errno.EDQUOT):
+                    raise
+                self._finish_after_disk_full(err)
+                return False
+        return True
+
+    def finish(self) -> None:
+        """Write the pending step, the MCAP summary and metadata.yaml; remove the reserve."""
+        if self.finished:
+            return
+        if any(entry.step_count for entry in self._topics.values()) and not self.end_step():
+            return  # the disk filled up: end_step finished the bag
+        self._close()
+
+    def __enter__(self) -> BagWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.finish()
+
+    @property
+    def _storage(self) -> _StepStorage:
+        storage = self._writer.storage
+        assert isinstance(storage, _StepStorage)
+        return storage
+
+    def _needed_reserve(self) -> int:
+        return RESERVE_BASE_BYTES + RESERVE_PER_CHUNK_BYTES * (self._chunks + RESERVE_STEP_CHUNKS)
+
+    def _grow_reserve(self) -> None:
+        size = self._needed_reserve()
+        fd = os.open(self._reserve, os.O_WRONLY | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW,
+                     0o600)
+        try:
+            os.posix_fallocate(fd, 0, size)
+        finally:
+            os.close(fd)
+        self._reserved = size
+
+    def _finish_after_disk_full(self, err: OSError) -> None:
+        """Finish on the reserve with the complete steps; say so in :attr:`disk_full`."""
+        self.disk_full = (f'{self.path}: disk full ({os.strerror(err.errno or errno.ENOSPC)}) '
+                          f'after {self.steps} complete steps; the bag holds them and is '
+                          'finished')
+        self._close()
+
+    def _close(self) -> None:
+        """Finish the MCAP and write metadata.yaml with the complete steps' counts."""
+        self.finished = True
+        self._reserve.unlink(missing_ok=True)
+        writer = self._writer
+        storage = self._storage
+        for entry in self._topics.values():
+            writer.counts[entry.connection.id] = entry.count
+            storage.channel_stats[entry.connection.id] = entry.count
+        if self.steps:
+            writer.min_timestamp, writer.max_timestamp = self._times
+            storage.message_start_time, storage.message_end_time = self._times
+        else:
+            writer.min_timestamp = writer.max_timestamp = 0
+            storage.message_start_time = storage.message_end_time = 0
+        try:
+            writer.close()
+        except OSError as err:
+            raise BagWriteError(f'{self.path}: cannot finish the bag ({err.strerror})') from err
+
+
+def mcap_file(path: Path) -> Path:
+    """The MCAP file of a bag directory (or ``path`` itself if it is a file).
+
+    Raises:
+        BagWriteError: no bag at ``path``.
+    """
+    if path.is_file():
+        return path
+    files = sorted(path.glob('*.mcap')) if path.is_dir() else []
+    if len(files) != 1:
+        raise BagWriteError(f'{path}: not a bag directory with one MCAP file '
+                            f'({len(files)} found)')
+    return files[0]
+
+
+def _complete_records(path: Path) -> tuple[dict[int, Schema], dict[int, Channel],
+                                           list[Message], str]:
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages: list[Message] = []
+    problem = ''
+    try:
+        with path.open('rb') as handle:
+            for record in StreamReader(handle, skip_magic=False).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    messages.append(record)
+    except (McapError, struct.error, EOFError, ValueError) as err:
+        problem = str(err) or type(err).__name__
+    return schemas, channels, messages, problem
+
+
+def _offered_qos(channel: Channel) -> list[Qos]:
+    text = channel.metadata.get('offered_qos_profiles', '')
+    return parse_qos(text) if text else []
+
+
+def repair_bag(path: Path) -> int:
+    """Rewrite a recording left unfinished (a killed recorder, a machine crash) into a
+    complete bag directory, in place: every message of every complete chunk is kept.
+
+    Works on a bag directory (with or without ``metadata.yaml``) or a lone ``.mcap`` file
+    (which becomes a bag directory of the same stem beside it).
+
+    Returns:
+        The number of messages kept.
+
+    Raises:
+        BagWriteError: nothing at ``path``, no readable MCAP records, or the new bag
+            cannot be written.
+    """
+    path = Path(path)
+    source = mcap_file(path)
+    schemas, channels, messages, problem = _complete_records(source)
+    if not channels:
+        raise BagWriteError(f'{source}: no readable MCAP channels ({problem or "empty"})')
+    target = path if path.is_dir() else path.with_suffix('')
+    workspace = target.with_name(f'.{target.name}.repairing')
+    shutil.rmtree(workspace, ignore_errors=True)
+    workspace.mkdir()
+    staging = workspace / target.name
+    kept = 0
+    try:
+        writer = BagWriter(staging)
+        by_id: dict[int, str] = {}
+        for cid, channel in sorted(channels.items()):
+            schema = schemas.get(channel.schema_id)
+            if schema is None or channel.topic in by_id.values():
+                continue
+            qos = _offered_qos(channel)
+            writer.add_topic(channel.topic, schema.name,
+                             qos[0] if qos else qos_profile(reliable=True,
+                                                            transient_local=False, depth=10))
+            by_id[cid] = channel.topic
+        step_time = None
+        for message in sorted(messages, key=lambda m: m.log_time):
+            topic = by_id.get(message.channel_id)
+            if topic is None:
+                continue
+            if step_time is not None and message.log_time != step_time:
+                writer.end_step()
+            writer.write(topic, message.data)
+            step_time = message.log_time
+            kept += 1
+        writer.finish()
+        if writer.disk_full:
+            raise BagWriteError(f'{target}: no room to repair the bag')
+        old = workspace / 'old'
+        if path.exists():
+            path.rename(old)
+        staging.rename(target)
+    finally:
+        shutil.rmtree(workspace, ignore_errors=True)
+    return kept

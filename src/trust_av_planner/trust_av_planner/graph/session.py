@@ -1,0 +1,205 @@
+"""This process's own rclpy node beside a run's node processes (:class:`Session`): it waits
+until the graph is connected and the recorder is ready, follows the recorder's progress,
+and watches the domain for publishers that are not the run's.
+
+A leased domain must be private (:func:`foreign_participants` is the check before a domain
+is used); during the run, a publisher on any of the graph's topics from a node that is not
+one of the run's stops the run with one line naming the topic and the intruder.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from collections.abc import Iterator
+from typing import Any
+
+from trust_av_planner.graph.processes import RECORDER, Graph, GraphError
+from trust_monitor.common.topics import TOPICS, expected_endpoints
+
+RECORDER_STATUS = 'recorder/status'
+"""The recorder's latched status (``state`` ready/recording/finished/disk_full, ``steps``)."""
+PROBE_S = 1.0
+"""How long a domain is observed for participants of others before it is used (discovery on
+localhost takes well under a second on an idle machine, longer under heavy load; what this
+misses, the watch during the run catches)."""
+WATCH_PERIOD_S = 1.0
+"""How often the graph's topics are checked for foreign publishers during a run."""
+UNNAMED_GRACE_S = 5.0
+"""A publisher is listed before the name of its node arrives (rmw shows
+``_NODE_NAME_UNKNOWN_``); one that stays unnamed this long (a plain DDS participant) counts
+as foreign."""
+UNKNOWN_NAME = '_NODE_NAME_UNKNOWN_'
+
+
+
+def qualified(name: str, namespace: str) -> str:
+    """A topic name as resolved in ``namespace`` (relative names join it)."""
+    if name.startswith('/'):
+        return name
+    return f'{namespace.rstrip("/")}/{name}'
+
+
+def foreign_participants(domain: int, wait_s: float = PROBE_S) -> str:
+    """Nodes already present on ``domain`` (observed for ``wait_s``), as one line; '' if
+    none. Discovery is localhost-only, so these are other processes on this machine."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    context = Context()
+    rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        node = rclpy.create_node('trust_av_domain_probe', context=context)
+        try:
+            time.sleep(wait_s)
+            names = sorted(f'{ns.rstrip("/")}/{name}'
+                           for name, ns in node.get_node_names_and_namespaces()
+                           if name != node.get_name())
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    return f'nodes {", ".join(names[:4])}' if names else ''
+
+
+class Session:
+    """The orchestrator's (or the shadow player's) node on a run's domain.
+
+    Args:
+        graph: the run's node processes.
+        node: this process's rclpy node (in the graph's namespace).
+        executor: the executor spinning ``node``.
+    """
+
+    def __init__(self, graph: Graph, node: Any, executor: Any) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        from trust_monitor.ros.qos import QOS
+
+        self.graph = graph
+        self.node = node
+        self.executor = executor
+        self.recorder_state = ''
+        self.recorder_steps = 0
+        self._ours = {(graph.namespace.rstrip('/') or '/', spec.name) for spec in graph.specs}
+        self._ours.add((node.get_namespace(), node.get_name()))
+        self._next_watch = 0.0
+        self._unnamed: dict[tuple[str, bytes], float] = {}
+        if any(spec.name == RECORDER for spec in graph.specs):
+            node.create_subscription(DiagnosticArray, RECORDER_STATUS, self._on_status,
+                                     QOS['LATCHED'])
+
+    def _on_status(self, msg: Any) -> None:
+        values = {kv.key: kv.value for kv in msg.status[0].values}
+        self.recorder_state = values.get('state', '')
+        self.recorder_steps = int(values.get('steps', '0'))
+
+    def spin(self, timeout_s: float) -> None:
+        """Process this node's callbacks for at most ``timeout_s``."""
+        self.executor.spin_once(timeout_sec=timeout_s)
+
+    def topic(self, name: str) -> str:
+        """A table topic as resolved in the graph's namespace."""
+        return qualified(name, self.graph.namespace)
+
+    def foreign_publishers(self) -> str:
+        """A publisher on any of the graph's topics from a node that is not the run's, as
+        one line ('' if none)."""
+        now = time.monotonic()
+        for row in TOPICS:
+            name = self.topic(row.name)
+            for info in self.node.get_publishers_info_by_topic(name):
+                if info.node_name == UNKNOWN_NAME:
+                    first = self._unnamed.setdefault((name, bytes(info.endpoint_gid)), now)
+                    if now - first < UNNAMED_GRACE_S:
+                        continue
+                    return (f'a foreign publisher on {name}: a participant without a ROS '
+                            f'node name (domain {self.graph.domain} is not private)')
+                key = (info.node_namespace.rstrip('/') or '/', info.node_name)
+                if key not in self._ours:
+                    return (f'a foreign publisher on {name}: node '
+                            f'{info.node_namespace.rstrip("/")}/{info.node_name} (domain '
+                            f'{self.graph.domain} is not private)')
+        return ''
+
+    def check(self, allowed_done: set[str]) -> None:
+        """Raise :class:`GraphError` for a dead node or a foreign publisher (the intruder
+        is named first: it is the likely cause of a node's death)."""
+        now = time.monotonic()
+        dead = any(p.popen.poll() not in (None, 0) or
+                   (p.popen.poll() == 0 and p.spec.name not in allowed_done)
+                   for p in self.graph.processes)
+        if dead or now >= self._next_watch:
+            self._next_watch = now + WATCH_PERIOD_S
+            intruder = self.foreign_publishers()
+            if intruder:
+                raise GraphError(f'stopped: {intruder}')
+        self.graph.check_alive(allowed_done)
+
+    def wait_connected(self, timeout_s: float) -> None:
+        """Wait until every topic has its publishers and subscribers and the recorder (if
+        any) has matched every publisher (``recorder/status`` says ready).
+
+        Raises:
+            GraphError: not connected in time (naming what is missing), or a node died.
+        """
+        expected = expected_endpoints({spec.name for spec in self.graph.specs})
+        has_recorder = any(spec.name == RECORDER for spec in self.graph.specs)
+        deadline = time.monotonic() + timeout_s
+        missing: list[str] = []
+        while time.monotonic() < deadline:
+            self.spin(0.05)
+            self.check(set())
+            missing = []
+            for row in TOPICS:
+                pubs, subs = expected[row.name]
+                name = self.topic(row.name)
+                have_pubs = self.node.count_publishers(name)
+                have_subs = self.node.count_subscribers(name)
+                if have_pubs < pubs or have_subs < subs:
+                    missing.append(f'{name} ({have_pubs}/{pubs} publishers, '
+                                   f'{have_subs}/{subs} subscribers)')
+            if has_recorder and self.recorder_state != 'ready':
+                missing.append('the recorder has not matched every publisher')
+            if not missing:
+                return
+        raise GraphError(f'graph not connected after {timeout_s:g} s: ' + '; '.join(missing))
+
+
+@contextlib.contextmanager
+def graph_session(graph: Graph, name: str) -> Iterator[Session]:
+    """This process's rclpy node ``name`` on the graph's domain and namespace (a
+    single-threaded executor: it only follows the recorder's status, at most twice a second),
+    then the graph's node processes; on exit, also on errors, destroy the
+    node, shut its context down and stop every process (:meth:`Graph.stop`).
+
+    No rclpy signal handler is installed: SIGINT (and SIGTERM, which ``trust-av`` turns into
+    the same exception) must reach the caller so that the nodes are stopped and the
+    recording is finished.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    context = Context()
+    try:
+        rclpy.init(context=context, domain_id=graph.domain,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node(name, namespace=graph.namespace, context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        try:
+            graph.start()
+            yield Session(graph, node, executor)
+        finally:
+            executor.remove_node(node)
+            executor.shutdown()
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        graph.stop()

@@ -1,0 +1,204 @@
+"""One validator: what ``trust-av`` accepts every node accepts, and what a node refuses
+``trust-av`` refuses first, with one line. Checked against the real nodes: one subprocess
+builds every graph node (their real classes, ``rclpy.init`` with real ``--ros-args``, the
+start-up of ``spin_node``) for each params file of a small corpus, layered exactly as the
+orchestrator layers them (shipped file, the corpus file, per-run values); a few nodes are
+also started as their own processes, as a user would start them by hand."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from preceding_traffic.sources import load_trace
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_monitor.common.param_layers import to_params_text
+
+# name: (file over the shipped one, trust-av accepts, every node accepts)
+CORPUS: dict[str, tuple[str, bool, bool]] = {
+    'one_key': ('preceding_traffic:\n  ros__parameters:\n    max_sample_gap_s: 3.0\n',
+                True, True),
+    'integer_for_double': ('/**:\n  ros__parameters:\n    dt_s: 1\n', True, True),
+    'any_namespace': ('/**/planner:\n  ros__parameters:\n    alpha: 0.25\n', True, True),
+    'tag_ignored': ('/**/planner:\n  ros__parameters:\n    alpha: !!float 1\n', True, True),
+    'yaml11_bool': ('/**:\n  ros__parameters:\n    speed_max_from_trace: off\n', True, True),
+    'null_is_a_string': ('/**/planner:\n  ros__parameters:\n    gru_model: null\n', True, True),
+    'alias': ('/**/planner:\n  ros__parameters:\n    a: &a 0.5\n    alpha: *a\n', False, False),
+    'unknown_in_node_section': ('planner:\n  ros__parameters:\n    alhpa: 0.5\n', False, False),
+    'unknown_in_wildcard': ('/**:\n  ros__parameters:\n    speed_limit: 3.0\n', False, False),
+    'double_for_integer': ('/**/planner:\n  ros__parameters:\n    horizon_steps: 4.0\n',
+                           False, False),
+    'out_of_range': ('/**/planner:\n  ros__parameters:\n    alpha: 1.5\n', False, False),
+    'bool_for_double': ('/**/planner:\n  ros__parameters:\n    alpha: on\n', False, False),
+    'bool_for_string': ('/**/planner:\n  ros__parameters:\n    predictor: yes\n', False, False),
+    'no_value': ('planner:\n  ros__parameters:\n    alpha: []\n', False, False),
+    'tiny_step': ('/**:\n  ros__parameters:\n    dt_s: 1.0e-9\n', False, False),
+    'trace_is_etc_passwd': ('preceding_traffic:\n  ros__parameters:\n    trace: /etc/passwd\n',
+                            False, False),
+    # Stricter than the nodes: rcl would silently drop these values; trust-av says so.
+    'shadowed_by_shipped_section': ('/**:\n  ros__parameters:\n    alpha: 0.3\n', False, True),
+    'type_change_over_shipped': ('/**:\n  ros__parameters:\n    horizon_steps: 4.0\n',
+                                 False, True),
+    'section_of_no_node': ('planer:\n  ros__parameters:\n    alpha: 0.5\n', False, True),
+}
+
+# The orchestrator's per-run values, in sections that first appear in their own file.
+RUN_VALUES = {'/human_driver': {'initial_position_m': 0.0, 'initial_speed_mps': 0.0,
+                                'start_time_s': 0.0},
+              '/ego_plant': {'initial_position_m': 10.0, 'initial_speed_mps': 0.0,
+                             'start_time_s': 0.0}}
+
+PROBE = r"""
+import json, sys
+import rclpy
+from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
+from human_driver_sim.driver_node import DriverNode
+from preceding_traffic.traffic_node import TrafficNode
+from trust_av_planner.ego_plant_node import EgoPlantNode
+from trust_av_planner.planner_node import PlannerNode
+from trust_monitor.monitor_node import MonitorNode
+from trust_monitor.common.params import ParamsError
+from trust_monitor.ros.spin import init_rclpy, start_node
+
+results = {}
+for name, args in json.loads(sys.argv[1]).items():
+    try:
+        init_rclpy(['probe', '--ros-args', *args])
+    except ParamsError as err:   # every node of this command line stops here
+        results[name] = {'rcl': 'refused: ' + str(err)}
+        continue
+    verdicts = {}
+    for cls in (TrafficNode, PlannerNode, DriverNode, MonitorNode, EgoPlantNode):
+        try:
+            node = start_node(cls)
+        except (ValueError, InvalidParameterValueException,
+                ParameterUninitializedException) as err:
+            verdicts[cls.__name__] = 'refused: ' + str(err)
+            continue
+        except Exception as err:  # a crash: neither accepted nor refused in one line
+            verdicts[cls.__name__] = f'crash: {type(err).__name__}: {err}'
+            continue
+        values = {}
+        for param in ('dt_s', 'alpha'):
+            if node.has_parameter(param):
+                p = node.get_parameter(param)
+                values[param] = [p.type_.name, p.value]
+        verdicts[cls.__name__] = values
+        node.close()
+        node.destroy_node()
+    rclpy.shutdown()
+    results[name] = verdicts
+print(json.dumps(results))
+"""
+
+
+def ros_env(tmp_path: Path, domain: int) -> dict[str, str]:
+    return dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+                ROS_LOG_DIR=str(tmp_path / 'ros_log'), PYTHONUNBUFFERED='1')
+
+
+def trust_av_verdict(path: Path) -> str:
+    """What ``trust-av`` does before it starts any node: read the configuration, load the
+    trace. '' when it accepts, else its one-line message."""
+    try:
+        config = load_run_config(path)
+        load_trace(config.trace.trace, config.planner.dt_s, config.trace)
+    except ValueError as err:   # every package's error class is a ValueError
+        return str(err)
+    return ''
+
+
+@pytest.fixture(scope='module')
+def node_verdicts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, object]]:
+    tmp = tmp_path_factory.mktemp('corpus')
+    run_values = tmp / 'run_values.yaml'
+    run_values.write_text(to_params_text(RUN_VALUES))
+    cases = {}
+    for name, (text, _, _) in CORPUS.items():
+        (tmp / f'{name}.yaml').write_text(text)
+        cases[name] = ['--params-file', str(DEFAULT_PARAMS_FILE), '--params-file',
+                       str(tmp / f'{name}.yaml'), '--params-file', str(run_values)]
+    proc = subprocess.run([sys.executable, '-c', PROBE, json.dumps(cases)], capture_output=True,
+                          text=True, timeout=300, env=ros_env(tmp, 229))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    verdicts: dict[str, dict[str, object]] = json.loads(proc.stdout.strip().splitlines()[-1])
+    return verdicts
+
+
+@pytest.mark.parametrize('name', sorted(CORPUS))
+def test_trust_av_refuses_first_what_a_node_refuses(
+        name: str, node_verdicts: dict[str, dict[str, object]], tmp_path: Path) -> None:
+    text, trust_av_accepts, nodes_accept = CORPUS[name]
+    path = tmp_path / f'{name}.yaml'
+    path.write_text(text)
+    mine = trust_av_verdict(path)
+    nodes = node_verdicts[name]
+    crashes = {k: v for k, v in nodes.items() if str(v).startswith('crash')}
+    assert not crashes
+    refusals = {k: v for k, v in nodes.items() if str(v).startswith('refused')}
+    assert (mine == '') == trust_av_accepts, mine
+    assert (not refusals) == nodes_accept, refusals
+    # the rule itself: trust-av accepts => every node accepts; a node refuses => trust-av
+    # refused first
+    assert not (mine == '' and refusals)
+    for message in [mine, *map(str, refusals.values())]:
+        assert '\n' not in message and 'root:' not in message
+
+
+def test_an_integer_for_a_double_is_declared_double(
+        node_verdicts: dict[str, dict[str, object]]) -> None:
+    """``dt_s: 1`` (rcl: INTEGER) works in a node; its parameter is DOUBLE 1.0."""
+    assert node_verdicts['integer_for_double']['PlannerNode'] == {
+        'dt_s': ['DOUBLE', 1.0], 'alpha': ['DOUBLE', 0.5]}
+    assert node_verdicts['tag_ignored']['PlannerNode']['alpha'] == ['DOUBLE', 1.0]  # type: ignore[index]
+    assert node_verdicts['any_namespace']['PlannerNode']['alpha'] == ['DOUBLE', 0.25]  # type: ignore[index]
+    # what rcl does to the values trust-av refuses: silently keeps the earlier ones
+    assert node_verdicts['shadowed_by_shipped_section']['PlannerNode']['alpha'] == [  # type: ignore[index]
+        'DOUBLE', 0.5]
+
+
+def start(tmp_path: Path, domain: int, module: str, *args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen([sys.executable, '-m', module, '--ros-args', *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=ros_env(tmp_path, domain), start_new_session=True)
+
+
+def test_hand_started_nodes(tmp_path: Path) -> None:
+    """As a user starts them: an unknown parameter from -p or from a params file is one line
+    naming it and exit 2; with no params file at all a node runs on the shipped values and
+    takes an integer for a double from -p."""
+    typo = tmp_path / 'typo.yaml'
+    typo.write_text('trust_monitor:\n  ros__parameters:\n    epsilon: 3.0\n')
+    procs = {
+        'p_typo': start(tmp_path, 226, 'trust_monitor.monitor_node', '-p', 'alhpa:=3'),
+        'file_typo': start(tmp_path, 227, 'trust_monitor.monitor_node', '--params-file',
+                           str(typo)),
+        'alone': start(tmp_path, 228, 'trust_av_planner.planner_node', '-p', 'dt_s:=1'),
+    }
+    outputs = {}
+    alone = procs.pop('alone')
+    assert alone.stdout is not None
+    seen = []
+    for line in alone.stdout:   # until it is up (or ends)
+        seen.append(line)
+        if 'ready' in line:
+            break
+    os.killpg(alone.pid, signal.SIGINT)
+    rest, _ = alone.communicate(timeout=60)
+    assert alone.returncode == 0 and 'ready (lock-step)' in ''.join(seen), ''.join(seen) + rest
+    for name, proc in procs.items():
+        outputs[name] = proc.communicate(timeout=120)[0]
+        assert proc.returncode == 2, outputs[name]
+        assert 'Traceback' not in outputs[name]
+    errors = {name: [line for line in out.splitlines() if line.startswith('error:')]
+              for name, out in outputs.items()}
+    assert errors['p_typo'] == ['error: /trust_monitor: unknown parameter(s) alhpa (not a '
+                                'parameter of this node or of any node of the graph)']
+    assert errors['file_typo'] == ['error: /trust_monitor: unknown parameter(s) epsilon (not a '
+                                   'parameter of this node or of any node of the graph)']

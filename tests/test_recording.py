@@ -1,0 +1,362 @@
+"""Recordings that survive every way a run can end: the bag writer (one chunk per step, a full
+disk, repair), the outputs a run writes, the per-user domain leases. Every bag is held to
+rosbag2 Jazzy's reader rules (tests/rosbag2_rules.py). The graph-level cases (SIGTERM, a
+killed orchestrator, a foreign publisher, a full disk under a real run) are at the end."""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import assert_every_topic_complete
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
+
+from trust_av_planner.cli.outputs import prepare_outputs
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph import bag_writer
+from trust_av_planner.graph.bag_writer import BagWriter, qos_profile, repair_bag
+from trust_av_planner.graph.domains import lease_domain
+from trust_av_planner.graph.processes import GraphError
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from rosbag2_rules import check_bag_directory  # the test-side oracle module
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+QOS = qos_profile(reliable=True, transient_local=True, depth=1000)
+
+
+def odometry(stamp_ns: int, speed: float) -> bytes:
+    types = TYPESTORE.types
+    msg = types['nav_msgs/msg/Odometry'](
+        header=types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=stamp_ns // 10**9,
+                                                      nanosec=stamp_ns % 10**9),
+            frame_id='odom'),
+        child_frame_id='ego',
+        pose=types['geometry_msgs/msg/PoseWithCovariance'](
+            pose=types['geometry_msgs/msg/Pose'](
+                position=types['geometry_msgs/msg/Point'](x=speed, y=0.0, z=0.0),
+                orientation=types['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0,
+                                                                  w=1.0)),
+            covariance=np.zeros(36)),
+        twist=types['geometry_msgs/msg/TwistWithCovariance'](
+            twist=types['geometry_msgs/msg/Twist'](
+                linear=types['geometry_msgs/msg/Vector3'](x=speed, y=0.0, z=0.0),
+                angular=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0)),
+            covariance=np.zeros(36)))
+    return bytes(TYPESTORE.serialize_cdr(msg, 'nav_msgs/msg/Odometry'))
+
+
+def record(writer: BagWriter, steps: int, topics: tuple[str, ...] = ('/a/odom', '/b/odom'),
+           *, finish: bool = True) -> None:
+    for topic in topics:
+        writer.add_topic(topic, 'nav_msgs/msg/Odometry', QOS)
+    for step in range(steps):
+        for topic in topics:
+            writer.write(topic, odometry((100 + step) * 10**9, float(step)))
+        if not writer.end_step():
+            return
+    if finish:
+        writer.finish()
+
+
+def counts(bag: Path) -> dict[str, int]:
+    with Reader(bag) as reader:
+        return {c.topic: c.msgcount for c in reader.connections}
+
+
+def test_bag_writer_writes_a_rosbag2_bag_directory(tmp_path: Path) -> None:
+    bag = tmp_path / 'run'
+    record(BagWriter(bag), 20)
+    assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run.mcap']
+    assert check_bag_directory(bag) == []
+    assert counts(bag) == {'/a/odom': 20, '/b/odom': 20}
+    with pytest.raises(bag_writer.BagWriteError, match='exists already'):
+        BagWriter(bag)
+
+
+def test_every_step_is_on_disk_before_the_bag_is_finished(tmp_path: Path) -> None:
+    """A writer that never finishes (SIGKILL) leaves every closed step in the file; repair
+    turns it into a complete bag, and a chunk cut in the middle is dropped whole."""
+    bag = tmp_path / 'killed'
+    record(BagWriter(bag), 10, finish=False)          # no summary, no metadata.yaml
+    assert not (bag / 'metadata.yaml').exists()
+    assert check_bag_directory(bag)                    # not readable as it is
+    cut = tmp_path / 'cut'
+    shutil.copytree(bag, cut)
+    mcap = cut / 'killed.mcap'
+    mcap.rename(cut / 'cut.mcap')
+    with (cut / 'cut.mcap').open('r+b') as handle:
+        handle.truncate(handle.seek(0, 2) - 200)       # inside the last step's chunk
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'repair-bag',
+                           str(bag)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert check_bag_directory(bag) == []
+    assert counts(bag) == {'/a/odom': 10, '/b/odom': 10}
+    assert sorted(p.name for p in bag.iterdir()) == ['killed.mcap', 'metadata.yaml']
+    assert repair_bag(cut) == 18                       # 9 whole steps of 2 messages
+    assert check_bag_directory(cut) == []
+
+
+def test_repair_bag_on_nothing_readable_is_one_line(tmp_path: Path) -> None:
+    junk = tmp_path / 'junk.mcap'
+    junk.write_bytes(b'\x89MCAP0\r\n' + b'\x00' * 7)
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'repair-bag',
+                           str(junk)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and proc.stderr.count('\n') == 1
+    assert 'no readable MCAP channels' in proc.stderr
+
+
+def test_a_full_disk_keeps_every_complete_step(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """The write of a step fails half-way: the partial step is cut off, the reserve pays for
+    the summary and metadata.yaml, the bag holds every complete step, nothing else is left."""
+    original = bag_writer._WholeWrites.write
+    bag = tmp_path / 'full'
+    capacity = 120_000                                 # the disk: the MCAP plus the reserve
+
+    def quota(handle: bag_writer._WholeWrites, data: bytes) -> int:
+        reserve = bag / bag_writer.RESERVE_NAME
+        used = handle.position + (reserve.stat().st_size if reserve.exists() else 0)
+        if used + len(data) > capacity:
+            original(handle, bytes(data)[:max(capacity - used, 0)])   # a short write first
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return original(handle, data)
+
+    monkeypatch.setattr(bag_writer._WholeWrites, 'write', quota)
+    writer = BagWriter(bag)
+    record(writer, 200, finish=False)
+    assert writer.finished and 'disk full' in writer.disk_full
+    assert 0 < writer.steps < 200
+    assert check_bag_directory(bag) == []
+    assert counts(bag) == {'/a/odom': writer.steps, '/b/odom': writer.steps}
+    assert sorted(p.name for p in bag.iterdir()) == ['full.mcap', 'metadata.yaml']
+    writer.finish()                                    # idempotent
+
+
+@pytest.fixture
+def small_disk(tmp_path: Path) -> Iterator[Path]:
+    """A real 200 kB tmpfs (needs the right to mount: skipped otherwise)."""
+    mount = tmp_path / 'disk'
+    mount.mkdir()
+    done = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=200k', 'tmpfs', str(mount)],
+                          capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        pytest.skip(f'cannot mount a tmpfs here: {done.stderr.strip()}')
+    try:
+        yield mount
+    finally:
+        subprocess.run(['umount', '--lazy', str(mount)], check=False)
+
+
+def test_a_real_full_disk(small_disk: Path) -> None:
+    bag = small_disk / 'run'
+    writer = BagWriter(bag)
+    record(writer, 10_000, finish=False)
+    assert 'disk full' in writer.disk_full and writer.steps > 10
+    assert check_bag_directory(bag) == []
+    assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run.mcap']
+
+
+def test_outputs_are_checked_before_a_run(tmp_path: Path) -> None:
+    with pytest.raises(TrustAvPlannerError, match=r'not an \.mcap file'):
+        prepare_outputs(tmp_path / 'x.mcap', overwrite=True)
+    bag = tmp_path / 'run'
+    (tmp_path / 'run.png').write_bytes(b'old plot')
+    with pytest.raises(TrustAvPlannerError, match=r'run\.png exists already'):
+        prepare_outputs(bag, overwrite=False)
+    (tmp_path / 'run.png').unlink()
+    (tmp_path / 'run.logs').symlink_to(tmp_path / 'nowhere')      # dangling
+    with pytest.raises(TrustAvPlannerError, match='is a symbolic link'):
+        prepare_outputs(bag, overwrite=True)
+    (tmp_path / 'run.logs').unlink()
+    bag.mkdir()
+    (bag / 'thesis.tex').write_text('precious')
+    with pytest.raises(TrustAvPlannerError, match='not a bag directory'):
+        prepare_outputs(bag, overwrite=True)
+    assert (bag / 'thesis.tex').read_text() == 'precious'
+    shutil.rmtree(bag)
+    record(BagWriter(bag), 2)
+    (tmp_path / 'run.png').write_bytes(b'old plot')
+    outputs = prepare_outputs(bag, overwrite=True)
+    assert not outputs.bag.exists() and not outputs.plot.exists()
+
+
+def test_leases_never_write_through_a_planted_link(tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv('TRUST_AV_DOMAIN_RANGE', '1-1')
+    leases = tmp_path / 'leases'
+    target = tmp_path / 'precious.txt'
+    target.write_text('keep me')
+    with lease_domain(directory=leases) as domain:
+        assert (leases / f'{domain}.lock').exists()
+    assert oct(os.stat(leases).st_mode & 0o777) == '0o700'
+    (leases / '1.lock').unlink()
+    (leases / '1.lock').symlink_to(target)
+    with pytest.raises(GraphError, match=r'1\.lock: a lease file is a symbolic link'), \
+            lease_domain(directory=leases):
+        pass
+    assert target.read_text() == 'keep me'
+
+
+def test_a_lease_directory_that_is_not_ours_is_refused(tmp_path: Path) -> None:
+    link = tmp_path / 'link'
+    link.symlink_to(tmp_path)
+    with pytest.raises(GraphError, match='not a directory'), lease_domain(directory=link):
+        pass
+    loose = tmp_path / 'loose'
+    loose.mkdir(mode=0o777)
+    os.chmod(loose, 0o777)
+    with lease_domain(directory=loose):
+        assert oct(os.stat(loose).st_mode & 0o777) == '0o700'
+    if os.getuid() != 0:
+        pytest.skip('changing the owner of the directory needs root')
+    other = tmp_path / 'other'
+    other.mkdir(mode=0o700)
+    os.chown(other, 12345, 12345)
+    with pytest.raises(GraphError, match='belongs to uid 12345'), lease_domain(directory=other):
+        pass
+
+
+def test_a_domain_with_someone_else_on_it_is_skipped(tmp_path: Path) -> None:
+    seen = []
+
+    def foreign(domain: int) -> str:
+        seen.append(domain)
+        return 'nodes /intruder' if len(seen) == 1 else ''
+
+    with lease_domain(foreign, directory=tmp_path / 'leases') as domain:
+        assert domain == seen[1] != seen[0]
+    with pytest.raises(GraphError, match=r'no free ROS domain id .*not private: '), \
+            lease_domain(lambda _domain: 'nodes /x', directory=tmp_path / 'leases2'):
+        pass
+
+
+# --- the whole graph ------------------------------------------------------------------------
+
+def run_command(bag: Path, steps: int = 600, *extra: str) -> list[str]:
+    return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
+            '--max-steps', str(steps), '--bag', str(bag), '--no-progress', *extra]
+
+
+def wait_for_steps(bag: Path, size: int = 90_000, proc: subprocess.Popen[str] | None = None,
+                   timeout_s: float = 120.0) -> None:
+    mcap = bag / f'{bag.name}.mcap'
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and not (mcap.exists() and mcap.stat().st_size > size):
+        assert proc is None or proc.poll() is None, proc.communicate()
+        time.sleep(0.1)
+
+
+def test_sigterm_finishes_the_bag_like_sigint(tmp_path: Path) -> None:
+    bag = tmp_path / 'term'
+    proc = subprocess.Popen(run_command(bag), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    wait_for_steps(bag, proc=proc)
+    proc.send_signal(signal.SIGTERM)
+    _out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert err.count('\n') == 1 and 'stopped by SIGTERM' in err
+    assert check_bag_directory(bag) == []
+    assert 0 < assert_every_topic_complete(bag) < 600
+
+
+def test_a_killed_orchestrator_leaves_a_finished_bag_and_no_process(tmp_path: Path) -> None:
+    bag = tmp_path / 'orphan'
+    proc = subprocess.Popen(run_command(bag), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    wait_for_steps(bag, proc=proc)
+    nodes = [int(p.name) for p in Path('/proc').iterdir() if p.name.isdigit()
+             and _parent(int(p.name)) == proc.pid]
+    assert len(nodes) == 6
+    proc.kill()
+    proc.communicate(timeout=60)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(_alive(pid) for pid in nodes):
+        time.sleep(0.1)
+    assert not any(_alive(pid) for pid in nodes)
+    assert (bag / 'metadata.yaml').exists()               # finished by the recorder itself
+    assert check_bag_directory(bag) == []
+    assert 0 < assert_every_topic_complete(bag) < 600
+
+
+def _parent(pid: int) -> int:
+    try:
+        return int(Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return -1
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != 'Z'
+
+
+def intruder(domain: int) -> subprocess.Popen[str]:
+    """Another user's process on ``domain``: publishes trust -999 on the graph's topic."""
+    code = ('import rclpy, time\n'
+            'from geometry_msgs.msg import Vector3Stamped\n'
+            'from trust_monitor.ros.qos import QOS\n'
+            'rclpy.init()\n'
+            "node = rclpy.create_node('intruder')\n"
+            "pub = node.create_publisher(Vector3Stamped, '/trust_monitor/trust', QOS['STEP'])\n"
+            'msg = Vector3Stamped(); msg.vector.z = -999.0\n'
+            "print('ready', flush=True)\n"
+            'while True:\n'
+            '    pub.publish(msg); time.sleep(0.2)\n')
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    process = subprocess.Popen([sys.executable, '-c', code], env=env, text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+    assert process.stdout is not None and process.stdout.readline() == 'ready\n'
+    return process
+
+
+def test_a_foreign_publisher_stops_the_run_and_a_foreign_domain_is_skipped(
+        tmp_path: Path) -> None:
+    """Domain 230 has someone on it: a run limited to 230-231 takes 231. Then the intruder
+    moves onto 231 while the run records: the run stops with one line naming the topic and
+    the node, exit 2, and the bag is finished."""
+    env = dict(os.environ, TRUST_AV_DOMAIN_RANGE='230-231')
+    first = intruder(230)
+    second = None
+    try:
+        time.sleep(1.0)                                  # discovered by then
+        bag = tmp_path / 'intruded'
+        proc = subprocess.Popen(run_command(bag), stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, env=env)
+        wait_for_steps(bag, proc=proc)
+        second = intruder(231)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        for process in (first, second):
+            if process is not None:
+                process.kill()
+                process.wait()
+    assert proc.returncode == 2, out + err
+    assert err.count('\n') == 1, err
+    assert 'foreign publisher on /trust_monitor/trust: node /intruder' in err
+    assert 'domain 231' in err
+    assert check_bag_directory(bag) == []              # finished (it may hold the intruder's
+                                                        # messages of the last second)
+
+
+def test_a_full_disk_under_a_real_run_is_one_line(small_disk: Path) -> None:
+    bag = small_disk / 'run'
+    proc = subprocess.run(run_command(bag), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert proc.stderr.count('\n') == 1 and 'disk full' in proc.stderr, proc.stderr
+    assert check_bag_directory(bag) == []
+    assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run.mcap']

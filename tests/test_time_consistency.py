@@ -1,0 +1,233 @@
+"""Time consistency: trust is defined per second (DESIGN section 1, "time step outside
+lock-step"; docs/MODEL.md, "Time consistency")."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import numpy as np
+import pytest
+from conftest import shipped_trace
+
+from preceding_traffic.traces import truncate
+from trust_av_planner.nmpc import TrustAwareNmpc, prediction_grid
+from trust_av_planner.predictors import Observation
+from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
+from trust_av_planner.predictors.sampling import ModelGridPredictor
+from trust_av_planner.preview import LeadPreview, hold_on_grid
+from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
+from trust_av_planner.system.config import load_run_config
+from trust_monitor.common.grids import hold_at, interp_at
+from trust_monitor.common.kinematics import rollout
+from trust_monitor.trust_model import (
+    TrustConfig,
+    TrustEstimator,
+    explicability_bound,
+    performance,
+    propagate_trust,
+    trust_input,
+    trust_step,
+)
+
+CONFIG = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,
+                     trust_initial=0.0)
+
+
+@pytest.mark.parametrize('score', [0.0, 0.01, 0.1, math.atanh(0.2) + 1e-6, 0.6])
+def test_one_second_step_is_exactly_eq_10(score: float) -> None:
+    """T + delta * 1 s * u_T is bit for bit the paper's T + delta * u_T."""
+    paper = 2.5 + 0.1 * trust_input(performance(score), 0.8)
+    assert trust_step(2.5, score, CONFIG, 1.0) == paper
+    assert trust_step(2.5, score, CONFIG) == paper
+
+
+@pytest.mark.parametrize('rate_hz', [2, 10, 50])
+def test_trust_per_second_does_not_depend_on_the_rate(rate_hz: int) -> None:
+    """The same E held for 1 s gives the same trust whether updated once or rate_hz times."""
+    estimator = TrustEstimator(CONFIG)
+    for _ in range(rate_hz):
+        estimator.step([0.3, 0.2, 0.1], [0.0, 0.0, 0.0], dt_s=1.0 / rate_hz)
+    once = TrustEstimator(CONFIG)
+    once.step([0.3, 0.2, 0.1], [0.0, 0.0, 0.0], dt_s=1.0)
+    assert estimator.trust == pytest.approx(once.trust, rel=1e-12)
+    assert once.trust > 0.0
+
+
+def test_estimator_refuses_negative_time() -> None:
+    with pytest.raises(ValueError, match='dt_s'):
+        TrustEstimator(CONFIG).step([0.0], [0.0], dt_s=-0.1)
+
+
+@pytest.mark.parametrize('trust', [-0.02, -0.005, 0.0, 0.003, 0.05, 3.0])
+@pytest.mark.parametrize('trust_min', [0.0, 0.2])
+def test_bound_on_a_fine_grid_is_the_propagated_per_second_rule(trust: float,
+                                                                trust_min: float) -> None:
+    """E <= E_max exactly when every T^k >= T_min on a 0.1 s grid of 30 steps."""
+    bound = explicability_bound(trust, trust_min, CONFIG, 30, 0.1)
+    for score in np.linspace(0.0, 0.999, 1500):
+        propagated_ok = min(propagate_trust(trust, float(score), CONFIG, 30, 0.1)) >= trust_min
+        bound_ok = bound is not None and score <= bound
+        if abs(score - (bound or 0.0)) > 1e-9:
+            assert propagated_ok == bound_ok, (trust, trust_min, score, bound)
+
+
+def test_bound_over_the_same_seconds_agrees_when_trust_is_above_t_min() -> None:
+    """Above T_min only the end of the horizon matters: 3 s is 3 s on either grid."""
+    for trust in (0.2, 0.21, 0.25, 3.0):
+        assert explicability_bound(trust, 0.2, CONFIG, 30, 0.1) == pytest.approx(
+            explicability_bound(trust, 0.2, CONFIG, 3, 1.0), rel=1e-12)
+
+
+# --- the prediction grid and the NMPC at 10 Hz ---------------------------------------------
+
+def _planner(run_config, **changes):  # type: ignore[no-untyped-def]
+    return dataclasses.replace(run_config.planner, speed_max_mps=30.0, **changes)
+
+
+def test_prediction_grid_is_the_paper_at_1_hz_and_the_period_at_10_hz(run_config) -> None:  # type: ignore[no-untyped-def]
+    planner = _planner(run_config)
+    assert prediction_grid(planner) == (1.0, 3)
+    assert prediction_grid(planner, 1.0) == (1.0, 3)
+    assert prediction_grid(planner, 0.1) == (0.1, 30)
+    assert prediction_grid(_planner(run_config, prediction_grid='model_step'), 0.1) == (1.0, 3)
+    with pytest.raises(ValueError, match='steps'):
+        prediction_grid(planner, 0.001)
+
+
+def test_near_standstill_the_1_s_prediction_falls_back_the_period_grid_does_not(
+        run_config) -> None:  # type: ignore[no-untyped-def]
+    """Creeping at 0.1 m/s 2 cm beyond d_s behind a stopped lead: the 1 s grid predicts
+    4.92 m at k = 1 whatever the plan and falls back; the 0.1 s grid brakes in time."""
+    planner = _planner(run_config)
+    coarse = TrustAwareNmpc(planner, run_config.trust)
+    result = coarse.step(5.02, 0.1, np.zeros(3), np.zeros(3), 5.0)
+    assert result.fallback and 'k=1' in result.status
+    fine = TrustAwareNmpc(planner, run_config.trust, 0.1)
+    result = fine.step(5.02, 0.1, np.zeros(30), np.zeros(30), 5.0)
+    assert result.success, result.status
+    gaps, speeds = rollout(5.02, 0.1, [0.0] * 30, result.plan_mps2.tolist(), 0.1)
+    assert min(gaps) >= 5.0 - 1e-6 and min(speeds) >= -1e-9
+
+
+def test_standstill_corner_on_the_fine_grid_is_solved(run_config) -> None:  # type: ignore[no-untyped-def]
+    """Stopped at d_s behind a stopped lead that starts to move after 1 s: every gap and speed
+    bound of the first second pins u = 0 from both sides (the case qrqp stalled on for
+    20-300 ms at N = 30)."""
+    nmpc = TrustAwareNmpc(_planner(run_config), run_config.trust, 0.1)
+    lead = np.concatenate([np.zeros(10), np.linspace(0.1, 2.0, 20)])
+    for expected in (np.zeros(30), np.full(30, 1e-18)):
+        result = nmpc.step(5.0, 0.0, lead, expected, 0.4)
+        assert result.success, result.status
+        assert np.allclose(result.plan_mps2[:9], 0.0, atol=1e-6)
+
+
+# --- grids, samples and previews ------------------------------------------------------------
+
+def test_hold_and_interp_on_another_grid() -> None:
+    plan = np.array([1.0, 2.0, 3.0])
+    assert hold_at(np.array([0.0, 1.0, 2.0]), plan, 1.0, 3).tolist() == plan.tolist()
+    held = hold_at(np.array([0.0, 1.0, 2.0]), plan, 0.1, 30)
+    assert held[:10].tolist() == [1.0] * 10 and held[10:20].tolist() == [2.0] * 10
+    assert held[29] == 3.0
+    assert hold_on_grid(plan, 1.0, 0.5, 4, offset_s=0.5).tolist() == [1.0, 2.0, 2.0, 3.0]
+    assert interp_at(np.array([0.0, 1.0]), np.array([0.0, 2.0]), 0.25, 5).tolist() == [
+        0.0, 0.5, 1.0, 1.5, 2.0]
+    with pytest.raises(ValueError, match='increase'):
+        hold_at(np.array([1.0, 0.0]), np.array([1.0, 2.0]), 0.1, 3)
+
+
+def test_estimator_sees_aligned_1_s_samples_at_10_hz() -> None:
+    """Ticks of 0.1 s: the CA estimator gets the mean acceleration of the last whole second."""
+    sampler = ModelGridPredictor(ConstantAccelerationPredictor(3, -3.0, 3.0), 1.0, 1)
+    assert sampler.predict(0.0)[0].tolist() == [0.0, 0.0, 0.0]
+    for k in range(1, 26):
+        accel = 1.0 if k <= 10 else (0.0 if k <= 15 else 2.0)  # applied over ((k-1)/10, k/10]
+        seen = Observation(gap_m=10.0, relative_speed_mps=0.0, time_headway_s=1.0,
+                           av_accel_mps2=accel)
+        sampler.observe(seen, k / 10, 0.1)
+        if k == 9:  # not a whole second of history yet
+            assert sampler.predict(0.9)[0].tolist() == [0.0, 0.0, 0.0]
+        if k == 13:  # the second (0, 1]: all 1.0, held until t = 2
+            plan, age = sampler.predict(1.3)
+            assert plan.tolist() == pytest.approx([1.0] * 3) and age == pytest.approx(0.3)
+    plan, age = sampler.predict(2.5)
+    assert age == pytest.approx(0.5)
+    assert plan.tolist() == pytest.approx([1.0] * 3)  # mean over (1, 2]: 5 x 0 + 5 x 2 = 1
+
+
+def test_lead_preview_from_odometry() -> None:
+    speed = LeadPreview('constant_speed', 1.0)
+    speed.observe(0.0, 10.0)
+    assert speed.preview(0.1, 3).tolist() == [10.0, 10.0, 10.0]
+    accel = LeadPreview('constant_acceleration', 1.0)
+    for k in range(21):
+        accel.observe(k / 10, 10.0 - 2.0 * k / 10)  # braking at 2 m/s^2
+    assert accel.acceleration_mps2() == pytest.approx(-2.0)
+    preview = accel.preview(1.0, 6)
+    assert preview.tolist() == pytest.approx([6.0, 4.0, 2.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match='no lead'):
+        LeadPreview('constant_speed', 1.0).preview(0.1, 3)
+
+
+# --- the closed loop at 1 Hz and 10 Hz ------------------------------------------------------
+
+WINDOW_S = 60
+"""The test compares the first 60 s of each trace (a standstill start, the first
+accelerations and, on US06, a stop): 8 loops at 10 Hz stay within seconds. The whole traces:
+``python scripts/rate_table.py`` (docs/RESULTS.md, "Control rate")."""
+CASES = [(trace, predictor, alpha) for trace in ('us06', 'commute_am')
+         for predictor in ('ca', 'gru') for alpha in (0.0, 1.0)]
+OUTSIDE_15_PERCENT = {('us06', 'ca', 0.0, 'mean_explicability'),
+                      ('us06', 'gru', 0.0, 'mean_explicability'),
+                      ('us06', 'gru', 0.0, 'rmse_mps2'),
+                      ('commute_am', 'ca', 1.0, 'mean_explicability'),
+                      ('commute_am', 'gru', 1.0, 'mean_explicability')}
+"""Where the 10 Hz loop's mean E or RMSE differs from 1 Hz by more than 15 % (measured;
+docs/RESULTS.md explains why: the 10 Hz plans are smoother, E is not a per-second rate)."""
+
+
+@functools.cache
+def rate_pair(trace: str, predictor: str, alpha: float) -> tuple[SimResult, SimResult]:
+    """The same window at 1 Hz and at 10 Hz (cached for the module)."""
+    config = load_run_config(overrides={'planner': {'alpha': alpha, 'predictor': predictor},
+                                        'preceding_traffic': {'trace': trace}})
+    return tuple(simulate(config, truncate(control_trace(config, rate), round(WINDOW_S * rate)))
+                 for rate in (1.0, 10.0))  # type: ignore[return-value]
+
+
+def test_one_hz_is_the_paper_loop(run_config) -> None:  # type: ignore[no-untyped-def]
+    """--control-rate-hz 1 is the default loop, record for record."""
+    config = load_run_config(overrides={'preceding_traffic': {'trace': 'us06'}})
+    default = simulate(config, truncate(shipped_trace('us06'), 40))
+    at_one = simulate(config, truncate(control_trace(config, 1.0), 40))
+    def untimed(result: SimResult) -> list[object]:
+        return [dataclasses.replace(r, solve_time_s=0.0, driver_solve_time_s=0.0)
+                for r in result.records]
+
+    assert untimed(default) == untimed(at_one)
+
+
+@pytest.mark.parametrize(('trace', 'predictor', 'alpha'), CASES)
+def test_ten_hz_keeps_trust_and_safety(trace: str, predictor: str, alpha: float) -> None:
+    one, ten = rate_pair(trace, predictor, alpha)
+    assert len(ten.records) == 10 * len(one.records)
+    m1, m10 = one.metrics, ten.metrics
+    assert m10.final_trust == pytest.approx(m1.final_trust, rel=0.03)
+    assert m10.unsafe_steps == 0
+    assert m10.fallback_steps == 0  # none at all, so none at a standstill
+    stopped = [r for r in ten.records if r.av_speed_mps < 0.05 and r.traffic_speed_mps < 0.05]
+    assert len(stopped) >= 10, 'the window holds a standstill'
+    assert min(r.av_gap_m for r in ten.records) >= 5.0 - 1e-6
+
+
+@pytest.mark.parametrize('metric', ['mean_explicability', 'rmse_mps2'])
+@pytest.mark.parametrize(('trace', 'predictor', 'alpha'), CASES)
+def test_ten_hz_mean_e_and_rmse_within_15_percent(trace: str, predictor: str, alpha: float,
+                                                 metric: str, request) -> None:  # type: ignore[no-untyped-def]
+    if (trace, predictor, alpha, metric) in OUTSIDE_15_PERCENT:
+        request.applymarker(pytest.mark.xfail(strict=True, reason='measured outside 15 %: '
+                                              'docs/RESULTS.md, "Control rate"'))
+    one, ten = rate_pair(trace, predictor, alpha)
+    assert getattr(ten.metrics, metric) == pytest.approx(getattr(one.metrics, metric), rel=0.15)
