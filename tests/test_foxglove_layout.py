@@ -32,7 +32,7 @@ STEPS = 20
 
 @pytest.fixture(scope='module')
 def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp('layout') / 'run.mcap'
+    path = tmp_path_factory.mktemp('layout') / 'run'
     proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
                            'us06', '--max-steps', str(STEPS), '--bag', str(path),
                            '--no-progress'], capture_output=True, text=True, timeout=300)

@@ -82,8 +82,8 @@ def test_recording_is_a_rosbag2_bag_by_rosbag2s_rules(graph_run: tuple[Path, str
     assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'us06.mcap']
     assert check_bag_directory(bag) == []
     with Reader(bag) as reader:
-        assert reader.message_count == STEPS * len(RECORDED) + 2
-        assert {c.topic for c in reader.connections} == RECORDED
+        assert reader.message_count == sum(RECORDED.values())
+        assert {c.topic for c in reader.connections} == set(RECORDED)
 
 
 def test_bag_reads_back_with_rosbags(graph_run: tuple[Path, str]) -> None:
