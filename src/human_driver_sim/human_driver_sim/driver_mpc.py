@@ -54,6 +54,9 @@ class DriverConfig:
     solver_max_iter: int
     fallback_gap_gain_per_s2: float
     fallback_speed_gain_per_s: float
+    desired_standstill_gap_m: float
+    """d_s inside the relative-distance feature f_rd (fitted, docs/DRIVER_IRL.md), m; the
+    gap constraint d_H >= ``standstill_gap_m`` (the paper's safety d_s) is separate."""
 
     def __post_init__(self) -> None:
         require(self.dt_s > 0.0, f'dt_s must be > 0, got {self.dt_s}')
@@ -70,6 +73,8 @@ class DriverConfig:
                 'need accel_min_mps2 < 0 < accel_max_mps2')
         require(self.gap_slack_weight > 0.0, 'gap_slack_weight must be > 0')
         require(self.solver_max_iter >= 1, 'solver_max_iter must be >= 1')
+        require(self.desired_standstill_gap_m >= 0.0,
+                f'desired_standstill_gap_m must be >= 0, got {self.desired_standstill_gap_m}')
 
     @property
     def weights(self) -> np.ndarray:
@@ -126,7 +131,7 @@ class DriverMpc:
         u_list = [u[k] for k in range(n)]
         e_list = [expected[k] for k in range(n)]
         feats = features(gap0, speed0, av_speed0, u_list, e_list, dt_s=config.dt_s,
-                         standstill_gap_m=config.standstill_gap_m,
+                         standstill_gap_m=config.desired_standstill_gap_m,
                          time_headway_s=config.time_headway_s,
                          desired_speed_mps=config.speed_max_mps)
         cost = ca.dot(weights, ca.vertcat(*feats)) + config.gap_slack_weight * ca.sum1(slack)

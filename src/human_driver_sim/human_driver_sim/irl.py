@@ -38,7 +38,7 @@ def _gradient_function(config: DriverConfig) -> ca.Function:
     state = ca.SX.sym('x', 3)
     feats = features(state[0], state[1], state[2], [u[k] for k in range(n)],
                      [expected[k] for k in range(n)], dt_s=config.dt_s,
-                     standstill_gap_m=config.standstill_gap_m,
+                     standstill_gap_m=config.desired_standstill_gap_m,
                      time_headway_s=config.time_headway_s,
                      desired_speed_mps=config.speed_max_mps)
     jac = ca.jacobian(ca.vertcat(*feats), u)  # 4 x N

@@ -96,6 +96,8 @@ DESCRIPTIONS = {
     'weight_desired_speed': 'driver feature weight: desired speed',
     'weight_relative_speed': 'driver feature weight: relative speed',
     'weight_relative_distance': 'driver feature weight: relative distance',
+    'desired_standstill_gap_m': 'driver: standstill gap d_s inside the relative-distance '
+                                'feature (fitted; the gap constraint uses standstill_gap_m), m',
     'gap_slack_weight': 'penalty weight on violating the driver gap bound',
     'clock_mode': 'lockstep (sim time, inputs paired by stamp) or wall (timer, latest inputs)',
     'control_rate_hz': 'wall mode: control loop rate, Hz',
