@@ -28,6 +28,11 @@ class FollowingPair:
         leader_speed_mps: Leader speed per sample, m/s.
         follower_speed_mps: Follower speed per sample, m/s.
         gap_m: Bumper-to-bumper gap per sample, m.
+        dataset: ``openacc``, ``ngsim`` or '' (unknown).
+        pair_key: The leader->follower pair this segment belongs to (several segments when
+            a pair was split around an artefact); '' means ``name``.
+        driver: The follower's identity (hold-out by driver); '' means unknown.
+        start_s: Time of the first sample from the start of the recording, s.
     """
 
     name: str
@@ -35,6 +40,15 @@ class FollowingPair:
     leader_speed_mps: np.ndarray
     follower_speed_mps: np.ndarray
     gap_m: np.ndarray
+    dataset: str = ''
+    pair_key: str = ''
+    driver: str = ''
+    start_s: float = 0.0
+
+    @property
+    def key(self) -> str:
+        """The pair's identity (``pair_key`` or ``name``)."""
+        return self.pair_key or self.name
 
 
 def read_openacc(path: Path, *, dt_s: float = 1.0) -> list[FollowingPair]:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from human_driver_sim import longitudinal
 from human_driver_sim.car_following import FollowingPair
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc, features
 
@@ -92,7 +93,8 @@ def demonstrations(pair: FollowingPair, horizon_steps: int) -> list[Demonstratio
 
 
 def replay_mpc(config: DriverConfig, pair: FollowingPair) -> tuple[np.ndarray, np.ndarray]:
-    """Open-loop replay: our driver MPC follows the recorded leader from the recorded start.
+    """Open-loop replay: our driver MPC follows the recorded leader from the recorded start,
+    integrated with explicit Euler like the MPC's prediction and the simulator.
 
     Returns:
         (gap_m, speed_mps) per sample.
@@ -108,10 +110,9 @@ def replay_mpc(config: DriverConfig, pair: FollowingPair) -> tuple[np.ndarray, n
         lead_accel = (lead[k] - lead[k - 1]) / dt if k > 0 else 0.0
         plan = mpc.solve(float(gap[k]), float(speed[k]), float(lead[k]),
                          np.full(config.horizon_steps, lead_accel)).plan_mps2
-        new_speed = max(0.0, speed[k] + float(plan[0]) * dt)
-        travelled = 0.5 * (speed[k] + new_speed) * dt
-        gap[k + 1] = gap[k] + 0.5 * (lead[k] + lead[k + 1]) * dt - travelled
-        speed[k + 1] = new_speed
+        gap[k + 1], new_speed = longitudinal.step(float(gap[k]), float(speed[k]),
+                                                  float(lead[k]), float(plan[0]), dt)
+        speed[k + 1] = max(0.0, new_speed)
     return gap, speed
 
 
