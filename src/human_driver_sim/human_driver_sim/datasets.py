@@ -454,3 +454,24 @@ def load_directory(directory: Path, fmt: str | None = None, *, dt_s: float = 1.0
     if not pairs:
         raise CarFollowingDataError(f'{directory}: no pair left after cleaning')
     return pairs
+
+
+def split_by_follower(pairs: Sequence[FollowingPair]) -> tuple[list[FollowingPair],
+                                                               list[FollowingPair]]:
+    """NGSIM fit / held-out split by vehicle: odd follower IDs are held out.
+
+    Every pair is kept whole (all its segments on one side), and a held-out driver is never
+    a follower in the fit set (NGSIM IDs are assigned in order of entry, so the parity is
+    unrelated to driving).
+
+    Raises:
+        CarFollowingDataError: A driver that is not ``ngsim:<integer ID>``.
+    """
+    fit, held_out = [], []
+    for pair in pairs:
+        ident = pair.driver.removeprefix('ngsim:')
+        if not ident.isdigit():
+            raise CarFollowingDataError(f'{pair.name}: driver {pair.driver!r} is not an '
+                                        f'NGSIM vehicle ID')
+        (held_out if int(ident) % 2 else fit).append(pair)
+    return fit, held_out
