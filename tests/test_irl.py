@@ -71,12 +71,12 @@ def test_bilevel_refinement_recovers_the_time_headway() -> None:
 
 
 def test_params_file_driver_is_the_pooled_fit() -> None:
-    """Issue 6: the default config's human driver is the shipped IRL fit (W and tau_H)."""
+    """Issue 6: the default config's human driver is the shipped fit (W, tau_H and d_s)."""
     import yaml
 
     from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
     from trust_av_planner.config import load_run_config
     pooled = yaml.safe_load(DRIVER_FIT_FILE.read_text())['pooled']
     driver = load_run_config().driver
-    for name in (*WEIGHT_NAMES, 'time_headway_s'):
+    for name in (*WEIGHT_NAMES, 'time_headway_s', 'desired_standstill_gap_m'):
         assert getattr(driver, name) == pooled[name], name

@@ -396,17 +396,18 @@ def read_ngsim_pairs(paths: Sequence[Path], *, dt_s: float = 1.0,
 
 
 def detect_format(directory: Path) -> str:
-    """``openacc`` or ``ngsim``, from the first CSV's first field.
+    """``openacc`` or ``ngsim``: the layout of the first CSV that has one of them.
 
     Raises:
-        CarFollowingDataError: Not a directory, no CSV, or neither format.
+        CarFollowingDataError: Not a directory, no CSV, or no file in either format.
     """
     files = csv_files(directory)
-    first = _read_rows(files[0])
-    if first and first[0] and first[0][0].strip() == 't1':
-        return 'ngsim'
-    if any(r and r[0].strip() == 'Time' for r in first[:20]):
-        return 'openacc'
+    for path in files:
+        rows = _read_rows(path)
+        if rows and rows[0] and rows[0][0].strip() == 't1':
+            return 'ngsim'
+        if any(r and r[0].strip() == 'Time' for r in rows[:20]):
+            return 'openacc'
     raise CarFollowingDataError(f'{files[0]}: neither OpenACC ("Time" header after metadata) '
                                 f'nor NGSIM chain ("t1" header)')
 

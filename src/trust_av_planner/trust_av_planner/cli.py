@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     'trust_av_planner.cmd_bags',
     'trust_av_planner.cmd_train_gru',
     'trust_av_planner.cmd_fit_driver',
+    'trust_av_planner.cmd_eval_driver',
 )
 """Modules that add a subcommand (in help order)."""
 
