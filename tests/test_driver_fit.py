@@ -197,8 +197,9 @@ def test_mpc_fit_recovers_headway_and_standstill_gap() -> None:
     runs = make_runs(pairs, 'window')
     start = {'weight_desired_speed': 0.01, 'weight_relative_speed': 0.5,
              'weight_relative_distance': 0.1, 'time_headway_s': 1.8,
-             'desired_standstill_gap_m': 3.0}
-    found = fit_mpc(CONFIG, [runs], starts=[start], iterations=150)
+             'desired_standstill_gap_m': 9.5}
+    other = {**start, 'time_headway_s': 0.8, 'desired_standstill_gap_m': 5.5}
+    found = fit_mpc(CONFIG, [runs], starts=[start, other], iterations=150)
     assert found.params['time_headway_s'] == pytest.approx(1.3, rel=0.05), found.params
     assert found.params['desired_standstill_gap_m'] == pytest.approx(7.0, abs=0.5), found.params
     assert found.loss < 0.01

@@ -103,7 +103,7 @@ def _load(args: argparse.Namespace, dt_s: float) -> tuple[dict[str, list[Followi
 
 
 def _mpc_starts(config: DriverConfig, kkt: np.ndarray) -> list[dict[str, float]]:
-    """The params file's driver, the hand-set one of before, inverse KKT, a low-gap one."""
+    """The params file's driver, inverse KKT at the hand-set tau_H, a short-headway one."""
     here = {'weight_desired_speed': config.weight_desired_speed,
             'weight_relative_speed': config.weight_relative_speed,
             'weight_relative_distance': config.weight_relative_distance,
@@ -114,11 +114,11 @@ def _mpc_starts(config: DriverConfig, kkt: np.ndarray) -> list[dict[str, float]]
                    'weight_relative_speed': max(float(kkt[2]), lo['weight_relative_speed']),
                    'weight_relative_distance': max(float(kkt[3]),
                                                    lo['weight_relative_distance']),
-                   'time_headway_s': 1.5, 'desired_standstill_gap_m': 5.0}
+                   'time_headway_s': 1.5, 'desired_standstill_gap_m': 6.0}
     return [here, clipped_kkt,
             {'weight_desired_speed': 1e-4, 'weight_relative_speed': 0.05,
              'weight_relative_distance': 0.01, 'time_headway_s': 1.0,
-             'desired_standstill_gap_m': 2.5}]
+             'desired_standstill_gap_m': 8.0}]
 
 
 def _fits(config: DriverConfig, fit: Mapping[str, list[FollowingPair]], starts: list[dict],
