@@ -54,14 +54,17 @@ def test_batch_driver_equals_driver_mpc() -> None:
         gap = rng.uniform(2.0, 70.0, count)   # some start below d_s: the constraint binds
         av = np.maximum(0.0, speed + rng.uniform(-6.0, 6.0, count))
         expected = np.repeat(rng.uniform(-3.0, 2.0, count)[:, None], 3, axis=1)
+        vmax = rng.choice([30.0, 36.0], count)          # v_max = max(v_PT) per row
         batch = BatchDriver(config)
-        plans = batch.plans(gap, speed, av, expected)
-        mpc = DriverMpc(config)
+        plans = batch.plans(gap, speed, av, expected, vmax)
+        mpc = {v: DriverMpc(dataclasses.replace(config, speed_max_mps=v)) for v in (30.0, 36.0)}
         for row in range(count):
-            mpc.reset()
-            truth = mpc.solve(gap[row], speed[row], av[row], expected[row]).plan_mps2
+            mpc[vmax[row]].reset()
+            truth = mpc[vmax[row]].solve(gap[row], speed[row], av[row], expected[row]).plan_mps2
             assert np.allclose(plans[row], truth, atol=1e-6), (row, plans[row], truth)
         assert 0 < batch.fallbacks < count   # both paths were exercised
+        same = BatchDriver(config).plans(gap, speed, av, expected)   # default: config v_max
+        assert np.allclose(same[vmax == 36.0], plans[vmax == 36.0], atol=1e-9)
 
 
 def test_t_quantile_and_ci() -> None:

@@ -7,7 +7,8 @@ dt, N and tau_H and the b_j on the state. So ``H = 2 sum_j w_j A_j^T A_j`` is on
 matrix (positive definite: w_a > 0) and the unconstrained minimiser ``u* = -H^-1 g(state)``
 is a linear law. It is the MPC's answer wherever it satisfies the MPC's constraints
 (acceleration and speed bounds, gap >= ``standstill_gap_m`` with zero slack); elsewhere
-:class:`BatchDriver` asks :class:`DriverMpc` itself, row by row.
+:class:`BatchDriver` asks :class:`DriverMpc` itself, row by row. Each row may have its own
+v_max (the paper's v_max = max(v_PT) of the trace the vehicle follows, Table I).
 
 ``tests/test_driver_fit.py`` checks the two against each other on random states, near the
 bounds too: if DriverMpc's constraints change, that test says so.
@@ -22,6 +23,8 @@ expected plan e::
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -47,13 +50,13 @@ class BatchDriver:
         self._w = dict(zip(('a', 'ds', 'rs', 'rd'), w, strict=True))
         hessian = 2.0 * sum(self._w[j] * self._a[j].T @ self._a[j] for j in self._a)
         self._inverse = np.linalg.inv(hessian)
-        self._mpc: DriverMpc | None = None
+        self._mpc: dict[float, DriverMpc] = {}
         self.fallbacks = 0
         """Rows answered by DriverMpc (a constraint binds)."""
         self.rows = 0
 
     def _offsets(self, gap: np.ndarray, speed: np.ndarray, av_speed: np.ndarray,
-                 expected: np.ndarray) -> dict[str, np.ndarray]:
+                 expected: np.ndarray, speed_max: np.ndarray) -> dict[str, np.ndarray]:
         c, n, dt = self.config, self.config.horizon_steps, self.config.dt_s
         # AV speeds at steps 0..N-1 and at the end of each step (f_rs), rows x N.
         av = av_speed[:, None] + dt * np.concatenate(
@@ -61,14 +64,14 @@ class BatchDriver:
         av_next = av + dt * expected
         steps = np.arange(1, n + 1)[None, :]
         gap_const = gap[:, None] + dt * np.cumsum(av, axis=1) - dt * steps * speed[:, None]
-        ones = np.ones((1, n))
-        return {'a': np.zeros((len(gap), n)), 'ds': speed[:, None] - c.speed_max_mps * ones,
+        return {'a': np.zeros((len(gap), n)), 'ds': speed[:, None] - speed_max[:, None]
+                + np.zeros((1, n)),
                 'rs': av_next - speed[:, None],
                 'rd': gap_const - c.desired_standstill_gap_m - c.time_headway_s * speed[:, None],
                 'gap_const': gap_const}
 
     def plans(self, gap_m: np.ndarray, speed_mps: np.ndarray, av_speed_mps: np.ndarray,
-              expected_mps2: np.ndarray) -> np.ndarray:
+              expected_mps2: np.ndarray, speed_max_mps: np.ndarray | None = None) -> np.ndarray:
         """Plans DriverMpc.solve would return, rows x N (m/s^2).
 
         Args:
@@ -76,11 +79,14 @@ class BatchDriver:
             speed_mps: Own speeds, m/s (rows).
             av_speed_mps: Speeds of the vehicle ahead, m/s (rows).
             expected_mps2: Its expected plans, rows x N, m/s^2.
+            speed_max_mps: v_max per row (the config's ``speed_max_mps`` if None), m/s.
         """
         c = self.config
         gap, speed, av = (np.asarray(x, dtype=float) for x in (gap_m, speed_mps, av_speed_mps))
         expected = np.asarray(expected_mps2, dtype=float)
-        b = self._offsets(gap, speed, av, expected)
+        vmax = (np.full(len(gap), c.speed_max_mps) if speed_max_mps is None
+                else np.asarray(speed_max_mps, dtype=float))
+        b = self._offsets(gap, speed, av, expected, vmax)
         grad = 2.0 * sum(self._w[j] * b[j] @ self._a[j] for j in self._a)
         plan = -grad @ self._inverse.T
         speeds = speed[:, None] + plan @ self._speed_map.T
@@ -89,14 +95,16 @@ class BatchDriver:
         ok = ((plan >= c.accel_min_mps2 - tol).all(axis=1)
               & (plan <= c.accel_max_mps2 + tol).all(axis=1)
               & (speeds >= c.speed_min_mps - tol).all(axis=1)
-              & (speeds <= c.speed_max_mps + tol).all(axis=1)
+              & (speeds <= vmax[:, None] + tol).all(axis=1)
               & (gaps >= c.standstill_gap_m - tol).all(axis=1))
         self.rows += len(gap)
         for row in np.flatnonzero(~ok):
             self.fallbacks += 1
-            if self._mpc is None:
-                self._mpc = DriverMpc(c)
-            self._mpc.reset()
-            plan[row] = self._mpc.solve(float(gap[row]), float(speed[row]), float(av[row]),
-                                        expected[row]).plan_mps2
+            key = float(vmax[row])
+            if key not in self._mpc:
+                self._mpc[key] = DriverMpc(dataclasses.replace(c, speed_max_mps=key))
+            mpc = self._mpc[key]
+            mpc.reset()
+            plan[row] = mpc.solve(float(gap[row]), float(speed[row]), float(av[row]),
+                                  expected[row]).plan_mps2
         return plan

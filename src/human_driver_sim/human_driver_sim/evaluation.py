@@ -7,6 +7,9 @@ predicts and the simulator moves (``longitudinal.step``; the speed stops at 0):
 * ``full``: from each segment's first sample to its end (open loop, drift included);
 * ``window``: re-initialised to the recorded gap and speed every ``window_s`` (30 s).
 
+The driver MPC's v_max is the leader's highest speed over the pair, the paper's rule
+v_max = max(v_PT) for the trace followed (Table I; the simulator's ``speed_max_from_trace``).
+
 Per pair (all segments and windows of one leader->follower pair together), the gap NRMSE
 is RMSE(gap) / mean recorded gap and the speed NRMSE RMSE(speed) / mean recorded speed,
 over every simulated sample (the re-initialised first samples excluded). Pooled: the mean
@@ -94,8 +97,9 @@ class Follower(Protocol):
     """A car-following model: accelerations for many (rows) states at once."""
 
     def accel(self, gap_m: np.ndarray, speed_mps: np.ndarray, leader_speed_mps: np.ndarray,
-              leader_accel_mps2: np.ndarray) -> np.ndarray:
-        """Accelerations, m/s^2, one per row."""
+              leader_accel_mps2: np.ndarray, speed_max_mps: np.ndarray) -> np.ndarray:
+        """Accelerations, m/s^2, one per row (``speed_max_mps``: max(v_PT) of each row's
+        leader trace, m/s)."""
 
 
 class MpcFollower:
@@ -107,10 +111,11 @@ class MpcFollower:
         self._n = config.horizon_steps
 
     def accel(self, gap_m: np.ndarray, speed_mps: np.ndarray, leader_speed_mps: np.ndarray,
-              leader_accel_mps2: np.ndarray) -> np.ndarray:
+              leader_accel_mps2: np.ndarray, speed_max_mps: np.ndarray) -> np.ndarray:
         """First planned accelerations, m/s^2."""
         expected = np.repeat(np.asarray(leader_accel_mps2, dtype=float)[:, None], self._n, 1)
-        return self.driver.plans(gap_m, speed_mps, leader_speed_mps, expected)[:, 0]
+        return self.driver.plans(gap_m, speed_mps, leader_speed_mps, expected,
+                                 speed_max_mps)[:, 0]
 
 
 class IdmFollower:
@@ -120,8 +125,8 @@ class IdmFollower:
         self.params = params
 
     def accel(self, gap_m: np.ndarray, speed_mps: np.ndarray, leader_speed_mps: np.ndarray,
-              leader_accel_mps2: np.ndarray) -> np.ndarray:
-        """IDM accelerations, m/s^2."""
+              leader_accel_mps2: np.ndarray, speed_max_mps: np.ndarray) -> np.ndarray:
+        """IDM accelerations, m/s^2 (its own desired speed; v_max unused)."""
         return idm_accel_array(self.params, gap_m, speed_mps, leader_speed_mps)
 
 
@@ -129,7 +134,7 @@ class ConstantSpeed:
     """Keeps its speed (a baseline that knows nothing)."""
 
     def accel(self, gap_m: np.ndarray, speed_mps: np.ndarray, leader_speed_mps: np.ndarray,
-              leader_accel_mps2: np.ndarray) -> np.ndarray:
+              leader_accel_mps2: np.ndarray, speed_max_mps: np.ndarray) -> np.ndarray:
         """Zeros."""
         return np.zeros(len(gap_m))
 
@@ -144,6 +149,8 @@ class Run:
     gap_m: np.ndarray
     speed_mps: np.ndarray
     leader_accel0_mps2: float
+    speed_max_mps: float
+    """max(v_PT): the leader's highest speed over the whole pair, m/s."""
 
 
 def make_runs(pairs: Sequence[FollowingPair], protocol: str,
@@ -156,6 +163,10 @@ def make_runs(pairs: Sequence[FollowingPair], protocol: str,
     if protocol not in PROTOCOLS:
         raise ValueError(f'unknown protocol {protocol!r} (known: {", ".join(PROTOCOLS)})')
     runs = []
+    trace_max: dict[str, float] = {}
+    for pair in pairs:
+        trace_max[pair.key] = max(trace_max.get(pair.key, 0.0),
+                                  float(np.max(pair.leader_speed_mps)))
     for pair in pairs:
         count = len(pair.gap_m)
         if protocol == 'full':
@@ -170,7 +181,8 @@ def make_runs(pairs: Sequence[FollowingPair], protocol: str,
         for lo, hi in bounds:
             accel0 = (lead[lo] - lead[lo - 1]) / pair.dt_s if lo > 0 else 0.0
             runs.append(Run(pair.key, pair.dt_s, lead[lo:hi], pair.gap_m[lo:hi],
-                            pair.follower_speed_mps[lo:hi], float(accel0)))
+                            pair.follower_speed_mps[lo:hi], float(accel0),
+                            max(trace_max[pair.key], 0.1)))
     return runs
 
 
@@ -200,6 +212,7 @@ def simulate(follower: Follower | None, runs: Sequence[Run]) -> list[tuple[np.nd
     gap[:, 0] = [r.gap_m[0] for r in runs]
     speed[:, 0] = [r.speed_mps[0] for r in runs]
     accel0 = np.array([r.leader_accel0_mps2 for r in runs])
+    speed_max = np.array([r.speed_max_mps for r in runs])
     for k in range(width - 1):
         rows = np.flatnonzero(lengths > k + 1)
         if follower is None:
@@ -207,7 +220,8 @@ def simulate(follower: Follower | None, runs: Sequence[Run]) -> list[tuple[np.nd
         else:
             lead_accel = (accel0[rows] if k == 0
                           else (lead[rows, k] - lead[rows, k - 1]) / dt[rows])
-            accel = follower.accel(gap[rows, k], speed[rows, k], lead[rows, k], lead_accel)
+            accel = follower.accel(gap[rows, k], speed[rows, k], lead[rows, k], lead_accel,
+                                   speed_max[rows])
         new_gap, new_speed = longitudinal.step(gap[rows, k], speed[rows, k], lead[rows, k],
                                                accel, dt[rows])
         gap[rows, k + 1] = new_gap
