@@ -291,13 +291,15 @@ class Evaluation:
                 'steps_below_2m': sum(s.steps_below_close_gap for s in scores),
                 'min_gap_m': min(s.min_gap_m for s in scores), 'pairs': len(scores)}
 
-    def to_dict(self) -> dict[str, object]:
-        """JSON-ready: pooled and per-pair scores."""
+    def to_dict(self, *, per_pair: bool = True) -> dict[str, object]:
+        """JSON-ready: pooled scores, and per-pair scores unless ``per_pair`` is False."""
         out: dict[str, object] = {'pairs': self.pairs}
         for protocol, models in self.per_pair.items():
-            out[protocol] = {model: {'pooled': self.pooled(protocol, model),
-                                     'per_pair': {k: vars(s) for k, s in scores.items()}}
-                             for model, scores in models.items()}
+            out[protocol] = {
+                model: {'pooled': self.pooled(protocol, model),
+                        **({'per_pair': {k: vars(s) for k, s in scores.items()}}
+                           if per_pair else {})}
+                for model, scores in models.items()}
         return out
 
 

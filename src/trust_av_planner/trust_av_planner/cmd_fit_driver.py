@@ -140,6 +140,17 @@ def _fits(config: DriverConfig, fit: Mapping[str, list[FollowingPair]], starts: 
     return out
 
 
+def compact(value: Any) -> Any:
+    """``value`` with every float rounded to 6 significant digits (a smaller JSON)."""
+    if isinstance(value, float):
+        return float(f'{value:.6g}')
+    if isinstance(value, dict):
+        return {k: compact(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [compact(v) for v in value]
+    return value
+
+
 def _target(evaluation: Evaluation, protocol: str, idm_models: Sequence[str]) -> dict[str, Any]:
     """The shipped MPC against the best IDM (lowest held-out gap NRMSE) of one protocol."""
     mpc = evaluation.pooled(protocol, SHIPPED)
@@ -195,7 +206,8 @@ def run(args: argparse.Namespace) -> int:
             pairs = [p for p in held['openacc'] if p.driver == driver]
             per_driver[driver] = evaluate({'MPC': MpcFollower(configured(config, mpc.params)),
                                            'IDM (bounded)': IdmFollower(IdmParams(**idm.params)),
-                                           SHIPPED: MpcFollower(shipped)}, pairs).to_dict()
+                                           SHIPPED: MpcFollower(shipped)},
+                                          pairs).to_dict(per_pair=False)
     targets = {name: {protocol: _target(ev, protocol, idm_models)
                       for protocol in ('full', 'window')}
                for name, ev in evaluations.items() if name.endswith('held out')}
@@ -238,9 +250,10 @@ def run(args: argparse.Namespace) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(yaml.safe_dump(document, sort_keys=False))
     eval_path = args.out.with_name(args.out.stem + '_eval.json')
-    eval_path.write_text(json.dumps({'cleaning': cleaning, 'target': targets,
-                                     'sets': {k: v.to_dict() for k, v in evaluations.items()},
-                                     'per_driver_openacc_held_out': per_driver}, indent=1))
+    eval_path.write_text(json.dumps(compact({
+        'cleaning': cleaning, 'target': targets,
+        'sets': {k: v.to_dict(per_pair=k.endswith('held out')) for k, v in evaluations.items()},
+        'per_driver_openacc_held_out': per_driver}), indent=1))
     for name, evaluation in evaluations.items():
         for protocol in ('full', 'window'):
             print(f'\n{name}, ' + format_table(evaluation, protocol))
