@@ -369,14 +369,14 @@ def read_ngsim_pairs(paths: Sequence[Path], *, dt_s: float = 1.0,
     for (lead, follow), pieces in sorted(by_pair.items(), key=lambda x: (int(x[0][1]),
                                                                          int(x[0][0]))):
         merged, dropped = _merge_windows(pieces)
-        key = f'ngsim:{lead}->{follow}'
+        name = f'ngsim:{lead}->{follow}'
         if report is not None:
             report.duplicates_merged += dropped
         gaps = [p.spacing_m - vehicle_length_m for p in merged]
         if min(float(np.nanmin(g)) for g in gaps) < NGSIM_MIN_GAP_M:
             if report is not None:
                 closest = min(float(np.nanmin(p.spacing_m)) for p in merged)
-                report.excluded[key] = (f'gap below {NGSIM_MIN_GAP_M} m with a '
+                report.excluded[name] = (f'gap below {NGSIM_MIN_GAP_M} m with a '
                                         f'{vehicle_length_m} m leader (closest front-to-front '
                                         f'spacing {closest:.2f} m)')
             continue
@@ -385,10 +385,10 @@ def read_ngsim_pairs(paths: Sequence[Path], *, dt_s: float = 1.0,
             t = piece.time_s[ok]
             g = _resample(t, gap[ok], dt_s)[1]
             pairs.append(FollowingPair(
-                name=key if len(merged) == 1 else f'{key}#{n}', dt_s=dt_s,
+                name=name if len(merged) == 1 else f'{name}#{n}', dt_s=dt_s,
                 leader_speed_mps=_resample(t, piece.leader_speed_mps[ok], dt_s)[1],
                 follower_speed_mps=_resample(t, piece.follower_speed_mps[ok], dt_s)[1],
-                gap_m=g, dataset='ngsim', pair_key=key, driver=f'ngsim:{follow}',
+                gap_m=g, dataset='ngsim', pair_key=name, driver=f'ngsim:{follow}',
                 start_s=float(t[0])))
     if report is not None:
         report.vehicle_length_m = vehicle_length_m
@@ -468,7 +468,8 @@ def split_by_follower(pairs: Sequence[FollowingPair]) -> tuple[list[FollowingPai
     Raises:
         CarFollowingDataError: A driver that is not ``ngsim:<integer ID>``.
     """
-    fit, held_out = [], []
+    fit: list[FollowingPair] = []
+    held_out: list[FollowingPair] = []
     for pair in pairs:
         ident = pair.driver.removeprefix('ngsim:')
         if not ident.isdigit():

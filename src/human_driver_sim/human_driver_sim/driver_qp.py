@@ -87,8 +87,8 @@ class BatchDriver:
         vmax = (np.full(len(gap), c.speed_max_mps) if speed_max_mps is None
                 else np.asarray(speed_max_mps, dtype=float))
         b = self._offsets(gap, speed, av, expected, vmax)
-        grad = 2.0 * sum(self._w[j] * b[j] @ self._a[j] for j in self._a)
-        plan = -grad @ self._inverse.T
+        grad: np.ndarray = 2.0 * sum(self._w[j] * b[j] @ self._a[j] for j in self._a)
+        plan: np.ndarray = -grad @ self._inverse.T
         speeds = speed[:, None] + plan @ self._speed_map.T
         gaps = b['gap_const'] + plan @ self._gap_map.T
         tol = _FEASIBILITY_TOL

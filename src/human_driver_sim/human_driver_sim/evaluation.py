@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -206,7 +206,10 @@ def simulate(follower: Follower | None, runs: Sequence[Run]) -> list[tuple[np.nd
     for row, run in enumerate(runs):
         lead[row, :lengths[row]] = run.leader_speed_mps
         recorded[row, :lengths[row]] = run.speed_mps
-    dt = np.array([r.dt_s for r in runs])
+    steps = {r.dt_s for r in runs}
+    if len(steps) != 1:
+        raise ValueError(f'runs with different steps {sorted(steps)} cannot share a batch')
+    dt = steps.pop()
     gap = np.zeros((len(runs), width))
     speed = np.zeros((len(runs), width))
     gap[:, 0] = [r.gap_m[0] for r in runs]
@@ -216,14 +219,14 @@ def simulate(follower: Follower | None, runs: Sequence[Run]) -> list[tuple[np.nd
     for k in range(width - 1):
         rows = np.flatnonzero(lengths > k + 1)
         if follower is None:
-            accel = (recorded[rows, k + 1] - speed[rows, k]) / dt[rows]
+            accel = (recorded[rows, k + 1] - speed[rows, k]) / dt
         else:
             lead_accel = (accel0[rows] if k == 0
-                          else (lead[rows, k] - lead[rows, k - 1]) / dt[rows])
+                          else (lead[rows, k] - lead[rows, k - 1]) / dt)
             accel = follower.accel(gap[rows, k], speed[rows, k], lead[rows, k], lead_accel,
                                    speed_max[rows])
         new_gap, new_speed = longitudinal.step(gap[rows, k], speed[rows, k], lead[rows, k],
-                                               accel, dt[rows])
+                                               accel, dt)
         gap[rows, k + 1] = new_gap
         speed[rows, k + 1] = np.maximum(new_speed, 0.0)
     return [(gap[row, :n], speed[row, :n]) for row, n in enumerate(lengths)]
@@ -279,7 +282,7 @@ class Evaluation:
     per_pair: dict[str, dict[str, dict[str, PairScore]]] = field(default_factory=dict)
     """protocol -> model -> pair key -> scores."""
 
-    def pooled(self, protocol: str, model: str) -> dict[str, object]:
+    def pooled(self, protocol: str, model: str) -> dict[str, Any]:
         """Mean and 95 % CI half-width over pairs, collisions, close-gap steps."""
         scores = list(self.per_pair[protocol][model].values())
         gap = mean_ci95([s.gap_nrmse for s in scores])

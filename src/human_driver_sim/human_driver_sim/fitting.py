@@ -14,6 +14,7 @@ import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -70,7 +71,7 @@ class BoundedBox:
         inner = np.array([math.log(params[n]) if log else params[n]
                           for n, log in zip(self.names, self._log, strict=True)])
         share = np.clip((inner - self._lo) / (self._hi - self._lo), 1e-3, 1 - 1e-3)
-        return np.log(share / (1.0 - share))
+        return np.asarray(np.log(share / (1.0 - share)), dtype=float)
 
 
 def _multistart(loss: Callable[[dict[str, float]], float], box: BoundedBox,
@@ -100,7 +101,8 @@ def dataset_loss(model_loss: Callable[[Sequence[Run]], float],
 
 def configured(config: DriverConfig, params: Mapping[str, float]) -> DriverConfig:
     """The driver config with fitted parameters (w_a = 1)."""
-    return dataclasses.replace(config, weight_acceleration=1.0, **params)
+    changes: dict[str, Any] = {'weight_acceleration': 1.0, **params}
+    return dataclasses.replace(config, **changes)
 
 
 def fit_mpc(config: DriverConfig, run_sets: Sequence[Sequence[Run]], *,

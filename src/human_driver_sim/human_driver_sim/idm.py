@@ -10,8 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from human_driver_sim import longitudinal
-
 
 @dataclass(frozen=True)
 class IdmParams:
@@ -52,7 +50,8 @@ def idm_accel_array(params: IdmParams, gap_m: np.ndarray, speed_mps: np.ndarray,
         0.0, speed * params.time_headway_s + speed * (speed - leader_speed_mps)
         / (2.0 * np.sqrt(params.max_accel_mps2 * params.comfort_decel_mps2)))
     ratio = (speed / params.desired_speed_mps) ** 4
-    return params.max_accel_mps2 * (1.0 - ratio - (star / np.maximum(gap_m, 0.1)) ** 2)
+    return np.asarray(params.max_accel_mps2
+                      * (1.0 - ratio - (star / np.maximum(gap_m, 0.1)) ** 2), dtype=float)
 
 
 def idm_accel(params: IdmParams, gap_m: float, speed_mps: float, leader_speed_mps: float) -> float:
@@ -63,23 +62,3 @@ def idm_accel(params: IdmParams, gap_m: float, speed_mps: float, leader_speed_mp
                                                    * params.comfort_decel_mps2)))
     ratio = (speed_mps / params.desired_speed_mps) ** 4
     return float(params.max_accel_mps2 * (1.0 - ratio - (star / max(gap_m, 0.1)) ** 2))
-
-
-def replay(params: IdmParams, leader_speed_mps: np.ndarray, gap0_m: float, speed0_mps: float,
-           dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Open-loop replay of an IDM follower against a recorded leader (explicit Euler, as
-    the MPC and the simulator: ``longitudinal.step``; the speed stops at 0).
-
-    Returns:
-        (gap_m, speed_mps) per sample, same length as ``leader_speed_mps``.
-    """
-    count = len(leader_speed_mps)
-    gap = np.empty(count)
-    speed = np.empty(count)
-    gap[0], speed[0] = gap0_m, speed0_mps
-    for k in range(count - 1):
-        accel = idm_accel(params, gap[k], speed[k], float(leader_speed_mps[k]))
-        gap[k + 1], new_speed = longitudinal.step(gap[k], speed[k], float(leader_speed_mps[k]),
-                                                  accel, dt_s)
-        speed[k + 1] = max(0.0, new_speed)
-    return gap, speed

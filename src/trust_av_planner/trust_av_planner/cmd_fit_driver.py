@@ -121,7 +121,8 @@ def _mpc_starts(config: DriverConfig, kkt: np.ndarray) -> list[dict[str, float]]
              'desired_standstill_gap_m': 8.0}]
 
 
-def _fits(config: DriverConfig, fit: Mapping[str, list[FollowingPair]], starts: list[dict],
+def _fits(config: DriverConfig, fit: Mapping[str, list[FollowingPair]],
+          starts: list[dict[str, float]],
           iterations: int, progress: Any) -> dict[str, tuple[FitResult, FitResult, float]]:
     """(IDM, MPC, seconds) fitted pooled, per data set and per OpenACC driver."""
     windows = {name: make_runs(pairs, 'window') for name, pairs in fit.items()}
