@@ -83,11 +83,15 @@ def test_fit_driver_writes_fit_and_evaluation(tmp_path: Path,
         assert lo <= fit['pooled'][name] <= hi
     assert fit['pooled']['weight_acceleration'] == 1.0
     assert set(fit['fits']) == {'pooled', 'openacc', 'ngsim', 'driver JRC-VC_280219:Car2',
-                                'driver JRC-VC_280219:Car3'}
+                                'driver JRC-VC_280219:Car3', 'without JRC-VC_280219:Car2',
+                                'without JRC-VC_280219:Car3'}
     assert fit['idm']['comfort_decel_mps2'] <= 4.0 and fit['idm']['min_gap_m'] >= 1.0
     assert len(fit['per_pair_inverse_kkt']) == 2
     evaluation = json.loads((tmp_path / 'fit' / 'driver_fit_eval.json').read_text())
     assert set(evaluation['target']) == {'openacc held out', 'ngsim held out'}
     assert set(evaluation['sets']) == {'openacc held out', 'ngsim held out', 'openacc fit',
                                        'ngsim fit'}
+    assert set(evaluation['per_driver_openacc_held_out']['JRC-VC_280219:Car2']['window']) == {
+        'recorded speed (noise floor)', 'MPC', 'IDM (bounded)', 'MPC without this driver',
+        'IDM without this driver', 'MPC pooled (shipped)'}
     assert 'target openacc held out window' in capsys.readouterr().out

@@ -124,7 +124,8 @@ def _mpc_starts(config: DriverConfig, kkt: np.ndarray) -> list[dict[str, float]]
 def _fits(config: DriverConfig, fit: Mapping[str, list[FollowingPair]],
           starts: list[dict[str, float]],
           iterations: int, progress: Any) -> dict[str, tuple[FitResult, FitResult, float]]:
-    """(IDM, MPC, seconds) fitted pooled, per data set and per OpenACC driver."""
+    """(IDM, MPC, seconds) fitted pooled, per data set, per OpenACC driver and on OpenACC
+    without each driver (leave-one-driver-out)."""
     windows = {name: make_runs(pairs, 'window') for name, pairs in fit.items()}
     groups: dict[str, list[Sequence[Run]]] = {'pooled': list(windows.values())}
     if len(windows) > 1:
@@ -132,6 +133,8 @@ def _fits(config: DriverConfig, fit: Mapping[str, list[FollowingPair]],
     for driver in sorted({p.driver for p in fit['openacc']}):
         groups[f'driver {driver}'] = [make_runs([p for p in fit['openacc']
                                                  if p.driver == driver], 'window')]
+        groups[f'without {driver}'] = [make_runs([p for p in fit['openacc']
+                                                  if p.driver != driver], 'window')]
     out = {}
     for name, sets in groups.items():
         started = time.perf_counter()
@@ -175,7 +178,8 @@ def run(args: argparse.Namespace) -> int:
     kkt = irl.fit_inverse_kkt(config, [d for p in fit['openacc']
                                        for d in irl.demonstrations(p, n)])
     starts = _mpc_starts(config, kkt)
-    groups = 1 + (len(fit) if len(fit) > 1 else 0) + len({p.driver for p in fit['openacc']})
+    groups = 1 + (len(fit) if len(fit) > 1 else 0) + 2 * len({p.driver
+                                                              for p in fit['openacc']})
     bar = None if args.no_progress else ProgressBar(
         'fit-driver', groups * (len(starts) + 3) * int(1.5 * args.iterations + 6))
     fits = _fits(config, fit, starts, args.iterations, None if bar is None else bar.update)
@@ -189,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
                                    'MPC before (params file)': MpcFollower(config)}
     idm_models = []
     for name, (idm, mpc, _) in fits.items():
-        if name.startswith('driver'):
+        if name.startswith(('driver', 'without')):
             continue
         if name != 'pooled':
             models[f'MPC {name}'] = MpcFollower(configured(config, mpc.params))
@@ -201,14 +205,16 @@ def run(args: argparse.Namespace) -> int:
     evaluations = {f'{name} held out': evaluate(models, pairs) for name, pairs in held.items()}
     evaluations.update({f'{name} fit': evaluate(models, pairs) for name, pairs in fit.items()})
     per_driver = {}
-    for name, (idm, mpc, _) in fits.items():
-        if name.startswith('driver'):
-            driver = name.removeprefix('driver ')
-            pairs = [p for p in held['openacc'] if p.driver == driver]
-            per_driver[driver] = evaluate({'MPC': MpcFollower(configured(config, mpc.params)),
-                                           'IDM (bounded)': IdmFollower(IdmParams(**idm.params)),
-                                           SHIPPED: MpcFollower(shipped)},
-                                          pairs).to_dict(per_pair=False)
+    for driver in sorted({p.driver for p in fit['openacc']}):
+        own_idm, own_mpc, _ = fits[f'driver {driver}']
+        other_idm, other_mpc, _ = fits[f'without {driver}']
+        per_driver[driver] = evaluate({
+            'MPC': MpcFollower(configured(config, own_mpc.params)),
+            'IDM (bounded)': IdmFollower(IdmParams(**own_idm.params)),
+            'MPC without this driver': MpcFollower(configured(config, other_mpc.params)),
+            'IDM without this driver': IdmFollower(IdmParams(**other_idm.params)),
+            SHIPPED: MpcFollower(shipped)},
+            [p for p in held['openacc'] if p.driver == driver]).to_dict(per_pair=False)
     targets = {name: {protocol: _target(ev, protocol, idm_models)
                       for protocol in ('full', 'window')}
                for name, ev in evaluations.items() if name.endswith('held out')}
