@@ -102,20 +102,19 @@ def _load(args: argparse.Namespace, dt_s: float) -> tuple[dict[str, list[Followi
     return fit, held, cleaning
 
 
-def _mpc_starts(config: DriverConfig, kkt: np.ndarray) -> list[dict[str, float]]:
-    """The params file's driver, inverse KKT at the hand-set tau_H, a short-headway one."""
-    here = {'weight_desired_speed': config.weight_desired_speed,
-            'weight_relative_speed': config.weight_relative_speed,
-            'weight_relative_distance': config.weight_relative_distance,
-            'time_headway_s': config.time_headway_s,
-            'desired_standstill_gap_m': config.desired_standstill_gap_m}
-    lo = {n: MPC_BOUNDS[n][0] * 1.01 for n in MPC_NAMES}
-    clipped_kkt = {'weight_desired_speed': max(float(kkt[1]), lo['weight_desired_speed']),
-                   'weight_relative_speed': max(float(kkt[2]), lo['weight_relative_speed']),
-                   'weight_relative_distance': max(float(kkt[3]),
-                                                   lo['weight_relative_distance']),
-                   'time_headway_s': 1.5, 'desired_standstill_gap_m': 6.0}
-    return [here, clipped_kkt,
+def _mpc_starts(kkt: np.ndarray) -> list[dict[str, float]]:
+    """Three fixed starts (the fit depends on the data only, not on the params file): the
+    inverse-KKT W at tau_H = 1.5 s, and two spread points of the box."""
+    floor = {n: MPC_BOUNDS[n][0] * 1.01 for n in MPC_NAMES}
+    from_kkt = {'weight_desired_speed': max(float(kkt[1]), floor['weight_desired_speed']),
+                'weight_relative_speed': max(float(kkt[2]), floor['weight_relative_speed']),
+                'weight_relative_distance': max(float(kkt[3]),
+                                                floor['weight_relative_distance']),
+                'time_headway_s': 1.5, 'desired_standstill_gap_m': 6.0}
+    return [from_kkt,
+            {'weight_desired_speed': 1e-3, 'weight_relative_speed': 0.15,
+             'weight_relative_distance': 2e-3, 'time_headway_s': 1.2,
+             'desired_standstill_gap_m': 5.5},
             {'weight_desired_speed': 1e-4, 'weight_relative_speed': 0.05,
              'weight_relative_distance': 0.01, 'time_headway_s': 1.0,
              'desired_standstill_gap_m': 8.0}]
@@ -177,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     n = config.horizon_steps
     kkt = irl.fit_inverse_kkt(config, [d for p in fit['openacc']
                                        for d in irl.demonstrations(p, n)])
-    starts = _mpc_starts(config, kkt)
+    starts = _mpc_starts(kkt)
     groups = 1 + (len(fit) if len(fit) > 1 else 0) + 2 * len({p.driver
                                                               for p in fit['openacc']})
     bar = None if args.no_progress else ProgressBar(
@@ -244,6 +243,7 @@ def run(args: argparse.Namespace) -> int:
             'iterations': args.iterations},
         'pooled': {k: float(v) for k, v in mpc_dict(pooled_mpc).items()},
         'fit_loss': pooled_mpc.loss,
+        'mpc_starts': starts,
         'pooled_inverse_kkt': {k: float(v) for k, v in zip(WEIGHT_NAMES, kkt, strict=True)},
         'per_pair_inverse_kkt': {name: [float(x) for x in w] for name, w in per_pair.items()},
         'fits': {name: {'mpc': mpc_dict(mpc), 'mpc_loss': mpc.loss,
