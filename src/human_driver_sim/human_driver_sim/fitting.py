@@ -30,8 +30,8 @@ MPC_BOUNDS: dict[str, tuple[float, float]] = {
 """Bounds of the fitted driver-MPC parameters (w_a = 1 is the normalisation), SI. The
 desired standstill gap starts at the safety gap the same MPC enforces (``standstill_gap_m``,
 the paper's d_s = 5 m; :func:`fit_mpc` raises the floor to it if larger): the recorded data
-hardly tells d_s from tau_H (docs/DRIVER_IRL.md: a fit in [1, 10] m ends at 1.08 m with a 2 %
-lower loss and the same held-out scores), and a human who aims inside his own hard bound
+hardly tells d_s from tau_H (docs/DRIVER_IRL.md: a fit in [1, 10] m ends at 1.14 m with a 1.6 %
+lower loss and no better held-out scores), and a human who aims inside his own hard bound
 would only press against it."""
 LOG_SCALE = frozenset({'weight_desired_speed', 'weight_relative_speed',
                        'weight_relative_distance'})
