@@ -1,37 +1,34 @@
-"""IDM baseline and OpenACC reader: physical behaviour and clear errors."""
+"""IDM: physical behaviour behind a braking leader, the textbook set, the fit bounds."""
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from human_driver_sim.car_following import CarFollowingDataError, read_openacc
-from human_driver_sim.idm import IdmParams, replay
+from human_driver_sim.car_following import FollowingPair
+from human_driver_sim.evaluation import IdmFollower, make_runs, simulate
+from human_driver_sim.idm import FIT_BOUNDS, TEXTBOOK_MOTORWAY, IdmParams, idm_accel
 
 
 def test_idm_no_collision_behind_braking_leader() -> None:
     leader = np.concatenate([np.full(20, 25.0), np.linspace(25.0, 0.0, 9), np.zeros(40)])
-    gap, speed = replay(IdmParams(), leader, 40.0, 25.0, 1.0)
-    assert gap.min() > 0.0
-    assert speed[-1] < 0.5
+    pair = FollowingPair('brake', 1.0, leader, np.full(leader.size, 25.0),
+                         np.full(leader.size, 40.0))
+    for params in (IdmParams(), TEXTBOOK_MOTORWAY):
+        gap, speed = simulate(IdmFollower(params), make_runs([pair], 'full'))[0]
+        assert gap.min() > 0.0
+        assert speed[-1] < 0.5
 
 
-def test_reader_rejects_missing_and_malformed(tmp_path: Path) -> None:
-    with pytest.raises(CarFollowingDataError, match='cannot read'):
-        read_openacc(tmp_path / 'absent.csv')
-    bad = tmp_path / 'bad.csv'
-    bad.write_text('a\nb\nc\nd\ne\nTime,Speed1,Speed2,IVS1\n0,1,x,3\n')
-    with pytest.raises(CarFollowingDataError, match='non-numeric'):
-        read_openacc(bad)
-
-
-def test_reader_resamples(tmp_path: Path) -> None:
-    good = tmp_path / 'good.csv'
-    lines = ['m'] * 5 + ['Time,Speed1,Speed2,IVS1']
-    lines += [f'{k / 10},{20 + k / 10},20,30' for k in range(31)]
-    good.write_text('\n'.join(lines) + '\n')
-    (pair,) = read_openacc(good, dt_s=1.0)
-    assert len(pair.gap_m) == 4
-    assert pair.leader_speed_mps[1] == pytest.approx(21.0)
+def test_textbook_and_bounds() -> None:
+    # Treiber & Kesting, Traffic Flow Dynamics (2013), Table 11.2, motorway.
+    assert TEXTBOOK_MOTORWAY.desired_speed_mps == pytest.approx(33.33, abs=0.01)
+    assert (TEXTBOOK_MOTORWAY.time_headway_s, TEXTBOOK_MOTORWAY.min_gap_m) == (1.0, 2.0)
+    assert FIT_BOUNDS['comfort_decel_mps2'][1] <= 4.0 and FIT_BOUNDS['min_gap_m'][0] >= 1.0
+    assert FIT_BOUNDS['time_headway_s'][0] >= 0.5
+    # In equilibrium (same speed, gap s0 + v T) IDM's acceleration is a (1 - (v/v0)^4) - a.
+    v = 20.0
+    accel = idm_accel(TEXTBOOK_MOTORWAY, 2.0 + v * 1.0, v, v)
+    assert accel == pytest.approx(-(v / TEXTBOOK_MOTORWAY.desired_speed_mps) ** 4, abs=1e-12)
+    with pytest.raises(ValueError, match='time_headway_s'):
+        IdmParams(time_headway_s=0.0)

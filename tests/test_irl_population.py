@@ -22,4 +22,4 @@ def test_population_seeded() -> None:
 
 def test_fit_driver_missing_data(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(['fit-driver', '--data', str(tmp_path), '--out', str(tmp_path / 'o.yaml')]) == 2
-    assert 'cannot read' in capsys.readouterr().err
+    assert 'no *.csv files' in capsys.readouterr().err

@@ -76,6 +76,9 @@ class DriverConfig:
                                             unit='1/s^2')
     fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
                                              unit='1/s')
+    desired_standstill_gap_m: float = param(
+        'the d_s inside the relative-distance feature f_rd, fitted to human drivers '
+        '(docs/DRIVER_IRL.md); the hard gap bound uses standstill_gap_m', unit='m', low=0.0)
     assumed_av_accel_min_mps2: float = param(
         "the AV's braking the human allows for in its gap bound: it plans d_H >= d_s against "
         "the AV at min(expected, this) at every step (Gipps 1981); the AV's u_R,min",
@@ -142,7 +145,7 @@ class DriverMpc:
         u_list = [u[k] for k in range(n)]
         e_list = [expected[k] for k in range(n)]
         feats = features(gap0, speed0, av_speed0, u_list, e_list, dt_s=config.dt_s,
-                         standstill_gap_m=config.standstill_gap_m,
+                         standstill_gap_m=config.desired_standstill_gap_m,
                          time_headway_s=config.time_headway_s,
                          desired_speed_mps=config.speed_max_mps)
         cost = ca.dot(weights, ca.vertcat(*feats))

@@ -1,4 +1,8 @@
-"""Intelligent Driver Model (Treiber, Hennecke & Helbing 2000), the car-following baseline."""
+"""Intelligent Driver Model (Treiber, Hennecke & Helbing 2000), the car-following baseline.
+
+Two fixed parameter sets are named here: :data:`TEXTBOOK_MOTORWAY` and the physical
+bounds of a fit, :data:`FIT_BOUNDS`. The fit itself is in :mod:`human_driver_sim.fitting`.
+"""
 
 from __future__ import annotations
 
@@ -26,6 +30,30 @@ class IdmParams:
             raise ValueError('IdmParams.min_gap_m must be non-negative')
 
 
+TEXTBOOK_MOTORWAY = IdmParams(desired_speed_mps=120.0 / 3.6, time_headway_s=1.0, min_gap_m=2.0,
+                              max_accel_mps2=1.0, comfort_decel_mps2=1.5)
+"""IDM for motorway traffic as given by Treiber & Kesting, *Traffic Flow Dynamics* (Springer
+2013), Table 11.2: v0 = 120 km/h, T = 1.0 s, s0 = 2 m, a = 1.0 m/s^2, b = 1.5 m/s^2, delta 4."""
+
+FIT_BOUNDS = {'desired_speed_mps': (10.0, 45.0), 'time_headway_s': (0.5, 3.0),
+              'min_gap_m': (1.0, 8.0), 'max_accel_mps2': (0.3, 4.0),
+              'comfort_decel_mps2': (0.5, 4.0)}
+"""Physical bounds of a fitted IDM (b <= 4 m/s^2, s0 >= 1 m, T >= 0.5 s), SI."""
+PARAM_NAMES = tuple(FIT_BOUNDS)
+
+
+def idm_accel_array(params: IdmParams, gap_m: np.ndarray, speed_mps: np.ndarray,
+                    leader_speed_mps: np.ndarray) -> np.ndarray:
+    """IDM accelerations for many states at once, m/s^2 (the gap floored at 0.1 m)."""
+    speed = np.asarray(speed_mps, dtype=float)
+    star = params.min_gap_m + np.maximum(
+        0.0, speed * params.time_headway_s + speed * (speed - leader_speed_mps)
+        / (2.0 * np.sqrt(params.max_accel_mps2 * params.comfort_decel_mps2)))
+    ratio = (speed / params.desired_speed_mps) ** 4
+    return np.asarray(params.max_accel_mps2
+                      * (1.0 - ratio - (star / np.maximum(gap_m, 0.1)) ** 2), dtype=float)
+
+
 def idm_accel(params: IdmParams, gap_m: float, speed_mps: float, leader_speed_mps: float) -> float:
     """IDM acceleration, m/s^2."""
     star = params.min_gap_m + max(0.0, speed_mps * params.time_headway_s + speed_mps
@@ -34,24 +62,3 @@ def idm_accel(params: IdmParams, gap_m: float, speed_mps: float, leader_speed_mp
                                                    * params.comfort_decel_mps2)))
     ratio = (speed_mps / params.desired_speed_mps) ** 4
     return float(params.max_accel_mps2 * (1.0 - ratio - (star / max(gap_m, 0.1)) ** 2))
-
-
-def replay(params: IdmParams, leader_speed_mps: np.ndarray, gap0_m: float, speed0_mps: float,
-           dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Open-loop replay of an IDM follower against a recorded leader.
-
-    Returns:
-        (gap_m, speed_mps) per sample, same length as ``leader_speed_mps``.
-    """
-    count = len(leader_speed_mps)
-    gap = np.empty(count)
-    speed = np.empty(count)
-    gap[0], speed[0] = gap0_m, speed0_mps
-    for k in range(count - 1):
-        accel = idm_accel(params, gap[k], speed[k], float(leader_speed_mps[k]))
-        new_speed = max(0.0, speed[k] + accel * dt_s)
-        travelled = 0.5 * (speed[k] + new_speed) * dt_s
-        lead = 0.5 * (leader_speed_mps[k] + leader_speed_mps[k + 1]) * dt_s
-        gap[k + 1] = gap[k] + lead - travelled
-        speed[k + 1] = new_speed
-    return gap, speed

@@ -5,11 +5,13 @@ the state (gap, speed, leader speed), the leader plan the follower expects and t
 accelerations the follower then drove. With inactive bounds the driver's optimality condition
 is sum_j w_j grad_u f_j = 0, linear in W; with the normalisation w_a = 1 the remaining three
 weights are the non-negative least-squares solution of the stacked stationarity residuals.
+The per-pair weights are the driver population's source; the shipped W, tau_H and d_s come
+from the bounded replay fit (:mod:`human_driver_sim.fitting`), which uses
+:func:`nelder_mead` below.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -17,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from human_driver_sim.car_following import FollowingPair
-from human_driver_sim.driver_mpc import DriverConfig, DriverMpc, features
+from human_driver_sim.driver_mpc import DriverConfig, features
 
 
 @dataclass(frozen=True)
@@ -38,7 +40,7 @@ def _gradient_function(config: DriverConfig) -> ca.Function:
     state = ca.SX.sym('x', 3)
     feats = features(state[0], state[1], state[2], [u[k] for k in range(n)],
                      [expected[k] for k in range(n)], dt_s=config.dt_s,
-                     standstill_gap_m=config.standstill_gap_m,
+                     standstill_gap_m=config.desired_standstill_gap_m,
                      time_headway_s=config.time_headway_s,
                      desired_speed_mps=config.speed_max_mps)
     jac = ca.jacobian(ca.vertcat(*feats), u)  # 4 x N
@@ -91,35 +93,6 @@ def demonstrations(pair: FollowingPair, horizon_steps: int) -> list[Demonstratio
     return demos
 
 
-def replay_mpc(config: DriverConfig, pair: FollowingPair) -> tuple[np.ndarray, np.ndarray]:
-    """Open-loop replay: our driver MPC follows the recorded leader from the recorded start.
-
-    Returns:
-        (gap_m, speed_mps) per sample.
-    """
-    mpc = DriverMpc(config)
-    dt = pair.dt_s
-    lead = pair.leader_speed_mps
-    count = len(lead)
-    gap = np.empty(count)
-    speed = np.empty(count)
-    gap[0], speed[0] = pair.gap_m[0], pair.follower_speed_mps[0]
-    for k in range(count - 1):
-        lead_accel = (lead[k] - lead[k - 1]) / dt if k > 0 else 0.0
-        plan = mpc.step(float(gap[k]), float(speed[k]), float(lead[k]),
-                         np.full(config.horizon_steps, lead_accel)).plan_mps2
-        new_speed = max(0.0, speed[k] + float(plan[0]) * dt)
-        travelled = 0.5 * (speed[k] + new_speed) * dt
-        gap[k + 1] = gap[k] + 0.5 * (lead[k] + lead[k + 1]) * dt - travelled
-        speed[k + 1] = new_speed
-    return gap, speed
-
-
-def rmse(a: np.ndarray, b: np.ndarray) -> float:
-    """Root-mean-square difference."""
-    return float(np.sqrt(np.mean((np.asarray(a) - np.asarray(b)) ** 2)))
-
-
 def nelder_mead(func: Callable[[np.ndarray], float], start: np.ndarray, *, step: float = 0.5,
                 iterations: int = 60) -> tuple[np.ndarray, float]:
     """Derivative-free minimisation (Nelder & Mead 1965), numpy only."""
@@ -150,49 +123,3 @@ def nelder_mead(func: Callable[[np.ndarray], float], start: np.ndarray, *, step:
                 values = [values[0]] + [func(x) for x in simplex[1:]]
     best = int(np.argmin(values))
     return simplex[best], float(values[best])
-
-
-def with_weights(config: DriverConfig, weights: np.ndarray) -> DriverConfig:
-    """The config with W replaced."""
-    return dataclasses.replace(config, weight_acceleration=float(weights[0]),
-                               weight_desired_speed=float(weights[1]),
-                               weight_relative_speed=float(weights[2]),
-                               weight_relative_distance=float(weights[3]))
-
-
-def refine_bilevel(config: DriverConfig, pairs: Sequence[FollowingPair], start: np.ndarray, *,
-                   iterations: int = 40, fit_time_headway: bool = True,
-                   progress: Callable[[int], None] | None = None
-                   ) -> tuple[np.ndarray, float, float]:
-    """Bilevel refinement: minimise the mean open-loop replay gap RMSE over the pairs.
-
-    The outer problem is Nelder-Mead on log(w_ds, w_rs, w_rd) (w_a = 1) and, with
-    ``fit_time_headway``, log(tau_H), the time headway of the relative-distance feature; the
-    inner problem is the driver MPC itself (:func:`replay_mpc`). tau_H starts at the
-    config's value.
-
-    Returns:
-        (W, tau_H in s, loss in m).
-    """
-    calls = [0]
-
-    def configured(x: np.ndarray) -> DriverConfig:
-        cfg = with_weights(config, np.concatenate([[1.0], np.exp(x[:3])]))
-        if fit_time_headway:
-            cfg = dataclasses.replace(cfg, time_headway_s=float(np.exp(x[3])))
-        return cfg
-
-    def loss(x: np.ndarray) -> float:
-        calls[0] += 1
-        if progress is not None:
-            progress(calls[0])
-        cfg = configured(x)
-        return float(np.mean([rmse(replay_mpc(cfg, p)[0], p.gap_m) for p in pairs]))
-
-    x0 = np.log(np.maximum(start[1:], 1e-4))
-    if fit_time_headway:
-        x0 = np.append(x0, np.log(config.time_headway_s))
-    x, value = nelder_mead(loss, x0, step=0.7 if fit_time_headway else 1.0,
-                           iterations=iterations)
-    best = configured(x)
-    return best.weights / best.weight_acceleration, best.time_headway_s, value

@@ -89,3 +89,18 @@ def per_pair_weights(path: Path = DRIVER_FIT_FILE) -> np.ndarray:
                                  f'{len(WEIGHT_NAMES)} non-negative numbers, got {weights!r}')
         rows.append([float(w) for w in weights])
     return np.array(rows)
+
+
+def fitted_idm_params(path: Path = DRIVER_FIT_FILE) -> dict[str, float]:
+    """The bounded IDM fitted beside the driver (``idm`` section of a driver-fit file).
+
+    Raises:
+        DriverFitError: missing section, or a parameter that is not a positive number.
+    """
+    section = _read_fit(path).get('idm')
+    names = ('desired_speed_mps', 'time_headway_s', 'min_gap_m', 'max_accel_mps2',
+             'comfort_decel_mps2')
+    if not isinstance(section, dict) or any(
+            not isinstance(section.get(n), int | float) or section[n] <= 0 for n in names):
+        raise DriverFitError(f'{path}: idm must hold {", ".join(names)} as positive numbers')
+    return {n: float(section[n]) for n in names}

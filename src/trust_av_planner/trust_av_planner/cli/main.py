@@ -31,6 +31,7 @@ COMMAND_MODULES = (
     'trust_av_planner.cli.repair_bag',
     'trust_av_planner.cli.train_gru',
     'trust_av_planner.cli.fit_driver',
+    'trust_av_planner.cli.eval_driver',
 )
 """Modules that add a subcommand (in help order)."""
 

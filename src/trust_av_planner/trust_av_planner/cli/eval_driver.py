@@ -1,0 +1,105 @@
+"""``trust-av eval-driver``: score the shipped human driver on recorded car following."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from human_driver_sim.car_following import CarFollowingDataError
+from human_driver_sim.datasets import FORMATS, NGSIM_VEHICLE_LENGTH_M, LoadReport, load_directory
+from human_driver_sim.evaluation import (
+    PROTOCOLS,
+    WINDOW_S,
+    ConstantSpeed,
+    Follower,
+    IdmFollower,
+    MpcFollower,
+    evaluate,
+    format_table,
+)
+from human_driver_sim.idm import TEXTBOOK_MOTORWAY, IdmParams
+from human_driver_sim.population import DRIVER_FIT_FILE, DriverFitError, fitted_idm_params
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+
+SHIPPED = 'driver MPC (params file)'
+BOUNDED_IDM = 'IDM, bounded fit'
+TEXTBOOK_IDM = 'IDM, textbook motorway'
+CONSTANT_SPEED = 'constant speed'
+
+
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the ``eval-driver`` subcommand."""
+    parser = subparsers.add_parser('eval-driver', help=__doc__, description=(
+        "Score the params file's driver MPC, the bounded IDM of the driver fit, the textbook "
+        'IDM and constant speed on a directory of OpenACC or NGSIM-chain CSVs (read only): '
+        'gap and speed NRMSE with 95 % CIs over pairs, collisions, gaps below 2 m, beside '
+        "the data's noise floor, for full runs and re-initialised windows."))
+    parser.add_argument('--data', type=Path, required=True, help='directory of CSV files')
+    parser.add_argument('--format', choices=FORMATS, default=None,
+                        help='file layout (default: detected from the first file)')
+    parser.add_argument('--json', type=Path, default=None,
+                        help='write pooled and per-pair scores to this JSON file')
+    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
+                        help='ROS 2 params file whose human_driver section is scored')
+    parser.add_argument('--driver-fit', type=Path, default=DRIVER_FIT_FILE,
+                        help='driver-fit file holding the bounded IDM (default: the shipped)')
+    parser.add_argument('--window-s', type=float, default=WINDOW_S,
+                        help='re-initialised window length, s (default: %(default)s)')
+    parser.add_argument('--vehicle-length-m', type=float, default=NGSIM_VEHICLE_LENGTH_M,
+                        help='NGSIM: assumed leader length, m (default: %(default)s)')
+    parser.set_defaults(func=run)
+
+
+def models(params_file: Path, driver_fit: Path) -> dict[str, Follower]:
+    """The four scored models.
+
+    Raises:
+        TrustAvPlannerError: Bad driver-fit file (ParamsError propagates for a bad params file).
+    """
+    config = load_run_config(params_file).driver
+    try:
+        idm = IdmParams(**fitted_idm_params(driver_fit))
+    except (DriverFitError, ValueError) as err:
+        raise TrustAvPlannerError(str(err)) from err
+    return {SHIPPED: MpcFollower(config), BOUNDED_IDM: IdmFollower(idm),
+            TEXTBOOK_IDM: IdmFollower(TEXTBOOK_MOTORWAY), CONSTANT_SPEED: ConstantSpeed()}
+
+
+def run(args: argparse.Namespace) -> int:
+    """Load, clean, score, print (and write JSON)."""
+    if not args.window_s > 0.0:
+        raise TrustAvPlannerError(f'--window-s must be > 0, got {args.window_s}')
+    scored = models(args.params_file, args.driver_fit)
+    report = LoadReport()
+    try:
+        pairs = load_directory(args.data, args.format, report=report,
+                               dt_s=load_run_config(args.params_file).driver.dt_s,
+                               vehicle_length_m=args.vehicle_length_m)
+    except CarFollowingDataError as err:
+        raise TrustAvPlannerError(str(err)) from err
+    result = evaluate(scored, pairs, window_s=args.window_s)
+    print(f'{args.data}: {len(report.files)} files, {len(result.pairs)} pairs '
+          f'({len(pairs)} segments); splices cut: {len(report.splices)}; '
+          f'repeated windows merged: {report.duplicates_merged}; left out: '
+          f'{len(report.excluded)}')
+    for splice in report.splices:
+        print(f'  splice {splice.pair}: {splice.start_s:.1f}-{splice.end_s:.1f} s cut '
+              f'(gap rate vs Doppler up to {splice.max_residual_mps:.1f} m/s)')
+    for key, why in report.excluded.items():
+        print(f'  left out {key}: {why}')
+    for protocol in PROTOCOLS:
+        print()
+        print(format_table(result, protocol))
+    if args.json is not None:
+        document = {'data': str(args.data), 'files': report.files,
+                    'splices': [vars(s) for s in report.splices],
+                    'excluded': report.excluded, 'window_s': args.window_s,
+                    'vehicle_length_m': report.vehicle_length_m, **result.to_dict()}
+        try:
+            args.json.write_text(json.dumps(document, indent=1))
+        except OSError as err:
+            raise TrustAvPlannerError(f'cannot write {args.json}: {err.strerror}') from err
+        print(f'\nwrote {args.json}')
+    return 0
