@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -182,11 +183,16 @@ def wall_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, rate_hz: fl
 
 def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *,
                    duration_s: float, rate_hz: float,
-                   startup_timeout_s: float = 30.0) -> ShadowRun:
+                   startup_timeout_s: float = 30.0,
+                   every_second: Callable[[dict[str, int], float], None] | None = None
+                   ) -> ShadowRun:
     """Every node in wall mode for ``duration_s`` of wall time after ``/sim/start``; every
     topic recorded to the bag directory ``bag`` (log time = header stamp = wall time).
 
     The nodes use the standard topic names (:data:`trust_monitor.common.topics.TOPICS`).
+    ``every_second``, if given, is called about once a second while the nodes run, with
+    their process ids by node name and the wall time since ``/sim/start`` (s); it runs in the
+    recording loop, so it must return quickly.
 
     Raises:
         GraphError: the nodes did not connect in time or one died.
@@ -218,14 +224,18 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                         lambda d, t=topic.name: recording.write(t, d), RECORD_QOS, raw=True)
                 _wait_topics(graph, node, executor, needs, startup_timeout_s)
                 start_pub.publish(Empty())
-                end = time.monotonic() + duration_s
-                next_chunk = time.monotonic() + 1.0
+                started = time.monotonic()
+                end = started + duration_s
+                next_chunk = started + 1.0
+                pids = {p.spec.name: p.popen.pid for p in graph.processes}
                 while time.monotonic() < end:
                     executor.spin_once(timeout_sec=0.05)
                     graph.check_alive(set())
                     if time.monotonic() >= next_chunk:
                         recording.end_step()
                         next_chunk += 1.0
+                        if every_second is not None:
+                            every_second(pids, time.monotonic() - started)
                 _stop_and_drain(graph, executor, WALL_GRAPH_NODES)
                 counts = dict(recording.counts)
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts,
