@@ -184,15 +184,17 @@ def wall_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, rate_hz: fl
 def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *,
                    duration_s: float, rate_hz: float,
                    startup_timeout_s: float = 30.0,
-                   every_second: Callable[[dict[str, int], float], None] | None = None
-                   ) -> ShadowRun:
+                   every_second: Callable[[dict[str, int], float], None] | None = None,
+                   on_message: Callable[[str, int], None] | None = None) -> ShadowRun:
     """Every node in wall mode for ``duration_s`` of wall time after ``/sim/start``; every
     topic recorded to the bag directory ``bag`` (log time = header stamp = wall time).
 
     The nodes use the standard topic names (:data:`trust_monitor.common.topics.TOPICS`).
     ``every_second``, if given, is called about once a second while the nodes run, with
     their process ids by node name and the wall time since ``/sim/start`` (s); it runs in the
-    recording loop, so it must return quickly.
+    recording loop, so it must return quickly. ``on_message``, if given, is called for every
+    recorded message with its topic and its DDS publication sequence number (the publisher's
+    count of messages, from 1).
 
     Raises:
         GraphError: the nodes did not connect in time or one died.
@@ -217,11 +219,16 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
             node, executor = session.node, session.executor
             start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
             with BagWriter(bag) as recording:
+                def record(topic: str, data: bytes, info: dict[str, Any]) -> None:
+                    recording.write(topic, data)
+                    if on_message is not None:
+                        on_message(topic, int(info['publication_sequence_number']))
+
                 for topic in recorded:
                     recording.add_topic(topic.name, topic.msgtype, offered_qos(QOS[topic.qos]))
                     node.create_subscription(
                         message_class(topic.msgtype), topic.name,
-                        lambda d, t=topic.name: recording.write(t, d), RECORD_QOS, raw=True)
+                        lambda d, info, t=topic.name: record(t, d, info), RECORD_QOS, raw=True)
                 _wait_topics(graph, node, executor, needs, startup_timeout_s)
                 start_pub.publish(Empty())
                 started = time.monotonic()
