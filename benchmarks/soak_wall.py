@@ -27,7 +27,8 @@ every recorded message (the publisher's count, from 1):
 - start edge: the messages before the first recorded one were published before the
   recorder had matched the publisher (the wall-mode profiles are volatile: a late subscriber
   gets nothing old). Allowed only before ``/sim/start``: a topic's first recorded message is
-  its publisher's first, or stamped before ``/sim/start`` (+ one period);
+  its publisher's first, or stamped before ``/sim/start`` (the runner sends ``/sim/start``
+  only once this process has received every publisher that publishes before it);
 - stop edge: at most :data:`STOP_EDGE` message per topic published and not recorded at the
   end (the one a node may publish while it is being stopped; best effort has no
   acknowledgement to wait for);
@@ -173,7 +174,7 @@ def read_bag(bag: Path, start_ns: int) -> dict[str, Recorded]:
 
 
 def topic_checks(published: dict[str, int], recorded: dict[str, Recorded],
-                 sequences: dict[str, Sequences], *, start_ns: int, period_ns: int,
+                 sequences: dict[str, Sequences], *, start_ns: int,
                  max_gap_s: float) -> tuple[list[dict[str, Any]], list[str]]:
     """Per topic: published (by the node) against recorded, the start and stop edges,
     holes and the longest gap; returns the rows and the problems found (one line each)."""
@@ -184,7 +185,9 @@ def topic_checks(published: dict[str, int], recorded: dict[str, Recorded],
         stop_edge = sent - seq.last
         row = {'topic': topic, 'published': sent, 'recorded': got.count,
                'start_edge': start_edge, 'holes': seq.holes, 'stop_edge': stop_edge,
-               'out_of_order': seq.out_of_order, 'max_gap_s': got.max_gap_ns / 1e9,
+               'out_of_order': seq.out_of_order,
+               'first_recorded_after_start_s': (got.first_ns - start_ns) / 1e9,
+               'max_gap_s': got.max_gap_ns / 1e9,
                'gaps_over_stale_s': got.gaps_over_stale}
         rows.append(row)
         where = f'{topic}: '
@@ -196,7 +199,7 @@ def topic_checks(published: dict[str, int], recorded: dict[str, Recorded],
         if seq.holes or seq.out_of_order:
             problems.append(where + f'{seq.holes} messages missing between the first and the '
                             f'last recorded ({seq.out_of_order} out of order)')
-        if start_edge and got.first_ns > start_ns + period_ns:
+        if start_edge and got.first_ns > start_ns:
             problems.append(where + f'the first {start_edge} messages are missing and the '
                             'first recorded one is after /sim/start')
         if not 0 <= stop_edge <= STOP_EDGE:
@@ -289,7 +292,6 @@ def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     load_after = os.getloadavg()
     if sampler.start_ns is None:
         raise RuntimeError('the run ended before its first second')
-    period_ns = round(1e9 / args.rate_hz)
     recorded = read_bag(work / 'soak', sampler.start_ns)
     published = {}
     for row in TOPICS:
@@ -298,7 +300,7 @@ def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
         sent = run.loops[row.publisher].get('published', {}).get(row.name, 0)
         published[row.name] = sent + (1 if row.name in INITIAL_STATE else 0)
     rows, problems = topic_checks(published, recorded, sequences, start_ns=sampler.start_ns,
-                                  period_ns=period_ns, max_gap_s=args.max_gap_s)
+                                  max_gap_s=args.max_gap_s)
     for row in rows:
         row['node'] = next(t.publisher for t in TOPICS if t.name == row['topic'])
     growth, grow_problems = growth_checks(sampler.series, args.baseline_min, args.rss_limit_mb)

@@ -49,6 +49,10 @@ OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_st
 SHADOW_NODES = ('planner', 'trust_monitor')
 WALL_GRAPH_NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_monitor')
 """The nodes of :func:`run_wall_graph` (this process records in place of ``recorder``)."""
+AFTER_START = ('/preceding_vehicle/odom', '/preceding_vehicle/speed_preview', '/human/plan',
+               '/human/driver_status')
+"""In a whole-graph wall run, the topics published only once ``/sim/start`` has come; the
+others are published from each node's first tick."""
 
 
 @dataclass
@@ -224,12 +228,23 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                     if on_message is not None:
                         on_message(topic, int(info['publication_sequence_number']))
 
+                subscriptions = []
                 for topic in recorded:
                     recording.add_topic(topic.name, topic.msgtype, offered_qos(QOS[topic.qos]))
-                    node.create_subscription(
+                    subscriptions.append(node.create_subscription(
                         message_class(topic.msgtype), topic.name,
-                        lambda d, info, t=topic.name: record(t, d, info), RECORD_QOS, raw=True)
-                _wait_topics(graph, node, executor, needs, startup_timeout_s)
+                        lambda d, info, t=topic.name: record(t, d, info), RECORD_QOS, raw=True))
+                # /sim/start only once this process receives every publisher: the graph's
+                # endpoint counts say that a publisher exists, not that it sends here (the
+                # wall profiles are volatile: what a publisher sent before it matched this
+                # subscription is never resent). Proof is a message received; for a topic
+                # published only after /sim/start, this subscription's own match.
+                _wait_topics(graph, node, executor, needs, startup_timeout_s,
+                             lambda: [f'{sub.topic_name} (not received here yet)'
+                                      for sub in subscriptions
+                                      if (sub.get_publisher_count() < 1
+                                          if sub.topic_name in AFTER_START
+                                          else recording.count(sub.topic_name) < 1)])
                 start_pub.publish(Empty())
                 started = time.monotonic()
                 end = started + duration_s
@@ -291,8 +306,9 @@ def _wait_nodes(graph: Graph, node: Any, executor: Any, topics: PlannerTopics,
 
 
 def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[int, int]],
-                 timeout_s: float) -> None:
-    """Wait until every topic has its (publishers, subscribers); name those that do not."""
+                 timeout_s: float, pending: Callable[[], list[str]] | None = None) -> None:
+    """Wait until every topic has its (publishers, subscribers) and ``pending`` (if given)
+    names nothing more; name what is missing."""
     deadline = time.monotonic() + timeout_s
     missing: list[str] = []
     while time.monotonic() < deadline:
@@ -302,6 +318,7 @@ def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[
                    f'{node.count_subscribers(topic)}/{subs} subscribers)'
                    for topic, (pubs, subs) in needs.items()
                    if node.count_publishers(topic) < pubs or node.count_subscribers(topic) < subs]
+        missing += pending() if pending is not None else []
         if not missing:
             return
     raise GraphError(f'shadow nodes not connected after {timeout_s:g} s: ' + '; '.join(missing))
