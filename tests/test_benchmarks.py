@@ -10,6 +10,16 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / 'benchmarks'))
+from soak_wall import (  # noqa: E402
+    NODES,
+    RECORDER,
+    STOP_EDGE,
+    Recorded,
+    Sequences,
+    growth_checks,
+    topic_checks,
+)
 
 
 def test_benchmark_suite_smoke(tmp_path: Path) -> None:
@@ -91,3 +101,95 @@ def test_shadow_benchmark_smoke(tmp_path: Path) -> None:
     assert all(loop['ticks'] > 0 for loop in figures['loops'].values())
     assert figures['worst_p99_jitter_ms'] == max(loop['jitter_ms']['p99']
                                                  for loop in figures['loops'].values())
+
+
+SECOND = 1_000_000_000
+PERIOD = SECOND // 10
+
+
+def _topic(first_seq: int, last_seq: int, start_ns: int, skip: tuple[int, ...] = (),
+           first_ns: int | None = None, late: int = 0) -> tuple[Recorded, Sequences]:
+    """A topic received as sequence numbers ``first_seq..last_seq`` (without ``skip``),
+    one per period from ``first_ns``; message ``late`` (if any) arrives 2 s late."""
+    recorded, sequences = Recorded(), Sequences()
+    t = start_ns - 5 * PERIOD if first_ns is None else first_ns
+    for seq in range(first_seq, last_seq + 1):
+        t += PERIOD + (2 * SECOND if seq == late else 0)
+        if seq in skip:
+            continue
+        recorded.add(t, start_ns)
+        sequences.add(seq)
+    return recorded, sequences
+
+
+def test_soak_wall_topic_checks() -> None:
+    """The soak's bag checks: the start and stop edges are the only messages allowed to be
+    missing; a hole, a late start, a long stop edge and a long gap each fail."""
+    start = 1000 * SECOND
+    ok = _topic(4, 300, start)
+    rows, problems = topic_checks({'/a': 300}, {'/a': ok[0]}, {'/a': ok[1]}, start_ns=start,
+                                  max_gap_s=1.0)
+    assert problems == [], problems
+    assert {k: rows[0][k] for k in ('published', 'recorded', 'start_edge', 'holes',
+                                    'stop_edge')} == {'published': 300, 'recorded': 297,
+                                                      'start_edge': 3, 'holes': 0,
+                                                      'stop_edge': 0}
+    cases = {
+        'hole': (300, _topic(1, 300, start, skip=(150,))),
+        'start edge after /sim/start': (300, _topic(20, 300, start, first_ns=start + SECOND)),
+        'stop edge': (300 + STOP_EDGE + 1, _topic(1, 300, start)),
+        'gap': (300, _topic(1, 300, start, late=100)),
+        'nothing after the start': (10, _topic(1, 3, start, first_ns=start - SECOND)),
+    }
+    expected = {'hole': 'missing between', 'start edge after /sim/start': 'after /sim/start',
+                'stop edge': 'after the last recorded', 'gap': 'a gap of 2.1',
+                'nothing after the start': 'nothing recorded after /sim/start'}
+    for name, (sent, (recorded, sequences)) in cases.items():
+        _, problems = topic_checks({'/a': sent}, {'/a': recorded}, {'/a': sequences},
+                                   start_ns=start, max_gap_s=1.0)
+        assert any(expected[name] in p for p in problems), (name, problems)
+
+
+def test_soak_wall_growth_checks() -> None:
+    """Growth is measured from the baseline minute to the last sample: RSS above the limit,
+    one more fd or one more thread each fail; growth before the baseline does not count."""
+    def series(rss: list[float], fds: list[int], threads: list[int]) -> list[dict[str, float]]:
+        return [{'t_min': float(k), 'rss_mb': r, 'fds': f, 'threads': t}
+                for k, (r, f, t) in enumerate(zip(rss, fds, threads, strict=True))]
+
+    flat = series([50, 90, 91, 95], [10, 20, 20, 20], [5, 9, 9, 9])
+    growth, problems = growth_checks({'planner': flat}, 1.0, 20.0)
+    assert problems == [] and growth['planner']['rss_mb'] == 5.0
+    bad = {'rss': series([50, 50, 60, 71], [9, 9, 9, 9], [5, 5, 5, 5]),
+           'fds': series([50, 50, 50, 50], [9, 9, 9, 10], [5, 5, 5, 5]),
+           'threads': series([50, 50, 50, 50], [9, 9, 9, 9], [5, 5, 6, 6])}
+    _, problems = growth_checks(bad, 1.0, 20.0)
+    assert [p.split(':')[0] for p in problems] == ['rss', 'fds', 'threads'], problems
+    _, problems = growth_checks({'x': flat}, 3.0, 20.0)
+    assert problems and 'no sample after the baseline' in problems[0]
+
+
+@pytest.mark.wall_clock
+def test_soak_wall_two_minutes(tmp_path: Path) -> None:
+    """benchmarks/soak_wall.py for 2 minutes of wall time (baseline minute 1): every node
+    and the recorder sampled each minute, every published message in the bag but the
+    documented start and stop edges, no hole, no gap over 1 s, no fd or thread growth (the
+    30-minute run: `python benchmarks/soak_wall.py`; no timing threshold)."""
+    out = tmp_path / 'soak_wall.json'
+    proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'soak_wall.py'),
+                           '--duration-min', '2', '--baseline-min', '1', '--out', str(out)],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    figures = json.loads(out.read_text())
+    assert figures['problems'] == []
+    assert set(figures['growth']) == {*NODES, RECORDER}
+    assert all(len(s) >= 3 for s in figures['series'].values())
+    assert all(g['fds'] <= 0 and g['threads'] <= 0 and g['rss_mb'] <= 20.0
+               for g in figures['growth'].values())
+    assert len(figures['topics']) == 11
+    for row in figures['topics']:
+        assert row['holes'] == 0 and 0 <= row['stop_edge'] <= STOP_EDGE, row
+        assert row['published'] - row['recorded'] == row['start_edge'] + row['stop_edge'], row
+        assert row['recorded'] >= 0.5 * 120 * figures['rate_hz'], row
+        assert row['max_gap_s'] <= 1.0, row
+    assert all(figures['loops'][node]['ticks'] > 0 for node in NODES)

@@ -54,8 +54,13 @@ def test_loop_stats_percentiles(tmp_path) -> None:  # type: ignore[no-untyped-de
     assert summary['jitter_ms']['max'] == pytest.approx(5.0)
     assert summary['compute_ms']['p99'] == pytest.approx(0.5)
     assert 'p50/p99/max 3.00' in format_summary(summary)
+    assert summary['published'] == {}
+    for topic in ('/ego/plan', '/ego/accel_cmd', '/ego/plan'):
+        stats.publish(topic)
     stats.write(tmp_path / 'j.json', 'planner')
-    assert json.loads((tmp_path / 'j.json').read_text())['node'] == 'planner'
+    written = json.loads((tmp_path / 'j.json').read_text())
+    assert written['node'] == 'planner'
+    assert written['published'] == {'/ego/accel_cmd': 1, '/ego/plan': 2}
     with pytest.raises(ValueError):
         LoopStats(0)
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,6 +49,10 @@ OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_st
 SHADOW_NODES = ('planner', 'trust_monitor')
 WALL_GRAPH_NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_monitor')
 """The nodes of :func:`run_wall_graph` (this process records in place of ``recorder``)."""
+AFTER_START = ('/preceding_vehicle/odom', '/preceding_vehicle/speed_preview', '/human/plan',
+               '/human/driver_status')
+"""In a whole-graph wall run, the topics published only once ``/sim/start`` has come; the
+others are published from each node's first tick."""
 
 
 @dataclass
@@ -183,11 +188,19 @@ def wall_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, rate_hz: fl
 
 def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *,
                    duration_s: float, rate_hz: float,
-                   startup_timeout_s: float = 30.0) -> ShadowRun:
+                   startup_timeout_s: float = 30.0,
+                   every_second: Callable[[dict[str, int], float], None] | None = None,
+                   on_message: Callable[[str, int], None] | None = None) -> ShadowRun:
     """Every node in wall mode for ``duration_s`` of wall time after ``/sim/start``; every
     topic recorded to the bag directory ``bag`` (log time = header stamp = wall time).
 
     The nodes use the standard topic names (:data:`trust_monitor.common.topics.TOPICS`).
+    ``/sim/start`` is published once this process receives every publisher, so every
+    message published after it is in the bag. ``every_second``, if given, is called about once a second while the nodes run, with
+    their process ids by node name and the wall time since ``/sim/start`` (s); it runs in the
+    recording loop, so it must return quickly. ``on_message``, if given, is called for every
+    recorded message with its topic and its DDS publication sequence number (the publisher's
+    count of messages, from 1).
 
     Raises:
         GraphError: the nodes did not connect in time or one died.
@@ -213,22 +226,42 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
             node, executor = session.node, session.executor
             start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
             with BagWriter(bag) as recording:
+                def record(topic: str, data: bytes, info: dict[str, Any]) -> None:
+                    recording.write(topic, data)
+                    if on_message is not None:
+                        on_message(topic, int(info['publication_sequence_number']))
+
+                subscriptions = []
                 for topic in recorded:
                     name = qualified(topic.name)
                     recording.add_topic(name, topic.msgtype, offered_qos(QOS[topic.qos]))
-                    node.create_subscription(
+                    subscriptions.append(node.create_subscription(
                         message_class(topic.msgtype), name,
-                        lambda d, t=name: recording.write(t, d), RECORD_QOS, raw=True)
-                _wait_topics(graph, node, executor, needs, startup_timeout_s)
+                        lambda d, info, t=name: record(t, d, info), RECORD_QOS, raw=True))
+                # /sim/start only once this process receives every publisher: the graph's
+                # endpoint counts say that a publisher exists, not that it sends here (the
+                # wall profiles are volatile: what a publisher sent before it matched this
+                # subscription is never resent). Proof is a message received; for a topic
+                # published only after /sim/start, this subscription's own match.
+                _wait_topics(graph, node, executor, needs, startup_timeout_s,
+                             lambda: [f'{sub.topic_name} (not received here yet)'
+                                      for sub in subscriptions
+                                      if (sub.get_publisher_count() < 1
+                                          if sub.topic_name in AFTER_START
+                                          else recording.count(sub.topic_name) < 1)])
                 start_pub.publish(Empty())
-                end = time.monotonic() + duration_s
-                next_chunk = time.monotonic() + 1.0
+                started = time.monotonic()
+                end = started + duration_s
+                next_chunk = started + 1.0
+                pids = {p.spec.name: p.popen.pid for p in graph.processes}
                 while time.monotonic() < end:
                     executor.spin_once(timeout_sec=0.05)
                     graph.check_alive(set())
                     if time.monotonic() >= next_chunk:
                         recording.end_step()
                         next_chunk += 1.0
+                        if every_second is not None:
+                            every_second(pids, time.monotonic() - started)
                 _stop_and_drain(graph, executor, WALL_GRAPH_NODES)
                 counts = dict(recording.counts)
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts,
@@ -279,8 +312,9 @@ def _wait_nodes(graph: Graph, node: Any, executor: Any, topics: PlannerTopics,
 
 
 def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[int, int]],
-                 timeout_s: float) -> None:
-    """Wait until every topic has its (publishers, subscribers); name those that do not."""
+                 timeout_s: float, pending: Callable[[], list[str]] | None = None) -> None:
+    """Wait until every topic has its (publishers, subscribers) and ``pending`` (if given)
+    names nothing more; name what is missing."""
     deadline = time.monotonic() + timeout_s
     missing: list[str] = []
     while time.monotonic() < deadline:
@@ -290,6 +324,7 @@ def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[
                    f'{node.count_subscribers(topic)}/{subs} subscribers)'
                    for topic, (pubs, subs) in needs.items()
                    if node.count_publishers(topic) < pubs or node.count_subscribers(topic) < subs]
+        missing += pending() if pending is not None else []
         if not missing:
             return
     raise GraphError(f'shadow nodes not connected after {timeout_s:g} s: ' + '; '.join(missing))

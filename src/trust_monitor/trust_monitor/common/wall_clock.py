@@ -107,7 +107,8 @@ class LatestInputs:
 
 
 class LoopStats:
-    """Tick-to-tick period error (actual period - nominal) and compute time of a loop."""
+    """Tick-to-tick period error (actual period - nominal) and compute time of a loop, and
+    the messages the node published per topic while it ran."""
 
     def __init__(self, period_ns: int) -> None:
         if period_ns <= 0:
@@ -116,6 +117,11 @@ class LoopStats:
         self._last_tick_ns: int | None = None
         self.jitter_ns: list[int] = []
         self.compute_ns: list[int] = []
+        self.published: dict[str, int] = {}
+
+    def publish(self, topic: str) -> None:
+        """The node published one message on ``topic``."""
+        self.published[topic] = self.published.get(topic, 0) + 1
 
     def tick(self, now_ns: int) -> None:
         """A loop iteration starts at ``now_ns``."""
@@ -128,10 +134,12 @@ class LoopStats:
         self.compute_ns.append(compute_ns)
 
     def summary(self) -> dict[str, Any]:
-        """p50/p99/max of |period error| and of compute time, ms, and the tick count."""
+        """p50/p99/max of |period error| and of compute time, ms, the tick count and the
+        messages published per topic."""
         return {'ticks': len(self.compute_ns), 'period_ms': self.period_ns / 1e6,
                 'jitter_ms': _percentiles(np.abs(np.asarray(self.jitter_ns, dtype=float))),
-                'compute_ms': _percentiles(np.asarray(self.compute_ns, dtype=float))}
+                'compute_ms': _percentiles(np.asarray(self.compute_ns, dtype=float)),
+                'published': dict(sorted(self.published.items()))}
 
     def write(self, path: str | Path, node: str) -> None:
         """Write :meth:`summary` (with the node name) as JSON."""

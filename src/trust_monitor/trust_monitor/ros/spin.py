@@ -8,7 +8,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable
-from typing import Protocol
+from typing import Any, Protocol
 
 import rclpy
 from rclpy.duration import Duration
@@ -17,6 +17,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.signals import SignalHandlerOptions
 
 from trust_monitor.common.params import ParamsError
@@ -27,15 +28,28 @@ from trust_monitor.ros.parameters import check_overrides
 class WallLoop:
     """A node's wall-clock control loop: a timer at ``control_rate_hz`` whose every tick is
     timed (:class:`trust_monitor.wall_clock.LoopStats`); p50/p99 are logged every
-    ``jitter_log_period_s`` and written to ``jitter_report_path`` by :meth:`close`."""
+    ``jitter_log_period_s`` and written to ``jitter_report_path`` by :meth:`close`, with the
+    number of messages the node published per topic from then on (every publisher the node
+    has when the loop is made is counted: its ``publish`` is wrapped)."""
 
     def __init__(self, node: Node, config: WallClockConfig, step: Callable[[], None]) -> None:
         self.node = node
         self.config = config
         self.step = step
         self.stats = LoopStats(config.period_ns)
+        for publisher in node.publishers:
+            self._count(publisher)
         self._next_log_ns = time.monotonic_ns() + round(config.jitter_log_period_s * NS_PER_S)
         self.timer = node.create_timer(1.0 / config.control_rate_hz, self._tick)
+
+    def _count(self, publisher: Publisher) -> None:
+        publish, topic = publisher.publish, publisher.topic_name
+
+        def counted(msg: Any) -> None:
+            publish(msg)
+            self.stats.publish(topic)
+
+        publisher.publish = counted  # type: ignore[method-assign]
 
     def _tick(self) -> None:
         start = time.monotonic_ns()
