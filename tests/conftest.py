@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,16 @@ from trust_av_planner.system.closed_loop import SimResult, simulate
 from trust_av_planner.system.config import RunConfig, load_run_config
 
 ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+@pytest.fixture
+def ros_domain() -> Iterator[str]:
+    """A ROS domain id leased for one test (the runs' lease: no other test or run uses it
+    meanwhile; 230-232 stay free for the tests that need fixed domains)."""
+    from trust_av_planner.graph.domains import lease_domain
+
+    with lease_domain() as domain:
+        yield str(domain)
 
 
 @pytest.fixture(scope='session')

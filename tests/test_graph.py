@@ -160,12 +160,34 @@ def node_pid(orchestrator: int, node: str) -> int:
     raise AssertionError(f'{node} process not found')
 
 
-def wait_for_bag(bag: Path, size: int = 20_000) -> None:
-    """Wait until the recording (the MCAP in the bag directory) has some steps in it."""
+def recorded_chunks(mcap: Path) -> int:
+    """Chunks written so far to a growing MCAP (the recorder writes one chunk per step), read
+    with mcap's stream reader up to the first incomplete record."""
+    import struct
+
+    from mcap.exceptions import McapError
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    chunks = 0
+    try:
+        with mcap.open('rb') as stream:
+            for record in StreamReader(stream, emit_chunks=True).records:
+                chunks += isinstance(record, Chunk)
+    except FileNotFoundError:
+        return 0                # not created yet
+    except (McapError, struct.error):
+        pass                    # the file ends mid-record while it is written: count so far
+    return chunks
+
+
+def wait_for_bag(bag: Path, steps: int = 20) -> None:
+    """Wait until the recording (the MCAP in the bag directory) holds ``steps`` steps."""
     mcap = bag / f'{bag.name}.mcap'
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (mcap.exists() and mcap.stat().st_size > size):
+    while time.monotonic() < deadline and recorded_chunks(mcap) < steps:
         time.sleep(0.2)
+    assert recorded_chunks(mcap) >= steps, f'{mcap}: fewer than {steps} steps after 120 s'
 
 
 def assert_gone(pids: list[int]) -> None:
@@ -206,9 +228,9 @@ def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path, moment: str) -
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     if moment == 'mid-run':
-        wait_for_bag(bag, size=90_000)
+        wait_for_bag(bag, steps=150)
     else:
-        wait_for_bag(bag, size=1)
+        wait_for_bag(bag, steps=1)
     children = children_of(proc.pid)
     proc.send_signal(signal.SIGINT)
     _out, err = proc.communicate(timeout=120)
