@@ -101,3 +101,24 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         return 1 if item.get_closest_marker('slow') is not None else 2
 
     items.sort(key=rank)
+
+
+def recorded_chunks(mcap: Path) -> int:
+    """Chunks written so far to a growing MCAP (the recorder writes one chunk per step), read
+    with mcap's stream reader up to the first incomplete record."""
+    import struct
+
+    from mcap.exceptions import McapError
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    chunks = 0
+    try:
+        with mcap.open('rb') as stream:
+            for record in StreamReader(stream, emit_chunks=True).records:
+                chunks += isinstance(record, Chunk)
+    except FileNotFoundError:
+        return 0                # not created yet
+    except (McapError, struct.error):
+        pass                    # the file ends mid-record while it is written: count so far
+    return chunks

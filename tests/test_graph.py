@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import assert_every_topic_complete
+from conftest import assert_every_topic_complete, recorded_chunks
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
@@ -158,27 +158,6 @@ def node_pid(orchestrator: int, node: str) -> int:
                 return pid
         time.sleep(0.2)
     raise AssertionError(f'{node} process not found')
-
-
-def recorded_chunks(mcap: Path) -> int:
-    """Chunks written so far to a growing MCAP (the recorder writes one chunk per step), read
-    with mcap's stream reader up to the first incomplete record."""
-    import struct
-
-    from mcap.exceptions import McapError
-    from mcap.records import Chunk
-    from mcap.stream_reader import StreamReader
-
-    chunks = 0
-    try:
-        with mcap.open('rb') as stream:
-            for record in StreamReader(stream, emit_chunks=True).records:
-                chunks += isinstance(record, Chunk)
-    except FileNotFoundError:
-        return 0                # not created yet
-    except (McapError, struct.error):
-        pass                    # the file ends mid-record while it is written: count so far
-    return chunks
 
 
 def wait_for_bag(bag: Path, steps: int = 20) -> None:
