@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The project's test command (README): set up .venv if needed, then lint (ruff), type-check
-# the pure core (mypy --strict), and run the whole test suite (pytest). Extra arguments go to
-# pytest, e.g. `bash scripts/test.sh -k nmpc`.
+# the pure core (mypy --strict), and run the whole test suite (pytest) on two workers
+# (pytest-xdist, --dist loadgroup: tests/conftest.py groups the wall-clock tests on one worker
+# so that they overlap with the CPU-bound ones). Extra arguments go to pytest, e.g.
+# `bash scripts/test.sh -k nmpc`, or `bash scripts/test.sh -n 0` for one process.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -16,4 +18,4 @@ mypy --exclude '(_node|cli/run|cli/shadow|setup)\.py$|/ros/|/graph/' \
   src/preceding_traffic/preceding_traffic src/trust_monitor/trust_monitor \
   src/human_driver_sim/human_driver_sim src/trust_av_planner/trust_av_planner
 echo '== pytest' >&2
-python -m pytest "$@"
+python -m pytest -n 2 --dist loadgroup "$@"

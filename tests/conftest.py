@@ -57,3 +57,36 @@ def assert_every_topic_complete(bag: Path) -> int:
             steps[name] = max(len(topics.get(name, {})) - initial, 0)
     assert min(steps.values()) >= complete and max(steps.values()) <= complete + 1, steps
     return complete
+@pytest.hookimpl(tryfirst=True)   # before pytest-xdist reads the xdist_group marks
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Order and group the suite for ``pytest -n 2 --dist loadgroup`` (scripts/test.sh).
+
+    * ``wall_clock`` tests (they mostly wait for real time, e.g. a soak at 10 Hz) form one
+      xdist group: one worker runs them one after the other, from the start of the run
+      (xdist hands out the largest group first), while the other worker runs the CPU-bound
+      tests; the waiting overlaps with computing instead of adding to it.
+    * ``slow`` tests (CPU-bound and long, e.g. the GRU retraining) come first among the
+      rest, so that they start at once on the other worker instead of ending the run.
+    * Tests that share a module-scoped fixture (a colcon build, one graph run) stay on one
+      worker, so that the fixture is built once.
+    Without xdist the marks do nothing and only the order changes.
+    """
+    del config
+    for item in items:
+        if item.get_closest_marker('wall_clock') is not None:
+            item.add_marker(pytest.mark.xdist_group('wall_clock'))
+            continue
+        fixture_info = getattr(item, '_fixtureinfo', None)
+        if fixture_info is None:
+            continue
+        for name, definitions in fixture_info.name2fixturedefs.items():
+            if definitions and definitions[-1].scope == 'module':
+                item.add_marker(pytest.mark.xdist_group(f'{item.module.__name__}.{name}'))
+                break
+
+    def rank(item: pytest.Item) -> int:
+        if item.get_closest_marker('wall_clock') is not None:
+            return 0
+        return 1 if item.get_closest_marker('slow') is not None else 2
+
+    items.sort(key=rank)

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -31,8 +33,8 @@ def test_floor_benchmark_smoke(tmp_path: Path) -> None:
     (no timing threshold)."""
     from mcap.reader import make_reader
 
-    from trust_monitor.graph_interface import TOPICS
-    from trust_monitor.step_chain import step_chain
+    from trust_monitor.common.step_chain import step_chain
+    from trust_monitor.common.topics import TOPICS
 
     out = tmp_path / 'floor.json'
     proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'bench_floor.py'),
@@ -71,6 +73,7 @@ def test_soak_short_version(tmp_path: Path) -> None:
     assert all(mb < 20.0 for mb in figures['growth_mb'].values()), figures['growth_mb']
 
 
+@pytest.mark.wall_clock
 def test_shadow_benchmark_smoke(tmp_path: Path) -> None:
     """bench_shadow.py, 2 s of every node in wall mode: per-loop figures are written (no
     timing threshold; the 10 ms acceptance figure is reported, not asserted)."""

@@ -50,19 +50,47 @@ def test_no_collision_and_physical_speeds(trace: str, alpha: float, run_config) 
     result = closed_loop(trace, alpha)
     d_s = run_config.planner.standstill_gap_m
     assert result.metrics.min_av_gap_m >= d_s - 0.5  # the NMPC's gap bound (Table I d_s)
-    assert result.metrics.min_human_gap_m > 0.0      # the human never reaches the AV
-    # The human is the IRL-fitted driver (tau_H 0.975 s), not bound by the AV's d_s: behind an
-    # AV that ignores explicability it may come closer in US06's hard stops (measured at
-    # alpha = 0: 3.92 m, one step); an explicable AV keeps it above the safety line too.
-    if alpha >= 0.25:
-        assert result.metrics.min_human_gap_m >= d_s - 0.5
-        assert result.metrics.unsafe_steps == 0
+    # The human keeps eq. (13)'s d_s as a hard bound with a margin for the AV braking harder
+    # than it expects (docs/MODEL.md, "The human's safety gap"): at every alpha it stays at
+    # or above the safety line d_s - safety_gap_margin_m, and rarely needs its braking
+    # fallback to do so.
+    assert result.metrics.min_human_gap_m >= run_config.min_safe_gap_m
+    assert result.metrics.unsafe_steps == 0
+    assert result.metrics.driver_fallback_steps <= MAX_FALLBACK_STEPS
     for r in result.records:
         assert r.av_speed_mps >= -BOUND_TOLERANCE and r.human_speed_mps >= -BOUND_TOLERANCE
     # Odometry is consistent with the gaps the controllers saw.
     last = result.records[-1]
     length = run_config.shared.vehicle_length_m
     assert last.traffic_position_m - last.av_position_m - length == pytest.approx(last.av_gap_m)
+
+
+@pytest.mark.parametrize('alpha', ALPHAS)
+def test_human_keeps_the_safety_line_behind_tac_gru(alpha: float, run_config) -> None:
+    """TAC-GRU on US06 brought the human closest before its gap bound was hard (3.55 m at
+    alpha = 0): every alpha now keeps it at or above d_s - safety_gap_margin_m."""
+    metrics = closed_loop('us06', alpha, 'gru').metrics
+    assert metrics.min_human_gap_m >= run_config.min_safe_gap_m
+    assert metrics.unsafe_steps == 0
+    assert metrics.driver_fallback_steps <= MAX_FALLBACK_STEPS
+
+
+def test_a_driver_stopped_behind_the_av_does_not_creep_below_d_s(run_config) -> None:
+    """NYCC's long stops behind TAC-CA (alpha = 0.75) with a driver who hardly wants speed
+    (driver 9 of ``--drivers 20``, seed 1, at 9af173a's fit): the QP met its gap bound only to
+    its tolerance, so the stopped human crept ~5e-8 m per step below d_s and then fell back
+    (65 steps). The plan is now corrected to meet the bound exactly."""
+    from trust_av_planner.system.closed_loop import simulate
+    from trust_av_planner.system.config import load_run_config
+    driver = {'weight_acceleration': 1.0, 'weight_desired_speed': 3.992764167065127e-09,
+              'weight_relative_speed': 0.033816528119931986,
+              'weight_relative_distance': 0.0007407111453434325,
+              'time_headway_s': 0.9751187838091812}
+    config = load_run_config(overrides={'planner': {'alpha': 0.75, 'predictor': 'ca'},
+                                        'human_driver': driver})
+    metrics = simulate(config, shipped_trace('nycc')).metrics
+    assert metrics.min_human_gap_m >= run_config.planner.standstill_gap_m - 1e-9
+    assert metrics.driver_fallback_steps == 0
 
 
 @pytest.mark.parametrize('trace', TRACES)

@@ -6,8 +6,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import tempfile
+import subprocess
+import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -28,10 +30,15 @@ from trust_av_planner.predictors.gru import (
 from trust_av_planner.study.gru_training import (
     TrainingSettings,
     build_dataset,
-    numerics_fingerprint,
     samples_from_run,
     train,
     train_with_dagger,
+)
+from trust_av_planner.study.pinned_numerics import (
+    CHILD_MARK,
+    numerics_report,
+    run_pinned,
+    unsupported_reason,
 )
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
@@ -136,59 +143,97 @@ def test_reduced_retraining_with_dagger_reproduces_itself(tmp_path: Path) -> Non
         np.testing.assert_array_equal(getattr(first, name), getattr(second, name))
 
 
-# Across CPUs (numerics fingerprint differs) retraining cannot be bit-identical; measured
-# on 2026-11-23: numpy's exp without AVX-512 moved the validation RMSE by 1.1e-5 and the
-# weights by 2e-9 (relative norm), numpy without X86_V4 plus PyTorch's scalar path moved
-# them by 1.3e-11 and 2e-9, the CI machine moved the RMSE by 2.9e-5; seed 8 instead of
-# 7 moves them by 6.2e-3 and 1.4. The tolerances sit between the two.
-CROSS_CPU_RMSE_ABS = 2e-4
-CROSS_CPU_WEIGHTS_REL = 1e-4
+def retrain_shipped(out: Path, *options: str) -> subprocess.CompletedProcess[str]:
+    """``trust-av train-gru --out OUT [options]`` as a user runs it (it trains in a child
+    process with pinned numerics)."""
+    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'train-gru',
+                           '--out', str(out), *options], capture_output=True, text=True)
+
+
+def assert_is_the_shipped_model(out: Path) -> None:
+    """The model written to ``out`` is the shipped one: same numerics fingerprint, the
+    model card's results (every float, every round's best epoch) and the weights bit for
+    bit (the ``.npz`` byte for byte)."""
+    card = json.loads(SHIPPED.with_suffix('.json').read_text())
+    new = json.loads(out.with_suffix('.json').read_text())
+    assert new['numerics_fingerprint'] == card['numerics_fingerprint'], (
+        'the pinned numerics differ from the ones the shipped model was trained with '
+        f"(this machine: {new['numerics']}; card: {card['numerics']})")
+    assert new['settings'] == card['settings']
+    assert new['results'] == card['results']
+    with np.load(SHIPPED) as shipped, np.load(out) as retrained:
+        assert sorted(shipped.files) == sorted(retrained.files)
+        for name in shipped.files:
+            np.testing.assert_array_equal(retrained[name], shipped[name], err_msg=name)
+    assert out.read_bytes() == SHIPPED.read_bytes()
 
 
 @pytest.mark.slow
-def test_retraining_reproduces_the_shipped_model() -> None:
-    """Full tier: same seed, same data -> the shipped model. On a CPU with the
-    card's numerics fingerprint: validation RMSE to 1e-6 and read-out weights to 1e-9; on
-    another CPU: within the cross-CPU tolerances above."""
+def test_retraining_reproduces_the_shipped_model(tmp_path: Path) -> None:
+    """Issue 4 and 14: `trust-av train-gru` rebuilds the shipped model bit for bit on any
+    x86-64 CPU with AVX2 (it pins numpy's, OpenBLAS's, PyTorch's and MKL's CPU paths in its
+    training process: pinned_numerics.py), whatever numpy/PyTorch settings the caller has.
+    The shipped model is the command's defaults (its card's settings are them)."""
+    reason = unsupported_reason()
+    if reason is not None:
+        pytest.skip(f'the pinned training numerics need x86-64 with AVX2: {reason}')
     card = json.loads(SHIPPED.with_suffix('.json').read_text())
-    settings = TrainingSettings(**{k: tuple(v) if isinstance(v, list) else v
-                                   for k, v in card['settings'].items()})
-    with tempfile.TemporaryDirectory() as work:
-        weights, report = train_with_dagger(load_run_config(), settings, Path(work))
-    shipped = load_weights(SHIPPED, 3)
-    if card['numerics_fingerprint'] == numerics_fingerprint():
-        assert report['validation_rmse_gru'] == pytest.approx(
-            card['results']['validation_rmse_gru'], abs=1e-6)
-        np.testing.assert_allclose(weights.out_weight, shipped.out_weight, atol=1e-9)
-        return
-    assert report['validation_rmse_gru'] == pytest.approx(
-        card['results']['validation_rmse_gru'], abs=CROSS_CPU_RMSE_ABS)
-    for name in ('weight_ih', 'weight_hh', 'out_weight'):
-        a, b = getattr(weights, name), getattr(shipped, name)
-        assert np.linalg.norm(a - b) <= CROSS_CPU_WEIGHTS_REL * np.linalg.norm(b), name
+    assert card['settings'] == json.loads(json.dumps(dataclasses.asdict(TrainingSettings())))
+    out = tmp_path / 'gru.npz'
+    proc = retrain_shipped(out)
+    assert proc.returncode == 0, proc.stderr
+    assert_is_the_shipped_model(out)
+
+
+def numerics_in_child(env: dict[str, str], *, pinned: bool) -> dict[str, Any]:
+    """:func:`numerics_report` of a fresh process with ``env`` on top of ours, pinned (the
+    training process of `trust-av train-gru`) or not."""
+    args = ['-m', 'trust_av_planner.study.pinned_numerics']
+    if pinned:
+        proc = run_pinned(args, env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    else:
+        clean = {k: v for k, v in os.environ.items() if k != CHILD_MARK}
+        proc = subprocess.run([sys.executable, *args], env={**clean, **env},
+                              capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    report: dict[str, Any] = json.loads(proc.stdout)
+    return report
 
 
 def test_numerics_fingerprint_is_stable_and_sees_the_cpu_path() -> None:
-    """Same process, same answer; numpy with its AVX-512 kernels switched off (where the CPU
-    has them) or PyTorch forced to its scalar path (where it has a vector path) gives
-    another fingerprint."""
-    import subprocess
-    import sys
+    """Same process, same report. Unpinned, each CPU path a user can select here changes
+    the kernel bits the fingerprint hashes: numpy baseline-only (where the CPU has X86_V3),
+    OpenBLAS's Sandybridge kernels (where it runs others), PyTorch's scalar path (where it
+    has a vector one), MKL's COMPATIBLE branch (where it runs another), glibc's libm
+    without its FMA variants (where the CPU has FMA). Pinned, the same
+    settings, all at once, change nothing: the training process's numerics are the pin's."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
-    from numpy._core._multiarray_umath import __cpu_features__
-    mine = numerics_fingerprint()
-    assert numerics_fingerprint() == mine
-    code = ('from trust_av_planner.study.gru_training import numerics_fingerprint; '
-            'print(numerics_fingerprint())')
-    overrides = []
-    if __cpu_features__.get('X86_V4'):
-        overrides.append({'NPY_DISABLE_CPU_FEATURES': 'X86_V4'})
-    if str(torch.backends.cpu.get_cpu_capability()) != 'DEFAULT':
-        overrides.append({'ATEN_CPU_CAPABILITY': 'default'})
-    for override in overrides:
-        other = subprocess.run([sys.executable, '-c', code], env={**os.environ, **override},
-                               capture_output=True, text=True, check=True).stdout.strip()
-        assert other != mine, override
+    plain = numerics_report()
+    assert numerics_report() == plain
+    live = plain['live']
+    selectable: list[tuple[dict[str, str], str]] = []
+    if __cpu_features__.get('X86_V3'):
+        selectable.append(({'NPY_DISABLE_CPU_FEATURES': ','.join(__cpu_dispatch__)}, 'numpy'))
+    if live['openblas_core'] != 'Sandybridge' and __cpu_features__.get('AVX'):
+        selectable.append(({'OPENBLAS_CORETYPE': 'Sandybridge'}, 'numpy'))
+    if live['torch_cpu_capability'] != 'DEFAULT':
+        selectable.append(({'ATEN_CPU_CAPABILITY': 'default'}, 'torch'))
+    if live['mkl_branch'] != 'COMPATIBLE':
+        selectable.append(({'MKL_CBWR': 'COMPATIBLE'}, 'torch'))
+    if __cpu_features__.get('FMA3'):   # glibc >= 2.33 names (sysdeps/x86/cpu-tunables.c)
+        selectable.append(({'GLIBC_TUNABLES': 'glibc.cpu.hwcaps=-AVX2,-FMA'}, 'libm'))
+    assert len(selectable) >= 4, live   # an x86-64 CPU with AVX2 offers all five
+    for override, library in selectable:
+        other = numerics_in_child(override, pinned=False)
+        assert other['kernels'][library] != plain['kernels'][library], override
+        assert other['fingerprint'] != plain['fingerprint'], override
+    if unsupported_reason() is not None:
+        return
+    pinned = numerics_in_child({}, pinned=True)
+    assert pinned['live']['pinned'] == '1' and pinned['live']['threads'] == 1
+    everything = {k: v for override, _ in selectable for k, v in override.items()}
+    assert numerics_in_child(everything, pinned=True) == pinned
 
 
 def test_gru_beats_ca_in_closed_loop_on_unseen_us06() -> None:

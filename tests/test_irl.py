@@ -15,7 +15,7 @@ CONFIG = DriverConfig(dt_s=1.0, horizon_steps=3, standstill_gap_m=2.0, speed_min
                       speed_max_mps=33.0, weight_acceleration=1.0, weight_desired_speed=0.02,
                       weight_relative_speed=0.4, weight_relative_distance=0.15,
                       time_headway_s=1.5, accel_min_mps2=-6.0, accel_max_mps2=3.0,
-                      gap_slack_weight=1000.0, solver_max_iter=50,
+                      solver_max_iter=50,
                       fallback_gap_gain_per_s2=0.3, fallback_speed_gain_per_s=0.8)
 TOLERANCE = 0.10  # relative error on each normalised weight
 

@@ -1,27 +1,27 @@
-"""The `as_reported` params file differs from the default only where the evidence says so."""
+"""The `as_reported` profile is a params-file layer that changes only what the evidence says
+the paper's implementation did differently: epsilon and the explicability cost scale."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_monitor.common.params import read_params_file
+from trust_monitor.common.param_layers import read_layer
 
 AS_REPORTED = Path(__file__).resolve().parents[1] / 'config' / 'paper_as_reported.yaml'
 
 
 def test_as_reported_changes_only_epsilon_and_the_explicability_scale() -> None:
-    default = read_params_file(DEFAULT_PARAMS_FILE)
-    reported = read_params_file(AS_REPORTED)
-    assert set(default) == set(reported)
-    changed = {(node, key): (default[node][key], reported[node].get(key))
-               for node in default for key in set(default[node]) | set(reported[node])
-               if default[node].get(key) != reported[node].get(key)}
-    assert changed == {('/**', 'epsilon_mps2'): (6.0, 3.0),
-                       ('planner', 'explicability_scale'): (0.005, 0.02)}
-
-
-def test_as_reported_loads() -> None:
-    config = load_run_config(AS_REPORTED, {})
-    assert config.trust.epsilon_mps2 == 3.0
-    assert config.planner.explicability_scale == 0.02
+    layer = read_layer(AS_REPORTED)
+    values = {(section, key): value for section, params in layer.items()
+              for key, value in params.items()}
+    assert {key: value for (_, key), value in values.items()} == {
+        'epsilon_mps2': 3.0, 'explicability_scale': 0.02}
+    default = load_run_config()
+    reported = load_run_config(AS_REPORTED, {})
+    assert (default.trust.epsilon_mps2, default.planner.explicability_scale) == (6.0, 0.005)
+    assert (reported.trust.epsilon_mps2, reported.planner.explicability_scale) == (3.0, 0.02)
+    assert reported.params_files == (DEFAULT_PARAMS_FILE, AS_REPORTED)
+    same = [field for field in ('alpha', 'time_headway_s', 'tracking_cost_scale_m2')
+            if getattr(reported.planner, field) == getattr(default.planner, field)]
+    assert len(same) == 3 and reported.driver == default.driver

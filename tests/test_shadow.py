@@ -50,6 +50,7 @@ def read(path: Path) -> dict[str, list[object]]:
     return out
 
 
+@pytest.mark.wall_clock
 def test_shadow_run_records_bounded_outputs_and_jitter(tmp_path: Path) -> None:
     result, out, stats = shadow(tmp_path)
     messages = read(out)
@@ -73,6 +74,7 @@ def test_shadow_run_records_bounded_outputs_and_jitter(tmp_path: Path) -> None:
         assert f'{name}:' in result.stdout
 
 
+@pytest.mark.wall_clock
 def test_remapped_input_topics_are_honoured(tmp_path: Path) -> None:
     params = tmp_path / 'remapped.yaml'
     text = PARAMS.read_text().replace('lead_odom_topic: /preceding_vehicle/odom',
@@ -98,6 +100,7 @@ def test_lead_replay_interpolates_and_integrates() -> None:
     np.testing.assert_allclose(lead.preview(0.5, 3, 1.0), [1.0, 2.0, 2.0])
 
 
+@pytest.mark.wall_clock
 def test_whole_graph_in_wall_mode_drives_at_real_time(tmp_path: Path) -> None:
     """Every node in wall mode (``--whole-graph``, GRU predictor): the lead of a constant
     10 m/s trace advances at 10 m/s of *wall* time, the simulated AV and human follow it

@@ -9,9 +9,15 @@ Features (our definitions, docs/MODEL.md), summed over the predicted steps k = 1
     f_rs = (v_R^k - v_H^k)^2                    relative speed to the AV, (m/s)^2
     f_rd = (d_H^k - d_s - tau_H v_H^k)^2        relative distance to the desired gap, m^2
 
-subject to ``v_min <= v_H^k <= v_max``, ``u_min <= u_H <= u_max`` and ``d_H^k >= d_s``; the
-gap bound is softened by an exact L1 penalty (``gap_slack_weight``) so that the problem is
-always feasible even when the AV brakes harder than expected.
+subject to ``v_min <= v_H^k <= v_max``, ``u_min <= u_H <= u_max`` and the HARD gap bound
+``d_H^k >= d_s`` (eq. 13) for k = 2..N: the next gap d_H^1 follows from today's speeds and
+no plan can change it, so the bound applies from the first step the plan acts on. For the
+gap bound (only; the cost keeps the expected plan) the human allows for the AV braking
+harder than expected: it predicts the AV at min(u_R^H,k, ``assumed_av_accel_min_mps2``)
+at every step (the AV's braking bound, as in Gipps' 1981 car-following model), the AV's
+speed never below 0. When no plan meets the bound (even the hardest braking plan does
+not), the human brakes as hard as it can and the step counts as a driver fallback
+(docs/MODEL.md, "The human's safety gap").
 """
 
 from __future__ import annotations
@@ -32,11 +38,20 @@ from trust_monitor.common.solver import sqp_options
 LOG = logging.getLogger(__name__)
 
 FEATURE_NAMES = ('acceleration', 'desired_speed', 'relative_speed', 'relative_distance')
+BOUND_FEASIBILITY_TOLERANCE_M = 1e-6
+"""The gap bound counts as feasible when the hardest braking plan misses it by at most this, m
+(rounding); within it the bound is lowered to what braking reaches."""
 
 
 @dataclass(frozen=True)
 class DriverConfig:
-    """Parameters of the driver MPC."""
+    """Parameters of the driver MPC.
+
+    Attributes:
+        assumed_av_accel_min_mps2: for the gap bound d_H^k >= d_s the human predicts the AV
+            at min(expected acceleration, this) at every step: the AV may brake this hard
+            whatever the human expects, m/s^2 (<= 0; Table I's u_R,min = -3 by default).
+    """
 
     dt_s: float = control_step_param()
     horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
@@ -56,13 +71,15 @@ class DriverConfig:
                                   high_inclusive=False)
     accel_max_mps2: float = param("human's upper acceleration bound", unit='m/s^2', low=0.0,
                                   low_inclusive=False)
-    gap_slack_weight: float = param('penalty weight on violating the driver gap bound', low=0.0,
-                                    low_inclusive=False)
     solver_max_iter: int = param('SQP iterations before the step falls back', low=1)
     fallback_gap_gain_per_s2: float = param('gap gain of the fallback controller',
                                             unit='1/s^2')
     fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
                                              unit='1/s')
+    assumed_av_accel_min_mps2: float = param(
+        "the AV's braking the human allows for in its gap bound: it plans d_H >= d_s against "
+        "the AV at min(expected, this) at every step (Gipps 1981); the AV's u_R,min",
+        unit='m/s^2', high=0.0, default=-3.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -118,28 +135,30 @@ class DriverMpc:
         self.config = config
         n = config.horizon_steps
         u = ca.SX.sym('u', n)
-        slack = ca.SX.sym('slack', n)
         gap0, speed0, av_speed0 = ca.SX.sym('gap0'), ca.SX.sym('speed0'), ca.SX.sym('av_speed0')
         expected = ca.SX.sym('expected', n)
         weights = ca.SX.sym('weights', len(FEATURE_NAMES))
+        cautious = ca.SX.sym('cautious_av_speeds', n)
         u_list = [u[k] for k in range(n)]
         e_list = [expected[k] for k in range(n)]
         feats = features(gap0, speed0, av_speed0, u_list, e_list, dt_s=config.dt_s,
                          standstill_gap_m=config.standstill_gap_m,
                          time_headway_s=config.time_headway_s,
                          desired_speed_mps=config.speed_max_mps)
-        cost = ca.dot(weights, ca.vertcat(*feats)) + config.gap_slack_weight * ca.sum1(slack)
-        av_speeds = kinematics.lead_speeds(av_speed0, e_list, config.dt_s)
-        gaps, speeds = kinematics.rollout(gap0, speed0, av_speeds, u_list, config.dt_s)
-        g = ca.vertcat(*[gaps[k] + slack[k] for k in range(n)], *speeds)
-        self._lbg = np.concatenate([np.full(n, config.standstill_gap_m),
+        cost = ca.dot(weights, ca.vertcat(*feats))
+        # The gap bound against the cautious AV prediction; d^1 is fixed, so k = 2..N.
+        gaps, speeds = kinematics.rollout(gap0, speed0, [cautious[k] for k in range(n)],
+                                            u_list, config.dt_s)
+        g = ca.vertcat(*gaps[1:], *speeds)
+        self._lbg = np.concatenate([np.full(n - 1, config.standstill_gap_m),
                                     np.full(n, config.speed_min_mps)])
-        self._ubg = np.concatenate([np.full(n, np.inf), np.full(n, config.speed_max_mps)])
-        self._lbx = np.concatenate([np.full(n, config.accel_min_mps2), np.zeros(n)])
-        self._ubx = np.concatenate([np.full(n, config.accel_max_mps2), np.full(n, np.inf)])
+        self._ubg = np.concatenate([np.full(n - 1, np.inf), np.full(n, config.speed_max_mps)])
+        self._lbx = np.full(n, config.accel_min_mps2)
+        self._ubx = np.full(n, config.accel_max_mps2)
         self._solver = ca.nlpsol('driver_mpc', 'sqpmethod',
-                                 {'x': ca.vertcat(u, slack), 'f': cost, 'g': g,
-                                  'p': ca.vertcat(gap0, speed0, av_speed0, expected, weights)},
+                                 {'x': u, 'f': cost, 'g': g,
+                                  'p': ca.vertcat(gap0, speed0, av_speed0, expected, weights,
+                                                  cautious)},
                                  sqp_options(config.solver_max_iter))
         self._previous: np.ndarray | None = None
 
@@ -147,9 +166,63 @@ class DriverMpc:
         """Forget the warm start."""
         self._previous = None
 
+    def cautious_av_speeds(self, av_speed_mps: float,
+                           expected_mps2: Sequence[float] | np.ndarray) -> np.ndarray:
+        """AV speeds at steps 0..N-1 that the gap bound is planned against, m/s.
+
+        The AV accelerates at min(expected, ``assumed_av_accel_min_mps2``) at every step and
+        never reverses.
+        """
+        c = self.config
+        speeds = [max(float(av_speed_mps), 0.0)]
+        for accel in list(expected_mps2)[:-1]:
+            speeds.append(max(speeds[-1] + min(float(accel), c.assumed_av_accel_min_mps2)
+                              * c.dt_s, 0.0))
+        return np.array(speeds)
+
+    def braking_plan(self, speed_mps: float) -> np.ndarray:
+        """The hardest braking plan: u_min at every step, never below ``speed_min_mps``.
+
+        It gives the largest gap at every step against any AV plan, so the gap bound is
+        feasible exactly when this plan meets it.
+        """
+        c = self.config
+        plan = []
+        for _ in range(c.horizon_steps):
+            accel = min(max(c.accel_min_mps2, (c.speed_min_mps - speed_mps) / c.dt_s),
+                        c.accel_max_mps2)
+            plan.append(accel)
+            speed_mps += accel * c.dt_s
+        return np.array(plan)
+
+    def _meet_bound(self, plan_mps2: np.ndarray, gap_m: float, speed_mps: float,
+                    cautious_mps: np.ndarray, bounds_m: np.ndarray) -> np.ndarray:
+        """The QP's plan with each acceleration lowered just enough that the gaps d^2..d^N
+        meet ``bounds_m`` exactly.
+
+        The QP meets its constraints only to its tolerance (measured: 5e-8 m/s^2 of creep per
+        step while stopped behind a stopped AV, 1e-6 m below d_s after 20 s); u^k first acts
+        on d^{k+2}, and lowering it raises every later gap.
+        """
+        dt = self.config.dt_s
+        plan = plan_mps2.copy()
+        for k in range(len(plan) - 1):
+            gaps, _ = kinematics.rollout(gap_m, speed_mps, list(cautious_mps), list(plan), dt)
+            shortfall = bounds_m[k] - gaps[k + 1]
+            if shortfall > 0.0:
+                plan[k] -= shortfall / dt ** 2
+        return plan
+
     def step(self, gap_m: float, speed_mps: float, av_speed_mps: float,
              expected_mps2: np.ndarray) -> DriverResult:
         """Plan the human's next N accelerations against the expected AV plan.
+
+        When the gap bound cannot be met (:meth:`braking_plan` misses it by more than
+        :data:`BOUND_FEASIBILITY_TOLERANCE_M`), the result is the braking plan with status
+        ``fallback: gap_bound_infeasible``; when the solver fails, the fallback controller
+        :func:`kinematics.hold_gap_plan` against the cautious AV prediction. Both have
+        ``success`` False (counted as driver fallbacks). A solved plan is corrected to meet
+        the bound exactly (:meth:`_meet_bound`).
 
         Args:
             gap_m: gap from the human's front bumper to the AV's rear bumper, m.
@@ -158,23 +231,34 @@ class DriverMpc:
             expected_mps2: the AV plan the human expects, N values, m/s^2.
         """
         c, n = self.config, self.config.horizon_steps
-        guess = np.zeros(2 * n)
-        if self._previous is not None:
-            guess[:n] = np.concatenate([self._previous[1:], self._previous[-1:]])
-        params = np.concatenate([[gap_m, speed_mps, av_speed_mps], expected_mps2, c.weights])
+        cautious = self.cautious_av_speeds(av_speed_mps, expected_mps2)
         start = time.perf_counter()
-        sol = self._solver(x0=guess, p=params, lbx=self._lbx, ubx=self._ubx, lbg=self._lbg,
+        braking = self.braking_plan(speed_mps)
+        reach, _ = kinematics.rollout(gap_m, speed_mps, list(cautious), list(braking), c.dt_s)
+        if min(reach[1:], default=np.inf) < c.standstill_gap_m - BOUND_FEASIBILITY_TOLERANCE_M:
+            LOG.debug('driver gap bound infeasible: braking plan reaches %.3f m', min(reach[1:]))
+            self._previous = None
+            return DriverResult(braking, 'fallback: gap_bound_infeasible', False, 0,
+                                time.perf_counter() - start)
+        lbg = self._lbg.copy()
+        lbg[:n - 1] = np.minimum(lbg[:n - 1], reach[1:])
+        guess = np.zeros(n)
+        if self._previous is not None:
+            guess = np.concatenate([self._previous[1:], self._previous[-1:]])
+        params = np.concatenate([[gap_m, speed_mps, av_speed_mps], expected_mps2, c.weights,
+                                 cautious])
+        sol = self._solver(x0=guess, p=params, lbx=self._lbx, ubx=self._ubx, lbg=lbg,
                            ubg=self._ubg)
         elapsed = time.perf_counter() - start
         stats = self._solver.stats()
         iterations = int(stats.get('iter_count', 0))
         if stats['success']:
-            plan = np.asarray(sol['x']).ravel()[:n]
+            plan = self._meet_bound(np.asarray(sol['x']).ravel(), gap_m, speed_mps, cautious,
+                                    lbg[:n - 1])
             self._previous = plan
             return DriverResult(plan, str(stats['return_status']), True, iterations, elapsed)
-        av_speeds = kinematics.lead_speeds(av_speed_mps, list(expected_mps2), c.dt_s)
         plan = np.asarray(kinematics.hold_gap_plan(
-            gap_m, speed_mps, av_speeds, dt_s=c.dt_s, standstill_gap_m=c.standstill_gap_m,
+            gap_m, speed_mps, list(cautious), dt_s=c.dt_s, standstill_gap_m=c.standstill_gap_m,
             time_headway_s=c.time_headway_s, gap_gain_per_s2=c.fallback_gap_gain_per_s2,
             speed_gain_per_s=c.fallback_speed_gain_per_s, accel_min_mps2=c.accel_min_mps2,
             accel_max_mps2=c.accel_max_mps2, speed_min_mps=c.speed_min_mps,

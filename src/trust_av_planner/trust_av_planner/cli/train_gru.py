@@ -1,9 +1,14 @@
-"""``trust-av train-gru``: build the TAC-CA dataset and train the GRU plan estimator."""
+"""``trust-av train-gru``: build the TAC-CA dataset and train the GRU plan estimator.
+
+The command re-runs itself in a child process with pinned numerics
+(:mod:`~trust_av_planner.study.pinned_numerics`); the training happens there.
+"""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import tempfile
 import time
@@ -13,21 +18,64 @@ from trust_av_planner.cli.options import Progress, add_params_file_option
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors.gru import MODELS_DIR
 from trust_av_planner.study.gru_training import TrainingSettings, save_model, train_with_dagger
+from trust_av_planner.study.pinned_numerics import (
+    check_pinned,
+    in_pinned_child,
+    run_pinned,
+    unsupported_reason,
+)
 from trust_av_planner.system.config import load_run_config
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run ``trust-av train-gru``."""
-    config = load_run_config(args.params_files)
+def default_jobs() -> int:
+    """Worker processes for the closed loops: the CPUs this process may use."""
+    return len(os.sched_getaffinity(0))
+
+
+def child_arguments(args: argparse.Namespace) -> list[str]:
+    """The ``trust-av train-gru`` arguments that repeat ``args`` in the pinned child."""
+    argv = ['-m', 'trust_av_planner.cli', *(['-v'] if args.verbose else []), 'train-gru',
+            '--out', os.path.abspath(args.out),
+            *[arg for path in args.params_files
+              for arg in ('--params-file', os.path.abspath(path))]]
+    for option in ('epochs', 'seed', 'dagger_rounds', 'jobs'):
+        value = getattr(args, option)
+        if value is not None:
+            argv += [f'--{option.replace("_", "-")}', str(value)]
+    return argv
+
+
+def settings_from_args(args: argparse.Namespace) -> TrainingSettings:
+    """The shipped settings with the command line's overrides (checked)."""
     settings = TrainingSettings()
     if args.epochs is not None:
+        if args.epochs < 1:
+            raise TrustAvPlannerError(f'--epochs must be >= 1, got {args.epochs}')
         settings = dataclasses.replace(settings, epochs=args.epochs)
     if args.seed is not None:
         settings = dataclasses.replace(settings, seed=args.seed)
+    if args.jobs is not None and args.jobs < 1:
+        raise TrustAvPlannerError(f'--jobs must be >= 1, got {args.jobs}')
     if args.dagger_rounds is not None:
         if args.dagger_rounds < 0:
             raise TrustAvPlannerError(f'--dagger-rounds must be >= 0, got {args.dagger_rounds}')
         settings = dataclasses.replace(settings, dagger_rounds=args.dagger_rounds)
+    return settings
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``trust-av train-gru``: in a fresh process with pinned numerics (module
+    :mod:`~.pinned_numerics`), which is this function again in the child."""
+    config = load_run_config(args.params_files)
+    settings = settings_from_args(args)
+    if not in_pinned_child():
+        reason = unsupported_reason()
+        if reason is not None:
+            print(f'trust-av train-gru: warning: {reason}; training without the pinned CPU '
+                  'kernels, so the model is not bit-comparable with the shipped one',
+                  file=sys.stderr)
+        return run_pinned(child_arguments(args)).returncode
+    check_pinned()
     start = time.monotonic()
     bar: Progress | None = None
 
@@ -45,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
             bar.update(done, total)
 
     with tempfile.TemporaryDirectory() as work:
-        weights, report = train_with_dagger(config, settings, Path(work), stage, epoch)
+        weights, report = train_with_dagger(config, settings, Path(work), stage, epoch,
+                                            jobs=args.jobs or default_jobs())
     if bar is not None:
         bar.close()
     save_model(weights, report, settings, args.out)
@@ -67,8 +116,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'accelerations, train the GRU (seeded, deterministic, CPU), then two DAgger '
                     'rounds (TAC-GRU runs of the current model on the same traces are added '
                     'and the model retrained), then write the weights, a JSON model card and '
-                    'the loss curve. The default output replaces the shipped model (about '
-                    '2 min on 2 cores).')
+                    'the loss curve. Training runs in a child process with pinned CPU numerics, '
+                    'so any x86-64 CPU with AVX2 gives the same weights bit for bit '
+                    '(docs/GRU.md). The default output replaces the shipped model.')
     parser.add_argument('--out', type=Path, default=MODELS_DIR / 'gru_plan_estimator.npz',
                         help='weights file to write (default: the shipped model)')
     parser.add_argument('--epochs', type=int, default=None, help='override the epochs')
@@ -76,5 +126,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--dagger-rounds', type=int, default=None,
                         help='override the number of DAgger rounds (default: '
                              f'{TrainingSettings().dagger_rounds})')
+    parser.add_argument('--jobs', type=int, default=None,
+                        help='processes for the closed-loop runs (default: the usable CPUs; '
+                             'the result does not depend on it)')
     add_params_file_option(parser)
     parser.set_defaults(func=run)

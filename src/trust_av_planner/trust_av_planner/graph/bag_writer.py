@@ -58,6 +58,8 @@ RESERVE_PER_CHUNK_BYTES = 256
 RESERVE_STEP_CHUNKS = 64
 """The reserve grows by this many chunks' worth at a time (one fallocate per 64 steps)."""
 RESERVE_NAME = '.reserve'
+EXIT_DISK_FULL = 3
+"""Exit code of a recorder that stopped because the disk was full (the bag is finished)."""
 MAX_INFINITE = QosTime(2147483647, 4294967295)
 """rmw's "infinite" duration as rosbag2 writes it in offered_qos_profiles."""
 
@@ -172,10 +174,11 @@ class BagWriter:
         except (WriterError, OSError) as err:
             raise BagWriteError(f'{self.path}: cannot create the bag directory ({err})') from err
         self._topics: dict[str, _Topic] = {}
+        self._storage_write = self._storage.write
         self._reserve = self.path / RESERVE_NAME
         self._reserved = 0
         self._chunks = 0
-        self._step_stamps: list[int] = []
+        self._step_first, self._step_last = 2**63 - 1, -1
         self._times = (2**63 - 1, 0)
         self.finished = False
         self.disk_full: str = ''
@@ -193,6 +196,11 @@ class BagWriter:
         """Messages per topic written so far (complete steps and the pending one)."""
         return {name: t.count + t.step_count for name, t in self._topics.items()}
 
+    def count(self, topic: str) -> int:
+        """Messages of ``topic`` written so far (complete steps and the pending one)."""
+        entry = self._topics[topic]
+        return entry.count + entry.step_count
+
     def add_topic(self, topic: str, msgtype: str, qos: Qos) -> None:
         """Register a topic with its type and the QoS its publisher offers."""
         connection = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
@@ -203,9 +211,12 @@ class BagWriter:
         """Append one raw CDR message to the current step; returns its stamp (ns)."""
         entry = self._topics[topic]
         stamp = header_stamp_ns(data)
-        self._writer.storage.write(entry.connection, stamp, data)  # type: ignore[union-attr]
+        self._storage_write(entry.connection, stamp, data)
         entry.step_count += 1
-        self._step_stamps.append(stamp)
+        if stamp < self._step_first:
+            self._step_first = stamp
+        if stamp > self._step_last:
+            self._step_last = stamp
         return stamp
 
     def end_step(self) -> bool:
@@ -225,7 +236,7 @@ class BagWriter:
                 raise
             for entry in self._topics.values():
                 entry.step_count = 0
-            self._step_stamps = []
+            self._step_first, self._step_last = 2**63 - 1, -1
             self._storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
             self._finish_after_disk_full(err)
             return False
@@ -233,10 +244,10 @@ class BagWriter:
         for entry in self._topics.values():
             entry.count += entry.step_count
             entry.step_count = 0
-        if self._step_stamps:
-            self._times = (min(self._times[0], *self._step_stamps),
-                           max(self._times[1], *self._step_stamps))
-        self._step_stamps = []
+        if self._step_last >= 0:
+            self._times = (min(self._times[0], self._step_first),
+                           max(self._times[1], self._step_last))
+        self._step_first, self._step_last = 2**63 - 1, -1
         self.steps += 1
         if self._reserved < self._needed_reserve():
             try:

@@ -32,10 +32,9 @@ from typing import Any
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.bag_records import records_from_bag
-from trust_av_planner.graph.bag_writer import DiskFullError, repair_bag
+from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, DiskFullError, repair_bag
 from trust_av_planner.graph.domains import lease_domain
 from trust_av_planner.graph.processes import RECORDER, Graph, GraphError, NodeSpec
-from trust_av_planner.graph.recorder_node import EXIT_DISK_FULL
 from trust_av_planner.graph.session import foreign_participants, graph_session
 from trust_av_planner.system.closed_loop import InitialState, equilibrium_start
 from trust_av_planner.system.config import RunConfig

@@ -23,10 +23,9 @@ from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rosbags.interfaces import Qos
 
-from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
+from trust_av_planner.graph.bag_qos import offered_qos
+from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, BagWriter
 from trust_monitor.common.params import check_fields, param
 from trust_monitor.common.topics import TOPICS
 from trust_monitor.common.wall_clock import WallClockConfig
@@ -35,8 +34,6 @@ from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS
 from trust_monitor.ros.spin import spin_node
 
-EXIT_DISK_FULL = 3
-"""Exit code of a recorder that stopped because the disk was full (the bag is finished)."""
 STATUS_TOPIC = 'recorder/status'
 STATUS_PERIOD_S = 0.5
 READY_CHECK_PERIOD_S = 0.05
@@ -54,14 +51,6 @@ class RecorderConfig:
 
     def __post_init__(self) -> None:
         check_fields(self)
-
-
-def offered_qos(profile: QoSProfile) -> Qos:
-    """The bag's record of a topic's offered QoS (keep-last, the profile's depth and
-    deadline)."""
-    return qos_profile(reliable=profile.reliability == ReliabilityPolicy.RELIABLE,
-                       transient_local=profile.durability == DurabilityPolicy.TRANSIENT_LOCAL,
-                       depth=profile.depth, deadline_ns=int(profile.deadline.nanoseconds))
 
 
 class RecorderNode(Node):
@@ -129,7 +118,7 @@ class RecorderNode(Node):
             return
         self.bag.write(topic, data)
         needed = self.needed.get(topic)
-        if needed is not None and self.bag.counts[topic] == needed:
+        if needed is not None and self.bag.count(topic) == needed:
             self.incomplete -= 1
             if self.incomplete == 0:
                 self.complete()

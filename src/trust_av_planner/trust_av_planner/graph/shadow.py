@@ -84,7 +84,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
     Raises:
         GraphError: the nodes did not connect in time or one died.
     """
-    from trust_av_planner.graph.recorder_node import offered_qos
+    from trust_av_planner.graph.bag_qos import offered_qos
     from trust_monitor.ros.messages import message_class, odometry, trajectory
     from trust_monitor.ros.qos import RECORD_QOS, wall_qos
 
@@ -193,7 +193,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
     """
     from std_msgs.msg import Empty
 
-    from trust_av_planner.graph.recorder_node import offered_qos
+    from trust_av_planner.graph.bag_qos import offered_qos
     from trust_monitor.ros.messages import message_class
     from trust_monitor.ros.qos import QOS, RECORD_QOS
 

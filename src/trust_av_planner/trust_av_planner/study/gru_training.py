@@ -11,12 +11,14 @@ Normalisation statistics come from the training split only and are stored with t
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import datetime
-import hashlib
 import json
 import math
+import multiprocessing
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +29,7 @@ from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TRAINING_TRACES
 from trust_av_planner.planner import observe
 from trust_av_planner.predictors.gru import FEATURES, GruWeights, gru_forward
+from trust_av_planner.study.pinned_numerics import numerics_report
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
@@ -47,6 +50,7 @@ class TrainingSettings:
     validation_fraction: float = 0.2
     seed: int = 7
     dagger_rounds: int = 2
+    patience: int = 5  # stop after this many epochs without a better validation RMSE; 0: never
 
 
 @dataclass
@@ -85,35 +89,53 @@ def samples_from_run(records: Sequence[StepRecord], history: int, horizon: int,
     return np.array(xs), np.array(ys), np.array(steps), np.array(ca)
 
 
+def run_samples(config: RunConfig, settings: TrainingSettings, trace_name: str, alpha: float,
+                predictor: str = 'ca', gru_model: str | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One closed-loop run of the dataset: (inputs, targets, validation flag, CA prediction)."""
+    trace = load_trace(trace_name, config.planner.dt_s, config.trace)
+    cut = int(trace.steps * (1.0 - settings.validation_fraction))
+    run_config = dataclasses.replace(config, planner=dataclasses.replace(
+        config.planner, alpha=alpha, predictor=predictor,
+        gru_model=gru_model or config.planner.gru_model))
+    records = simulate(run_config, trace).records
+    x, y, steps, ca = samples_from_run(records, settings.history_steps,
+                                       config.planner.horizon_steps,
+                                       config.shared.vehicle_length_m,
+                                       config.planner.time_headway_cap_s)
+    # Train: every step a sample touches (t-H .. t+N-1) is before the cut;
+    # validation: every step after it; samples across the cut are dropped.
+    horizon = config.planner.horizon_steps
+    validation = steps - settings.history_steps >= cut
+    keep = validation | (steps + horizon - 1 < cut)
+    return x[keep], y[keep], validation[keep], ca[keep]
+
+
 def build_dataset(config: RunConfig, settings: TrainingSettings,
                   on_run: Callable[[int, int], None] | None = None,
-                  predictor: str = 'ca', gru_model: str | None = None) -> Dataset:
+                  predictor: str = 'ca', gru_model: str | None = None,
+                  pool: Executor | None = None) -> Dataset:
     """Run TAC-CA (or TAC-GRU with ``gru_model``) on every training trace and alpha; split
-    by trace segment."""
+    by trace segment.
+
+    With ``pool`` the runs go to its worker processes (each run is independent and the
+    samples are assembled in the same order, so the dataset is the same bit for bit; the
+    workers inherit this process's environment, hence its pinned numerics).
+    """
+    cases = [(name, alpha) for name in settings.traces for alpha in settings.alphas]
     parts: list[tuple[np.ndarray, ...]] = []
-    total = len(settings.traces) * len(settings.alphas)
-    done = 0
-    for name in settings.traces:
-        trace = load_trace(name, config.planner.dt_s, config.trace)
-        cut = int(trace.steps * (1.0 - settings.validation_fraction))
-        for alpha in settings.alphas:
-            run_config = dataclasses.replace(config, planner=dataclasses.replace(
-                config.planner, alpha=alpha, predictor=predictor,
-                gru_model=gru_model or config.planner.gru_model))
-            records = simulate(run_config, trace).records
-            x, y, steps, ca = samples_from_run(records, settings.history_steps,
-                                               config.planner.horizon_steps,
-                                               config.shared.vehicle_length_m,
-                                               config.planner.time_headway_cap_s)
-            # Train: every step a sample touches (t-H .. t+N-1) is before the cut;
-            # validation: every step after it; samples across the cut are dropped.
-            horizon = config.planner.horizon_steps
-            validation = steps - settings.history_steps >= cut
-            keep = validation | (steps + horizon - 1 < cut)
-            parts.append((x[keep], y[keep], validation[keep], ca[keep]))
-            done += 1
+    if pool is None:
+        for done, (name, alpha) in enumerate(cases, start=1):
+            parts.append(run_samples(config, settings, name, alpha, predictor, gru_model))
             if on_run is not None:
-                on_run(done, total)
+                on_run(done, len(cases))
+    else:
+        futures = [pool.submit(run_samples, config, settings, name, alpha, predictor,
+                               gru_model) for name, alpha in cases]
+        for done, future in enumerate(futures, start=1):
+            parts.append(future.result())
+            if on_run is not None:
+                on_run(done, len(cases))
     arrays = {name: np.concatenate([p[i] for p in parts])
               for i, name in enumerate(ARRAY_FIELDS)}
     return Dataset(**arrays, dt_s=config.planner.dt_s)
@@ -130,33 +152,53 @@ def merge(a: Dataset, b: Dataset) -> Dataset:
 
 def train_with_dagger(config: RunConfig, settings: TrainingSettings, work_dir: Path,
                       on_stage: Callable[[str], None] | None = None,
-                      on_epoch: Callable[[int, int], None] | None = None
-                      ) -> tuple[GruWeights, dict[str, Any]]:
+                      on_epoch: Callable[[int, int], None] | None = None,
+                      jobs: int = 1) -> tuple[GruWeights, dict[str, Any]]:
     """TAC-CA data, then ``dagger_rounds`` rounds of aggregation (Ross et al., 2011).
 
     A GRU trained on TAC-CA runs only is used in a loop it has never seen: with alpha > 0
     the AV leans towards the GRU's prediction, and the prediction is made from the AV's own
     past, so errors feed back. Each round runs TAC-GRU with the current model on the same
     *training* traces, adds those samples and retrains from scratch with the same seed.
+    ``jobs`` > 1 runs the closed loops in that many worker processes (same result).
     """
     def stage(name: str) -> None:
         if on_stage is not None:
             on_stage(name)
 
-    stage('TAC-CA runs on the training traces')
-    dataset = build_dataset(config, settings)
-    stage('training on TAC-CA data')
-    weights, report = train(dataset, settings, on_epoch)
-    for round_index in range(settings.dagger_rounds):
-        path = work_dir / f'dagger_{round_index}.npz'
-        save_arrays(weights, path)
-        stage(f'DAgger round {round_index + 1}: TAC-GRU runs on the training traces')
-        dataset = merge(dataset, build_dataset(config, settings, predictor='gru',
-                                               gru_model=str(path)))
-        stage(f'DAgger round {round_index + 1}: training on {len(dataset.targets)} samples')
-        weights, report = train(dataset, settings, on_epoch)
+    with contextlib.ExitStack() as stack:
+        pool = None
+        if jobs > 1:
+            pool = stack.enter_context(ProcessPoolExecutor(
+                max_workers=jobs, mp_context=multiprocessing.get_context('spawn')))
+        stage('TAC-CA runs on the training traces')
+        dataset = build_dataset(config, settings, pool=pool)
+        stage('training on TAC-CA data')
+        last = settings.dagger_rounds == 0
+        weights, report = train(dataset, settings, on_epoch, deployed_rmse=last)
+        rounds = [round_summary(report)]
+        for round_index in range(settings.dagger_rounds):
+            path = work_dir / f'dagger_{round_index}.npz'
+            save_arrays(weights, path)
+            stage(f'DAgger round {round_index + 1}: TAC-GRU runs on the training traces')
+            dataset = merge(dataset, build_dataset(config, settings, predictor='gru',
+                                                   gru_model=str(path), pool=pool))
+            stage(f'DAgger round {round_index + 1}: training on {len(dataset.targets)} '
+                  'samples')
+            last = round_index == settings.dagger_rounds - 1
+            weights, report = train(dataset, settings, on_epoch, deployed_rmse=last)
+            rounds.append(round_summary(report))
     report['dagger_rounds'] = settings.dagger_rounds
+    report['rounds'] = rounds
     return weights, report
+
+
+def round_summary(report: dict[str, Any]) -> dict[str, Any]:
+    """What the model card keeps of one training round (the last round's curve is kept
+    whole; ``validation_rmse_gru`` is PyTorch's for the intermediate rounds)."""
+    return {'samples_train': report['samples_train'], 'best_epoch': report['best_epoch'],
+            'epochs_run': len(report['curve']),
+            'validation_rmse_gru': report['validation_rmse_gru']}
 
 
 def save_arrays(weights: GruWeights, path: Path) -> None:
@@ -174,9 +216,14 @@ def rmse(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def train(dataset: Dataset, settings: TrainingSettings,
-          on_epoch: Callable[[int, int], None] | None = None
+          on_epoch: Callable[[int, int], None] | None = None, *, deployed_rmse: bool = True
           ) -> tuple[GruWeights, dict[str, Any]]:
-    """Train the GRU (seeded, deterministic, one CPU thread); return weights and a report."""
+    """Train the GRU (seeded, deterministic, one CPU thread); return weights and a report.
+
+    The report's ``validation_rmse_gru`` is the deployed numpy forward pass's (one sample at
+    a time, as the planner runs it) if ``deployed_rmse``, else PyTorch's batched one (the
+    best epoch's, cheaper: for the intermediate DAgger rounds).
+    """
     import torch
 
     torch.manual_seed(settings.seed)
@@ -234,43 +281,27 @@ def train(dataset: Dataset, settings: TrainingSettings,
                 dt_s=dataset.dt_s))
         if on_epoch is not None:
             on_epoch(epoch + 1, settings.epochs)
+        if settings.patience and epoch + 1 - best[1] >= settings.patience:
+            break  # the best epoch is kept either way; later ones only cost time
     assert best is not None
     weights = best[2]
-    numpy_val = np.array([gru_forward(weights, x) for x in x_val.numpy()])
+    validation_rmse = best[0]
+    if deployed_rmse:
+        numpy_val = np.array([gru_forward(weights, x) for x in x_val.numpy()])
+        validation_rmse = rmse(numpy_val, y_val)
     report = {
         'samples_train': int(train_mask.sum()), 'samples_validation': int((~train_mask).sum()),
-        'validation_rmse_gru': rmse(numpy_val, y_val),
+        'validation_rmse_gru': validation_rmse,
         'validation_rmse_ca': rmse(dataset.ca_predictions[~train_mask], y_val),
         'best_epoch': best[1], 'curve': curve,
     }
     return weights, report
 
 
-def numerics_fingerprint() -> str:
-    """A hash of the last bits of the floating-point kernels the training pipeline runs on.
-
-    Retraining is bit-for-bit reproducible on one machine, but not across CPUs: numpy picks
-    its ``exp`` kernel by instruction set (with and without AVX-512 they differ by one ulp
-    on about 5 % of inputs; seen here), OpenBLAS its matrix-vector kernel, PyTorch its
-    vectorised CPU path. The GRU's numpy forward pass feeds the DAgger closed loops, so such
-    ulps move the trained model slightly. The model card stores this fingerprint; the
-    retraining test demands bit equality only where the fingerprint matches.
-    """
-    import torch
-
-    rng = np.random.default_rng(0)
-    x = rng.normal(0.0, 3.0, 4096)
-    matrix = rng.normal(0.0, 1.0, (48, 16))
-    digest = hashlib.sha256()
-    for array in (np.exp(x), np.tanh(x), matrix @ x[:16], matrix.T @ x[:48]):
-        digest.update(np.ascontiguousarray(array).tobytes())
-    digest.update(str(torch.backends.cpu.get_cpu_capability()).encode())
-    return digest.hexdigest()[:16]
-
-
 def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSettings,
                out: Path) -> None:
     """Write the ``.npz`` weights, a JSON model card and a loss-curve PNG beside it."""
+    numerics = numerics_report()
     save_arrays(weights, out)
     card = {
         'model': 'one-layer GRU + linear read-out (Ozkan & Ma, eqs. 6-7)',
@@ -285,7 +316,8 @@ def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSe
         'settings': dataclasses.asdict(settings),
         'results': {k: v for k, v in report.items() if k != 'curve'},
         'trained': datetime.datetime.now(datetime.UTC).date().isoformat(),
-        'numerics_fingerprint': numerics_fingerprint(),
+        'numerics_fingerprint': numerics['fingerprint'],
+        'numerics': numerics['live'],
         'reproduce': 'trust-av train-gru',
     }
     out.with_suffix('.json').write_text(json.dumps(card, indent=2) + '\n')
