@@ -43,7 +43,7 @@ from typing import Any
 
 HERE = Path(__file__).resolve().parent
 MODULE = Path(__file__).stem
-DIAGNOSTIC_VALUES = {'/ego/planner_status': 8, '/human/driver_status': 4}
+DIAGNOSTIC_VALUES = {'ego/planner_status': 8, 'human/driver_status': 4}
 """Key/values per status message, as planner_node and driver_node publish them."""
 
 
@@ -73,12 +73,29 @@ class FloorConfig:
 
 def template(topic: str, msgtype: str, horizon: int, dt_s: float) -> tuple[Any, Any]:
     """A constant message of ``topic`` shaped like the graph's, and its stamp object."""
-    from trust_monitor.ros.messages import diagnostics, message_class, odometry, trajectory
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage
+
+    from trust_monitor.ros.messages import (
+        diagnostics,
+        header,
+        message_class,
+        odometry,
+        trajectory,
+        vehicle_markers,
+    )
 
     if msgtype == 'nav_msgs/msg/Odometry':
-        msg = odometry(0, 100.0, 10.0, topic.split('/')[1])
+        msg = odometry(0, 100.0, 10.0, topic.split('/')[0])
+    elif msgtype == 'tf2_msgs/msg/TFMessage':
+        msg = TFMessage(transforms=[TransformStamped(header=header(0, 'odom'),
+                                                     child_frame_id='ego')])
+        return msg, msg.transforms[0].header.stamp
+    elif msgtype == 'visualization_msgs/msg/MarkerArray':
+        msg = vehicle_markers(4.5)
+        return msg, msg.markers[0].header.stamp
     elif msgtype == 'trajectory_msgs/msg/JointTrajectory':
-        msg = trajectory(0, dt_s, accelerations=[0.25] * horizon)
+        msg = trajectory(0, dt_s, frame_id='ego', accelerations=[0.25] * horizon)
     elif msgtype == 'diagnostic_msgs/msg/DiagnosticArray':
         count = DIAGNOSTIC_VALUES.get(topic, 4)
         msg = diagnostics(0, 'floor_status', True, 'Solve_Succeeded',
@@ -161,6 +178,7 @@ def _make_recorder() -> Any:
     from rclpy.node import Node
     from rosbags.typesys import Stores, get_typestore
 
+    from trust_av_planner.graph.bag_writer import STAMP_IN_FIRST_ELEMENT
     from trust_monitor.common.step_chain import RECORDER, step_chain
     from trust_monitor.common.topics import TOPICS
     from trust_monitor.ros.messages import message_class
@@ -185,6 +203,8 @@ def _make_recorder() -> Any:
             self.finished = False
             self.exit_code = 0
             schemas: dict[str, int] = {}
+            offsets: dict[int, int] = {}
+            self.offsets = offsets
             for topic in TOPICS:
                 if RECORDER not in topic.subscribers:
                     continue
@@ -194,13 +214,15 @@ def _make_recorder() -> Any:
                         topic.msgtype, 'ros2msg', text.encode())
                 channel = self.writer.register_channel(topic.name, 'cdr',
                                                        schemas[topic.msgtype])
-                self.total += self.config.steps + (topic.name in state)
+                self.total += topic.per_step * self.config.steps + (topic.name in state)
+                offsets[channel] = 8 if topic.msgtype in STAMP_IN_FIRST_ELEMENT else 4
                 self.create_subscription(message_class(topic.msgtype), topic.name,
                                          lambda data, c=channel: self.on_message(c, data),
                                          QOS[topic.qos], raw=True)
 
         def on_message(self, channel: int, data: bytes) -> None:
-            sec, nanosec = (little if data[1] == 1 else big).unpack_from(data, 4)
+            sec, nanosec = (little if data[1] == 1 else big).unpack_from(data,
+                                                                         self.offsets[channel])
             ns = sec * 1_000_000_000 + nanosec
             self.writer.add_message(channel, log_time=ns, data=data, publish_time=ns)
             self.count += 1
@@ -323,7 +345,7 @@ def _wait_connected(graph: Any, node: Any, executor: Any, nodes: tuple[str, ...]
         graph.check_alive(set())
         missing = [name for name, (pubs, subs) in expected.items()
                    if node.count_publishers(name) < pubs
-                   or node.count_subscribers(name) - (name == '/clock') < subs]
+                   or node.count_subscribers(name) - (name == 'clock') < subs]
         if not missing:
             return
     raise GraphError(f'floor not connected after {timeout_s:g} s: {", ".join(missing)}')
@@ -379,9 +401,9 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
         with graph_session(graph, 'orchestrator') as session:
             node, executor = session.node, session.executor
             node.create_subscription(
-                Clock, '/clock', lambda msg: clock.on_step(msg_ns(msg.clock) // dt_ns + 1),
+                Clock, 'clock', lambda msg: clock.on_step(msg_ns(msg.clock) // dt_ns + 1),
                 QOS['CLOCK'])
-            start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
+            start_pub = node.create_publisher(Empty, 'sim/start', QOS['LATCHED'])
             _wait_connected(graph, node, executor, names, startup_timeout_s)
             start_pub.publish(Empty())
             process = graph.by_name(ender).popen

@@ -27,6 +27,8 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   args=()
   for p in "${packages[@]}"; do args+=(-e "$root/src/$p"); done
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation "${args[@]}" 2> >(grep -v "^WARNING: Location" >&2)
+  # tf2_msgs has no wheel: built from vendor/tf2_msgs (about a minute, once per environment)
+  "$venv/bin/python" -c 'import tf2_msgs.msg' 2>/dev/null || bash "$root/scripts/build_tf2_msgs.sh" "$venv"
   echo "$want" > "$stamp"
 fi
 export PATH="$venv/bin:$PATH"

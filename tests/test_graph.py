@@ -20,17 +20,18 @@ from rosbags.highlevel import AnyReader
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.graph.bag_records import records_from_bag
+from trust_av_planner.graph.bag_records import message_stamp, records_from_bag
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import StepRecord
-from trust_monitor.common.topics import TOPICS
+from trust_monitor.common.topics import TOPICS, qualified
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from rosbag2_rules import check_bag_directory  # the test-side oracle module
 
 STEPS = 120
-RECORDED = {t.name for t in TOPICS if 'recorder' in t.subscribers}
+RECORDED = {qualified(t.name): t.messages(STEPS) for t in TOPICS if 'recorder' in t.subscribers}
+"""Full topic name in a root-namespace run -> messages recorded in STEPS steps."""
 
 
 def run_command(bag: Path, *extra: str) -> list[str]:
@@ -81,21 +82,17 @@ def test_recording_is_a_rosbag2_bag_by_rosbag2s_rules(graph_run: tuple[Path, str
     assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'us06.mcap']
     assert check_bag_directory(bag) == []
     with Reader(bag) as reader:
-        assert reader.message_count == STEPS * len(RECORDED) + 2
-        assert {c.topic for c in reader.connections} == RECORDED
+        assert reader.message_count == sum(RECORDED.values())
+        assert {c.topic for c in reader.connections} == set(RECORDED)
 
 
 def test_bag_reads_back_with_rosbags(graph_run: tuple[Path, str]) -> None:
     bag, _ = graph_run
     with AnyReader([bag]) as reader:
         topics = {c.topic: c.msgcount for c in reader.connections}
-        assert set(topics) == RECORDED
-        for topic, count in topics.items():
-            extra = 1 if topic in {'/ego/odom', '/human/odom'} else 0   # + the initial state
-            assert count == STEPS + extra, topic
+        assert topics == RECORDED         # odometry and tf: + the initial states
         for connection, log_time, raw in reader.messages():
-            msg = reader.deserialize(raw, connection.msgtype)
-            stamp = msg.clock if connection.topic == '/clock' else msg.header.stamp
+            stamp = message_stamp(reader.deserialize(raw, connection.msgtype))
             assert log_time == stamp.sec * 10**9 + stamp.nanosec     # log time = sim time
 
 
@@ -117,7 +114,7 @@ def test_bag_decodes_with_mcap_ros2(graph_run: tuple[Path, str]) -> None:
                 assert 0.0 <= ros_msg.vector.x <= 1.0
                 assert message.log_time == stamp.sec * 10**9 + stamp.nanosec
             decoded += 1
-    assert decoded == STEPS * len(RECORDED) + 2
+    assert decoded == sum(RECORDED.values())
 
 
 def test_parallel_runs_do_not_hear_each_other(tmp_path: Path) -> None:

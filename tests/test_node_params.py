@@ -37,7 +37,7 @@ CORPUS: dict[str, tuple[str, bool, bool]] = {
     'out_of_range': ('/**/planner:\n  ros__parameters:\n    alpha: 1.5\n', False, False),
     'bool_for_double': ('/**/planner:\n  ros__parameters:\n    alpha: on\n', False, False),
     'bool_for_string': ('/**/planner:\n  ros__parameters:\n    predictor: yes\n', False, False),
-    'no_value': ('/**/planner:\n  ros__parameters:\n    alpha: []\n', False, False),
+    'no_value': ('planner:\n  ros__parameters:\n    alpha: []\n', False, False),
     'tiny_step': ('/**:\n  ros__parameters:\n    dt_s: 1.0e-9\n', False, False),
     'trace_is_etc_passwd': ('preceding_traffic:\n  ros__parameters:\n    trace: /etc/passwd\n',
                             False, False),

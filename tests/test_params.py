@@ -112,11 +112,15 @@ def test_sections_match_as_rclpy_matches_them(tmp_path: Path) -> None:
     assert load_run_config([plain]).planner.alpha == 0.1
     assert load_run_config([anywhere, plain, car1], namespace='/car1').planner.alpha == 0.9
     assert load_run_config([anywhere, car1], namespace='/car2').planner.alpha == 0.5
-    # In /, the section planner first appeared in the shipped file, so it is applied before
-    # /**/planner of anywhere.yaml: the node would keep 0.5, and trust-av says so.
-    with pytest.raises(ParamsError, match=r'plain.yaml: parameter alpha = 0.1 would not reach '
-                                          r'/planner, which would get 0.5'):
-        load_run_config([anywhere, plain])
+    # The shipped file's node sections are /**/planner: plain.yaml's planner first appears
+    # after them, so it is applied after them, in / only.
+    assert load_run_config([anywhere, plain]).planner.alpha == 0.1
+    assert load_run_config([anywhere, plain], namespace='/car1').planner.alpha == 0.5
+    # a section that first appeared earlier still wins over a later /**: refused, as rcl
+    # would silently keep the earlier value
+    with pytest.raises(ParamsError, match=r'alpha = 0.3 would not reach /car1/planner'):
+        load_run_config([write(tmp_path, '/**:\n  ros__parameters:\n    alpha: 0.3\n',
+                               'wild.yaml')], namespace='/car1')
 
 
 def test_a_later_value_rcl_would_drop_is_refused(tmp_path: Path) -> None:

@@ -21,8 +21,9 @@ from rosbags.highlevel import AnyReader
 from preceding_traffic.bags import TYPESTORE
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.graph.bag_records import message_stamp
 from trust_monitor.common.kinematics import advance
-from trust_monitor.common.topics import TOPICS
+from trust_monitor.common.topics import TOPICS, qualified
 
 REPO = Path(__file__).resolve().parents[1]
 PARAMS = REPO / 'config' / 'trust_av.yaml'
@@ -77,9 +78,9 @@ def test_shadow_run_records_bounded_outputs_and_jitter(tmp_path: Path) -> None:
 @pytest.mark.wall_clock
 def test_remapped_input_topics_are_honoured(tmp_path: Path) -> None:
     params = tmp_path / 'remapped.yaml'
-    text = PARAMS.read_text().replace('lead_odom_topic: /preceding_vehicle/odom',
+    text = PARAMS.read_text().replace('lead_odom_topic: preceding_vehicle/odom',
                                       'lead_odom_topic: /vehicle/lead/odom')
-    text = text.replace('ego_odom_topic: /ego/odom', 'ego_odom_topic: /vehicle/ego/odom')
+    text = text.replace('ego_odom_topic: ego/odom', 'ego_odom_topic: /vehicle/ego/odom')
     assert '/vehicle/lead/odom' in text and '/vehicle/ego/odom' in text
     params.write_text(text)
     _result, out, _stats = shadow(tmp_path, '--params-file', str(params))
@@ -119,11 +120,11 @@ def test_whole_graph_in_wall_mode_drives_at_real_time(tmp_path: Path) -> None:
     with AnyReader([out], default_typestore=TYPESTORE) as reader:
         for connection, log_ns, raw in reader.messages():
             msg = reader.deserialize(raw, connection.msgtype)
-            stamp = msg.header.stamp  # type: ignore[attr-defined]
+            stamp = message_stamp(msg)
             assert log_ns == stamp.sec * 1_000_000_000 + stamp.nanosec, connection.topic
             assert before_ns <= log_ns <= after_ns, connection.topic
             stamped.setdefault(connection.topic, []).append((log_ns, msg))
-    recorded = {t.name for t in TOPICS} - {'/clock', '/sim/start'}
+    recorded = {qualified(t.name) for t in TOPICS} - {'/clock', '/sim/start'}
     assert recorded <= set(stamped), recorded - set(stamped)
     lead = stamped['/preceding_vehicle/odom']
     (t0, first), (t1, last) = lead[0], lead[-1]

@@ -24,28 +24,28 @@ def test_chain_is_the_protocol_of_graph_interface() -> None:
     chain = step_chain()
     assert chain.source == 'preceding_traffic'
     assert [n.name for n in chain.nodes][:2] == ['preceding_traffic', 'planner']
-    assert set(chain.state_topics) == {'/ego/odom', '/human/odom'}
+    assert set(chain.state_topics) == {'ego/odom', 'human/odom'}
     expected = {
         'preceding_traffic': (
-            {Port('/ego/odom', 1), Port('/human/odom', 1), Port('/trust_monitor/trust', 0),
-             Port('/ego/planner_status', 0)},
-            {Port('/clock', 0), Port('/preceding_vehicle/odom', 0),
-             Port('/preceding_vehicle/speed_preview', 0)}),
+            {Port('ego/odom', 1), Port('human/odom', 1), Port('trust_monitor/trust', 0),
+             Port('ego/planner_status', 0)},
+            {Port('clock', 0), Port('preceding_vehicle/odom', 0),
+             Port('preceding_vehicle/speed_preview', 0), Port('tf', 0)}),
         'planner': (
-            {Port('/preceding_vehicle/odom', 0), Port('/preceding_vehicle/speed_preview', 0),
-             Port('/ego/odom', 0), Port('/human/odom', 0), Port('/trust_monitor/trust', -1)},
-            {Port('/ego/plan', 0), Port('/ego/expected_plan', 0), Port('/ego/accel_cmd', 0),
-             Port('/ego/planner_status', 0)}),
-        'ego_plant': ({Port('/ego/accel_cmd', 0)}, {Port('/ego/odom', 1)}),
-        'human_driver': ({Port('/ego/expected_plan', 0), Port('/ego/odom', 0)},
-                         {Port('/human/plan', 0), Port('/human/driver_status', 0),
-                          Port('/human/odom', 1)}),
-        'trust_monitor': ({Port('/ego/plan', 0), Port('/ego/expected_plan', 0)},
-                          {Port('/trust_monitor/trust', 0)}),
+            {Port('preceding_vehicle/odom', 0), Port('preceding_vehicle/speed_preview', 0),
+             Port('ego/odom', 0), Port('human/odom', 0), Port('trust_monitor/trust', -1)},
+            {Port('ego/plan', 0), Port('ego/expected_plan', 0), Port('ego/accel_cmd', 0),
+             Port('ego/planner_status', 0), Port('vehicle_markers', 0)}),
+        'ego_plant': ({Port('ego/accel_cmd', 0)}, {Port('ego/odom', 1), Port('tf', 0)}),
+        'human_driver': ({Port('ego/expected_plan', 0), Port('ego/odom', 0)},
+                         {Port('human/plan', 0), Port('human/driver_status', 0),
+                          Port('human/odom', 1), Port('tf', 0)}),
+        'trust_monitor': ({Port('ego/plan', 0), Port('ego/expected_plan', 0)},
+                          {Port('trust_monitor/trust', 0)}),
     }
     assert {n.name: ports(n.name) for n in chain.nodes} == expected
-    assert chain.node('preceding_traffic').start == ('/sim/start',)
-    assert chain.node('ego_plant').initial == ('/ego/odom',)
+    assert chain.node('preceding_traffic').start == ('sim/start',)
+    assert chain.node('ego_plant').initial == ('ego/odom',)
     assert chain.node('planner').needed(0) == 4 and chain.node('planner').needed(1) == 5
 
 
@@ -85,28 +85,30 @@ def test_chain_runs_every_step_without_deadlock() -> None:
     sent, acts = simulate(chain, 7)
     assert set(acts.values()) == {7} and len(acts) == 5
     for topic in TOPICS:
-        if topic.publisher == 'orchestrator':
+        if 'orchestrator' in topic.publishers:
             continue
-        assert sent[topic.name] == 7 + (topic.name in chain.state_topics), topic.name
+        # every publisher once per step (tf: the three vehicles), the states also at start-up
+        assert sent[topic.name] == topic.per_step * 7 + (topic.name in chain.state_topics), \
+            topic.name
 
 
 def test_gate_waits_for_previous_step_input_and_ignores_the_initial_state() -> None:
     chain = step_chain()
     planner = StepGate(chain.node('planner'), 5 * DT_NS, DT_NS)
-    for topic in ('/preceding_vehicle/odom', '/preceding_vehicle/speed_preview', '/ego/odom'):
+    for topic in ('preceding_vehicle/odom', 'preceding_vehicle/speed_preview', 'ego/odom'):
         assert planner.put(topic, 5 * DT_NS) == []
-    assert planner.put('/human/odom', 5 * DT_NS) == [0]  # no trust needed at step 0
-    for topic in ('/preceding_vehicle/odom', '/preceding_vehicle/speed_preview', '/ego/odom',
-                  '/human/odom'):
+    assert planner.put('human/odom', 5 * DT_NS) == [0]  # no trust needed at step 0
+    for topic in ('preceding_vehicle/odom', 'preceding_vehicle/speed_preview', 'ego/odom',
+                  'human/odom'):
         assert planner.put(topic, 6 * DT_NS) == []
-    assert planner.put('/trust_monitor/trust', 5 * DT_NS) == [1]  # step 0's trust
+    assert planner.put('trust_monitor/trust', 5 * DT_NS) == [1]  # step 0's trust
     source = StepGate(chain.node('preceding_traffic'), 0, DT_NS)
-    assert source.put('/ego/odom', 0) == []  # the initial odometry: before step 0
-    assert source.put('/human/odom', 0) == []
-    for topic in ('/ego/odom', '/human/odom'):
+    assert source.put('ego/odom', 0) == []  # the initial odometry: before step 0
+    assert source.put('human/odom', 0) == []
+    for topic in ('ego/odom', 'human/odom'):
         assert source.put(topic, DT_NS) == []
-    assert source.put('/trust_monitor/trust', 0) == []
-    assert source.put('/ego/planner_status', 0) == [0]
+    assert source.put('trust_monitor/trust', 0) == []
+    assert source.put('ego/planner_status', 0) == [0]
 
 
 def replace(name: str, **changes: object) -> tuple[Topic, ...]:
@@ -117,28 +119,28 @@ def replace(name: str, **changes: object) -> tuple[Topic, ...]:
 def test_chain_follows_the_table() -> None:
     """Without the initial-state mark the ego odometry closes a cycle planner -> ego_plant ->
     planner, so the planner takes it from the previous step; a new subscriber gets it too."""
-    chain = step_chain(replace('/ego/odom', rate='once per step'))
+    chain = step_chain(replace('ego/odom', rate='once per step'))
     inputs, _ = ports('planner', chain)
-    assert Port('/ego/odom', -1) in inputs
-    assert chain.node('ego_plant').initial == () and Port('/ego/odom', 0) in ports(
+    assert Port('ego/odom', -1) in inputs
+    assert chain.node('ego_plant').initial == () and Port('ego/odom', 0) in ports(
         'ego_plant', chain)[1]
     subs = ('trust_monitor', 'recorder')
-    chain = step_chain(replace('/human/plan', subscribers=subs))
-    assert Port('/human/plan', 0) in ports('trust_monitor', chain)[0]
+    chain = step_chain(replace('human/plan', subscribers=subs))
+    assert Port('human/plan', 0) in ports('trust_monitor', chain)[0]
     assert [n.name for n in chain.nodes].index('human_driver') < [
         n.name for n in chain.nodes].index('trust_monitor')
 
 
 def test_bad_tables_are_refused() -> None:
-    with pytest.raises(StepChainError, match='one /clock'):
-        step_chain(t for t in TOPICS if t.name != '/clock')
+    with pytest.raises(StepChainError, match='one clock'):
+        step_chain(t for t in TOPICS if t.name != 'clock')
     with pytest.raises(StepChainError, match=r'not reached.*ego_plant'):
-        step_chain(replace('/ego/accel_cmd', subscribers=('recorder',)))
-    both_ways = (Topic('/a', 'std_msgs/msg/Empty', 'human_driver', ('trust_monitor',), 'STEP',
-                       'once per step', ''),
-                 Topic('/b', 'std_msgs/msg/Empty', 'trust_monitor', ('human_driver',), 'STEP',
-                       'once per step', ''))
+        step_chain(replace('ego/accel_cmd', subscribers=('recorder',)))
+    both_ways = (Topic('a', 'std_msgs/msg/Empty', ('human_driver',), ('trust_monitor',),
+                       'STEP', 'once per step', '', ''),
+                 Topic('b', 'std_msgs/msg/Empty', ('trust_monitor',), ('human_driver',),
+                       'STEP', 'once per step', '', ''))
     with pytest.raises(StepChainError, match='no stamp offset breaks'):
         step_chain(TOPICS + both_ways)
     with pytest.raises(StepChainError, match='subscribes no orchestrator'):
-        step_chain(t for t in TOPICS if t.name != '/sim/start')
+        step_chain(t for t in TOPICS if t.name != 'sim/start')

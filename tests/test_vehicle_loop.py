@@ -161,13 +161,13 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
                                  lambda m: statuses.append((int.from_bytes(m.status[0].level,
                                                                            'little'),
                                                             diagnostic_values(m))),
-                                 topic_qos('/ego/planner_status', clock))
+                                 topic_qos('ego/planner_status', clock))
         node.create_subscription(AccelStamped, '/ego/accel_cmd',
                                  lambda m: commands.append(m.accel.linear.x),
-                                 topic_qos('/ego/accel_cmd', clock))
+                                 topic_qos('ego/accel_cmd', clock))
         lead = node.create_publisher(Odometry, '/preceding_vehicle/odom',
-                                     topic_qos('/preceding_vehicle/odom', clock, True))
-        ego = node.create_publisher(Odometry, '/ego/odom', topic_qos('/ego/odom', clock, True))
+                                     topic_qos('preceding_vehicle/odom', clock, True))
+        ego = node.create_publisher(Odometry, '/ego/odom', topic_qos('ego/odom', clock, True))
 
         def spin(seconds: float, publish: bool = False) -> None:
             end = time.monotonic() + seconds

@@ -1,15 +1,16 @@
 """``human_driver`` node: the simulated human follower (driver MPC of eq. 13).
 
-Per step, on the expected AV plan ``/ego/expected_plan`` and the AV's odometry ``/ego/odom``
+Per step, on the expected AV plan ``ego/expected_plan`` and the AV's odometry ``ego/odom``
 (paired by stamp), the driver plans against the plan it *expects*, publishes its plan
-(``/human/plan``) and solver status, integrates its own odometry one step and publishes it
-(``/human/odom``, stamped one step later; the initial state at start-up).
+(``human/plan``, frame ``human``) and solver status, integrates its own odometry one step
+and publishes it (``human/odom``, stamped one step later; the initial state at start-up)
+with its transform on ``tf`` (``odom`` -> ``human``).
 
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` plans from the latest
 expected plan and AV odometry (both fresher than ``input_timeout_s``), applies the plan's
 first acceleration over the real time elapsed since the previous tick
 (:func:`trust_monitor.common.kinematics.advance`, no reversing) and publishes plan, status and
-odometry stamped now; until ``/sim/start`` it holds its initial state. With a missing or
+odometry stamped now; until ``sim/start`` it holds its initial state. With a missing or
 stale input it does not plan: the status says ``inputs_not_ready`` with the reason and the
 simulated human coasts (0 m/s^2).
 """
@@ -25,6 +26,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from std_msgs.msg import Empty
+from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc
@@ -32,11 +34,12 @@ from trust_monitor.common.grids import hold_at
 from trust_monitor.common.kinematics import advance
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
 from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import (
+    VehicleOdometry,
     diagnostics,
     msg_ns,
-    odometry,
     trajectory,
     trajectory_times,
     trajectory_values,
@@ -76,26 +79,36 @@ class DriverNode(Node):
         self.buffer = StepBuffer(['expected', 'ego'])
         self.latest = LatestInputs(['expected', 'ego'])
         self.last_tick_ns = time.monotonic_ns()
+        self.frame = VEHICLE_FRAMES['human_driver']
+        self.vehicle = VehicleOdometry(self.frame)
         self.pub_odom = self.create_publisher(
-            Odometry, '/human/odom', topic_qos('/human/odom', self.clock, publisher=True))
-        self.pub_plan = self.create_publisher(JointTrajectory, '/human/plan',
-                                              topic_qos('/human/plan', self.clock))
-        self.pub_status = self.create_publisher(DiagnosticArray, '/human/driver_status',
-                                                topic_qos('/human/driver_status', self.clock))
+            Odometry, 'human/odom', topic_qos('human/odom', self.clock, publisher=True))
+        self.pub_tf = self.create_publisher(TFMessage, 'tf',
+                                            topic_qos('tf', self.clock, publisher=True))
+        self.pub_plan = self.create_publisher(JointTrajectory, 'human/plan',
+                                              topic_qos('human/plan', self.clock))
+        self.pub_status = self.create_publisher(DiagnosticArray, 'human/driver_status',
+                                                topic_qos('human/driver_status', self.clock))
         callback = self.on_latest if self.clock.wall else self.on_input
-        self.create_subscription(JointTrajectory, '/ego/expected_plan',
+        self.create_subscription(JointTrajectory, 'ego/expected_plan',
                                  lambda m: callback('expected', m),
-                                 topic_qos('/ego/expected_plan', self.clock))
-        self.create_subscription(Odometry, '/ego/odom', lambda m: callback('ego', m),
-                                 topic_qos('/ego/odom', self.clock))
+                                 topic_qos('ego/expected_plan', self.clock))
+        self.create_subscription(Odometry, 'ego/odom', lambda m: callback('ego', m),
+                                 topic_qos('ego/odom', self.clock))
         start_ns = now_ns(self) if self.clock.wall else stamp_ns(self.follower.start_time_s)
-        self.pub_odom.publish(odometry(start_ns, self.position_m, self.speed_mps, 'human'))
+        self.publish_odometry(start_ns)
         self.started = False
         if self.clock.wall:
-            self.create_subscription(Empty, '/sim/start', self.on_start, QOS['LATCHED'])
+            self.create_subscription(Empty, 'sim/start', self.on_start, QOS['LATCHED'])
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
         self.get_logger().info(f'ready ({self.clock.clock_mode}): weights '
                                f'{self.config.weights.tolist()}')
+
+    def publish_odometry(self, ns: int) -> None:
+        """The current state as odometry, then its transform, stamped ``ns``."""
+        odom, tf = self.vehicle.update(ns, self.position_m, self.speed_mps)
+        self.pub_odom.publish(odom)
+        self.pub_tf.publish(tf)
 
     def on_start(self, _msg: Empty) -> None:
         """Wall mode: start driving."""
@@ -112,7 +125,7 @@ class DriverNode(Node):
         ns = now_ns(self)
         if not self.started:
             self.last_tick_ns = tick
-            self.pub_odom.publish(odometry(ns, self.position_m, self.speed_mps, 'human'))
+            self.publish_odometry(ns)
             return
         why = self.latest.problems(tick, self.clock.input_timeout_s)
         accel = 0.0
@@ -126,7 +139,7 @@ class DriverNode(Node):
         self.position_m, self.speed_mps = advance(self.position_m, self.speed_mps, accel,
                                                   (tick - self.last_tick_ns) / NS_PER_S)
         self.last_tick_ns = tick
-        self.pub_odom.publish(odometry(ns, self.position_m, self.speed_mps, 'human'))
+        self.publish_odometry(ns)
 
     def close(self) -> None:
         """At shutdown: the wall loop's jitter statistics."""
@@ -147,8 +160,7 @@ class DriverNode(Node):
         dt = self.config.dt_s
         self.position_m, self.speed_mps = (self.position_m + self.speed_mps * dt,
                                            self.speed_mps + accel * dt)
-        self.pub_odom.publish(odometry(ns + stamp_ns(dt), self.position_m, self.speed_mps,
-                                       'human'))
+        self.publish_odometry(ns + stamp_ns(dt))
 
     def plan(self, ns: int, expected_msg: JointTrajectory, ego: Odometry) -> float:
         """Solve the driver MPC, publish its plan and status (stamped ``ns``); the first
@@ -162,7 +174,8 @@ class DriverNode(Node):
         gap = av_position - self.position_m - self.follower.vehicle_length_m
         result = self.mpc.step(gap, self.speed_mps, av_speed, expected)
         dt = self.config.dt_s
-        self.pub_plan.publish(trajectory(ns, dt, accelerations=result.plan_mps2.tolist()))
+        self.pub_plan.publish(trajectory(ns, dt, frame_id=self.frame,
+                                         accelerations=result.plan_mps2.tolist()))
         self.pub_status.publish(diagnostics(
             ns, 'driver_mpc', result.success, result.status,
             {'status': result.status, 'success': str(result.success),

@@ -1,19 +1,21 @@
 """``preceding_traffic`` node: the preceding vehicle, and the step authority in simulation.
 
-Publishes, once per step t (sim time): ``/clock``, the preceding vehicle's odometry
-``/preceding_vehicle/odom`` and its speed over the horizon ``/preceding_vehicle/speed_preview``
-(the trace's future; a replayed bag's recorded future). It starts after ``/sim/start`` and
+Publishes, once per step t (sim time): the step clock ``clock``, the preceding vehicle's
+odometry ``preceding_vehicle/odom`` with its transform on ``tf`` (``odom`` ->
+``preceding_vehicle``) and its speed over the horizon ``preceding_vehicle/speed_preview``
+(the trace's future; a replayed bag's recorded future). All names are relative (the node's
+namespace). It starts after ``sim/start`` and
 advances to t + 1 only when the step's outputs are in: ego and human odometry stamped
 t + dt, the trust and the planner status stamped t (lock-step, see
 :mod:`trust_monitor.graph_interface`). After the last step it logs ``done`` and keeps its
 publishers alive until it is stopped: a writer that exits takes the samples a slow
 subscriber (the recorder) has not acknowledged yet with it.
 
-``clock_mode: wall``: no ``/clock`` and no stepping; after ``/sim/start`` the trace (or bag)
+``clock_mode: wall``: no ``clock`` and no stepping; after ``sim/start`` the trace (or bag)
 is replayed at real-time speed (:class:`preceding_traffic.replay.LeadReplay`: speed
 interpolated, position its integral): a wall-clock timer at ``control_rate_hz`` publishes
-the odometry and the preview of the recorded future, stamped now. At the end of the trace
-it logs ``done`` and stops publishing, so the planner reports its inputs stale.
+the odometry, its transform and the preview of the recorded future, stamped now. At the end
+of the trace it logs ``done`` and stops publishing, so the planner reports its inputs stale.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Empty
+from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
 from preceding_traffic.replay import LeadReplay
@@ -35,8 +38,9 @@ from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig, truncate
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
 from trust_monitor.common.params import check_fields, control_step_param, param
+from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
-from trust_monitor.ros.messages import msg_ns, odometry, time_msg, trajectory
+from trust_monitor.ros.messages import VehicleOdometry, msg_ns, time_msg, trajectory
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS, topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -80,32 +84,36 @@ class TrafficNode(Node):
         self.step = -1
         self.done = False
         self.buffer = StepBuffer(['ego', 'human', 'trust', 'status'])
-        self.pub_clock = self.create_publisher(Clock, '/clock', QOS['CLOCK'])
+        self.frame = VEHICLE_FRAMES['preceding_traffic']
+        self.vehicle = VehicleOdometry(self.frame)
+        self.pub_clock = self.create_publisher(Clock, 'clock', QOS['CLOCK'])
         self.pub_odom = self.create_publisher(
-            Odometry, '/preceding_vehicle/odom',
-            topic_qos('/preceding_vehicle/odom', self.clock, publisher=True))
+            Odometry, 'preceding_vehicle/odom',
+            topic_qos('preceding_vehicle/odom', self.clock, publisher=True))
+        self.pub_tf = self.create_publisher(TFMessage, 'tf',
+                                            topic_qos('tf', self.clock, publisher=True))
         self.pub_preview = self.create_publisher(
-            JointTrajectory, '/preceding_vehicle/speed_preview',
-            topic_qos('/preceding_vehicle/speed_preview', self.clock, publisher=True))
-        self.create_subscription(Empty, '/sim/start', self.on_start, QOS['LATCHED'])
+            JointTrajectory, 'preceding_vehicle/speed_preview',
+            topic_qos('preceding_vehicle/speed_preview', self.clock, publisher=True))
+        self.create_subscription(Empty, 'sim/start', self.on_start, QOS['LATCHED'])
         self.replay = LeadReplay(trace, self.run.initial_position_m)
         self.start_ns: int | None = None
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
         if self.clock.wall:
             self.get_logger().info(f'trace {trace.name}: {self.replay.duration_s:g} s to replay '
                                    f'at real time, {self.clock.control_rate_hz:g} Hz; waiting '
-                                   'for /sim/start')
+                                   f'for {self.resolve_topic_name("sim/start")}')
             return
-        self.create_subscription(Odometry, '/ego/odom', lambda m: self.on_done('ego', m, 1),
+        self.create_subscription(Odometry, 'ego/odom', lambda m: self.on_done('ego', m, 1),
                                  QOS['STEP'])
-        self.create_subscription(Odometry, '/human/odom', lambda m: self.on_done('human', m, 1),
+        self.create_subscription(Odometry, 'human/odom', lambda m: self.on_done('human', m, 1),
                                  QOS['STEP'])
-        self.create_subscription(Vector3Stamped, '/trust_monitor/trust',
+        self.create_subscription(Vector3Stamped, 'trust_monitor/trust',
                                  lambda m: self.on_done('trust', m, 0), QOS['STEP'])
-        self.create_subscription(DiagnosticArray, '/ego/planner_status',
+        self.create_subscription(DiagnosticArray, 'ego/planner_status',
                                  lambda m: self.on_done('status', m, 0), QOS['STEP'])
         self.get_logger().info(f'trace {trace.name}: {trace.steps} steps of {trace.dt_s} s; '
-                               'waiting for /sim/start')
+                               f'waiting for {self.resolve_topic_name("sim/start")}')
 
     def wall_step(self) -> None:
         """Wall mode: the trace at the elapsed wall time, stamped now; nothing after its end."""
@@ -118,11 +126,12 @@ class TrafficNode(Node):
             return
         ns = now_ns(self)
         state = self.replay.state(elapsed_s)
-        self.pub_odom.publish(odometry(ns, state.position_m, state.speed_mps,
-                                       'preceding_vehicle'))
+        odom, tf = self.vehicle.update(ns, state.position_m, state.speed_mps)
+        self.pub_odom.publish(odom)
         self.pub_preview.publish(trajectory(
-            ns, self.run.dt_s, velocities=self.replay.preview(
+            ns, self.run.dt_s, frame_id=self.frame, velocities=self.replay.preview(
                 elapsed_s, self.run.horizon_steps, self.run.dt_s).tolist()))
+        self.pub_tf.publish(tf)
 
     def close(self) -> None:
         """At shutdown: the wall loop's jitter statistics."""
@@ -142,15 +151,17 @@ class TrafficNode(Node):
             self.publish_step(0)
 
     def publish_step(self, step: int) -> None:
-        """Publish the clock, odometry and preview of ``step``."""
+        """Publish the clock, odometry, transform and preview of ``step``."""
         self.step = step
         ns = self.stamp(step)
         speed = float(self.trace.speeds_mps[step])
+        odom, tf = self.vehicle.update(ns, self.position_m, speed)
         self.pub_clock.publish(Clock(clock=time_msg(ns)))
-        self.pub_odom.publish(odometry(ns, self.position_m, speed, 'preceding_vehicle'))
+        self.pub_odom.publish(odom)
         self.pub_preview.publish(trajectory(
-            ns, self.run.dt_s,
+            ns, self.run.dt_s, frame_id=self.frame,
             velocities=self.trace.preview(step, self.run.horizon_steps).tolist()))
+        self.pub_tf.publish(tf)  # after the planner's inputs: not on the chain
 
     def on_done(self, name: str, msg: Odometry | Vector3Stamped | DiagnosticArray,
                 offset: int) -> None:

@@ -1,18 +1,19 @@
 """``ego_plant`` node: the simulated AV, integrated from the planner's acceleration command.
 
 Kept apart from the planner so that a real vehicle can take its place: it subscribes
-``/ego/accel_cmd`` and publishes ``/ego/odom`` (the first message, the initial state, at
-start-up; then one per command, stamped one step later), exactly what a real drive-by-wire
-vehicle and its odometry would do. Parameters: ``dt_s`` and the initial state.
+``ego/accel_cmd`` and publishes ``ego/odom`` with its transform on ``tf`` (``odom`` ->
+``ego``; the first message, the initial state, at start-up; then one per command, stamped
+one step later), exactly what a real drive-by-wire vehicle and its odometry would do.
+Parameters: ``dt_s`` and the initial state.
 
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` integrates the latest
 command over the real time elapsed since the previous tick
 (:func:`trust_monitor.common.kinematics.advance`, no reversing) and publishes the odometry stamped
-now (sensor-data QoS); until ``/sim/start`` the vehicle holds its initial state (the traffic
-node starts its replay then). A command older than its deadline (two control periods, by its
-stamp; the command QoS carries the same deadline) or none yet is not applied: the vehicle
-coasts (0 m/s^2) and a warning names the reason, as a drive-by-wire unit drops a stale
-set-point.
+now (sensor-data QoS) with its transform; until ``sim/start`` the vehicle holds its initial
+state (the traffic node starts its replay then). A command older than its deadline (two
+control periods, by its stamp; the command QoS carries the same deadline) or none yet is not
+applied: the vehicle coasts (0 m/s^2) and a warning names the reason, as a drive-by-wire unit
+drops a stale set-point.
 """
 
 from __future__ import annotations
@@ -25,12 +26,14 @@ from geometry_msgs.msg import AccelStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from std_msgs.msg import Empty
+from tf2_msgs.msg import TFMessage
 
 from trust_monitor.common.kinematics import VehicleState, advance, integrate
 from trust_monitor.common.lockstep import stamp_ns
 from trust_monitor.common.params import check_fields, control_step_param, param
+from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
-from trust_monitor.ros.messages import msg_ns, odometry
+from trust_monitor.ros.messages import VehicleOdometry, msg_ns
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS, command_deadline_s, topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -68,20 +71,29 @@ class EgoPlantNode(Node):
         self.config = declare_config(self, PlantConfig)
         self.clock = declare_config(self, WallClockConfig)
         self.state = VehicleState(self.config.initial_position_m, self.config.initial_speed_mps)
-        self.pub = self.create_publisher(Odometry, '/ego/odom',
-                                         topic_qos('/ego/odom', self.clock, publisher=True))
+        self.vehicle = VehicleOdometry(VEHICLE_FRAMES['ego_plant'])
+        self.pub = self.create_publisher(Odometry, 'ego/odom',
+                                         topic_qos('ego/odom', self.clock, publisher=True))
+        self.pub_tf = self.create_publisher(TFMessage, 'tf',
+                                            topic_qos('tf', self.clock, publisher=True))
         self.latest = LatestInputs(['command'])
-        self.create_subscription(AccelStamped, '/ego/accel_cmd',
+        self.create_subscription(AccelStamped, 'ego/accel_cmd',
                                  self.on_latest if self.clock.wall else self.on_command,
-                                 topic_qos('/ego/accel_cmd', self.clock))
+                                 topic_qos('ego/accel_cmd', self.clock))
         self.last_tick_ns = time.monotonic_ns()
         start_ns = now_ns(self) if self.clock.wall else stamp_ns(self.config.start_time_s)
-        self.pub.publish(odometry(start_ns, self.state.position_m, self.state.speed_mps, 'ego'))
+        self.publish(start_ns)
         self.started = False
         if self.clock.wall:
-            self.create_subscription(Empty, '/sim/start', self.on_start, QOS['LATCHED'])
+            self.create_subscription(Empty, 'sim/start', self.on_start, QOS['LATCHED'])
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
         self.get_logger().info(f'ready ({self.clock.clock_mode}): initial state {self.state}')
+
+    def publish(self, ns: int) -> None:
+        """The current state as odometry, then its transform, stamped ``ns``."""
+        odom, tf = self.vehicle.update(ns, self.state.position_m, self.state.speed_mps)
+        self.pub.publish(odom)
+        self.pub_tf.publish(tf)
 
     def on_start(self, _msg: Empty) -> None:
         """Wall mode: start moving."""
@@ -90,8 +102,7 @@ class EgoPlantNode(Node):
     def on_command(self, msg: AccelStamped) -> None:
         """Apply the command for one step and publish the new odometry."""
         self.state = integrate(self.state, float(msg.accel.linear.x), self.config.dt_s)
-        ns = msg_ns(msg.header.stamp) + stamp_ns(self.config.dt_s)
-        self.pub.publish(odometry(ns, self.state.position_m, self.state.speed_mps, 'ego'))
+        self.publish(msg_ns(msg.header.stamp) + stamp_ns(self.config.dt_s))
 
     def on_latest(self, msg: AccelStamped) -> None:
         """Wall mode: keep the latest command."""
@@ -105,15 +116,14 @@ class EgoPlantNode(Node):
         accel = 0.0 if why or command is None else float(command.accel.linear.x)
         if not self.started:
             self.last_tick_ns = tick
-            self.pub.publish(odometry(now_ns(self), self.state.position_m,
-                                      self.state.speed_mps, 'ego'))
+            self.publish(now_ns(self))
             return
         if why:
             self.get_logger().warning(f'coasting: command {why}', throttle_duration_sec=5.0)
         position, speed = advance(self.state.position_m, self.state.speed_mps, accel,
                                   (tick - self.last_tick_ns) / NS_PER_S)
         self.state, self.last_tick_ns = VehicleState(position, speed), tick
-        self.pub.publish(odometry(now_ns(self), position, speed, 'ego'))
+        self.publish(now_ns(self))
 
     def close(self) -> None:
         """At shutdown: the wall loop's jitter statistics."""

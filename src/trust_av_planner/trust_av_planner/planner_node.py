@@ -3,8 +3,10 @@
 Subscribes the preceding vehicle's odometry and speed preview, the ego and human odometry
 and the monitor's trust; per step (inputs paired by header stamp) it runs
 :class:`trust_av_planner.planner.AvPlanner` (plan estimator + NMPC) and publishes the
-plan, the expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``)
-and the solver status (``DiagnosticArray``). Parameters: the ``planner`` section of
+plan, the expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``),
+all three in the AV's frame ``ego``, the solver status (``DiagnosticArray``) and the three
+vehicles' markers (``vehicle_markers``, each in its vehicle's frame). Topic names are
+relative (the node's namespace). Parameters: the ``planner`` section of
 ``config/trust_av.yaml``.
 
 ``clock_mode: wall`` (real-vehicle mode, README "Real-vehicle mode"): a wall-clock timer at
@@ -33,6 +35,7 @@ from nav_msgs.msg import Odometry
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
 
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PlannerConfig
@@ -41,8 +44,10 @@ from trust_av_planner.system.config import PlannerTopics, SharedConfig
 from trust_monitor.common.grids import interp_at
 from trust_monitor.common.kinematics import VehicleState
 from trust_monitor.common.lockstep import StepBuffer
+from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import (
+    VehicleMarkers,
     diagnostics,
     header,
     msg_ns,
@@ -57,8 +62,8 @@ from trust_monitor.ros.tuning import Tunable, enable_tuning
 from trust_monitor.trust_model import TrustConfig
 
 STEP_INPUTS = ('traffic', 'preview', 'ego', 'human')
-TABLE_TOPIC = {'traffic': '/preceding_vehicle/odom', 'preview': '/preceding_vehicle/speed_preview',
-               'ego': '/ego/odom', 'human': '/human/odom', 'trust': '/trust_monitor/trust'}
+TABLE_TOPIC = {'traffic': 'preceding_vehicle/odom', 'preview': 'preceding_vehicle/speed_preview',
+               'ego': 'ego/odom', 'human': 'human/odom', 'trust': 'trust_monitor/trust'}
 """Input -> the topic-table row whose QoS it uses (its actual name may be remapped)."""
 
 
@@ -94,14 +99,18 @@ class PlannerNode(Node):
         self.required = ['traffic', 'preview', 'ego'] if recorded else ['traffic', 'ego']
         self.missed: dict[str, int] = {}  # input -> deadline events since its last message
         self.stale_reason = ''
-        self.pub_plan = self.create_publisher(JointTrajectory, '/ego/plan',
-                                              topic_qos('/ego/plan', self.clock))
-        self.pub_expected = self.create_publisher(JointTrajectory, '/ego/expected_plan',
-                                                  topic_qos('/ego/expected_plan', self.clock))
-        self.pub_accel = self.create_publisher(AccelStamped, '/ego/accel_cmd',
-                                               topic_qos('/ego/accel_cmd', self.clock))
-        self.pub_status = self.create_publisher(DiagnosticArray, '/ego/planner_status',
-                                                topic_qos('/ego/planner_status', self.clock))
+        self.frame = VEHICLE_FRAMES['ego_plant']
+        self.markers = VehicleMarkers(shared.vehicle_length_m)
+        self.pub_plan = self.create_publisher(JointTrajectory, 'ego/plan',
+                                              topic_qos('ego/plan', self.clock))
+        self.pub_expected = self.create_publisher(JointTrajectory, 'ego/expected_plan',
+                                                  topic_qos('ego/expected_plan', self.clock))
+        self.pub_accel = self.create_publisher(AccelStamped, 'ego/accel_cmd',
+                                               topic_qos('ego/accel_cmd', self.clock))
+        self.pub_status = self.create_publisher(DiagnosticArray, 'ego/planner_status',
+                                                topic_qos('ego/planner_status', self.clock))
+        self.pub_markers = self.create_publisher(MarkerArray, 'vehicle_markers',
+                                                 topic_qos('vehicle_markers', self.clock))
         inputs = (('traffic', Odometry, topics.lead_odom_topic),
                   ('preview', JointTrajectory,
                    topics.lead_preview_topic if recorded or not wall else ''),
@@ -251,11 +260,14 @@ class PlannerNode(Node):
     def publish(self, ns: int, plan: np.ndarray, expected: np.ndarray, accel_mps2: float,
                 trust: float, *, status: str, ok: bool, extra: dict[str, str],
                 error: bool = False) -> None:
-        """The four outputs of a step, stamped ``ns`` (plans on the prediction grid)."""
+        """The four outputs of a step, stamped ``ns`` (plans on the prediction grid, in the
+        AV's frame), then the vehicles' markers."""
         step_s = self.planner.grid[0]
-        self.pub_plan.publish(trajectory(ns, step_s, accelerations=plan.tolist()))
-        self.pub_expected.publish(trajectory(ns, step_s, accelerations=expected.tolist()))
-        command = AccelStamped(header=header(ns, 'base_link'))
+        self.pub_plan.publish(trajectory(ns, step_s, frame_id=self.frame,
+                                         accelerations=plan.tolist()))
+        self.pub_expected.publish(trajectory(ns, step_s, frame_id=self.frame,
+                                             accelerations=expected.tolist()))
+        command = AccelStamped(header=header(ns, self.frame))
         command.accel.linear.x = accel_mps2
         self.pub_accel.publish(command)
         report = diagnostics(ns, 'trust_aware_nmpc', ok, status,
@@ -264,6 +276,7 @@ class PlannerNode(Node):
         if error:
             report.status[0].level = DiagnosticStatus.ERROR
         self.pub_status.publish(report)
+        self.pub_markers.publish(self.markers.update(ns))
 
 
 def main(args: list[str] | None = None) -> int:

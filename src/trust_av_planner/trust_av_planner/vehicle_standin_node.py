@@ -86,17 +86,17 @@ class StandinNode(Node):
         self.deadline_s = command_deadline_s(self.clock)
         self.random = random.Random(c.seed)
         self.pub_ego = self.create_publisher(Odometry, EGO_TOPIC,
-                                             topic_qos('/ego/odom', self.clock, publisher=True))
+                                             topic_qos('ego/odom', self.clock, publisher=True))
         self.pub_lead = self.create_publisher(
-            Odometry, LEAD_TOPIC, topic_qos('/preceding_vehicle/odom', self.clock,
+            Odometry, LEAD_TOPIC, topic_qos('preceding_vehicle/odom', self.clock,
                                             publisher=True))
         self.command: AccelStamped | None = None
         self.create_subscription(AccelStamped, COMMAND_TOPIC, self.on_command,
-                                 topic_qos('/ego/accel_cmd', self.clock))
-        self.create_subscription(DiagnosticArray, '/ego/planner_status', self.on_status,
-                                 topic_qos('/ego/planner_status', self.clock))
-        self.create_subscription(Vector3Stamped, '/trust_monitor/trust', self.on_trust,
-                                 topic_qos('/trust_monitor/trust', self.clock))
+                                 topic_qos('ego/accel_cmd', self.clock))
+        self.create_subscription(DiagnosticArray, 'ego/planner_status', self.on_status,
+                                 topic_qos('ego/planner_status', self.clock))
+        self.create_subscription(Vector3Stamped, 'trust_monitor/trust', self.on_trust,
+                                 topic_qos('trust_monitor/trust', self.clock))
         self.log: dict[str, list[dict[str, Any]]] = {'ticks': [], 'status': [], 'trust': [],
                                                      'sent': []}
         self.start_ns: int | None = None
@@ -138,7 +138,7 @@ class StandinNode(Node):
         """The planner subscribes to both inputs and the trust monitor publishes."""
         return (self.count_subscribers(EGO_TOPIC) >= 1 and self.count_subscribers(LEAD_TOPIC)
                 >= 1 and self.count_publishers(COMMAND_TOPIC) >= 1
-                and self.count_publishers('/trust_monitor/trust') >= 1)
+                and self.count_publishers('trust_monitor/trust') >= 1)
 
     def tick(self) -> None:
         """Even ticks: drive and measure; odd ticks: publish the measurement."""

@@ -1,11 +1,12 @@
 """``trust_monitor`` node: E, P and trust from the observed plan and the expected plan.
 
-Subscribes ``/ego/plan`` and ``/ego/expected_plan`` (paired by header stamp), publishes
-``/trust_monitor/trust`` (``geometry_msgs/Vector3Stamped``: x = E, y = P, z = trust after
-the step), stamped like the plans. Parameters: the trust model's (``config/trust_av.yaml``)
-and ``dt_s``. Trust is per second: each plan's update is scaled by the time it is applied for,
-``dt_s`` in lock-step (one step = eq. 10 exactly). The expected plan is read on the plan's
-times (both carry ``time_from_start``).
+Subscribes ``ego/plan`` and ``ego/expected_plan`` (paired by header stamp), publishes
+``trust_monitor/trust`` (``geometry_msgs/Vector3Stamped``: x = E, y = P, z = trust after
+the step; ``frame_id`` empty, the three numbers are not a spatial vector), stamped like the
+plans. Topic names are relative (the node's namespace). Parameters: the trust model's
+(``config/trust_av.yaml``) and ``dt_s``. Trust is per second: each plan's update is scaled by
+the time it is applied for, ``dt_s`` in lock-step (one step = eq. 10 exactly). The expected
+plan is read on the plan's times (both carry ``time_from_start``).
 
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` scores the latest plan and
 expected plan once (when both carry the same, new stamp) and stamps the trust with the
@@ -25,6 +26,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from trust_monitor.common.grids import hold_at
 from trust_monitor.common.lockstep import StepBuffer
+from trust_monitor.common.topics import NO_FRAME
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import header, msg_ns, trajectory_times, trajectory_values
 from trust_monitor.ros.parameters import declare_config
@@ -46,14 +48,14 @@ class MonitorNode(Node):
         self.buffer = StepBuffer(['plan', 'expected'])
         self.latest = LatestInputs(['plan', 'expected'])
         self.scored_ns: int | None = None
-        self.pub = self.create_publisher(Vector3Stamped, '/trust_monitor/trust',
-                                         topic_qos('/trust_monitor/trust', self.clock))
+        self.pub = self.create_publisher(Vector3Stamped, 'trust_monitor/trust',
+                                         topic_qos('trust_monitor/trust', self.clock))
         callback = self.on_latest if self.clock.wall else self.on_input
-        self.create_subscription(JointTrajectory, '/ego/plan', lambda m: callback('plan', m),
-                                 topic_qos('/ego/plan', self.clock))
-        self.create_subscription(JointTrajectory, '/ego/expected_plan',
+        self.create_subscription(JointTrajectory, 'ego/plan', lambda m: callback('plan', m),
+                                 topic_qos('ego/plan', self.clock))
+        self.create_subscription(JointTrajectory, 'ego/expected_plan',
                                  lambda m: callback('expected', m),
-                                 topic_qos('/ego/expected_plan', self.clock))
+                                 topic_qos('ego/expected_plan', self.clock))
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
         self.get_logger().info(f'ready ({self.clock.clock_mode})')
 
@@ -101,7 +103,7 @@ class MonitorNode(Node):
                        np.array(trajectory_values(expected, 'accelerations')), step_s,
                        len(values))
         estimate = self.estimator.step(values, held.tolist(), dt_s)
-        out = Vector3Stamped(header=header(ns, ''))
+        out = Vector3Stamped(header=header(ns, NO_FRAME))
         out.vector.x = estimate.explicability
         out.vector.y = estimate.performance
         out.vector.z = estimate.trust

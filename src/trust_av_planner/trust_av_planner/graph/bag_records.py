@@ -24,15 +24,26 @@ def _ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
+def message_stamp(msg: Any) -> Any:
+    """A recorded message's stamp: a Clock's time, a header's stamp, or (``tf``, markers)
+    the first element's header stamp."""
+    if hasattr(msg, 'clock'):
+        return msg.clock
+    if hasattr(msg, 'header'):
+        return msg.header.stamp
+    elements = msg.transforms if hasattr(msg, 'transforms') else msg.markers
+    return elements[0].header.stamp
+
+
 def read_topics(path: Path) -> dict[str, dict[int, Any]]:
-    """Topic -> stamp (ns) -> deserialised message."""
+    """Topic -> stamp (ns) -> deserialised message (the last of a stamp: ``tf`` holds three
+    per stamp, one per vehicle)."""
     out: dict[str, dict[int, Any]] = defaultdict(dict)
     try:
         with AnyReader([path], default_typestore=TYPESTORE) as reader:
             for connection, _log_time, raw in reader.messages():
                 msg = reader.deserialize(raw, connection.msgtype)
-                stamp = msg.clock if connection.topic == '/clock' else msg.header.stamp
-                out[connection.topic][_ns(stamp)] = msg
+                out[connection.topic][_ns(message_stamp(msg))] = msg
     except Exception as err:  # rosbags raises several unrelated types for a bad file
         raise TrustAvPlannerError(f'{path}: cannot read the recording ({err})') from err
     return out

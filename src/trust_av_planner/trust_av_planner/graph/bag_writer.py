@@ -72,11 +72,18 @@ class DiskFullError(BagWriteError):
     """The disk filled up while recording; the bag was finished with the complete steps."""
 
 
-def header_stamp_ns(data: bytes | memoryview) -> int:
-    """Stamp of a CDR message that starts with a Time or a Header (after the 4-byte
-    encapsulation header: int32 sec, uint32 nanosec, little or big endian)."""
+STAMP_IN_FIRST_ELEMENT = frozenset({'tf2_msgs/msg/TFMessage',
+                                    'visualization_msgs/msg/MarkerArray'})
+"""Types that start with a sequence of stamped messages: the stamp is the first element's
+(after the uint32 sequence length)."""
+
+
+def header_stamp_ns(data: bytes | memoryview, offset: int = 4) -> int:
+    """Stamp of a CDR message that starts with a Time or a Header at ``offset`` (4: after
+    the 4-byte encapsulation header; 8: in the first element of a leading sequence): int32
+    sec, uint32 nanosec, little or big endian."""
     little = data[1] == 1
-    sec, nanosec = struct.unpack_from('<iI' if little else '>iI', data, 4)
+    sec, nanosec = struct.unpack_from('<iI' if little else '>iI', data, offset)
     return int(sec) * 1_000_000_000 + int(nanosec)
 
 
@@ -175,6 +182,7 @@ class BagWriter:
             raise BagWriteError(f'{self.path}: cannot create the bag directory ({err})') from err
         self._topics: dict[str, _Topic] = {}
         self._storage_write = self._storage.write
+        self._offsets: dict[str, int] = {}
         self._reserve = self.path / RESERVE_NAME
         self._reserved = 0
         self._chunks = 0
@@ -206,11 +214,12 @@ class BagWriter:
         connection = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
                                                  offered_qos_profiles=[qos])
         self._topics[topic] = _Topic(connection)
+        self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
 
     def write(self, topic: str, data: bytes | memoryview) -> int:
         """Append one raw CDR message to the current step; returns its stamp (ns)."""
         entry = self._topics[topic]
-        stamp = header_stamp_ns(data)
+        stamp = header_stamp_ns(data, self._offsets[topic])
         self._storage_write(entry.connection, stamp, data)
         entry.step_count += 1
         if stamp < self._step_first:

@@ -71,17 +71,17 @@ class RecorderNode(Node):
         for topic in TOPICS:
             if 'recorder' not in topic.subscribers:
                 continue
-            self.bag.add_topic(topic.name, topic.msgtype, offered_qos(QOS[topic.qos]))
-            self.publishers_needed[topic.name] = 1
+            name = self.resolve_topic_name(topic.name)  # the bag holds full names
+            self.bag.add_topic(name, topic.msgtype, offered_qos(QOS[topic.qos]))
+            self.publishers_needed[name] = len(topic.publishers)
             if steps:
-                initial = 1 if topic.name.endswith('/odom') and \
-                    topic.publisher != 'preceding_traffic' else 0
-                self.needed[topic.name] = steps + initial
+                self.needed[name] = topic.messages(steps)
                 self.incomplete += 1
-            self.subscriptions_by_topic[topic.name] = self.create_subscription(
+            self.subscriptions_by_topic[name] = self.create_subscription(
                 message_class(topic.msgtype), topic.name,
-                lambda data, t=topic.name: self.on_message(t, data), QOS[topic.qos], raw=True)
-        self.step_topic = next(t.name for t in TOPICS if t.msgtype == 'rosgraph_msgs/msg/Clock')
+                lambda data, t=name: self.on_message(t, data), QOS[topic.qos], raw=True)
+        self.step_topic = self.resolve_topic_name(
+            next(t.name for t in TOPICS if t.msgtype == 'rosgraph_msgs/msg/Clock'))
         self.pub_status = self.create_publisher(DiagnosticArray, STATUS_TOPIC, QOS['LATCHED'])
         self.ready = False
         self.last_status_s = 0.0

@@ -39,7 +39,7 @@ from trust_av_planner.graph.session import graph_session
 from trust_av_planner.system.closed_loop import equilibrium_start
 from trust_av_planner.system.config import PlannerTopics, RunConfig
 from trust_monitor.common.kinematics import VehicleState, advance
-from trust_monitor.common.topics import TOPIC, TOPICS
+from trust_monitor.common.topics import TOPIC, TOPICS, qualified
 from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig
 
 OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_status',
@@ -90,9 +90,9 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
 
     topics = topics if topics is not None else PlannerTopics()
     # actual topic name -> the topic-table entry it stands for (message type, QoS)
-    recorded = {topics.lead_odom_topic: TOPIC['/preceding_vehicle/odom'],
-                topics.ego_odom_topic: TOPIC['/ego/odom'],
-                **{name: TOPIC[name] for name in OUTPUTS}}
+    recorded = {qualified(topics.lead_odom_topic): TOPIC['preceding_vehicle/odom'],
+                qualified(topics.ego_odom_topic): TOPIC['ego/odom'],
+                **{name: TOPIC[name.lstrip('/')] for name in OUTPUTS}}
     cfg = config.for_trace(trace)
     initial = equilibrium_start(cfg, trace)
     lead = LeadReplay(trace, initial.traffic.position_m)
@@ -106,12 +106,12 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
             wall = WallClockConfig(clock_mode='wall', control_rate_hz=rate_hz)
             sensor = wall_qos('SENSOR', wall, publisher=True)
             pub_lead = node.create_publisher(
-                message_class(TOPIC['/preceding_vehicle/odom'].msgtype),
+                message_class(TOPIC['preceding_vehicle/odom'].msgtype),
                 topics.lead_odom_topic, sensor)
             pub_preview = node.create_publisher(
-                message_class(TOPIC['/preceding_vehicle/speed_preview'].msgtype),
+                message_class(TOPIC['preceding_vehicle/speed_preview'].msgtype),
                 topics.lead_preview_topic, sensor)
-            pub_ego = node.create_publisher(message_class(TOPIC['/ego/odom'].msgtype),
+            pub_ego = node.create_publisher(message_class(TOPIC['ego/odom'].msgtype),
                                             topics.ego_odom_topic, sensor)
             command = {'accel_mps2': 0.0}
             stats = LoopStats(period_ns)
@@ -129,7 +129,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                 def on_command(msg: Any) -> None:
                     command['accel_mps2'] = float(msg.accel.linear.x)
 
-                node.create_subscription(message_class(TOPIC['/ego/accel_cmd'].msgtype),
+                node.create_subscription(message_class(TOPIC['ego/accel_cmd'].msgtype),
                                          '/ego/accel_cmd', on_command, RECORD_QOS)
                 _wait_nodes(graph, node, executor, topics, startup_timeout_s)
                 ego = initial.av
@@ -151,7 +151,8 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                     pub_lead.publish(odometry(stamp, state.position_m, state.speed_mps,
                                               'preceding_vehicle'))
                     pub_preview.publish(trajectory(
-                        stamp, cfg.planner.dt_s, velocities=lead.preview(
+                        stamp, cfg.planner.dt_s, frame_id='preceding_vehicle',
+                        velocities=lead.preview(
                             elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
                     pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
                     if now >= next_chunk:
@@ -197,10 +198,11 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
     from trust_monitor.ros.messages import message_class
     from trust_monitor.ros.qos import QOS, RECORD_QOS
 
-    recorded = [t for t in TOPICS if t.name not in ('/clock', '/sim/start')]
+    recorded = [t for t in TOPICS if t.name not in ('clock', 'sim/start')]
     # In wall mode the traffic node subscribes nothing but /sim/start (as do the two simulated
     # vehicles, which hold still until then); this process records.
-    needs = {t.name: (1, len([s for s in t.subscribers if s != 'preceding_traffic']))
+    needs = {qualified(t.name): (len(t.publishers),
+                                 len([s for s in t.subscribers if s != 'preceding_traffic']))
              for t in recorded}
     needs['/sim/start'] = (1, 3)
     log_dir = bag.with_name(bag.name + '.logs')
@@ -212,10 +214,11 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
             start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
             with BagWriter(bag) as recording:
                 for topic in recorded:
-                    recording.add_topic(topic.name, topic.msgtype, offered_qos(QOS[topic.qos]))
+                    name = qualified(topic.name)
+                    recording.add_topic(name, topic.msgtype, offered_qos(QOS[topic.qos]))
                     node.create_subscription(
-                        message_class(topic.msgtype), topic.name,
-                        lambda d, t=topic.name: recording.write(t, d), RECORD_QOS, raw=True)
+                        message_class(topic.msgtype), name,
+                        lambda d, t=name: recording.write(t, d), RECORD_QOS, raw=True)
                 _wait_topics(graph, node, executor, needs, startup_timeout_s)
                 start_pub.publish(Empty())
                 end = time.monotonic() + duration_s
@@ -266,8 +269,10 @@ def _advance(ego: VehicleState, accel_mps2: float, dt_s: float) -> VehicleState:
 def _wait_nodes(graph: Graph, node: Any, executor: Any, topics: PlannerTopics,
                 timeout_s: float) -> None:
     """Wait until both nodes publish and subscribe what the player exchanges with them."""
-    needs = {topics.lead_odom_topic: (1, 2), topics.lead_preview_topic: (1, 1),
-             topics.ego_odom_topic: (1, 2), '/ego/plan': (1, 2), '/ego/expected_plan': (1, 2),
+    needs = {qualified(topics.lead_odom_topic): (1, 2),
+             qualified(topics.lead_preview_topic): (1, 1),
+             qualified(topics.ego_odom_topic): (1, 2), '/ego/plan': (1, 2),
+             '/ego/expected_plan': (1, 2),
              '/ego/accel_cmd': (1, 2), '/ego/planner_status': (1, 1),
              '/trust_monitor/trust': (1, 2)}
     _wait_topics(graph, node, executor, needs, timeout_s)

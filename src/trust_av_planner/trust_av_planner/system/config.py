@@ -39,6 +39,7 @@ from trust_monitor.common.params import (
     require,
 )
 from trust_monitor.common.rcl_values import ParsedParams
+from trust_monitor.common.topics import is_topic_name
 from trust_monitor.common.wall_clock import WallClockConfig
 from trust_monitor.trust_model import MonitorConfig, TrustConfig
 
@@ -69,22 +70,23 @@ class PlannerTopics:
     there is no follower state (wall mode only: the plan estimator then observes nothing)."""
 
     lead_odom_topic: str = param('preceding vehicle odometry topic (nav_msgs/msg/Odometry)',
-                                 default='/preceding_vehicle/odom')
+                                 default='preceding_vehicle/odom')
     lead_preview_topic: str = param('preceding vehicle speed preview topic (JointTrajectory)',
-                                    default='/preceding_vehicle/speed_preview')
+                                    default='preceding_vehicle/speed_preview')
     ego_odom_topic: str = param('ego (AV) odometry topic (nav_msgs/msg/Odometry)',
-                                default='/ego/odom')
+                                default='ego/odom')
     human_odom_topic: str = param("human follower odometry topic ('' = none, wall mode only)",
-                                  default='/human/odom')
+                                  default='human/odom')
     trust_topic: str = param('trust estimate topic (geometry_msgs/msg/Vector3Stamped)',
-                             default='/trust_monitor/trust')
+                             default='trust_monitor/trust')
 
     def __post_init__(self) -> None:
-        for name in ('lead_odom_topic', 'lead_preview_topic', 'ego_odom_topic', 'trust_topic'):
-            require(getattr(self, name).startswith('/'),
-                    f'{name} must be an absolute topic name, got {getattr(self, name)!r}')
-        require(self.human_odom_topic == '' or self.human_odom_topic.startswith('/'),
-                f'human_odom_topic must be empty or absolute, got {self.human_odom_topic!r}')
+        for name in ('lead_odom_topic', 'lead_preview_topic', 'ego_odom_topic', 'trust_topic',
+                     'human_odom_topic'):
+            value = getattr(self, name)
+            require((name == 'human_odom_topic' and value == '') or is_topic_name(value),
+                    f'{name} must be a ROS topic name (relative names resolve in the '
+                    f"node's namespace), got {value!r}")
 
 
 T = TypeVar('T')

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 from trust_monitor.common.topics import TOPICS, Topic
 
-CLOCK_TOPIC = '/clock'
+CLOCK_TOPIC = 'clock'
 INITIAL_STATE_MARK = '+ the initial state'
 """Text of a topic's ``rate`` that makes it a state topic (published at start-up too)."""
 ORCHESTRATOR = 'orchestrator'
@@ -140,13 +140,13 @@ def step_chain(topics: Iterable[Topic] = TOPICS) -> StepChain:
     clock = [t for t in table if t.name == CLOCK_TOPIC]
     if len(clock) != 1:
         raise StepChainError(f'expected one {CLOCK_TOPIC} topic, found {len(clock)}')
-    source = clock[0].publisher
+    source = clock[0].publishers[0]
     state = {t.name for t in table if INITIAL_STATE_MARK in t.rate}
-    names = {t.publisher for t in table} | {s for t in table for s in t.subscribers}
+    names = {p for t in table for p in t.publishers} | {s for t in table for s in t.subscribers}
     names -= {ORCHESTRATOR, RECORDER}
-    step = [t for t in table if t.publisher != ORCHESTRATOR]
+    step = [t for t in table if ORCHESTRATOR not in t.publishers]
     # Same-step edges between nodes (not into the source, not state): publisher -> subscriber.
-    edges = {(t.publisher, s, t.name) for t in step for s in t.subscribers
+    edges = {(p, s, t.name) for t in step for p in t.publishers for s in t.subscribers
              if s in names and s != source and t.name not in state}
     level = _levels(source, {(a, b) for a, b, _ in edges})
     unreached = sorted(names - set(level))
@@ -166,14 +166,14 @@ def step_chain(topics: Iterable[Topic] = TOPICS) -> StepChain:
             if node == source:
                 offset = 1 if t.name in state else 0
             else:
-                offset = -1 if (t.publisher, t.name) in back else 0
+                offset = -1 if any((p, t.name) in back for p in t.publishers) else 0
             inputs.append(Port(t.name, offset))
         outputs = tuple(Port(t.name, 1 if t.name in state else 0)
-                        for t in step if t.publisher == node)
+                        for t in step if node in t.publishers)
         chains.append(NodeChain(
             name=node, inputs=tuple(inputs), outputs=outputs,
-            initial=tuple(t.name for t in step if t.publisher == node and t.name in state),
-            start=tuple(t.name for t in table if t.publisher == ORCHESTRATOR
+            initial=tuple(t.name for t in step if node in t.publishers and t.name in state),
+            start=tuple(t.name for t in table if ORCHESTRATOR in t.publishers
                         and node in t.subscribers)))
     if not chains[0].start:
         raise StepChainError(f'the step source {source} subscribes no {ORCHESTRATOR} topic')

@@ -5,8 +5,22 @@ subscriptions with the QoS profile named in each row (:mod:`trust_monitor.ros.qo
 table (:data:`TOPICS`) is the source of the README's topic table and of the connection
 check the orchestrator makes before the first step.
 
+Names are relative, so a graph started in a namespace (``--ros-args -r __ns:=/car1``)
+publishes and subscribes only inside it (``/car1/ego/odom``); in the root namespace they are
+the familiar ``/ego/odom``. That includes the step clock ``clock``: in the root namespace it
+is ``/clock`` (what ``use_sim_time`` and ``ros2 bag play --clock`` use); under ``/car1`` it
+is ``/car1/clock``, so two graphs in one domain never hear each other's step clock. No node
+of the graph uses sim time (they pair messages by header stamp); a node that should follow a
+namespaced graph's clock is started with ``-r /clock:=clock``.
+
+Frames (REP-105, REP-103): every vehicle's odometry is in ``odom`` with the vehicle's body
+frame as child (:data:`VEHICLE_FRAMES`); plans and commands are accelerations of one vehicle
+along its own x axis, in its body frame; the node that publishes a vehicle's odometry also
+publishes the transform ``odom`` -> vehicle on ``tf`` with the same stamp. Trust and
+diagnostics hold no spatial quantity: ``frame_id`` empty (:data:`NO_FRAME`).
+
 Lock-step protocol (sim time; the step bookkeeping is :mod:`trust_monitor.common.lockstep`).
-Step t starts when ``preceding_traffic`` publishes ``/clock`` = t, the preceding vehicle's
+Step t starts when ``preceding_traffic`` publishes ``clock`` = t, the preceding vehicle's
 odometry and its speed preview, all stamped t. Every step output is stamped with the step's
 time t (odometry after a step: t + dt):
 
@@ -23,66 +37,139 @@ time t (odometry after a step: t + dt):
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass
+
+ODOM_FRAME = 'odom'
+"""The world-fixed frame (REP-105 ``odom``): x along the road in the direction of travel,
+y to the left, z up (REP-103); a simulated run starts the human driver's front bumper at 0."""
+
+VEHICLE_FRAMES = {'preceding_traffic': 'preceding_vehicle', 'ego_plant': 'ego',
+                  'human_driver': 'human'}
+"""Node -> the body frame of the vehicle whose odometry it publishes (REP-105 ``base_link``
+role: x forward, origin at the front bumper, so the vehicle spans x in [-length, 0])."""
+
+NO_FRAME = ''
+"""frame_id of stamped messages that hold no spatial quantity (trust, diagnostics)."""
 
 
 @dataclass(frozen=True)
 class Topic:
-    """One row of the topic table."""
+    """One row of the topic table.
+
+    Attributes:
+        name: relative topic name (resolved in the node's namespace: ``ego/odom`` is
+            ``/ego/odom`` in the root namespace and ``/car1/ego/odom`` under ``/car1``).
+        msgtype: ``package/msg/Name``.
+        publishers: the nodes that publish it (``tf``: every node that owns a vehicle's
+            odometry).
+        subscribers: the nodes that subscribe it.
+        qos: profile name in :data:`trust_monitor.ros.qos.QOS`.
+        rate: when it is published, in words.
+        units: what its fields mean, with units.
+        frames: ``header.frame_id`` (and ``child_frame_id``) of its messages.
+        per_step: messages per lock-step step, all publishers together.
+        initial: messages published before the first step (the initial states).
+        wall_qos: profile name in wall mode (:func:`trust_monitor.ros.qos.wall_qos`).
+    """
 
     name: str
     msgtype: str
-    publisher: str
+    publishers: tuple[str, ...]
     subscribers: tuple[str, ...]
     qos: str
     rate: str
     units: str
+    frames: str
+    per_step: int = 1
+    initial: int = 0
     wall_qos: str = 'STATE'
+
+    def messages(self, steps: int) -> int:
+        """Messages of a lock-step run of ``steps`` steps (what the recorder must hold)."""
+        return self.per_step * steps + self.initial
 
 
 NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_monitor',
          'recorder')
 
+_ODOM_UNITS = 'pose.position.x: m along the road (front bumper); twist.linear.x: m/s'
+_STATUS_FRAMES = "'' (not spatial)"
+
 TOPICS: tuple[Topic, ...] = (
-    Topic('/clock', 'rosgraph_msgs/msg/Clock', 'preceding_traffic', ('recorder',),
-          'CLOCK', 'once per step', 'sim time, s'),
-    Topic('/preceding_vehicle/odom', 'nav_msgs/msg/Odometry', 'preceding_traffic',
-          ('planner', 'recorder'), 'STEP', 'once per step',
-          'pose.position.x: m along the road; twist.linear.x: m/s', wall_qos='SENSOR'),
-    Topic('/preceding_vehicle/speed_preview', 'trajectory_msgs/msg/JointTrajectory',
-          'preceding_traffic', ('planner', 'recorder'), 'STEP', 'once per step',
-          'N points, velocities[0]: m/s, time_from_start k*dt', wall_qos='SENSOR'),
-    Topic('/ego/odom', 'nav_msgs/msg/Odometry', 'ego_plant',
+    Topic('clock', 'rosgraph_msgs/msg/Clock', ('preceding_traffic',), ('recorder',),
+          'CLOCK', 'once per step', 'sim time, s', 'none (no header)'),
+    Topic('preceding_vehicle/odom', 'nav_msgs/msg/Odometry', ('preceding_traffic',),
+          ('planner', 'recorder'), 'STEP', 'once per step', _ODOM_UNITS,
+          '`odom`, child `preceding_vehicle`', wall_qos='SENSOR'),
+    Topic('preceding_vehicle/speed_preview', 'trajectory_msgs/msg/JointTrajectory',
+          ('preceding_traffic',), ('planner', 'recorder'), 'STEP', 'once per step',
+          'N points, velocities[0]: m/s, time_from_start k*dt', '`preceding_vehicle`',
+          wall_qos='SENSOR'),
+    Topic('ego/odom', 'nav_msgs/msg/Odometry', ('ego_plant',),
           ('planner', 'human_driver', 'preceding_traffic', 'recorder'), 'STEP',
-          'once per step (+ the initial state)', 'as above', wall_qos='SENSOR'),
-    Topic('/ego/plan', 'trajectory_msgs/msg/JointTrajectory', 'planner',
+          'once per step (+ the initial state)', _ODOM_UNITS, '`odom`, child `ego`',
+          initial=1, wall_qos='SENSOR'),
+    Topic('ego/plan', 'trajectory_msgs/msg/JointTrajectory', ('planner',),
           ('trust_monitor', 'recorder'), 'STEP', 'once per step',
-          'N points, accelerations[0]: m/s^2'),
-    Topic('/ego/expected_plan', 'trajectory_msgs/msg/JointTrajectory', 'planner',
+          'N points, accelerations[0]: m/s^2', '`ego`'),
+    Topic('ego/expected_plan', 'trajectory_msgs/msg/JointTrajectory', ('planner',),
           ('trust_monitor', 'human_driver', 'recorder'), 'STEP', 'once per step',
-          'u_R^H: N points, accelerations[0]: m/s^2'),
-    Topic('/ego/accel_cmd', 'geometry_msgs/msg/AccelStamped', 'planner',
+          'u_R^H: N points, accelerations[0]: m/s^2', '`ego`'),
+    Topic('ego/accel_cmd', 'geometry_msgs/msg/AccelStamped', ('planner',),
           ('ego_plant', 'recorder'), 'STEP', 'once per step', 'accel.linear.x: m/s^2',
-          wall_qos='COMMAND'),
-    Topic('/ego/planner_status', 'diagnostic_msgs/msg/DiagnosticArray', 'planner',
+          '`ego`', wall_qos='COMMAND'),
+    Topic('ego/planner_status', 'diagnostic_msgs/msg/DiagnosticArray', ('planner',),
           ('preceding_traffic', 'recorder'), 'STEP', 'once per step',
-          'solver status, iterations, solve time (s), fallback, E_max'),
-    Topic('/human/odom', 'nav_msgs/msg/Odometry', 'human_driver',
+          'solver status, iterations, solve time (s), fallback, E_max', _STATUS_FRAMES),
+    Topic('human/odom', 'nav_msgs/msg/Odometry', ('human_driver',),
           ('planner', 'preceding_traffic', 'recorder'), 'STEP',
-          'once per step (+ the initial state)', 'as above', wall_qos='SENSOR'),
-    Topic('/human/plan', 'trajectory_msgs/msg/JointTrajectory', 'human_driver',
-          ('recorder',), 'STEP', 'once per step', 'N points, accelerations[0]: m/s^2'),
-    Topic('/human/driver_status', 'diagnostic_msgs/msg/DiagnosticArray', 'human_driver',
-          ('recorder',), 'STEP', 'once per step', 'solver status, solve time (s)'),
-    Topic('/trust_monitor/trust', 'geometry_msgs/msg/Vector3Stamped', 'trust_monitor',
+          'once per step (+ the initial state)', _ODOM_UNITS, '`odom`, child `human`',
+          initial=1, wall_qos='SENSOR'),
+    Topic('human/plan', 'trajectory_msgs/msg/JointTrajectory', ('human_driver',),
+          ('recorder',), 'STEP', 'once per step', 'N points, accelerations[0]: m/s^2',
+          '`human`'),
+    Topic('human/driver_status', 'diagnostic_msgs/msg/DiagnosticArray', ('human_driver',),
+          ('recorder',), 'STEP', 'once per step', 'solver status, solve time (s)',
+          _STATUS_FRAMES),
+    Topic('trust_monitor/trust', 'geometry_msgs/msg/Vector3Stamped', ('trust_monitor',),
           ('planner', 'preceding_traffic', 'recorder'), 'STEP', 'once per step',
-          'vector.x: E, vector.y: P, vector.z: trust after the step (dimensionless)'),
-    Topic('/sim/start', 'std_msgs/msg/Empty', 'orchestrator', ('preceding_traffic',),
+          'vector.x: E, vector.y: P, vector.z: trust after the step (dimensionless)',
+          _STATUS_FRAMES),
+    Topic('tf', 'tf2_msgs/msg/TFMessage', ('preceding_traffic', 'ego_plant', 'human_driver'),
+          ('recorder',), 'STEP',
+          'with every odometry message: 3 per step, 2 at start-up (ego and human)',
+          'transform.translation.x: m, the odometry position; rotation identity',
+          '`odom` to `preceding_vehicle`, `ego`, `human`', per_step=3, initial=2),
+    Topic('vehicle_markers', 'visualization_msgs/msg/MarkerArray', ('planner',),
+          ('recorder',), 'STEP', 'once per step',
+          'per vehicle a box (x from -vehicle_length_m to 0, 1.8 m wide, 1.5 m high) and a '
+          'label', "each vehicle's own frame, frame_locked"),
+    Topic('sim/start', 'std_msgs/msg/Empty', ('orchestrator',), ('preceding_traffic',),
           'LATCHED', 'once', 'none: the go signal after the graph is connected',
-          wall_qos='LATCHED'),
+          'none (no header)', per_step=0, initial=1, wall_qos='LATCHED'),
 )
 TOPIC = {t.name: t for t in TOPICS}
+
+
+_TOPIC_NAME = re.compile(r'(~|~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*', re.ASCII)
+
+
+def is_topic_name(name: str) -> bool:
+    """Whether ``name`` is a valid ROS 2 topic name, absolute or relative (rcl
+    ``rcl_validate_topic_name``, without ``{}`` substitutions): tokens of letters, digits and
+    underscores separated by ``/``, none starting with a digit, no empty token."""
+    return _TOPIC_NAME.fullmatch(name) is not None
+
+
+def qualified(name: str, namespace: str = '/') -> str:
+    """The fully qualified name of a relative topic name in ``namespace`` (rcl's expansion
+    of a relative name: ``qualified('ego/odom', '/car1') == '/car1/ego/odom'``)."""
+    if name.startswith('/'):
+        return name
+    return f'{namespace.rstrip("/")}/{name}'
+
 
 JOINT_NAME = 'longitudinal'
 """The one joint of every longitudinal JointTrajectory."""
@@ -106,14 +193,14 @@ WALL_QOS_TEXT = {
 
 def topic_table_markdown() -> str:
     """The README's topic table, generated from :data:`TOPICS` (a test keeps them equal)."""
-    lines = ['| topic | type | publisher | subscribers | QoS (lock-step) | QoS (wall mode) | '
-             'rate | units |',
-             '|---|---|---|---|---|---|---|---|']
+    lines = ['| topic | type | publishers | subscribers | QoS (lock-step) | QoS (wall mode) | '
+             'rate | units | frames |',
+             '|---|---|---|---|---|---|---|---|---|']
     for t in TOPICS:
-        wall = 'not published' if t.name == '/clock' else WALL_QOS_TEXT[t.wall_qos]
-        lines.append(f'| `{t.name}` | `{t.msgtype}` | {t.publisher} | '
+        wall = 'not published' if t.name == 'clock' else WALL_QOS_TEXT[t.wall_qos]
+        lines.append(f'| `{t.name}` | `{t.msgtype}` | {", ".join(t.publishers)} | '
                      f'{", ".join(t.subscribers)} | {LOCKSTEP_QOS_TEXT[t.qos]} | {wall} | '
-                     f'{t.rate} | {t.units} |')
+                     f'{t.rate} | {t.units} | {t.frames} |')
     return '\n'.join(lines) + '\n'
 
 
@@ -122,7 +209,7 @@ def expected_endpoints(nodes: Iterable[str] = NODES) -> dict[str, tuple[int, int
     present = set(nodes) | {'orchestrator'}
     out = {}
     for topic in TOPICS:
-        pubs = 1 if topic.publisher in present else 0
+        pubs = sum(1 for p in topic.publishers if p in present)
         subs = sum(1 for s in topic.subscribers if s in present)
         out[topic.name] = (pubs, subs)
     return out

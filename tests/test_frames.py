@@ -1,0 +1,112 @@
+"""REP-105 frames: one convention in the topic table, and the messages the nodes build follow
+it (odometry and tf in ``odom`` with the vehicle's body frame as child, the vehicles' markers
+in their own frames, serialised once with only the stamp and values written in)."""
+
+from __future__ import annotations
+
+import pytest
+from nav_msgs.msg import Odometry
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import Header
+from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import MarkerArray
+
+from trust_monitor.common.topics import (
+    NO_FRAME,
+    ODOM_FRAME,
+    TOPIC,
+    TOPICS,
+    VEHICLE_FRAMES,
+    is_topic_name,
+    qualified,
+)
+from trust_monitor.ros.messages import (
+    SerializedTemplate,
+    VehicleMarkers,
+    VehicleOdometry,
+    diagnostics,
+    message_class,
+    trajectory,
+)
+from trust_monitor.ros.messages import odometry as plain_odometry
+
+
+def test_every_row_is_relative_and_names_its_frames() -> None:
+    for topic in TOPICS:
+        assert is_topic_name(topic.name) and not topic.name.startswith('/'), topic.name
+        assert topic.frames, topic.name
+        message_class(topic.msgtype)                        # the type is installed
+    # each vehicle's odometry row names odom and the frame of the node that publishes it
+    for name, node in (('preceding_vehicle/odom', 'preceding_traffic'),
+                       ('ego/odom', 'ego_plant'), ('human/odom', 'human_driver')):
+        assert TOPIC[name].publishers == (node,)
+        assert TOPIC[name].frames == f'`{ODOM_FRAME}`, child `{VEHICLE_FRAMES[node]}`'
+    # tf: published by exactly the odometry owners, one transform per odometry message
+    odometry = [t for t in TOPICS if t.msgtype == 'nav_msgs/msg/Odometry']
+    assert set(TOPIC['tf'].publishers) == set(VEHICLE_FRAMES) == {
+        p for t in odometry for p in t.publishers}
+    assert TOPIC['tf'].messages(7) == sum(t.messages(7) for t in odometry)
+    assert TOPIC['ego/accel_cmd'].frames == '`ego`'          # not base_link: the AV is `ego`
+
+
+def test_qualified_names_and_topic_name_rules() -> None:
+    assert qualified('ego/odom') == '/ego/odom'
+    assert qualified('ego/odom', '/car1') == '/car1/ego/odom'
+    assert qualified('ego/odom', '/car1/') == '/car1/ego/odom'
+    assert qualified('/clock', '/car1') == '/clock'
+    for good in ('ego/odom', '/ego/odom', 'clock', '~/status', '_x/y2'):
+        assert is_topic_name(good), good
+    for bad in ('', '/', 'ego//odom', 'ego/odom/', '1ego', 'ego/2odom', 'ego odom', 'ego-odom'):
+        assert not is_topic_name(bad), bad
+
+
+def test_vehicle_odometry_and_its_transform_share_stamp_and_position() -> None:
+    vehicle = VehicleOdometry('human')
+    for ns, x, v in ((12_500_000_000, 103.25, 9.5), (13_000_000_000, 112.75, 0.0),
+                     (-1_000_000_001, -0.5, 31.0)):
+        odometry_bytes, tf_bytes = vehicle.update(ns, x, v)
+        odometry = deserialize_message(odometry_bytes, Odometry)
+        (transform,) = deserialize_message(tf_bytes, TFMessage).transforms
+        for header in (odometry.header, transform.header):
+            assert header.frame_id == ODOM_FRAME
+            assert header.stamp.sec * 10**9 + header.stamp.nanosec == ns
+        assert odometry.child_frame_id == transform.child_frame_id == 'human'
+        assert odometry.pose.pose.position.x == transform.transform.translation.x == x
+        assert odometry.twist.twist.linear.x == v
+        assert odometry.pose.pose.orientation.w == transform.transform.rotation.w == 1.0
+        # every other field as the plain builder makes it (CDR padding bytes may differ)
+        assert odometry == plain_odometry(ns, x, v, 'human')
+
+
+def test_markers_box_each_vehicle_in_its_own_frame() -> None:
+    markers = VehicleMarkers(4.5)
+    markers.update(7_000_000_001)
+    data = markers.update(8_000_000_000)
+    msg = deserialize_message(data, MarkerArray)
+    boxes = [m for m in msg.markers if m.type == m.CUBE]
+    labels = [m for m in msg.markers if m.type == m.TEXT_VIEW_FACING]
+    assert sorted(m.header.frame_id for m in boxes) == sorted(VEHICLE_FRAMES.values())
+    assert sorted(m.header.frame_id for m in labels) == sorted(VEHICLE_FRAMES.values())
+    assert len({(m.ns, m.id) for m in msg.markers}) == len(msg.markers)
+    for box in boxes:
+        # the frame origin is the front bumper: the box spans x in [-length, 0]
+        assert box.scale.x == 4.5
+        assert box.pose.position.x - box.scale.x / 2 == pytest.approx(-4.5)
+        assert box.pose.position.x + box.scale.x / 2 == pytest.approx(0.0)
+        assert box.frame_locked and box.color.a > 0
+    assert all(label.text for label in labels)
+    assert all((m.header.stamp.sec, m.header.stamp.nanosec) == (8, 0) for m in msg.markers)
+
+
+def test_template_refuses_a_sentinel_it_cannot_place() -> None:
+    header = Header(frame_id='odom')
+    with pytest.raises(ValueError, match=r'found 1 times.*expected 2'):
+        SerializedTemplate(header, [header.stamp, header.stamp])
+
+
+def test_plans_diagnostics_and_trust_frames() -> None:
+    plan = trajectory(0, 1.0, frame_id='ego', accelerations=[0.5, 0.0, -0.5])
+    assert plan.header.frame_id == 'ego'
+    assert diagnostics(0, 'x', True, 'ok', {}).header.frame_id == NO_FRAME == ''
+    with pytest.raises(TypeError):
+        trajectory(0, 1.0, accelerations=[0.0])  # type: ignore[call-arg]  # frame required
