@@ -3,8 +3,12 @@ until the graph is connected and the recorder is ready, follows the recorder's p
 and watches the domain for publishers that are not the run's.
 
 A leased domain must be private (:func:`foreign_participants` is the check before a domain
-is used); during the run, a publisher on any of the graph's topics from a node that is not
-one of the run's stops the run with one line naming the topic and the intruder.
+is used); a domain given by the user may be shared with graphs in other namespaces
+(:func:`clashing_participants` refuses only what would clash with this graph's namespace).
+During the run, a publisher on any of the graph's topics (resolved in its namespace) from a
+node that is not one of the run's, or a second node under one of the run's names, stops the
+run with one line naming the topic and the intruder; the topics of graphs in other
+namespaces are not watched.
 """
 
 from __future__ import annotations
@@ -44,6 +48,20 @@ def qualified(name: str, namespace: str) -> str:
 def foreign_participants(domain: int, wait_s: float = PROBE_S) -> str:
     """Nodes already present on ``domain`` (observed for ``wait_s``), as one line; '' if
     none. Discovery is localhost-only, so these are other processes on this machine."""
+    return _probe(domain, None, wait_s)
+
+
+def clashing_participants(domain: int, namespace: str, wait_s: float = PROBE_S) -> str:
+    """On a shared ``domain``: what would clash with a graph in ``namespace``, as one line
+    ('' if nothing): a node in that very namespace (another graph there: same node names,
+    same topics) or a publisher on one of the graph's topics in it. Nodes in other
+    namespaces (another graph under ``/car2``) and subscribers (a viewer) are left alone."""
+    return _probe(domain, namespace, wait_s)
+
+
+def _probe(domain: int, namespace: str | None, wait_s: float) -> str:
+    """Observe ``domain`` for ``wait_s``: every other node (``namespace`` None) or only
+    what clashes with a graph in ``namespace``."""
     import rclpy
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
@@ -52,17 +70,25 @@ def foreign_participants(domain: int, wait_s: float = PROBE_S) -> str:
     context = Context()
     rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        node = rclpy.create_node('trust_av_domain_probe', context=context)
+        node = rclpy.create_node('trust_av_domain_probe', namespace=namespace or '/',
+                                 context=context)
         try:
             time.sleep(wait_s)
             names = sorted(f'{ns.rstrip("/")}/{name}'
                            for name, ns in node.get_node_names_and_namespaces()
-                           if name != node.get_name())
+                           if name != node.get_name() and
+                           (namespace is None or ns == node.get_namespace()))
+            publishers = [] if namespace is None else sorted(
+                {qualified(row.name, namespace) for row in TOPICS
+                 if node.count_publishers(qualified(row.name, namespace))})
         finally:
             node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
-    return f'nodes {", ".join(names[:4])}' if names else ''
+    found = [f'nodes {", ".join(names[:4])}'] if names else []
+    if publishers:
+        found.append(f'publishers on {", ".join(publishers[:4])}')
+    return '; '.join(found)
 
 
 class Session:
@@ -111,6 +137,7 @@ class Session:
         now = time.monotonic()
         for row in TOPICS:
             name = self.topic(row.name)
+            seen: set[tuple[str, str]] = set()
             for info in self.node.get_publishers_info_by_topic(name):
                 if info.node_name == UNKNOWN_NAME:
                     first = self._unnamed.setdefault((name, bytes(info.endpoint_gid)), now)
@@ -123,6 +150,12 @@ class Session:
                     return (f'a foreign publisher on {name}: node '
                             f'{info.node_namespace.rstrip("/")}/{info.node_name} (domain '
                             f'{self.graph.domain} is not private)')
+                if key in seen:      # each of our nodes publishes a topic once
+                    return (f'a foreign publisher on {name}: a second node named '
+                            f'{info.node_namespace.rstrip("/")}/{info.node_name} (another '
+                            f'graph in namespace {self.graph.namespace} on domain '
+                            f'{self.graph.domain}?)')
+                seen.add(key)
         return ''
 
     def check(self, allowed_done: set[str]) -> None:
