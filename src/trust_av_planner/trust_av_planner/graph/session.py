@@ -45,13 +45,13 @@ def qualified(name: str, namespace: str) -> str:
     return f'{namespace.rstrip("/")}/{name}'
 
 
-def foreign_participants(domain: int, wait_s: float = PROBE_S) -> str:
+def foreign_participants(domain: int, wait_s: float | None = None) -> str:
     """Nodes already present on ``domain`` (observed for ``wait_s``), as one line; '' if
     none. Discovery is localhost-only, so these are other processes on this machine."""
     return _probe(domain, None, wait_s)
 
 
-def clashing_participants(domain: int, namespace: str, wait_s: float = PROBE_S) -> str:
+def clashing_participants(domain: int, namespace: str, wait_s: float | None = None) -> str:
     """On a shared ``domain``: what would clash with a graph in ``namespace``, as one line
     ('' if nothing): a node in that very namespace (another graph there: same node names,
     same topics) or a publisher on one of the graph's topics in it. Nodes in other
@@ -59,9 +59,9 @@ def clashing_participants(domain: int, namespace: str, wait_s: float = PROBE_S) 
     return _probe(domain, namespace, wait_s)
 
 
-def _probe(domain: int, namespace: str | None, wait_s: float) -> str:
-    """Observe ``domain`` for ``wait_s``: every other node (``namespace`` None) or only
-    what clashes with a graph in ``namespace``."""
+def _probe(domain: int, namespace: str | None, wait_s: float | None) -> str:
+    """Observe ``domain`` for ``wait_s`` (default :data:`PROBE_S`): every other node
+    (``namespace`` None) or only what clashes with a graph in ``namespace``."""
     import rclpy
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
@@ -73,7 +73,7 @@ def _probe(domain: int, namespace: str | None, wait_s: float) -> str:
         node = rclpy.create_node('trust_av_domain_probe', namespace=namespace or '/',
                                  context=context)
         try:
-            time.sleep(wait_s)
+            time.sleep(PROBE_S if wait_s is None else wait_s)
             names = sorted(f'{ns.rstrip("/")}/{name}'
                            for name, ns in node.get_node_names_and_namespaces()
                            if name != node.get_name() and
