@@ -90,7 +90,7 @@ def check_namespace(namespace: object, option: str = 'namespace') -> str:
     if problem is None:
         longest = max((qualified(t.name, namespace) for t in TOPICS), key=len)
         if len(longest) > TOPIC_NAME_MAX:
-            problem = (f'topic {longest[:40]}... would be longer than rmw\'s '
+            problem = (f"topic {longest[:40]}... would be longer than rmw's "
                        f'{TOPIC_NAME_MAX} characters')
     if problem is not None:
         raise TrustAvPlannerError(f'{option} {namespace!r}: {problem}')
