@@ -24,10 +24,11 @@ from trust_monitor.common.topics import TOPICS, expected_endpoints
 
 RECORDER_STATUS = 'recorder/status'
 """The recorder's latched status (``state`` ready/recording/finished/disk_full, ``steps``)."""
-PROBE_S = 1.0
-"""How long a domain is observed for participants of others before it is used (discovery on
-localhost takes well under a second on an idle machine, longer under heavy load; what this
-misses, the watch during the run catches)."""
+PROBE_S = 2.0
+"""How long a domain is observed for participants of others before it is used (node discovery
+on localhost takes well under a second on an idle machine; with two CPU-bound test workers on
+2 cores, 1 s missed an intruder that had been up for a second; what this misses, the watch
+during the run catches and names)."""
 WATCH_PERIOD_S = 1.0
 """How often the graph's topics are checked for foreign publishers during a run."""
 UNNAMED_GRACE_S = 5.0

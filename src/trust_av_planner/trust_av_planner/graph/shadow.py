@@ -196,11 +196,11 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
 
     The nodes use the standard topic names (:data:`trust_monitor.common.topics.TOPICS`).
     ``/sim/start`` is published once this process receives every publisher, so every
-    message published after it is in the bag. ``every_second``, if given, is called about once a second while the nodes run, with
-    their process ids by node name and the wall time since ``/sim/start`` (s); it runs in the
-    recording loop, so it must return quickly. ``on_message``, if given, is called for every
-    recorded message with its topic and its DDS publication sequence number (the publisher's
-    count of messages, from 1).
+    message published after it is in the bag. ``every_second``, if given, is called about
+    once a second while the nodes run, with their process ids by node name and the wall time
+    since ``/sim/start`` (s); it runs in the recording loop, so it must return quickly.
+    ``on_message``, if given, is called for every recorded message with its topic and its
+    DDS publication sequence number (the publisher's count of messages, from 1).
 
     Raises:
         GraphError: the nodes did not connect in time or one died.
