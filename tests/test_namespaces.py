@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import recorded_chunks
 from rosbags.highlevel import AnyReader
 from test_graph import assert_records_equal  # the graph == in-process comparison
 
@@ -264,7 +265,7 @@ def test_a_publisher_on_the_namespaced_topics_stops_only_that_graph(tmp_path: Pa
         try:
             mcap = bag / f'{bag.name}.mcap'
             deadline = time.monotonic() + 120
-            while not (mcap.exists() and mcap.stat().st_size > 90_000):
+            while recorded_chunks(mcap) < 150:                 # steps recorded
                 assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
                 time.sleep(0.1)
             mine = intruder(domain, '/car1/human/plan')
