@@ -74,7 +74,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser = subparsers.add_parser(
         'run', help='the ROS 2 node graph on one trace, recorded to a rosbag2 bag',
         description='Start the six nodes (preceding_traffic, planner, ego_plant, human_driver, '
-                    'trust_monitor, recorder) as separate processes on a private ROS domain, '
+                    'trust_monitor, recorder) as separate processes on a private ROS domain '
+                    '(or on --domain-id, in --namespace), '
                     'step them in lock-step on sim time to the end of the trace, record every '
                     'topic to a rosbag2 bag directory (metadata.yaml + MCAP), then print the '
                     'metrics and write a plot (BAG.png) and the node logs (BAG.logs/) beside '
