@@ -31,6 +31,9 @@ on localhost takes well under a second on an idle machine; with two CPU-bound te
 during the run catches and names)."""
 WATCH_PERIOD_S = 1.0
 """How often the graph's topics are checked for foreign publishers during a run."""
+DEATH_ATTRIBUTION_S = 1.0
+"""When a node dies, how long the graph's topics are watched for an intruder (the likely
+cause) before the node's death is reported."""
 UNNAMED_GRACE_S = 5.0
 """A publisher is listed before the name of its node arrives (rmw shows
 ``_NODE_NAME_UNKNOWN_``); one that stays unnamed this long (a plain DDS participant) counts
@@ -169,6 +172,12 @@ class Session:
         if dead or now >= self._next_watch:
             self._next_watch = now + WATCH_PERIOD_S
             intruder = self.foreign_publishers()
+            # A node killed by an intruder's message heard it before this process may have
+            # discovered the intruder: give discovery a moment before blaming the node.
+            until = now + (DEATH_ATTRIBUTION_S if dead else 0.0)
+            while not intruder and time.monotonic() < until:
+                self.spin(0.05)
+                intruder = self.foreign_publishers()
             if intruder:
                 raise GraphError(f'stopped: {intruder}')
         self.graph.check_alive(allowed_done)
