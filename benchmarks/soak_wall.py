@@ -18,19 +18,23 @@ directory, which ``preceding_traffic`` replays at real-time speed.
 Every minute (and once in the last second) it samples each node process's and its own
 resident memory (``/proc/<pid>/status`` VmRSS), open file descriptors (``/proc/<pid>/fd``)
 and threads (``/proc/<pid>/task``). At the end it reads the bag back with rosbags and checks,
-per recorded topic, against the publishing node's own count of what it published (its loop
-statistics, ``jitter_report_path``; ``/ego/odom`` and ``/human/odom`` add the initial state
-each node publishes once before its loop starts) and the DDS publication sequence number of
-every recorded message (the publisher's count, from 1):
+every topic the run records (the table's topics but the step clock and ``/sim/start``; the
+bag holds exactly these), against its publishing nodes' own count of what they published
+(their loop statistics, ``jitter_report_path``, summed over the topic's publishers, plus the
+table's ``initial`` messages each node publishes before its loop starts) and the DDS
+publication sequence number of every recorded message (each publisher's own count, from 1;
+the publishers of ``/tf`` are told apart by the transform's child frame):
 
-- holes: no sequence number is missing between a topic's first and last recorded message;
-- start edge: the messages before the first recorded one were published before the
-  recorder had matched the publisher (the wall-mode profiles are volatile: a late subscriber
-  gets nothing old). Allowed only before ``/sim/start``: a topic's first recorded message is
-  its publisher's first, or stamped before ``/sim/start`` (the runner sends ``/sim/start``
-  only once this process has received every publisher that publishes before it);
-- stop edge: at most :data:`STOP_EDGE` message per topic published and not recorded at the
-  end (the one a node may publish while it is being stopped; best effort has no
+- holes: no sequence number of a publisher is missing between its first and last recorded
+  message;
+- start edge: the messages before a publisher's first recorded one were published before
+  the recorder had matched the publisher (the wall-mode profiles are volatile: a late
+  subscriber gets nothing old). Allowed only before ``/sim/start``: a publisher's first
+  recorded message is its first, or was received before ``/sim/start`` (the runner sends
+  ``/sim/start`` only once this process has received every publisher that publishes before
+  it);
+- stop edge: at most :data:`STOP_EDGE` message per publisher published and not recorded at
+  the end (the one a node may publish while it is being stopped; best effort has no
   acknowledgement to wait for);
 - so published - recorded = start edge + stop edge, nothing else;
 - no gap between consecutive messages (header stamps, from ``/sim/start`` on) longer than
@@ -71,8 +75,9 @@ START_MARGIN_S = 60.0
 replay clock starts, so this is slack, not start-up time)."""
 STOP_EDGE = 1
 """Messages per topic that may be published and not recorded when the nodes are stopped."""
-INITIAL_STATE = ('/ego/odom', '/human/odom')
-"""Topics whose node publishes the initial state once before its wall loop starts."""
+NOT_RECORDED = ('clock', 'sim/start')
+"""Table rows a wall run does not record: the lock-step clock (not published in wall mode) and
+the go signal (this process publishes it)."""
 RECORDER = 'wall_recorder'
 """This process (it records the bag in wall mode)."""
 NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_monitor')
@@ -114,26 +119,75 @@ def process_sample(pid: int) -> dict[str, float]:
             'threads': len(os.listdir(proc / 'task'))}
 
 
+def recorded_topics() -> list[Any]:
+    """The table's rows a wall run records (:data:`NOT_RECORDED` left out)."""
+    from trust_monitor.common.topics import TOPICS
+
+    return [t for t in TOPICS if t.name not in NOT_RECORDED]
+
+
 @dataclass
-class Sequences:
-    """The publication sequence numbers seen on one topic, in constant memory."""
+class Stream:
+    """The publication sequence numbers seen from one publisher, in constant memory."""
 
     first: int = 0
     last: int = 0
     count: int = 0
     holes: int = 0
     out_of_order: int = 0
+    first_received_ns: int = 0
 
-    def add(self, seq: int) -> None:
-        """One recorded message with sequence number ``seq``."""
+    def add(self, seq: int, received_ns: int) -> None:
+        """One recorded message with sequence number ``seq``, received at ``received_ns``."""
         if self.count == 0:
-            self.first = seq
+            self.first, self.first_received_ns = seq, received_ns
         elif seq > self.last:
             self.holes += seq - self.last - 1
         else:
             self.out_of_order += 1
         self.last = max(self.last, seq)
         self.count += 1
+
+
+@dataclass
+class Sequences:
+    """The publication sequence numbers seen on one topic, per publisher (``source``)."""
+
+    streams: dict[str, Stream] = field(default_factory=dict)
+
+    def add(self, seq: int, received_ns: int = 0, source: str = '') -> None:
+        """One recorded message of publisher ``source`` (wall time of receipt, ns)."""
+        self.streams.setdefault(source, Stream()).add(seq, received_ns)
+
+    @property
+    def count(self) -> int:
+        """Messages received, all publishers."""
+        return sum(s.count for s in self.streams.values())
+
+    @property
+    def holes(self) -> int:
+        """Sequence numbers missing between each publisher's first and last received."""
+        return sum(s.holes for s in self.streams.values())
+
+    @property
+    def out_of_order(self) -> int:
+        """Messages received after one with a higher sequence number (same publisher)."""
+        return sum(s.out_of_order for s in self.streams.values())
+
+    @property
+    def last(self) -> int:
+        """The publishers' last received sequence numbers, summed (= messages published up
+        to them)."""
+        return sum(s.last for s in self.streams.values())
+
+    def start_edge(self) -> int:
+        """Messages published before each publisher's first received one, summed."""
+        return sum(s.first - 1 for s in self.streams.values())
+
+    def late_start(self, start_ns: int) -> int:
+        """Start-edge messages of the publishers first received after ``start_ns``."""
+        return sum(s.first - 1 for s in self.streams.values()
+                   if s.first_received_ns > start_ns)
 
 
 @dataclass
@@ -174,16 +228,24 @@ def read_bag(bag: Path, start_ns: int) -> dict[str, Recorded]:
 
 
 def topic_checks(published: dict[str, int], recorded: dict[str, Recorded],
-                 sequences: dict[str, Sequences], *, start_ns: int,
-                 max_gap_s: float) -> tuple[list[dict[str, Any]], list[str]]:
-    """Per topic: published (by the node) against recorded, the start and stop edges,
-    holes and the longest gap; returns the rows and the problems found (one line each)."""
+                 sequences: dict[str, Sequences], *, start_ns: int, max_gap_s: float,
+                 publishers: dict[str, int] | None = None
+                 ) -> tuple[list[dict[str, Any]], list[str]]:
+    """Per topic: published (by its nodes) against recorded, the start and stop edges,
+    holes and the longest gap; returns the rows and the problems found (one line each).
+    ``publishers``: topic -> its number of publishers (default 1 each), each allowed
+    :data:`STOP_EDGE`; a topic in the bag but not in ``published`` is a problem."""
     rows, problems = [], []
+    for topic in sorted(set(recorded) - set(published)):
+        problems.append(f'{topic}: {recorded[topic].count} messages in the bag on a topic '
+                        'the run does not record')
     for topic, sent in published.items():
         got, seq = recorded.get(topic, Recorded()), sequences.get(topic, Sequences())
-        start_edge = seq.first - 1 if seq.count else sent
+        allowed_stop = STOP_EDGE * (publishers or {}).get(topic, 1)
+        start_edge = seq.start_edge() if seq.count else sent
         stop_edge = sent - seq.last
         row = {'topic': topic, 'published': sent, 'recorded': got.count,
+               'publishers_seen': len(seq.streams),
                'start_edge': start_edge, 'holes': seq.holes, 'stop_edge': stop_edge,
                'out_of_order': seq.out_of_order,
                'first_recorded_after_start_s': (got.first_ns - start_ns) / 1e9,
@@ -199,12 +261,13 @@ def topic_checks(published: dict[str, int], recorded: dict[str, Recorded],
         if seq.holes or seq.out_of_order:
             problems.append(where + f'{seq.holes} messages missing between the first and the '
                             f'last recorded ({seq.out_of_order} out of order)')
-        if start_edge and got.first_ns > start_ns:
-            problems.append(where + f'the first {start_edge} messages are missing and the '
-                            'first recorded one is after /sim/start')
-        if not 0 <= stop_edge <= STOP_EDGE:
+        late = seq.late_start(start_ns)
+        if late:
+            problems.append(where + f'the first {late} messages of a publisher are missing and '
+                            'its first recorded one came after /sim/start')
+        if not 0 <= stop_edge <= allowed_stop:
             problems.append(where + f'{stop_edge} messages published after the last recorded '
-                            f'one (allowed 0 to {STOP_EDGE})')
+                            f'ones (allowed 0 to {allowed_stop})')
         if sent - got.count != start_edge + stop_edge + seq.holes:
             problems.append(where + f'published {sent}, recorded {got.count}: not explained '
                             f'by the edges ({start_edge} + {stop_edge})')
@@ -239,6 +302,35 @@ def growth_checks(series: dict[str, list[dict[str, float]]], baseline_min: float
     return out, problems
 
 
+class Sources:
+    """Which publisher sent a recorded message: the only one of a single-publisher topic;
+    on ``tf`` the node that owns the transform's child frame
+    (:data:`trust_monitor.common.topics.VEHICLE_FRAMES`)."""
+
+    def __init__(self, topics: dict[str, Any]) -> None:
+        from trust_monitor.common.topics import VEHICLE_FRAMES
+
+        self.topics = topics
+        self.owner = {frame: node for node, frame in VEHICLE_FRAMES.items()}
+        self._classes: dict[str, Any] = {}
+
+    def __call__(self, topic: str, data: bytes) -> str:
+        """The publishing node of ``data`` (serialized) on ``topic``."""
+        row = self.topics[topic]
+        if len(row.publishers) == 1:
+            return str(row.publishers[0])
+        if row.msgtype != 'tf2_msgs/msg/TFMessage':
+            raise RuntimeError(f'{topic}: {len(row.publishers)} publishers of '
+                               f'{row.msgtype}, which this soak cannot tell apart')
+        from rclpy.serialization import deserialize_message
+
+        from trust_monitor.ros.messages import message_class
+
+        cls = self._classes.setdefault(row.msgtype, message_class(row.msgtype))
+        frames = {t.child_frame_id for t in deserialize_message(data, cls).transforms}
+        return ','.join(sorted(self.owner.get(f, f) for f in frames))
+
+
 class Sampler:
     """The once-a-second callback of the run: a sample per process each minute and one in
     the run's last second."""
@@ -269,8 +361,9 @@ def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     from preceding_traffic.sources import load_trace
     from trust_av_planner.graph.shadow import run_wall_graph
     from trust_av_planner.system.config import load_run_config
-    from trust_monitor.common.topics import TOPICS
+    from trust_monitor.common.topics import qualified
 
+    topics = {qualified(t.name): t for t in recorded_topics()}
     duration_s = args.duration_min * 60.0
     base = load_run_config()
     chain = work / 'commute_chain'
@@ -281,8 +374,11 @@ def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     sampler = Sampler(duration_s)
     sequences: dict[str, Sequences] = {}
 
-    def on_message(topic: str, seq: int) -> None:
-        sequences.setdefault(topic, Sequences()).add(seq)
+    sources = Sources(topics)
+
+    def on_message(topic: str, seq: int, data: bytes) -> None:
+        sequences.setdefault(topic, Sequences()).add(seq, time.time_ns(),
+                                                     sources(topic, data))
 
     load_before = os.getloadavg()
     started = time.monotonic()
@@ -293,16 +389,16 @@ def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     if sampler.start_ns is None:
         raise RuntimeError('the run ended before its first second')
     recorded = read_bag(work / 'soak', sampler.start_ns)
-    published = {}
-    for row in TOPICS:
-        if row.name in ('/clock', '/sim/start'):
-            continue
-        sent = run.loops[row.publisher].get('published', {}).get(row.name, 0)
-        published[row.name] = sent + (1 if row.name in INITIAL_STATE else 0)
+    published = {name: t.initial + sum(run.loops[node].get('published', {}).get(name, 0)
+                                       for node in t.publishers)
+                  for name, t in topics.items()}
     rows, problems = topic_checks(published, recorded, sequences, start_ns=sampler.start_ns,
-                                  max_gap_s=args.max_gap_s)
+                                  max_gap_s=args.max_gap_s,
+                                  publishers={n: len(t.publishers) for n, t in topics.items()})
     for row in rows:
-        row['node'] = next(t.publisher for t in TOPICS if t.name == row['topic'])
+        row['node'] = ','.join(topics[row['topic']].publishers) if row['topic'] in topics \
+            else '?'
+
     growth, grow_problems = growth_checks(sampler.series, args.baseline_min, args.rss_limit_mb)
     return {
         'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
