@@ -422,10 +422,11 @@ def print_table(figures: dict[str, Any]) -> None:
     print(f'\nwall-clock soak: {figures["duration_min"]:g} min at {figures["rate_hz"]:g} Hz '
           f'({figures["lead"]["trips"]}), {figures["cpu_count"]} cores, load average '
           f'{figures["load_average_before"][0]:.1f} -> {figures["load_average_after"][0]:.1f}')
-    print(f'{"topic":34s} {"node":18s} {"published":>9s} {"recorded":>9s} {"start":>5s} '
+    width = max(18, *(len(r['node']) for r in figures['topics']))
+    print(f'{"topic":34s} {"node":{width}s} {"published":>9s} {"recorded":>9s} {"start":>5s} '
           f'{"holes":>5s} {"stop":>4s} {"max gap s":>9s} {"> 0.5 s":>7s}')
     for r in figures['topics']:
-        print(f'{r["topic"]:34s} {r["node"]:18s} {r["published"]:9d} {r["recorded"]:9d} '
+        print(f'{r["topic"]:34s} {r["node"]:{width}s} {r["published"]:9d} {r["recorded"]:9d} '
               f'{r["start_edge"]:5d} {r["holes"]:5d} {r["stop_edge"]:4d} '
               f'{r["max_gap_s"]:9.3f} {r["gaps_over_stale_s"]:7d}')
     print(f'\n{"process":18s} {"RSS MB base -> end":>20s} {"growth":>7s} {"fds":>9s} '
