@@ -74,7 +74,8 @@ START_MARGIN_S = 60.0
 """The chained bag outlasts the run by at least this much (start-up happens before the
 replay clock starts, so this is slack, not start-up time)."""
 STOP_EDGE = 1
-"""Messages per topic that may be published and not recorded when the nodes are stopped."""
+"""Messages per publisher of a topic that may be published and not recorded when the nodes
+are stopped."""
 NOT_RECORDED = ('clock', 'sim/start')
 """Table rows a wall run does not record: the lock-step clock (not published in wall mode) and
 the go signal (this process publishes it)."""
