@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,16 @@ from trust_av_planner.system.closed_loop import SimResult, simulate
 from trust_av_planner.system.config import RunConfig, load_run_config
 
 ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+@pytest.fixture
+def ros_domain() -> Iterator[str]:
+    """A ROS domain id leased for one test (the runs' lease: no other test or run uses it
+    meanwhile; 230-232 stay free for the tests that need fixed domains)."""
+    from trust_av_planner.graph.domains import lease_domain
+
+    with lease_domain() as domain:
+        yield str(domain)
 
 
 @pytest.fixture(scope='session')
@@ -90,3 +101,24 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         return 1 if item.get_closest_marker('slow') is not None else 2
 
     items.sort(key=rank)
+
+
+def recorded_chunks(mcap: Path) -> int:
+    """Chunks written so far to a growing MCAP (the recorder writes one chunk per step), read
+    with mcap's stream reader up to the first incomplete record."""
+    import struct
+
+    from mcap.exceptions import McapError
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    chunks = 0
+    try:
+        with mcap.open('rb') as stream:
+            for record in StreamReader(stream, emit_chunks=True).records:
+                chunks += isinstance(record, Chunk)
+    except FileNotFoundError:
+        return 0                # not created yet
+    except (McapError, struct.error):
+        pass                    # the file ends mid-record while it is written: count so far
+    return chunks

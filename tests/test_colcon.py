@@ -6,10 +6,12 @@ cleanly; trust-monitor-estimate runs from the install."""
 from __future__ import annotations
 
 import os
+import queue
 import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -69,34 +71,41 @@ def test_installed_copy_finds_its_share(install: Path, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(('package', 'executable'), sorted(EXECUTABLES))
 def test_installed_executable_comes_up(install: Path, package: str, executable: str,
-                                       tmp_path: Path) -> None:
+                                       tmp_path: Path, ros_domain: str) -> None:
     exe = install / package / 'lib' / package / executable
     assert exe.exists(), f'{exe} missing: `ros2 run {package} {executable}` would fail'
     extra = list(EXECUTABLES[(package, executable)])
     if executable == 'recorder':
-        extra += ['-p', f'bag_path:={tmp_path / "r.mcap"}']
+        extra += ['-p', f'bag_path:={tmp_path / "r"}']
     # no --params-file: a node started alone runs on the installed shipped values
     script = f'source {install / "setup.bash"} && exec {exe} --ros-args ' + ' '.join(extra)
-    env = dict(os.environ, ROS_DOMAIN_ID='231', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+    env = dict(os.environ, ROS_DOMAIN_ID=ros_domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_LOG_DIR=str(tmp_path / 'ros_log'), PYTHONUNBUFFERED='1')
     proc = subprocess.Popen(['bash', '-c', script], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, env=env,
                             start_new_session=True)
-    deadline = time.monotonic() + 60
-    lines = []
+    words = ('recording ',) if executable == 'recorder' else ('ready', 'waiting for /sim/start')
+    lines: queue.Queue[str] = queue.Queue()
     assert proc.stdout is not None
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if 'ready' in line or 'waiting for /sim/start' in line:
-            break
-    assert proc.poll() is None, ''.join(lines)
+    reader = threading.Thread(target=lambda out=proc.stdout: [lines.put(x) for x in out],
+                              daemon=True)
+    reader.start()
+    seen: list[str] = []
+    deadline = time.monotonic() + 60
+    while not any(word in line for line in seen for word in words):
+        assert time.monotonic() < deadline, f'{executable} not up in 60 s:\n' + ''.join(seen)
+        try:
+            seen.append(lines.get(timeout=0.5))
+        except queue.Empty:
+            assert proc.poll() is None, ''.join(seen)
+    assert proc.poll() is None, ''.join(seen)
     os.killpg(proc.pid, signal.SIGINT)
-    rest, _ = proc.communicate(timeout=30)
-    assert proc.returncode == 0, ''.join(lines) + rest
-    assert 'Traceback' not in ''.join(lines) + rest
+    proc.wait(timeout=30)
+    reader.join(timeout=10)                             # the pipe is drained to its end
+    while not lines.empty():
+        seen.append(lines.get())
+    assert proc.returncode == 0, ''.join(seen)
+    assert 'Traceback' not in ''.join(seen)
     shutil.rmtree(tmp_path / 'ros_log', ignore_errors=True)
 
 
@@ -129,12 +138,12 @@ def test_installed_trust_monitor_estimate(install: Path, tmp_path: Path) -> None
     (['-p', 'alhpa:=0.5'], 'unknown parameter(s) alhpa'),
 ])
 def test_node_rejects_bad_parameters_at_start_up(tmp_path: Path, args: list[str],
-                                                 message: str) -> None:
+                                                 message: str, ros_domain: str) -> None:
     """A node started with a bad value stops at once, naming it (exit 2)."""
     override = tmp_path / 'override.yaml'
     override.write_text('planner:\n  ros__parameters:\n    alpha: 1.5\n')
     args = [str(override) if a == 'OVERRIDE' else a for a in args]
-    env = dict(os.environ, ROS_DOMAIN_ID='230', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+    env = dict(os.environ, ROS_DOMAIN_ID=ros_domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_LOG_DIR=str(tmp_path / 'ros_log'))
     proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.planner_node', '--ros-args',
                            '--params-file', str(PARAMS), *args], capture_output=True,

@@ -9,14 +9,8 @@ import numpy as np
 import pytest
 from synthetic_car_following import leader_speed, write_ngsim_chain, write_openacc
 
-from human_driver_sim.car_following import CarFollowingDataError, FollowingPair
-from human_driver_sim.datasets import (
-    LoadReport,
-    load_directory,
-    read_ngsim_pairs,
-    read_openacc_pairs,
-    split_by_follower,
-)
+from human_driver_sim.car_following import CarFollowingDataError, FollowingPair, LoadReport
+from human_driver_sim.datasets import load_directory, read_openacc_pairs
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc
 from human_driver_sim.driver_qp import BatchDriver
 from human_driver_sim.evaluation import (
@@ -32,6 +26,7 @@ from human_driver_sim.evaluation import (
 )
 from human_driver_sim.fitting import MPC_BOUNDS, configured, fit_idm, fit_mpc
 from human_driver_sim.idm import FIT_BOUNDS, TEXTBOOK_MOTORWAY, IdmParams
+from human_driver_sim.ngsim import read_ngsim_pairs, split_by_follower
 
 CONFIG = DriverConfig(dt_s=1.0, horizon_steps=3, standstill_gap_m=5.0, speed_min_mps=0.0,
                       speed_max_mps=36.0, weight_acceleration=1.0, weight_desired_speed=0.002,

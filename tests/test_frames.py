@@ -4,11 +4,14 @@ in their own frames, serialised once with only the stamp and values written in).
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+from geometry_msgs.msg import AccelStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
+from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from trust_monitor.common.topics import (
@@ -22,11 +25,14 @@ from trust_monitor.common.topics import (
 )
 from trust_monitor.ros.messages import (
     SerializedTemplate,
+    TrajectoryBytes,
     VehicleMarkers,
     VehicleOdometry,
+    accel_command_bytes,
     diagnostics,
     message_class,
     trajectory,
+    vector3_bytes,
 )
 from trust_monitor.ros.messages import odometry as plain_odometry
 
@@ -110,3 +116,50 @@ def test_plans_diagnostics_and_trust_frames() -> None:
     assert diagnostics(0, 'x', True, 'ok', {}).header.frame_id == NO_FRAME == ''
     with pytest.raises(TypeError):
         trajectory(0, 1.0, accelerations=[0.0])  # type: ignore[call-arg]  # frame required
+
+
+@pytest.mark.parametrize('field', ['accelerations', 'velocities'])
+def test_serialised_plans_are_the_plain_builders_messages(field: str) -> None:
+    """Plans, previews, commands and trust published as bytes decode to exactly what the
+    plain builders make, for any length, grid and value (extremes and signed zero
+    included), the template of one length unaffected by another's."""
+    rng = np.random.default_rng(7)
+    plans = TrajectoryBytes(field, 'ego')
+    for n in (0, 1, 3, 3, 30, 1):
+        for dt_s in (1.0, 0.1, 0.05):
+            values = (rng.normal(size=n) * rng.choice([1.0, 1e-300, 1e300])).tolist()
+            if n:
+                values[0] = -0.0
+            ns = int(rng.integers(-10**18, 10**18))
+            msg = deserialize_message(plans.render(ns, dt_s, values), JointTrajectory)
+            assert msg == trajectory(ns, dt_s, frame_id='ego', **{field: values})
+    command = deserialize_message(accel_command_bytes('ego').render(5_000_000_001, -2.5),
+                                  AccelStamped)
+    assert command.header.frame_id == 'ego' and command.accel.linear.x == -2.5
+    assert (command.header.stamp.sec, command.header.stamp.nanosec) == (5, 1)
+    trust = deserialize_message(vector3_bytes(NO_FRAME).render(0, 0.1, 0.2, 59.5),
+                                Vector3Stamped)
+    assert (trust.vector.x, trust.vector.y, trust.vector.z) == (0.1, 0.2, 59.5)
+    with pytest.raises(ValueError, match='accelerations or velocities'):
+        TrajectoryBytes('positions', 'ego')
+
+
+def test_serialised_messages_have_their_exact_cdr_length() -> None:
+    """rosbags refuses a message whose bytes run past its last field ("CDR message size
+    mismatch"); rmw_fastrtps' serialize gives its size estimate as the length, so every
+    template cuts its bytes to the message's end."""
+    from rosbags.serde import SerdeError
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    odometry, tf = VehicleOdometry('ego').update(5, 1.0, 2.0)
+    cases = [(TrajectoryBytes('velocities', 'x').render(5, 0.1, [1.0] * n),
+              'trajectory_msgs/msg/JointTrajectory') for n in (0, 1, 3, 30)]
+    cases += [(VehicleMarkers(4.5).update(5), 'visualization_msgs/msg/MarkerArray'),
+              (odometry, 'nav_msgs/msg/Odometry'), (tf, 'tf2_msgs/msg/TFMessage'),
+              (accel_command_bytes('ego').render(5, 1.0), 'geometry_msgs/msg/AccelStamped'),
+              (vector3_bytes('').render(5, 1.0, 2.0, 3.0), 'geometry_msgs/msg/Vector3Stamped')]
+    for data, msgtype in cases:
+        store.deserialize_cdr(data, msgtype)            # raises on a size mismatch
+        with pytest.raises(SerdeError, match='size mismatch'):
+            store.deserialize_cdr(data + bytes(4), msgtype)

@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import assert_every_topic_complete
+from conftest import assert_every_topic_complete, recorded_chunks
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
@@ -160,12 +160,13 @@ def node_pid(orchestrator: int, node: str) -> int:
     raise AssertionError(f'{node} process not found')
 
 
-def wait_for_bag(bag: Path, size: int = 20_000) -> None:
-    """Wait until the recording (the MCAP in the bag directory) has some steps in it."""
+def wait_for_bag(bag: Path, steps: int = 20) -> None:
+    """Wait until the recording (the MCAP in the bag directory) holds ``steps`` steps."""
     mcap = bag / f'{bag.name}.mcap'
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (mcap.exists() and mcap.stat().st_size > size):
+    while time.monotonic() < deadline and recorded_chunks(mcap) < steps:
         time.sleep(0.2)
+    assert recorded_chunks(mcap) >= steps, f'{mcap}: fewer than {steps} steps after 120 s'
 
 
 def assert_gone(pids: list[int]) -> None:
@@ -206,9 +207,9 @@ def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path, moment: str) -
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     if moment == 'mid-run':
-        wait_for_bag(bag, size=90_000)
+        wait_for_bag(bag, steps=150)
     else:
-        wait_for_bag(bag, size=1)
+        wait_for_bag(bag, steps=1)
     children = children_of(proc.pid)
     proc.send_signal(signal.SIGINT)
     _out, err = proc.communicate(timeout=120)

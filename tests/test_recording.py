@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import assert_every_topic_complete
+from conftest import assert_every_topic_complete, recorded_chunks
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
@@ -249,13 +249,15 @@ def run_command(bag: Path, steps: int = 600, *extra: str) -> list[str]:
             '--max-steps', str(steps), '--bag', str(bag), '--no-progress', *extra]
 
 
-def wait_for_steps(bag: Path, size: int = 90_000, proc: subprocess.Popen[str] | None = None,
+def wait_for_steps(bag: Path, steps: int = 8, proc: subprocess.Popen[str] | None = None,
                    timeout_s: float = 120.0) -> None:
+    """Wait until the run has recorded ``steps`` steps (MCAP chunks); fail if it ends first."""
     mcap = bag / f'{bag.name}.mcap'
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and not (mcap.exists() and mcap.stat().st_size > size):
+    while time.monotonic() < deadline and recorded_chunks(mcap) < steps:
         assert proc is None or proc.poll() is None, proc.communicate()
         time.sleep(0.1)
+    assert recorded_chunks(mcap) >= steps, f'{mcap}: fewer than {steps} steps'
 
 
 def test_sigterm_finishes_the_bag_like_sigint(tmp_path: Path) -> None:

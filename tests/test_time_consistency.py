@@ -19,6 +19,11 @@ from trust_av_planner.predictors.sampling import ModelGridPredictor
 from trust_av_planner.preview import LeadPreview, hold_on_grid
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.metrics import (
+    explicability_by_age,
+    step_change_rms_mps2,
+    ticks_per_model_step,
+)
 from trust_monitor.common.grids import hold_at, interp_at
 from trust_monitor.common.kinematics import rollout
 from trust_monitor.trust_model import (
@@ -171,6 +176,24 @@ def test_lead_preview_from_odometry() -> None:
         LeadPreview('constant_speed', 1.0).preview(0.1, 3)
 
 
+def test_rate_diagnostics_on_known_records(run_config) -> None:  # type: ignore[no-untyped-def]
+    """1 s means of the executed acceleration and E by the expectation's age, by hand."""
+    config = load_run_config(overrides={'preceding_traffic': {'trace': 'us06'}})
+    base = simulate(config, truncate(control_trace(config, 10.0), 2)).records[0]
+    accels = [1.0] * 10 + [0.0] * 5 + [2.0] * 5 + [4.0] * 10 + [9.0] * 3  # 3 whole seconds
+    records = [dataclasses.replace(base, av_accel_mps2=a, explicability=0.1 * (k % 10) + k)
+               for k, a in enumerate(accels)]
+    assert step_change_rms_mps2(records, 10) == pytest.approx(math.sqrt((0.0 + 9.0) / 2))
+    assert step_change_rms_mps2(records[9:12], 1) == pytest.approx(math.sqrt(1.0 / 2))
+    by_age = explicability_by_age(records[:30], 10)
+    assert by_age.tolist() == pytest.approx([0.1 * j + 10 + j for j in range(10)])
+    assert ticks_per_model_step(0.1, 1.0) == 10 and ticks_per_model_step(1.0, 1.0) == 1
+    with pytest.raises(ValueError, match='whole number'):
+        ticks_per_model_step(0.3, 1.0)
+    with pytest.raises(ValueError, match='two model steps'):
+        step_change_rms_mps2(records[:15], 10)
+
+
 # --- the closed loop at 1 Hz and 10 Hz ------------------------------------------------------
 
 WINDOW_S = 60
@@ -179,13 +202,19 @@ accelerations and, on US06, a stop): 8 loops at 10 Hz stay within seconds. The w
 ``python scripts/rate_table.py`` (docs/RESULTS.md, "Control rate")."""
 CASES = [(trace, predictor, alpha) for trace in ('us06', 'commute_am')
          for predictor in ('ca', 'gru') for alpha in (0.0, 1.0)]
-OUTSIDE_15_PERCENT = {('us06', 'ca', 0.0, 'mean_explicability'),
-                      ('us06', 'gru', 0.0, 'mean_explicability'),
-                      ('us06', 'gru', 0.0, 'rmse_mps2'),
-                      ('commute_am', 'ca', 1.0, 'mean_explicability'),
-                      ('commute_am', 'gru', 1.0, 'mean_explicability')}
-"""Where the 10 Hz loop's mean E or RMSE differs from 1 Hz by more than 15 % (measured;
-docs/RESULTS.md explains why: the 10 Hz plans are smoother, E is not a per-second rate)."""
+SMOOTHER = ('the 10 Hz AV changes its 1 s mean acceleration less from second to second than '
+            'the 1 Hz AV (each command held for 1 s, behind a lead whose speed steps once per '
+            'second); at alpha = 0 the plan ignores E, so E and the RMSE of the GRU fall with it')
+AGED = ('the 1 s expectation is refreshed once per second and ages up to 0.9 s before the next '
+        'refresh; alpha = 1 keeps E small at the refresh, so its growth with age dominates')
+OUTSIDE_15_PERCENT = {('us06', 'ca', 0.0, 'mean_explicability'): SMOOTHER,
+                      ('us06', 'gru', 0.0, 'mean_explicability'): SMOOTHER,
+                      ('us06', 'gru', 0.0, 'rmse_mps2'): SMOOTHER,
+                      ('commute_am', 'ca', 1.0, 'mean_explicability'): AGED,
+                      ('commute_am', 'gru', 1.0, 'mean_explicability'): AGED}
+"""Where the 10 Hz loop's mean E or RMSE differs from 1 Hz by more than 15 %, and the measured
+reason (docs/MODEL.md, "Time consistency", with the definitions of E and RMSE tried; the two
+reasons are asserted below for every case)."""
 
 
 @functools.cache
@@ -227,7 +256,28 @@ def test_ten_hz_keeps_trust_and_safety(trace: str, predictor: str, alpha: float)
 def test_ten_hz_mean_e_and_rmse_within_15_percent(trace: str, predictor: str, alpha: float,
                                                  metric: str, request) -> None:  # type: ignore[no-untyped-def]
     if (trace, predictor, alpha, metric) in OUTSIDE_15_PERCENT:
-        request.applymarker(pytest.mark.xfail(strict=True, reason='measured outside 15 %: '
-                                              'docs/RESULTS.md, "Control rate"'))
+        request.applymarker(pytest.mark.xfail(
+            strict=True, reason=OUTSIDE_15_PERCENT[trace, predictor, alpha, metric]))
     one, ten = rate_pair(trace, predictor, alpha)
     assert getattr(ten.metrics, metric) == pytest.approx(getattr(one.metrics, metric), rel=0.15)
+
+
+@pytest.mark.parametrize(('trace', 'predictor', 'alpha'), CASES)
+def test_ten_hz_av_changes_its_one_second_acceleration_less(trace: str, predictor: str,
+                                                            alpha: float) -> None:
+    """The first reason E differs: the same drive is a different closed loop at 10 Hz, whose
+    AV moves its 1 s mean acceleration less between seconds (what a held expectation
+    misses)."""
+    one, ten = rate_pair(trace, predictor, alpha)
+    assert step_change_rms_mps2(ten.records, 10) < 0.95 * step_change_rms_mps2(one.records, 1)
+
+
+@pytest.mark.parametrize(('trace', 'predictor', 'alpha'), CASES)
+def test_ten_hz_e_grows_with_the_expectations_age(trace: str, predictor: str,
+                                                  alpha: float) -> None:
+    """The second reason: the expectation is refreshed on the 1 s grid, and E 0.9 s after a
+    refresh is well above E at the refresh."""
+    _, ten = rate_pair(trace, predictor, alpha)
+    by_age = explicability_by_age(ten.records, 10)
+    assert by_age[-1] > 1.4 * by_age[0]
+    assert np.all(np.diff(by_age) > 0.0)

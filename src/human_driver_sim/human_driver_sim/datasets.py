@@ -16,23 +16,25 @@ bumper-to-bumper gap, chosen so that the gap and the two speeds agree with each 
   across) are found where the gap's rate and the Doppler relative speed disagree by
   more than :data:`SPLICE_RESIDUAL_MPS`, or a Doppler acceleration exceeds
   :data:`SPLICE_ACCEL_MPS2`; the span is cut out and the pair split around it.
-* **NGSIM chains** (US DOT FHWA I-80; 6-vehicle chains as published in Keke-Long/PERL_planning):
-  spacing is front to front, so the gap is ``Y_k - Y_{k+1} - vehicle_length_m`` with one
-  assumed length for every leader (lengths are not given). The chains are sliding windows:
-  every leader->follower pair is kept once, and repeated windows of a pair are merged
-  on their common samples.
+* **NGSIM chains**: :mod:`human_driver_sim.ngsim`.
 """
 
 from __future__ import annotations
 
-import csv
-from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from human_driver_sim.car_following import CarFollowingDataError, FollowingPair
+from human_driver_sim.car_following import (
+    CarFollowingDataError,
+    FollowingPair,
+    LoadReport,
+    Splice,
+    numeric_table,
+    read_rows,
+    resample,
+)
+from human_driver_sim.ngsim import NGSIM_VEHICLE_LENGTH_M, read_ngsim_pairs
 
 SPLICE_RESIDUAL_MPS = 5.0
 """|d IVS/dt - (v_lead - v_follow)| (1 s mean) above this is a splice artefact, m/s (the
@@ -45,65 +47,7 @@ SPLICE_MARGIN_S = 1.0
 """Time cut on either side of a flagged span, s."""
 MIN_SEGMENT_S = 20.0
 """Shorter pieces left by a cut are dropped, s."""
-NGSIM_VEHICLE_LENGTH_M = 4.5
-"""Assumed length of every NGSIM leader (front-to-front spacing -> gap), m; the project's
-``vehicle_length_m``. Not given in the chains; docs/DRIVER_IRL.md shows what it changes."""
-NGSIM_MIN_GAP_M = 0.5
-"""An NGSIM pair whose gap (after the assumed length) ever falls below this is not a
-same-lane car-following pair of two cars (or the length is wrong); it is left out, m."""
 FORMATS = ('openacc', 'ngsim')
-
-
-@dataclass(frozen=True)
-class Splice:
-    """One span cut out of an OpenACC pair (times from the file's first sample, s)."""
-
-    pair: str
-    start_s: float
-    end_s: float
-    max_residual_mps: float
-
-
-@dataclass
-class LoadReport:
-    """What loading a directory did: files, pairs kept, splices cut, pairs left out."""
-
-    files: list[str] = field(default_factory=list)
-    splices: list[Splice] = field(default_factory=list)
-    excluded: dict[str, str] = field(default_factory=dict)
-    duplicates_merged: int = 0
-    vehicle_length_m: float | None = None
-
-
-def _read_rows(path: Path) -> list[list[str]]:
-    try:
-        with path.open(newline='') as handle:
-            return [row for row in csv.reader(handle)]
-    except OSError as err:
-        raise CarFollowingDataError(f'cannot read {path}: {err.strerror}') from err
-    except (UnicodeDecodeError, csv.Error) as err:
-        raise CarFollowingDataError(f'{path}: not a CSV text file ({err})') from err
-
-
-def _numeric_table(path: Path, rows: list[list[str]], header_at: int,
-                   needed: Sequence[str]) -> dict[str, np.ndarray]:
-    header = [c.strip() for c in rows[header_at]]
-    missing = [c for c in needed if c not in header]
-    if missing:
-        raise CarFollowingDataError(f'{path}: missing columns {missing}')
-    index = [header.index(c) for c in needed]
-    body = [r for r in rows[header_at + 1:] if r and any(x.strip() for x in r)]
-    try:
-        data = np.array([[float(r[i]) for i in index] for r in body], dtype=float)
-    except (ValueError, IndexError) as err:
-        raise CarFollowingDataError(f'{path}: non-numeric or short row ({err})') from err
-    if data.shape[0] < 2:
-        raise CarFollowingDataError(f'{path}: fewer than 2 data rows')
-    if not np.all(np.isfinite(data)):
-        raise CarFollowingDataError(f'{path}: a value is not finite')
-    if not np.all(np.diff(data[:, 0]) > 0.0):
-        raise CarFollowingDataError(f'{path}: time is not increasing')
-    return {c: data[:, k] for k, c in enumerate(needed)}
 
 
 def _mean_1s(values: np.ndarray, time_s: np.ndarray) -> np.ndarray:
@@ -199,12 +143,6 @@ def splice_mask(time_s: np.ndarray, gap_m: np.ndarray, leader_doppler_mps: np.nd
     return ok, spans
 
 
-def _resample(time_s: np.ndarray, values: np.ndarray, dt_s: float) -> tuple[np.ndarray,
-                                                                              np.ndarray]:
-    grid = np.arange(time_s[0], time_s[-1] + 1e-9, dt_s)
-    return grid, np.interp(grid, time_s, values)
-
-
 def read_openacc_pairs(path: Path, *, dt_s: float = 1.0, leader: str = 'along_track',
                        report: LoadReport | None = None) -> list[FollowingPair]:
     """Every leader->follower pair of one OpenACC file, cleaned and resampled to ``dt_s``.
@@ -227,7 +165,7 @@ def read_openacc_pairs(path: Path, *, dt_s: float = 1.0, leader: str = 'along_tr
         raise CarFollowingDataError(f'dt_s must be positive, got {dt_s}')
     if leader not in ('along_track', 'gap'):
         raise CarFollowingDataError(f'unknown leader construction {leader!r}')
-    rows = _read_rows(path)
+    rows = read_rows(path)
     header_at = next((i for i, r in enumerate(rows[:20]) if r and r[0].strip() == 'Time'), None)
     if header_at is None:
         raise CarFollowingDataError(f'{path}: no header line starting with "Time" (OpenACC)')
@@ -239,7 +177,7 @@ def read_openacc_pairs(path: Path, *, dt_s: float = 1.0, leader: str = 'along_tr
     for i in range(1, count + 1):
         needed += [f'Speed{i}', f'E{i}', f'N{i}']
     needed += [f'IVS{i}' for i in range(1, count)]
-    col = _numeric_table(path, rows, header_at, needed)
+    col = numeric_table(path, rows, header_at, needed)
     names = next((r[1:count + 1] for r in rows[:header_at] if r and r[0] == 'Vehicle_order'),
                  [str(i) for i in range(1, count + 1)])
     time_s = col['Time']
@@ -267,131 +205,14 @@ def read_openacc_pairs(path: Path, *, dt_s: float = 1.0, leader: str = 'along_tr
         pieces = _segments(ok, time_s, MIN_SEGMENT_S)
         for n, piece in enumerate(pieces, start=1):
             t = time_s[piece]
-            grid, g = _resample(t, gap[piece], dt_s)
+            grid, g = resample(t, gap[piece], dt_s)
             pairs.append(FollowingPair(
                 name=key if len(pieces) == 1 else f'{key}#{n}', dt_s=dt_s,
-                leader_speed_mps=_resample(t, lead_v[piece], dt_s)[1],
-                follower_speed_mps=_resample(t, follow_v[piece], dt_s)[1], gap_m=g,
+                leader_speed_mps=resample(t, lead_v[piece], dt_s)[1],
+                follower_speed_mps=resample(t, follow_v[piece], dt_s)[1], gap_m=g,
                 dataset='openacc', pair_key=key,
                 driver=f'{path.stem.split("_part")[0]}:{names[i].strip() or i + 1}',
                 start_s=round(float(grid[0] - time_s[0]), 3)))
-    return pairs
-
-
-@dataclass
-class _NgsimPiece:
-    file: str
-    time_s: np.ndarray
-    spacing_m: np.ndarray
-    leader_speed_mps: np.ndarray
-    follower_speed_mps: np.ndarray
-
-
-def _merge_windows(pieces: list[_NgsimPiece]) -> tuple[list[_NgsimPiece], int]:
-    """Merge windows of one pair that share samples (equal spacing and speeds at a shift)."""
-    merged: list[_NgsimPiece] = []
-    dropped = 0
-    for piece in sorted(pieces, key=lambda p: p.file):
-        for target in merged:
-            shift = _common_shift(target, piece)
-            if shift is None:
-                continue
-            step = float(np.median(np.diff(target.time_s)))
-            start = min(0, shift)
-            stop = max(len(target.time_s), shift + len(piece.time_s))
-            out = {}
-            for name in ('spacing_m', 'leader_speed_mps', 'follower_speed_mps'):
-                values = np.full(stop - start, np.nan)
-                values[shift - start:shift - start + len(piece.time_s)] = getattr(piece, name)
-                values[-start:-start + len(target.time_s)] = getattr(target, name)
-                out[name] = values
-            target.time_s = target.time_s[0] + step * np.arange(start, stop)
-            target.spacing_m = out['spacing_m']
-            target.leader_speed_mps = out['leader_speed_mps']
-            target.follower_speed_mps = out['follower_speed_mps']
-            target.file += '+' + piece.file
-            dropped += 1
-            break
-        else:
-            merged.append(piece)
-    return merged, dropped
-
-
-def _common_shift(a: _NgsimPiece, b: _NgsimPiece) -> int | None:
-    """Sample shift s with b[k] == a[k + s] on at least 10 common samples, or None."""
-    for shift in range(-len(b.time_s) + 10, len(a.time_s) - 9):
-        lo, hi = max(0, -shift), min(len(b.time_s), len(a.time_s) - shift)
-        if hi - lo < 10:
-            continue
-        if (np.allclose(a.spacing_m[lo + shift:hi + shift], b.spacing_m[lo:hi], atol=1e-3)
-                and np.allclose(a.follower_speed_mps[lo + shift:hi + shift],
-                                b.follower_speed_mps[lo:hi], atol=1e-3)):
-            return shift
-    return None
-
-
-def read_ngsim_pairs(paths: Sequence[Path], *, dt_s: float = 1.0,
-                     vehicle_length_m: float = NGSIM_VEHICLE_LENGTH_M,
-                     report: LoadReport | None = None) -> list[FollowingPair]:
-    """Unique leader->follower pairs of NGSIM chain files, resampled to ``dt_s``.
-
-    Args:
-        paths: Chain CSVs (``t1, IDk, Yk, vk, ak`` for k = 1..K, vehicle 1 leads).
-        dt_s: Output step, s.
-        vehicle_length_m: Assumed leader length (spacing is front to front), m.
-        report: Receives the merged duplicates and the pairs left out.
-
-    Raises:
-        CarFollowingDataError: Unreadable file, missing columns, bad values.
-    """
-    if dt_s <= 0.0 or vehicle_length_m < 0.0:
-        raise CarFollowingDataError('need dt_s > 0 and vehicle_length_m >= 0')
-    by_pair: dict[tuple[str, str], list[_NgsimPiece]] = {}
-    for path in paths:
-        rows = _read_rows(path)
-        if not rows or not rows[0] or rows[0][0].strip() != 't1':
-            raise CarFollowingDataError(f'{path}: no header starting with "t1" (NGSIM chain)')
-        header = [c.strip() for c in rows[0]]
-        count = sum(1 for c in header if c.startswith('ID') and c[2:].isdigit())
-        if count < 2:
-            raise CarFollowingDataError(f'{path}: fewer than 2 vehicles (ID1, ID2, ...)')
-        needed = ['t1'] + [f'{c}{k}' for k in range(1, count + 1) for c in ('ID', 'Y', 'v')]
-        col = _numeric_table(path, rows, 0, needed)
-        for k in range(1, count):
-            ids = (col[f'ID{k}'], col[f'ID{k + 1}'])
-            if any(np.ptp(i) != 0.0 for i in ids):
-                raise CarFollowingDataError(f'{path}: vehicle ID{k} or ID{k + 1} changes')
-            key = (f'{ids[0][0]:.0f}', f'{ids[1][0]:.0f}')
-            by_pair.setdefault(key, []).append(_NgsimPiece(
-                path.name, col['t1'], col[f'Y{k}'] - col[f'Y{k + 1}'], col[f'v{k}'],
-                col[f'v{k + 1}']))
-    pairs = []
-    for (lead, follow), pieces in sorted(by_pair.items(), key=lambda x: (int(x[0][1]),
-                                                                         int(x[0][0]))):
-        merged, dropped = _merge_windows(pieces)
-        name = f'ngsim:{lead}->{follow}'
-        if report is not None:
-            report.duplicates_merged += dropped
-        gaps = [p.spacing_m - vehicle_length_m for p in merged]
-        if min(float(np.nanmin(g)) for g in gaps) < NGSIM_MIN_GAP_M:
-            if report is not None:
-                closest = min(float(np.nanmin(p.spacing_m)) for p in merged)
-                report.excluded[name] = (f'gap below {NGSIM_MIN_GAP_M} m with a '
-                                        f'{vehicle_length_m} m leader (closest front-to-front '
-                                        f'spacing {closest:.2f} m)')
-            continue
-        for n, (piece, gap) in enumerate(zip(merged, gaps, strict=True), start=1):
-            ok = np.isfinite(gap)
-            t = piece.time_s[ok]
-            g = _resample(t, gap[ok], dt_s)[1]
-            pairs.append(FollowingPair(
-                name=name if len(merged) == 1 else f'{name}#{n}', dt_s=dt_s,
-                leader_speed_mps=_resample(t, piece.leader_speed_mps[ok], dt_s)[1],
-                follower_speed_mps=_resample(t, piece.follower_speed_mps[ok], dt_s)[1],
-                gap_m=g, dataset='ngsim', pair_key=name, driver=f'ngsim:{follow}',
-                start_s=float(t[0])))
-    if report is not None:
-        report.vehicle_length_m = vehicle_length_m
     return pairs
 
 
@@ -403,7 +224,7 @@ def detect_format(directory: Path) -> str:
     """
     files = csv_files(directory)
     for path in files:
-        rows = _read_rows(path)
+        rows = read_rows(path)
         if rows and rows[0] and rows[0][0].strip() == 't1':
             return 'ngsim'
         if any(r and r[0].strip() == 'Time' for r in rows[:20]):
@@ -441,7 +262,7 @@ def load_directory(directory: Path, fmt: str | None = None, *, dt_s: float = 1.0
     if fmt == 'openacc':
         # Only data tables: OpenACC directories also hold a vehicle-specification CSV.
         tables = [f for f in files if any(r and r[0].strip() == 'Time'
-                                          for r in _read_rows(f)[:20])]
+                                          for r in read_rows(f)[:20])]
         if not tables:
             raise CarFollowingDataError(f'{directory}: no OpenACC file ("Time" header)')
         pairs = [p for f in tables for p in read_openacc_pairs(f, dt_s=dt_s, leader=leader,
@@ -455,25 +276,3 @@ def load_directory(directory: Path, fmt: str | None = None, *, dt_s: float = 1.0
     if not pairs:
         raise CarFollowingDataError(f'{directory}: no pair left after cleaning')
     return pairs
-
-
-def split_by_follower(pairs: Sequence[FollowingPair]) -> tuple[list[FollowingPair],
-                                                               list[FollowingPair]]:
-    """NGSIM fit / held-out split by vehicle: odd follower IDs are held out.
-
-    Every pair is kept whole (all its segments on one side), and a held-out driver is never
-    a follower in the fit set (NGSIM IDs are assigned in order of entry, so the parity is
-    unrelated to driving).
-
-    Raises:
-        CarFollowingDataError: A driver that is not ``ngsim:<integer ID>``.
-    """
-    fit: list[FollowingPair] = []
-    held_out: list[FollowingPair] = []
-    for pair in pairs:
-        ident = pair.driver.removeprefix('ngsim:')
-        if not ident.isdigit():
-            raise CarFollowingDataError(f'{pair.name}: driver {pair.driver!r} is not an '
-                                        f'NGSIM vehicle ID')
-        (held_out if int(ident) % 2 else fit).append(pair)
-    return fit, held_out

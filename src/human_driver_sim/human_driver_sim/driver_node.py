@@ -37,10 +37,10 @@ from trust_monitor.common.params import check_fields, param
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import (
+    TrajectoryBytes,
     VehicleOdometry,
     diagnostics,
     msg_ns,
-    trajectory,
     trajectory_times,
     trajectory_values,
 )
@@ -80,6 +80,7 @@ class DriverNode(Node):
         self.latest = LatestInputs(['expected', 'ego'])
         self.last_tick_ns = time.monotonic_ns()
         self.frame = VEHICLE_FRAMES['human_driver']
+        self.plan_bytes = TrajectoryBytes('accelerations', self.frame)
         self.vehicle = VehicleOdometry(self.frame)
         self.pub_odom = self.create_publisher(
             Odometry, 'human/odom', topic_qos('human/odom', self.clock, publisher=True))
@@ -174,8 +175,7 @@ class DriverNode(Node):
         gap = av_position - self.position_m - self.follower.vehicle_length_m
         result = self.mpc.step(gap, self.speed_mps, av_speed, expected)
         dt = self.config.dt_s
-        self.pub_plan.publish(trajectory(ns, dt, frame_id=self.frame,
-                                         accelerations=result.plan_mps2.tolist()))
+        self.pub_plan.publish(self.plan_bytes.render(ns, dt, result.plan_mps2.tolist()))
         self.pub_status.publish(diagnostics(
             ns, 'driver_mpc', result.success, result.status,
             {'status': result.status, 'success': str(result.success),

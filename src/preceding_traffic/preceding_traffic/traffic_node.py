@@ -40,7 +40,7 @@ from trust_monitor.common.lockstep import StepBuffer, stamp_ns
 from trust_monitor.common.params import check_fields, control_step_param, param
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
-from trust_monitor.ros.messages import VehicleOdometry, msg_ns, time_msg, trajectory
+from trust_monitor.ros.messages import TrajectoryBytes, VehicleOdometry, msg_ns, time_msg
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS, topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -85,6 +85,7 @@ class TrafficNode(Node):
         self.done = False
         self.buffer = StepBuffer(['ego', 'human', 'trust', 'status'])
         self.frame = VEHICLE_FRAMES['preceding_traffic']
+        self.preview_bytes = TrajectoryBytes('velocities', self.frame)
         self.vehicle = VehicleOdometry(self.frame)
         self.pub_clock = self.create_publisher(Clock, 'clock', QOS['CLOCK'])
         self.pub_odom = self.create_publisher(
@@ -128,9 +129,9 @@ class TrafficNode(Node):
         state = self.replay.state(elapsed_s)
         odom, tf = self.vehicle.update(ns, state.position_m, state.speed_mps)
         self.pub_odom.publish(odom)
-        self.pub_preview.publish(trajectory(
-            ns, self.run.dt_s, frame_id=self.frame, velocities=self.replay.preview(
-                elapsed_s, self.run.horizon_steps, self.run.dt_s).tolist()))
+        self.pub_preview.publish(self.preview_bytes.render(
+            ns, self.run.dt_s, self.replay.preview(elapsed_s, self.run.horizon_steps,
+                                                   self.run.dt_s).tolist()))
         self.pub_tf.publish(tf)
 
     def close(self) -> None:
@@ -158,9 +159,8 @@ class TrafficNode(Node):
         odom, tf = self.vehicle.update(ns, self.position_m, speed)
         self.pub_clock.publish(Clock(clock=time_msg(ns)))
         self.pub_odom.publish(odom)
-        self.pub_preview.publish(trajectory(
-            ns, self.run.dt_s, frame_id=self.frame,
-            velocities=self.trace.preview(step, self.run.horizon_steps).tolist()))
+        self.pub_preview.publish(self.preview_bytes.render(
+            ns, self.run.dt_s, self.trace.preview(step, self.run.horizon_steps).tolist()))
         self.pub_tf.publish(tf)  # after the planner's inputs: not on the chain
 
     def on_done(self, name: str, msg: Odometry | Vector3Stamped | DiagnosticArray,

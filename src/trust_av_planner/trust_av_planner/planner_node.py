@@ -47,11 +47,11 @@ from trust_monitor.common.lockstep import StepBuffer
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import (
+    TrajectoryBytes,
     VehicleMarkers,
+    accel_command_bytes,
     diagnostics,
-    header,
     msg_ns,
-    trajectory,
     trajectory_times,
     trajectory_values,
 )
@@ -101,6 +101,8 @@ class PlannerNode(Node):
         self.stale_reason = ''
         self.frame = VEHICLE_FRAMES['ego_plant']
         self.markers = VehicleMarkers(shared.vehicle_length_m)
+        self.plan_bytes = TrajectoryBytes('accelerations', self.frame)
+        self.command_bytes = accel_command_bytes(self.frame)
         self.pub_plan = self.create_publisher(JointTrajectory, 'ego/plan',
                                               topic_qos('ego/plan', self.clock))
         self.pub_expected = self.create_publisher(JointTrajectory, 'ego/expected_plan',
@@ -263,13 +265,9 @@ class PlannerNode(Node):
         """The four outputs of a step, stamped ``ns`` (plans on the prediction grid, in the
         AV's frame), then the vehicles' markers."""
         step_s = self.planner.grid[0]
-        self.pub_plan.publish(trajectory(ns, step_s, frame_id=self.frame,
-                                         accelerations=plan.tolist()))
-        self.pub_expected.publish(trajectory(ns, step_s, frame_id=self.frame,
-                                             accelerations=expected.tolist()))
-        command = AccelStamped(header=header(ns, self.frame))
-        command.accel.linear.x = accel_mps2
-        self.pub_accel.publish(command)
+        self.pub_plan.publish(self.plan_bytes.render(ns, step_s, plan.tolist()))
+        self.pub_expected.publish(self.plan_bytes.render(ns, step_s, expected.tolist()))
+        self.pub_accel.publish(self.command_bytes.render(ns, accel_mps2))
         report = diagnostics(ns, 'trust_aware_nmpc', ok, status,
                              {'status': status, **extra, 'trust': repr(trust),
                               'command_mps2': repr(accel_mps2)})

@@ -28,7 +28,7 @@ from trust_monitor.common.grids import hold_at
 from trust_monitor.common.lockstep import StepBuffer
 from trust_monitor.common.topics import NO_FRAME
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
-from trust_monitor.ros.messages import header, msg_ns, trajectory_times, trajectory_values
+from trust_monitor.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -50,6 +50,7 @@ class MonitorNode(Node):
         self.scored_ns: int | None = None
         self.pub = self.create_publisher(Vector3Stamped, 'trust_monitor/trust',
                                          topic_qos('trust_monitor/trust', self.clock))
+        self.trust_bytes = vector3_bytes(NO_FRAME)
         callback = self.on_latest if self.clock.wall else self.on_input
         self.create_subscription(JointTrajectory, 'ego/plan', lambda m: callback('plan', m),
                                  topic_qos('ego/plan', self.clock))
@@ -103,11 +104,8 @@ class MonitorNode(Node):
                        np.array(trajectory_values(expected, 'accelerations')), step_s,
                        len(values))
         estimate = self.estimator.step(values, held.tolist(), dt_s)
-        out = Vector3Stamped(header=header(ns, NO_FRAME))
-        out.vector.x = estimate.explicability
-        out.vector.y = estimate.performance
-        out.vector.z = estimate.trust
-        self.pub.publish(out)
+        self.pub.publish(self.trust_bytes.render(ns, estimate.explicability,
+                                                 estimate.performance, estimate.trust))
 
 
 def main(args: list[str] | None = None) -> int:

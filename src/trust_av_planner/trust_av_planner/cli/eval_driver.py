@@ -6,8 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
-from human_driver_sim.car_following import CarFollowingDataError
-from human_driver_sim.datasets import FORMATS, NGSIM_VEHICLE_LENGTH_M, LoadReport, load_directory
+from human_driver_sim.car_following import CarFollowingDataError, LoadReport
+from human_driver_sim.datasets import FORMATS, load_directory
 from human_driver_sim.evaluation import (
     PROTOCOLS,
     WINDOW_S,
@@ -19,6 +19,7 @@ from human_driver_sim.evaluation import (
     format_table,
 )
 from human_driver_sim.idm import TEXTBOOK_MOTORWAY, IdmParams
+from human_driver_sim.ngsim import NGSIM_VEHICLE_LENGTH_M
 from human_driver_sim.population import DRIVER_FIT_FILE, DriverFitError, fitted_idm_params
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config

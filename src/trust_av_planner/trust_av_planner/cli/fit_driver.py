@@ -15,8 +15,8 @@ import numpy as np
 import yaml
 
 from human_driver_sim import irl
-from human_driver_sim.car_following import CarFollowingDataError, FollowingPair
-from human_driver_sim.datasets import LoadReport, load_directory, split_by_follower
+from human_driver_sim.car_following import CarFollowingDataError, FollowingPair, LoadReport
+from human_driver_sim.datasets import load_directory
 from human_driver_sim.driver_mpc import DriverConfig
 from human_driver_sim.evaluation import (
     ConstantSpeed,
@@ -31,6 +31,7 @@ from human_driver_sim.evaluation import (
 )
 from human_driver_sim.fitting import MPC_BOUNDS, FitResult, configured, fit_idm, fit_mpc
 from human_driver_sim.idm import PARAM_NAMES, TEXTBOOK_MOTORWAY, IdmParams
+from human_driver_sim.ngsim import split_by_follower
 from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from trust_av_planner.cli.options import Progress
 from trust_av_planner.errors import TrustAvPlannerError

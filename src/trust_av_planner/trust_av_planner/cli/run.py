@@ -1,4 +1,5 @@
-"""``trust-av run``: the ROS 2 node graph on one trace, recorded to MCAP; metrics and a plot."""
+"""``trust-av run``: the ROS 2 node graph on one trace (in a namespace, on a private or a
+given ROS domain), recorded to a rosbag2 bag; metrics and a plot."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from trust_av_planner.cli.options import (
     steps_value,
 )
 from trust_av_planner.cli.outputs import prepare_outputs
+from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
 from trust_av_planner.graph.orchestrator import run_graph_records
 from trust_av_planner.study.plots import run_overview
 from trust_av_planner.system.config import load_run_config
@@ -23,6 +25,8 @@ from trust_av_planner.system.metrics import compute_metrics
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av run``."""
+    namespace = check_namespace(args.namespace, '--namespace')
+    domain_id = None if args.domain_id is None else domain_id_value(args.domain_id)
     config = load_run_config(args.params_files, run_overrides(args))
     trace = truncate(load_trace(config.trace.trace, config.planner.dt_s, config.trace),
                      args.max_steps)
@@ -34,13 +38,15 @@ def run(args: argparse.Namespace) -> int:
         result, records = run_graph_records(
             config, config.trace.trace, trace, outputs.bag,
             max_steps=args.max_steps, startup_timeout_s=args.startup_timeout_s,
-            log_dir=outputs.logs, on_step=None if bar is None else bar.update)
+            log_dir=outputs.logs, on_step=None if bar is None else bar.update,
+            namespace=namespace, domain_id=domain_id)
     finally:
         if bar is not None:
             bar.close()
     metrics = compute_metrics(records, config.min_safe_gap_m)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
-             f'alpha = {config.planner.alpha:g} (ROS 2 graph, domain {result.domain_id})')
+             f'alpha = {config.planner.alpha:g} (ROS 2 graph, domain {result.domain_id}'
+             f'{"" if namespace == "/" else ", namespace " + namespace})')
     run_overview(records, title, outputs.plot)
     print(format_metrics(metrics, title))
     print(f'wall time {result.wall_s:.1f} s (start-up {result.startup_s:.1f} s), '
@@ -50,12 +56,26 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def domain_id_value(text: str) -> int:
+    """``--domain-id``: a whole number in 0..232.
+
+    Raises:
+        TrustAvPlannerError: it is not (one line naming the option).
+    """
+    try:
+        value: object = int(text, 10)
+    except ValueError:
+        value = text
+    return check_domain_id(value, '--domain-id')
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``run`` to ``trust-av``."""
     parser = subparsers.add_parser(
         'run', help='the ROS 2 node graph on one trace, recorded to a rosbag2 bag',
         description='Start the six nodes (preceding_traffic, planner, ego_plant, human_driver, '
-                    'trust_monitor, recorder) as separate processes on a private ROS domain, '
+                    'trust_monitor, recorder) as separate processes on a private ROS domain '
+                    '(or on --domain-id, in --namespace), '
                     'step them in lock-step on sim time to the end of the trace, record every '
                     'topic to a rosbag2 bag directory (metadata.yaml + MCAP), then print the '
                     'metrics and write a plot (BAG.png) and the node logs (BAG.logs/) beside '
@@ -70,6 +90,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='replace an existing bag directory, plot and logs')
     parser.add_argument('--max-steps', type=steps_value, default=0,
                         help='stop after this many steps (default: the whole trace)')
+    parser.add_argument('--namespace', default='/', metavar='NS',
+                        help='ROS namespace of every node (as --ros-args -r __ns:=NS): the '
+                             'topics become NS/ego/odom, NS/tf, ... and the bag records those '
+                             'names; a valid ROS 2 namespace (absolute, tokens of letters, '
+                             'digits and _ not starting with a digit). Two runs in different '
+                             'namespaces on one --domain-id do not hear each other '
+                             '(default: %(default)s)')
+    parser.add_argument('--domain-id', default=None, metavar='N',
+                        help=f'run on ROS_DOMAIN_ID N (0..{DOMAIN_ID_MAX}, what Fast DDS can '
+                             'use), shared with other graphs in other namespaces: refused if '
+                             'a node in --namespace or a publisher on one of its topics is '
+                             'already there, and stopped if one appears. Default: lease a '
+                             'free, private domain that nothing else uses')
     parser.add_argument('--startup-timeout-s', type=float, default=30.0,
                         help='how long to wait for the graph to connect (default: %(default)s)')
     parser.set_defaults(func=run)

@@ -16,6 +16,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.metrics import StepRecord
+from trust_monitor.common.topics import qualified
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
@@ -53,27 +54,30 @@ def _accels(msg: Any) -> tuple[float, ...]:
     return tuple(float(p.accelerations[0]) for p in msg.points)
 
 
-def records_from_bag(path: Path) -> list[StepRecord]:
+def records_from_bag(path: Path, namespace: str = '/') -> list[StepRecord]:
     """One :class:`StepRecord` per complete step of a graph recording, in time order.
 
     A step is complete when the planner's, driver's and monitor's outputs for its stamp are
     all in the bag; a recording cut short by a fault yields the steps before the fault.
+    ``namespace`` is the run's (its topics are read: ``/car1/ego/odom`` for ``/car1``).
     """
     topics = read_topics(path)
+
+    def at(name: str, stamp: int) -> Any:
+        return topics[qualified(name, namespace)][stamp]
+
     records = []
-    for ns in sorted(topics['/ego/planner_status']):
+    for ns in sorted(topics[qualified('ego/planner_status', namespace)]):
         try:
-            traffic = topics['/preceding_vehicle/odom'][ns]
-            ego = topics['/ego/odom'][ns]
-            human = topics['/human/odom'][ns]
-            plan = topics['/ego/plan'][ns]
-            expected = topics['/ego/expected_plan'][ns]
-            human_plan = topics['/human/plan'][ns]
-            trust = topics['/trust_monitor/trust'][ns]
-            status = {kv.key: kv.value
-                      for kv in topics['/ego/planner_status'][ns].status[0].values}
-            driver = {kv.key: kv.value
-                      for kv in topics['/human/driver_status'][ns].status[0].values}
+            traffic = at('preceding_vehicle/odom', ns)
+            ego = at('ego/odom', ns)
+            human = at('human/odom', ns)
+            plan = at('ego/plan', ns)
+            expected = at('ego/expected_plan', ns)
+            human_plan = at('human/plan', ns)
+            trust = at('trust_monitor/trust', ns)
+            status = {kv.key: kv.value for kv in at('ego/planner_status', ns).status[0].values}
+            driver = {kv.key: kv.value for kv in at('human/driver_status', ns).status[0].values}
         except KeyError:
             break  # the first incomplete step: the recording ends here
         ego_x, ego_v = ego.pose.pose.position.x, ego.twist.twist.linear.x

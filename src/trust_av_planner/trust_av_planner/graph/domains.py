@@ -23,8 +23,16 @@ import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.processes import GraphError
+from trust_monitor.common.rcl_values import TOPIC_NAME_MAX, namespace_problem
+from trust_monitor.common.topics import TOPICS, qualified
 
+DOMAIN_ID_MAX = 232
+"""The largest ROS domain id Fast DDS (Jazzy's rmw_fastrtps) can use: it derives every UDP
+port from the domain id (RTPS port mapping, ``include/fastdds/rtps/common/PortParameters.h``
+and ``src/cpp/rtps/network/NetworkFactory.cpp: calculate_well_known_port``: 7400 + 250 *
+domain + offset, the process exits when that exceeds 65535; 7400 + 250 * 233 = 65650)."""
 DOMAIN_RANGE = range(1, 102)
 """ROS domain ids leased to runs (Fast DDS: 0-232 are valid; 1-101 avoid the defaults)."""
 RANGE_ENV = 'TRUST_AV_DOMAIN_RANGE'
@@ -45,9 +53,48 @@ def domain_range() -> range:
         low, high = int(first), int(last or first)
     except ValueError:
         low = high = -1
-    if not 0 <= low <= high <= 232:
-        raise GraphError(f'{RANGE_ENV}={text!r}: expected first-last domain ids in 0..232')
+    if not 0 <= low <= high <= DOMAIN_ID_MAX:
+        raise GraphError(f'{RANGE_ENV}={text!r}: expected first-last domain ids in '
+                         f'0..{DOMAIN_ID_MAX}')
     return range(low, high + 1)
+
+
+def check_domain_id(domain_id: object, option: str = 'domain_id') -> int:
+    """``domain_id`` if it is a ROS domain id Fast DDS can use (0..:data:`DOMAIN_ID_MAX`).
+
+    Raises:
+        TrustAvPlannerError: it is not a whole number in that range (one line naming
+            ``option``).
+    """
+    if isinstance(domain_id, bool) or not isinstance(domain_id, int) or \
+            not 0 <= domain_id <= DOMAIN_ID_MAX:
+        raise TrustAvPlannerError(f'{option} {domain_id!r}: a ROS domain id is a whole number '
+                                  f'in 0..{DOMAIN_ID_MAX} (Fast DDS derives its UDP ports '
+                                  'from it)')
+    return domain_id
+
+
+def check_namespace(namespace: object, option: str = 'namespace') -> str:
+    """``namespace`` if a whole graph can run in it: a valid ROS 2 node namespace (rmw
+    ``validate_namespace.c: rmw_validate_namespace``, which rcl's ``rcl_node_init`` applies:
+    absolute, ``/`` alone or tokens of ``[A-Za-z0-9_]`` not starting with a digit, no
+    repeated or trailing ``/``, at most 245 characters) whose every topic of the table is a
+    valid full topic name (rmw ``validate_full_topic_name.c``: at most 247 characters).
+
+    Raises:
+        TrustAvPlannerError: it is not (one line naming ``option`` and rmw's reason).
+    """
+    if not isinstance(namespace, str):
+        raise TrustAvPlannerError(f'{option} {namespace!r}: a ROS namespace is a string')
+    problem = namespace_problem(namespace)
+    if problem is None:
+        longest = max((qualified(t.name, namespace) for t in TOPICS), key=len)
+        if len(longest) > TOPIC_NAME_MAX:
+            problem = (f"topic {longest[:40]}... would be longer than rmw's "
+                       f'{TOPIC_NAME_MAX} characters')
+    if problem is not None:
+        raise TrustAvPlannerError(f'{option} {namespace!r}: {problem}')
+    return namespace
 
 
 def lock_dir() -> Path:

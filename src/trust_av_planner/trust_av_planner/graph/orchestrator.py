@@ -5,7 +5,8 @@ process (:mod:`trust_av_planner.graph.processes`), each run leases a free, priva
 ``ROS_DOMAIN_ID`` (:mod:`trust_av_planner.graph.domains`) with localhost-only discovery,
 and this process follows the run through its own node (:mod:`trust_av_planner.graph.session`).
 
-Sequence: lease a domain that holds no one else's participants; start the nodes; wait until
+Sequence: lease a domain that holds no one else's participants (or, on a domain the caller
+names, check that nothing there clashes with the run's namespace); start the nodes; wait until
 every topic of the table has its publishers and subscribers and the recorder has matched
 every publisher; publish ``sim/start``; follow the recorder's status for progress (no
 per-step subscriber of our own), the nodes' health and the domain's privacy; the run is
@@ -23,8 +24,9 @@ If this process is killed, the nodes stop by themselves and the recorder finishe
 
 from __future__ import annotations
 
+import contextlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,9 +35,13 @@ from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.bag_records import records_from_bag
 from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, DiskFullError, repair_bag
-from trust_av_planner.graph.domains import lease_domain
+from trust_av_planner.graph.domains import check_domain_id, check_namespace, lease_domain
 from trust_av_planner.graph.processes import RECORDER, Graph, GraphError, NodeSpec
-from trust_av_planner.graph.session import foreign_participants, graph_session
+from trust_av_planner.graph.session import (
+    clashing_participants,
+    foreign_participants,
+    graph_session,
+)
 from trust_av_planner.system.closed_loop import InitialState, equilibrium_start
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
@@ -83,7 +89,8 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
               max_steps: int = 0, startup_timeout_s: float = 30.0,
               step_timeout_s: float = 30.0, log_dir: Path | None = None,
               on_step: Callable[[int, int], None] | None = None,
-              on_clock: Callable[[int], None] | None = None) -> GraphRun:
+              on_clock: Callable[[int], None] | None = None, namespace: str = '/',
+              domain_id: int | None = None) -> GraphRun:
     """Run the whole graph over ``trace`` (already truncated to ``max_steps``) into the bag
     directory ``bag`` (it must not exist).
 
@@ -101,10 +108,17 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
         on_step: progress: called with (steps recorded, total steps), at most twice a second.
         on_clock: benchmarks: called with every step's 1-based index as this process
             receives the step clock (adds a per-step subscriber).
+        namespace: the ROS namespace every node (and this process's node) runs in: its
+            topics are ``<namespace>/ego/odom`` ..., and so are the recorded names.
+        domain_id: the ROS domain to run on, shared with whatever else is there (other
+            graphs in other namespaces); the run refuses to start if a node in
+            ``namespace`` or a publisher on one of its topics is already there. None:
+            lease a free, private domain (nothing else may be on it).
 
     Raises:
+        TrustAvPlannerError: ``namespace`` or ``domain_id`` is invalid (one line naming it).
         GraphError: the graph did not connect in time, a node died, a step stalled, or a
-            foreign publisher appeared.
+            foreign publisher appeared (on one of this graph's topics).
         DiskFullError: the disk filled up; the bag is finished with every complete step.
     """
     from rosgraph_msgs.msg import Clock
@@ -112,12 +126,15 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
 
     from trust_monitor.ros.qos import QOS
 
+    check_namespace(namespace)
+    if domain_id is not None:
+        check_domain_id(domain_id)
     initial = equilibrium_start(config.for_trace(trace), trace)
     specs = node_specs(config, trace_arg, trace, initial, bag, max_steps)
     started = time.monotonic()
     logs = log_dir if log_dir is not None else bag.with_name(bag.name + '.logs')
-    with lease_domain(foreign_participants) as domain:
-        graph = Graph(specs, config.params_files, domain, logs)
+    with _domain(domain_id, namespace) as domain:
+        graph = Graph(specs, config.params_files, domain, logs, namespace)
         try:
             with graph_session(graph, 'orchestrator') as session:
                 node = session.node
@@ -137,6 +154,21 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
             _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
                     wall_s=time.monotonic() - started, startup_s=startup)
+
+
+@contextlib.contextmanager
+def _domain(domain_id: int | None, namespace: str) -> Iterator[int]:
+    """The run's domain: a leased private one, or ``domain_id`` once nothing on it clashes
+    with a graph in ``namespace``."""
+    if domain_id is None:
+        with lease_domain(foreign_participants) as domain:
+            yield domain
+        return
+    clash = clashing_participants(domain_id, namespace)
+    if clash:
+        raise GraphError(f'domain {domain_id} already has a graph in namespace {namespace}: '
+                         f'{clash}')
+    yield domain_id
 
 
 def _follow(session: Any, steps: int, step_timeout_s: float,
@@ -185,7 +217,7 @@ def run_graph_records(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag:
         TrustAvPlannerError: the recording does not hold every step of the run.
     """
     result = run_graph(config, trace_arg, trace, bag, **options)
-    records = records_from_bag(bag)
+    records = records_from_bag(bag, options.get('namespace', '/'))
     if len(records) != trace.steps:
         raise TrustAvPlannerError(f'{bag}: {len(records)} complete steps recorded, expected '
                                   f'{trace.steps}')

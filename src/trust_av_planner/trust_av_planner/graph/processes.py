@@ -41,6 +41,9 @@ class NodeSpec:
 
 
 STEP_AUTHORITY = 'preceding_traffic'
+PROFILE_ENV = 'TRUST_AV_PROFILE_DIR'
+"""If set, every node runs under cProfile and writes ``<dir>/<node>.prof`` when it stops
+(``python -m pstats``, snakeviz; benchmarks/bench_graph.py --profile-dir)."""
 RECORDER = 'recorder'
 
 
@@ -107,8 +110,11 @@ class Graph:
             {node_fqn(self.namespace, spec.name): spec.params
              for spec in self.specs if spec.params}))
         layers = [arg for path in self.params_files for arg in ('--params-file', str(path))]
+        profile_dir = os.environ.get(PROFILE_ENV)
         for spec in self.specs:
-            command = [sys.executable, '-m', spec.module, '--ros-args', '-r',
+            profiler = ([] if not profile_dir else
+                        ['-m', 'cProfile', '-o', str(Path(profile_dir) / f'{spec.name}.prof')])
+            command = [sys.executable, *profiler, '-m', spec.module, '--ros-args', '-r',
                        f'__node:={spec.name}', '-r', f'__ns:={self.namespace}', *layers,
                        '--params-file', str(run_params)]
             log_path = self.log_dir / f'{spec.name}.log'

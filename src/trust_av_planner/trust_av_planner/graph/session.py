@@ -3,8 +3,12 @@ until the graph is connected and the recorder is ready, follows the recorder's p
 and watches the domain for publishers that are not the run's.
 
 A leased domain must be private (:func:`foreign_participants` is the check before a domain
-is used); during the run, a publisher on any of the graph's topics from a node that is not
-one of the run's stops the run with one line naming the topic and the intruder.
+is used); a domain given by the user may be shared with graphs in other namespaces
+(:func:`clashing_participants` refuses only what would clash with this graph's namespace).
+During the run, a publisher on any of the graph's topics (resolved in its namespace) from a
+node that is not one of the run's, or a second node under one of the run's names, stops the
+run with one line naming the topic and the intruder; the topics of graphs in other
+namespaces are not watched.
 """
 
 from __future__ import annotations
@@ -20,12 +24,16 @@ from trust_monitor.common.topics import TOPICS, expected_endpoints
 
 RECORDER_STATUS = 'recorder/status'
 """The recorder's latched status (``state`` ready/recording/finished/disk_full, ``steps``)."""
-PROBE_S = 1.0
-"""How long a domain is observed for participants of others before it is used (discovery on
-localhost takes well under a second on an idle machine, longer under heavy load; what this
-misses, the watch during the run catches)."""
+PROBE_S = 2.0
+"""How long a domain is observed for participants of others before it is used (node discovery
+on localhost takes well under a second on an idle machine; with two CPU-bound test workers on
+2 cores, 1 s missed an intruder that had been up for a second; what this misses, the watch
+during the run catches and names)."""
 WATCH_PERIOD_S = 1.0
 """How often the graph's topics are checked for foreign publishers during a run."""
+DEATH_ATTRIBUTION_S = 1.0
+"""When a node dies, how long the graph's topics are watched for an intruder (the likely
+cause) before the node's death is reported."""
 UNNAMED_GRACE_S = 5.0
 """A publisher is listed before the name of its node arrives (rmw shows
 ``_NODE_NAME_UNKNOWN_``); one that stays unnamed this long (a plain DDS participant) counts
@@ -41,9 +49,23 @@ def qualified(name: str, namespace: str) -> str:
     return f'{namespace.rstrip("/")}/{name}'
 
 
-def foreign_participants(domain: int, wait_s: float = PROBE_S) -> str:
+def foreign_participants(domain: int, wait_s: float | None = None) -> str:
     """Nodes already present on ``domain`` (observed for ``wait_s``), as one line; '' if
     none. Discovery is localhost-only, so these are other processes on this machine."""
+    return _probe(domain, None, wait_s)
+
+
+def clashing_participants(domain: int, namespace: str, wait_s: float | None = None) -> str:
+    """On a shared ``domain``: what would clash with a graph in ``namespace``, as one line
+    ('' if nothing): a node in that very namespace (another graph there: same node names,
+    same topics) or a publisher on one of the graph's topics in it. Nodes in other
+    namespaces (another graph under ``/car2``) and subscribers (a viewer) are left alone."""
+    return _probe(domain, namespace, wait_s)
+
+
+def _probe(domain: int, namespace: str | None, wait_s: float | None) -> str:
+    """Observe ``domain`` for ``wait_s`` (default :data:`PROBE_S`): every other node
+    (``namespace`` None) or only what clashes with a graph in ``namespace``."""
     import rclpy
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
@@ -52,17 +74,25 @@ def foreign_participants(domain: int, wait_s: float = PROBE_S) -> str:
     context = Context()
     rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        node = rclpy.create_node('trust_av_domain_probe', context=context)
+        node = rclpy.create_node('trust_av_domain_probe', namespace=namespace or '/',
+                                 context=context)
         try:
-            time.sleep(wait_s)
+            time.sleep(PROBE_S if wait_s is None else wait_s)
             names = sorted(f'{ns.rstrip("/")}/{name}'
                            for name, ns in node.get_node_names_and_namespaces()
-                           if name != node.get_name())
+                           if name != node.get_name() and
+                           (namespace is None or ns == node.get_namespace()))
+            publishers = [] if namespace is None else sorted(
+                {qualified(row.name, namespace) for row in TOPICS
+                 if node.count_publishers(qualified(row.name, namespace))})
         finally:
             node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
-    return f'nodes {", ".join(names[:4])}' if names else ''
+    found = [f'nodes {", ".join(names[:4])}'] if names else []
+    if publishers:
+        found.append(f'publishers on {", ".join(publishers[:4])}')
+    return '; '.join(found)
 
 
 class Session:
@@ -111,6 +141,7 @@ class Session:
         now = time.monotonic()
         for row in TOPICS:
             name = self.topic(row.name)
+            seen: set[tuple[str, str]] = set()
             for info in self.node.get_publishers_info_by_topic(name):
                 if info.node_name == UNKNOWN_NAME:
                     first = self._unnamed.setdefault((name, bytes(info.endpoint_gid)), now)
@@ -123,6 +154,12 @@ class Session:
                     return (f'a foreign publisher on {name}: node '
                             f'{info.node_namespace.rstrip("/")}/{info.node_name} (domain '
                             f'{self.graph.domain} is not private)')
+                if key in seen:      # each of our nodes publishes a topic once
+                    return (f'a foreign publisher on {name}: a second node named '
+                            f'{info.node_namespace.rstrip("/")}/{info.node_name} (another '
+                            f'graph in namespace {self.graph.namespace} on domain '
+                            f'{self.graph.domain}?)')
+                seen.add(key)
         return ''
 
     def check(self, allowed_done: set[str]) -> None:
@@ -135,6 +172,12 @@ class Session:
         if dead or now >= self._next_watch:
             self._next_watch = now + WATCH_PERIOD_S
             intruder = self.foreign_publishers()
+            # A node killed by an intruder's message heard it before this process may have
+            # discovered the intruder: give discovery a moment before blaming the node.
+            until = now + (DEATH_ATTRIBUTION_S if dead else 0.0)
+            while not intruder and time.monotonic() < until:
+                self.spin(0.05)
+                intruder = self.foreign_publishers()
             if intruder:
                 raise GraphError(f'stopped: {intruder}')
         self.graph.check_alive(allowed_done)

@@ -81,3 +81,40 @@ def compute_metrics(records: list[StepRecord], min_safe_gap_m: float) -> Metrics
         driver_fallback_steps=sum(not r.driver_success for r in records),
         unsafe_steps=sum(min(r.av_gap_m, r.human_gap_m) < min_safe_gap_m for r in records),
     )
+
+
+def ticks_per_model_step(period_s: float, model_step_s: float) -> int:
+    """How many control periods make one model step (10 at 10 Hz with the paper's 1 s).
+
+    Raises:
+        ValueError: the model step is not a whole number of periods.
+    """
+    ticks = round(model_step_s / period_s)
+    if ticks < 1 or abs(ticks * period_s - model_step_s) > 1e-9 * model_step_s:
+        raise ValueError(f'the model step {model_step_s:g} s is not a whole number of '
+                         f'{period_s:g} s periods')
+    return ticks
+
+
+def step_change_rms_mps2(records: list[StepRecord], ticks: int) -> float:
+    """RMS change of the AV's executed acceleration from one model step to the next, each
+    step's value its mean over the step's ``ticks`` control periods, m/s^2 (at the model
+    rate, ``ticks`` = 1, the change between consecutive commands). How much the AV's
+    behaviour moves between 1 s samples: what a constant-acceleration expectation misses."""
+    executed = np.array([r.av_accel_mps2 for r in records])
+    whole = executed[:executed.size - executed.size % ticks].reshape(-1, ticks).mean(axis=1)
+    if whole.size < 2:
+        raise ValueError('need at least two model steps')
+    return float(math.sqrt(np.mean(np.square(np.diff(whole)))))
+
+
+def explicability_by_age(records: list[StepRecord], ticks: int) -> np.ndarray:
+    """Mean E by the age of the expectation: entry j is the mean over the control steps j
+    periods after a whole model step of the run (when the 1 s estimator's samples were
+    taken, :class:`~trust_av_planner.predictors.sampling.ModelGridPredictor`), j = 0..ticks-1.
+    """
+    scores = np.array([r.explicability for r in records])
+    if scores.size < ticks:
+        raise ValueError(f'need at least {ticks} steps')
+    out: np.ndarray = np.array([scores[j::ticks].mean() for j in range(ticks)])
+    return out

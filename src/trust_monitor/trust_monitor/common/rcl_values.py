@@ -26,6 +26,8 @@ _PARAMS_LEVEL = 2  # impl/types.h MAP_PARAMS_LVL
 _TOPIC_MAX = 255 - 8  # rmw validate_full_topic_name.h RMW_TOPIC_MAX_NAME_LENGTH
 _NAMESPACE_MAX = _TOPIC_MAX - 2  # rmw validate_namespace.h RMW_NAMESPACE_MAX_LENGTH
 _NODE_NAME_MAX = 255  # rmw validate_node_name.h RMW_NODE_NAME_MAX_NAME_LENGTH
+TOPIC_NAME_MAX = _TOPIC_MAX
+"""rmw's longest full topic name, characters (``RMW_TOPIC_MAX_NAME_LENGTH``)."""
 _INT64_MIN = -(2**63)
 _INT64_MAX = 2**63 - 1
 _DBL_MIN = 2.2250738585072014e-308
@@ -237,6 +239,12 @@ def _validate_namespace(namespace: str) -> str | None:
     if len(namespace) > _NAMESPACE_MAX:
         return f'namespace should not exceed {_NAMESPACE_MAX} characters'
     return None
+
+
+def namespace_problem(namespace: str) -> str | None:
+    """Why ``namespace`` is not a valid node namespace by rmw's rules
+    (``rmw_validate_namespace``, in rmw's own words), or None if it is."""
+    return _validate_namespace(namespace)
 
 
 def _validate_node_name(node_name: str) -> str | None:

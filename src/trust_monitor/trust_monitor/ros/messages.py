@@ -17,7 +17,7 @@ from typing import Any
 
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import AccelStamped, TransformStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from std_msgs.msg import ColorRGBA, Header
 from tf2_msgs.msg import TFMessage
@@ -74,7 +74,7 @@ class SerializedTemplate:
         msg: the message, complete except the marked stamps and fields.
         stamps: the ``Time`` objects inside ``msg`` that every render sets.
         fields: (object inside ``msg``, attribute name) of the float64 fields to set, in the
-            order :meth:`render` takes their values.
+            order :meth:`render` takes their values (a ``float64[]`` field holds one value).
 
     Raises:
         ValueError: a sentinel was not found exactly as often as marked.
@@ -90,8 +90,9 @@ class SerializedTemplate:
             stamp.sec, stamp.nanosec = self._SEC, self._NANOSEC
         sentinels = [-1.2345678901234567e300 * (index + 1) for index in range(len(fields))]
         for (owner, name), value in zip(fields, sentinels, strict=True):
-            setattr(owner, name, value)
-        data = serialize_message(msg)
+            is_array = not isinstance(getattr(owner, name), float)  # float64[] of one value
+            setattr(owner, name, [value] if is_array else value)
+        data = _exact(serialize_message(msg), type(msg))
         order = '<' if data[1] == 1 else '>'  # encapsulation: CDR little or big endian
         self._time = struct.Struct(order + 'iI')
         self._double = struct.Struct(order + 'd')
@@ -107,6 +108,31 @@ class SerializedTemplate:
         for offset, value in zip(self._field_at, values, strict=True):
             self._double.pack_into(self._data, offset, value)
         return bytes(self._data)
+
+
+def _exact(data: bytes, msg_type: Any) -> bytes:
+    """``data`` cut to the message's CDR length. rmw_fastrtps' ``rmw_serialize`` (behind
+    ``serialize_message``) returns its size *estimate* as the length: for a message with
+    sequences the bytes end in a few unwritten ones, which a publisher would then send and a
+    strict reader (rosbags: "CDR message size mismatch") refuses; a published Python
+    message has its exact length. The exact length is the shortest prefix that deserialises:
+    every field read, the last one up to its end."""
+    from rclpy._rclpy_pybind11 import RMWError
+    from rclpy.serialization import deserialize_message
+
+    def reads(length: int) -> bool:
+        try:
+            deserialize_message(data[:length], msg_type)
+        except RMWError:            # Fast CDR: not enough bytes for the next field
+            return False
+        return True
+
+    if not reads(len(data)):
+        raise ValueError(f'{msg_type.__name__}: the serialised bytes do not deserialise')
+    length = len(data)
+    while length > 4 and reads(length - 1):
+        length -= 1
+    return data[:length]
 
 
 def _find(data: bytes, pattern: bytes, count: int) -> list[int]:
@@ -223,6 +249,45 @@ def trajectory(ns: int, dt_s: float, *, frame_id: str,
                                          nanosec=total % 1_000_000_000)
         msg.points.append(point)
     return msg
+
+
+class TrajectoryBytes:
+    """Serialised :func:`trajectory` messages of one field and frame: one
+    :class:`SerializedTemplate` per (number of points, step), made on first use, so a plan is
+    published as bytes without building the message (the same bytes as
+    ``serialize_message(trajectory(...))``)."""
+
+    def __init__(self, field: str, frame_id: str) -> None:
+        if field not in ('accelerations', 'velocities'):
+            raise ValueError(f'field must be accelerations or velocities, got {field!r}')
+        self.field = field
+        self.frame_id = frame_id
+        self._templates: dict[tuple[int, float], SerializedTemplate] = {}
+
+    def render(self, ns: int, dt_s: float, values: Sequence[float]) -> bytes:
+        """The trajectory of ``values`` on the grid ``k * dt_s``, stamped ``ns``."""
+        key = (len(values), dt_s)
+        template = self._templates.get(key)
+        if template is None:
+            msg = trajectory(0, dt_s, frame_id=self.frame_id,
+                             **{self.field: [0.0] * len(values)})  # type: ignore[arg-type]
+            template = SerializedTemplate(msg, [msg.header.stamp],
+                                          [(point, self.field) for point in msg.points])
+            self._templates[key] = template
+        return template.render(ns, *values)
+
+
+def accel_command_bytes(frame_id: str) -> SerializedTemplate:
+    """``AccelStamped`` in ``frame_id``: ``render(ns, accel_x_mps2)``."""
+    msg = AccelStamped(header=header(0, frame_id))
+    return SerializedTemplate(msg, [msg.header.stamp], [(msg.accel.linear, 'x')])
+
+
+def vector3_bytes(frame_id: str) -> SerializedTemplate:
+    """``Vector3Stamped`` in ``frame_id``: ``render(ns, x, y, z)``."""
+    msg = Vector3Stamped(header=header(0, frame_id))
+    return SerializedTemplate(msg, [msg.header.stamp],
+                              [(msg.vector, 'x'), (msg.vector, 'y'), (msg.vector, 'z')])
 
 
 def trajectory_values(msg: JointTrajectory, field: str) -> list[float]:
