@@ -11,14 +11,12 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'benchmarks'))
-from soak_wall import (  # noqa: E402
-    NODES,
-    RECORDER,
+from soak_wall import NODES, RECORDER, recorded_topics  # noqa: E402
+from soak_wall_checks import (  # noqa: E402
     STOP_EDGE,
     Recorded,
     Sequences,
     growth_checks,
-    recorded_topics,
     topic_checks,
 )
 
