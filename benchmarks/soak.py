@@ -3,7 +3,10 @@
 Builds a trace of at least ``--duration-s`` (default one hour of sim time) by chaining the
 two commute trips (am, pm, am, ...; each trip's time shifted to follow the previous one),
 runs the whole graph over it, samples the resident memory (VmRSS) of every node process
-once per simulated minute, and reports each node's RSS at minute 5 and at the end. Writes
+(the recorder included) at each progress report (at most twice a second of wall time), keeps
+one sample per simulated minute, and reports each node's RSS at the first sample at or after
+minute 5 (``--baseline-s``) and at its last sample while it ran (the recorder exits when it
+holds every step: its last sample is its last progress report). Writes
 benchmarks/results_soak.json (or --out). The target is growth < 20 MB per node.
 
     python benchmarks/soak.py [--duration-s 3600]
@@ -75,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     config = load_run_config()
     samples: dict[int, dict[str, float]] = {}
+    last_alive: dict[str, tuple[int, float]] = {}
     lock = threading.Lock()
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / 'soak.csv'
@@ -82,29 +86,38 @@ def main(argv: list[str] | None = None) -> int:
         trace = load_trace(str(csv), config.planner.dt_s, config.trace)
         every = max(1, round(60.0 / trace.dt_s))
         baseline_step = round(args.baseline_s / trace.dt_s)
+        due = [0, baseline_step]
 
         def on_step(done: int, total: int) -> None:
-            if done % every == 0 or done in (baseline_step, total):
-                with lock:
-                    samples[done] = node_rss_mb()
+            rss = node_rss_mb()
+            with lock:
+                last_alive.update({node: (done, mb) for node, mb in rss.items()})
+                if done >= min(due) or done == total:
+                    samples[done] = rss
+                    due[:] = [d for d in due if d > done] or [done - done % every + every]
 
         run = run_graph(config, str(csv), trace, Path(tmp) / 'soak',
                         on_step=on_step)
     steps = sorted(samples)
-    base = min(steps, key=lambda s: abs(s - baseline_step))
+    base = next((s for s in steps if s >= baseline_step), None)
+    if base is None or base == steps[-1]:
+        print(f'error: no memory sample after the baseline step {baseline_step} '
+              f'(samples at {steps})', file=sys.stderr)
+        return 1
     last = steps[-1]
-    growth = {node: samples[last][node] - samples[base][node]
-              for node in samples[base] if node in samples[last]}
+    growth = {node: last_alive[node][1] - samples[base][node] for node in samples[base]}
     figures = {'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
                'cpu_count': os.cpu_count(), 'sim_s': end, 'steps': trace.steps,
                'wall_s': run.wall_s, 'baseline_step': base, 'last_step': last,
-               'rss_mb_at_baseline': samples[base], 'rss_mb_at_end': samples[last],
+               'rss_mb_at_baseline': samples[base],
+               'rss_mb_at_end': {node: mb for node, (_, mb) in last_alive.items()},
+               'last_step_sampled': {node: step for node, (step, _) in last_alive.items()},
                'growth_mb': growth, 'samples': {str(k): v for k, v in samples.items()}}
     print(f'soak: {trace.steps} steps ({end / 60:.0f} min of sim time) in {run.wall_s:.0f} s '
           'wall')
     for node, mb in sorted(growth.items()):
         print(f'  {node:18s} RSS {samples[base][node]:7.1f} MB at step {base} -> '
-              f'{samples[last][node]:7.1f} MB at step {last}: {mb:+.1f} MB')
+              f'{last_alive[node][1]:7.1f} MB at step {last_alive[node][0]}: {mb:+.1f} MB')
     args.out.write_text(json.dumps(figures, indent=2) + '\n')
     print(f'wrote {args.out}')
     return 0

@@ -18,20 +18,24 @@ directory, which ``preceding_traffic`` replays at real-time speed.
 Every minute (and once in the last second) it samples each node process's and its own
 resident memory (``/proc/<pid>/status`` VmRSS), open file descriptors (``/proc/<pid>/fd``)
 and threads (``/proc/<pid>/task``). At the end it reads the bag back with rosbags and checks,
-per recorded topic, against the publishing node's own count of what it published (its loop
-statistics, ``jitter_report_path``; ``/ego/odom`` and ``/human/odom`` add the initial state
-each node publishes once before its loop starts) and the DDS publication sequence number of
-every recorded message (the publisher's count, from 1):
+every topic the run records (the table's topics but the step clock and ``/sim/start``; the
+bag holds exactly these), against its publishing nodes' own count of what they published
+(their loop statistics, ``jitter_report_path``, summed over the topic's publishers, plus the
+table's ``initial`` messages each node publishes before its loop starts) and the DDS
+publication sequence number of every recorded message (each publisher's own count, from 1;
+the publishers of ``/tf`` are told apart by the transform's child frame):
 
-- holes: no sequence number is missing between a topic's first and last recorded message;
-- start edge: the messages before the first recorded one were published before the
-  recorder had matched the publisher (the wall-mode profiles are volatile: a late subscriber
-  gets nothing old). Allowed only before ``/sim/start``: a topic's first recorded message is
-  its publisher's first, or stamped before ``/sim/start`` (the runner sends ``/sim/start``
-  only once this process has received every publisher that publishes before it);
-- stop edge: at most :data:`STOP_EDGE` message per topic published and not recorded at the
-  end (the one a node may publish while it is being stopped; best effort has no
-  acknowledgement to wait for);
+- holes: no sequence number of a publisher is missing between its first and last recorded
+  message;
+- start edge: the messages before a publisher's first recorded one were published before
+  the recorder had matched the publisher (the wall-mode profiles are volatile: a late
+  subscriber gets nothing old). Allowed only before ``/sim/start``: a publisher's first
+  recorded message is its first, or was received before ``/sim/start`` (the runner sends
+  ``/sim/start`` only once this process has received every publisher that publishes before
+  it);
+- stop edge: at most :data:`soak_wall_checks.STOP_EDGE` message per publisher published and
+  not recorded at the end (the one a node may publish while it is being stopped; best effort
+  has no acknowledgement to wait for);
 - so published - recorded = start edge + stop edge, nothing else;
 - no gap between consecutive messages (header stamps, from ``/sim/start`` on) longer than
   ``--max-gap-s`` (default 1 s = 10 periods: longer is a lost run of messages or a stalled
@@ -55,11 +59,11 @@ import os
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from soak_wall_checks import STOP_EDGE, Sequences, growth_checks, read_bag, topic_checks
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -69,15 +73,12 @@ TRIP_GAP_S = 1.0
 START_MARGIN_S = 60.0
 """The chained bag outlasts the run by at least this much (start-up happens before the
 replay clock starts, so this is slack, not start-up time)."""
-STOP_EDGE = 1
-"""Messages per topic that may be published and not recorded when the nodes are stopped."""
-INITIAL_STATE = ('/ego/odom', '/human/odom')
-"""Topics whose node publishes the initial state once before its wall loop starts."""
+NOT_RECORDED = ('clock', 'sim/start')
+"""Table rows a wall run does not record: the lock-step clock (not published in wall mode) and
+the go signal (this process publishes it)."""
 RECORDER = 'wall_recorder'
 """This process (it records the bag in wall mode)."""
 NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_monitor')
-STALE_S = 0.5
-"""The planner's default ``input_timeout_s``: a gap above it is an input it calls stale."""
 
 
 def chain_trips(out: Path, min_span_s: float, config: Any) -> dict[str, Any]:
@@ -114,129 +115,40 @@ def process_sample(pid: int) -> dict[str, float]:
             'threads': len(os.listdir(proc / 'task'))}
 
 
-@dataclass
-class Sequences:
-    """The publication sequence numbers seen on one topic, in constant memory."""
+def recorded_topics() -> list[Any]:
+    """The table's rows a wall run records (:data:`NOT_RECORDED` left out)."""
+    from trust_monitor.common.topics import TOPICS
 
-    first: int = 0
-    last: int = 0
-    count: int = 0
-    holes: int = 0
-    out_of_order: int = 0
-
-    def add(self, seq: int) -> None:
-        """One recorded message with sequence number ``seq``."""
-        if self.count == 0:
-            self.first = seq
-        elif seq > self.last:
-            self.holes += seq - self.last - 1
-        else:
-            self.out_of_order += 1
-        self.last = max(self.last, seq)
-        self.count += 1
+    return [t for t in TOPICS if t.name not in NOT_RECORDED]
 
 
-@dataclass
-class Recorded:
-    """One topic as read back from the bag: message count, first stamp, gaps (ns)."""
+class Sources:
+    """Which publisher sent a recorded message: the only one of a single-publisher topic;
+    on ``tf`` the node that owns the transform's child frame
+    (:data:`trust_monitor.common.topics.VEHICLE_FRAMES`)."""
 
-    count: int = 0
-    first_ns: int = 0
-    max_gap_ns: int = 0
-    gaps_over_stale: int = 0
-    stamps_after_start: int = 0
-    _last_ns: int | None = field(default=None, repr=False)
+    def __init__(self, topics: dict[str, Any]) -> None:
+        from trust_monitor.common.topics import VEHICLE_FRAMES
 
-    def add(self, stamp_ns: int, start_ns: int) -> None:
-        """One message stamped ``stamp_ns``; gaps are counted from ``start_ns`` on."""
-        if self.count == 0:
-            self.first_ns = stamp_ns
-        self.count += 1
-        if stamp_ns < start_ns:
-            return
-        if self._last_ns is not None:
-            gap = stamp_ns - self._last_ns
-            self.max_gap_ns = max(self.max_gap_ns, gap)
-            self.gaps_over_stale += gap > STALE_S * 1e9
-        self.stamps_after_start += 1
-        self._last_ns = stamp_ns
+        self.topics = topics
+        self.owner = {frame: node for node, frame in VEHICLE_FRAMES.items()}
+        self._classes: dict[str, Any] = {}
 
+    def __call__(self, topic: str, data: bytes) -> str:
+        """The publishing node of ``data`` (serialized) on ``topic``."""
+        row = self.topics[topic]
+        if len(row.publishers) == 1:
+            return str(row.publishers[0])
+        if row.msgtype != 'tf2_msgs/msg/TFMessage':
+            raise RuntimeError(f'{topic}: {len(row.publishers)} publishers of '
+                               f'{row.msgtype}, which this soak cannot tell apart')
+        from rclpy.serialization import deserialize_message
 
-def read_bag(bag: Path, start_ns: int) -> dict[str, Recorded]:
-    """Every topic of the bag (rosbags; log time = header stamp in wall mode)."""
-    from rosbags.highlevel import AnyReader
+        from trust_monitor.ros.messages import message_class
 
-    out: dict[str, Recorded] = {}
-    with AnyReader([bag]) as reader:
-        for connection, log_time, _raw in reader.messages():
-            out.setdefault(connection.topic, Recorded()).add(log_time, start_ns)
-    return out
-
-
-def topic_checks(published: dict[str, int], recorded: dict[str, Recorded],
-                 sequences: dict[str, Sequences], *, start_ns: int,
-                 max_gap_s: float) -> tuple[list[dict[str, Any]], list[str]]:
-    """Per topic: published (by the node) against recorded, the start and stop edges,
-    holes and the longest gap; returns the rows and the problems found (one line each)."""
-    rows, problems = [], []
-    for topic, sent in published.items():
-        got, seq = recorded.get(topic, Recorded()), sequences.get(topic, Sequences())
-        start_edge = seq.first - 1 if seq.count else sent
-        stop_edge = sent - seq.last
-        row = {'topic': topic, 'published': sent, 'recorded': got.count,
-               'start_edge': start_edge, 'holes': seq.holes, 'stop_edge': stop_edge,
-               'out_of_order': seq.out_of_order,
-               'first_recorded_after_start_s': (got.first_ns - start_ns) / 1e9,
-               'max_gap_s': got.max_gap_ns / 1e9,
-               'gaps_over_stale_s': got.gaps_over_stale}
-        rows.append(row)
-        where = f'{topic}: '
-        if got.count == 0 or got.stamps_after_start == 0:
-            problems.append(where + 'nothing recorded after /sim/start')
-            continue
-        if got.count != seq.count:
-            problems.append(where + f'{got.count} messages in the bag, {seq.count} received')
-        if seq.holes or seq.out_of_order:
-            problems.append(where + f'{seq.holes} messages missing between the first and the '
-                            f'last recorded ({seq.out_of_order} out of order)')
-        if start_edge and got.first_ns > start_ns:
-            problems.append(where + f'the first {start_edge} messages are missing and the '
-                            'first recorded one is after /sim/start')
-        if not 0 <= stop_edge <= STOP_EDGE:
-            problems.append(where + f'{stop_edge} messages published after the last recorded '
-                            f'one (allowed 0 to {STOP_EDGE})')
-        if sent - got.count != start_edge + stop_edge + seq.holes:
-            problems.append(where + f'published {sent}, recorded {got.count}: not explained '
-                            f'by the edges ({start_edge} + {stop_edge})')
-        if got.max_gap_ns > max_gap_s * 1e9:
-            problems.append(where + f'a gap of {got.max_gap_ns / 1e9:.3f} s between two '
-                            f'messages (limit {max_gap_s:g} s)')
-    return rows, problems
-
-
-def growth_checks(series: dict[str, list[dict[str, float]]], baseline_min: float,
-                  rss_limit_mb: float) -> tuple[dict[str, dict[str, float]], list[str]]:
-    """Per process: RSS, fds and threads at the first sample at or after ``baseline_min``
-    and at the last sample; returns the growth and the problems (one line each)."""
-    out, problems = {}, []
-    for name, samples in series.items():
-        base = next((s for s in samples if s['t_min'] >= baseline_min), None)
-        if base is None or base is samples[-1]:
-            problems.append(f'{name}: no sample after the baseline minute {baseline_min:g}')
-            continue
-        end = samples[-1]
-        grow = {'from_min': base['t_min'], 'to_min': end['t_min'],
-                'rss_mb': end['rss_mb'] - base['rss_mb'], 'fds': end['fds'] - base['fds'],
-                'threads': end['threads'] - base['threads']}
-        out[name] = grow
-        if grow['rss_mb'] > rss_limit_mb:
-            problems.append(f'{name}: RSS grew by {grow["rss_mb"]:.1f} MB from minute '
-                            f'{base["t_min"]:.1f} to {end["t_min"]:.1f} (limit {rss_limit_mb:g})')
-        for what in ('fds', 'threads'):
-            if grow[what] > 0:
-                problems.append(f'{name}: {grow[what]:+.0f} {what} from minute '
-                                f'{base["t_min"]:.1f} to {end["t_min"]:.1f}')
-    return out, problems
+        cls = self._classes.setdefault(row.msgtype, message_class(row.msgtype))
+        frames = {t.child_frame_id for t in deserialize_message(data, cls).transforms}
+        return ','.join(sorted(self.owner.get(f, f) for f in frames))
 
 
 class Sampler:
@@ -269,8 +181,9 @@ def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     from preceding_traffic.sources import load_trace
     from trust_av_planner.graph.shadow import run_wall_graph
     from trust_av_planner.system.config import load_run_config
-    from trust_monitor.common.topics import TOPICS
+    from trust_monitor.common.topics import qualified
 
+    topics = {qualified(t.name): t for t in recorded_topics()}
     duration_s = args.duration_min * 60.0
     base = load_run_config()
     chain = work / 'commute_chain'
@@ -281,8 +194,11 @@ def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     sampler = Sampler(duration_s)
     sequences: dict[str, Sequences] = {}
 
-    def on_message(topic: str, seq: int) -> None:
-        sequences.setdefault(topic, Sequences()).add(seq)
+    sources = Sources(topics)
+
+    def on_message(topic: str, seq: int, data: bytes) -> None:
+        sequences.setdefault(topic, Sequences()).add(seq, time.time_ns(),
+                                                     sources(topic, data))
 
     load_before = os.getloadavg()
     started = time.monotonic()
@@ -293,16 +209,16 @@ def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     if sampler.start_ns is None:
         raise RuntimeError('the run ended before its first second')
     recorded = read_bag(work / 'soak', sampler.start_ns)
-    published = {}
-    for row in TOPICS:
-        if row.name in ('/clock', '/sim/start'):
-            continue
-        sent = run.loops[row.publisher].get('published', {}).get(row.name, 0)
-        published[row.name] = sent + (1 if row.name in INITIAL_STATE else 0)
+    published = {name: t.initial + sum(run.loops[node].get('published', {}).get(name, 0)
+                                       for node in t.publishers)
+                  for name, t in topics.items()}
     rows, problems = topic_checks(published, recorded, sequences, start_ns=sampler.start_ns,
-                                  max_gap_s=args.max_gap_s)
+                                  max_gap_s=args.max_gap_s,
+                                  publishers={n: len(t.publishers) for n, t in topics.items()})
     for row in rows:
-        row['node'] = next(t.publisher for t in TOPICS if t.name == row['topic'])
+        row['node'] = ','.join(topics[row['topic']].publishers) if row['topic'] in topics \
+            else '?'
+
     growth, grow_problems = growth_checks(sampler.series, args.baseline_min, args.rss_limit_mb)
     return {
         'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
@@ -326,10 +242,11 @@ def print_table(figures: dict[str, Any]) -> None:
     print(f'\nwall-clock soak: {figures["duration_min"]:g} min at {figures["rate_hz"]:g} Hz '
           f'({figures["lead"]["trips"]}), {figures["cpu_count"]} cores, load average '
           f'{figures["load_average_before"][0]:.1f} -> {figures["load_average_after"][0]:.1f}')
-    print(f'{"topic":34s} {"node":18s} {"published":>9s} {"recorded":>9s} {"start":>5s} '
+    width = max(18, *(len(r['node']) for r in figures['topics']))
+    print(f'{"topic":34s} {"node":{width}s} {"published":>9s} {"recorded":>9s} {"start":>5s} '
           f'{"holes":>5s} {"stop":>4s} {"max gap s":>9s} {"> 0.5 s":>7s}')
     for r in figures['topics']:
-        print(f'{r["topic"]:34s} {r["node"]:18s} {r["published"]:9d} {r["recorded"]:9d} '
+        print(f'{r["topic"]:34s} {r["node"]:{width}s} {r["published"]:9d} {r["recorded"]:9d} '
               f'{r["start_edge"]:5d} {r["holes"]:5d} {r["stop_edge"]:4d} '
               f'{r["max_gap_s"]:9.3f} {r["gaps_over_stale_s"]:7d}')
     print(f'\n{"process":18s} {"RSS MB base -> end":>20s} {"growth":>7s} {"fds":>9s} '

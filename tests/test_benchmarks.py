@@ -11,9 +11,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'benchmarks'))
-from soak_wall import (  # noqa: E402
-    NODES,
-    RECORDER,
+from soak_wall import NODES, RECORDER, recorded_topics  # noqa: E402
+from soak_wall_checks import (  # noqa: E402
     STOP_EDGE,
     Recorded,
     Sequences,
@@ -118,7 +117,7 @@ def _topic(first_seq: int, last_seq: int, start_ns: int, skip: tuple[int, ...] =
         if seq in skip:
             continue
         recorded.add(t, start_ns)
-        sequences.add(seq)
+        sequences.add(seq, t)
     return recorded, sequences
 
 
@@ -148,6 +147,46 @@ def test_soak_wall_topic_checks() -> None:
         _, problems = topic_checks({'/a': sent}, {'/a': recorded}, {'/a': sequences},
                                    start_ns=start, max_gap_s=1.0)
         assert any(expected[name] in p for p in problems), (name, problems)
+
+
+def test_soak_wall_several_publishers() -> None:
+    """A topic with several publishers (``tf``): each publisher's sequence numbers are
+    checked on their own; published counts are summed and each publisher may have its own
+    start and stop edge; a hole in one publisher fails although the interleaved numbers of
+    the others fill it."""
+    start = 1000 * SECOND
+
+    def two(skip_b: tuple[int, ...] = ()) -> tuple[Recorded, Sequences]:
+        recorded, sequences = Recorded(), Sequences()
+        t = start - 5 * PERIOD
+        for seq in range(1, 301):
+            t += PERIOD
+            for source, first in (('a', 3), ('b', 1)):
+                if seq >= first and not (source == 'b' and seq in skip_b):
+                    recorded.add(t, start)
+                    sequences.add(seq, t, source)
+        return recorded, sequences
+
+    recorded, sequences = two()
+    # a: 2 before its first recorded (start edge); each one after its last (stop edges)
+    rows, problems = topic_checks({'/tf': 602}, {'/tf': recorded}, {'/tf': sequences},
+                                  start_ns=start, max_gap_s=1.0, publishers={'/tf': 2})
+    assert problems == [], problems
+    assert {k: rows[0][k] for k in ('recorded', 'start_edge', 'stop_edge', 'holes',
+                                    'publishers_seen')} == {
+        'recorded': 598, 'start_edge': 2, 'stop_edge': 2, 'holes': 0, 'publishers_seen': 2}
+    _, problems = topic_checks({'/tf': 602 + 1}, {'/tf': recorded},
+                               {'/tf': sequences}, start_ns=start, max_gap_s=1.0,
+                               publishers={'/tf': 2})
+    assert any('after the last recorded' in p for p in problems), problems
+    recorded, sequences = two(skip_b=(150,))
+    _, problems = topic_checks({'/tf': 600}, {'/tf': recorded}, {'/tf': sequences},
+                               start_ns=start, max_gap_s=1.0, publishers={'/tf': 2})
+    assert any('1 messages missing' in p for p in problems), problems
+    _, problems = topic_checks({'/tf': 601}, {'/tf': recorded, '/x': recorded},
+                               {'/tf': sequences}, start_ns=start, max_gap_s=1.0,
+                               publishers={'/tf': 2})
+    assert any(p.startswith('/x: ') and 'does not record' in p for p in problems), problems
 
 
 def test_soak_wall_growth_checks() -> None:
@@ -180,15 +219,21 @@ def test_soak_wall_two_minutes(tmp_path: Path) -> None:
                            '--duration-min', '2', '--baseline-min', '1', '--out', str(out)],
                           capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    from trust_monitor.common.topics import TOPICS, qualified
+
     figures = json.loads(out.read_text())
     assert figures['problems'] == []
     assert set(figures['growth']) == {*NODES, RECORDER}
     assert all(len(s) >= 3 for s in figures['series'].values())
     assert all(g['fds'] <= 0 and g['threads'] <= 0 and g['rss_mb'] <= 20.0
                for g in figures['growth'].values())
-    assert len(figures['topics']) == 11
+    table = {qualified(t.name): t for t in recorded_topics()}
+    assert {row['topic'] for row in figures['topics']} == set(table)
+    assert len(table) == len(TOPICS) - 2  # all but the lock-step clock and /sim/start
     for row in figures['topics']:
-        assert row['holes'] == 0 and 0 <= row['stop_edge'] <= STOP_EDGE, row
+        publishers = table[row['topic']].publishers
+        assert row['publishers_seen'] == len(publishers), row
+        assert row['holes'] == 0 and 0 <= row['stop_edge'] <= STOP_EDGE * len(publishers), row
         assert row['published'] - row['recorded'] == row['start_edge'] + row['stop_edge'], row
         assert row['recorded'] >= 0.5 * 120 * figures['rate_hz'], row
         assert row['max_gap_s'] <= 1.0, row

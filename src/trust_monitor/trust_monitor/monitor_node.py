@@ -8,9 +8,9 @@ plans. Topic names are relative (the node's namespace). Parameters: the trust mo
 the time it is applied for, ``dt_s`` in lock-step (one step = eq. 10 exactly). The expected
 plan is read on the plan's times (both carry ``time_from_start``).
 
-``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` scores the latest plan and
-expected plan once (when both carry the same, new stamp) and stamps the trust with the
-current time; the update is scaled by the time since the previously scored plan (at most
+``clock_mode: wall``: the latest plan and expected plan are scored once, as soon as both
+carry the same, new stamp (checked on every arrival and on a wall-clock timer at
+``control_rate_hz``), and the trust is stamped with the current time; the update is scaled by the time since the previously scored plan (at most
 ``input_timeout_s``; one control period for the first). Loop jitter as in the planner.
 """
 
@@ -61,8 +61,11 @@ class MonitorNode(Node):
         self.get_logger().info(f'ready ({self.clock.clock_mode})')
 
     def on_latest(self, name: str, msg: JointTrajectory) -> None:
-        """Wall mode: keep the latest plan of each kind."""
+        """Wall mode: keep the latest plan of each kind and score a new pair as soon as it
+        is complete (on the tick alone, a tick that fell just before the planner's publish
+        found nothing new, and under load whole seconds went unscored)."""
         self.latest.put(name, time.monotonic_ns(), msg)
+        self.wall_step()
 
     def wall_step(self) -> None:
         """Wall mode: score the latest plan pair once, stamped now."""

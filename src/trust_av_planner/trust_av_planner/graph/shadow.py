@@ -190,7 +190,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                    duration_s: float, rate_hz: float,
                    startup_timeout_s: float = 30.0,
                    every_second: Callable[[dict[str, int], float], None] | None = None,
-                   on_message: Callable[[str, int], None] | None = None) -> ShadowRun:
+                   on_message: Callable[[str, int, bytes], None] | None = None) -> ShadowRun:
     """Every node in wall mode for ``duration_s`` of wall time after ``/sim/start``; every
     topic recorded to the bag directory ``bag`` (log time = header stamp = wall time).
 
@@ -199,8 +199,9 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
     message published after it is in the bag. ``every_second``, if given, is called about
     once a second while the nodes run, with their process ids by node name and the wall time
     since ``/sim/start`` (s); it runs in the recording loop, so it must return quickly.
-    ``on_message``, if given, is called for every recorded message with its topic and its
-    DDS publication sequence number (the publisher's count of messages, from 1).
+    ``on_message``, if given, is called for every recorded message with its topic, its DDS
+    publication sequence number (the publisher's count of messages, from 1) and its
+    serialized bytes (which tell the publishers of one topic apart).
 
     Raises:
         GraphError: the nodes did not connect in time or one died.
@@ -229,7 +230,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                 def record(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     recording.write(topic, data)
                     if on_message is not None:
-                        on_message(topic, int(info['publication_sequence_number']))
+                        on_message(topic, int(info['publication_sequence_number']), data)
 
                 subscriptions = []
                 for topic in recorded:
