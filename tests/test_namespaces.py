@@ -219,25 +219,36 @@ def test_two_whole_graphs_in_one_domain_do_not_hear_each_other(tmp_path: Path) -
     assert [r.av_plan_mps2 for r in records1] != [r.av_plan_mps2 for r in records2]
 
 
-def intruder(domain: int, topic: str) -> subprocess.Popen[str]:
+def intruder(domain: int, topic: str, *, on_go: bool = False) -> subprocess.Popen[str]:
     """A node of someone else in namespace /elsewhere: publishes empty human plans on
     ``topic`` (a topic only the recorder subscribes: no node of the graph dies of it, so
-    the watch is what stops the run)."""
-    code = ('import rclpy, time\n'
+    the watch is what stops the run). With ``on_go`` the node is up at once but creates its
+    publisher only when it reads a line (:func:`go`): its node name is known by then, so the
+    publisher is named as soon as it is discovered."""
+    code = ('import rclpy, sys, time\n'
             'from trajectory_msgs.msg import JointTrajectory\n'
             'from trust_monitor.ros.qos import QOS\n'
             'rclpy.init()\n'
             "node = rclpy.create_node('intruder', namespace='/elsewhere')\n"
+            "print('ready', flush=True)\n"
+            f'if {on_go!r}: sys.stdin.readline()\n'
             f"pub = node.create_publisher(JointTrajectory, {topic!r}, QOS['STEP'])\n"
             'msg = JointTrajectory()\n'
-            "print('ready', flush=True)\n"
             'while True:\n'
             '    pub.publish(msg); time.sleep(0.2)\n')
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     process = subprocess.Popen([sys.executable, '-c', code], env=env, text=True,
-                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                               stderr=subprocess.DEVNULL)
     assert process.stdout is not None and process.stdout.readline() == 'ready\n'
     return process
+
+
+def go(process: subprocess.Popen[str]) -> None:
+    """Let an ``on_go`` intruder publish."""
+    assert process.stdin is not None
+    process.stdin.write('go\n')
+    process.stdin.flush()
 
 
 @pytest.mark.slow
@@ -259,24 +270,23 @@ def test_a_publisher_on_the_namespaced_topics_stops_only_that_graph(tmp_path: Pa
         assert_records_equal(records_from_bag(tmp_path / 'car1', '/car1'), in_process('/car1'))
 
         bag = tmp_path / 'intruded'
+        mine = intruder(domain, '/car1/human/plan', on_go=True)   # a node, no publisher yet
         proc = subprocess.Popen(cli_run(bag, '/car1', domain, steps=600),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        mine = None
         try:
             mcap = bag / f'{bag.name}.mcap'
             deadline = time.monotonic() + 120
-            while recorded_chunks(mcap) < 150:                 # steps recorded
+            while recorded_chunks(mcap) < 20:                  # steps recorded
                 assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
                 time.sleep(0.1)
-            mine = intruder(domain, '/car1/human/plan')
+            go(mine)
             out, err = proc.communicate(timeout=120)
         finally:
             if proc.poll() is None:
                 proc.kill()
                 proc.communicate()
-            if mine is not None:
-                mine.kill()
-                mine.wait()
+            mine.kill()
+            mine.wait()
     assert proc.returncode == 2, out + err
     assert err.count('\n') == 1, err
     assert 'foreign publisher on /car1/human/plan: node /elsewhere/intruder' in err

@@ -197,7 +197,8 @@ def test_population_cases_are_seeded_and_named() -> None:
     assert first[0].driver_params == first[3].driver_params
     params = dict(first[0].driver_params)
     assert params['weight_acceleration'] == 1.0 and len(params) == 5
-    assert params['time_headway_s'] == pytest.approx(0.975, abs=1e-3)   # the shipped fit
+    from human_driver_sim.population import fitted_time_headway_s
+    assert params['time_headway_s'] == fitted_time_headway_s() == pytest.approx(1.2715, abs=1e-3)
     assert first[1].label == 'us06/TAC-GRU/alpha=0/driver=2'
     assert first[4].base == Case('us06', 'gru', 1.0)
     from trust_av_planner.errors import TrustAvPlannerError
