@@ -70,14 +70,15 @@ def assert_every_topic_complete(bag: Path) -> int:
     return complete
 @pytest.hookimpl(tryfirst=True)   # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Order and group the suite for ``pytest -n 2 --dist loadgroup`` (scripts/test.sh).
+    """Order and group the suite for ``pytest -n 3 --dist loadgroup`` (scripts/test.sh).
 
     * ``wall_clock`` tests (they mostly wait for real time, e.g. a soak at 10 Hz) form one
       xdist group: one worker runs them one after the other, from the start of the run
-      (xdist hands out the largest group first), while the other worker runs the CPU-bound
-      tests; the waiting overlaps with computing instead of adding to it.
+      (xdist hands out the largest group first), while the other two workers run the
+      CPU-bound tests on the two cores; the waiting overlaps with computing instead of
+      adding to it.
     * ``slow`` tests (CPU-bound and long, e.g. the GRU retraining) come first among the
-      rest, so that they start at once on the other worker instead of ending the run.
+      rest, so that they start at once on the other workers instead of ending the run.
     * Tests that share a module-scoped fixture (a colcon build, one graph run) stay on one
       worker, so that the fixture is built once.
     Without xdist the marks do nothing and only the order changes.

@@ -236,6 +236,7 @@ def vehicle_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     return data
 
 
+@pytest.mark.wall_clock
 def test_vehicle_in_the_loop_gap_and_commands(vehicle_run: dict[str, Any]) -> None:
     config = load_run_config()
     ticks = vehicle_run['ticks']
@@ -254,6 +255,7 @@ def test_vehicle_in_the_loop_gap_and_commands(vehicle_run: dict[str, Any]) -> No
     assert max(t['ego_speed_mps'] for t in ticks) > 5.0  # it drove
 
 
+@pytest.mark.wall_clock
 def test_vehicle_in_the_loop_outage_decelerates_then_recovers(
         vehicle_run: dict[str, Any]) -> None:
     statuses = vehicle_run['status']
