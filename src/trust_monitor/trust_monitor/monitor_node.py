@@ -10,8 +10,9 @@ plan is read on the plan's times (both carry ``time_from_start``).
 
 ``clock_mode: wall``: the latest plan and expected plan are scored once, as soon as both
 carry the same, new stamp (checked on every arrival and on a wall-clock timer at
-``control_rate_hz``), and the trust is stamped with the current time; the update is scaled by the time since the previously scored plan (at most
-``input_timeout_s``; one control period for the first). Loop jitter as in the planner.
+``control_rate_hz``), and the trust is stamped with the current time; the update is scaled
+by the time since the previously scored plan (at most ``input_timeout_s``; one control
+period for the first). Loop jitter as in the planner.
 """
 
 from __future__ import annotations
