@@ -40,7 +40,7 @@ from trust_av_planner.graph.session import graph_session
 from trust_av_planner.system.closed_loop import equilibrium_start
 from trust_av_planner.system.config import PlannerTopics, RunConfig
 from trust_monitor.common.kinematics import VehicleState, advance
-from trust_monitor.common.topics import TOPIC, TOPICS, qualified
+from trust_monitor.common.topics import TOPIC, TOPICS, VEHICLE_FRAMES, qualified
 from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig
 
 OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_status',
@@ -206,7 +206,9 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
     Raises:
         GraphError: the nodes did not connect in time or one died.
     """
+    from rclpy.serialization import deserialize_message
     from std_msgs.msg import Empty
+    from tf2_msgs.msg import TFMessage
 
     from trust_av_planner.graph.bag_qos import offered_qos
     from trust_monitor.ros.messages import message_class
@@ -226,9 +228,17 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
         with graph_session(graph, 'wall_recorder') as session:
             node, executor = session.node, session.executor
             start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
+            tf_topic = qualified('tf')
+            tf_before_start = {VEHICLE_FRAMES[n] for n in TOPIC['tf'].publishers
+                               if n != 'preceding_traffic'}
+            tf_seen: set[str] = set()     # child frames heard on tf before /sim/start
+            started_at: list[float] = []
             with BagWriter(bag) as recording:
                 def record(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     recording.write(topic, data)
+                    if topic == tf_topic and not started_at:
+                        tf_seen.update(t.child_frame_id for t in
+                                       deserialize_message(data, TFMessage).transforms)
                     if on_message is not None:
                         on_message(topic, int(info['publication_sequence_number']), data)
 
@@ -242,16 +252,27 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                 # /sim/start only once this process receives every publisher: the graph's
                 # endpoint counts say that a publisher exists, not that it sends here (the
                 # wall profiles are volatile: what a publisher sent before it matched this
-                # subscription is never resent). Proof is a message received; for a topic
-                # published only after /sim/start, this subscription's own match.
-                _wait_topics(graph, node, executor, needs, startup_timeout_s,
-                             lambda: [f'{sub.topic_name} (not received here yet)'
-                                      for sub in subscriptions
-                                      if (sub.get_publisher_count() < 1
-                                          if sub.topic_name in AFTER_START
-                                          else recording.count(sub.topic_name) < 1)])
+                # subscription is never resent). Proof is a message received from each
+                # publisher (on tf: each vehicle's child frame); for a publisher that
+                # starts only after /sim/start, this subscription's own match with it.
+                publishers = {qualified(t.name): len(t.publishers) for t in recorded}
+
+                def not_received() -> list[str]:
+                    missing = [f'{sub.topic_name} (not every publisher matched here yet)'
+                               for sub in subscriptions
+                               if sub.get_publisher_count() < publishers[sub.topic_name]]
+                    missing += [f'{sub.topic_name} (not received here yet)'
+                                for sub in subscriptions
+                                if sub.topic_name not in AFTER_START
+                                and recording.count(sub.topic_name) < 1]
+                    missing += [f'{tf_topic} from {frame} (not received here yet)'
+                                for frame in sorted(tf_before_start - tf_seen)]
+                    return missing
+
+                _wait_topics(graph, node, executor, needs, startup_timeout_s, not_received)
                 start_pub.publish(Empty())
                 started = time.monotonic()
+                started_at.append(started)
                 end = started + duration_s
                 next_chunk = started + 1.0
                 pids = {p.spec.name: p.popen.pid for p in graph.processes}
