@@ -41,7 +41,7 @@ FIT_PART = 'JRC-VC_280219_part2'
 TEST_PART = 'JRC-VC_280219_part3'
 SHIPPED = 'MPC pooled (shipped)'
 TARGET_RATIO = 0.9
-"""Issue 17: the driver's held-out gap NRMSE at most 0.9 x the best IDM's."""
+"""The target: the driver's held-out gap NRMSE at most 0.9 x the best IDM's."""
 MPC_NAMES = tuple(MPC_BOUNDS)
 
 

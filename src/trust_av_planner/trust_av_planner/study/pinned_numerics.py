@@ -1,4 +1,4 @@
-"""Pinned floating-point numerics for the GRU training process (issue 14; docs/GRU.md).
+"""Pinned floating-point numerics for the GRU training process (docs/GRU.md).
 
 Training the GRU runs closed loops (CasADi, numpy) whose inputs come from the GRU's own
 numpy forward pass, then trains in PyTorch. Every library on that path picks some of its
