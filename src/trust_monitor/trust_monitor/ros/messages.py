@@ -254,8 +254,8 @@ def trajectory(ns: int, dt_s: float, *, frame_id: str,
 class TrajectoryBytes:
     """Serialised :func:`trajectory` messages of one field and frame: one
     :class:`SerializedTemplate` per (number of points, step), made on first use, so a plan is
-    published as bytes without building the message (the same bytes as
-    ``serialize_message(trajectory(...))``)."""
+    published as bytes without building the message (they decode to exactly the message
+    :func:`trajectory` builds; only CDR padding bytes may differ)."""
 
     def __init__(self, field: str, frame_id: str) -> None:
         if field not in ('accelerations', 'velocities'):
