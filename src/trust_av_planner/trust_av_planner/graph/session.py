@@ -118,6 +118,13 @@ class Session:
         self._ours.add((node.get_namespace(), node.get_name()))
         self._next_watch = 0.0
         self._unnamed: dict[tuple[str, bytes], float] = {}
+        # The DDS participant (first 12 bytes of an endpoint's gid) of each of our nodes
+        # that publishes on the table, learnt from its named endpoints: once every one is
+        # known, an endpoint whose node name has not arrived yet is told apart at once.
+        ns = graph.namespace.rstrip('/') or '/'
+        self._publishing = {(ns, spec.name) for spec in graph.specs
+                            if any(spec.name in row.publishers for row in TOPICS)}
+        self._participants: dict[tuple[str, str], bytes] = {}
         if any(spec.name == RECORDER for spec in graph.specs):
             node.create_subscription(DiagnosticArray, RECORDER_STATUS, self._on_status,
                                      QOS['LATCHED'])
@@ -139,16 +146,27 @@ class Session:
         """A publisher on any of the graph's topics from a node that is not the run's, as
         one line ('' if none)."""
         now = time.monotonic()
-        for row in TOPICS:
-            name = self.topic(row.name)
+        endpoints = {self.topic(row.name): self.node.get_publishers_info_by_topic(
+            self.topic(row.name)) for row in TOPICS}
+        for infos in endpoints.values():
+            for info in infos:
+                key = (info.node_namespace.rstrip('/') or '/', info.node_name)
+                if key in self._publishing:
+                    self._participants[key] = bytes(info.endpoint_gid)[:12]
+        all_known = self._publishing <= self._participants.keys()
+        ours = set(self._participants.values())
+        for name, infos in endpoints.items():
             seen: set[tuple[str, str]] = set()
-            for info in self.node.get_publishers_info_by_topic(name):
+            for info in infos:
                 if info.node_name == UNKNOWN_NAME:
+                    participant = bytes(info.endpoint_gid)[:12]
+                    if participant in ours:
+                        continue
                     first = self._unnamed.setdefault((name, bytes(info.endpoint_gid)), now)
-                    if now - first < UNNAMED_GRACE_S:
+                    if not all_known and now - first < UNNAMED_GRACE_S:
                         continue
                     return (f'a foreign publisher on {name}: a participant without a ROS '
-                            f'node name (domain {self.graph.domain} is not private)')
+                            f'node name yet (domain {self.graph.domain} is not private)')
                 key = (info.node_namespace.rstrip('/') or '/', info.node_name)
                 if key not in self._ours:
                     return (f'a foreign publisher on {name}: node '
