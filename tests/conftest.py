@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import subprocess
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -123,3 +125,15 @@ def recorded_chunks(mcap: Path) -> int:
     except (McapError, struct.error):
         pass                    # the file ends mid-record while it is written: count so far
     return chunks
+
+
+def wait_for_steps(bag: Path, steps: int, proc: subprocess.Popen[str] | None = None,
+                   timeout_s: float = 120.0) -> None:
+    """Wait until the run recording the bag directory ``bag`` holds ``steps`` steps (MCAP
+    chunks); fail if ``proc`` (the run) ends first or the time runs out."""
+    mcap = bag / f'{bag.name}.mcap'
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and recorded_chunks(mcap) < steps:
+        assert proc is None or proc.poll() is None, proc.communicate()
+        time.sleep(0.1)
+    assert recorded_chunks(mcap) >= steps, f'{mcap}: fewer than {steps} steps in {timeout_s:g} s'

@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import assert_every_topic_complete, recorded_chunks
+from conftest import assert_every_topic_complete, wait_for_steps
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
@@ -160,15 +160,6 @@ def node_pid(orchestrator: int, node: str) -> int:
     raise AssertionError(f'{node} process not found')
 
 
-def wait_for_bag(bag: Path, steps: int = 20) -> None:
-    """Wait until the recording (the MCAP in the bag directory) holds ``steps`` steps."""
-    mcap = bag / f'{bag.name}.mcap'
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and recorded_chunks(mcap) < steps:
-        time.sleep(0.2)
-    assert recorded_chunks(mcap) >= steps, f'{mcap}: fewer than {steps} steps after 120 s'
-
-
 def assert_gone(pids: list[int]) -> None:
     """None of ``pids`` is alive (zombies awaiting their reaper count as gone)."""
     for pid in pids:
@@ -181,7 +172,7 @@ def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     planner = node_pid(proc.pid, 'planner')
-    wait_for_bag(bag)                # let it run some steps
+    wait_for_steps(bag, 20)          # let it run some steps
     children = children_of(proc.pid)
     os.kill(planner, signal.SIGKILL)
     _out, err = proc.communicate(timeout=120)
@@ -207,9 +198,9 @@ def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path, moment: str) -
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     if moment == 'mid-run':
-        wait_for_bag(bag, steps=150)
+        wait_for_steps(bag, 150)
     else:
-        wait_for_bag(bag, steps=1)
+        wait_for_steps(bag, 1)
     children = children_of(proc.pid)
     proc.send_signal(signal.SIGINT)
     _out, err = proc.communicate(timeout=120)
@@ -242,7 +233,7 @@ def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
     bag = tmp_path / 'cut'
     proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    wait_for_bag(bag)
+    wait_for_steps(bag, 20)
     os.kill(node_pid(proc.pid, 'recorder'), signal.SIGKILL)
     _out, err = proc.communicate(timeout=120)
     assert proc.returncode == 2

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import recorded_chunks
+from conftest import wait_for_steps
 from rosbags.highlevel import AnyReader
 from test_graph import assert_records_equal  # the graph == in-process comparison
 
@@ -274,11 +274,7 @@ def test_a_publisher_on_the_namespaced_topics_stops_only_that_graph(tmp_path: Pa
         proc = subprocess.Popen(cli_run(bag, '/car1', domain, steps=600),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
-            mcap = bag / f'{bag.name}.mcap'
-            deadline = time.monotonic() + 120
-            while recorded_chunks(mcap) < 20:                  # steps recorded
-                assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
-                time.sleep(0.1)
+            wait_for_steps(bag, 20, proc=proc)
             go(mine)
             out, err = proc.communicate(timeout=120)
         finally:

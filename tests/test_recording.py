@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import assert_every_topic_complete, recorded_chunks
+from conftest import assert_every_topic_complete, wait_for_steps
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
@@ -249,22 +249,11 @@ def run_command(bag: Path, steps: int = 600, *extra: str) -> list[str]:
             '--max-steps', str(steps), '--bag', str(bag), '--no-progress', *extra]
 
 
-def wait_for_steps(bag: Path, steps: int = 8, proc: subprocess.Popen[str] | None = None,
-                   timeout_s: float = 120.0) -> None:
-    """Wait until the run has recorded ``steps`` steps (MCAP chunks); fail if it ends first."""
-    mcap = bag / f'{bag.name}.mcap'
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and recorded_chunks(mcap) < steps:
-        assert proc is None or proc.poll() is None, proc.communicate()
-        time.sleep(0.1)
-    assert recorded_chunks(mcap) >= steps, f'{mcap}: fewer than {steps} steps'
-
-
 def test_sigterm_finishes_the_bag_like_sigint(tmp_path: Path) -> None:
     bag = tmp_path / 'term'
     proc = subprocess.Popen(run_command(bag), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
-    wait_for_steps(bag, proc=proc)
+    wait_for_steps(bag, 8, proc=proc)
     proc.send_signal(signal.SIGTERM)
     _out, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err
@@ -277,7 +266,7 @@ def test_a_killed_orchestrator_leaves_a_finished_bag_and_no_process(tmp_path: Pa
     bag = tmp_path / 'orphan'
     proc = subprocess.Popen(run_command(bag), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
-    wait_for_steps(bag, proc=proc)
+    wait_for_steps(bag, 8, proc=proc)
     nodes = [int(p.name) for p in Path('/proc').iterdir() if p.name.isdigit()
              and _parent(int(p.name)) == proc.pid]
     assert len(nodes) == 6
@@ -339,7 +328,7 @@ def test_a_foreign_publisher_stops_the_run_and_a_foreign_domain_is_skipped(
         bag = tmp_path / 'intruded'
         proc = subprocess.Popen(run_command(bag), stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True, env=env)
-        wait_for_steps(bag, proc=proc)
+        wait_for_steps(bag, 8, proc=proc)
         second = intruder(231)
         out, err = proc.communicate(timeout=120)
     finally:
