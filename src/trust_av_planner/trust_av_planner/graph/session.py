@@ -125,6 +125,7 @@ class Session:
         self._publishing = {(ns, spec.name) for spec in graph.specs
                             if any(spec.name in row.publishers for row in TOPICS)}
         self._participants: dict[tuple[str, str], bytes] = {}
+        self._foreign_pending = False   # a foreign endpoint seen, its node name not yet
         if any(spec.name == RECORDER for spec in graph.specs):
             node.create_subscription(DiagnosticArray, RECORDER_STATUS, self._on_status,
                                      QOS['LATCHED'])
@@ -146,6 +147,7 @@ class Session:
         """A publisher on any of the graph's topics from a node that is not the run's, as
         one line ('' if none)."""
         now = time.monotonic()
+        self._foreign_pending = False
         endpoints = {self.topic(row.name): self.node.get_publishers_info_by_topic(
             self.topic(row.name)) for row in TOPICS}
         for infos in endpoints.values():
@@ -163,10 +165,13 @@ class Session:
                     if participant in ours:
                         continue
                     first = self._unnamed.setdefault((name, bytes(info.endpoint_gid)), now)
-                    if not all_known and now - first < UNNAMED_GRACE_S:
+                    if now - first < UNNAMED_GRACE_S:
+                        # foreign for sure once every node of the run is known: wait for
+                        # its name (check() spins for it) rather than report it unnamed
+                        self._foreign_pending = self._foreign_pending or all_known
                         continue
                     return (f'a foreign publisher on {name}: a participant without a ROS '
-                            f'node name yet (domain {self.graph.domain} is not private)')
+                            f'node name (domain {self.graph.domain} is not private)')
                 key = (info.node_namespace.rstrip('/') or '/', info.node_name)
                 if key not in self._ours:
                     return (f'a foreign publisher on {name}: node '
@@ -193,7 +198,7 @@ class Session:
             # A node killed by an intruder's message heard it before this process may have
             # discovered the intruder: give discovery a moment before blaming the node.
             until = now + (DEATH_ATTRIBUTION_S if dead else 0.0)
-            while not intruder and time.monotonic() < until:
+            while not intruder and (time.monotonic() < until or self._foreign_pending):
                 self.spin(0.05)
                 intruder = self.foreign_publishers()
             if intruder:
