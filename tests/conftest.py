@@ -95,10 +95,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         fixture_info = getattr(item, '_fixtureinfo', None)
         if fixture_info is None:
             continue
-        for name, definitions in fixture_info.name2fixturedefs.items():
-            if definitions and definitions[-1].scope == 'module':
-                item.add_marker(pytest.mark.xdist_group(f'{item.module.__name__}.{name}'))
-                break
+        # one group per module, whichever of its module-scoped fixtures a test uses (a
+        # group per fixture split a module's tests that share one run over two workers)
+        if any(definitions and definitions[-1].scope == 'module'
+               for definitions in fixture_info.name2fixturedefs.values()):
+            item.add_marker(pytest.mark.xdist_group(f'{item.module.__name__}.module_fixtures'))
 
     def rank(item: pytest.Item) -> int:
         if item.get_closest_marker('wall_clock') is not None:

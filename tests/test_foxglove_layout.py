@@ -35,7 +35,8 @@ def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp('layout') / 'run'
     proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
                            'us06', '--max-steps', str(STEPS), '--bag', str(path),
-                           '--no-progress'], capture_output=True, text=True, timeout=300)
+                           '--no-progress', '--no-plot'], capture_output=True, text=True,
+                          timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return path
 

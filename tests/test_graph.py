@@ -34,10 +34,11 @@ RECORDED = {qualified(t.name): t.messages(STEPS) for t in TOPICS if 'recorder' i
 """Full topic name in a root-namespace run -> messages recorded in STEPS steps."""
 
 
-def run_command(bag: Path, *extra: str) -> list[str]:
+def run_command(bag: Path, *extra: str, plot: bool = False) -> list[str]:
+    """``trust-av run`` on US06 (TAC-CA, alpha 0.5); only ``graph_run`` draws the plot."""
     return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
             '--alpha', '0.5', '--predictor', 'ca', '--max-steps', str(STEPS), '--bag', str(bag),
-            '--no-progress', *extra]
+            '--no-progress', *([] if plot else ['--no-plot']), *extra]
 
 
 def in_process(steps: int = STEPS) -> list[StepRecord]:
@@ -62,7 +63,8 @@ def assert_records_equal(graph: list[StepRecord], ref: list[StepRecord]) -> None
 @pytest.fixture(scope='module')
 def graph_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     bag = tmp_path_factory.mktemp('graph') / 'us06'
-    proc = subprocess.run(run_command(bag), capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(run_command(bag, plot=True), capture_output=True, text=True,
+                          timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return bag, proc.stdout
 

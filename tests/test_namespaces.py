@@ -176,7 +176,7 @@ def cli_run(bag: Path, namespace: str, domain: int, steps: int = GRAPH_STEPS) ->
     settings = CARS[namespace]
     return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
             '--alpha', str(settings['alpha']), '--predictor', settings['predictor'],
-            '--max-steps', str(steps), '--bag', str(bag), '--no-progress',
+            '--max-steps', str(steps), '--bag', str(bag), '--no-progress', '--no-plot',
             '--namespace', namespace, '--domain-id', str(domain)]
 
 

@@ -246,7 +246,7 @@ def test_a_domain_with_someone_else_on_it_is_skipped(tmp_path: Path) -> None:
 
 def run_command(bag: Path, steps: int = 600, *extra: str) -> list[str]:
     return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
-            '--max-steps', str(steps), '--bag', str(bag), '--no-progress', *extra]
+            '--max-steps', str(steps), '--bag', str(bag), '--no-progress', '--no-plot', *extra]
 
 
 def test_sigterm_finishes_the_bag_like_sigint(tmp_path: Path) -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from preceding_traffic.bags import write_trace_bag
 from preceding_traffic.traces import SHIPPED_TRACES, TraceConfig, read_samples, trace_path
 from trust_av_planner.cli.options import add_params_file_option
 from trust_av_planner.system.config import load_run_config
@@ -13,6 +12,8 @@ from trust_av_planner.system.config import load_run_config
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av trace-to-bag``."""
+    from preceding_traffic.bags import write_trace_bag  # rosbags: only when a bag is written
+
     config = load_run_config(args.params_files)
     topic = args.topic or config.trace.bag_topic
     times, speeds = read_samples(trace_path(args.trace), TraceConfig(

@@ -7,11 +7,12 @@ import argparse
 from pathlib import Path
 
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph.bag_writer import repair_bag
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av repair-bag``."""
+    from trust_av_planner.graph.bag_writer import repair_bag  # rosbags: only when a bag is written
+
     path: Path = args.path
     if not path.exists():
         raise TrustAvPlannerError(f'{path}: no such bag directory or .mcap file')

@@ -17,14 +17,16 @@ from trust_av_planner.cli.options import (
 )
 from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
-from trust_av_planner.graph.orchestrator import run_graph_records
-from trust_av_planner.study.plots import run_overview
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import compute_metrics
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av run``."""
+    # imported here: rclpy, rosbags and matplotlib cost about 1 CPU-s, which --help and a
+    # refused option do not need to pay
+    from trust_av_planner.graph.orchestrator import run_graph_records
+
     namespace = check_namespace(args.namespace, '--namespace')
     domain_id = None if args.domain_id is None else domain_id_value(args.domain_id)
     config = load_run_config(args.params_files, run_overrides(args))
@@ -47,12 +49,18 @@ def run(args: argparse.Namespace) -> int:
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
              f'alpha = {config.planner.alpha:g} (ROS 2 graph, domain {result.domain_id}'
              f'{"" if namespace == "/" else ", namespace " + namespace})')
-    run_overview(records, title, outputs.plot)
+    if not args.no_plot:
+        from trust_av_planner.study.plots import run_overview  # matplotlib: ~1 CPU-s
+
+        run_overview(records, title, outputs.plot)
     print(format_metrics(metrics, title))
     print(f'wall time {result.wall_s:.1f} s (start-up {result.startup_s:.1f} s), '
           f'{trace.steps * trace.dt_s / max(result.wall_s - result.startup_s, 1e-9):.0f}x '
           'real time while stepping')
-    print(f'recording (rosbag2): {outputs.bag}\nplot: {outputs.plot}\nnode logs: {outputs.logs}')
+    print(f'recording (rosbag2): {outputs.bag}')
+    if not args.no_plot:
+        print(f'plot: {outputs.plot}')
+    print(f'node logs: {outputs.logs}')
     return 0
 
 
@@ -88,6 +96,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                              'alpha<alpha>)')
     parser.add_argument('--overwrite', action='store_true',
                         help='replace an existing bag directory, plot and logs')
+    parser.add_argument('--no-plot', action='store_true',
+                        help='do not draw BAG.png (saves about 1 CPU-s per run in scripted '
+                             'batches; the metrics are printed either way)')
     parser.add_argument('--max-steps', type=steps_value, default=0,
                         help='stop after this many steps (default: the whole trace)')
     parser.add_argument('--namespace', default='/', metavar='NS',

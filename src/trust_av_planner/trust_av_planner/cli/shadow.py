@@ -7,17 +7,20 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from preceding_traffic.sources import load_trace
 from trust_av_planner.cli.options import add_params_file_option, alpha_value
 from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph.shadow import ShadowRun, run_shadow, run_wall_graph
 from trust_av_planner.nmpc import PREDICTORS
 from trust_av_planner.system.config import PlannerTopics, load_run_config
 from trust_monitor.common.param_layers import layered_params, node_fqn, read_layers
 from trust_monitor.common.params import build_config
 from trust_monitor.common.wall_clock import WallClockConfig, format_summary
+
+if TYPE_CHECKING:
+    from trust_av_planner.graph.shadow import ShadowRun
 
 
 def positive_seconds(text: str) -> float:
@@ -41,6 +44,9 @@ def summary_lines(result: ShadowRun) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av shadow``."""
+    # imported here, as in `trust-av run`: --help and a refused option do not pay for rclpy
+    from trust_av_planner.graph.shadow import run_shadow, run_wall_graph
+
     overrides: dict[str, dict[str, object]] = {'preceding_traffic': {'trace': str(args.bag)}}
     if args.bag_topic is not None:
         overrides['preceding_traffic']['bag_topic'] = args.bag_topic

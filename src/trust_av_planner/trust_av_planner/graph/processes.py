@@ -22,7 +22,6 @@ from typing import IO, Any
 
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_monitor.common.param_layers import node_fqn, to_params_text
-from trust_monitor.ros.spin import PARENT_ENV
 
 GRACE_S = {'SIGINT': 5.0, 'SIGTERM': 3.0}
 
@@ -89,6 +88,8 @@ class Graph:
         self.log_dir = log_dir
         self.namespace = namespace
         self.processes: list[Process] = []
+        from trust_monitor.ros.spin import PARENT_ENV  # rclpy: only when a graph starts
+
         self.env = dict(os.environ, ROS_DOMAIN_ID=str(domain),
                         ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                         RMW_IMPLEMENTATION='rmw_fastrtps_cpp', PYTHONUNBUFFERED='1',

@@ -326,10 +326,9 @@ def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSe
 
 def plot_curve(curve: list[dict[str, float]], ca_rmse: float, path: Path) -> None:
     """Train MSE and validation RMSE per epoch, with the CA baseline."""
-    import matplotlib
+    from trust_av_planner.study.plots import pyplot
 
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     epochs = [c['epoch'] for c in curve]
     fig, ax = plt.subplots(figsize=(7, 4))

@@ -236,10 +236,9 @@ def read_series(bag: Path, paths: Iterable[MessagePath]) -> dict[str, tuple[list
 def render_plots(bag: Path, png: Path, layout: Layout | None = None, dpi: int = 110) -> None:
     """Draw the layout's plot panels from a recording into one PNG, one axis per panel,
     every line with its label (dotted and marked: a line the layout leaves switched off)."""
-    import matplotlib
+    from trust_av_planner.study.plots import pyplot
 
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     layout = layout if layout is not None else load_layout()
     series = read_series(bag, [s.path for p in layout.plots for s in p.series])

@@ -6,18 +6,26 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use('Agg')
-import matplotlib.pyplot as plt
 import numpy as np
 
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.study.paper_results import TRACE_LABELS
 
 
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` on the Agg backend, imported when a figure is drawn (about
+    1 CPU-s: commands that draw nothing, ``--help`` and bad input, do not pay it)."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def speed_profiles(traces: Sequence[SpeedTrace], path: Path) -> None:
     """Figure 2: the preceding traffic's speed profile of each trace."""
+    plt = pyplot()
     fig, axes = plt.subplots(len(traces), 1, figsize=(8, 2.2 * len(traces)), squeeze=False)
     for ax, trace in zip(axes[:, 0], traces, strict=True):
         t = trace.t0_s + trace.dt_s * np.arange(len(trace.speeds_mps))
@@ -47,6 +55,7 @@ def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
         path: PNG to write.
         growth_per_step: delta of eq. (10).
     """
+    plt = pyplot()
     fig, axes = plt.subplots(2, len(series), figsize=(6 * len(series), 7), squeeze=False,
                              sharex=True, sharey='row', height_ratios=[2, 1])
     colors = plt.get_cmap('viridis')
@@ -76,6 +85,7 @@ def run_overview(records: Sequence[Any], title: str, path: Path) -> None:
     ``records`` are :class:`trust_av_planner.system.metrics.StepRecord` (or objects with the same
     attributes).
     """
+    plt = pyplot()
     t = [r.t_s for r in records]
     fig, axes = plt.subplots(5, 1, figsize=(9, 11), sharex=True)
     axes[0].plot(t, [r.traffic_speed_mps for r in records], label='preceding traffic')
