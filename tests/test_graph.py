@@ -225,6 +225,7 @@ def test_gru_planner_in_the_graph_equals_in_process(tmp_path: Path) -> None:
     command[command.index('ca')] = 'gru'
     proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert 'plot:' not in proc.stdout and not bag.with_name('gru.png').exists()  # --no-plot
     config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'gru'}})
     trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), 60)
     assert_records_equal(records_from_bag(bag), simulate(config, trace).records)
