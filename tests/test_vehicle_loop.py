@@ -116,12 +116,14 @@ def test_stale_decel_is_bounded_by_the_acceleration_bound() -> None:
         PlannerConfig(**{**config.__dict__, 'stale_decel_mps2': 0.0})
 
 
+@pytest.mark.parametrize('predictor', ['ca', 'gru'])
 def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
-        tmp_path: Path) -> None:
+        tmp_path: Path, predictor: str) -> None:
     """The planner alone in wall mode: without inputs it commands the stale deceleration with
     status ERROR naming them; fresh inputs give normal plans; when they stop, the QoS deadline
     event names the input; alpha changes at run time (logged), a safety bound does not (its
-    descriptor says why)."""
+    descriptor says why). With the CA predictor the human odometry is optional (here: no
+    topic); the GRU needs it, so it is one of the inputs that must be fresh."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import AccelStamped
@@ -136,10 +138,12 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
     from trust_monitor.ros.qos import topic_qos
 
     params = tmp_path / 'run.yaml'
+    human_topic = "    human_odom_topic: ''\n" if predictor == 'ca' else ''
     params.write_text('planner:\n  ros__parameters:\n    clock_mode: wall\n'
-                      "    human_odom_topic: ''\n    predictor: ca\n"
+                      f'{human_topic}    predictor: {predictor}\n'
                       '    lead_preview: constant_speed\n'
                       '    speed_max_from_trace: false\n')
+    inputs = 'traffic, ego' if predictor == 'ca' else 'traffic, ego, human'
     clock = WallClockConfig(clock_mode='wall')
     with lease_domain() as domain:
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
@@ -168,6 +172,8 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
         lead = node.create_publisher(Odometry, '/preceding_vehicle/odom',
                                      topic_qos('preceding_vehicle/odom', clock, True))
         ego = node.create_publisher(Odometry, '/ego/odom', topic_qos('ego/odom', clock, True))
+        human = node.create_publisher(Odometry, '/human/odom',
+                                      topic_qos('human/odom', clock, True))
 
         def spin(seconds: float, publish: bool = False) -> None:
             end = time.monotonic() + seconds
@@ -176,6 +182,7 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
                     ns = time.time_ns()
                     lead.publish(odometry(ns, 30.0, 10.0, 'lead'))
                     ego.publish(odometry(ns, 0.0, 10.0, 'ego'))
+                    human.publish(odometry(ns, -30.0, 10.0, 'human'))
                 executor.spin_once(timeout_sec=0.05)
 
         def call(client: Any, request: Any) -> Any:
@@ -191,7 +198,7 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
             spin(1.0)
             level, values = statuses[-1]
             assert (level, values['status']) == (2, 'stale_inputs')
-            assert values['reason'] == 'missing: traffic, ego'
+            assert values['reason'] == f'missing: {inputs}'
             assert commands and commands[-1] == -2.0
             statuses.clear()
             spin(3.0, publish=True)
@@ -200,7 +207,7 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
             statuses.clear()
             spin(1.5)
             stale = [v for lvl, v in statuses if lvl == 2]
-            assert stale and any('deadline missed (QoS event): traffic, ego' in v['reason']
+            assert stale and any(f'deadline missed (QoS event): {inputs}' in v['reason']
                                  for v in stale)
             setter = node.create_client(SetParameters, '/planner/set_parameters')
             result = call(setter, SetParameters.Request(parameters=[

@@ -97,6 +97,10 @@ class PlannerNode(Node):
                              'clock_mode wall and predictor ca')
         recorded = self.config.lead_preview == 'recorded'
         self.required = ['traffic', 'preview', 'ego'] if recorded else ['traffic', 'ego']
+        if self.config.predictor != 'ca':
+            # the GRU's inputs include the follower's gap and speed: without a fresh human
+            # odometry it cannot predict, so the stale-input policy applies
+            self.required.append('human')
         self.missed: dict[str, int] = {}  # input -> deadline events since its last message
         self.stale_reason = ''
         self.frame = VEHICLE_FRAMES['ego_plant']
