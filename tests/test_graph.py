@@ -119,20 +119,6 @@ def test_bag_decodes_with_mcap_ros2(graph_run: tuple[Path, str]) -> None:
     assert decoded == sum(RECORDED.values())
 
 
-def test_parallel_runs_do_not_hear_each_other(tmp_path: Path) -> None:
-    bags = [tmp_path / 'a', tmp_path / 'b']
-    procs = [subprocess.Popen(run_command(b, '--max-steps', '40'), stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True) for b in bags]
-    outputs = [p.communicate(timeout=300) for p in procs]
-    for proc, (out, err) in zip(procs, outputs, strict=True):
-        assert proc.returncode == 0, out + err
-    domains = {out.split('domain ')[1].split(')')[0] for out, _ in outputs}
-    assert len(domains) == 2
-    first, second = (records_from_bag(b) for b in bags)
-    assert_records_equal(first, in_process(40))
-    assert_records_equal(second, in_process(40))
-
-
 def children_of(pid: int) -> list[int]:
     """Every live process whose parent is ``pid``."""
     found = []
@@ -246,14 +232,15 @@ def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
     assert_records_equal(records, in_process(600)[:len(records)])
 
 
-@pytest.mark.parametrize('bag_name', ['commute_am', 'commute_pm'])
-def test_commute_bag_replays_through_the_graph(tmp_path: Path, bag_name: str) -> None:
-    """A real commute bag as the preceding vehicle, graph == in-process."""
+def test_commute_bag_replays_through_the_graph(tmp_path: Path) -> None:
+    """A real commute bag as the preceding vehicle, graph == in-process (one bag: the graph
+    path is the same for any; tests/test_bags.py reads every shipped commute bag)."""
+    bag_name = 'commute_am'
     trace_arg = str(Path(__file__).resolve().parents[1] / 'bags' / bag_name)
     bag = tmp_path / 'replay'
     command = run_command(bag, '--max-steps', '60')
     at = command.index('--trace')
-    command[at:at + 2] = ['--bag-in', trace_arg]   # the issue's spelling; --trace BAG is alike
+    command[at:at + 2] = ['--bag-in', trace_arg]   # as documented; --trace BAG is alike
     proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'ca'}})

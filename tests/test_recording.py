@@ -6,6 +6,7 @@ killed orchestrator, a foreign publisher, a full disk under a real run) are at t
 from __future__ import annotations
 
 import errno
+import math
 import os
 import shutil
 import signal
@@ -244,8 +245,8 @@ def test_a_domain_with_someone_else_on_it_is_skipped(tmp_path: Path) -> None:
 
 # --- the whole graph ------------------------------------------------------------------------
 
-def run_command(bag: Path, steps: int = 600, *extra: str) -> list[str]:
-    return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
+def run_command(bag: Path, steps: int = 600, *extra: str, trace: str = 'us06') -> list[str]:
+    return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', trace,
             '--max-steps', str(steps), '--bag', str(bag), '--no-progress', '--no-plot', *extra]
 
 
@@ -321,13 +322,20 @@ def test_a_foreign_publisher_stops_the_run_and_a_foreign_domain_is_skipped(
     moves onto 231 while the run records: the run stops with one line naming the topic and
     the node, exit 2, and the bag is finished."""
     env = dict(os.environ, TRUST_AV_DOMAIN_RANGE='230-231')
+    # A trace long enough to outlast discovery (the run stops when it names the intruder:
+    # up to one periodic participant announcement, 3 s, plus the watch period; US06 ends
+    # about 3 s after step 8 on an idle machine).
+    long_trace = tmp_path / 'long.csv'
+    long_trace.write_text('time_s,speed_mps\n' + ''.join(
+        f'{t},{10.0 + 5.0 * math.sin(t / 30.0):.3f}\n' for t in range(3001)))
     first = intruder(230)
     second = None
     try:
         time.sleep(1.0)                                  # discovered by then
         bag = tmp_path / 'intruded'
-        proc = subprocess.Popen(run_command(bag), stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True, env=env)
+        proc = subprocess.Popen(run_command(bag, 3000, trace=str(long_trace)),
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env=env)
         wait_for_steps(bag, 8, proc=proc)
         second = intruder(231)
         out, err = proc.communicate(timeout=120)

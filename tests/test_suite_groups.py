@@ -73,7 +73,7 @@ def test_groups_stay_on_one_worker(tmp_path: Path) -> None:
         """))
     out = tmp_path / 'where.jsonl'
     proc = subprocess.run(
-        [sys.executable, '-m', 'pytest', '-n', '3', '--dist', 'loadgroup', '-q',
+        [sys.executable, '-m', 'pytest', '-n', '2', '--dist', 'loadgroup', '-q',
          '-p', 'no:cacheprovider', str(tmp_path / 'test_probe.py')],
         cwd=tmp_path, capture_output=True, text=True, timeout=120,
         env={**os.environ, 'GROUPS_OUT': str(out)})

@@ -24,16 +24,23 @@ from trust_monitor.common.topics import TOPICS, expected_endpoints
 
 RECORDER_STATUS = 'recorder/status'
 """The recorder's latched status (``state`` ready/recording/finished/disk_full, ``steps``)."""
-PROBE_S = 2.0
-"""How long a domain is observed for participants of others before it is used (node discovery
-on localhost takes well under a second on an idle machine; with two CPU-bound test workers on
-2 cores, 1 s missed an intruder that had been up for a second; what this misses, the watch
-during the run catches and names)."""
+PROBE_S = 3.5
+"""How long a domain is observed for participants of others before it is used. A new
+participant lists one already on the domain either at once (about 0.1 s) or only after that
+one's next periodic announcement (Fast DDS ``leaseDuration_announcementperiod``: 3 s by
+default): ten fresh participants on an idle machine listed a node that had been up for a
+second after 0.10 s three times and after 2.10-2.69 s seven times. 3 s plus a margin covers
+one period; what this misses, the watch during the run catches and names."""
 WATCH_PERIOD_S = 1.0
 """How often the graph's topics are checked for foreign publishers during a run."""
-DEATH_ATTRIBUTION_S = 1.0
+DEATH_ATTRIBUTION_S = 4.0
 """When a node dies, how long the graph's topics are watched for an intruder (the likely
-cause) before the node's death is reported."""
+cause) before the node's death is reported. A node can hear an intruder's message seconds
+before this process has discovered it: a participant that misses a new participant's
+initial announcements (Fast DDS: 5 at 0.1 s) learns of it only from its next periodic one
+(Fast DDS ``leaseDuration_announcementperiod``, 3 s by default). Measured on a CPU-bound
+2-core machine: an orchestrator that had not listed an intruder 3.4 s after its publisher
+was up, while a participant started 1 s before the intruder listed it after 0.06 s."""
 UNNAMED_GRACE_S = 5.0
 """A publisher is listed before the name of its node arrives (rmw shows
 ``_NODE_NAME_UNKNOWN_``); one that stays unnamed this long (a plain DDS participant) counts
