@@ -74,14 +74,13 @@ def assert_every_topic_complete(bag: Path) -> int:
     return complete
 @pytest.hookimpl(tryfirst=True)   # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Order and group the suite for ``pytest -n 4 --dist loadgroup`` (scripts/test.sh).
+    """Order and group the suite for ``pytest -n 3 --dist loadgroup`` (scripts/test.sh).
 
-    * ``wall_clock`` tests (they mostly wait for real time, e.g. a soak at 10 Hz) form
-      xdist groups: ``wall_clock`` and, for a test marked ``wall_clock(group=NAME)``,
-      ``wall_clock_NAME`` (the 2-minute soak has its own: alone it is half of the rest).
-      One worker runs each group's tests one after the other, from the start of the run
-      (xdist hands out the largest group first), while the other workers run the CPU-bound
-      tests on the two cores; the waiting overlaps with computing instead of adding to it.
+    * ``wall_clock`` tests (they mostly wait for real time, e.g. a soak at 10 Hz) form one
+      xdist group: one worker runs them one after the other, from the start of the run
+      (xdist hands out the largest group first), while the other two workers run the
+      CPU-bound tests on the two cores; the waiting overlaps with computing instead of
+      adding to it.
     * ``slow`` tests (CPU-bound and long, e.g. the GRU retraining) come first among the
       rest, so that they start at once on the other workers instead of ending the run.
     * Tests that share a module-scoped fixture (a colcon build, one graph run) stay on one
@@ -90,11 +89,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """
     del config
     for item in items:
-        wall = item.get_closest_marker('wall_clock')
-        if wall is not None:
-            group = wall.kwargs.get('group')
-            item.add_marker(pytest.mark.xdist_group(f'wall_clock_{group}' if group
-                                                    else 'wall_clock'))
+        if item.get_closest_marker('wall_clock') is not None:
+            item.add_marker(pytest.mark.xdist_group('wall_clock'))
             continue
         fixture_info = getattr(item, '_fixtureinfo', None)
         if fixture_info is None:

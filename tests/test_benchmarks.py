@@ -208,7 +208,7 @@ def test_soak_wall_growth_checks() -> None:
     assert problems and 'no sample after the baseline' in problems[0]
 
 
-@pytest.mark.wall_clock(group='soak')
+@pytest.mark.wall_clock
 def test_soak_wall_two_minutes(tmp_path: Path) -> None:
     """benchmarks/soak_wall.py for 2 minutes of wall time (baseline minute 1): every node
     and the recorder sampled each minute, every published message in the bag but the
