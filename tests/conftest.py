@@ -57,21 +57,30 @@ def closed_loop(trace: str, alpha: float, predictor: str = 'ca') -> SimResult:
 def assert_every_topic_complete(bag: Path) -> int:
     """Every recorded topic of the table holds every complete step, the topics within one
     step of each other (a topic absent from the bag holds none); returns the number of
-    complete steps."""
+    complete steps.
+
+    Step k is complete with the vehicles' odometry and tf at stamp k, which the plants
+    publish at the end of step k - 1 (stamp 0: the initial state, before the first step). So
+    these topics hold complete + 1 stamps once the plants have finished the last complete
+    step, and only complete stamps when the run stopped before they did.
+    """
     from trust_av_planner.graph.bag_records import read_topics, records_from_bag  # rosbags
     from trust_monitor.common.topics import TOPICS
     topics = read_topics(bag)
     complete = len(records_from_bag(bag))
-    steps = {}
+    bad = {}
     for row in TOPICS:
         if 'recorder' in row.subscribers:
             name = row.name if row.name.startswith('/') else f'/{row.name}'
-            # odometry and tf of the two simulated vehicles are published once more,
-            # at stamp 0, before the first step
-            initial = 1 if name in ('/ego/odom', '/human/odom', '/tf') else 0
-            steps[name] = max(len(topics.get(name, {})) - initial, 0)
-    assert min(steps.values()) >= complete and max(steps.values()) <= complete + 1, steps
+            stamps = len(topics.get(name, {}))
+            ahead = name in ('/ego/odom', '/human/odom', '/tf')
+            low, high = (complete, complete + 2) if ahead else (complete, complete + 1)
+            if not low <= stamps <= high:
+                bad[name] = (stamps, (low, high))
+    assert not bad, f'{complete} complete steps; topics outside their range: {bad}'
     return complete
+
+
 @pytest.hookimpl(tryfirst=True)   # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Order and group the suite for ``pytest -n 3 --dist loadgroup`` (scripts/test.sh).
