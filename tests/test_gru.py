@@ -170,7 +170,7 @@ def assert_is_the_shipped_model(out: Path) -> None:
 
 @pytest.mark.slow
 def test_retraining_reproduces_the_shipped_model(tmp_path: Path) -> None:
-    """Issue 4 and 14: `trust-av train-gru` rebuilds the shipped model bit for bit on any
+    """`trust-av train-gru` rebuilds the shipped model bit for bit on any
     x86-64 CPU with AVX2 (it pins numpy's, OpenBLAS's, PyTorch's and MKL's CPU paths in its
     training process: pinned_numerics.py), whatever numpy/PyTorch settings the caller has.
     The shipped model is the command's defaults (its card's settings are them)."""
