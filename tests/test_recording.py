@@ -243,6 +243,31 @@ def test_a_domain_with_someone_else_on_it_is_skipped(tmp_path: Path) -> None:
         pass
 
 
+def test_a_domain_whose_rtps_ports_are_bound_is_not_private(tmp_path: Path) -> None:
+    """A socket on one of a domain's RTPS ports (what any DDS participant binds) makes it
+    not private at once; the ports of other domains do not; a socket table in the kernel's
+    format is read for both address families."""
+    import socket
+
+    from trust_av_planner.graph.session import domain_ports_in_use, foreign_participants
+
+    with lease_domain(directory=tmp_path / 'leases') as domain:
+        assert foreign_participants(domain) == ''
+        port = 7400 + 250 * domain + 10 + 2 * 7          # participant 7's discovery port
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            sock.bind(('127.0.0.1', port))
+            assert f'UDP ports {port} in use' in foreign_participants(domain)
+            other = domain - 1 if domain > 0 else domain + 1
+            assert port not in (domain_ports_in_use(other) or [])
+        assert foreign_participants(domain) == ''
+    table = tmp_path / 'udp6'
+    table.write_text('  sl  local_address                         remote_address  st\n'
+                     '   0: 00000000000000000000000001000000:FC96 '
+                     '00000000000000000000000000000000:0000 07\n')
+    assert domain_ports_in_use(229, (table,)) == [64662]      # 7400 + 250 * 229 + 12
+    assert domain_ports_in_use(229, (tmp_path / 'none',)) is None
+
+
 # --- the whole graph ------------------------------------------------------------------------
 
 def run_command(bag: Path, steps: int = 600, *extra: str, trace: str = 'us06') -> list[str]:
@@ -331,7 +356,6 @@ def test_a_foreign_publisher_stops_the_run_and_a_foreign_domain_is_skipped(
     first = intruder(230)
     second = None
     try:
-        time.sleep(1.0)                                  # discovered by then
         bag = tmp_path / 'intruded'
         proc = subprocess.Popen(run_command(bag, 3000, trace=str(long_trace)),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

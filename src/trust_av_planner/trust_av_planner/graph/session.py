@@ -2,9 +2,10 @@
 until the graph is connected and the recorder is ready, follows the recorder's progress,
 and watches the domain for publishers that are not the run's.
 
-A leased domain must be private (:func:`foreign_participants` is the check before a domain
-is used); a domain given by the user may be shared with graphs in other namespaces
-(:func:`clashing_participants` refuses only what would clash with this graph's namespace).
+A leased domain must be private (:func:`foreign_participants`, the domain's RTPS ports in
+the kernel's socket table, is the check before a domain is used); a domain given by the
+user may be shared with graphs in other namespaces (:func:`clashing_participants` refuses
+only what would clash with this graph's namespace).
 During the run, a publisher on any of the graph's topics (resolved in its namespace) from a
 node that is not one of the run's, or a second node under one of the run's names, stops the
 run with one line naming the topic and the intruder; the topics of graphs in other
@@ -17,6 +18,7 @@ import contextlib
 import os
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 from trust_av_planner.graph.processes import RECORDER, Graph, GraphError
@@ -25,12 +27,14 @@ from trust_monitor.common.topics import TOPICS, expected_endpoints
 RECORDER_STATUS = 'recorder/status'
 """The recorder's latched status (``state`` ready/recording/finished/disk_full, ``steps``)."""
 PROBE_S = 3.5
-"""How long a domain is observed for participants of others before it is used. A new
-participant lists one already on the domain either at once (about 0.1 s) or only after that
-one's next periodic announcement (Fast DDS ``leaseDuration_announcementperiod``: 3 s by
-default): ten fresh participants on an idle machine listed a node that had been up for a
-second after 0.10 s three times and after 2.10-2.69 s seven times. 3 s plus a margin covers
-one period; what this misses, the watch during the run catches and names."""
+"""How long a ROS node observes a domain before a graph joins it, where the socket table
+cannot answer (a domain shared with graphs in other namespaces: which nodes, in which
+namespace, is for ROS discovery to say). A new participant lists one already on the domain
+either at once (about 0.1 s) or only after that one's next periodic announcement (Fast DDS
+``leaseDuration_announcementperiod``: 3 s by default): ten fresh participants on an idle
+machine listed a node that had been up for a second after 0.10 s three times and after
+2.10-2.69 s seven times. 3 s plus a margin covers one period; what this misses, the watch
+during the run catches and names."""
 WATCH_PERIOD_S = 1.0
 """How often the graph's topics are checked for foreign publishers during a run."""
 DEATH_ATTRIBUTION_S = 4.0
@@ -56,10 +60,52 @@ def qualified(name: str, namespace: str) -> str:
     return f'{namespace.rstrip("/")}/{name}'
 
 
+RTPS_PORT_BASE = 7400
+RTPS_DOMAIN_GAIN = 250
+"""DDS-RTPS 2.5, 9.6.1.1: every port of domain d is PB + DG * d + offset + PG * participant
+(PB 7400, DG 250; offsets 0, 1, 10, 11; PG 2), so [PB + DG*d, PB + DG*(d+1)) is domain
+d's block. Fast DDS (rmw_fastrtps, also for LOCALHOST discovery) binds its unicast
+discovery and user ports there; so does any other RTPS implementation on its defaults."""
+UDP_TABLES = (Path('/proc/net/udp'), Path('/proc/net/udp6'))
+
+
+def domain_ports_in_use(domain: int, tables: tuple[Path, ...] = UDP_TABLES) -> list[int] | None:
+    """The UDP ports of ``domain``'s RTPS port block that a socket on this host has bound
+    (from the kernel's socket tables), or None when no table can be read."""
+    low = RTPS_PORT_BASE + RTPS_DOMAIN_GAIN * domain
+    found: set[int] = set()
+    read_any = False
+    for table in tables:
+        try:
+            lines = table.read_text().splitlines()[1:]
+        except OSError:
+            continue
+        read_any = True
+        for line in lines:
+            fields = line.split()
+            if len(fields) > 1 and ':' in fields[1]:
+                port = int(fields[1].rsplit(':', 1)[1], 16)
+                if low <= port < low + RTPS_DOMAIN_GAIN:
+                    found.add(port)
+    return sorted(found) if read_any else None
+
+
 def foreign_participants(domain: int, wait_s: float | None = None) -> str:
-    """Nodes already present on ``domain`` (observed for ``wait_s``), as one line; '' if
-    none. Discovery is localhost-only, so these are other processes on this machine."""
-    return _probe(domain, None, wait_s)
+    """Participants already on ``domain`` on this machine, as one line; '' if none.
+
+    A DDS participant binds UDP ports of its domain's block as it is created, so the
+    kernel's socket table tells at once and exactly whether anyone is there (any RTPS
+    vendor, any ROS or no ROS), with no discovery to wait for: a ROS probe can need a
+    whole announcement period, 3 s (:data:`PROBE_S`). Only without the socket tables is
+    the domain observed with a ROS node for ``wait_s`` (default :data:`PROBE_S`).
+    """
+    ports = domain_ports_in_use(domain)
+    if ports is None:
+        return _probe(domain, None, wait_s)
+    if not ports:
+        return ''
+    shown = ', '.join(str(p) for p in ports[:4]) + (', ...' if len(ports) > 4 else '')
+    return f'DDS participants on this machine (UDP ports {shown} in use)'
 
 
 def clashing_participants(domain: int, namespace: str, wait_s: float | None = None) -> str:
