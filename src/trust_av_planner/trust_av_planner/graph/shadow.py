@@ -292,9 +292,31 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
 
 def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
                     drain_s: float = 0.5) -> None:
-    """Stop the nodes (they write their loop statistics on exit), then take in for
-    ``drain_s`` what they published last."""
-    graph.stop(list(names))
+    """Stop the nodes (they write their loop statistics on exit) while this process goes on
+    taking what they publish, then take in for ``drain_s`` what they published last.
+
+    The stop runs in a thread so that the executor keeps spinning: the command topics keep
+    only the last message (keep-last 1), so a node that ticks twice while being stopped
+    (seen under a load average of 21: two ticks between the last take and the node's
+    exit) would otherwise overwrite the first before it was recorded.
+    """
+    import threading
+
+    errors: list[BaseException] = []
+
+    def stop() -> None:
+        try:
+            graph.stop(list(names))
+        except BaseException as err:  # re-raised below, in the caller's thread
+            errors.append(err)
+
+    stopper = threading.Thread(target=stop, name='stop-nodes')
+    stopper.start()
+    while stopper.is_alive():
+        executor.spin_once(timeout_sec=0.02)
+    stopper.join()
+    if errors:
+        raise errors[0]
     drain_until = time.monotonic() + drain_s
     while time.monotonic() < drain_until:
         executor.spin_once(timeout_sec=0.05)
