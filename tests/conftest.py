@@ -61,8 +61,9 @@ def assert_every_topic_complete(bag: Path) -> int:
 
     Step k is complete with the vehicles' odometry and tf at stamp k, which the plants
     publish at the end of step k - 1 (stamp 0: the initial state, before the first step). So
-    these topics hold complete + 1 stamps once the plants have finished the last complete
-    step, and only complete stamps when the run stopped before they did.
+    these topics run ahead: complete stamps when the run stopped before the plants finished
+    the last complete step, complete + 1 once they had, complete + 2 when they had also
+    finished the next step, which the other nodes had not.
     """
     from trust_av_planner.graph.bag_records import read_topics, records_from_bag  # rosbags
     from trust_monitor.common.topics import TOPICS

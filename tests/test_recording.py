@@ -251,7 +251,7 @@ def test_a_domain_whose_rtps_ports_are_bound_is_not_private(tmp_path: Path) -> N
 
     from trust_av_planner.graph.session import domain_ports_in_use, foreign_participants
 
-    with lease_domain(directory=tmp_path / 'leases') as domain:
+    with lease_domain() as domain:        # the lease every run takes: no run of ours is on it
         assert foreign_participants(domain) == ''
         port = 7400 + 250 * domain + 10 + 2 * 7          # participant 7's discovery port
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
