@@ -249,7 +249,8 @@ def test_a_domain_whose_rtps_ports_are_bound_is_not_private(tmp_path: Path) -> N
     format is read for both address families."""
     import socket
 
-    from trust_av_planner.graph.session import domain_ports_in_use, foreign_participants
+    from trust_av_planner.graph.domains import domain_ports_in_use
+    from trust_av_planner.graph.session import foreign_participants
 
     with lease_domain() as domain:        # the lease every run takes: no run of ours is on it
         assert foreign_participants(domain) == ''

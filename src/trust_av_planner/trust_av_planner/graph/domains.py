@@ -33,6 +33,36 @@ DOMAIN_ID_MAX = 232
 port from the domain id (RTPS port mapping, ``include/fastdds/rtps/common/PortParameters.h``
 and ``src/cpp/rtps/network/NetworkFactory.cpp: calculate_well_known_port``: 7400 + 250 *
 domain + offset, the process exits when that exceeds 65535; 7400 + 250 * 233 = 65650)."""
+RTPS_PORT_BASE = 7400
+RTPS_DOMAIN_GAIN = 250
+"""DDS-RTPS 2.5, 9.6.1.1: every port of domain d is PB + DG * d + offset + PG * participant
+(PB 7400, DG 250; offsets 0, 1, 10, 11; PG 2), so [PB + DG*d, PB + DG*(d+1)) is domain
+d's block. Fast DDS (rmw_fastrtps, also for LOCALHOST discovery) binds its unicast
+discovery and user ports there; so does any other RTPS implementation on its defaults."""
+UDP_TABLES = (Path('/proc/net/udp'), Path('/proc/net/udp6'))
+
+
+def domain_ports_in_use(domain: int, tables: tuple[Path, ...] = UDP_TABLES) -> list[int] | None:
+    """The UDP ports of ``domain``'s RTPS port block that a socket on this host has bound
+    (from the kernel's socket tables), or None when no table can be read."""
+    low = RTPS_PORT_BASE + RTPS_DOMAIN_GAIN * domain
+    found: set[int] = set()
+    read_any = False
+    for table in tables:
+        try:
+            lines = table.read_text().splitlines()[1:]
+        except OSError:
+            continue
+        read_any = True
+        for line in lines:
+            fields = line.split()
+            if len(fields) > 1 and ':' in fields[1]:
+                port = int(fields[1].rsplit(':', 1)[1], 16)
+                if low <= port < low + RTPS_DOMAIN_GAIN:
+                    found.add(port)
+    return sorted(found) if read_any else None
+
+
 DOMAIN_RANGE = range(1, 102)
 """ROS domain ids leased to runs (Fast DDS: 0-232 are valid; 1-101 avoid the defaults)."""
 RANGE_ENV = 'TRUST_AV_DOMAIN_RANGE'

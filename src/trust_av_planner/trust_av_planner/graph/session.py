@@ -18,11 +18,11 @@ import contextlib
 import os
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
+from trust_av_planner.graph.domains import domain_ports_in_use
 from trust_av_planner.graph.processes import RECORDER, Graph, GraphError
-from trust_monitor.common.topics import TOPICS, expected_endpoints
+from trust_monitor.common.topics import TOPICS, expected_endpoints, qualified
 
 RECORDER_STATUS = 'recorder/status'
 """The recorder's latched status (``state`` ready/recording/finished/disk_full, ``steps``)."""
@@ -50,44 +50,6 @@ UNNAMED_GRACE_S = 5.0
 ``_NODE_NAME_UNKNOWN_``); one that stays unnamed this long (a plain DDS participant) counts
 as foreign."""
 UNKNOWN_NAME = '_NODE_NAME_UNKNOWN_'
-
-
-
-def qualified(name: str, namespace: str) -> str:
-    """A topic name as resolved in ``namespace`` (relative names join it)."""
-    if name.startswith('/'):
-        return name
-    return f'{namespace.rstrip("/")}/{name}'
-
-
-RTPS_PORT_BASE = 7400
-RTPS_DOMAIN_GAIN = 250
-"""DDS-RTPS 2.5, 9.6.1.1: every port of domain d is PB + DG * d + offset + PG * participant
-(PB 7400, DG 250; offsets 0, 1, 10, 11; PG 2), so [PB + DG*d, PB + DG*(d+1)) is domain
-d's block. Fast DDS (rmw_fastrtps, also for LOCALHOST discovery) binds its unicast
-discovery and user ports there; so does any other RTPS implementation on its defaults."""
-UDP_TABLES = (Path('/proc/net/udp'), Path('/proc/net/udp6'))
-
-
-def domain_ports_in_use(domain: int, tables: tuple[Path, ...] = UDP_TABLES) -> list[int] | None:
-    """The UDP ports of ``domain``'s RTPS port block that a socket on this host has bound
-    (from the kernel's socket tables), or None when no table can be read."""
-    low = RTPS_PORT_BASE + RTPS_DOMAIN_GAIN * domain
-    found: set[int] = set()
-    read_any = False
-    for table in tables:
-        try:
-            lines = table.read_text().splitlines()[1:]
-        except OSError:
-            continue
-        read_any = True
-        for line in lines:
-            fields = line.split()
-            if len(fields) > 1 and ':' in fields[1]:
-                port = int(fields[1].rsplit(':', 1)[1], 16)
-                if low <= port < low + RTPS_DOMAIN_GAIN:
-                    found.add(port)
-    return sorted(found) if read_any else None
 
 
 def foreign_participants(domain: int, wait_s: float | None = None) -> str:
