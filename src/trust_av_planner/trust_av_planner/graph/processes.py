@@ -94,6 +94,8 @@ class Graph:
                         ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                         RMW_IMPLEMENTATION='rmw_fastrtps_cpp', PYTHONUNBUFFERED='1',
                         ROS_LOG_DIR=str(log_dir / 'ros'), **{PARENT_ENV: str(os.getpid())})
+        # One BLAS thread per node unless the user set it (trust_av_planner.cli says why).
+        self.env.setdefault('OPENBLAS_NUM_THREADS', '1')
 
     def start(self) -> None:
         """Start every node process.
