@@ -61,12 +61,14 @@ def in_install(install: Path, command: str, tmp_path: Path, domain: str = '232',
 
 def test_installed_copy_finds_its_share(install: Path, tmp_path: Path) -> None:
     proc = in_install(install, 'python3 -c "import trust_monitor.common.param_layers as m; '
-                               'print(m.__file__); print(m.shipped_params_file())"', tmp_path)
+                               'print(m.__file__); print(m.shipped_params_file()); '
+                               "print(m.shipped_params_file('fastdds_graph.xml'))\"", tmp_path)
     assert proc.returncode == 0, proc.stderr
-    module, shipped = proc.stdout.split()
+    module, shipped, profile = proc.stdout.split()
     assert Path(module).is_relative_to(install / 'trust_monitor')
-    assert Path(shipped) == install / 'trust_monitor' / 'share' / 'trust_monitor' / 'config' / \
-        'trust_av.yaml'
+    share = install / 'trust_monitor' / 'share' / 'trust_monitor' / 'config'
+    assert Path(shipped) == share / 'trust_av.yaml'
+    assert Path(profile) == share / 'fastdds_graph.xml' and Path(profile).is_file()
 
 
 @pytest.mark.parametrize(('package', 'executable'), sorted(EXECUTABLES))

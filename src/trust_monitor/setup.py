@@ -12,8 +12,10 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        # the shipped params files (package_name/config links to the repository's config/)
-        ('share/' + package_name + '/config', sorted(glob(package_name + '/config/*.yaml'))),
+        # the shipped params files and the graph's Fast DDS profile (package_name/config
+        # links to the repository's config/)
+        ('share/' + package_name + '/config', sorted(glob(package_name + '/config/*.yaml')
+                                                     + glob(package_name + '/config/*.xml'))),
     ],
     install_requires=['setuptools'],
     zip_safe=False,

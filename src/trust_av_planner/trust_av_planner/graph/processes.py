@@ -15,13 +15,13 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import MutableMapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_monitor.common.param_layers import node_fqn, to_params_text
+from trust_monitor.common.param_layers import node_fqn, shipped_params_file, to_params_text
 
 GRACE_S = {'SIGINT': 5.0, 'SIGTERM': 3.0}
 
@@ -44,6 +44,28 @@ PROFILE_ENV = 'TRUST_AV_PROFILE_DIR'
 """If set, every node runs under cProfile and writes ``<dir>/<node>.prof`` when it stops
 (``python -m pstats``, snakeviz; benchmarks/bench_graph.py --profile-dir)."""
 RECORDER = 'recorder'
+DDS_PROFILE = 'fastdds_graph.xml'
+"""The Fast DDS participant profile of a run (config/fastdds_graph.xml: discovery timing
+for a graph whose participants start within seconds of each other; the file says why)."""
+PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
+"""Where Fast DDS looks for a profiles file (2.x reads the first; 3.x the second)."""
+
+
+def use_run_discovery(env: MutableMapping[str, str]) -> None:
+    """Set the discovery settings every participant of a run gets in ``env``: ROS 2's
+    LOCALHOST range (this machine only) and the shipped Fast DDS profile, unless the user
+    names a profiles file of their own (theirs is kept, untouched).
+
+    Raises:
+        GraphError: the shipped profile is missing (Fast DDS would log an error and go on
+            with its defaults: a run that connects seconds later, for no visible reason).
+    """
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    if not any(env.get(name) for name in PROFILE_VARIABLES):
+        profile = shipped_params_file(DDS_PROFILE)
+        if not profile.is_file():
+            raise GraphError(f'the Fast DDS profile {profile} is missing (a broken install?)')
+        env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
 
 
 def _stop_with_parent() -> None:
@@ -91,9 +113,9 @@ class Graph:
         from trust_monitor.ros.spin import PARENT_ENV  # rclpy: only when a graph starts
 
         self.env = dict(os.environ, ROS_DOMAIN_ID=str(domain),
-                        ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                         RMW_IMPLEMENTATION='rmw_fastrtps_cpp', PYTHONUNBUFFERED='1',
                         ROS_LOG_DIR=str(log_dir / 'ros'), **{PARENT_ENV: str(os.getpid())})
+        use_run_discovery(self.env)
         # One BLAS thread per node unless the user set it (trust_av_planner.cli says why).
         self.env.setdefault('OPENBLAS_NUM_THREADS', '1')
 

@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from trust_av_planner.graph.domains import domain_ports_in_use
-from trust_av_planner.graph.processes import RECORDER, Graph, GraphError
+from trust_av_planner.graph.processes import RECORDER, Graph, GraphError, use_run_discovery
 from trust_monitor.common.topics import TOPICS, expected_endpoints, qualified
 
 RECORDER_STATUS = 'recorder/status'
@@ -85,7 +85,7 @@ def _probe(domain: int, namespace: str | None, wait_s: float | None) -> str:
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
 
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    use_run_discovery(os.environ)
     context = Context()
     rclpy.init(context=context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     try:
@@ -266,7 +266,7 @@ def graph_session(graph: Graph, name: str) -> Iterator[Session]:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    use_run_discovery(os.environ)
     context = Context()
     try:
         rclpy.init(context=context, domain_id=graph.domain,
