@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The project's test command (README): set up .venv if needed, then lint (ruff), type-check
-# the pure core (mypy --strict), and run the whole test suite (pytest) on three workers for
+# the pure core (mypy --strict), and run the whole test suite (pytest) on four workers for
 # two cores (pytest-xdist, --dist loadgroup: tests/conftest.py puts the wall-clock tests,
 # which mostly wait for real time, on one worker, and the CPU-bound tests run on the other
-# two meanwhile). Extra arguments go to pytest, e.g.
+# three meanwhile; many of them also wait, for node start-up and stops). Extra arguments go
+# to pytest, e.g.
 # `bash scripts/test.sh -k nmpc`, or `bash scripts/test.sh -n 0` for one process.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -19,4 +20,4 @@ mypy --exclude '(_node|cli/run|cli/shadow|setup)\.py$|/ros/|/graph/' \
   src/preceding_traffic/preceding_traffic src/trust_monitor/trust_monitor \
   src/human_driver_sim/human_driver_sim src/trust_av_planner/trust_av_planner
 echo '== pytest' >&2
-python -m pytest -n 3 --dist loadgroup "$@"
+python -m pytest -n 4 --dist loadgroup "$@"

@@ -84,11 +84,11 @@ def assert_every_topic_complete(bag: Path) -> int:
 
 @pytest.hookimpl(tryfirst=True)   # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Order and group the suite for ``pytest -n 3 --dist loadgroup`` (scripts/test.sh).
+    """Order and group the suite for ``pytest -n 4 --dist loadgroup`` (scripts/test.sh).
 
     * ``wall_clock`` tests (they mostly wait for real time, e.g. a soak at 10 Hz) form one
       xdist group: one worker runs them one after the other, from the start of the run
-      (xdist hands out the largest group first), while the other two workers run the
+      (xdist hands out the largest group first), while the other workers run the
       CPU-bound tests on the two cores; the waiting overlaps with computing instead of
       adding to it.
     * ``slow`` tests (CPU-bound and long, e.g. the GRU retraining) come first among the

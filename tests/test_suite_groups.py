@@ -1,4 +1,4 @@
-"""The suite's own scheduling holds: under ``pytest -n 3 --dist loadgroup`` (scripts/test.sh)
+"""The suite's own scheduling holds: under ``pytest -n 4 --dist loadgroup`` (scripts/test.sh)
 the groups tests/conftest.py marks keep their tests on one worker.
 
 The suite's 5-minute budget rests on it: the wall-clock tests wait on one worker while the
