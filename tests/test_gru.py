@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-import torch
 from conftest import shipped_trace
 
 from preceding_traffic.traces import truncate
@@ -62,6 +61,8 @@ def save(weights: GruWeights, path: Path) -> Path:
 
 
 def test_numpy_forward_equals_torch() -> None:
+    import torch  # here, not at the top: every xdist worker collects this module
+
     w = random_weights()
     gru = torch.nn.GRU(4, 8, batch_first=True).double()
     with torch.no_grad():
