@@ -174,21 +174,27 @@ def _make_step_node(name: str) -> Any:
 
 
 def _make_recorder() -> Any:
+    from diagnostic_msgs.msg import DiagnosticArray
     from mcap.writer import CompressionType, Writer
     from rclpy.node import Node
     from rosbags.typesys import Stores, get_typestore
 
     from trust_av_planner.graph.bag_writer import STAMP_IN_FIRST_ELEMENT
+    from trust_av_planner.graph.recorder_node import READY_CHECK_PERIOD_S
+    from trust_av_planner.graph.session import RECORDER_STATUS
     from trust_monitor.common.step_chain import RECORDER, step_chain
     from trust_monitor.common.topics import TOPICS
-    from trust_monitor.ros.messages import message_class
+    from trust_monitor.ros.messages import diagnostics, message_class
     from trust_monitor.ros.parameters import declare_config
     from trust_monitor.ros.qos import QOS
 
     little, big = struct.Struct('<iI'), struct.Struct('>iI')
 
     class FloorRecorder(Node):  # type: ignore[misc]
-        """Raw subscriptions to every recorded topic; each message written as it comes."""
+        """Raw subscriptions to every recorded topic; each message written as it comes.
+        Says ``ready`` on ``recorder/status`` once every subscription has matched its
+        publishers, as the project's recorder does (a message published before that, on a
+        volatile subscription, would be lost and the floor would wait for it forever)."""
 
         def __init__(self) -> None:
             super().__init__(RECORDER)
@@ -205,6 +211,7 @@ def _make_recorder() -> Any:
             schemas: dict[str, int] = {}
             offsets: dict[int, int] = {}
             self.offsets = offsets
+            self.matching: list[tuple[Any, int]] = []
             for topic in TOPICS:
                 if RECORDER not in topic.subscribers:
                     continue
@@ -216,9 +223,19 @@ def _make_recorder() -> Any:
                                                        schemas[topic.msgtype])
                 self.total += topic.per_step * self.config.steps + (topic.name in state)
                 offsets[channel] = 8 if topic.msgtype in STAMP_IN_FIRST_ELEMENT else 4
-                self.create_subscription(message_class(topic.msgtype), topic.name,
-                                         lambda data, c=channel: self.on_message(c, data),
-                                         QOS[topic.qos], raw=True)
+                sub = self.create_subscription(message_class(topic.msgtype), topic.name,
+                                               lambda data, c=channel: self.on_message(c, data),
+                                               QOS[topic.qos], raw=True)
+                self.matching.append((sub, len(topic.publishers)))
+            self.pub_status = self.create_publisher(DiagnosticArray, RECORDER_STATUS,
+                                                    QOS['LATCHED'])
+            self.ready_timer = self.create_timer(READY_CHECK_PERIOD_S, self.check_ready)
+
+        def check_ready(self) -> None:
+            if all(sub.get_publisher_count() >= needed for sub, needed in self.matching):
+                self.ready_timer.cancel()
+                self.pub_status.publish(diagnostics(0, RECORDER, True, 'ready',
+                                                    {'state': 'ready', 'steps': '0'}))
 
         def on_message(self, channel: int, data: bytes) -> None:
             sec, nanosec = (little if data[1] == 1 else big).unpack_from(data,
@@ -331,21 +348,23 @@ class StepClock:
                 'shutdown_s': self.ended - t_last, 'cpu_ms_per_step': cpu}
 
 
-def _wait_connected(graph: Any, node: Any, executor: Any, nodes: tuple[str, ...],
-                    timeout_s: float) -> None:
+def _wait_connected(session: Any, nodes: tuple[str, ...], timeout_s: float) -> None:
     """Wait until every topic has its expected publishers and subscribers (the orchestrator's
-    own /clock subscription not counted)."""
-    from trust_av_planner.graph.processes import GraphError
+    own /clock subscription not counted) and the recorder, if any, says ``ready``."""
+    from trust_av_planner.graph.processes import RECORDER, GraphError
     from trust_monitor.common.topics import expected_endpoints
 
     expected = expected_endpoints(nodes)
     deadline = time.monotonic() + timeout_s
+    missing: list[str] = []
     while time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-        graph.check_alive(set())
+        session.executor.spin_once(timeout_sec=0.05)
+        session.graph.check_alive(set())
         missing = [name for name, (pubs, subs) in expected.items()
-                   if node.count_publishers(name) < pubs
-                   or node.count_subscribers(name) - (name == 'clock') < subs]
+                   if session.node.count_publishers(name) < pubs
+                   or session.node.count_subscribers(name) - (name == 'clock') < subs]
+        if RECORDER in nodes and session.recorder_state != 'ready':
+            missing.append('the recorder has not matched every publisher')
         if not missing:
             return
     raise GraphError(f'floor not connected after {timeout_s:g} s: {", ".join(missing)}')
@@ -404,7 +423,7 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
                 Clock, 'clock', lambda msg: clock.on_step(msg_ns(msg.clock) // dt_ns + 1),
                 QOS['CLOCK'])
             start_pub = node.create_publisher(Empty, 'sim/start', QOS['LATCHED'])
-            _wait_connected(graph, node, executor, names, startup_timeout_s)
+            _wait_connected(session, names, startup_timeout_s)
             start_pub.publish(Empty())
             process = graph.by_name(ender).popen
             seen, last_change = 0, time.monotonic()
