@@ -53,7 +53,8 @@ def test_fast_dds_takes_the_shipped_profile_and_refuses_a_broken_one(tmp_path: P
     assert 'XMLPARSER' in said and 'leaseAnouncement' in said  # ... naming what it ignored
 
 
-def test_a_run_uses_the_shipped_profile_unless_the_user_names_one(tmp_path: Path) -> None:
+def test_a_run_uses_the_shipped_profile_unless_the_user_names_one(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     env: dict[str, str] = {}
     use_run_discovery(env)
     assert env == {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
@@ -63,10 +64,20 @@ def test_a_run_uses_the_shipped_profile_unless_the_user_names_one(tmp_path: Path
         use_run_discovery(theirs)
         assert theirs == {name: '/etc/their_profile.xml',
                           'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    # A graph's nodes get the same, from this process's environment (an in-process session
+    # earlier in this worker may have set the variable already: start from none).
+    for name in (*PROFILE_VARIABLES, 'OPENBLAS_NUM_THREADS'):
+        monkeypatch.delenv(name, raising=False)
     graph = Graph([], [], 7, tmp_path / 'logs')
     assert graph.env['ROS_DOMAIN_ID'] == '7'
-    if not any(os.environ.get(name) for name in PROFILE_VARIABLES):
-        assert graph.env['FASTRTPS_DEFAULT_PROFILES_FILE'] == str(SHIPPED)
+    assert graph.env['FASTRTPS_DEFAULT_PROFILES_FILE'] == str(SHIPPED)
+    assert graph.env['OPENBLAS_NUM_THREADS'] == '1'
+    monkeypatch.setenv('FASTDDS_DEFAULT_PROFILES_FILE', '/etc/their_profile.xml')
+    monkeypatch.setenv('OPENBLAS_NUM_THREADS', '2')
+    graph = Graph([], [], 7, tmp_path / 'logs')
+    assert 'FASTRTPS_DEFAULT_PROFILES_FILE' not in graph.env
+    assert graph.env['FASTDDS_DEFAULT_PROFILES_FILE'] == '/etc/their_profile.xml'
+    assert graph.env['OPENBLAS_NUM_THREADS'] == '2'
 
 
 def test_a_missing_profile_is_one_error(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
