@@ -128,6 +128,7 @@ def _make_step_node(name: str) -> Any:
             self.gate = StepGate(me, 0, self.dt_ns)
             self.finished = False
             self.exit_code = 0
+            self.stopping = False  # set by spin_node on a stop request: no further step
             self.started = False
             self.outputs = []
             for port in me.outputs:
@@ -159,6 +160,8 @@ def _make_step_node(name: str) -> Any:
             for step in self.gate.put(topic, stamp.sec * 1_000_000_000 + stamp.nanosec):
                 if not self.is_source:
                     self.publish_step(step)
+                elif self.stopping:
+                    continue  # a stop was requested: no further step
                 elif step + 1 < self.config.steps:
                     self.publish_step(step + 1)
                 else:

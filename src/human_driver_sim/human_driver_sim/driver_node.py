@@ -69,6 +69,7 @@ class DriverNode(Node):
     def __init__(self) -> None:
         super().__init__('human_driver')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.config = declare_config(self, DriverConfig)
         self.follower = declare_config(self, FollowerState)

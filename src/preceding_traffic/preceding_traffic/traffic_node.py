@@ -7,7 +7,8 @@ odometry ``preceding_vehicle/odom`` with its transform on ``tf`` (``odom`` ->
 namespace). It starts after ``sim/start`` and
 advances to t + 1 only when the step's outputs are in: ego and human odometry stamped
 t + dt, the trust and the planner status stamped t (lock-step, see
-:mod:`trust_monitor.graph_interface`). After the last step it logs ``done`` and keeps its
+:mod:`trust_monitor.graph_interface`). Once asked to stop it completes the step in
+progress and starts no other. After the last step it logs ``done`` and keeps its
 publishers alive until it is stopped: a writer that exits takes the samples a slow
 subscriber (the recorder) has not acknowledged yet with it.
 
@@ -75,6 +76,7 @@ class TrafficNode(Node):
         super().__init__('preceding_traffic')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
         self.exit_code = 0
+        self.stopping = False  # a stop was requested: no further step
         self.run = declare_config(self, TrafficRunConfig)
         trace_config = declare_config(self, TraceConfig)
         self.clock = declare_config(self, WallClockConfig)
@@ -179,6 +181,9 @@ class TrafficNode(Node):
             self.position_m += float(self.trace.speeds_mps[self.step]) * self.run.dt_s
             if self.step + 1 >= self.trace.steps:
                 self.get_logger().info(f'done: {self.trace.steps} steps')
+                self.done = True
+            elif self.stopping:
+                self.get_logger().info(f'stopped after step {self.step}')
                 self.done = True
             else:
                 self.publish_step(self.step + 1)

@@ -67,6 +67,7 @@ class EgoPlantNode(Node):
     def __init__(self) -> None:
         super().__init__('ego_plant')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.config = declare_config(self, PlantConfig)
         self.clock = declare_config(self, WallClockConfig)

@@ -78,6 +78,7 @@ class PlannerNode(Node):
     def __init__(self) -> None:
         super().__init__('planner')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.config = declare_config(self, PlannerConfig)
         trust = declare_config(self, TrustConfig)

@@ -77,6 +77,7 @@ class StandinNode(Node):
     def __init__(self) -> None:
         super().__init__('vehicle_standin')
         self.finished = False
+        self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.config = declare_config(self, StandinConfig)
         self.clock = declare_config(self, WallClockConfig)

@@ -42,6 +42,7 @@ class MonitorNode(Node):
     def __init__(self) -> None:
         super().__init__('trust_monitor')
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.estimator = TrustEstimator(declare_config(self, TrustConfig))
         self.step_s = declare_config(self, MonitorConfig).dt_s

@@ -59,6 +59,7 @@ class RecorderNode(Node):
     def __init__(self) -> None:
         super().__init__('recorder')
         self.finished = False
+        self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.config = declare_config(self, RecorderConfig)
         self.clock = declare_config(self, WallClockConfig)

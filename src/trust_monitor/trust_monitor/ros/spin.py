@@ -97,10 +97,14 @@ class GraphNode(Protocol):
             every step); the loop then stops.
         exit_code: the process exit code once it ends (0, or e.g. the recorder's 3 for a
             full disk).
+        stopping: set to True by :func:`spin_node` when a stop is requested, before the
+            node takes what is still queued: from then on it finishes work in progress but
+            starts none of its own (the step authority publishes no further step).
     """
 
     finished: bool
     exit_code: int
+    stopping: bool
 
     def close(self) -> None:
         """Called once before the node is destroyed (finish files, write statistics)."""
@@ -158,7 +162,11 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     orchestrator can name the node that died. SIGINT and SIGTERM end the node cleanly (its
     ``exit_code``), as does the death of the process named by :data:`PARENT_ENV`: the node
     first takes what is queued for :data:`DRAIN_S` and waits until its messages are
-    acknowledged, so a recorder stopped after it holds them.
+    acknowledged, so a recorder stopped after it holds them. While it drains, its
+    ``stopping`` is set: the step authority starts no new step (it would otherwise keep the
+    lock-step chain going for the whole drain, tens of steps a stopped run did not ask for,
+    whose messages a recorder behind on a loaded machine had not acknowledged when their
+    writers exited).
 
     Args:
         factory: builds the node (its constructor).
@@ -208,6 +216,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
             if parent and os.getppid() != parent:
                 stop['requested'] = True
         if not graph_node.finished and rclpy.ok():
+            graph_node.stopping = True
             _drain(executor, node)
     except ExternalShutdownException:
         pass  # the context was shut down from outside: clean exit below
