@@ -186,10 +186,14 @@ def test_retraining_reproduces_the_shipped_model(tmp_path: Path) -> None:
     assert_is_the_shipped_model(out)
 
 
-def numerics_in_child(env: dict[str, str], *, pinned: bool) -> dict[str, Any]:
+def numerics_in_child(env: dict[str, str], *, pinned: bool,
+                      libraries: str | None = None) -> dict[str, Any]:
     """:func:`numerics_report` of a fresh process with ``env`` on top of ours, pinned (the
-    training process of `trust-av train-gru`) or not."""
+    training process of `trust-av train-gru`) or not, of every library or of ``libraries``
+    (comma-separated)."""
     args = ['-m', 'trust_av_planner.study.pinned_numerics']
+    if libraries is not None:
+        args += ['--libraries', libraries]
     if pinned:
         proc = run_pinned(args, env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     else:
@@ -226,9 +230,16 @@ def test_numerics_fingerprint_is_stable_and_sees_the_cpu_path() -> None:
         selectable.append(({'GLIBC_TUNABLES': 'glibc.cpu.hwcaps=-AVX2,-FMA'}, 'libm'))
     assert len(selectable) >= 4, live   # an x86-64 CPU with AVX2 offers all five
     for override, library in selectable:
-        other = numerics_in_child(override, pinned=False)
-        assert other['kernels'][library] != plain['kernels'][library], override
-        assert other['fingerprint'] != plain['fingerprint'], override
+        # Only the library the setting is for (a child without PyTorch when it is not
+        # torch's: 1.5 CPU-s less each); the fingerprint of that library alone moves too.
+        other = numerics_in_child(override, pinned=False, libraries=library)
+        alone = numerics_report([library])
+        assert set(other['kernels']) == {library}
+        assert alone['kernels'][library] == plain['kernels'][library]
+        assert other['kernels'][library] != alone['kernels'][library], override
+        assert other['fingerprint'] != alone['fingerprint'], override
+    assert numerics_in_child({}, pinned=False, libraries='numpy,libm')['kernels'] == {
+        k: plain['kernels'][k] for k in ('numpy', 'libm')}
     if unsupported_reason() is not None:
         return
     pinned = numerics_in_child({}, pinned=True)

@@ -164,12 +164,15 @@ def _mkl_branch() -> int:
     return int(get(1))  # MKL_CBWR_BRANCH
 
 
-def live_numerics() -> dict[str, Any]:
-    """What this process's libraries actually chose (a description for the model card)."""
+LIBRARIES = ('numpy', 'libm', 'torch')
+"""The libraries whose kernels :func:`numerics_report` hashes."""
+
+
+def live_numerics(torch_settings: bool = True) -> dict[str, Any]:
+    """What this process's libraries actually chose (a description for the model card);
+    without ``torch_settings``, numpy's and libc's only (PyTorch is then not imported)."""
     import ctypes
     import glob
-
-    import torch
 
     active = [t for t in __cpu_dispatch__ if __cpu_features__.get(t)]
     openblas = '?'
@@ -179,16 +182,21 @@ def live_numerics() -> dict[str, Any]:
         corename = ctypes.CDLL(libs[0]).scipy_openblas_get_corename64_
         corename.restype = ctypes.c_char_p
         openblas = corename().decode()
-    return {
+    live: dict[str, Any] = {
         'pinned': os.environ.get(CHILD_MARK, 'no'),
-        'mkl_branch': MKL_BRANCHES.get(_mkl_branch(), f'branch {_mkl_branch()}'),
         'numpy': np.__version__, 'numpy_dispatch': active,
         'openblas_core': openblas,
-        'torch': torch.__version__,
-        'torch_cpu_capability': str(torch.backends.cpu.get_cpu_capability()),
-        'threads': torch.get_num_threads(),
         'libc': ' '.join(platform.libc_ver()),
     }
+    if torch_settings:
+        import torch
+
+        live.update({
+            'mkl_branch': MKL_BRANCHES.get(_mkl_branch(), f'branch {_mkl_branch()}'),
+            'torch': torch.__version__,
+            'torch_cpu_capability': str(torch.backends.cpu.get_cpu_capability()),
+            'threads': torch.get_num_threads()})
+    return live
 
 
 def check_pinned() -> None:
@@ -212,7 +220,7 @@ def _digest(*arrays: Any) -> str:
     return digest.hexdigest()[:16]
 
 
-def numerics_report() -> dict[str, Any]:
+def numerics_report(libraries: Sequence[str] = LIBRARIES) -> dict[str, Any]:
     """The bits of the floating-point kernels the training pipeline runs on, per library,
     and what this process's libraries chose (:func:`live_numerics`).
 
@@ -222,9 +230,14 @@ def numerics_report() -> dict[str, Any]:
     sigmoid/tanh and one GRU forward, backward and update step (ATen). Library versions
     and the live settings are part of the fingerprint, the CPU model is not: in the pinned
     training process (this module) it is the same on every x86-64 CPU with AVX2.
-    """
-    import torch
 
+    ``libraries`` (a subset of :data:`LIBRARIES`) limits the kernels, the live settings
+    and so the fingerprint to those libraries; without ``'torch'`` PyTorch is not imported
+    (about 1.5 CPU-s). The model card holds the whole fingerprint.
+    """
+    unknown = sorted(set(libraries) - set(LIBRARIES))
+    if unknown:
+        raise ValueError(f'unknown libraries {unknown}; known: {list(LIBRARIES)}')
     rng = np.random.default_rng(0)
     x = rng.normal(0.0, 3.0, 4096)
     matrix = rng.normal(0.0, 1.0, (48, 16))
@@ -235,6 +248,20 @@ def numerics_report() -> dict[str, Any]:
                                    math.log(abs(v) + 1e-3), math.pow(abs(v) + 0.5, 1.7)]
                                   for v in x[:1024]])),
     }
+    kernels = {name: kernels[name] for name in libraries if name in kernels}
+    if 'torch' in libraries:
+        kernels['torch'] = _torch_kernels(x, matrix)
+    live = live_numerics(torch_settings='torch' in libraries)
+    fingerprint = _digest(np.frombuffer(json.dumps([kernels, live], sort_keys=True).encode(),
+                                        dtype=np.uint8))
+    return {'fingerprint': fingerprint, 'kernels': kernels, 'live': live}
+
+
+def _torch_kernels(x: np.ndarray, matrix: np.ndarray) -> str:
+    """Digest of PyTorch's float64 matrix product, sigmoid/tanh and one GRU forward,
+    backward and update step."""
+    import torch
+
     with torch.random.fork_rng():
         torch.manual_seed(0)
         threads = torch.get_num_threads()
@@ -253,16 +280,12 @@ def numerics_report() -> dict[str, Any]:
                     assert grad is not None
                     p.sub_(3e-3 * grad / (torch.sqrt(grad * grad) + 1e-8))
             a = torch.tensor(matrix)
-            kernels['torch'] = _digest(
+            return _digest(
                 (a.T @ a).numpy(), torch.sigmoid(torch.tensor(x)).numpy(),
                 torch.tanh(torch.tensor(x)).numpy(),
                 *[p.detach().numpy() for p in params])
         finally:
             torch.set_num_threads(threads)
-    live = live_numerics()
-    fingerprint = _digest(np.frombuffer(json.dumps([kernels, live], sort_keys=True).encode(),
-                                        dtype=np.uint8))
-    return {'fingerprint': fingerprint, 'kernels': kernels, 'live': live}
 
 
 def numerics_fingerprint() -> str:
@@ -281,11 +304,25 @@ def numerics_fingerprint() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m trust_av_planner.study.pinned_numerics``: print this process's numerics
-    (fingerprint, its parts, the live settings) as JSON."""
-    del argv
+    """``python -m trust_av_planner.study.pinned_numerics [--libraries numpy,libm]``: print
+    this process's numerics (fingerprint, its parts, the live settings) as JSON."""
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog='python -m trust_av_planner.study.pinned_numerics',
+        description="Print this process's floating-point numerics as JSON: the fingerprint "
+                    'the GRU model card stores, the kernel digests per library and the '
+                    'settings the libraries chose.')
+    parser.add_argument('--libraries', default=','.join(LIBRARIES),
+                        help='comma-separated subset of %(default)s (default: all; the '
+                             'fingerprint then covers only these)')
+    args = parser.parse_args(argv)
+    libraries = [name for name in args.libraries.split(',') if name]
+    unknown = sorted(set(libraries) - set(LIBRARIES))
+    if unknown or not libraries:
+        parser.error(f'--libraries: unknown {unknown}; choose from {",".join(LIBRARIES)}')
     check_pinned()
-    print(json.dumps(numerics_report(), sort_keys=True))
+    print(json.dumps(numerics_report(libraries), sort_keys=True))
     return 0
 
 
