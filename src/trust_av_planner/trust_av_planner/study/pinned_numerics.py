@@ -314,13 +314,14 @@ def main(argv: list[str] | None = None) -> int:
                     'the GRU model card stores, the kernel digests per library and the '
                     'settings the libraries chose.')
     parser.add_argument('--libraries', default=','.join(LIBRARIES),
-                        help='comma-separated subset of %(default)s (default: all; the '
-                             'fingerprint then covers only these)')
+                        help='comma-separated subset of %(default)s (default: all); the '
+                             'kernels, settings and fingerprint cover only these')
     args = parser.parse_args(argv)
     libraries = [name for name in args.libraries.split(',') if name]
     unknown = sorted(set(libraries) - set(LIBRARIES))
     if unknown or not libraries:
-        parser.error(f'--libraries: unknown {unknown}; choose from {",".join(LIBRARIES)}')
+        parser.error(f'--libraries {args.libraries!r}: give one or more of '
+                     f'{",".join(LIBRARIES)}')
     check_pinned()
     print(json.dumps(numerics_report(libraries), sort_keys=True))
     return 0
