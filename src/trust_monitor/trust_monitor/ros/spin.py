@@ -233,13 +233,24 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
 
 def _drain(executor: EventsExecutor, node: Node) -> None:
     """Take what is queued (:data:`DRAIN_S`), then wait for the acknowledgements of what
-    this node published (:data:`ACK_TIMEOUT_S` over all publishers)."""
+    this node published (:data:`ACK_TIMEOUT_S` over all publishers); a topic whose
+    subscribers have not acknowledged everything by then is named in a warning.
+
+    A reliable reader acknowledges when its writer's heartbeat asks, so this wait ends as
+    soon as a heartbeat period allows: the run's Fast DDS profile
+    (``config/fastdds_graph.xml``) sets it to 100 ms; with Fast DDS's default (3 s) the
+    wait ran into its timeout on every stop, acknowledged or not.
+    """
     end = time.monotonic() + DRAIN_S
     while time.monotonic() < end and rclpy.ok():
         executor.spin_once(timeout_sec=0.02)
     deadline = time.monotonic() + ACK_TIMEOUT_S
+    unacknowledged = []
     for publisher in node.publishers:
-        left = deadline - time.monotonic()
-        if left <= 0.0:
-            break
-        publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
+        left = max(0.0, deadline - time.monotonic())
+        if not publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+            unacknowledged.append(publisher.topic_name)
+    if unacknowledged:
+        node.get_logger().warning(
+            f'stopping: not acknowledged by every subscriber within {ACK_TIMEOUT_S:g} s: '
+            f'{", ".join(unacknowledged)}')
