@@ -150,3 +150,23 @@ def wait_for_steps(bag: Path, steps: int, proc: subprocess.Popen[str] | None = N
         assert proc is None or proc.poll() is None, proc.communicate()
         time.sleep(0.1)
     assert recorded_chunks(mcap) >= steps, f'{mcap}: fewer than {steps} steps in {timeout_s:g} s'
+
+
+INTERRUPTED_RUN_STEPS = 3000
+"""Steps of :func:`long_trace`: a run a test stops midway must not be able to finish first."""
+
+
+def long_trace(directory: Path) -> Path:
+    """A 3000-step CSV trace (a smooth 5-15 m/s profile, 1 s steps) in ``directory``, for
+    runs that a test interrupts, kills or intrudes on after some recorded steps. With US06
+    (600 steps) a run could step through all of them before the stop arrived on a loaded
+    machine, where the recorder lags the graph (seen with four busy processes beside the
+    SIGINT test: all 600 steps recorded after waiting for 150), and the test would then not
+    test an interruption."""
+    import math
+
+    path = directory / 'long.csv'
+    path.write_text('time_s,speed_mps\n' + ''.join(
+        f'{t},{10.0 + 5.0 * math.sin(t / 30.0):.3f}\n'
+        for t in range(INTERRUPTED_RUN_STEPS + 1)))
+    return path

@@ -13,7 +13,12 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import assert_every_topic_complete, wait_for_steps
+from conftest import (
+    INTERRUPTED_RUN_STEPS,
+    assert_every_topic_complete,
+    long_trace,
+    wait_for_steps,
+)
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
@@ -41,10 +46,19 @@ def run_command(bag: Path, *extra: str, plot: bool = False) -> list[str]:
             '--no-progress', *([] if plot else ['--no-plot']), *extra]
 
 
-def in_process(steps: int = STEPS) -> list[StepRecord]:
+def in_process(steps: int = STEPS, trace_arg: str = 'us06') -> list[StepRecord]:
     config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'ca'}})
-    trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), steps)
+    trace = truncate(load_trace(trace_arg, config.planner.dt_s, config.trace), steps)
     return simulate(config, trace).records
+
+
+def interrupted_run(bag: Path) -> tuple[subprocess.Popen[str], str]:
+    """A run of :func:`conftest.long_trace` that a test stops midway, and that trace."""
+    trace = str(long_trace(bag.parent))
+    proc = subprocess.Popen(run_command(bag, '--trace', trace, '--max-steps',
+                                        str(INTERRUPTED_RUN_STEPS)),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return proc, trace
 
 
 def assert_records_equal(graph: list[StepRecord], ref: list[StepRecord]) -> None:
@@ -170,8 +184,7 @@ def assert_gone(pids: list[int]) -> None:
 
 def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
     bag = tmp_path / 'killed'
-    proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc, trace = interrupted_run(bag)
     planner = node_pid(proc.pid, 'planner')
     wait_for_steps(bag, 20)          # let it run some steps
     children = children_of(proc.pid)
@@ -182,8 +195,8 @@ def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
     assert err.startswith('trust-av run: error:')
     assert_gone(children)                                  # no orphans
     records = records_from_bag(bag)                         # readable up to the kill
-    assert 0 < len(records) < 600
-    assert_records_equal(records, in_process(600)[:len(records)])
+    assert 0 < len(records) < INTERRUPTED_RUN_STEPS
+    assert_records_equal(records, in_process(len(records), trace))
 
 
 def test_readme_topic_table_is_the_code_table() -> None:
@@ -196,8 +209,7 @@ def test_readme_topic_table_is_the_code_table() -> None:
 def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path, moment: str) -> None:
     """Ctrl-C at any moment: exit 130, one line, every topic holds every complete step."""
     bag = tmp_path / 'interrupted'
-    proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc, trace = interrupted_run(bag)
     if moment == 'mid-run':
         wait_for_steps(bag, 150)
     else:
@@ -213,8 +225,8 @@ def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path, moment: str) -
     assert err.count('\n') == 1
     assert check_bag_directory(bag) == []
     records = records_from_bag(bag)
-    assert len(records) == assert_every_topic_complete(bag) < 600
-    assert_records_equal(records, in_process(600)[:len(records)])
+    assert len(records) == assert_every_topic_complete(bag) < INTERRUPTED_RUN_STEPS
+    assert_records_equal(records, in_process(len(records), trace))
 
 
 def test_gru_planner_in_the_graph_equals_in_process(tmp_path: Path) -> None:
@@ -233,16 +245,15 @@ def test_gru_planner_in_the_graph_equals_in_process(tmp_path: Path) -> None:
 def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
     """The recorder killed mid-run: exit 2 naming it, and the truncated MCAP is repaired."""
     bag = tmp_path / 'cut'
-    proc = subprocess.Popen(run_command(bag, '--max-steps', '600'), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc, trace = interrupted_run(bag)
     wait_for_steps(bag, 20)
     os.kill(node_pid(proc.pid, 'recorder'), signal.SIGKILL)
     _out, err = proc.communicate(timeout=120)
     assert proc.returncode == 2
     assert 'node recorder exited with code -9' in err
     records = records_from_bag(bag)             # readable again after the repair
-    assert 0 < len(records) < 600
-    assert_records_equal(records, in_process(600)[:len(records)])
+    assert 0 < len(records) < INTERRUPTED_RUN_STEPS
+    assert_records_equal(records, in_process(len(records), trace))
 
 
 def test_commute_bag_replays_through_the_graph(tmp_path: Path) -> None:

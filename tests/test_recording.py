@@ -6,7 +6,6 @@ killed orchestrator, a foreign publisher, a full disk under a real run) are at t
 from __future__ import annotations
 
 import errno
-import math
 import os
 import shutil
 import signal
@@ -18,7 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import assert_every_topic_complete, wait_for_steps
+from conftest import (
+    INTERRUPTED_RUN_STEPS,
+    assert_every_topic_complete,
+    long_trace,
+    wait_for_steps,
+)
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
@@ -278,21 +282,23 @@ def run_command(bag: Path, steps: int = 600, *extra: str, trace: str = 'us06') -
 
 def test_sigterm_finishes_the_bag_like_sigint(tmp_path: Path) -> None:
     bag = tmp_path / 'term'
-    proc = subprocess.Popen(run_command(bag), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    proc = subprocess.Popen(run_command(bag, INTERRUPTED_RUN_STEPS,
+                                        trace=str(long_trace(tmp_path))),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_steps(bag, 8, proc=proc)
     proc.send_signal(signal.SIGTERM)
     _out, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err
     assert err.count('\n') == 1 and 'stopped by SIGTERM' in err
     assert check_bag_directory(bag) == []
-    assert 0 < assert_every_topic_complete(bag) < 600
+    assert 0 < assert_every_topic_complete(bag) < INTERRUPTED_RUN_STEPS
 
 
 def test_a_killed_orchestrator_leaves_a_finished_bag_and_no_process(tmp_path: Path) -> None:
     bag = tmp_path / 'orphan'
-    proc = subprocess.Popen(run_command(bag), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    proc = subprocess.Popen(run_command(bag, INTERRUPTED_RUN_STEPS,
+                                        trace=str(long_trace(tmp_path))),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_steps(bag, 8, proc=proc)
     nodes = [int(p.name) for p in Path('/proc').iterdir() if p.name.isdigit()
              and _parent(int(p.name)) == proc.pid]
@@ -305,7 +311,7 @@ def test_a_killed_orchestrator_leaves_a_finished_bag_and_no_process(tmp_path: Pa
     assert not any(_alive(pid) for pid in nodes)
     assert (bag / 'metadata.yaml').exists()               # finished by the recorder itself
     assert check_bag_directory(bag) == []
-    assert 0 < assert_every_topic_complete(bag) < 600
+    assert 0 < assert_every_topic_complete(bag) < INTERRUPTED_RUN_STEPS
 
 
 def _parent(pid: int) -> int:
@@ -351,14 +357,12 @@ def test_a_foreign_publisher_stops_the_run_and_a_foreign_domain_is_skipped(
     # A trace long enough to outlast discovery (the run stops when it names the intruder:
     # up to one periodic participant announcement, 3 s, plus the watch period; US06 ends
     # about 3 s after step 8 on an idle machine).
-    long_trace = tmp_path / 'long.csv'
-    long_trace.write_text('time_s,speed_mps\n' + ''.join(
-        f'{t},{10.0 + 5.0 * math.sin(t / 30.0):.3f}\n' for t in range(3001)))
+    trace = long_trace(tmp_path)
     first = intruder(230)
     second = None
     try:
         bag = tmp_path / 'intruded'
-        proc = subprocess.Popen(run_command(bag, 3000, trace=str(long_trace)),
+        proc = subprocess.Popen(run_command(bag, INTERRUPTED_RUN_STEPS, trace=str(trace)),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 env=env)
         wait_for_steps(bag, 8, proc=proc)
