@@ -2,10 +2,10 @@
 
 On SIGINT/SIGTERM a node keeps taking what is queued for a moment (``spin_node``'s drain),
 so that a recorder stopped after it holds every complete step. The step authority
-(``preceding_traffic``) must not start new steps meanwhile: it did, and kept a stopped run
-going for the whole drain (64 further steps in a suite run), whose messages a recorder behind
-on a loaded machine had not acknowledged when their writers exited, so whole topics of the
-bag ended 64 steps before the others. The real node class, in a fresh rclpy process.
+(``preceding_traffic``) must not start new steps meanwhile: otherwise a stopped run goes on
+for the whole drain (64 further steps in one suite run), whose messages a recorder behind on
+a loaded machine has not acknowledged when their writers exit, so whole topics of the bag
+end 64 steps before the others. The real node class, in a fresh rclpy process.
 """
 
 from __future__ import annotations
@@ -55,8 +55,9 @@ node.destroy_node()
 """
 
 
-def test_a_stop_request_ends_the_chain_at_the_step_in_progress(tmp_path: Path) -> None:
-    env = dict(os.environ, ROS_DOMAIN_ID='227', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+def test_a_stop_request_ends_the_chain_at_the_step_in_progress(tmp_path: Path,
+                                                              ros_domain: str) -> None:
+    env = dict(os.environ, ROS_DOMAIN_ID=ros_domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_LOG_DIR=str(tmp_path / 'ros_log'))
     proc = subprocess.run([sys.executable, '-c', PROBE, str(DEFAULT_PARAMS_FILE)],
                           capture_output=True, text=True, timeout=120, env=env)
