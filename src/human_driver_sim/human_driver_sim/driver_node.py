@@ -46,6 +46,7 @@ from trust_monitor.ros.messages import (
 )
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS, topic_qos
+from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
@@ -92,11 +93,10 @@ class DriverNode(Node):
         self.pub_status = self.create_publisher(DiagnosticArray, 'human/driver_status',
                                                 topic_qos('human/driver_status', self.clock))
         callback = self.on_latest if self.clock.wall else self.on_input
-        self.create_subscription(JointTrajectory, 'ego/expected_plan',
-                                 lambda m: callback('expected', m),
-                                 topic_qos('ego/expected_plan', self.clock))
-        self.create_subscription(Odometry, 'ego/odom', lambda m: callback('ego', m),
-                                 topic_qos('ego/odom', self.clock))
+        subscribe(self, JointTrajectory, 'ego/expected_plan',
+                  lambda m: callback('expected', m), topic_qos('ego/expected_plan', self.clock))
+        subscribe(self, Odometry, 'ego/odom', lambda m: callback('ego', m),
+                  topic_qos('ego/odom', self.clock))
         start_ns = now_ns(self) if self.clock.wall else stamp_ns(self.follower.start_time_s)
         self.publish_odometry(start_ns)
         self.started = False

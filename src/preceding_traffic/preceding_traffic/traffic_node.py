@@ -44,6 +44,7 @@ from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
 from trust_monitor.ros.messages import TrajectoryBytes, VehicleOdometry, msg_ns, time_msg
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS, topic_qos
+from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
@@ -107,12 +108,11 @@ class TrafficNode(Node):
                                    f'at real time, {self.clock.control_rate_hz:g} Hz; waiting '
                                    f'for {self.resolve_topic_name("sim/start")}')
             return
-        self.create_subscription(Odometry, 'ego/odom', lambda m: self.on_done('ego', m, 1),
-                                 QOS['STEP'])
-        self.create_subscription(Odometry, 'human/odom', lambda m: self.on_done('human', m, 1),
-                                 QOS['STEP'])
-        self.create_subscription(Vector3Stamped, 'trust_monitor/trust',
-                                 lambda m: self.on_done('trust', m, 0), QOS['STEP'])
+        subscribe(self, Odometry, 'ego/odom', lambda m: self.on_done('ego', m, 1), QOS['STEP'])
+        subscribe(self, Odometry, 'human/odom', lambda m: self.on_done('human', m, 1),
+                  QOS['STEP'])
+        subscribe(self, Vector3Stamped, 'trust_monitor/trust',
+                  lambda m: self.on_done('trust', m, 0), QOS['STEP'])
         self.create_subscription(DiagnosticArray, 'ego/planner_status',
                                  lambda m: self.on_done('status', m, 0), QOS['STEP'])
         self.get_logger().info(f'trace {trace.name}: {trace.steps} steps of {trace.dt_s} s; '

@@ -36,6 +36,7 @@ from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockCon
 from trust_monitor.ros.messages import VehicleOdometry, msg_ns
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS, command_deadline_s, topic_qos
+from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 
 
@@ -78,9 +79,9 @@ class EgoPlantNode(Node):
         self.pub_tf = self.create_publisher(TFMessage, 'tf',
                                             topic_qos('tf', self.clock, publisher=True))
         self.latest = LatestInputs(['command'])
-        self.create_subscription(AccelStamped, 'ego/accel_cmd',
-                                 self.on_latest if self.clock.wall else self.on_command,
-                                 topic_qos('ego/accel_cmd', self.clock))
+        subscribe(self, AccelStamped, 'ego/accel_cmd',
+                  self.on_latest if self.clock.wall else self.on_command,
+                  topic_qos('ego/accel_cmd', self.clock))
         self.last_tick_ns = time.monotonic_ns()
         start_ns = now_ns(self) if self.clock.wall else stamp_ns(self.config.start_time_s)
         self.publish(start_ns)

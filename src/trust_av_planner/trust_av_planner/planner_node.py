@@ -57,6 +57,7 @@ from trust_monitor.ros.messages import (
 )
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import topic_qos
+from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 from trust_monitor.ros.tuning import Tunable, enable_tuning
 from trust_monitor.trust_model import TrustConfig
@@ -127,8 +128,8 @@ class PlannerNode(Node):
         callback = self.on_latest if wall else self.on_input
         for name, msgtype, topic in inputs:
             if topic:
-                self.create_subscription(
-                    msgtype, topic, lambda m, n=name: callback(n, m),
+                subscribe(
+                    self, msgtype, topic, lambda m, n=name: callback(n, m),
                     topic_qos(TABLE_TOPIC[name], self.clock),
                     event_callbacks=self.event_callbacks(name) if wall else None)
         self.loop = WallLoop(self, self.clock, self.wall_step) if wall else None

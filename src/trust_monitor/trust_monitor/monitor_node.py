@@ -32,6 +32,7 @@ from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockCon
 from trust_monitor.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import topic_qos
+from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 from trust_monitor.trust_model import MonitorConfig, TrustConfig, TrustEstimator
 
@@ -54,11 +55,10 @@ class MonitorNode(Node):
                                          topic_qos('trust_monitor/trust', self.clock))
         self.trust_bytes = vector3_bytes(NO_FRAME)
         callback = self.on_latest if self.clock.wall else self.on_input
-        self.create_subscription(JointTrajectory, 'ego/plan', lambda m: callback('plan', m),
-                                 topic_qos('ego/plan', self.clock))
-        self.create_subscription(JointTrajectory, 'ego/expected_plan',
-                                 lambda m: callback('expected', m),
-                                 topic_qos('ego/expected_plan', self.clock))
+        subscribe(self, JointTrajectory, 'ego/plan', lambda m: callback('plan', m),
+                  topic_qos('ego/plan', self.clock))
+        subscribe(self, JointTrajectory, 'ego/expected_plan', lambda m: callback('expected', m),
+                  topic_qos('ego/expected_plan', self.clock))
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
         self.get_logger().info(f'ready ({self.clock.clock_mode})')
 
