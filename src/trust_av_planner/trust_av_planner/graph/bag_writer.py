@@ -101,14 +101,21 @@ def qos_profile(*, reliable: bool, transient_local: bool, depth: int,
 
 class _WholeWrites:
     """An unbuffered file whose ``write`` writes everything or raises ``OSError`` (no silent
-    short writes: rosbags' writer ignores ``write``'s return value)."""
+    short writes: rosbags' writer ignores ``write``'s return value). Between
+    :meth:`gather` and :meth:`commit` writes are collected and go to the file in one
+    ``os.write`` loop (a chunk and its ~45 small index records: one system call, not 45)."""
 
     def __init__(self, path: Path, offset: int) -> None:
         self.fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC)
         os.lseek(self.fd, offset, os.SEEK_SET)
         self.position = offset
+        self.gathered: list[bytes] | None = None
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
+        if self.gathered is not None:
+            self.gathered.append(bytes(data))
+            self.position += len(data)
+            return len(data)
         view = memoryview(data)
         while view:
             written = os.write(self.fd, view)
@@ -116,11 +123,23 @@ class _WholeWrites:
             view = view[written:]
         return len(data)
 
+    def gather(self) -> None:
+        """Collect writes from now on (``tell`` counts them) until :meth:`commit`."""
+        self.gathered = []
+
+    def commit(self) -> None:
+        """Write what was collected; ``OSError`` if it does not all fit."""
+        view, self.gathered = memoryview(b''.join(self.gathered or ())), None
+        while view:   # ``position`` already counts these bytes
+            view = view[os.write(self.fd, view):]
+
     def tell(self) -> int:
         return self.position
 
     def truncate(self, size: int) -> None:
-        """Cut the file at ``size`` and continue writing there."""
+        """Cut the file at ``size`` and continue writing there (collected writes are
+        dropped)."""
+        self.gathered = None
         os.ftruncate(self.fd, size)
         os.lseek(self.fd, size, os.SEEK_SET)
         self.position = size
@@ -145,11 +164,14 @@ class _StepStorage(McapWriter):
         chunk began, drop the chunk and re-raise."""
         if not self.chunk.bio.tell():
             return
-        start = self.bio.tell()
+        start, indexed = self.bio.tell(), len(self.chunks)
+        self.bio.gather()
         try:
             self.close_chunk()
+            self.bio.commit()
         except OSError:
             self.bio.truncate(start)
+            del self.chunks[indexed:]   # close_chunk indexed the chunk the file lacks
             raise
 
 
