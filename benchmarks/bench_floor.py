@@ -43,6 +43,8 @@ from typing import Any
 
 HERE = Path(__file__).resolve().parent
 MODULE = Path(__file__).stem
+STAMP = struct.Struct('<iI')
+"""A header stamp (sec, nanosec) in little-endian CDR."""
 DIAGNOSTIC_VALUES = {'ego/planner_status': 8, 'human/driver_status': 4}
 """Key/values per status message, as planner_node and driver_node publish them."""
 
@@ -58,6 +60,9 @@ class FloorConfig:
         recorder: a recorder ends the run (without one the source exits after the last step).
         bag_path: the recorder's MCAP file.
         compression: the recorder's chunk compression, ``zstd`` or ``none``.
+        raw_inputs: the nodes take their inputs as bytes and read only the stamp (a floor
+            below the specified one, which takes rclpy messages; for comparison with the
+            graph, which reads its inputs from bytes).
     """
 
     dt_s: float
@@ -66,6 +71,7 @@ class FloorConfig:
     recorder: bool = True
     bag_path: str = ''
     compression: str = 'zstd'
+    raw_inputs: bool = False
 
 
 # ---------------------------------------------------------------------------- node side
@@ -142,9 +148,15 @@ def _make_step_node(name: str) -> Any:
                     pub.publish(msg)  # the initial state, stamped 0
             for port in me.inputs:
                 topic = TOPIC[port.topic]
-                self.create_subscription(message_class(topic.msgtype), topic.name,
-                                         lambda m, t=topic.name: self.on_input(t, m),
-                                         QOS[topic.qos])
+                if self.config.raw_inputs:  # the stamp: bytes 4-11 after the CDR_LE header
+                    self.create_subscription(
+                        message_class(topic.msgtype), topic.name,
+                        lambda data, t=topic.name: self.on_stamp(
+                            t, STAMP.unpack_from(data, 4)), QOS[topic.qos], raw=True)
+                else:
+                    self.create_subscription(message_class(topic.msgtype), topic.name,
+                                             lambda m, t=topic.name: self.on_input(t, m),
+                                             QOS[topic.qos])
             for start in me.start:
                 topic = TOPIC[start]
                 self.create_subscription(message_class(topic.msgtype), topic.name,
@@ -157,7 +169,10 @@ def _make_step_node(name: str) -> Any:
 
         def on_input(self, topic: str, msg: Any) -> None:
             stamp = msg.header.stamp
-            for step in self.gate.put(topic, stamp.sec * 1_000_000_000 + stamp.nanosec):
+            self.on_stamp(topic, (stamp.sec, stamp.nanosec))
+
+        def on_stamp(self, topic: str, stamp: tuple[int, int]) -> None:
+            for step in self.gate.put(topic, stamp[0] * 1_000_000_000 + stamp[1]):
                 if not self.is_source:
                     self.publish_step(step)
                 elif self.stopping:
@@ -374,8 +389,9 @@ def _wait_connected(session: Any, nodes: tuple[str, ...], timeout_s: float) -> N
 
 
 def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str = 'zstd',
-              project_recorder: bool = False, startup_timeout_s: float = 30.0,
-              step_timeout_s: float = 30.0) -> dict[str, Any]:
+              project_recorder: bool = False, raw_inputs: bool = False,
+              startup_timeout_s: float = 30.0, step_timeout_s: float = 30.0
+              ) -> dict[str, Any]:
     """Run the floor for ``steps`` steps with logs and the bag under ``work``.
 
     ``project_recorder``: the project's recorder node instead of the raw one (an ablation:
@@ -409,7 +425,7 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
     ender = RECORDER if recorder else chain.source
     bag = work / 'floor.mcap'
     params = {'steps': steps, 'recorder': recorder, 'bag_path': str(bag),
-              'compression': compression}
+              'compression': compression, 'raw_inputs': raw_inputs}
     specs = [NodeSpec(name, MODULE, dict(params)) for name in names]  # no YAML aliases
     if recorder and project_recorder:
         bag = work / 'project_bag'
@@ -478,6 +494,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--compression', choices=('zstd', 'none'), default='zstd')
     parser.add_argument('--project-recorder', action='store_true',
                         help="the project's recorder node instead of the raw one (ablation)")
+    parser.add_argument('--raw-inputs', action='store_true',
+                        help='the nodes take their inputs as bytes and read only the stamp '
+                             '(a lower floor than the specified one; the graph reads its '
+                             'inputs from bytes too)')
     parser.add_argument('--keep', type=Path, help='keep logs and bag in this directory')
     parser.add_argument('--out', type=Path, help='results JSON')
     args = parser.parse_args(argv)
@@ -493,7 +513,8 @@ def main(argv: list[str] | None = None) -> int:
             load_before = load()
             figures = run_floor(args.steps, work, recorder=not args.no_recorder,
                                 compression=args.compression,
-                                project_recorder=args.project_recorder)
+                                project_recorder=args.project_recorder,
+                                raw_inputs=args.raw_inputs)
             figures['load_before'], figures['load_after'] = load_before, load()
             runs.append(figures)
             print(describe(f'floor run {repeat + 1}', figures) + f' (load {load_before})',
@@ -502,6 +523,7 @@ def main(argv: list[str] | None = None) -> int:
         'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
         'cpu_count': os.cpu_count(), 'steps': args.steps, 'recorder': not args.no_recorder,
         'compression': args.compression, 'project_recorder': args.project_recorder,
+        'raw_inputs': args.raw_inputs,
         'runs': runs,
         'steady_ms_per_step': summary([r['steady_ms_per_step'] for r in runs]),
     }

@@ -36,8 +36,10 @@ def test_benchmark_suite_smoke(tmp_path: Path) -> None:
     assert 'speed-up at p99' in out.with_suffix('.md').read_text()
 
 
-def test_floor_benchmark_smoke(tmp_path: Path) -> None:
-    """bench_floor.py, 20 steps: every step's /clock is observed and the raw recorder holds
+@pytest.mark.parametrize('inputs', ['messages', 'raw'])
+def test_floor_benchmark_smoke(tmp_path: Path, inputs: str) -> None:
+    """bench_floor.py, 20 steps, its nodes taking rclpy messages (the specified floor) or
+    bytes (``--raw-inputs``): every step's /clock is observed and the raw recorder holds
     one message per topic and step of the table (plus the initial states), each stamp once
     (no timing threshold)."""
     from mcap.reader import make_reader
@@ -47,9 +49,11 @@ def test_floor_benchmark_smoke(tmp_path: Path) -> None:
 
     out = tmp_path / 'floor.json'
     proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'bench_floor.py'),
-                           '--steps', '20', '--keep', str(tmp_path), '--out', str(out)],
+                           '--steps', '20', '--keep', str(tmp_path), '--out', str(out),
+                           *(['--raw-inputs'] if inputs == 'raw' else [])],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert json.loads(out.read_text())['raw_inputs'] == (inputs == 'raw')
     run = json.loads(out.read_text())['runs'][0]
     assert run['steps'] == run['clocks_seen'] == 20
     assert run['steady_ms_per_step'] > 0 and run['startup_s'] > 0 and run['shutdown_s'] > 0
