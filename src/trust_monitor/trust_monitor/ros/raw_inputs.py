@@ -120,10 +120,6 @@ class _Cursor:
         self.at = end
         return text
 
-    def doubles(self) -> list[float]:
-        count = self.uint32()
-        return list(self.unpack('d', 8, count)) if count else []
-
     def header(self) -> Header:
         sec = self.unpack('i', 4)[0]
         nanosec = self.uint32()
