@@ -34,8 +34,10 @@ the publishers of ``/tf`` are told apart by the transform's child frame):
   ``/sim/start`` only once this process has received every publisher that publishes before
   it);
 - stop edge: at most :data:`soak_wall_checks.STOP_EDGE` message per publisher published and
-  not recorded at the end (the one a node may publish while it is being stopped; best effort
-  has no acknowledgement to wait for);
+  not recorded at the end (the one a node may publish while it is being stopped: the
+  recorder subscribes to the odometry best effort, as it is published, and there is no
+  acknowledgement to wait for; the other topics it takes reliably, as they are published,
+  so a stopping node waits until they are acknowledged: 0 there);
 - so published - recorded = start edge + stop edge, nothing else;
 - no gap between consecutive messages (header stamps, from ``/sim/start`` on) longer than
   ``--max-gap-s`` (default 1 s = 10 periods: longer is a lost run of messages or a stalled

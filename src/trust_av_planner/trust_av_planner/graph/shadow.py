@@ -91,7 +91,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
     """
     from trust_av_planner.graph.bag_qos import offered_qos
     from trust_monitor.ros.messages import message_class, odometry, trajectory
-    from trust_monitor.ros.qos import RECORD_QOS, wall_qos
+    from trust_monitor.ros.qos import RECORD_QOS, record_qos, wall_qos
 
     topics = topics if topics is not None else PlannerTopics()
     # actual topic name -> the topic-table entry it stands for (message type, QoS)
@@ -129,7 +129,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                     recording.add_topic(name, topic.msgtype, offered_qos(offered))
                     node.create_subscription(message_class(topic.msgtype), name,
                                              lambda d, t=name: on_message(t, d),
-                                             RECORD_QOS, raw=True)
+                                             record_qos(topic.wall_qos), raw=True)
 
                 def on_command(msg: Any) -> None:
                     command['accel_mps2'] = float(msg.accel.linear.x)
@@ -212,7 +212,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
 
     from trust_av_planner.graph.bag_qos import offered_qos
     from trust_monitor.ros.messages import message_class
-    from trust_monitor.ros.qos import QOS, RECORD_QOS
+    from trust_monitor.ros.qos import QOS, record_qos
 
     recorded = [t for t in TOPICS if t.name not in ('clock', 'sim/start')]
     # In wall mode the traffic node subscribes nothing but /sim/start (as do the two simulated
@@ -248,7 +248,8 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                     recording.add_topic(name, topic.msgtype, offered_qos(QOS[topic.qos]))
                     subscriptions.append(node.create_subscription(
                         message_class(topic.msgtype), name,
-                        lambda d, info, t=name: record(t, d, info), RECORD_QOS, raw=True))
+                        lambda d, info, t=name: record(t, d, info), record_qos(topic.wall_qos),
+                        raw=True))
                 # /sim/start only once this process receives every publisher: the graph's
                 # endpoint counts say that a publisher exists, not that it sends here (the
                 # wall profiles are volatile: what a publisher sent before it matched this

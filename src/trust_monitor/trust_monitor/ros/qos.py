@@ -49,8 +49,28 @@ late (the recorder), none for a late joiner (volatile)."""
 RECORD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH,
                         reliability=ReliabilityPolicy.BEST_EFFORT,
                         durability=DurabilityPolicy.VOLATILE)
-"""A wall-mode recorder's subscriptions: compatible with every publisher (best effort, no
-deadline), deep enough not to drop while the recorder writes."""
+"""A wall-mode subscription compatible with every publisher (best effort, no deadline),
+deep enough not to drop while its reader is busy."""
+
+
+def record_qos(kind: str) -> QoSProfile:
+    """A wall-mode recorder's subscription to a topic of wall-mode kind ``kind``
+    (:func:`wall_qos`): as reliable as its publishers, like ``ros2 bag record``, so that a
+    reliable publisher resends what a busy recorder missed and a stopping node waits for
+    the recorder's acknowledgement (trust_monitor.ros.spin); best effort for sensor data,
+    which cannot be asked for more. Volatile, keep last :data:`HISTORY_DEPTH`, no deadline
+    (so it matches every publisher of the topic).
+
+    Raises:
+        KeyError: an unknown kind.
+    """
+    if kind not in ('SENSOR', 'COMMAND', 'STATE', 'LATCHED'):
+        raise KeyError(f'unknown wall-mode QoS kind {kind!r}')
+    if kind == 'SENSOR':
+        return RECORD_QOS
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
 
 
 def command_deadline_s(clock: WallClockConfig) -> float:
