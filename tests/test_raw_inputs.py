@@ -26,15 +26,20 @@ def _text(rng: random.Random) -> str:
     return ''.join(rng.choice('abc_/xyzé0') for _ in range(rng.randrange(0, 12)))
 
 
+def _header(msg: Any, rng: random.Random) -> None:
+    msg.header.stamp.sec = rng.randrange(-2**31, 2**31)
+    msg.header.stamp.nanosec = rng.randrange(0, 10**9)
+    msg.header.frame_id = _text(rng)
+
+
 def _f(rng: random.Random) -> float:
     return rng.choice([0.0, -0.0, 1e308, -5e-324, rng.uniform(-1e6, 1e6)])
 
 
 def random_odometry(rng: random.Random) -> Odometry:
     msg = Odometry()
-    msg.header.stamp.sec = rng.randrange(-2**31, 2**31)
-    msg.header.stamp.nanosec = rng.randrange(0, 10**9)
-    msg.header.frame_id, msg.child_frame_id = _text(rng), _text(rng)
+    _header(msg, rng)
+    msg.child_frame_id = _text(rng)
     p = msg.pose.pose
     p.position.x, p.position.y, p.position.z = _f(rng), _f(rng), _f(rng)
     p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = (
@@ -49,9 +54,7 @@ def random_odometry(rng: random.Random) -> Odometry:
 
 def random_trajectory(rng: random.Random) -> JointTrajectory:
     msg = JointTrajectory()
-    msg.header.stamp.sec = rng.randrange(-2**31, 2**31)
-    msg.header.stamp.nanosec = rng.randrange(0, 10**9)
-    msg.header.frame_id = _text(rng)
+    _header(msg, rng)
     msg.joint_names = [_text(rng) for _ in range(rng.randrange(0, 3))]
     for _ in range(rng.randrange(0, 12)):
         point = JointTrajectoryPoint()
@@ -65,9 +68,7 @@ def random_trajectory(rng: random.Random) -> JointTrajectory:
 
 def random_vector3(rng: random.Random) -> Vector3Stamped:
     msg = Vector3Stamped()
-    msg.header.stamp.sec = rng.randrange(-2**31, 2**31)
-    msg.header.stamp.nanosec = rng.randrange(0, 10**9)
-    msg.header.frame_id = _text(rng)
+    _header(msg, rng)
     msg.vector.x, msg.vector.y, msg.vector.z = _f(rng), _f(rng), _f(rng)
     return msg
 
@@ -75,9 +76,7 @@ def random_vector3(rng: random.Random) -> Vector3Stamped:
 def random_accel(rng: random.Random) -> Any:
     from geometry_msgs.msg import AccelStamped
     msg = AccelStamped()
-    msg.header.stamp.sec = rng.randrange(-2**31, 2**31)
-    msg.header.stamp.nanosec = rng.randrange(0, 10**9)
-    msg.header.frame_id = _text(rng)
+    _header(msg, rng)
     a = msg.accel
     a.linear.x, a.linear.y, a.linear.z = _f(rng), _f(rng), _f(rng)
     a.angular.x, a.angular.y, a.angular.z = _f(rng), _f(rng), _f(rng)
