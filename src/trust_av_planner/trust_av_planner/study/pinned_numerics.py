@@ -168,6 +168,14 @@ LIBRARIES = ('numpy', 'libm', 'torch')
 """The libraries whose kernels :func:`numerics_report` hashes."""
 
 
+def check_libraries(libraries: Sequence[str]) -> None:
+    """Raise ``ValueError`` unless ``libraries`` names one or more of :data:`LIBRARIES`."""
+    unknown = sorted(set(libraries) - set(LIBRARIES))
+    if unknown or not libraries:
+        what = f'unknown libraries {unknown}' if unknown else 'no library named'
+        raise ValueError(f'{what}; give one or more of {",".join(LIBRARIES)}')
+
+
 def live_numerics(torch_settings: bool = True) -> dict[str, Any]:
     """What this process's libraries actually chose (a description for the model card);
     without ``torch_settings``, numpy's and libc's only (PyTorch is then not imported)."""
@@ -235,9 +243,7 @@ def numerics_report(libraries: Sequence[str] = LIBRARIES) -> dict[str, Any]:
     and so the fingerprint to those libraries; without ``'torch'`` PyTorch is not imported
     (about 1.5 CPU-s). The model card holds the whole fingerprint.
     """
-    unknown = sorted(set(libraries) - set(LIBRARIES))
-    if unknown:
-        raise ValueError(f'unknown libraries {unknown}; known: {list(LIBRARIES)}')
+    check_libraries(libraries)
     rng = np.random.default_rng(0)
     x = rng.normal(0.0, 3.0, 4096)
     matrix = rng.normal(0.0, 1.0, (48, 16))
@@ -318,10 +324,10 @@ def main(argv: list[str] | None = None) -> int:
                              'kernels, settings and fingerprint cover only these')
     args = parser.parse_args(argv)
     libraries = [name for name in args.libraries.split(',') if name]
-    unknown = sorted(set(libraries) - set(LIBRARIES))
-    if unknown or not libraries:
-        parser.error(f'--libraries {args.libraries!r}: give one or more of '
-                     f'{",".join(LIBRARIES)}')
+    try:
+        check_libraries(libraries)
+    except ValueError as err:
+        parser.error(f'--libraries {args.libraries!r}: {err}')
     check_pinned()
     print(json.dumps(numerics_report(libraries), sort_keys=True))
     return 0
