@@ -43,8 +43,14 @@ from typing import Any
 
 HERE = Path(__file__).resolve().parent
 MODULE = Path(__file__).stem
-STAMP = struct.Struct('<iI')
-"""A header stamp (sec, nanosec) in little-endian CDR."""
+STAMP = {1: struct.Struct('<iI'), 0: struct.Struct('>iI')}
+"""A stamp (sec, nanosec) by the CDR encapsulation's second byte (1: little-endian)."""
+
+
+def cdr_stamp(data: bytes, offset: int) -> tuple[int, int]:
+    """The (sec, nanosec) at ``offset`` of a serialised message, in its byte order."""
+    sec, nanosec = STAMP[data[1] & 1].unpack_from(data, offset)
+    return sec, nanosec
 DIAGNOSTIC_VALUES = {'ego/planner_status': 8, 'human/driver_status': 4}
 """Key/values per status message, as planner_node and driver_node publish them."""
 
@@ -148,11 +154,11 @@ def _make_step_node(name: str) -> Any:
                     pub.publish(msg)  # the initial state, stamped 0
             for port in me.inputs:
                 topic = TOPIC[port.topic]
-                if self.config.raw_inputs:  # the stamp: bytes 4-11 after the CDR_LE header
+                if self.config.raw_inputs:  # the header's stamp, first after the CDR header
                     self.create_subscription(
                         message_class(topic.msgtype), topic.name,
-                        lambda data, t=topic.name: self.on_stamp(
-                            t, STAMP.unpack_from(data, 4)), QOS[topic.qos], raw=True)
+                        lambda data, t=topic.name: self.on_stamp(t, cdr_stamp(data, 4)),
+                        QOS[topic.qos], raw=True)
                 else:
                     self.create_subscription(message_class(topic.msgtype), topic.name,
                                              lambda m, t=topic.name: self.on_input(t, m),
@@ -206,8 +212,6 @@ def _make_recorder() -> Any:
     from trust_monitor.ros.parameters import declare_config
     from trust_monitor.ros.qos import QOS
 
-    little, big = struct.Struct('<iI'), struct.Struct('>iI')
-
     class FloorRecorder(Node):  # type: ignore[misc]
         """Raw subscriptions to every recorded topic; each message written as it comes.
         Says ``ready`` on ``recorder/status`` once every subscription has matched its
@@ -256,8 +260,7 @@ def _make_recorder() -> Any:
                                                     {'state': 'ready', 'steps': '0'}))
 
         def on_message(self, channel: int, data: bytes) -> None:
-            sec, nanosec = (little if data[1] == 1 else big).unpack_from(data,
-                                                                         self.offsets[channel])
+            sec, nanosec = cdr_stamp(data, self.offsets[channel])
             ns = sec * 1_000_000_000 + nanosec
             self.writer.add_message(channel, log_time=ns, data=data, publish_time=ns)
             self.count += 1
