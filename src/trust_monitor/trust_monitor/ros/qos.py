@@ -64,13 +64,11 @@ def record_qos(kind: str) -> QoSProfile:
     Raises:
         KeyError: an unknown kind.
     """
-    if kind not in ('SENSOR', 'COMMAND', 'STATE', 'LATCHED'):
-        raise KeyError(f'unknown wall-mode QoS kind {kind!r}')
-    if kind == 'SENSOR':
-        return RECORD_QOS
+    # The publishers' reliability, from the one definition of each kind (the rate and
+    # timeout a clock sets do not change it).
+    reliability = wall_qos(kind, WallClockConfig(), publisher=True).reliability
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH,
-                      reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE)
+                      reliability=reliability, durability=DurabilityPolicy.VOLATILE)
 
 
 def command_deadline_s(clock: WallClockConfig) -> float:
