@@ -280,11 +280,16 @@ def run_command(bag: Path, steps: int = 600, *extra: str, trace: str = 'us06') -
             '--max-steps', str(steps), '--bag', str(bag), '--no-progress', '--no-plot', *extra]
 
 
+def interrupted_run(bag: Path) -> subprocess.Popen[str]:
+    """A run of :func:`conftest.long_trace` (written beside ``bag``) that a test stops."""
+    return subprocess.Popen(run_command(bag, INTERRUPTED_RUN_STEPS,
+                                        trace=str(long_trace(bag.parent))),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
 def test_sigterm_finishes_the_bag_like_sigint(tmp_path: Path) -> None:
     bag = tmp_path / 'term'
-    proc = subprocess.Popen(run_command(bag, INTERRUPTED_RUN_STEPS,
-                                        trace=str(long_trace(tmp_path))),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = interrupted_run(bag)
     wait_for_steps(bag, 8, proc=proc)
     proc.send_signal(signal.SIGTERM)
     _out, err = proc.communicate(timeout=120)
@@ -296,9 +301,7 @@ def test_sigterm_finishes_the_bag_like_sigint(tmp_path: Path) -> None:
 
 def test_a_killed_orchestrator_leaves_a_finished_bag_and_no_process(tmp_path: Path) -> None:
     bag = tmp_path / 'orphan'
-    proc = subprocess.Popen(run_command(bag, INTERRUPTED_RUN_STEPS,
-                                        trace=str(long_trace(tmp_path))),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = interrupted_run(bag)
     wait_for_steps(bag, 8, proc=proc)
     nodes = [int(p.name) for p in Path('/proc').iterdir() if p.name.isdigit()
              and _parent(int(p.name)) == proc.pid]
