@@ -184,19 +184,12 @@ class DriverMpc:
         return np.array(speeds)
 
     def braking_plan(self, speed_mps: float) -> np.ndarray:
-        """The hardest braking plan: u_min at every step, never below ``speed_min_mps``.
-
-        It gives the largest gap at every step against any AV plan, so the gap bound is
-        feasible exactly when this plan meets it.
-        """
+        """The hardest braking plan (:func:`kinematics.braking_plan`): u_min at every step,
+        never below ``speed_min_mps``; the gap bound is feasible exactly when it meets it."""
         c = self.config
-        plan = []
-        for _ in range(c.horizon_steps):
-            accel = min(max(c.accel_min_mps2, (c.speed_min_mps - speed_mps) / c.dt_s),
-                        c.accel_max_mps2)
-            plan.append(accel)
-            speed_mps += accel * c.dt_s
-        return np.array(plan)
+        return np.array(kinematics.braking_plan(speed_mps, c.horizon_steps, c.dt_s,
+                                                c.accel_min_mps2, c.accel_max_mps2,
+                                                c.speed_min_mps))
 
     def _meet_bound(self, plan_mps2: np.ndarray, gap_m: float, speed_mps: float,
                     cautious_mps: np.ndarray, bounds_m: np.ndarray) -> np.ndarray:

@@ -214,6 +214,8 @@ class PlanResult:
         solve_time_s: wall time of the solver call (instrumentation only).
         explicability_max: E_max of the trust constraint for this step.
         cost: objective value of the returned plan.
+        gap_bounds_relaxed: the vehicle was already outside [d_min, d_max] as far as it can
+            act, and the gap bounds were what it can reach (the status says to what).
     """
 
     plan_mps2: np.ndarray
@@ -223,6 +225,7 @@ class PlanResult:
     solve_time_s: float
     explicability_max: float
     cost: float = field(default=float('nan'))
+    gap_bounds_relaxed: bool = False
 
     @property
     def fallback(self) -> bool:
@@ -269,7 +272,8 @@ class TrustAwareNmpc:
                 + alpha * score / config.explicability_scale)
         params = ca.vertcat(gap0, speed0, lead, expected, alpha)
         # d^1 does not depend on the plan: a constant row would break the QP's constraint
-        # qualification, so it is checked before solving instead (:meth:`step`).
+        # qualification, so it only enters the bounds of the later gaps
+        # (:meth:`_reachable_gap_bounds`).
         constraints = ca.vertcat(*gaps[1:], *speeds, score)
         self._solver = ca.nlpsol('trust_aware_nmpc', 'sqpmethod',
                                  {'x': u, 'p': params, 'f': cost, 'g': constraints},
@@ -332,11 +336,8 @@ class TrustAwareNmpc:
         else:
             guess = np.concatenate([self._previous[1:], self._previous[-1:]])
         lbg, ubg = self.bounds(e_max)
-        first_gap = gap_m + (lead_speeds_mps[0] - speed_mps) * dt
-        if not lbg[0] - BOUND_TOLERANCE <= first_gap <= ubg[0] + BOUND_TOLERANCE:
-            return self._fallback(gap_m, speed_mps, lead_speeds_mps,
-                                  f'gap {first_gap:.3f} m at k=1 is outside [{c.gap_min_m}, '
-                                  f'{c.gap_max_m}] m whatever the plan', e_max, 0, 0.0)
+        lbg, ubg, relaxed = self._reachable_gap_bounds(lbg, ubg, gap_m, speed_mps,
+                                                       lead_speeds_mps)
         start, cpu_start = time.perf_counter(), time.thread_time()
         sol = self._solver(x0=guess, p=params, lbx=c.accel_min_mps2, ubx=c.accel_max_mps2,
                            lbg=lbg[1:], ubg=ubg[1:])
@@ -365,8 +366,40 @@ class TrustAwareNmpc:
                                   f'bound violated by {violation:.2e}', e_max, iterations,
                                   elapsed)
         self._previous = plan
-        return PlanResult(plan, str(stats['return_status']), True, iterations, elapsed, e_max,
-                          float(sol['f']))
+        return PlanResult(plan, str(stats['return_status']) + relaxed, True, iterations, elapsed,
+                          e_max, float(sol['f']), gap_bounds_relaxed=bool(relaxed))
+
+    def _reachable_gap_bounds(self, lower: np.ndarray, upper: np.ndarray, gap_m: float,
+                              speed_mps: float, lead_speeds_mps: np.ndarray
+                              ) -> tuple[np.ndarray, np.ndarray, str]:
+        """The gap bounds the plan can meet: where even the hardest braking ends closer than
+        d_min (stopped short of d_s, a cut-in), the bound at that step is what it reaches,
+        and likewise the hardest acceleration against d_max; elsewhere d_min and d_max.
+
+        d^1 does not depend on the plan and every later gap is monotone in it, so these are
+        exactly the bounds some plan meets: the NMPC keeps planning (the plan may not make
+        the gap worse than braking would), instead of a solver failure and the fallback. The
+        third value is a note for the status ('' when the bounds are d_min and d_max, or
+        differ from them by no more than :data:`BOUND_TOLERANCE`).
+        """
+        c, n, dt = self.config, self.steps, self.grid_step_s
+        lead = lead_speeds_mps.tolist()
+        braking = kinematics.rollout(gap_m, speed_mps, lead, kinematics.braking_plan(
+            speed_mps, n, dt, c.accel_min_mps2, c.accel_max_mps2, c.speed_min_mps), dt)[0]
+        speeding = kinematics.rollout(gap_m, speed_mps, lead, kinematics.accelerating_plan(
+            speed_mps, n, dt, c.accel_min_mps2, c.accel_max_mps2, c.speed_max_mps), dt)[0]
+        low, high = np.array(braking), np.array(speeding)
+        if low.min() >= lower[0] and high.max() <= upper[0]:
+            return lower, upper, ''
+        lower, upper = lower.copy(), upper.copy()
+        lower[:n] = np.minimum(lower[:n], low)
+        upper[:n] = np.maximum(upper[:n], high)
+        tol = BOUND_TOLERANCE
+        if low.min() >= c.gap_min_m - tol and high.max() <= c.gap_max_m + tol:
+            return lower, upper, ''  # a rounding error (a stop that crept 1e-7 m too far)
+        return lower, upper, (f' (gap bounds relaxed to what the vehicle can reach: '
+                              f'{min(low.min(), c.gap_min_m):.3f} to '
+                              f'{max(high.max(), c.gap_max_m):.3f} m)')
 
     def bound_violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
                         lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray,

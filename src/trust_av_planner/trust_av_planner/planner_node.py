@@ -255,8 +255,10 @@ class PlannerNode(Node):
                                 trust, t_s)
         result = out.result
         self.publish(ns, result.plan_mps2, out.expected_mps2, float(result.plan_mps2[0]), trust,
-                     status=result.status, ok=result.success,
+                     status=result.status,
+                     ok=result.success and not result.gap_bounds_relaxed,
                      extra={'success': str(result.success), 'fallback': str(result.fallback),
+                            'gap_bounds_relaxed': str(result.gap_bounds_relaxed),
                             'iterations': str(result.iterations),
                             'solve_time_s': repr(result.solve_time_s),
                             'explicability_max': repr(result.explicability_max),

@@ -84,6 +84,35 @@ def lead_speeds(speed_mps: Any, accels_mps2: Sequence[Any], dt_s: float) -> list
     return out
 
 
+def braking_plan(speed_mps: float, steps: int, dt_s: float, accel_min_mps2: float,
+                 accel_max_mps2: float, speed_min_mps: float) -> list[float]:
+    """The hardest braking plan: ``accel_min_mps2`` at every step, never below
+    ``speed_min_mps`` (never reverses).
+
+    It gives the largest gap at every step against any plan that keeps the speed bound, so a
+    lower gap bound is feasible exactly when this plan meets it.
+    """
+    plan = []
+    for _ in range(steps):
+        accel = min(max(accel_min_mps2, (speed_min_mps - speed_mps) / dt_s), accel_max_mps2)
+        plan.append(accel)
+        speed_mps += accel * dt_s
+    return plan
+
+
+def accelerating_plan(speed_mps: float, steps: int, dt_s: float, accel_min_mps2: float,
+                      accel_max_mps2: float, speed_max_mps: float) -> list[float]:
+    """The hardest accelerating plan: ``accel_max_mps2`` at every step, never above
+    ``speed_max_mps``; the smallest gap at every step (the counterpart of
+    :func:`braking_plan` for an upper gap bound)."""
+    plan = []
+    for _ in range(steps):
+        accel = max(min(accel_max_mps2, (speed_max_mps - speed_mps) / dt_s), accel_min_mps2)
+        plan.append(accel)
+        speed_mps += accel * dt_s
+    return plan
+
+
 def hold_gap_plan(gap_m: float, speed_mps: float, lead_speeds_mps: Sequence[float], *,
                   dt_s: float, standstill_gap_m: float, time_headway_s: float,
                   gap_gain_per_s2: float, speed_gain_per_s: float, accel_min_mps2: float,
