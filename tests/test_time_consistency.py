@@ -20,6 +20,8 @@ from trust_av_planner.preview import LeadPreview, hold_on_grid
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import (
+    compute_metrics,
+    expectation_errors,
     explicability_by_age,
     step_change_rms_mps2,
     ticks_per_model_step,
@@ -234,6 +236,32 @@ def test_rate_diagnostics_on_known_records(run_config) -> None:  # type: ignore[
         ticks_per_model_step(0.3, 1.0)
     with pytest.raises(ValueError, match='two model steps'):
         step_change_rms_mps2(records[:15], 10)
+
+
+def test_rmse_compares_each_expected_value_at_its_own_time() -> None:
+    """At 10 Hz a plan on the 1 s grid (``prediction_grid: model_step``) is compared with the
+    command executed 1 s, 2 s later, not 0.1 s, 0.2 s later: an expectation that is exactly
+    what the AV then did scores 0, and the loop's RMSE uses the plans' own grid."""
+    config = load_run_config(overrides={'preceding_traffic': {'trace': 'us06'}})
+    base = simulate(config, truncate(control_trace(config, 10.0), 2)).records[0]
+    accel = [math.sin(0.37 * k) for k in range(60)]
+    records = [dataclasses.replace(
+        base, t_s=0.1 * k, av_accel_mps2=a,
+        expected_plan_mps2=tuple(accel[min(k + 10 * j, 59)] for j in range(3)))
+        for k, a in enumerate(accel)]
+    assert compute_metrics(records, 4.0, plan_step_s=1.0).rmse_mps2 == 0.0
+    assert compute_metrics(records, 4.0).rmse_mps2 > 0.3  # read on the 0.1 s grid: wrong
+    assert expectation_errors(records, 1.0).size == sum(min(3, (59 - k) // 10 + 1)
+                                                        for k in range(60))
+    with pytest.raises(ValueError, match='whole number'):
+        expectation_errors(records, 0.25)
+    stepped = simulate(load_run_config(overrides={
+        'planner': {'prediction_grid': 'model_step'}, 'preceding_traffic': {'trace': 'us06'}}),
+        truncate(control_trace(config, 10.0), 50))
+    assert stepped.plan_step_s == 1.0
+    assert stepped.metrics.rmse_mps2 == pytest.approx(math.sqrt(np.mean(np.square(
+        expectation_errors(stepped.records, 1.0)))))
+    assert simulate(config, truncate(control_trace(config, 10.0), 5)).plan_step_s is None
 
 
 # --- the closed loop at 1 Hz and 10 Hz ------------------------------------------------------

@@ -77,11 +77,13 @@ class SimResult:
     predictor: str
     min_safe_gap_m: float
     records: list[StepRecord] = field(default_factory=list)
+    plan_step_s: float | None = None
+    """The step of the plans' grid when it is not the control period, s."""
 
     @property
     def metrics(self) -> Metrics:
         """Final trust, mean E, prediction RMSE, minimum gaps, fallback and unsafe counts."""
-        return compute_metrics(self.records, self.min_safe_gap_m)
+        return compute_metrics(self.records, self.min_safe_gap_m, self.plan_step_s)
 
     def write_csv(self, path: Path) -> None:
         """One row per step; plans are spread over ``<name>_0 .. <name>_{N-1}`` columns."""
@@ -204,9 +206,11 @@ def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | No
         on_step: called with (steps done, total steps) after each step (progress).
     """
     loop = ClosedLoop(config, trace, initial)
+    step_s = loop.planner.grid[0]
     result = SimResult(trace=trace.name, alpha=config.planner.alpha,
                        predictor=config.planner.predictor,
-                       min_safe_gap_m=config.min_safe_gap_m)
+                       min_safe_gap_m=config.min_safe_gap_m,
+                       plan_step_s=None if step_s == loop.period_s else step_s)
     for record in loop.steps():
         result.records.append(record)
         if min(record.av_gap_m, record.human_gap_m) < config.min_safe_gap_m:

@@ -56,20 +56,19 @@ class Metrics:
     unsafe_steps: int = 0
 
 
-def compute_metrics(records: list[StepRecord], min_safe_gap_m: float) -> Metrics:
-    """Metrics of DESIGN section 1; RMSE compares u_R^H(t) with the executed u_R(t..t+N-1).
+def compute_metrics(records: list[StepRecord], min_safe_gap_m: float,
+                    plan_step_s: float | None = None) -> Metrics:
+    """Metrics of DESIGN section 1; RMSE compares each value of u_R^H(t) with the
+    acceleration the AV executed at its time (:func:`expectation_errors`).
 
     ``unsafe_steps`` counts steps where either gap is below ``min_safe_gap_m`` (a collision
     margin, ``standstill_gap_m - safety_gap_margin_m``); every shipped run must have none.
+    ``plan_step_s``: the step of the plans' grid when it is not the control period
+    (``prediction_grid: model_step`` at a faster rate); None = the control period.
     """
     if not records:
         raise ValueError('no steps to summarise')
-    executed = np.array([r.av_accel_mps2 for r in records])
-    errors = []
-    for t, r in enumerate(records):
-        for k, predicted in enumerate(r.expected_plan_mps2):
-            if t + k < len(executed):
-                errors.append(predicted - executed[t + k])
+    errors = expectation_errors(records, plan_step_s)
     return Metrics(
         steps=len(records),
         final_trust=records[-1].trust,
@@ -81,6 +80,29 @@ def compute_metrics(records: list[StepRecord], min_safe_gap_m: float) -> Metrics
         driver_fallback_steps=sum(not r.driver_success for r in records),
         unsafe_steps=sum(min(r.av_gap_m, r.human_gap_m) < min_safe_gap_m for r in records),
     )
+
+
+def expectation_errors(records: list[StepRecord],
+                       plan_step_s: float | None = None) -> np.ndarray:
+    """u_R^H(t)[k] minus the acceleration the AV executed at t + k * plan_step_s, for every
+    step t and every k whose time is within the run, m/s^2.
+
+    The executed acceleration at a time is the command of the control step then (held over
+    its period). ``plan_step_s`` must be a whole number of control periods; None = the
+    control period (value k is compared with the command k steps later).
+
+    Raises:
+        ValueError: ``plan_step_s`` is not a whole number of control periods.
+    """
+    executed = np.array([r.av_accel_mps2 for r in records])
+    stride = 1
+    if plan_step_s is not None and len(records) > 1:
+        stride = ticks_per_model_step(records[1].t_s - records[0].t_s, plan_step_s)
+    errors = [predicted - executed[t + k * stride]
+              for t, r in enumerate(records)
+              for k, predicted in enumerate(r.expected_plan_mps2)
+              if t + k * stride < executed.size]
+    return np.asarray(errors, dtype=float)
 
 
 def ticks_per_model_step(period_s: float, model_step_s: float) -> int:
