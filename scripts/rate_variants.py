@@ -12,7 +12,12 @@ loop for this process only. Variants (join with ``+``):
 - ``mean-e``: E on the 1 s means of the plan and the expectation, in the NMPC and the
   monitor (the 1 s grid is the identity);
 - ``held-lead``: the lead's speed held between its 1 s samples (the 1 Hz loop's lead),
-  instead of interpolated.
+  instead of interpolated;
+- ``model-step``: the NMPC on the paper's 1 s grid at the faster rate (``prediction_grid:
+  model_step``, sampled-data control);
+- ``blocked-commands``: the NMPC on the control period's grid, its plan held in the 1 s blocks
+  of the expectation (the first block is the rest of the current second): the AV plans in the
+  steps in which the human forms the expectation, and is still checked every period.
 
 Scores from the records: ``E`` and ``RMSE`` (the definitions of the metrics), ``E@points``
 (plan and expectation compared at k * dt_s only), ``E@1s-means`` (their 1 s means),
@@ -31,17 +36,21 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+import casadi as ca
 import numpy as np
 
 from preceding_traffic.traces import SpeedTrace, truncate
 from trust_av_planner import nmpc, planner
 from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
+from trust_av_planner.preview import hold_on_grid
 from trust_av_planner.system.closed_loop import control_trace, simulate
 from trust_av_planner.system.config import RunConfig, load_run_config
-from trust_av_planner.system.metrics import StepRecord, ticks_per_model_step
+from trust_av_planner.system.metrics import StepRecord, expectation_errors, ticks_per_model_step
 from trust_monitor import trust_model
+from trust_monitor.common import kinematics
 
-VARIANTS = ('main', 'sliding', 'ca-every-tick', 'mean-e', 'held-lead')
+VARIANTS = ('main', 'sliding', 'ca-every-tick', 'mean-e', 'held-lead', 'model-step',
+            'blocked-commands')
 SCORES = ('trust', 'E', 'E@points', 'E@1s-means', 'E@whole-s', 'RMSE', 'RMSE@points',
           'RMSE@1s-means')
 
@@ -69,6 +78,52 @@ def _mean_e(score: Callable[..., Any], horizon_steps: int) -> Callable[..., Any]
     return scored
 
 
+class _BlockedSolver:
+    """The NMPC's solver with its plan held in the expectation's 1 s blocks: it takes and
+    returns the plan on the prediction grid, so :meth:`TrustAwareNmpc.step` (warm start,
+    bound check, fallback) is unchanged."""
+
+    def __init__(self, owner: nmpc.TrustAwareNmpc) -> None:
+        c, n, dt = owner.config, owner.steps, owner.grid_step_s
+        blocks = c.horizon_steps
+        w, mapping = ca.SX.sym('w', blocks), ca.SX.sym('blocks', n, blocks)
+        u = ca.mtimes(mapping, w)
+        gap0, speed0 = ca.SX.sym('gap0'), ca.SX.sym('speed0')
+        lead, expected, alpha = ca.SX.sym('lead', n), ca.SX.sym('expected', n), ca.SX.sym('a')
+        plan = [u[k] for k in range(n)]
+        gaps, speeds = kinematics.rollout(gap0, speed0, [lead[k] for k in range(n)], plan, dt)
+        tracking = sum((c.standstill_gap_m + c.time_headway_s * speeds[k] - gaps[k]) ** 2
+                       for k in range(n)) * (c.horizon_steps / n)
+        score = trust_model.explicability(plan, [expected[k] for k in range(n)],
+                                          owner.trust.epsilon_mps2)
+        self.solver = ca.nlpsol('blocked_nmpc', 'sqpmethod', {
+            'x': w, 'f': tracking / c.tracking_cost_scale_m2 + alpha * score
+            / c.explicability_scale, 'g': ca.vertcat(*gaps[1:], *speeds, score),
+            'p': ca.vertcat(gap0, speed0, lead, expected, alpha, ca.reshape(mapping, -1, 1))},
+            nmpc.nmpc_solver_options(c.solver_max_iter, blocks))
+        self.owner, self.age_s = owner, 0.0
+
+    def matrix(self) -> np.ndarray:
+        """Which block each point of the prediction grid belongs to, at the current age."""
+        o = self.owner
+        blocks = o.config.horizon_steps
+        index = hold_on_grid(np.arange(blocks, dtype=float), o.config.dt_s, o.grid_step_s,
+                             o.steps, self.age_s).astype(int)
+        out = np.zeros((o.steps, blocks))
+        out[np.arange(o.steps), index] = 1.0
+        return out
+
+    def __call__(self, x0: np.ndarray, p: np.ndarray, **bounds: Any) -> dict[str, Any]:
+        mapping = self.matrix()
+        first = mapping.argmax(axis=0)  # the first point of each block (0 if unused)
+        sol = self.solver(x0=np.asarray(x0)[first], p=np.concatenate(
+            [np.asarray(p).ravel(), mapping.ravel(order='F')]), **bounds)
+        return {'x': mapping @ np.asarray(sol['x']).ravel(), 'f': sol['f']}
+
+    def stats(self) -> dict[str, Any]:
+        return self.solver.stats()  # type: ignore[no-any-return]
+
+
 def apply_variant(parts: set[str], config: RunConfig) -> None:
     """Replace the pieces named in ``parts`` for this process.
 
@@ -90,8 +145,20 @@ def apply_variant(parts: set[str], config: RunConfig) -> None:
             self.sampler = None  # observed every tick, its plan held from now
         elif 'sliding' in parts:
             self.sampler.aligned = False
+        if 'blocked-commands' in parts:
+            self.nmpc._solver = _BlockedSolver(self.nmpc)  # type: ignore[assignment]
 
     planner.AvPlanner.__init__ = init  # type: ignore[method-assign]
+    if 'blocked-commands' in parts:
+        shipped_expect = planner.AvPlanner.expect
+
+        def expect(self: planner.AvPlanner, *args: Any) -> tuple[np.ndarray, float]:
+            expected, age_s = shipped_expect(self, *args)
+            if isinstance(self.nmpc._solver, _BlockedSolver):
+                self.nmpc._solver.age_s = age_s
+            return expected, age_s
+
+        planner.AvPlanner.expect = expect  # type: ignore[method-assign,assignment]
     if 'mean-e' in parts:
         scored = _mean_e(trust_model.explicability, config.planner.horizon_steps)
         nmpc.explicability = scored  # type: ignore[assignment]
@@ -112,23 +179,27 @@ def loop_trace(config: RunConfig, rate_hz: float, parts: set[str],
     return trace
 
 
-def scores(records: list[StepRecord], ticks: int, epsilon_mps2: float) -> dict[str, float]:
-    """Every score of :data:`SCORES` from one run's records (``ticks`` per model step)."""
+def scores(records: list[StepRecord], ticks: int, epsilon_mps2: float,
+           plan_step_s: float | None = None) -> dict[str, float]:
+    """Every score of :data:`SCORES` from one run's records (``ticks`` per model step; plans
+    on the grid of ``plan_step_s``, None = the control period)."""
     executed = np.array([r.av_accel_mps2 for r in records])
-    e_points, e_means, errors, at_points, at_means = [], [], [], [], []
+    per_point = 1 if plan_step_s is not None else ticks  # plan points per model step
+    stride = ticks // per_point  # control steps per plan point
+    e_points, e_means, at_points, at_means = [], [], [], []
     for t, r in enumerate(records):
         plan, expected = np.array(r.av_plan_mps2), np.array(r.expected_plan_mps2)
-        e_points.append(trust_model.explicability(plan[::ticks].tolist(),
-                                                  expected[::ticks].tolist(), epsilon_mps2))
+        e_points.append(trust_model.explicability(plan[::per_point].tolist(),
+                                                  expected[::per_point].tolist(), epsilon_mps2))
         e_means.append(trust_model.explicability(
-            _one_second_means(plan.tolist(), ticks), _one_second_means(expected.tolist(), ticks),
-            epsilon_mps2))
-        errors += [p - executed[t + k] for k, p in enumerate(expected) if t + k < executed.size]
-        for k in range(0, expected.size, ticks):
-            if t + k + ticks <= executed.size:
-                at_points.append(expected[k] - executed[t + k])
-                at_means.append(expected[k:k + ticks].mean()
-                                - executed[t + k:t + k + ticks].mean())
+            _one_second_means(plan.tolist(), per_point),
+            _one_second_means(expected.tolist(), per_point), epsilon_mps2))
+        for k in range(0, expected.size, per_point):
+            if t + k * stride + ticks <= executed.size:
+                at_points.append(expected[k] - executed[t + k * stride])
+                at_means.append(expected[k:k + per_point].mean()
+                                - executed[t + k * stride:t + k * stride + ticks].mean())
+    errors = expectation_errors(records, plan_step_s).tolist()
 
     def rms(values: list[float]) -> float:
         return math.sqrt(float(np.mean(np.square(values))))
@@ -159,8 +230,9 @@ def main() -> None:
     for trace in args.traces.split(','):
         for predictor in args.predictors.split(','):
             for alpha in (float(a) for a in args.alphas.split(',')):
+                grid = {'prediction_grid': 'model_step'} if 'model-step' in parts else {}
                 config = load_run_config(overrides={
-                    'planner': {'alpha': alpha, 'predictor': predictor},
+                    'planner': {'alpha': alpha, 'predictor': predictor, **grid},
                     'preceding_traffic': {'trace': trace}})
                 if not applied:
                     apply_variant(parts, config)
@@ -170,7 +242,8 @@ def main() -> None:
                 fast = simulate(config, loop_trace(config, args.rate_hz, parts,
                                                    args.max_steps_s))
                 eps = config.trust.epsilon_mps2
-                s1, sf = scores(one.records, 1, eps), scores(fast.records, ticks, eps)
+                s1 = scores(one.records, 1, eps)
+                sf = scores(fast.records, ticks, eps, fast.plan_step_s)
                 cells = [f'{s1[k]:.5g} / {sf[k]:.5g} ({100 * (sf[k] - s1[k]) / s1[k]:+.1f} %)'
                          for k in SCORES]
                 m = fast.metrics
