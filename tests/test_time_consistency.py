@@ -149,7 +149,7 @@ def test_stopped_short_of_d_s_is_planned_not_a_fallback(run_config, period_s: fl
     assert result.success, result.status
     assert result.gap_bounds_relaxed == (short_m > 1e-6)  # a rounding error is not reported
     gaps, speeds = rollout(start, 0.0, lead.tolist(), result.plan_mps2.tolist(), nmpc.grid_step_s)
-    assert min(gaps) >= start - 1e-6 and min(speeds) >= -1e-9
+    assert min(gaps) >= start - 1e-6 and min(speeds) >= -1e-6  # the bound check's tolerance
 
 
 @pytest.mark.parametrize('period_s', [0.1, None])

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -336,38 +337,59 @@ class TrustAwareNmpc:
         else:
             guess = np.concatenate([self._previous[1:], self._previous[-1:]])
         lbg, ubg = self.bounds(e_max)
-        lbg, ubg, relaxed = self._reachable_gap_bounds(lbg, ubg, gap_m, speed_mps,
-                                                       lead_speeds_mps)
+        low, high, note = self._reachable_gap_bounds(lbg, ubg, gap_m, speed_mps, lead_speeds_mps)
+        # The bounds of (12) first, unless no plan can meet them (then the reachable ones); the
+        # reachable ones again when (12) fails a rounding error short of them.
+        tries = [(low, high)] if note else [(lbg, ubg)]
+        if not note and (low is not lbg or high is not ubg):
+            tries.append((low, high))
         start, cpu_start = time.perf_counter(), time.thread_time()
-        sol = self._solver(x0=guess, p=params, lbx=c.accel_min_mps2, ubx=c.accel_max_mps2,
-                           lbg=lbg[1:], ubg=ubg[1:])
-        stats = self._solver.stats()
-        iterations = int(stats.get('iter_count', 0))
-        if not stats['success'] and self._previous is not None:
-            # A warm start can stall SQP on degenerate corners (standstill at d_min): retry cold.
-            sol = self._solver(x0=np.zeros(n), p=params, lbx=c.accel_min_mps2,
-                               ubx=c.accel_max_mps2, lbg=lbg[1:], ubg=ubg[1:])
-            stats = self._solver.stats()
-            iterations += int(stats.get('iter_count', 0))
+        iterations = 0
+        for lower, upper in tries:
+            sol, stats, used = self._solve(guess, params, lower, upper)
+            iterations += used
+            plan = np.asarray(sol['x']).ravel()
+            solved = stats['success'] or stats['return_status'] == STATIONARY_STATUS
+            violation = (self._violation(plan, gap_m, speed_mps, lead_speeds_mps, expected_mps2,
+                                         lower, upper) if solved else math.inf)
+            if violation <= BOUND_TOLERANCE:
+                break
         elapsed, cpu = time.perf_counter() - start, time.thread_time() - cpu_start
-        plan = np.asarray(sol['x']).ravel()
         if cpu > c.solver_cpu_budget_s:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps,
                                   f'CPU budget exceeded ({cpu * 1e3:.3f} ms > '
                                   f'{c.solver_cpu_budget_s * 1e3:.3f} ms)', e_max, iterations,
                                   elapsed)
-        if not stats['success'] and stats['return_status'] != STATIONARY_STATUS:
+        if not solved:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps,
                                   str(stats['return_status']), e_max, iterations, elapsed)
-        violation = self._violation(plan, gap_m, speed_mps, lead_speeds_mps, expected_mps2,
-                                    lbg, ubg)
         if violation > BOUND_TOLERANCE:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps,
                                   f'bound violated by {violation:.2e}', e_max, iterations,
                                   elapsed)
         self._previous = plan
-        return PlanResult(plan, str(stats['return_status']) + relaxed, True, iterations, elapsed,
-                          e_max, float(sol['f']), gap_bounds_relaxed=bool(relaxed))
+        return PlanResult(plan, str(stats['return_status']) + note, True, iterations, elapsed,
+                          e_max, float(sol['f']), gap_bounds_relaxed=bool(note))
+
+    def _solve(self, guess: np.ndarray, params: np.ndarray, lower: np.ndarray,
+               upper: np.ndarray) -> tuple[Any, dict[str, Any], int]:
+        """One solve with these constraint bounds, retried cold when a warm start fails.
+
+        Returns:
+            The solution, the solver's stats and the SQP iterations of both calls.
+        """
+        c = self.config
+        sol = self._solver(x0=guess, p=params, lbx=c.accel_min_mps2, ubx=c.accel_max_mps2,
+                           lbg=lower[1:], ubg=upper[1:])
+        stats = self._solver.stats()
+        iterations = int(stats.get('iter_count', 0))
+        if not stats['success'] and self._previous is not None:
+            # A warm start can stall SQP on degenerate corners (standstill at d_min): retry cold.
+            sol = self._solver(x0=np.zeros(self.steps), p=params, lbx=c.accel_min_mps2,
+                               ubx=c.accel_max_mps2, lbg=lower[1:], ubg=upper[1:])
+            stats = self._solver.stats()
+            iterations += int(stats.get('iter_count', 0))
+        return sol, stats, iterations
 
     def _reachable_gap_bounds(self, lower: np.ndarray, upper: np.ndarray, gap_m: float,
                               speed_mps: float, lead_speeds_mps: np.ndarray
@@ -403,10 +425,15 @@ class TrustAwareNmpc:
 
     def bound_violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
                         lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray,
-                        explicability_max: float) -> float:
-        """Largest violation of any bound of eq. (12) by ``plan`` (0 when all hold)."""
-        return self._violation(plan, gap_m, speed_mps, lead_speeds_mps, expected_mps2,
-                               *self.bounds(explicability_max))
+                        explicability_max: float, reachable: bool = False) -> float:
+        """Largest violation of any bound of eq. (12) by ``plan`` (0 when all hold); with
+        ``reachable``, of the gap bounds the vehicle can reach instead of d_min and d_max."""
+        lower, upper = self.bounds(explicability_max)
+        if reachable:
+            lower, upper, _ = self._reachable_gap_bounds(lower, upper, gap_m, speed_mps,
+                                                         lead_speeds_mps)
+        return self._violation(plan, gap_m, speed_mps, lead_speeds_mps, expected_mps2, lower,
+                               upper)
 
     def _violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
                    lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray, lower: np.ndarray,
