@@ -169,12 +169,71 @@ def assert_is_the_shipped_model(out: Path) -> None:
     assert out.read_bytes() == SHIPPED.read_bytes()
 
 
+TRAINED_ON = ('AuthenticAMD', False)
+"""(CPU vendor, AVX-512) of the machines the shipped model was trained and retrained on bit
+for bit: AMD EPYC without AVX-512 (docs/GRU.md)."""
+
+RESULT_RTOL = 1e-5
+"""Relative tolerance of the card's float results on other CPUs. Measured on an Intel Xeon
+with AVX-512 (Sapphire Rapids, 2026-11-25): validation RMSEs 1.8e-7 and 2.2e-7 apart."""
+WEIGHT_ATOL = 2e-3
+"""Absolute tolerance of the weights on other CPUs (the same machine: 7.3e-5 apart; they are
+of order 1)."""
+
+
+def cpu_class() -> tuple[str, bool]:
+    """This machine's (CPU vendor, AVX-512F) from /proc/cpuinfo."""
+    info = Path('/proc/cpuinfo').read_text() if Path('/proc/cpuinfo').exists() else ''
+    fields = dict(line.split(':', 1) for line in info.splitlines() if ':' in line)
+    vendor = {k.strip(): v.strip() for k, v in fields.items()}.get('vendor_id', '')
+    return vendor, ' avx512f' in info
+
+
+def assert_close_to_the_shipped_model(out: Path) -> None:
+    """What holds on every supported CPU: the same pinned kernel bits (fingerprint), settings,
+    sample counts, epochs and best epochs, the float results to :data:`RESULT_RTOL` and the
+    weights to :data:`WEIGHT_ATOL`."""
+    card = json.loads(SHIPPED.with_suffix('.json').read_text())
+    new = json.loads(out.with_suffix('.json').read_text())
+    assert new['numerics_fingerprint'] == card['numerics_fingerprint'], (
+        'the pinned numerics differ from the ones the shipped model was trained with '
+        f"(this machine: {new['numerics']}; card: {card['numerics']})")
+    assert new['settings'] == card['settings']
+
+    def same(a: Any, b: Any) -> None:
+        if isinstance(b, dict):
+            assert sorted(a) == sorted(b)
+            for key in b:
+                same(a[key], b[key])
+        elif isinstance(b, list):
+            assert len(a) == len(b)
+            for x, y in zip(a, b, strict=True):
+                same(x, y)
+        elif isinstance(b, float):
+            assert a == pytest.approx(b, rel=RESULT_RTOL)
+        else:
+            assert a == b
+
+    same(new['results'], card['results'])
+    with np.load(SHIPPED) as shipped, np.load(out) as retrained:
+        assert sorted(shipped.files) == sorted(retrained.files)
+        for name in shipped.files:
+            np.testing.assert_allclose(retrained[name], shipped[name], rtol=0, atol=WEIGHT_ATOL,
+                                       err_msg=name)
+
+
 @pytest.mark.slow
 def test_retraining_reproduces_the_shipped_model(tmp_path: Path) -> None:
-    """`trust-av train-gru` rebuilds the shipped model bit for bit on any
-    x86-64 CPU with AVX2 (it pins numpy's, OpenBLAS's, PyTorch's and MKL's CPU paths in its
-    training process: pinned_numerics.py), whatever numpy/PyTorch settings the caller has.
-    The shipped model is the command's defaults (its card's settings are them)."""
+    """`trust-av train-gru` rebuilds the shipped model (it pins numpy's, OpenBLAS's,
+    PyTorch's and MKL's CPU paths in its training process: pinned_numerics.py), whatever
+    numpy/PyTorch settings the caller has. The shipped model is the command's defaults (its
+    card's settings are them).
+
+    Across CPUs only what is stable across them is asserted: on the class of machine the
+    model was trained on (:data:`TRAINED_ON`) the weights byte for byte and every float of the
+    card; on other x86-64 CPUs with AVX2 the same kernel bits, counts and epochs, and floats
+    and weights to measured tolerances (an Intel Xeon with AVX-512 trains other bits from the
+    first DAgger round on, cause not found: docs/GRU.md)."""
     reason = unsupported_reason()
     if reason is not None:
         pytest.skip(f'the pinned training numerics need x86-64 with AVX2: {reason}')
@@ -183,7 +242,9 @@ def test_retraining_reproduces_the_shipped_model(tmp_path: Path) -> None:
     out = tmp_path / 'gru.npz'
     proc = retrain_shipped(out)
     assert proc.returncode == 0, proc.stderr
-    assert_is_the_shipped_model(out)
+    assert_close_to_the_shipped_model(out)
+    if cpu_class() == TRAINED_ON:
+        assert_is_the_shipped_model(out)
 
 
 def numerics_in_child(env: dict[str, str], *, pinned: bool,

@@ -116,9 +116,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'accelerations, train the GRU (seeded, deterministic, CPU), then two DAgger '
                     'rounds (TAC-GRU runs of the current model on the same traces are added '
                     'and the model retrained), then write the weights, a JSON model card and '
-                    'the loss curve. Training runs in a child process with pinned CPU numerics, '
-                    'so any x86-64 CPU with AVX2 gives the same weights bit for bit '
-                    '(docs/GRU.md). The default output replaces the shipped model.')
+                    'the loss curve. Training runs in a child process with pinned CPU numerics: '
+                    'the same machine gives the same weights bit for bit, machines like the one '
+                    'the shipped model was trained on (AMD EPYC without AVX-512) give the '
+                    'shipped weights bit for bit, other x86-64 CPUs with AVX2 weights within '
+                    'about 1e-4 (docs/GRU.md). The default output replaces the shipped model.')
     parser.add_argument('--out', type=Path, default=MODELS_DIR / 'gru_plan_estimator.npz',
                         help='weights file to write (default: the shipped model)')
     parser.add_argument('--epochs', type=int, default=None, help='override the epochs')
