@@ -59,11 +59,8 @@ MAX_GRID_STEPS = 300
 """Largest prediction grid (steps) the NMPC is built with."""
 
 QRQP_MAX_STEPS = 10
-"""Largest grid solved with ``qrqp``; finer grids use qpOASES. At a standstill behind a
-stopped lead each step's gap and speed bounds pin u^k = 0 from both sides; with N = 30
-``qrqp`` stalled there for 20-300 ms or returned a plan off the bounds (fallbacks on US06 at
-10 Hz); the dual active-set solver DAQP solves the same inputs in about 1 ms (qpOASES and
-proxQP too, in 1-10 ms; docs/MODEL.md, "Time consistency")."""
+"""Largest grid solved with ``qrqp``; finer grids use DAQP, which solves the standstill
+corner ``qrqp`` stalled on at N = 30 (docs/MODEL.md, "QP solver on fine grids")."""
 
 
 def nmpc_solver_options(max_iter: int, steps: int) -> dict[str, Any]:
@@ -174,16 +171,13 @@ class PlannerConfig:
 
 
 def prediction_grid(config: PlannerConfig, period_s: float | None = None) -> tuple[float, int]:
-    """The NMPC's prediction grid (step in s, number of steps) at a control period.
+    """The NMPC's prediction grid (step in s, number of steps) at a control period
+    ``period_s`` (None = ``dt_s``, lock-step).
 
     ``control_period``: the plan is predicted on the control period's grid over the same
     horizon in seconds, N = round(horizon_s / period) (at the paper's 1 s period exactly
     ``dt_s`` and ``horizon_steps``). ``model_step``: sampled-data control over the 1 s grid
     whatever the period.
-
-    Args:
-        config: the planner's parameters.
-        period_s: the control period, s; None = ``dt_s`` (lock-step).
 
     Raises:
         ValueError: the period is not > 0, or the grid would have more than
@@ -215,8 +209,7 @@ class PlanResult:
         solve_time_s: wall time of the solver call (instrumentation only).
         explicability_max: E_max of the trust constraint for this step.
         cost: objective value of the returned plan.
-        gap_bounds_relaxed: the vehicle was already outside [d_min, d_max] as far as it can
-            act, and the gap bounds were what it can reach (the status says to what).
+        gap_bounds_relaxed: the gap bounds were what the vehicle can reach (status: to what).
     """
 
     plan_mps2: np.ndarray
@@ -373,11 +366,8 @@ class TrustAwareNmpc:
 
     def _solve(self, guess: np.ndarray, params: np.ndarray, lower: np.ndarray,
                upper: np.ndarray) -> tuple[Any, dict[str, Any], int]:
-        """One solve with these constraint bounds, retried cold when a warm start fails.
-
-        Returns:
-            The solution, the solver's stats and the SQP iterations of both calls.
-        """
+        """One solve with these constraint bounds, retried cold when a warm start fails:
+        the solution, the solver's stats and the SQP iterations of both calls."""
         c = self.config
         sol = self._solver(x0=guess, p=params, lbx=c.accel_min_mps2, ubx=c.accel_max_mps2,
                            lbg=lower[1:], ubg=upper[1:])
@@ -394,34 +384,24 @@ class TrustAwareNmpc:
     def _reachable_gap_bounds(self, lower: np.ndarray, upper: np.ndarray, gap_m: float,
                               speed_mps: float, lead_speeds_mps: np.ndarray
                               ) -> tuple[np.ndarray, np.ndarray, str]:
-        """The gap bounds the plan can meet: where even the hardest braking ends closer than
-        d_min (stopped short of d_s, a cut-in), the bound at that step is what it reaches,
-        and likewise the hardest acceleration against d_max; elsewhere d_min and d_max.
-
-        d^1 does not depend on the plan and every later gap is monotone in it, so these are
-        exactly the bounds some plan meets: the NMPC keeps planning (the plan may not make
-        the gap worse than braking would), instead of a solver failure and the fallback. The
-        third value is a note for the status ('' when the bounds are d_min and d_max, or
-        differ from them by no more than :data:`BOUND_TOLERANCE`).
-        """
-        c, n, dt = self.config, self.steps, self.grid_step_s
-        lead = lead_speeds_mps.tolist()
-        braking = kinematics.rollout(gap_m, speed_mps, lead, kinematics.braking_plan(
-            speed_mps, n, dt, c.accel_min_mps2, c.accel_max_mps2, c.speed_min_mps), dt)[0]
-        speeding = kinematics.rollout(gap_m, speed_mps, lead, kinematics.accelerating_plan(
-            speed_mps, n, dt, c.accel_min_mps2, c.accel_max_mps2, c.speed_max_mps), dt)[0]
-        low, high = np.array(braking), np.array(speeding)
-        if low.min() >= lower[0] and high.max() <= upper[0]:
+        """``lower``/``upper`` with the gap bounds some plan meets
+        (:func:`kinematics.reachable_gap_bounds`: stopped short of d_s, a cut-in, a lead far
+        ahead), and a note for the status ('' when they are d_min and d_max to within
+        :data:`BOUND_TOLERANCE`). The same objects when nothing changes."""
+        c, n = self.config, self.steps
+        low, high = kinematics.reachable_gap_bounds(
+            c.gap_min_m, c.gap_max_m, gap_m, speed_mps, lead_speeds_mps.tolist(),
+            self.grid_step_s, c.accel_min_mps2, c.accel_max_mps2, c.speed_min_mps,
+            c.speed_max_mps)
+        if min(low) >= c.gap_min_m and max(high) <= c.gap_max_m:
             return lower, upper, ''
         lower, upper = lower.copy(), upper.copy()
-        lower[:n] = np.minimum(lower[:n], low)
-        upper[:n] = np.maximum(upper[:n], high)
-        tol = BOUND_TOLERANCE
-        if low.min() >= c.gap_min_m - tol and high.max() <= c.gap_max_m + tol:
+        lower[:n], upper[:n] = low, high
+        if (min(low) >= c.gap_min_m - BOUND_TOLERANCE
+                and max(high) <= c.gap_max_m + BOUND_TOLERANCE):
             return lower, upper, ''  # a rounding error (a stop that crept 1e-7 m too far)
         return lower, upper, (f' (gap bounds relaxed to what the vehicle can reach: '
-                              f'{min(low.min(), c.gap_min_m):.3f} to '
-                              f'{max(high.max(), c.gap_max_m):.3f} m)')
+                              f'{min(low):.3f} to {max(high):.3f} m)')
 
     def bound_violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
                         lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray,

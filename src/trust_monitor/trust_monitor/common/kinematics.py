@@ -113,6 +113,22 @@ def accelerating_plan(speed_mps: float, steps: int, dt_s: float, accel_min_mps2:
     return plan
 
 
+def reachable_gap_bounds(gap_min_m: float, gap_max_m: float, gap_m: float, speed_mps: float,
+                         lead_speeds_mps: Sequence[float], dt_s: float, accel_min_mps2: float,
+                         accel_max_mps2: float, speed_min_mps: float,
+                         speed_max_mps: float) -> tuple[list[float], list[float]]:
+    """Gap bounds at steps 1..N that some plan within the acceleration and speed bounds
+    meets: ``gap_min_m``, or where even :func:`braking_plan` ends closer, what it reaches;
+    ``gap_max_m``, or where even :func:`accelerating_plan` ends further, what it reaches (d^1
+    does not depend on the plan, and every later gap falls as the plan rises)."""
+    steps, lead = len(lead_speeds_mps), list(lead_speeds_mps)
+    low = rollout(gap_m, speed_mps, lead, braking_plan(
+        speed_mps, steps, dt_s, accel_min_mps2, accel_max_mps2, speed_min_mps), dt_s)[0]
+    high = rollout(gap_m, speed_mps, lead, accelerating_plan(
+        speed_mps, steps, dt_s, accel_min_mps2, accel_max_mps2, speed_max_mps), dt_s)[0]
+    return [min(gap_min_m, g) for g in low], [max(gap_max_m, g) for g in high]
+
+
 def hold_gap_plan(gap_m: float, speed_mps: float, lead_speeds_mps: Sequence[float], *,
                   dt_s: float, standstill_gap_m: float, time_headway_s: float,
                   gap_gain_per_s2: float, speed_gain_per_s: float, accel_min_mps2: float,
