@@ -151,16 +151,23 @@ def retrain_shipped(out: Path, *options: str) -> subprocess.CompletedProcess[str
                            '--out', str(out), *options], capture_output=True, text=True)
 
 
-def assert_is_the_shipped_model(out: Path) -> None:
-    """The model written to ``out`` is the shipped one: same numerics fingerprint, the
-    model card's results (every float, every round's best epoch) and the weights bit for
-    bit (the ``.npz`` byte for byte)."""
+def shipped_and_new_cards(out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The shipped model's card and the one written with ``out``, after checking that both
+    were trained with the same pinned kernel bits (fingerprint) and settings."""
     card = json.loads(SHIPPED.with_suffix('.json').read_text())
     new = json.loads(out.with_suffix('.json').read_text())
     assert new['numerics_fingerprint'] == card['numerics_fingerprint'], (
         'the pinned numerics differ from the ones the shipped model was trained with '
         f"(this machine: {new['numerics']}; card: {card['numerics']})")
     assert new['settings'] == card['settings']
+    return card, new
+
+
+def assert_is_the_shipped_model(out: Path) -> None:
+    """The model written to ``out`` is the shipped one: same numerics fingerprint, the
+    model card's results (every float, every round's best epoch) and the weights bit for
+    bit (the ``.npz`` byte for byte)."""
+    card, new = shipped_and_new_cards(out)
     assert new['results'] == card['results']
     with np.load(SHIPPED) as shipped, np.load(out) as retrained:
         assert sorted(shipped.files) == sorted(retrained.files)
@@ -193,12 +200,7 @@ def assert_close_to_the_shipped_model(out: Path) -> None:
     """What holds on every supported CPU: the same pinned kernel bits (fingerprint), settings,
     sample counts, epochs and best epochs, the float results to :data:`RESULT_RTOL` and the
     weights to :data:`WEIGHT_ATOL`."""
-    card = json.loads(SHIPPED.with_suffix('.json').read_text())
-    new = json.loads(out.with_suffix('.json').read_text())
-    assert new['numerics_fingerprint'] == card['numerics_fingerprint'], (
-        'the pinned numerics differ from the ones the shipped model was trained with '
-        f"(this machine: {new['numerics']}; card: {card['numerics']})")
-    assert new['settings'] == card['settings']
+    card, new = shipped_and_new_cards(out)
 
     def same(a: Any, b: Any) -> None:
         if isinstance(b, dict):

@@ -184,12 +184,12 @@ class DriverMpc:
         return np.array(speeds)
 
     def braking_plan(self, speed_mps: float) -> np.ndarray:
-        """The hardest braking plan (:func:`kinematics.braking_plan`): u_min at every step,
+        """The hardest braking plan (:func:`kinematics.hardest_plan`): u_min at every step,
         never below ``speed_min_mps``; the gap bound is feasible exactly when it meets it."""
         c = self.config
-        return np.array(kinematics.braking_plan(speed_mps, c.horizon_steps, c.dt_s,
+        return np.array(kinematics.hardest_plan(speed_mps, c.horizon_steps, c.dt_s,
                                                 c.accel_min_mps2, c.accel_max_mps2,
-                                                c.speed_min_mps))
+                                                c.speed_min_mps, braking=True))
 
     def _meet_bound(self, plan_mps2: np.ndarray, gap_m: float, speed_mps: float,
                     cautious_mps: np.ndarray, bounds_m: np.ndarray) -> np.ndarray:

@@ -84,30 +84,18 @@ def lead_speeds(speed_mps: Any, accels_mps2: Sequence[Any], dt_s: float) -> list
     return out
 
 
-def braking_plan(speed_mps: float, steps: int, dt_s: float, accel_min_mps2: float,
-                 accel_max_mps2: float, speed_min_mps: float) -> list[float]:
-    """The hardest braking plan: ``accel_min_mps2`` at every step, never below
-    ``speed_min_mps`` (never reverses).
-
-    It gives the largest gap at every step against any plan that keeps the speed bound, so a
-    lower gap bound is feasible exactly when this plan meets it.
-    """
+def hardest_plan(speed_mps: float, steps: int, dt_s: float, accel_min_mps2: float,
+                 accel_max_mps2: float, speed_limit_mps: float, *, braking: bool) -> list[float]:
+    """The hardest braking plan (``accel_min_mps2`` at every step, never below
+    ``speed_limit_mps``: it never reverses) or the hardest accelerating one (``accel_max_mps2``,
+    never above it). They give the largest and the smallest gap at every step against any
+    plan within the bounds, so a lower (upper) gap bound is feasible exactly when the braking
+    (accelerating) plan meets it."""
     plan = []
     for _ in range(steps):
-        accel = min(max(accel_min_mps2, (speed_min_mps - speed_mps) / dt_s), accel_max_mps2)
-        plan.append(accel)
-        speed_mps += accel * dt_s
-    return plan
-
-
-def accelerating_plan(speed_mps: float, steps: int, dt_s: float, accel_min_mps2: float,
-                      accel_max_mps2: float, speed_max_mps: float) -> list[float]:
-    """The hardest accelerating plan: ``accel_max_mps2`` at every step, never above
-    ``speed_max_mps``; the smallest gap at every step (the counterpart of
-    :func:`braking_plan` for an upper gap bound)."""
-    plan = []
-    for _ in range(steps):
-        accel = max(min(accel_max_mps2, (speed_max_mps - speed_mps) / dt_s), accel_min_mps2)
+        to_limit = (speed_limit_mps - speed_mps) / dt_s
+        accel = max(accel_min_mps2, to_limit) if braking else min(accel_max_mps2, to_limit)
+        accel = min(max(accel, accel_min_mps2), accel_max_mps2)
         plan.append(accel)
         speed_mps += accel * dt_s
     return plan
@@ -118,14 +106,17 @@ def reachable_gap_bounds(gap_min_m: float, gap_max_m: float, gap_m: float, speed
                          accel_max_mps2: float, speed_min_mps: float,
                          speed_max_mps: float) -> tuple[list[float], list[float]]:
     """Gap bounds at steps 1..N that some plan within the acceleration and speed bounds
-    meets: ``gap_min_m``, or where even :func:`braking_plan` ends closer, what it reaches;
-    ``gap_max_m``, or where even :func:`accelerating_plan` ends further, what it reaches (d^1
-    does not depend on the plan, and every later gap falls as the plan rises)."""
+    meets: ``gap_min_m``, or where even the hardest braking (:func:`hardest_plan`) ends
+    closer, what it reaches; ``gap_max_m``, or where even the hardest acceleration ends
+    further, what it reaches (d^1 does not depend on the plan, and every later gap falls as
+    the plan rises)."""
     steps, lead = len(lead_speeds_mps), list(lead_speeds_mps)
-    low = rollout(gap_m, speed_mps, lead, braking_plan(
-        speed_mps, steps, dt_s, accel_min_mps2, accel_max_mps2, speed_min_mps), dt_s)[0]
-    high = rollout(gap_m, speed_mps, lead, accelerating_plan(
-        speed_mps, steps, dt_s, accel_min_mps2, accel_max_mps2, speed_max_mps), dt_s)[0]
+    low = rollout(gap_m, speed_mps, lead, hardest_plan(
+        speed_mps, steps, dt_s, accel_min_mps2, accel_max_mps2, speed_min_mps, braking=True),
+        dt_s)[0]
+    high = rollout(gap_m, speed_mps, lead, hardest_plan(
+        speed_mps, steps, dt_s, accel_min_mps2, accel_max_mps2, speed_max_mps, braking=False),
+        dt_s)[0]
     return [min(gap_min_m, g) for g in low], [max(gap_max_m, g) for g in high]
 
 
