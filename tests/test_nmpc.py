@@ -95,12 +95,17 @@ def test_standstill_at_minimum_gap_is_solved_not_fallen_back(run_config) -> None
 
 
 def test_cpu_budget_exceeded_falls_back(run_config) -> None:
-    """A tiny CPU budget: every solve overruns, every step is a documented fallback."""
+    """A tiny CPU budget against the wall clock: every solve overruns, every step is a
+    documented fallback. Without the wall clock (lock-step, in-process) the budget does not
+    apply: the same solve is planned, so timing never changes those results."""
     cfg = dataclasses.replace(run_config.planner, speed_max_mps=36.0, solver_cpu_budget_s=1e-9)
-    nmpc = TrustAwareNmpc(cfg, run_config.trust)
+    nmpc = TrustAwareNmpc(cfg, run_config.trust, cpu_budget=True)
     result = nmpc.step(20.0, 12.0, np.full(3, 12.0), np.zeros(3), trust=5.0)
     assert result.status.startswith('fallback: CPU budget exceeded')
     assert np.all(np.abs(result.plan_mps2) <= 3.0)
+    untimed = TrustAwareNmpc(cfg, run_config.trust).step(20.0, 12.0, np.full(3, 12.0),
+                                                         np.zeros(3), trust=5.0)
+    assert untimed.success, untimed.status
 
 
 def test_loop_plans_agree_with_the_baseline_solver(run_config) -> None:

@@ -90,6 +90,23 @@ def test_remapped_input_topics_are_honoured(tmp_path: Path) -> None:
     assert messages.get('/ego/plan'), 'the planner did not plan from the remapped topics'
 
 
+@pytest.mark.wall_clock
+def test_cpu_budget_overrun_publishes_the_fallback_and_goes_on(tmp_path: Path) -> None:
+    """Against the wall clock a tiny CPU budget makes every NMPC solve overrun: the planner
+    publishes the fallback plan with the reason in its status and keeps commanding."""
+    params = tmp_path / 'tiny_budget.yaml'
+    params.write_text(PARAMS.read_text().replace('solver_cpu_budget_s: 0.02',
+                                                 'solver_cpu_budget_s: 0.000000001'))
+    assert 'solver_cpu_budget_s: 0.000000001' in params.read_text()
+    _result, out, _stats = shadow(tmp_path, '--params-file', str(params))
+    messages = read(out)
+    statuses = [m.status[0].message for m in messages['/ego/planner_status']]  # type: ignore[attr-defined]
+    solved = [s for s in statuses if not s.startswith('stale')]
+    assert solved and all(s.startswith('fallback: CPU budget exceeded') for s in solved), (
+        sorted(set(statuses)))
+    assert len(messages['/ego/accel_cmd']) >= len(solved)
+
+
 def test_lead_replay_interpolates_and_integrates() -> None:
     trace = SpeedTrace('t', 1.0, np.array([0.0, 2.0, 2.0]))
     lead = LeadReplay(trace, 10.0)

@@ -76,14 +76,17 @@ class AvPlanner:
         period_s: the control period, s (None = ``dt_s``, the paper's loop). At another
             period the NMPC predicts on :func:`~trust_av_planner.nmpc.prediction_grid` and
             the estimator is fed 1 s samples (:class:`ModelGridPredictor`).
+        cpu_budget: the NMPC's CPU budget applies (a loop against the wall clock;
+            :class:`TrustAwareNmpc`).
     """
 
     def __init__(self, config: PlannerConfig, trust: TrustConfig, vehicle_length_m: float,
-                 predictor: Predictor | None = None, period_s: float | None = None) -> None:
+                 predictor: Predictor | None = None, period_s: float | None = None, *,
+                 cpu_budget: bool = False) -> None:
         self.config = config
         self.vehicle_length_m = vehicle_length_m
         self.period_s = config.dt_s if period_s is None else period_s
-        self.nmpc = TrustAwareNmpc(config, trust, self.period_s)
+        self.nmpc = TrustAwareNmpc(config, trust, self.period_s, cpu_budget=cpu_budget)
         self.predictor = predictor if predictor is not None else make_predictor(config)
         self.same_grid = abs(self.period_s - config.dt_s) <= 1e-12 * config.dt_s
         history = getattr(getattr(self.predictor, 'weights', None), 'history_steps', 1)

@@ -88,7 +88,8 @@ class PlannerNode(Node):
         topics = declare_config(self, PlannerTopics)
         wall = self.clock.wall
         self.planner = AvPlanner(self.config, trust, shared.vehicle_length_m,
-                                 period_s=1.0 / self.clock.control_rate_hz if wall else None)
+                                 period_s=1.0 / self.clock.control_rate_hz if wall else None,
+                                 cpu_budget=wall)
         self.trust_initial = trust.trust_initial
         self.previous_ns: int | None = None
         self.buffer = StepBuffer([*STEP_INPUTS, 'trust'])
