@@ -90,11 +90,10 @@ def test_remapped_input_topics_are_honoured(tmp_path: Path) -> None:
     assert messages.get('/ego/plan'), 'the planner did not plan from the remapped topics'
 
 
+@pytest.mark.wall_clock
 def test_cpu_budget_overrun_publishes_the_fallback_and_goes_on(tmp_path: Path) -> None:
     """Against the wall clock a tiny CPU budget makes every NMPC solve overrun: the planner
-    publishes the fallback plan with the reason in its status and keeps commanding. (Not in
-    the wall_clock group: it waits 3 s but asserts nothing about timing, so it may share a
-    busy worker instead of lengthening the group that ends the suite.)"""
+    publishes the fallback plan with the reason in its status and keeps commanding."""
     params = tmp_path / 'tiny_budget.yaml'
     params.write_text(PARAMS.read_text().replace('solver_cpu_budget_s: 0.02',
                                                  'solver_cpu_budget_s: 0.000000001'))
