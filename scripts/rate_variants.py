@@ -48,6 +48,7 @@ from trust_av_planner.system.config import RunConfig, load_run_config
 from trust_av_planner.system.metrics import StepRecord, expectation_errors, ticks_per_model_step
 from trust_monitor import trust_model
 from trust_monitor.common import kinematics
+from trust_monitor.common.solver import nmpc_solver_options
 
 VARIANTS = ('main', 'sliding', 'ca-every-tick', 'mean-e', 'held-lead', 'model-step',
             'blocked-commands')
@@ -100,7 +101,7 @@ class _BlockedSolver:
             'x': w, 'f': tracking / c.tracking_cost_scale_m2 + alpha * score
             / c.explicability_scale, 'g': ca.vertcat(*gaps[1:], *speeds, score),
             'p': ca.vertcat(gap0, speed0, lead, expected, alpha, ca.reshape(mapping, -1, 1))},
-            nmpc.nmpc_solver_options(c.solver_max_iter, blocks))
+            nmpc_solver_options(c.solver_max_iter, blocks))
         self.owner, self.age_s = owner, 0.0
 
     def matrix(self) -> np.ndarray:

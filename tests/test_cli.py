@@ -55,6 +55,11 @@ def test_simulate_prints_metrics_and_writes_table(short_trace: Path, tmp_path: P
     (['--predictor', 'magic'], "invalid choice: 'magic'"),
     (['--trace', '/no/such/trace.csv'], '/no/such/trace.csv: cannot open trace'),
     (['--params-file', '/no/such.yaml'], '/no/such.yaml: cannot read params file'),
+    (['--control-rate-hz', '0'], 'must be a finite rate > 0 Hz'),
+    (['--control-rate-hz', 'nan'], 'must be a finite rate > 0 Hz'),
+    (['--control-rate-hz', '0.5'], 'control_rate_hz 0.5: a 2 s control period is longer '
+                                   'than the model step'),
+    (['--control-rate-hz', '101'], 'needs 303 steps (at most 300)'),
 ])
 def test_bad_arguments_give_one_clear_line(args: list[str], message: str) -> None:
     proc = trust_av('simulate', '--no-progress', *args)

@@ -41,6 +41,14 @@ CORPUS: dict[str, tuple[str, bool, bool]] = {
     'tiny_step': ('/**:\n  ros__parameters:\n    dt_s: 1.0e-9\n', False, False),
     'trace_is_etc_passwd': ('preceding_traffic:\n  ros__parameters:\n    trace: /etc/passwd\n',
                             False, False),
+    # wall-mode parameters, declared by every node, refused alike in any clock mode
+    'negative_control_rate': ('/**:\n  ros__parameters:\n    control_rate_hz: -1.0\n',
+                              False, False),
+    'control_period_over_dt_s': ('/**:\n  ros__parameters:\n    clock_mode: wall\n'
+                                 '    control_rate_hz: 0.5\n', False, False),
+    'control_rate_unused_in_lock_step': ('/**:\n  ros__parameters:\n    control_rate_hz: 0.5\n',
+                                         True, True),
+    'zero_input_timeout': ('/**:\n  ros__parameters:\n    input_timeout_s: 0.0\n', False, False),
     # Stricter than the nodes: rcl would silently drop these values; trust-av says so.
     'shadowed_by_shipped_section': ('/**:\n  ros__parameters:\n    alpha: 0.3\n', False, True),
     'type_change_over_shipped': ('/**:\n  ros__parameters:\n    horizon_steps: 4.0\n',

@@ -41,7 +41,7 @@ from trust_monitor.common.params import (
     param,
     require,
 )
-from trust_monitor.common.solver import sqp_options
+from trust_monitor.common.solver import nmpc_solver_options
 from trust_monitor.trust_model import TrustConfig, explicability, explicability_bound
 
 LOG = logging.getLogger(__name__)
@@ -57,20 +57,6 @@ PREDICTION_GRIDS = ('control_period', 'model_step')
 
 MAX_GRID_STEPS = 300
 """Largest prediction grid (steps) the NMPC is built with."""
-
-QRQP_MAX_STEPS = 10
-"""Largest grid solved with ``qrqp``; finer grids use DAQP, which solves the standstill
-corner ``qrqp`` stalled on at N = 30 (docs/MODEL.md, "QP solver on fine grids")."""
-
-
-def nmpc_solver_options(max_iter: int, steps: int) -> dict[str, Any]:
-    """SQP options of the NMPC: the shared ``qrqp`` settings up to :data:`QRQP_MAX_STEPS`
-    steps (the paper's grid), DAQP for finer grids."""
-    options = sqp_options(max_iter)
-    if steps > QRQP_MAX_STEPS:
-        options['qpsol'] = 'daqp'
-        options['qpsol_options'] = {'error_on_fail': False}
-    return options
 
 BOUND_TOLERANCE = 1e-6
 """Largest bound violation (m, m/s, m/s^2 or E) accepted from the solver."""
@@ -181,13 +167,20 @@ def prediction_grid(config: PlannerConfig, period_s: float | None = None) -> tup
     whatever the period.
 
     Raises:
-        ValueError: the period is not > 0, or the grid would have more than
+        ValueError: the period is not > 0, is longer than ``dt_s`` (the estimators take a
+            sample every model step), or the grid would have more than
             :data:`MAX_GRID_STEPS` steps.
     """
-    if period_s is None or config.prediction_grid == 'model_step':
+    if period_s is None:
         return config.dt_s, config.horizon_steps
     if not period_s > 0.0:
         raise ValueError(f'control period must be > 0 s, got {period_s}')
+    if period_s > config.dt_s * (1.0 + 1e-12):
+        raise ValueError(f'a {period_s:g} s control period is longer than the model step dt_s '
+                         f'= {config.dt_s:g} s, which the plan estimators sample: use a rate '
+                         f'of at least {1.0 / config.dt_s:g} Hz')
+    if config.prediction_grid == 'model_step':
+        return config.dt_s, config.horizon_steps
     if abs(period_s - config.dt_s) <= 1e-12 * config.dt_s:
         return config.dt_s, config.horizon_steps
     steps = max(1, round(config.horizon_s / period_s))

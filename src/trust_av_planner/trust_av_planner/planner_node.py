@@ -40,7 +40,7 @@ from visualization_msgs.msg import MarkerArray
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PlannerConfig
 from trust_av_planner.planner import AvPlanner
-from trust_av_planner.system.config import PlannerTopics, SharedConfig
+from trust_av_planner.system.config import PlannerTopics, SharedConfig, check_control_rate
 from trust_monitor.common.grids import interp_at
 from trust_monitor.common.kinematics import VehicleState
 from trust_monitor.common.lockstep import StepBuffer
@@ -87,6 +87,8 @@ class PlannerNode(Node):
         self.clock = declare_config(self, WallClockConfig)
         topics = declare_config(self, PlannerTopics)
         wall = self.clock.wall
+        if wall:
+            check_control_rate(self.config, self.clock.control_rate_hz)
         self.planner = AvPlanner(self.config, trust, shared.vehicle_length_m,
                                  period_s=1.0 / self.clock.control_rate_hz if wall else None,
                                  cpu_budget=wall)

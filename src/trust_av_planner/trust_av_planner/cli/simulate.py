@@ -17,7 +17,7 @@ from trust_av_planner.cli.options import (
 )
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
-from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.config import check_control_rate, load_run_config
 
 
 def run(args: argparse.Namespace) -> int:
@@ -25,6 +25,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         output_file(args.out)
     config = load_run_config(args.params_files, run_overrides(args))
+    if args.control_rate_hz is not None:  # the planner node's rule for control_rate_hz
+        check_control_rate(config.planner, args.control_rate_hz)
     trace = control_trace(config, args.control_rate_hz)
     bar = None if args.no_progress else Progress(f'simulate {trace.name}', trace.steps)
     result = simulate(config, trace, on_step=None if bar is None else bar.update)

@@ -19,7 +19,7 @@ from typing import Any, TypeVar
 
 from human_driver_sim.driver_mpc import DriverConfig
 from preceding_traffic.traces import SpeedTrace, TraceConfig
-from trust_av_planner.nmpc import PlannerConfig
+from trust_av_planner.nmpc import PlannerConfig, prediction_grid
 from trust_monitor.common.param_layers import (
     Layered,
     layer_files,
@@ -137,6 +137,21 @@ class RunConfig:
 OVERRIDES_WHERE = 'command-line options'
 
 
+def check_control_rate(planner: PlannerConfig, control_rate_hz: float) -> None:
+    """The wall-mode control rate must give the NMPC a prediction grid
+    (:func:`~trust_av_planner.nmpc.prediction_grid`: a period no longer than ``dt_s``, at
+    most its largest grid); checked in wall mode by ``trust-av`` and by the planner node
+    alike (lock-step does not use it).
+
+    Raises:
+        ParamsError: one line naming ``control_rate_hz``.
+    """
+    try:
+        prediction_grid(planner, 1.0 / control_rate_hz)
+    except ValueError as err:
+        raise ParamsError(f'control_rate_hz {control_rate_hz:g}: {err}') from err
+
+
 def check_sections(layers: Sequence[ParsedParams]) -> None:
     """Every section names a node of the graph (or is a wildcard) and holds only parameters
     of that node's components (a wildcard: of any component).
@@ -186,12 +201,20 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
             {(name if section_target(name) is None else node_fqn(namespace, name)): values
              for name, values in overrides.items() if values}, OVERRIDES_WHERE))
     check_sections(layers)
+    for node, components in NODE_COMPONENTS.items():  # every value each node will declare
+        params = layered_params(layers, node_fqn(namespace, node))
+        for component in components:
+            _build(component, params)
     traffic = layered_params(layers, node_fqn(namespace, 'preceding_traffic'))
     planner = layered_params(layers, node_fqn(namespace, 'planner'))
+    planner_config = _build(PlannerConfig, planner)
+    clock = _build(WallClockConfig, planner)
+    if clock.wall:
+        check_control_rate(planner_config, clock.control_rate_hz)
     return RunConfig(
         shared=_build(SharedConfig, traffic),
         trace=_build(TraceConfig, traffic),
-        planner=_build(PlannerConfig, planner),
+        planner=planner_config,
         driver=_build(DriverConfig, layered_params(layers, node_fqn(namespace, 'human_driver'))),
         trust=_build(TrustConfig, layered_params(layers, node_fqn(namespace, 'trust_monitor'))),
         params_files=paths,

@@ -1,4 +1,5 @@
-"""CasADi solver settings shared by the project's small MPCs (the AV's and the driver's)."""
+"""CasADi solver settings shared by the project's small MPCs (the AV's and the driver's),
+and the AV NMPC's choice of QP solver by grid size."""
 
 from __future__ import annotations
 
@@ -18,3 +19,18 @@ def sqp_options(max_iter: int) -> dict[str, Any]:
     return {'qpsol': 'qrqp', 'qpsol_options': quiet_qp, 'convexify_strategy': 'none',
             'max_iter': max_iter, 'print_time': False, 'print_header': False,
             'print_iteration': False, 'print_status': False, 'error_on_fail': False}
+
+
+QRQP_MAX_STEPS = 10
+"""Largest grid solved with ``qrqp``; finer grids use DAQP, which solves the standstill
+corner ``qrqp`` stalled on at N = 30 (docs/MODEL.md, "QP solver on fine grids")."""
+
+
+def nmpc_solver_options(max_iter: int, steps: int) -> dict[str, Any]:
+    """SQP options of the NMPC: the shared ``qrqp`` settings up to :data:`QRQP_MAX_STEPS`
+    steps (the paper's grid), DAQP for finer grids."""
+    options = sqp_options(max_iter)
+    if steps > QRQP_MAX_STEPS:
+        options['qpsol'] = 'daqp'
+        options['qpsol_options'] = {'error_on_fail': False}
+    return options
