@@ -107,6 +107,27 @@ def test_cpu_budget_overrun_publishes_the_fallback_and_goes_on(tmp_path: Path) -
     assert len(messages['/ego/accel_cmd']) >= len(solved)
 
 
+@pytest.mark.parametrize(('rate', 'message'), [
+    ('0', 'must be a finite rate > 0 Hz'),
+    ('abc', 'expected a rate in Hz'),
+    ('0.5', 'control_rate_hz 0.5: a 2 s control period is longer than the model step'),
+    ('101', 'needs 303 steps (at most 300)'),
+])
+def test_bad_rate_is_one_line_before_anything_starts(tmp_path: Path, rate: str,
+                                                     message: str) -> None:
+    """The planner node's rule for its rate, applied by the command before any node or
+    output exists (a 0.5 Hz shadow run used to start, leave its --out directory and stop on
+    the node's refusal)."""
+    out = tmp_path / 'shadow'
+    result = subprocess.run(
+        [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
+         str(REPO / 'bags' / 'commute_am'), '--duration-s', '1', '--out', str(out),
+         '--rate-hz', rate], capture_output=True, text=True, timeout=60, check=False)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert message in result.stderr.strip().splitlines()[-1]  # argparse's usage, then one line
+    assert 'Traceback' not in result.stderr and not out.exists()
+
+
 def test_lead_replay_interpolates_and_integrates() -> None:
     trace = SpeedTrace('t', 1.0, np.array([0.0, 2.0, 2.0]))
     lead = LeadReplay(trace, 10.0)

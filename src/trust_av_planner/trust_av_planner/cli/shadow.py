@@ -10,11 +10,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from preceding_traffic.sources import load_trace
-from trust_av_planner.cli.options import add_params_file_option, alpha_value
+from trust_av_planner.cli.options import add_params_file_option, alpha_value, positive_hz
 from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PREDICTORS
-from trust_av_planner.system.config import PlannerTopics, load_run_config
+from trust_av_planner.system.config import (
+    PlannerTopics,
+    check_control_rate,
+    load_run_config,
+)
 from trust_monitor.common.param_layers import layered_params, node_fqn, read_layers
 from trust_monitor.common.params import build_config
 from trust_monitor.common.wall_clock import WallClockConfig, format_summary
@@ -63,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     clock = build_config(WallClockConfig, planner_section)
     topics = build_config(PlannerTopics, planner_section)
     rate_hz = args.rate_hz if args.rate_hz is not None else clock.control_rate_hz
+    check_control_rate(config.planner, rate_hz)  # the planner node's rule, before any output
     if args.whole_graph and topics != PlannerTopics():
         files = ', '.join(str(p) for p in config.params_files)
         raise TrustAvPlannerError('--whole-graph runs the simulated nodes on the standard topics; '
@@ -121,7 +126,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='replace an existing --out bag directory')
     parser.add_argument('--duration-s', type=positive_seconds, default=None,
                         help='wall time to replay, s (default: the whole bag)')
-    parser.add_argument('--rate-hz', type=positive_seconds, default=None,
+    parser.add_argument('--rate-hz', type=positive_hz, default=None,
                         help="control rate, Hz (default: the params file's control_rate_hz)")
     parser.add_argument('--alpha', type=alpha_value, default=None,
                         help="explicability weight in [0, 1] (default: the params file's)")
