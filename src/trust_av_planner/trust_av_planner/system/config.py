@@ -201,22 +201,22 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
             {(name if section_target(name) is None else node_fqn(namespace, name)): values
              for name, values in overrides.items() if values}, OVERRIDES_WHERE))
     check_sections(layers)
-    for node, components in NODE_COMPONENTS.items():  # every value each node will declare
+    # Every component each node will declare, built once (a node refuses what fails here).
+    built: dict[tuple[str, type], Any] = {}
+    for node, components in NODE_COMPONENTS.items():
         params = layered_params(layers, node_fqn(namespace, node))
         for component in components:
-            _build(component, params)
-    traffic = layered_params(layers, node_fqn(namespace, 'preceding_traffic'))
-    planner = layered_params(layers, node_fqn(namespace, 'planner'))
-    planner_config = _build(PlannerConfig, planner)
-    clock = _build(WallClockConfig, planner)
+            built[node, component] = _build(component, params)
+    planner: PlannerConfig = built['planner', PlannerConfig]
+    clock: WallClockConfig = built['planner', WallClockConfig]
     if clock.wall:
-        check_control_rate(planner_config, clock.control_rate_hz)
+        check_control_rate(planner, clock.control_rate_hz)
     return RunConfig(
-        shared=_build(SharedConfig, traffic),
-        trace=_build(TraceConfig, traffic),
-        planner=planner_config,
-        driver=_build(DriverConfig, layered_params(layers, node_fqn(namespace, 'human_driver'))),
-        trust=_build(TrustConfig, layered_params(layers, node_fqn(namespace, 'trust_monitor'))),
+        shared=built['preceding_traffic', SharedConfig],
+        trace=built['preceding_traffic', TraceConfig],
+        planner=planner,
+        driver=built['human_driver', DriverConfig],
+        trust=built['trust_monitor', TrustConfig],
         params_files=paths,
         namespace=namespace,
     )
