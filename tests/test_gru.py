@@ -191,8 +191,8 @@ of order 1)."""
 def cpu_class() -> tuple[str, bool]:
     """This machine's (CPU vendor, AVX-512F) from /proc/cpuinfo."""
     info = Path('/proc/cpuinfo').read_text() if Path('/proc/cpuinfo').exists() else ''
-    fields = dict(line.split(':', 1) for line in info.splitlines() if ':' in line)
-    vendor = {k.strip(): v.strip() for k, v in fields.items()}.get('vendor_id', '')
+    vendor = next((line.split(':', 1)[1].strip() for line in info.splitlines()
+                   if line.startswith('vendor_id')), '')
     return vendor, ' avx512f' in info
 
 
