@@ -180,11 +180,10 @@ def run(args: argparse.Namespace) -> int:
     starts = _mpc_starts(kkt)
     groups = 1 + (len(fit) if len(fit) > 1 else 0) + 2 * len({p.driver
                                                               for p in fit['openacc']})
-    bar = None if args.no_progress else Progress(
-        'fit-driver', groups * (len(starts) + 3) * int(1.5 * args.iterations + 6))
-    fits = _fits(config, fit, starts, args.iterations, None if bar is None else bar.update)
-    if bar is not None:
-        bar.close()
+    bar = Progress('fit-driver', groups * (len(starts) + 3) * int(1.5 * args.iterations + 6),
+                   shown=not args.no_progress)
+    fits = _fits(config, fit, starts, args.iterations, bar.update)
+    bar.close()
     pooled_idm, pooled_mpc, _ = fits['pooled']
     shipped = configured(config, pooled_mpc.params)
     per_pair = {p.key: irl.fit_inverse_kkt(shipped, irl.demonstrations(p, n))

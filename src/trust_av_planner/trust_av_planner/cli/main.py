@@ -20,6 +20,7 @@ import sys
 from human_driver_sim.errors import HumanDriverSimError
 from preceding_traffic.errors import PrecedingTrafficError
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph import stop_signals
 from trust_monitor.errors import TrustMonitorError
 
 COMMAND_MODULES = (
@@ -50,19 +51,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class Stopped(KeyboardInterrupt):
-    """A stop signal other than SIGINT (SIGTERM, as ``timeout``, ``docker stop`` and systemd
-    send it): raised like Ctrl-C so that every command takes the same way out."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-
-def _stop(signum: int, _frame: object) -> None:
-    raise Stopped(signum)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``trust-av``.
 
@@ -73,27 +61,27 @@ def main(argv: list[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
-    # Ctrl-C must always reach us (a background start inherits SIGINT as ignored), and
-    # SIGTERM takes the same way: long commands stop what they started and finish their
-    # files on the way out.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _stop)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format='%(levelname)s %(name)s: %(message)s')
-    try:
-        return int(args.func(args))
-    except (TrustMonitorError, PrecedingTrafficError, HumanDriverSimError,
-            TrustAvPlannerError) as err:
-        print(f'trust-av {args.command}: error: {err}', file=sys.stderr)
-        return 2
-    except KeyboardInterrupt as err:
-        # Everything started has been stopped and every recording finished on the way out.
-        signum = err.signum if isinstance(err, Stopped) else signal.SIGINT
-        what = 'interrupted' if signum == signal.SIGINT else \
-            f'stopped by {signal.Signals(signum).name}'
-        print(f'trust-av {args.command}: {what}; everything it started was stopped and its '
-              'recordings finished', file=sys.stderr)
-        return 128 + int(signum)
+    # Ctrl-C and SIGTERM raise Stopped: long commands stop what they started and finish
+    # their files on the way out.
+    with stop_signals.installed():
+        try:
+            code = int(args.func(args))
+            stop_signals.deliver_pending()  # one that arrived where it could not be raised
+            return code
+        except (TrustMonitorError, PrecedingTrafficError, HumanDriverSimError,
+                TrustAvPlannerError) as err:
+            print(f'trust-av {args.command}: error: {err}', file=sys.stderr)
+            return 2
+        except KeyboardInterrupt as err:
+            # Everything started has been stopped and every recording finished on the way.
+            signum = err.signum if isinstance(err, stop_signals.Stopped) else signal.SIGINT
+            what = 'interrupted' if signum == signal.SIGINT else \
+                f'stopped by {signal.Signals(signum).name}'
+            print(f'trust-av {args.command}: {what}; everything it started was stopped and '
+                  'its recordings finished', file=sys.stderr)
+            return 128 + int(signum)
 
 
 if __name__ == '__main__':

@@ -15,6 +15,7 @@ from tqdm import tqdm
 
 from preceding_traffic.traces import SHIPPED_TRACES
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph import stop_signals
 from trust_av_planner.nmpc import LEAD_PREVIEWS, PREDICTORS, PlannerConfig
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 from trust_av_planner.system.metrics import Metrics
@@ -171,16 +172,20 @@ def format_metrics(metrics: Metrics, title: str) -> str:
 class Progress:
     """A progress bar on stderr (tqdm) fed with absolute counts (``update(done, total)``, the
     ``on_step`` callback of the runners). On a terminal it is redrawn at most every 0.1 s;
-    when stderr is not a terminal (CI logs) only one final line is written.
+    when stderr is not a terminal (CI logs) only one final line is written. Each update
+    also raises a stop signal that arrived where Python could not raise it
+    (:func:`~trust_av_planner.graph.stop_signals.deliver_pending`), shown or not.
 
     Args:
         label: what is counted, e.g. ``simulate us06``.
         total: the expected count.
+        shown: False writes nothing (``--no-progress``).
     """
 
-    def __init__(self, label: str, total: int) -> None:
+    def __init__(self, label: str, total: int, *, shown: bool = True) -> None:
         self.label = label
-        self.interactive = sys.stderr.isatty()
+        self.shown = shown
+        self.interactive = shown and sys.stderr.isatty()
         self._start = time.monotonic()
         self._bar = tqdm(total=max(total, 1), desc=label, unit='step', mininterval=0.1,
                          disable=not self.interactive, leave=True)
@@ -189,6 +194,7 @@ class Progress:
 
     def update(self, done: int, total: int | None = None) -> None:
         """Report ``done`` of ``total`` items."""
+        stop_signals.deliver_pending()
         self.done = done
         if total is not None and total != self.total:
             self.total = max(total, 1)
@@ -196,9 +202,9 @@ class Progress:
         self._bar.update(done - self._bar.n)
 
     def close(self) -> None:
-        """Finish the bar (a final line when stderr is not a terminal)."""
+        """Finish the bar (a final line when shown and stderr is not a terminal)."""
         self._bar.close()
-        if not self.interactive:
+        if self.shown and not self.interactive:
             elapsed = time.monotonic() - self._start
             print(f'{self.label}: {self.done}/{self.total} in {elapsed:.1f} s', file=sys.stderr)
 

@@ -108,14 +108,13 @@ def run(args: argparse.Namespace) -> int:
         executor = sweep.RayExecutor(args.ray_address, args.workers)
     else:
         executor = sweep.LocalExecutor(args.workers)
-    bar = None if args.no_progress else Progress('reproduce', len(cases))
+    bar = Progress('reproduce', len(cases), shown=not args.no_progress)
     start = time.monotonic()
     runner = 'graph' if args.graph else 'in-process'
     results = sweep.run_sweep(cases, params_file, out, executor,
-                              None if bar is None else bar.update, runner=runner,
+                              bar.update, runner=runner,
                               max_steps=args.max_steps)
-    if bar is not None:
-        bar.close()
+    bar.close()
     elapsed = time.monotonic() - start
 
     with (out / 'all_runs.csv').open('w', newline='') as handle:

@@ -35,16 +35,15 @@ def run(args: argparse.Namespace) -> int:
     bag: Path = args.bag or Path('bags') / (
         f'run_{trace.name}_{config.planner.predictor}_alpha{config.planner.alpha:g}')
     outputs = prepare_outputs(bag, overwrite=args.overwrite)
-    bar = None if args.no_progress else Progress(f'graph {trace.name}', trace.steps)
+    bar = Progress(f'graph {trace.name}', trace.steps, shown=not args.no_progress)
     try:
         result, records = run_graph_records(
             config, config.trace.trace, trace, outputs.bag,
             max_steps=args.max_steps, startup_timeout_s=args.startup_timeout_s,
-            log_dir=outputs.logs, on_step=None if bar is None else bar.update,
+            log_dir=outputs.logs, on_step=bar.update,
             namespace=namespace, domain_id=domain_id)
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     metrics = compute_metrics(records, config.min_safe_gap_m)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
              f'alpha = {config.planner.alpha:g} (ROS 2 graph, domain {result.domain_id}'

@@ -28,10 +28,9 @@ def run(args: argparse.Namespace) -> int:
     if args.control_rate_hz is not None:  # the planner node's rule for control_rate_hz
         check_control_rate(config.planner, args.control_rate_hz)
     trace = control_trace(config, args.control_rate_hz)
-    bar = None if args.no_progress else Progress(f'simulate {trace.name}', trace.steps)
-    result = simulate(config, trace, on_step=None if bar is None else bar.update)
-    if bar is not None:
-        bar.close()
+    bar = Progress(f'simulate {trace.name}', trace.steps, shown=not args.no_progress)
+    result = simulate(config, trace, on_step=bar.update)
+    bar.close()
     if args.out is not None:
         write_table(result, args.out)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '

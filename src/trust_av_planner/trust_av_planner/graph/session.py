@@ -20,6 +20,7 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
+from trust_av_planner.graph import stop_signals
 from trust_av_planner.graph.domains import domain_ports_in_use
 from trust_av_planner.graph.processes import RECORDER, Graph, GraphError, use_run_discovery
 from trust_monitor.common.topics import TOPICS, expected_endpoints, qualified
@@ -151,8 +152,9 @@ class Session:
         self.recorder_steps = int(values.get('steps', '0'))
 
     def spin(self, timeout_s: float) -> None:
-        """Process this node's callbacks for at most ``timeout_s``."""
-        self.executor.spin_once(timeout_sec=timeout_s)
+        """Process this node's callbacks for at most ``timeout_s`` (a stop signal is raised
+        after it)."""
+        stop_signals.spin_once(self.executor, timeout_s)
 
     def topic(self, name: str) -> str:
         """A table topic as resolved in the graph's namespace."""

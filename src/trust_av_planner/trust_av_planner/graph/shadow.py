@@ -32,6 +32,7 @@ from typing import Any
 
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
+from trust_av_planner.graph import stop_signals
 from trust_av_planner.graph.bag_writer import BagWriter
 from trust_av_planner.graph.domains import lease_domain
 from trust_av_planner.graph.orchestrator import node_specs
@@ -143,7 +144,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                 while True:
                     now = time.monotonic_ns()
                     if now < next_tick:
-                        executor.spin_once(timeout_sec=(next_tick - now) / NS_PER_S)
+                        stop_signals.spin_once(executor, (next_tick - now) / NS_PER_S)
                         continue
                     stats.tick(now)
                     elapsed_s = (now - start) / NS_PER_S
@@ -278,7 +279,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                 next_chunk = started + 1.0
                 pids = {p.spec.name: p.popen.pid for p in graph.processes}
                 while time.monotonic() < end:
-                    executor.spin_once(timeout_sec=0.05)
+                    stop_signals.spin_once(executor, 0.05)
                     graph.check_alive(set())
                     if time.monotonic() >= next_chunk:
                         recording.end_step()
@@ -314,13 +315,13 @@ def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
     stopper = threading.Thread(target=stop, name='stop-nodes')
     stopper.start()
     while stopper.is_alive():
-        executor.spin_once(timeout_sec=0.02)
+        stop_signals.spin_once(executor, 0.02)
     stopper.join()
     if errors:
         raise errors[0]
     drain_until = time.monotonic() + drain_s
     while time.monotonic() < drain_until:
-        executor.spin_once(timeout_sec=0.05)
+        stop_signals.spin_once(executor, 0.05)
 
 
 def _node_loops(graph: Graph, log_dir: Path, names: tuple[str, ...]) -> dict[str, Any]:
@@ -363,7 +364,7 @@ def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[
     deadline = time.monotonic() + timeout_s
     missing: list[str] = []
     while time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
+        stop_signals.spin_once(executor, 0.05)
         graph.check_alive(set())
         missing = [f'{topic} ({node.count_publishers(topic)}/{pubs} publishers, '
                    f'{node.count_subscribers(topic)}/{subs} subscribers)'

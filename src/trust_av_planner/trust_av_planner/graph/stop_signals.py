@@ -1,0 +1,101 @@
+"""SIGINT and SIGTERM in ``trust-av``: raised as :class:`Stopped` (a ``KeyboardInterrupt``)
+so that every command takes the same way out (stop what it started, finish its files), and
+never lost.
+
+Python raises a signal handler's exception wherever the main thread happens to be. Two
+places lose it:
+
+- a destructor or a garbage-collector callback (``__del__``: rclpy's ``Future``, casadi's
+  objects): Python prints "Exception ignored in ..." and goes on, so the command ran to its
+  end and exited 0 after a Ctrl-C;
+- rclpy's executor, where an exception raised half-way through ``spin_once`` can leave it
+  inconsistent (the nodes avoid it the same way, ``trust_monitor/ros/spin.py``).
+
+So a stop that could not be raised is kept: while rclpy spins (:func:`spin_once`) the
+handler only records it, and a ``KeyboardInterrupt`` that Python discarded as unraisable is
+recorded by :func:`sys.unraisablehook` instead of printed. :func:`deliver_pending` raises a
+recorded stop; it runs after every spin, at every progress update of the long in-process
+commands, and when a command returns.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+from collections.abc import Iterator
+from types import FrameType
+from typing import Any
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+"""The signals that stop a command (Ctrl-C; ``timeout``, ``docker stop``, systemd)."""
+
+_state: dict[str, int] = {'deferring': 0, 'pending': 0}
+
+
+class Stopped(KeyboardInterrupt):
+    """A stop signal, raised like Ctrl-C; ``signum`` says which."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _handler(signum: int, _frame: FrameType | None) -> None:
+    if _state['deferring']:
+        _state['pending'] = signum
+        return
+    _state['pending'] = 0
+    raise Stopped(signum)
+
+
+def _unraisable(unraisable: Any) -> None:
+    error = unraisable.exc_value
+    if isinstance(error, KeyboardInterrupt):
+        _state['pending'] = getattr(error, 'signum', signal.SIGINT)
+        return
+    sys.__unraisablehook__(unraisable)
+
+
+@contextlib.contextmanager
+def installed() -> Iterator[None]:
+    """Inside the block, SIGINT and SIGTERM raise :class:`Stopped` (also where a background
+    start inherited SIGINT as ignored) and a stop Python could not raise is kept; the
+    previous handlers and hook are back afterwards."""
+    previous = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
+    previous_hook = sys.unraisablehook
+    _state['pending'] = 0
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, _handler)
+    sys.unraisablehook = _unraisable
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous_hook
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def deliver_pending() -> None:
+    """Raise the stop that arrived where it could not be raised, if any."""
+    signum, _state['pending'] = _state['pending'], 0
+    if signum:
+        raise Stopped(signum)
+
+
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """A stop inside the block is recorded, and raised when the block ends normally."""
+    _state['deferring'] += 1
+    try:
+        yield
+    finally:
+        _state['deferring'] -= 1
+    if not _state['deferring']:
+        deliver_pending()
+
+
+def spin_once(executor: Any, timeout_s: float) -> None:
+    """``executor.spin_once`` with a stop deferred to its end (at most ``timeout_s``)."""
+    with deferred():
+        executor.spin_once(timeout_sec=timeout_s)
