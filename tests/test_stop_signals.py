@@ -9,12 +9,14 @@ these tests put it there on purpose.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 
@@ -99,7 +101,7 @@ def test_a_stop_while_deferred_is_raised_when_the_block_ends() -> None:
             reached.append('end of the block')
         assert reached == ['end of the block'] and stopped.value.signum == signal.SIGTERM
         stop_signals.deliver_pending()          # delivered once, not again
-    assert signal.getsignal(signal.SIGTERM) is not stop_signals._handler  # restored
+    assert signal.getsignal(signal.SIGTERM) is not stop_signals.handle  # restored
 
 
 def test_a_stop_lost_in_a_destructor_stops_trust_av_simulate_at_the_next_step() -> None:
@@ -128,3 +130,103 @@ sys.exit(code)
     assert done.stderr == ('trust-av simulate: interrupted; everything it started was stopped '
                            'and its recordings finished\n')
     assert done.stdout == 'steps 5\n'           # no metrics: stopped at that step's progress
+
+
+def descendants(pid: int) -> set[int]:
+    """Every live process started, directly or not, by ``pid``."""
+    parents: dict[int, int] = {}
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
+            except OSError:
+                continue
+            if fields[0] != 'Z':
+                parents[int(entry.name)] = int(fields[1])
+    found, frontier = set(), {pid}
+    while frontier:
+        frontier = {child for child, parent in parents.items() if parent in frontier}
+        found |= frontier
+    return found
+
+
+def assert_gone(pids: set[int]) -> None:
+    """None of ``pids`` is alive after a moment (zombies count as gone)."""
+    deadline = time.monotonic() + 60
+    alive = pids
+    while alive and time.monotonic() < deadline:
+        alive = {pid for pid in alive if Path(f'/proc/{pid}').exists()
+                 and 'Z' not in (Path(f'/proc/{pid}/stat').read_text()
+                                 .rsplit(')', 1)[1].split()[0])}
+        time.sleep(0.1)
+    assert not alive, f'still running: {alive}'
+
+
+def trust_av(*args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_sigterm_stops_a_sweep_and_its_workers(tmp_path: Path) -> None:
+    """SIGTERM to ``trust-av reproduce`` alone (as ``docker stop`` or systemd send it): the
+    queued cases do not run, no worker is left, every stored case is whole (a rerun
+    resumes from them: tests/test_reproduce.py). A process pool's own shutdown used to run
+    every queued case first."""
+    sweep = ('reproduce', '--traces', 'us06,nycc', '--predictors', 'ca', '--drivers', '2',
+             '--workers', '2', '--results-dir', str(tmp_path), '--no-progress')
+    cases = 2 * 5 * 2                            # traces x alpha x drivers
+    proc = trust_av(*sweep)
+    cache = tmp_path / 'cache'
+    deadline = time.monotonic() + 120
+    while not list(cache.glob('*.json')) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    workers = descendants(proc.pid)
+    assert len(workers) >= 2                     # the two workers (and Python's helpers)
+    proc.send_signal(signal.SIGTERM)
+    _out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert err.splitlines() == ['trust-av reproduce: stopped by SIGTERM; everything it '
+                                'started was stopped and its recordings finished']
+    assert_gone(workers)
+    stored = list(cache.glob('*.json'))
+    assert 1 <= len(stored) < cases, len(stored)
+    for path in stored:
+        json.loads(path.read_text())
+    assert not list(cache.glob('*.tmp'))
+
+
+@pytest.mark.parametrize('how', ['SIGTERM to it', 'Ctrl-C at the terminal', 'SIGKILL'])
+def test_train_gru_stops_its_pinned_child_and_workers(tmp_path: Path, how: str) -> None:
+    """``trust-av train-gru`` trains in a child process (pinned numerics) with worker
+    processes: a stop reaches each of them once, whichever way it comes, and nothing is
+    left running or written."""
+    out = tmp_path / 'model.npz'
+    proc = subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', 'train-gru',
+                             '--out', str(out), '--jobs', '2'], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    assert proc.stderr is not None
+    first = proc.stderr.readline()               # the child is running its first stage
+    assert 'TAC-CA runs on the training traces' in first, first
+    started = descendants(proc.pid)
+    deadline = time.monotonic() + 60
+    while len(started) < 3 and time.monotonic() < deadline:  # the child and two workers
+        time.sleep(0.05)
+        started = descendants(proc.pid)
+    assert len(started) >= 3, started
+    if how == 'SIGTERM to it':
+        proc.send_signal(signal.SIGTERM)
+    elif how == 'Ctrl-C at the terminal':
+        os.killpg(proc.pid, signal.SIGINT)      # the terminal's process group
+    else:
+        proc.kill()
+    _out, rest = proc.communicate(timeout=120)
+    if how == 'SIGKILL':
+        assert proc.returncode == -signal.SIGKILL
+    else:
+        assert proc.returncode == (143 if how == 'SIGTERM to it' else 130), rest
+        what = 'stopped by SIGTERM' if how == 'SIGTERM to it' else 'interrupted'
+        lines = [line for line in rest.splitlines() if not line.startswith('[')]
+        assert lines == [f'trust-av train-gru: {what}; everything it started was stopped '
+                         'and its recordings finished']
+    assert_gone(started)
+    assert not out.exists() and not list(tmp_path.iterdir())

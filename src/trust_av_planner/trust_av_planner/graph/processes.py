@@ -9,7 +9,6 @@ SIGTERM, then SIGKILL after grace periods."""
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import os
 import signal
 import subprocess
@@ -21,6 +20,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph import stop_signals
 from trust_monitor.common.param_layers import node_fqn, shipped_params_file, to_params_text
 
 GRACE_S = {'SIGINT': 5.0, 'SIGTERM': 3.0}
@@ -66,12 +66,6 @@ def use_run_discovery(env: MutableMapping[str, str]) -> None:
         if not profile.is_file():
             raise GraphError(f'the Fast DDS profile {profile} is missing (a broken install?)')
         env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
-
-
-def _stop_with_parent() -> None:
-    """In the child: get SIGTERM (a clean stop) when the orchestrator dies."""
-    libc = ctypes.CDLL('libc.so.6', use_errno=True)
-    libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
 
 @dataclass
@@ -146,7 +140,8 @@ class Graph:
             log = log_path.open('wb')
             popen = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
                                      stdin=subprocess.DEVNULL, env=self.env,
-                                     start_new_session=True, preexec_fn=_stop_with_parent)
+                                     start_new_session=True,
+                                     preexec_fn=stop_signals.stop_with_parent)
             self.processes.append(Process(spec, popen, log_path, log))
 
     def by_name(self, name: str) -> Process:

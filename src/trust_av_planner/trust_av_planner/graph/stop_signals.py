@@ -21,6 +21,7 @@ commands, and when a command returns.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import signal
 import sys
 from collections.abc import Iterator
@@ -41,7 +42,8 @@ class Stopped(KeyboardInterrupt):
         self.signum = signum
 
 
-def _handler(signum: int, _frame: FrameType | None) -> None:
+def handle(signum: int, _frame: FrameType | None) -> None:
+    """The signal handler: raise :class:`Stopped`, or record it inside :func:`deferred`."""
     if _state['deferring']:
         _state['pending'] = signum
         return
@@ -49,7 +51,9 @@ def _handler(signum: int, _frame: FrameType | None) -> None:
     raise Stopped(signum)
 
 
-def _unraisable(unraisable: Any) -> None:
+def unraisable_hook(unraisable: Any) -> None:
+    """``sys.unraisablehook``: record a discarded ``KeyboardInterrupt`` (a stop), print
+    anything else as Python does."""
     error = unraisable.exc_value
     if isinstance(error, KeyboardInterrupt):
         _state['pending'] = getattr(error, 'signum', signal.SIGINT)
@@ -66,8 +70,8 @@ def installed() -> Iterator[None]:
     previous_hook = sys.unraisablehook
     _state['pending'] = 0
     for signum in STOP_SIGNALS:
-        signal.signal(signum, _handler)
-    sys.unraisablehook = _unraisable
+        signal.signal(signum, handle)
+    sys.unraisablehook = unraisable_hook
     try:
         yield
     finally:
@@ -99,3 +103,10 @@ def spin_once(executor: Any, timeout_s: float) -> None:
     """``executor.spin_once`` with a stop deferred to its end (at most ``timeout_s``)."""
     with deferred():
         executor.spin_once(timeout_sec=timeout_s)
+
+
+def stop_with_parent() -> None:
+    """In a child process, before it runs (``preexec_fn``): SIGTERM, a clean stop, when the
+    process that started it dies, even by SIGKILL (Linux ``PR_SET_PDEATHSIG``)."""
+    libc = ctypes.CDLL('libc.so.6', use_errno=True)
+    libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG

@@ -16,9 +16,8 @@ import dataclasses
 import datetime
 import json
 import math
-import multiprocessing
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,6 +29,7 @@ from preceding_traffic.traces import TRAINING_TRACES
 from trust_av_planner.planner import observe
 from trust_av_planner.predictors.gru import FEATURES, GruWeights, gru_forward
 from trust_av_planner.study.pinned_numerics import numerics_report
+from trust_av_planner.study.workers import worker_pool
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
@@ -169,8 +169,7 @@ def train_with_dagger(config: RunConfig, settings: TrainingSettings, work_dir: P
     with contextlib.ExitStack() as stack:
         pool = None
         if jobs > 1:
-            pool = stack.enter_context(ProcessPoolExecutor(
-                max_workers=jobs, mp_context=multiprocessing.get_context('spawn')))
+            pool = stack.enter_context(worker_pool(jobs))
         stage('TAC-CA runs on the training traces')
         dataset = build_dataset(config, settings, pool=pool)
         stage('training on TAC-CA data')

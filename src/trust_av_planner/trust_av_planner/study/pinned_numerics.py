@@ -50,6 +50,7 @@ import json
 import math
 import os
 import platform
+import signal
 import subprocess
 import sys
 from collections.abc import Mapping, Sequence
@@ -59,6 +60,7 @@ import numpy as np
 from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph import stop_signals
 from trust_av_planner.predictors.gru import FEATURES
 
 PINNED_NUMPY_TARGET = 'X86_V3'
@@ -123,15 +125,19 @@ def run_pinned(args: Sequence[str], extra_env: Mapping[str, str] | None = None,
     """Run ``python ARGS`` in a fresh process with the pinned numerics.
 
     ``extra_env`` is applied *before* the pin (it stands for the caller's own settings,
-    which the pin overrides). ``kwargs`` go to :func:`subprocess.run`. A Ctrl-C reaches the
-    child too (same process group): we wait for it to finish its files and return its code.
+    which the pin overrides). ``kwargs`` go to :class:`subprocess.Popen`. The child runs in
+    its own process group and stops with this process: a stop signal here (Ctrl-C at the
+    terminal, which reaches only this group, or SIGINT/SIGTERM sent to this process) is
+    passed on to it once, then we wait for it to finish its files and return its code
+    (130, 143); if this process dies, the child gets SIGTERM.
     """
     env = pinned_environment({**os.environ, **(extra_env or {})})
-    with subprocess.Popen([sys.executable, *args], env=env, text=True,
-                          **kwargs) as process:
+    with subprocess.Popen([sys.executable, *args], env=env, text=True, process_group=0,
+                          preexec_fn=stop_signals.stop_with_parent, **kwargs) as process:
         try:
             stdout, stderr = process.communicate()
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as stop:
+            process.send_signal(getattr(stop, 'signum', signal.SIGINT))
             stdout, stderr = process.communicate()
         return subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
 

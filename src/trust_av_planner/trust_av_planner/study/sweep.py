@@ -16,7 +16,6 @@ import dataclasses
 import hashlib
 import json
 import logging
-import multiprocessing
 import os
 import shutil
 from collections.abc import Callable, Iterable, Sequence
@@ -36,6 +35,7 @@ from human_driver_sim.population import (
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.study.workers import worker_pool
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import StepRecord, compute_metrics
@@ -183,20 +183,17 @@ class LocalExecutor:
     def run(self, cases: Sequence[Case], params_file: str,
             on_result: Callable[[Case, dict[str, Any]], None],
             settings: RunSettings = RunSettings()) -> None:
-        """Run the cases on the pool; the first failure stops the sweep with its case."""
+        """Run the cases on the pool; the first failure, or a stop signal, stops the sweep
+        and its workers (:func:`~.workers.worker_pool`)."""
         if not cases:
             return
-        context = multiprocessing.get_context('spawn')
-        with concurrent.futures.ProcessPoolExecutor(min(self.workers, len(cases)),
-                                                    mp_context=context) as pool:
+        with worker_pool(min(self.workers, len(cases))) as pool:  # stops with the sweep
             futures = {pool.submit(run_case, case, params_file, settings): case for case in cases}
             for future in concurrent.futures.as_completed(futures):
                 case = futures[future]
                 try:
                     result = future.result()
                 except Exception as err:
-                    for other in futures:
-                        other.cancel()
                     raise TrustAvPlannerError(f'case {case.label} failed: {err}') from err
                 on_result(case, result)
 

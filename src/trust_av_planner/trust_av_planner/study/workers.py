@@ -1,0 +1,114 @@
+"""Worker processes for the long study commands (the sweep's cases, the GRU's training
+loops) that stop when the command stops.
+
+A plain ``concurrent.futures.ProcessPoolExecutor`` leaves its ``with`` block through
+``shutdown(wait=True)``, which runs every queued call first: SIGTERM sent to ``trust-av
+reproduce`` 6 s into a 20 s sweep ended it after 14 s more, with the whole sweep run.
+:func:`worker_pool` instead, when its block ends with an exception (a stop signal, a failed
+case):
+
+1. cancels every call that has not started;
+2. sends SIGTERM to the workers: a worker inside a call unwinds it (its ``finally`` blocks
+   run: a graph case stops its nodes and finishes its recording) and exits with 128 + the
+   signal; a worker waiting for work exits at once;
+3. waits :data:`WORKER_GRACE_S` for them, then sends SIGKILL.
+
+Workers ignore SIGINT: a Ctrl-C at the terminal reaches the whole process group, and the
+command that owns the pool decides what its workers do (the graph's node processes are
+handled the same way, in their own process groups). A worker whose command dies (even by
+SIGKILL) gets SIGTERM and stops as above.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import multiprocessing
+import os
+import signal
+import sys
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
+from types import FrameType
+from typing import Any, TypeVar
+
+from trust_av_planner.graph import stop_signals
+
+T = TypeVar('T')
+
+WORKER_GRACE_S = 20.0
+"""How long a stopped worker may take to unwind its call before it is killed (a graph
+case stops its nodes in at most 13 s: graph/processes.py)."""
+
+_in_call = {'now': False}
+
+
+def _on_stop(signum: int, frame: FrameType | None) -> None:
+    if not _in_call['now']:
+        os._exit(128 + signum)      # waiting for work: nothing to unwind
+    stop_signals.handle(signum, frame)  # raised (recorded while rclpy spins)
+
+
+def _initialize_worker() -> None:
+    stop_signals.stop_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _on_stop)
+    sys.unraisablehook = stop_signals.unraisable_hook
+
+
+def _call(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+    """``fn(*args, **kwargs)`` in a worker; on SIGTERM, unwind it and end the worker."""
+    _in_call['now'] = True
+    try:
+        result = fn(*args, **kwargs)
+        stop_signals.deliver_pending()  # one that arrived where it could not be raised
+        return result
+    except stop_signals.Stopped as stop:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(128 + stop.signum)
+    finally:
+        _in_call['now'] = False
+
+
+class WorkerPool(ProcessPoolExecutor):
+    """A spawn-context process pool whose workers follow the rules above; use it through
+    :func:`worker_pool`."""
+
+    def __init__(self, workers: int) -> None:
+        super().__init__(workers, mp_context=multiprocessing.get_context('spawn'),
+                         initializer=_initialize_worker)
+
+    def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
+        return super().submit(functools.partial(_call, fn), *args, **kwargs)
+
+    def stop_workers(self) -> None:
+        """Cancel what has not started; SIGTERM, then after the grace SIGKILL, to every
+        worker; wait for them."""
+        # CPython 3.14 adds ProcessPoolExecutor.terminate_workers() for this; on 3.11 the
+        # workers are the executor's ``_processes`` (pid -> multiprocessing.Process).
+        processes = list((getattr(self, '_processes', None) or {}).values())
+        self.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            if process.is_alive():
+                process.terminate()
+        for process in processes:
+            process.join(WORKER_GRACE_S)
+            if process.is_alive():
+                process.kill()
+                process.join()
+        self.shutdown(wait=True)
+
+
+@contextlib.contextmanager
+def worker_pool(workers: int) -> Iterator[WorkerPool]:
+    """A :class:`WorkerPool` of ``workers`` processes; on leaving the block normally it
+    waits for every call, on an exception (a stop signal included) it stops the workers
+    first (:meth:`WorkerPool.stop_workers`) and re-raises."""
+    pool = WorkerPool(workers)
+    try:
+        yield pool
+    except BaseException:
+        pool.stop_workers()
+        raise
+    pool.shutdown(wait=True)
