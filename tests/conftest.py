@@ -170,3 +170,32 @@ def long_trace(directory: Path) -> Path:
         f'{t},{10.0 + 5.0 * math.sin(t / 30.0):.3f}\n'
         for t in range(INTERRUPTED_RUN_STEPS + 1)))
     return path
+
+
+@pytest.fixture
+def small_disk(tmp_path: Path) -> Iterator[Path]:
+    """A real 200 kB tmpfs (needs the right to mount: skipped otherwise)."""
+    mount = tmp_path / 'disk'
+    mount.mkdir()
+    done = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=200k', 'tmpfs', str(mount)],
+                          capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        pytest.skip(f'cannot mount a tmpfs here: {done.stderr.strip()}')
+    try:
+        yield mount
+    finally:
+        subprocess.run(['umount', '--lazy', str(mount)], check=False)
+
+
+def children_of(pid: int) -> list[int]:
+    """Every live process whose parent is ``pid``."""
+    found = []
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid and fields[0] != 'Z':
+                found.append(int(entry.name))
+    return found

@@ -16,6 +16,7 @@ import pytest
 from conftest import (
     INTERRUPTED_RUN_STEPS,
     assert_every_topic_complete,
+    children_of,
     long_trace,
     wait_for_steps,
 )
@@ -144,20 +145,6 @@ def test_bag_decodes_with_mcap_ros2(graph_run: tuple[Path, str]) -> None:
                 assert message.log_time == stamp.sec * 10**9 + stamp.nanosec
             decoded += 1
     assert decoded == sum(RECORDED.values())
-
-
-def children_of(pid: int) -> list[int]:
-    """Every live process whose parent is ``pid``."""
-    found = []
-    for entry in Path('/proc').iterdir():
-        if entry.name.isdigit():
-            try:
-                fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[1]) == pid and fields[0] != 'Z':
-                found.append(int(entry.name))
-    return found
 
 
 def command_line(pid: int) -> str:

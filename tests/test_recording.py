@@ -12,7 +12,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -147,21 +146,6 @@ def test_a_full_disk_keeps_every_complete_step(tmp_path: Path,
     assert counts(bag) == {'/a/odom': writer.steps, '/b/odom': writer.steps}
     assert sorted(p.name for p in bag.iterdir()) == ['full.mcap', 'metadata.yaml']
     writer.finish()                                    # idempotent
-
-
-@pytest.fixture
-def small_disk(tmp_path: Path) -> Iterator[Path]:
-    """A real 200 kB tmpfs (needs the right to mount: skipped otherwise)."""
-    mount = tmp_path / 'disk'
-    mount.mkdir()
-    done = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=200k', 'tmpfs', str(mount)],
-                          capture_output=True, text=True, check=False)
-    if done.returncode != 0:
-        pytest.skip(f'cannot mount a tmpfs here: {done.stderr.strip()}')
-    try:
-        yield mount
-    finally:
-        subprocess.run(['umount', '--lazy', str(mount)], check=False)
 
 
 def test_a_real_full_disk(small_disk: Path) -> None:

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import children_of
 
 from trust_av_planner.graph import stop_signals
 
@@ -134,23 +135,15 @@ sys.exit(code)
 
 def descendants(pid: int) -> set[int]:
     """Every live process started, directly or not, by ``pid``."""
-    parents: dict[int, int] = {}
-    for entry in Path('/proc').iterdir():
-        if entry.name.isdigit():
-            try:
-                fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
-            except OSError:
-                continue
-            if fields[0] != 'Z':
-                parents[int(entry.name)] = int(fields[1])
-    found, frontier = set(), {pid}
+    found: set[int] = set()
+    frontier = [pid]
     while frontier:
-        frontier = {child for child, parent in parents.items() if parent in frontier}
-        found |= frontier
+        frontier = [child for parent in frontier for child in children_of(parent)]
+        found.update(frontier)
     return found
 
 
-def assert_gone(pids: set[int]) -> None:
+def assert_all_exit(pids: set[int]) -> None:
     """None of ``pids`` is alive after a moment (zombies count as gone)."""
     deadline = time.monotonic() + 60
     alive = pids
@@ -187,7 +180,7 @@ def test_sigterm_stops_a_sweep_and_its_workers(tmp_path: Path) -> None:
     assert proc.returncode == 143, err
     assert err.splitlines() == ['trust-av reproduce: stopped by SIGTERM; everything it '
                                 'started was stopped and its recordings finished']
-    assert_gone(workers)
+    assert_all_exit(workers)
     stored = list(cache.glob('*.json'))
     assert 1 <= len(stored) < cases, len(stored)
     for path in stored:
@@ -228,5 +221,5 @@ def test_train_gru_stops_its_pinned_child_and_workers(tmp_path: Path, how: str) 
         lines = [line for line in rest.splitlines() if not line.startswith('[')]
         assert lines == [f'trust-av train-gru: {what}; everything it started was stopped '
                          'and its recordings finished']
-    assert_gone(started)
+    assert_all_exit(started)
     assert not out.exists() and not list(tmp_path.iterdir())

@@ -18,6 +18,9 @@ This module is I/O, not a model: it imports rosbags (pure Python), never rclpy.
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -166,17 +169,29 @@ def write_trace_bag(times_s: np.ndarray, speeds_mps: np.ndarray, path: Path, top
         The number of messages written.
 
     Raises:
-        BagError: the bag directory exists already or cannot be written.
+        BagError: the bag directory exists already or cannot be written (then nothing of
+            it is left).
     """
     if path.exists():
         raise BagError(f'{path}: exists already; remove it or choose another name')
     count = 0
+    # written in a temporary directory beside it and renamed when finished: a stop or a
+    # full disk half-way leaves no bag (rosbags' Writer would close a shorter one that looks
+    # finished)
+    staging: Path | None = None
     try:
-        with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        staging = Path(tempfile.mkdtemp(dir=path.parent, prefix=f'.{path.name}.'))
+        with Writer(staging / path.name, version=9,
+                    storage_plugin=StoragePlugin.MCAP) as writer:
             connection = writer.add_connection(topic, ODOMETRY, typestore=TYPESTORE)
             for ns, msg in odometry_messages(times_s, speeds_mps, frame_id, child_frame_id):
                 writer.write(connection, ns, TYPESTORE.serialize_cdr(msg, ODOMETRY))
                 count += 1
-    except WriterError as err:
-        raise BagError(f'{path}: cannot write bag ({err})') from err
+        os.rename(staging / path.name, path)
+    except (WriterError, OSError) as err:
+        reason = err.strerror if isinstance(err, OSError) and err.strerror else err
+        raise BagError(f'{path}: cannot write bag ({reason})') from err
+    finally:
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
     return count

@@ -20,11 +20,11 @@ import os
 import re
 import stat
 import sys
-import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TextIO
 
+from trust_monitor.common.output_files import replacing
 from trust_monitor.common.param_layers import layer_files, layered_params, read_layers
 from trust_monitor.common.params import build_config, check_known
 from trust_monitor.common.rcl_values import ParsedParams
@@ -159,8 +159,8 @@ def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig) -> int:
 
     Raises:
         EstimateError: unreadable, not UTF-8 or not CSV, bad columns, non-numeric,
-            non-finite or out-of-range values, time not increasing, a non-finite estimate,
-            or an output that cannot be written.
+            non-finite or out-of-range values, time not increasing, a non-finite estimate.
+        OutputFileError: the output cannot be written (the file there before is kept).
     """
     check_output(out_path)
     try:
@@ -176,21 +176,10 @@ def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig) -> int:
             raise EstimateError(f'{in_path}: not UTF-8 text (expected a CSV)') from err
         except csv.Error as err:
             raise EstimateError(f'{in_path}: not CSV text ({err})') from err
-    try:
-        handle_no, temporary = tempfile.mkstemp(dir=out_path.parent, prefix=f'.{out_path.name}.',
-                                                suffix='.tmp')
-    except OSError as err:
-        raise EstimateError(f'{out_path}: cannot write ({err.strerror})') from err
-    try:
-        with os.fdopen(handle_no, 'w', newline='') as out:
-            writer = csv.writer(out)
-            writer.writerow(['t', 'E', 'P', 'trust'])
-            writer.writerows([[repr(v) for v in r] for r in rows])
-        os.replace(temporary, out_path)
-    except OSError as err:
-        raise EstimateError(f'{out_path}: cannot write ({err.strerror})') from err
-    finally:
-        Path(temporary).unlink(missing_ok=True)
+    with replacing(out_path) as (temporary,), temporary.open('w', newline='') as out:
+        writer = csv.writer(out)
+        writer.writerow(['t', 'E', 'P', 'trust'])
+        writer.writerows([[repr(v) for v in r] for r in rows])
     return len(rows)
 
 

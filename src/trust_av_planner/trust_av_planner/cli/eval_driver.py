@@ -23,6 +23,7 @@ from human_driver_sim.ngsim import NGSIM_VEHICLE_LENGTH_M
 from human_driver_sim.population import DRIVER_FIT_FILE, DriverFitError, fitted_idm_params
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_monitor.common import output_files
 
 SHIPPED = 'driver MPC (params file)'
 BOUNDED_IDM = 'IDM, bounded fit'
@@ -98,9 +99,6 @@ def run(args: argparse.Namespace) -> int:
                     'splices': [vars(s) for s in report.splices],
                     'excluded': report.excluded, 'window_s': args.window_s,
                     'vehicle_length_m': report.vehicle_length_m, **result.to_dict()}
-        try:
-            args.json.write_text(json.dumps(document, indent=1))
-        except OSError as err:
-            raise TrustAvPlannerError(f'cannot write {args.json}: {err.strerror}') from err
+        output_files.write_text(args.json, json.dumps(document, indent=1))
         print(f'\nwrote {args.json}')
     return 0

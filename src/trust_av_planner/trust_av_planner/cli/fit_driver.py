@@ -36,6 +36,7 @@ from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from trust_av_planner.cli.options import Progress
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_monitor.common.output_files import replacing
 
 FIT_PART = 'JRC-VC_280219_part2'
 TEST_PART = 'JRC-VC_280219_part3'
@@ -254,13 +255,14 @@ def run(args: argparse.Namespace) -> int:
         'idm': {k: float(pooled_idm.params[k]) for k in PARAM_NAMES},
         'idm_textbook': {k: float(getattr(TEXTBOOK_MOTORWAY, k)) for k in PARAM_NAMES},
         'target': targets}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(yaml.safe_dump(document, sort_keys=False))
     eval_path = args.out.with_name(args.out.stem + '_eval.json')
-    eval_path.write_text(json.dumps(compact({
-        'cleaning': cleaning, 'target': targets,
-        'sets': {k: v.to_dict(per_pair=k.endswith('held out')) for k, v in evaluations.items()},
-        'per_driver_openacc_held_out': per_driver}), indent=1))
+    with replacing(args.out, eval_path) as (fit_file, eval_file):  # both or neither
+        fit_file.write_text(yaml.safe_dump(document, sort_keys=False))
+        eval_file.write_text(json.dumps(compact({
+            'cleaning': cleaning, 'target': targets,
+            'sets': {k: v.to_dict(per_pair=k.endswith('held out'))
+                     for k, v in evaluations.items()},
+            'per_driver_openacc_held_out': per_driver}), indent=1))
     for name, evaluation in evaluations.items():
         for protocol in ('full', 'window'):
             print(f'\n{name}, ' + format_table(evaluation, protocol))

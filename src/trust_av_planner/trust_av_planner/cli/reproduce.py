@@ -21,6 +21,7 @@ from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_II
 from trust_av_planner.study.plots import speed_profiles, trust_over_time
 from trust_av_planner.study.sweep import Case
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_monitor.common import output_files
 from trust_monitor.common.params import read_params_file
 
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
@@ -36,8 +37,9 @@ def with_lead_preview(params_file: Path, lead_preview: str, out: Path) -> Path:
     sections = read_params_file(params_file)
     sections.setdefault('planner', {})['lead_preview'] = lead_preview
     path = out / f'params_lead_preview_{lead_preview}.yaml'
-    path.write_text(yaml.safe_dump({node: {'ros__parameters': values}
-                                    for node, values in sections.items()}, sort_keys=False))
+    output_files.write_text(path, yaml.safe_dump({node: {'ros__parameters': values}
+                                                 for node, values in sections.items()},
+                                                sort_keys=False))
     return path
 
 
@@ -117,7 +119,8 @@ def run(args: argparse.Namespace) -> int:
     bar.close()
     elapsed = time.monotonic() - start
 
-    with (out / 'all_runs.csv').open('w', newline='') as handle:
+    with output_files.replacing(out / 'all_runs.csv') as (table,), \
+            table.open('w', newline='') as handle:
         writer = csv.writer(handle)
         driver_names = (*WEIGHT_NAMES, 'time_headway_s')
         writer.writerow(['trace', 'predictor', 'alpha', 'driver', *driver_names,

@@ -19,6 +19,7 @@ from trust_av_planner.system.config import (
     check_control_rate,
     load_run_config,
 )
+from trust_monitor.common import output_files
 from trust_monitor.common.param_layers import layered_params, node_fqn, read_layers
 from trust_monitor.common.params import build_config
 from trust_monitor.common.wall_clock import WallClockConfig, format_summary
@@ -94,9 +95,9 @@ def run(args: argparse.Namespace) -> int:
                             startup_timeout_s=args.startup_timeout_s)
     print('\n'.join(summary_lines(result)))
     if args.json is not None:
-        args.json.write_text(json.dumps({'bag': str(args.bag), 'duration_s': duration_s,
-                                         'rate_hz': rate_hz, 'counts': result.counts,
-                                         'loops': result.loops}, indent=1) + '\n')
+        output_files.write_text(args.json, json.dumps(
+            {'bag': str(args.bag), 'duration_s': duration_s, 'rate_hz': rate_hz,
+             'counts': result.counts, 'loops': result.loops}, indent=1) + '\n')
     return 0
 
 

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
-import tempfile
 from pathlib import Path
 
 from trust_av_planner.cli.options import (
@@ -15,9 +13,9 @@ from trust_av_planner.cli.options import (
     positive_hz,
     run_overrides,
 )
-from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import check_control_rate, load_run_config
+from trust_monitor.common.output_files import replacing
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,25 +40,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def write_table(result: SimResult, out: Path) -> None:
-    """Write the per-step table through a temporary file beside ``out`` (no partial file).
+    """Write the per-step table, whole or not at all (a temporary file beside ``out``).
 
     Raises:
-        TrustAvPlannerError: the file cannot be written.
+        OutputFileError: the file cannot be written.
     """
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        handle, temporary = tempfile.mkstemp(dir=out.parent, prefix=f'.{out.name}.',
-                                             suffix='.tmp')
-        os.close(handle)
-    except OSError as err:
-        raise TrustAvPlannerError(f'{out}: cannot write ({err.strerror})') from err
-    try:
-        result.write_csv(Path(temporary))
-        os.replace(temporary, out)
-    except OSError as err:
-        raise TrustAvPlannerError(f'{out}: cannot write ({err.strerror})') from err
-    finally:
-        Path(temporary).unlink(missing_ok=True)
+    with replacing(out) as (temporary,):
+        result.write_csv(temporary)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]

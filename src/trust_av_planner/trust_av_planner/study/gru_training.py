@@ -34,6 +34,7 @@ from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
 from trust_monitor.common.kinematics import VehicleState
+from trust_monitor.common.output_files import replacing
 
 
 @dataclass(frozen=True)
@@ -299,9 +300,9 @@ def train(dataset: Dataset, settings: TrainingSettings,
 
 def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSettings,
                out: Path) -> None:
-    """Write the ``.npz`` weights, a JSON model card and a loss-curve PNG beside it."""
+    """Write the ``.npz`` weights, a JSON model card and a loss-curve PNG beside it: the
+    three replace what was there together, once all are written (``output_files``)."""
     numerics = numerics_report()
-    save_arrays(weights, out)
     card = {
         'model': 'one-layer GRU + linear read-out (Ozkan & Ma, eqs. 6-7)',
         'features': list(FEATURES), 'history_steps': weights.history_steps,
@@ -319,8 +320,10 @@ def save_model(weights: GruWeights, report: dict[str, Any], settings: TrainingSe
         'numerics': numerics['live'],
         'reproduce': 'trust-av train-gru',
     }
-    out.with_suffix('.json').write_text(json.dumps(card, indent=2) + '\n')
-    plot_curve(report['curve'], report['validation_rmse_ca'], out.with_suffix('.png'))
+    with replacing(out, out.with_suffix('.json'), out.with_suffix('.png')) as (npz, json_, png):
+        save_arrays(weights, npz)
+        json_.write_text(json.dumps(card, indent=2) + '\n')
+        plot_curve(report['curve'], report['validation_rmse_ca'], png)
 
 
 def plot_curve(curve: list[dict[str, float]], ca_rmse: float, path: Path) -> None:
@@ -340,5 +343,5 @@ def plot_curve(curve: list[dict[str, float]], ca_rmse: float, path: Path) -> Non
     ax.legend()
     ax.set_title('GRU plan estimator training')
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110)  # a temporary file of save_model's
     plt.close(fig)

@@ -236,7 +236,7 @@ def read_series(bag: Path, paths: Iterable[MessagePath]) -> dict[str, tuple[list
 def render_plots(bag: Path, png: Path, layout: Layout | None = None, dpi: int = 110) -> None:
     """Draw the layout's plot panels from a recording into one PNG, one axis per panel,
     every line with its label (dotted and marked: a line the layout leaves switched off)."""
-    from trust_av_planner.study.plots import pyplot
+    from trust_av_planner.study.plots import pyplot, save_figure
 
     plt = pyplot()
 
@@ -256,8 +256,7 @@ def render_plots(bag: Path, png: Path, layout: Layout | None = None, dpi: int = 
     axes[-1, 0].set_xlabel('time since the first message (s)')
     fig.suptitle(f'Foxglove layout plot panels: {bag.name}', fontsize=10)
     fig.tight_layout()
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=dpi)
+    save_figure(fig, png, dpi=dpi)
     plt.close(fig)
 
 

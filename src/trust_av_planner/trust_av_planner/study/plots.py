@@ -10,6 +10,7 @@ import numpy as np
 
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.study.paper_results import TRACE_LABELS
+from trust_monitor.common.output_files import replacing
 
 
 def pyplot() -> Any:
@@ -21,6 +22,13 @@ def pyplot() -> Any:
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig: Any, path: Path, dpi: int) -> None:
+    """``fig.savefig(path)``, whole or not at all (``trust_monitor.common.output_files``;
+    the format follows the suffix)."""
+    with replacing(path) as (temporary,):
+        fig.savefig(temporary, dpi=dpi)
 
 
 def speed_profiles(traces: Sequence[SpeedTrace], path: Path) -> None:
@@ -36,7 +44,7 @@ def speed_profiles(traces: Sequence[SpeedTrace], path: Path) -> None:
     axes[-1, 0].set_xlabel('time (s)')
     fig.suptitle('Figure 2: speed profiles of the preceding traffic')
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 
@@ -75,7 +83,7 @@ def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
     axes[1, 0].set_ylabel('trust lost vs. ceiling δ·t')
     fig.suptitle('Figure 3: trust level of the human driver during the trip')
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 
@@ -111,5 +119,5 @@ def run_overview(records: Sequence[Any], title: str, path: Path) -> None:
             ax.legend(loc='upper right', fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)

@@ -39,6 +39,7 @@ from trust_av_planner.study.workers import worker_pool
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import StepRecord, compute_metrics
+from trust_monitor.common import output_files
 
 LOG = logging.getLogger(__name__)
 
@@ -315,9 +316,7 @@ def run_sweep(cases: Sequence[Case], params_file: Path, results_dir: Path, execu
         on_progress(len(results), len(cases))
 
     def store(case: Case, result: dict[str, Any]) -> None:
-        tmp = cache / f'{keys[case]}.json.tmp'
-        tmp.write_text(json.dumps(result))
-        tmp.replace(cache / f'{keys[case]}.json')
+        output_files.write_text(cache / f'{keys[case]}.json', json.dumps(result))
         results[case] = result
         if on_progress is not None:
             on_progress(len(results), len(cases))

@@ -14,6 +14,7 @@ import numpy as np
 from trust_av_planner.study.paper_results import MAX_IMPROVEMENT_PERCENT
 from trust_av_planner.study.stats import mean_ci95
 from trust_av_planner.study.sweep import ALPHAS, METRICS, Case, by_driver
+from trust_monitor.common.output_files import replacing
 from trust_monitor.trust_bound import row_bound
 from trust_monitor.trust_model import TrustConfig
 
@@ -60,13 +61,14 @@ def max_improvements(results: dict[Case, dict[str, Any]], trace: str,
 
 def write_rows(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
     """Write a CSV and a Markdown table with the same content (``path`` without suffix)."""
-    with path.with_suffix('.csv').open('w', newline='') as handle:
-        writer = csv.writer(handle)
-        writer.writerow(header)
-        writer.writerows(rows)
     lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
     lines += ['| ' + ' | '.join(str(v) for v in row) + ' |' for row in rows]
-    path.with_suffix('.md').write_text('\n'.join(lines) + '\n')
+    with replacing(path.with_suffix('.csv'), path.with_suffix('.md')) as (csv_path, md_path):
+        with csv_path.open('w', newline='') as handle:
+            writer = csv.writer(handle)
+            writer.writerow(header)
+            writer.writerows(rows)
+        md_path.write_text('\n'.join(lines) + '\n')
 
 
 def alpha_table(results: dict[Case, dict[str, Any]], trace: str, predictor: str,

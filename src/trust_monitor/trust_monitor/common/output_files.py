@@ -1,0 +1,90 @@
+"""Output files written whole or not at all.
+
+A command that writes its result straight to the named file leaves a truncated file that
+looks finished when it is stopped half-way (SIGINT, SIGTERM, a kill) or the disk fills up,
+and it has already destroyed the file it was replacing; ``train-gru`` and ``fit-driver``
+replace the shipped model files by default. :func:`replacing` lets the caller write
+temporary files beside the targets and renames them over the targets only when every one
+is complete and on disk (``os.replace`` is atomic within a file system, POSIX
+``rename(2)``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import tempfile
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+from trust_monitor.errors import TrustMonitorError
+
+HELD_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+"""Held back while a set of files is renamed into place, so a stop cannot split the set."""
+
+
+class OutputFileError(TrustMonitorError):
+    """An output file could not be written (the message names it and the reason); the
+    file that was there before is unchanged and no temporary file is left."""
+
+
+def _mode_for(path: Path) -> int:
+    """The replaced file's permissions, or what a new file gets under the umask (a
+    temporary file is created 0600)."""
+    try:
+        return os.stat(path).st_mode & 0o7777
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
+
+
+@contextlib.contextmanager
+def replacing(*paths: Path) -> Iterator[tuple[Path, ...]]:
+    """Temporary files beside ``paths`` (same suffixes) for the block to write.
+
+    When the block ends normally, each temporary file is flushed to disk and renamed over
+    its path, with SIGINT and SIGTERM held back from the first rename to the last (a stop
+    then acts right after the whole set is in place). When the block raises, or writing
+    fails, the temporary files are removed and every path keeps what it had.
+
+    Raises:
+        OutputFileError: a file could not be created, written or renamed (a full disk, no
+            permission, a missing directory that cannot be made); one line naming it.
+    """
+    temporaries: list[Path] = []
+    try:
+        try:
+            for path in paths:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                handle, name = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.',
+                                                suffix=f'.tmp{path.suffix}')
+                os.close(handle)
+                temporaries.append(Path(name))
+                os.chmod(name, _mode_for(path))
+            yield tuple(temporaries)
+            for temporary in temporaries:
+                with open(temporary, 'rb+') as handle_:
+                    os.fsync(handle_.fileno())
+            in_main = threading.current_thread() is threading.main_thread()
+            held = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS) if in_main else None
+            try:
+                for temporary, path in zip(temporaries, paths, strict=True):
+                    os.replace(temporary, path)
+            finally:
+                if held is not None:
+                    signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        except OSError as err:
+            names = ', '.join(str(p) for p in paths)
+            raise OutputFileError(f'{names}: cannot write ({err.strerror or err})') from err
+    finally:
+        for temporary in temporaries:
+            temporary.unlink(missing_ok=True)
+
+
+def write_text(path: Path, text: str) -> None:
+    """``path.write_text(text)``, whole or not at all (:func:`replacing`)."""
+    with replacing(path) as (temporary,):
+        temporary.write_text(text)

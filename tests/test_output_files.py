@@ -1,0 +1,125 @@
+"""Output files are written whole or not at all: a failure or a stop while writing leaves
+the file that was there before, byte for byte, and no temporary file (a real full disk:
+a 200 kB tmpfs, skipped where mounting is not allowed)."""
+
+from __future__ import annotations
+
+import os
+import stat
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from preceding_traffic.bags import write_trace_bag
+from preceding_traffic.errors import PrecedingTrafficError
+from trust_av_planner.predictors.gru import load_weights
+from trust_av_planner.study import gru_training
+from trust_monitor.common.output_files import OutputFileError, replacing, write_text
+
+BIG = 'x' * 400_000             # larger than the small disk
+
+
+def test_a_set_of_files_replaces_the_old_set_with_their_permissions(tmp_path: Path) -> None:
+    old = tmp_path / 'a.txt'
+    old.write_text('old')
+    old.chmod(0o640)
+    new = tmp_path / 'sub' / 'b.png'
+    with replacing(old, new) as (a, b):
+        assert a.parent == tmp_path and a.suffix == '.txt' and b.suffix == '.png'
+        assert old.read_text() == 'old'                  # nothing replaced while writing
+        a.write_text('new a')
+        b.write_text('new b')
+    assert old.read_text() == 'new a' and new.read_text() == 'new b'
+    assert stat.S_IMODE(old.stat().st_mode) == 0o640     # kept, not mkstemp's 0600
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(new.stat().st_mode) == 0o666 & ~umask
+    assert sorted(p.name for p in tmp_path.rglob('*')) == ['a.txt', 'b.png', 'sub']
+
+
+@pytest.mark.parametrize('failure', [KeyboardInterrupt, ValueError])
+def test_a_stop_or_error_while_writing_keeps_every_old_file(tmp_path: Path,
+                                                            failure: type) -> None:
+    first, second = tmp_path / 'model.npz', tmp_path / 'model.json'
+    first.write_bytes(b'old weights')
+    second.write_text('old card')
+    with pytest.raises(failure), replacing(first, second) as (a, _b):
+        a.write_bytes(b'new weights')
+        raise failure('stopped between the two files')
+    assert first.read_bytes() == b'old weights' and second.read_text() == 'old card'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['model.json', 'model.npz']
+
+
+def test_a_full_disk_is_one_line_and_keeps_the_old_file(small_disk: Path) -> None:
+    out = small_disk / 'table.csv'
+    out.write_text('old table')
+    with pytest.raises(OutputFileError) as error:
+        write_text(out, BIG)
+    assert str(error.value) == f'{out}: cannot write (No space left on device)'
+    assert out.read_text() == 'old table' and [p.name for p in small_disk.iterdir()] == [
+        'table.csv']
+
+
+def test_a_trained_model_on_a_full_disk_keeps_the_shipped_one(small_disk: Path) -> None:
+    """The model, its card and its curve replace the old three together or not at all."""
+    shipped = Path(gru_training.__file__).parents[1] / 'models' / 'gru_plan_estimator.npz'
+    out = small_disk / 'gru.npz'
+    old = {out: b'old weights', out.with_suffix('.json'): b'old card',
+           out.with_suffix('.png'): b'old curve'}
+    for path, content in old.items():
+        path.write_bytes(content)
+    (small_disk / 'filler').write_bytes(b'\0' * 150_000)  # leaves room for some, not all
+    report = {'curve': [{'epoch': 1, 'train_mse': 0.04, 'validation_rmse': 0.2}],
+              'validation_rmse_ca': 0.3}
+    with pytest.raises(OutputFileError, match='No space left on device'):
+        gru_training.save_model(load_weights(shipped, 3), report,
+                                gru_training.TrainingSettings(), out)
+    assert {path: path.read_bytes() for path in old} == old
+    assert sorted(p.name for p in small_disk.iterdir()) == ['filler', 'gru.json', 'gru.npz',
+                                                            'gru.png']
+
+
+def test_simulate_out_on_a_full_disk(small_disk: Path) -> None:
+    out = small_disk / 'run.csv'
+    out.write_text('old run')
+    (small_disk / 'filler').write_bytes(b'\0' * 190_000)
+    done = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'simulate', '--trace',
+                           'us06', '--no-progress', '--out', str(out)], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 2
+    assert done.stderr == (f'trust-av simulate: error: {out}: cannot write (No space left '
+                           'on device)\n')
+    assert out.read_text() == 'old run'
+    assert sorted(p.name for p in small_disk.iterdir()) == ['filler', 'run.csv']
+
+
+def test_a_bag_stopped_half_way_leaves_nothing(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """rosbags' Writer closes a shorter bag that looks finished; the bag is only renamed
+    into place once written."""
+    from preceding_traffic import bags
+
+    real = bags.odometry_messages
+
+    def stopped_after_three(*args: object) -> object:
+        for index, item in enumerate(real(*args)):  # type: ignore[arg-type]
+            if index == 3:
+                raise KeyboardInterrupt
+            yield item
+
+    monkeypatch.setattr(bags, 'odometry_messages', stopped_after_three)
+    bag = tmp_path / 'commute'
+    with pytest.raises(KeyboardInterrupt):
+        write_trace_bag(np.arange(10.0), np.full(10, 3.0), bag, '/lead/odom')
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_bag_on_a_full_disk_is_one_line_and_leaves_nothing(small_disk: Path) -> None:
+    bag = small_disk / 'commute'
+    with pytest.raises(PrecedingTrafficError) as error:
+        write_trace_bag(np.arange(20_000.0), np.full(20_000, 3.0), bag, '/lead/odom')
+    assert str(error.value) == f'{bag}: cannot write bag (No space left on device)'
+    assert list(small_disk.iterdir()) == []
