@@ -28,7 +28,8 @@ from rosbags.typesys import Stores, get_typestore
 from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph import bag_writer
-from trust_av_planner.graph.bag_writer import BagWriter, qos_profile, repair_bag
+from trust_av_planner.graph.bag_repair import _swap_into_place, repair_bag
+from trust_av_planner.graph.bag_writer import BagWriteError, BagWriter, qos_profile
 from trust_av_planner.graph.domains import lease_domain
 from trust_av_planner.graph.processes import GraphError
 
@@ -119,6 +120,46 @@ def test_repair_bag_on_nothing_readable_is_one_line(tmp_path: Path) -> None:
                            str(junk)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and proc.stderr.count('\n') == 1
     assert 'no readable MCAP channels' in proc.stderr
+
+
+def unfinished_recording(directory: Path) -> tuple[Path, bytes]:
+    """A lone .mcap of a killed recorder, and its bytes."""
+    bag = directory / 'rec'
+    record(BagWriter(bag), 5, finish=False)
+    lone = directory / 'lone.mcap'
+    (bag / 'rec.mcap').rename(lone)
+    shutil.rmtree(bag)
+    return lone, lone.read_bytes()
+
+
+def test_repair_never_loses_the_recording(tmp_path: Path) -> None:
+    """The recording is deleted only once its repaired bag is in place: a lone .mcap whose
+    bag directory name is taken is refused; a rename that fails puts the recording back; a
+    repair killed between its renames leaves it where the next repair names it."""
+    lone, content = unfinished_recording(tmp_path)
+    taken = tmp_path / 'lone'
+    taken.mkdir()
+    (taken / 'notes.txt').write_text('not a bag')
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'repair-bag',
+                           str(lone)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr == (f'trust-av repair-bag: error: {taken} exists already and the '
+                           f'repaired bag of {lone} would replace it; move it away first\n')
+    assert lone.read_bytes() == content and (taken / 'notes.txt').read_text() == 'not a bag'
+
+    staging = tmp_path / 'staging'
+    staging.mkdir()                                   # renaming it onto `taken` fails
+    with pytest.raises(BagWriteError, match='cannot put the repaired bag there'):
+        _swap_into_place(lone, staging, taken, tmp_path / 'old')
+    assert lone.read_bytes() == content and not (tmp_path / 'old').exists()
+
+    shutil.rmtree(taken)
+    workspace = tmp_path / '.lone.repairing'         # as a repair killed between renames
+    workspace.mkdir()
+    lone.rename(workspace / 'old')
+    with pytest.raises(BagWriteError, match='an earlier repair that did not finish'):
+        repair_bag(lone)
+    assert (workspace / 'old').read_bytes() == content
 
 
 def test_a_full_disk_keeps_every_complete_step(tmp_path: Path,

@@ -11,7 +11,7 @@ from trust_av_planner.errors import TrustAvPlannerError
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av repair-bag``."""
-    from trust_av_planner.graph.bag_writer import repair_bag  # rosbags: only when repairing
+    from trust_av_planner.graph.bag_repair import repair_bag  # rosbags: only when repairing
 
     path: Path = args.path
     if not path.exists():

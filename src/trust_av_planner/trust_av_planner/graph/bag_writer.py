@@ -8,7 +8,8 @@ On top of it, :class:`BagWriter` adds what a recording that must survive any end
 
 - **a chunk per step**: :meth:`BagWriter.end_step` closes the MCAP chunk and writes it
   through to the file (unbuffered), so a killed process leaves every step up to the kill
-  on disk; :func:`repair_bag` turns such a directory into a complete bag.
+  on disk; :func:`~trust_av_planner.graph.bag_repair.repair_bag` turns such a directory
+  into a complete bag.
 - **a full disk**: a reserve file inside the bag directory holds, at all times, room for
   the MCAP summary and ``metadata.yaml``; when a write fails with ``ENOSPC`` the partial
   step is cut off, the reserve is released, the bag is finished with every complete step,
@@ -30,9 +31,6 @@ from io import BytesIO
 from pathlib import Path
 from typing import Any
 
-from mcap.exceptions import McapError
-from mcap.records import Channel, Message, Schema
-from mcap.stream_reader import StreamReader
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -42,7 +40,6 @@ from rosbags.interfaces import (
     QosTime,
 )
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
-from rosbags.rosbag2.metadata import parse_qos
 from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
 from rosbags.typesys import Stores, get_typestore
 
@@ -349,102 +346,3 @@ class BagWriter:
             writer.close()
         except OSError as err:
             raise BagWriteError(f'{self.path}: cannot finish the bag ({err.strerror})') from err
-
-
-def mcap_file(path: Path) -> Path:
-    """The MCAP file of a bag directory (or ``path`` itself if it is a file).
-
-    Raises:
-        BagWriteError: no bag at ``path``.
-    """
-    if path.is_file():
-        return path
-    files = sorted(path.glob('*.mcap')) if path.is_dir() else []
-    if len(files) != 1:
-        raise BagWriteError(f'{path}: not a bag directory with one MCAP file '
-                            f'({len(files)} found)')
-    return files[0]
-
-
-def _complete_records(path: Path) -> tuple[dict[int, Schema], dict[int, Channel],
-                                           list[Message], str]:
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    messages: list[Message] = []
-    problem = ''
-    try:
-        with path.open('rb') as handle:
-            for record in StreamReader(handle, skip_magic=False).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    messages.append(record)
-    except (McapError, struct.error, EOFError, ValueError) as err:
-        problem = str(err) or type(err).__name__
-    return schemas, channels, messages, problem
-
-
-def _offered_qos(channel: Channel) -> list[Qos]:
-    text = channel.metadata.get('offered_qos_profiles', '')
-    return parse_qos(text) if text else []
-
-
-def repair_bag(path: Path) -> int:
-    """Rewrite a recording left unfinished (a killed recorder, a machine crash) into a
-    complete bag directory, in place: every message of every complete chunk is kept.
-
-    Works on a bag directory (with or without ``metadata.yaml``) or a lone ``.mcap`` file
-    (which becomes a bag directory of the same stem beside it).
-
-    Returns:
-        The number of messages kept.
-
-    Raises:
-        BagWriteError: nothing at ``path``, no readable MCAP records, or the new bag
-            cannot be written.
-    """
-    path = Path(path)
-    source = mcap_file(path)
-    schemas, channels, messages, problem = _complete_records(source)
-    if not channels:
-        raise BagWriteError(f'{source}: no readable MCAP channels ({problem or "empty"})')
-    target = path if path.is_dir() else path.with_suffix('')
-    workspace = target.with_name(f'.{target.name}.repairing')
-    shutil.rmtree(workspace, ignore_errors=True)
-    workspace.mkdir()
-    staging = workspace / target.name
-    kept = 0
-    try:
-        writer = BagWriter(staging)
-        by_id: dict[int, str] = {}
-        for cid, channel in sorted(channels.items()):
-            schema = schemas.get(channel.schema_id)
-            if schema is None or channel.topic in by_id.values():
-                continue
-            qos = _offered_qos(channel)
-            writer.add_topic(channel.topic, schema.name,
-                             qos[0] if qos else qos_profile(reliable=True,
-                                                            transient_local=False, depth=10))
-            by_id[cid] = channel.topic
-        step_time = None
-        for message in sorted(messages, key=lambda m: m.log_time):
-            topic = by_id.get(message.channel_id)
-            if topic is None:
-                continue
-            if step_time is not None and message.log_time != step_time:
-                writer.end_step()
-            writer.write(topic, message.data)
-            step_time = message.log_time
-            kept += 1
-        writer.finish()
-        if writer.disk_full:
-            raise BagWriteError(f'{target}: no room to repair the bag')
-        old = workspace / 'old'
-        if path.exists():
-            path.rename(old)
-        staging.rename(target)
-    finally:
-        shutil.rmtree(workspace, ignore_errors=True)
-    return kept

@@ -16,7 +16,7 @@ complete when the recorder, holding every message of every step, finishes its ba
 However it ends, the recording is a finished rosbag2 bag directory: on an interrupt
 (SIGINT, SIGTERM) or an error the nodes are stopped step authority first and recorder last
 (:meth:`~trust_av_planner.graph.processes.Graph.stop`); if the recorder itself died it is
-repaired from its chunks (:func:`~trust_av_planner.graph.bag_writer.repair_bag`); a full
+repaired from its chunks (:func:`~trust_av_planner.graph.bag_repair.repair_bag`); a full
 disk finishes it with every complete step
 (:class:`~trust_av_planner.graph.bag_writer.DiskFullError`).
 If this process is killed, the nodes stop by themselves and the recorder finishes the bag.
@@ -34,7 +34,8 @@ from typing import Any
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.bag_records import records_from_bag
-from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, DiskFullError, repair_bag
+from trust_av_planner.graph.bag_repair import repair_bag
+from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, DiskFullError
 from trust_av_planner.graph.domains import check_domain_id, check_namespace, lease_domain
 from trust_av_planner.graph.processes import RECORDER, Graph, GraphError, NodeSpec
 from trust_av_planner.graph.session import (

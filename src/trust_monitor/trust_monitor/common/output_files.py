@@ -42,6 +42,20 @@ def _mode_for(path: Path) -> int:
 
 
 @contextlib.contextmanager
+def stop_signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM wait until the block is done (blocked for the main thread, where
+    Python runs its handlers; delivered when unblocked). For a few renames, not for work."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+
+
+@contextlib.contextmanager
 def replacing(*paths: Path) -> Iterator[tuple[Path, ...]]:
     """Temporary files beside ``paths`` (same suffixes) for the block to write.
 
@@ -68,14 +82,9 @@ def replacing(*paths: Path) -> Iterator[tuple[Path, ...]]:
             for temporary in temporaries:
                 with open(temporary, 'rb+') as handle_:
                     os.fsync(handle_.fileno())
-            in_main = threading.current_thread() is threading.main_thread()
-            held = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS) if in_main else None
-            try:
+            with stop_signals_held():
                 for temporary, path in zip(temporaries, paths, strict=True):
                     os.replace(temporary, path)
-            finally:
-                if held is not None:
-                    signal.pthread_sigmask(signal.SIG_SETMASK, held)
         except OSError as err:
             names = ', '.join(str(p) for p in paths)
             raise OutputFileError(f'{names}: cannot write ({err.strerror or err})') from err
