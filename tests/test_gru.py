@@ -100,7 +100,8 @@ def test_missing_and_mismatched_weights_are_named(tmp_path: Path) -> None:
         load_weights(broken, 3)
     with pytest.raises(ModelError, match=r'dt_s = 1 s, but the planner runs at dt_s = 0\.5 s'):
         load_weights(save(random_weights(), tmp_path / 'dt.npz'), 3, dt_s=0.5)
-    shipped_step = load_run_config(overrides={'planner': {'predictor': 'gru', 'dt_s': 0.5}})
+    shipped_step = load_run_config(overrides={'/**': {'dt_s': 0.5},
+                                              'planner': {'predictor': 'gru'}})
     with pytest.raises(ModelError, match=r'gru_plan_estimator\.npz: trained at dt_s = 1 s'):
         make_predictor(shipped_step.planner)   # what the simulator and the planner node call
     config = load_run_config(overrides={'planner': {'predictor': 'gru',

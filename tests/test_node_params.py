@@ -7,6 +7,7 @@ also started as their own processes, as a user would start them by hand."""
 
 from __future__ import annotations
 
+import ast
 import json
 import os
 import signal
@@ -17,7 +18,11 @@ from pathlib import Path
 import pytest
 
 from preceding_traffic.sources import load_trace
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.system.config import (
+    DEFAULT_PARAMS_FILE,
+    NODE_COMPONENTS,
+    load_run_config,
+)
 from trust_monitor.common.param_layers import to_params_text
 
 # name: (file over the shipped one, trust-av accepts, every node accepts)
@@ -49,11 +54,31 @@ CORPUS: dict[str, tuple[str, bool, bool]] = {
     'control_rate_unused_in_lock_step': ('/**:\n  ros__parameters:\n    control_rate_hz: 0.5\n',
                                          True, True),
     'zero_input_timeout': ('/**:\n  ros__parameters:\n    input_timeout_s: 0.0\n', False, False),
+    # each node's section holds what that node declares: the wall-mode keys in every node
+    'wall_key_in_driver_section': ('human_driver:\n  ros__parameters:\n'
+                                   '    control_rate_hz: 20.0\n', True, True),
+    'wall_key_in_traffic_section': ('preceding_traffic:\n  ros__parameters:\n'
+                                    '    input_timeout_s: 0.4\n', True, True),
+    'per_node_model_value': ('/**/human_driver:\n  ros__parameters:\n'
+                             '    standstill_gap_m: 3.0\n', True, True),
     # Stricter than the nodes: rcl would silently drop these values; trust-av says so.
     'shadowed_by_shipped_section': ('/**:\n  ros__parameters:\n    alpha: 0.3\n', False, True),
     'type_change_over_shipped': ('/**:\n  ros__parameters:\n    horizon_steps: 4.0\n',
                                  False, True),
     'section_of_no_node': ('planer:\n  ros__parameters:\n    alpha: 0.5\n', False, True),
+    # Stricter than the nodes: one value for the whole graph (each node alone cannot know
+    # that another has another value; the graph would differ from the in-process loop, or
+    # stall)
+    'trust_model_differs': ('planner:\n  ros__parameters:\n    epsilon_mps2: 3.0\n',
+                            False, True),
+    'vehicle_length_differs': ('human_driver:\n  ros__parameters:\n'
+                               '    vehicle_length_m: 4.0\n', False, True),
+    'step_differs': ('planner:\n  ros__parameters:\n    dt_s: 0.5\n    horizon_steps: 6\n',
+                     False, True),
+    'clock_differs': ('planner:\n  ros__parameters:\n    clock_mode: wall\n', False, True),
+    # a node trust-av configures per run: its values come from /** and the run
+    'plant_section': ('ego_plant:\n  ros__parameters:\n    clock_mode: lockstep\n',
+                      False, True),
 }
 
 # The orchestrator's per-run values, in sections that first appear in their own file.
@@ -169,6 +194,43 @@ def test_an_integer_for_a_double_is_declared_double(
     # what rcl does to the values trust-av refuses: silently keeps the earlier ones
     assert node_verdicts['shadowed_by_shipped_section']['PlannerNode']['alpha'] == [  # type: ignore[index]
         'DOUBLE', 0.5]
+
+
+NODE_MODULES = {'preceding_traffic': 'preceding_traffic/preceding_traffic/traffic_node.py',
+                'planner': 'trust_av_planner/trust_av_planner/planner_node.py',
+                'human_driver': 'human_driver_sim/human_driver_sim/driver_node.py',
+                'trust_monitor': 'trust_monitor/trust_monitor/monitor_node.py'}
+PER_RUN = {'TrafficRunConfig': 'the trace and steps of the run',
+           'FollowerState': "the human's initial state (its vehicle_length_m is SharedConfig's)"}
+"""Configurations a node declares that trust-av sets for each run (not a params file's)."""
+
+
+def declared_components(path: Path) -> set[str]:
+    """The configuration classes a node module passes to ``declare_config``."""
+    return {call.args[1].id for call in ast.walk(ast.parse(path.read_text()))
+            if isinstance(call, ast.Call) and isinstance(call.func, ast.Name)
+            and call.func.id == 'declare_config' and isinstance(call.args[1], ast.Name)}
+
+
+@pytest.mark.parametrize('node', sorted(NODE_MODULES))
+def test_each_node_section_holds_what_the_node_declares(node: str) -> None:
+    """trust-av's table of node sections is the nodes' own declarations (read from their
+    source), so a key a node takes from its section is not refused by trust-av; trust-av
+    adds SharedConfig only, which it reads itself."""
+    src = Path(__file__).resolve().parents[1] / 'src'
+    declared = declared_components(src / NODE_MODULES[node]) - set(PER_RUN)
+    listed = {component.__name__ for component in NODE_COMPONENTS[node]}
+    assert declared and declared <= listed, declared - listed
+    assert listed - declared <= {'SharedConfig'}, listed - declared
+
+
+def test_one_value_per_graph_is_named_with_both_nodes(tmp_path: Path) -> None:
+    path = tmp_path / 'planner_eps.yaml'
+    path.write_text(CORPUS['trust_model_differs'][0])
+    assert trust_av_verdict(path) == (
+        f'{path}, {DEFAULT_PARAMS_FILE}: epsilon_mps2 is 3.0 for planner but 6.0 for '
+        'trust_monitor: the planner and the monitor must run the same trust model; set it '
+        'once, in /**')
 
 
 def start(tmp_path: Path, domain: int, module: str, *args: str) -> subprocess.Popen[str]:

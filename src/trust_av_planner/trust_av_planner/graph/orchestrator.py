@@ -118,6 +118,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
 
     Raises:
         TrustAvPlannerError: ``namespace`` or ``domain_id`` is invalid (one line naming it).
+        GraphError: the configuration's ``clock_mode`` is not ``lockstep``.
         GraphError: the graph did not connect in time, a node died, a step stalled, or a
             foreign publisher appeared (on one of this graph's topics).
         DiskFullError: the disk filled up; the bag is finished with every complete step.
@@ -127,6 +128,10 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
 
     from trust_monitor.ros.qos import QOS
 
+    if config.clock_mode != 'lockstep':
+        raise GraphError(f'clock_mode {config.clock_mode} (params file): this command steps '
+                         'the graph on sim time (lockstep); wall-clock runs are trust-av '
+                         'shadow, or the nodes started by hand')
     check_namespace(namespace)
     if domain_id is not None:
         check_domain_id(domain_id)

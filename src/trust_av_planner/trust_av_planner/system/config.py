@@ -91,14 +91,31 @@ class PlannerTopics:
 
 T = TypeVar('T')
 
-# Node name -> the configuration classes its section may hold.
+# Node name -> the configuration classes its section may hold: what the node declares
+# (tests/test_node_params.py reads the nodes' declare_config calls), except the values
+# trust-av sets per run, plus SharedConfig where trust-av itself reads it (the metrics'
+# margin and the gaps of the in-process loop come from the preceding_traffic section).
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
-    'preceding_traffic': (TraceConfig, SharedConfig),
+    'preceding_traffic': (TraceConfig, SharedConfig, WallClockConfig),
     'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics),
-    'human_driver': (DriverConfig, SharedConfig),
+    'human_driver': (DriverConfig, SharedConfig, WallClockConfig),
     'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig),
 }
 _ALL = tuple({c for comps in NODE_COMPONENTS.values() for c in comps})
+
+ONE_VALUE_PER_GRAPH: dict[str, str] = {
+    **{f.name: 'the planner and the monitor must run the same trust model'
+       for f in dataclasses.fields(TrustConfig)},
+    **{f.name: 'the in-process loop and every node must see one vehicle geometry and one '
+               'safety margin' for f in dataclasses.fields(SharedConfig)},
+    'dt_s': 'the lock-step graph has one step',
+    'clock_mode': 'the nodes of one graph run on one clock',
+}
+"""Parameters several nodes declare that must have one value in all of them (a node
+section may set them only to the value every other node has): otherwise a graph run would
+differ from the in-process loop, which has one value, or the lock-step graph would stall.
+The other parameters several nodes share (``standstill_gap_m``, ``horizon_steps``, the
+speed bounds) may differ per node: the AV's and the human's models are separate in both."""
 
 
 @dataclass(frozen=True)
@@ -109,6 +126,8 @@ class RunConfig:
         params_files: the params files it was read from, bottom (the shipped file) first:
             hand them to every node in this order (``--params-file`` once each).
         namespace: the namespace its node names were matched in.
+        clock_mode: the nodes' ``clock_mode`` (one for all of them): ``lockstep`` or
+            ``wall``.
     """
 
     shared: SharedConfig
@@ -118,6 +137,7 @@ class RunConfig:
     trust: TrustConfig
     params_files: tuple[Path, ...] = field(default=(), compare=False)
     namespace: str = '/'
+    clock_mode: str = field(default='lockstep', compare=False)
 
     @property
     def min_safe_gap_m(self) -> float:
@@ -203,15 +223,19 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
     check_sections(layers)
     # Every component each node will declare, built once (a node refuses what fails here).
     built: dict[tuple[str, type], Any] = {}
+    sources: dict[str, Mapping[str, str]] = {}
     for node, components in NODE_COMPONENTS.items():
         params = layered_params(layers, node_fqn(namespace, node))
+        sources[node] = params.sources
         for component in components:
             built[node, component] = _build(component, params)
+    check_one_value_per_graph(built, sources)
     planner: PlannerConfig = built['planner', PlannerConfig]
     clock: WallClockConfig = built['planner', WallClockConfig]
     if clock.wall:
         check_control_rate(planner, clock.control_rate_hz)
     return RunConfig(
+        clock_mode=clock.clock_mode,
         shared=built['preceding_traffic', SharedConfig],
         trace=built['preceding_traffic', TraceConfig],
         planner=planner,
@@ -220,6 +244,33 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         params_files=paths,
         namespace=namespace,
     )
+
+
+def check_one_value_per_graph(built: Mapping[tuple[str, type], Any],
+                              sources: Mapping[str, Mapping[str, str]]) -> None:
+    """Every parameter of :data:`ONE_VALUE_PER_GRAPH` has the same value in every node
+    that has it.
+
+    Args:
+        built: (node, component) -> the component as that node builds it.
+        sources: node -> the file each of its values came from.
+
+    Raises:
+        ParamsError: one line naming the parameter, two nodes and their values, the file(s)
+            that set them, and why it must be one value.
+    """
+    for name, why in ONE_VALUE_PER_GRAPH.items():
+        values: dict[str, Any] = {}
+        for (node, _component), config in built.items():
+            if hasattr(config, name):
+                values.setdefault(node, getattr(config, name))
+        distinct = list(dict.fromkeys(values.values()))
+        if len(distinct) > 1:
+            first, other = (next(n for n, v in values.items() if v == d) for d in distinct[:2])
+            where = sorted({sources[n][name] for n in (first, other) if name in sources[n]})
+            raise ParamsError(f'{", ".join(where)}: {name} is {values[first]!r} for '
+                              f'{first} but {values[other]!r} for {other}: {why}; set it '
+                              'once, in /**')
 
 
 def _build(cls: type[T], params: Layered) -> T:
