@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import wait_for_steps
+from conftest import INTERRUPTED_RUN_STEPS, long_trace, wait_for_steps
 from rosbags.highlevel import AnyReader
 from test_graph import assert_records_equal  # the graph == in-process comparison
 
@@ -172,9 +172,10 @@ def bag_topics(bag: Path) -> dict[str, int]:
         return {c.topic: c.msgcount for c in reader.connections}
 
 
-def cli_run(bag: Path, namespace: str, domain: int, steps: int = GRAPH_STEPS) -> list[str]:
+def cli_run(bag: Path, namespace: str, domain: int, steps: int = GRAPH_STEPS,
+            trace: str = 'us06') -> list[str]:
     settings = CARS[namespace]
-    return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
+    return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', trace,
             '--alpha', str(settings['alpha']), '--predictor', settings['predictor'],
             '--max-steps', str(steps), '--bag', str(bag), '--no-progress', '--no-plot',
             '--namespace', namespace, '--domain-id', str(domain)]
@@ -271,7 +272,8 @@ def test_a_publisher_on_the_namespaced_topics_stops_only_that_graph(tmp_path: Pa
 
         bag = tmp_path / 'intruded'
         mine = intruder(domain, '/car1/human/plan', on_go=True)   # a node, no publisher yet
-        proc = subprocess.Popen(cli_run(bag, '/car1', domain, steps=600),
+        proc = subprocess.Popen(cli_run(bag, '/car1', domain, steps=INTERRUPTED_RUN_STEPS,
+                                        trace=str(long_trace(tmp_path))),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             wait_for_steps(bag, 20, proc=proc)

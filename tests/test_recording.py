@@ -416,3 +416,43 @@ def test_a_full_disk_under_a_real_run_is_one_line(small_disk: Path) -> None:
     assert proc.stderr.count('\n') == 1 and 'disk full' in proc.stderr, proc.stderr
     assert check_bag_directory(bag) == []
     assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run.mcap']
+
+
+def test_a_plan_without_points_in_a_recording_is_one_line(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A recorded plan that no node of the graph would publish (an empty JointTrajectory,
+    e.g. from a foreign publisher the run did not catch in time) is named, not an
+    IndexError; an empty expected plan stays allowed."""
+    from types import SimpleNamespace as M
+
+    from trust_av_planner.errors import TrustAvPlannerError
+    from trust_av_planner.graph import bag_records
+
+    def diagnostics(**values: str) -> M:
+        return M(status=[M(values=[M(key=k, value=v) for k, v in values.items()])])
+
+    odom = M(pose=M(pose=M(position=M(x=0.0))), twist=M(twist=M(linear=M(x=1.0))))
+    plan = M(points=[M(accelerations=[0.5]), M(accelerations=[0.25])])
+    step = {'preceding_vehicle/odom': odom, 'ego/odom': odom, 'human/odom': odom,
+            'ego/plan': plan, 'ego/expected_plan': M(points=[]), 'human/plan': plan,
+            'trust_monitor/trust': M(vector=M(x=0.1, y=0.9, z=0.2)),
+            'ego/planner_status': diagnostics(gap_m='20', explicability_max='1',
+                                              status='ok', success='True', iterations='3',
+                                              solve_time_s='0.001'),
+            'human/driver_status': diagnostics(gap_m='25', status='ok', success='True',
+                                               solve_time_s='0.001')}
+
+    def recording(human_plan: M) -> None:
+        topics = {f'/car1/{name}': {2_000_000_000: msg} for name, msg in step.items()}
+        topics['/car1/human/plan'] = {2_000_000_000: human_plan}
+        monkeypatch.setattr(bag_records, 'read_topics', lambda _path: topics)
+
+    recording(plan)
+    [record] = bag_records.records_from_bag(tmp_path, '/car1')
+    assert record.human_plan_mps2 == (0.5, 0.25) and record.expected_plan_mps2 == ()
+    recording(M(points=[]))
+    with pytest.raises(TrustAvPlannerError) as error:
+        bag_records.records_from_bag(tmp_path, '/car1')
+    assert str(error.value) == (f'{tmp_path}: /car1/human/plan at t = 2 s: a plan without '
+                                'accelerations (not one the graph publishes: another '
+                                'publisher on the topic?)')

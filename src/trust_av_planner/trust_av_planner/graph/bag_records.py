@@ -50,7 +50,18 @@ def read_topics(path: Path) -> dict[str, dict[int, Any]]:
     return out
 
 
-def _accels(msg: Any) -> tuple[float, ...]:
+def _accels(msg: Any, where: str, *, may_be_empty: bool = False) -> tuple[float, ...]:
+    """The accelerations of a recorded plan, one per point.
+
+    Raises:
+        TrustAvPlannerError: a plan without points (unless ``may_be_empty``), or a point
+            without an acceleration (not one of the graph's plans: e.g. another node's on
+            the same topic).
+    """
+    if (not msg.points and not may_be_empty) or any(len(p.accelerations) < 1
+                                                    for p in msg.points):
+        raise TrustAvPlannerError(f'{where}: a plan without accelerations (not one the graph '
+                                  'publishes: another publisher on the topic?)')
     return tuple(float(p.accelerations[0]) for p in msg.points)
 
 
@@ -83,15 +94,19 @@ def records_from_bag(path: Path, namespace: str = '/') -> list[StepRecord]:
         ego_x, ego_v = ego.pose.pose.position.x, ego.twist.twist.linear.x
         human_x, human_v = human.pose.pose.position.x, human.twist.twist.linear.x
         traffic_x = traffic.pose.pose.position.x
+        plans = {name: _accels(msg, f'{path}: {qualified(name, namespace)} at t = '
+                                    f'{ns * 1e-9:g} s', may_be_empty=name == 'ego/expected_plan')
+                 for name, msg in (('ego/plan', plan), ('ego/expected_plan', expected),
+                                   ('human/plan', human_plan))}
         records.append(StepRecord(
             t_s=ns * 1e-9, traffic_position_m=traffic_x,
             traffic_speed_mps=traffic.twist.twist.linear.x,
             av_position_m=ego_x, av_speed_mps=ego_v,
             av_gap_m=float(status['gap_m']), human_position_m=human_x,
             human_speed_mps=human_v, human_gap_m=float(driver['gap_m']),
-            av_accel_mps2=_accels(plan)[0], human_accel_mps2=_accels(human_plan)[0],
-            av_plan_mps2=_accels(plan), expected_plan_mps2=_accels(expected),
-            human_plan_mps2=_accels(human_plan), explicability=trust.vector.x,
+            av_accel_mps2=plans['ego/plan'][0], human_accel_mps2=plans['human/plan'][0],
+            av_plan_mps2=plans['ego/plan'], expected_plan_mps2=plans['ego/expected_plan'],
+            human_plan_mps2=plans['human/plan'], explicability=trust.vector.x,
             performance=trust.vector.y, trust=trust.vector.z,
             explicability_max=float(status['explicability_max']),
             solver_status=status['status'], solver_success=status['success'] == 'True',
