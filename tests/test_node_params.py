@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from preceding_traffic.sources import load_trace
+from trust_av_planner.graph.domains import lease_domain
 from trust_av_planner.system.config import (
     DEFAULT_PARAMS_FILE,
     NODE_COMPONENTS,
@@ -157,8 +158,10 @@ def node_verdicts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[st
         (tmp / f'{name}.yaml').write_text(text)
         cases[name] = ['--params-file', str(DEFAULT_PARAMS_FILE), '--params-file',
                        str(tmp / f'{name}.yaml'), '--params-file', str(run_values)]
-    proc = subprocess.run([sys.executable, '-c', PROBE, json.dumps(cases)], capture_output=True,
-                          text=True, timeout=300, env=ros_env(tmp, 229))
+    with lease_domain() as domain:   # a private domain: no other graph's nodes of these names
+        proc = subprocess.run([sys.executable, '-c', PROBE, json.dumps(cases)],
+                              capture_output=True, text=True, timeout=300,
+                              env=ros_env(tmp, domain))
     assert proc.returncode == 0, proc.stderr[-3000:]
     verdicts: dict[str, dict[str, object]] = json.loads(proc.stdout.strip().splitlines()[-1])
     return verdicts
