@@ -123,3 +123,35 @@ def test_a_bag_on_a_full_disk_is_one_line_and_leaves_nothing(small_disk: Path) -
         write_trace_bag(np.arange(20_000.0), np.full(20_000, 3.0), bag, '/lead/odom')
     assert str(error.value) == f'{bag}: cannot write bag (No space left on device)'
     assert list(small_disk.iterdir()) == []
+
+
+def test_a_link_is_followed_and_a_special_file_written_in_place(tmp_path: Path) -> None:
+    """Renaming over ``/dev/stdout`` or a FIFO would replace the device, not write to it;
+    a link keeps pointing where it did."""
+    import threading
+
+    real = tmp_path / 'results' / 'table.csv'
+    real.parent.mkdir()
+    real.write_text('old')
+    link = tmp_path / 'latest.csv'
+    link.symlink_to(real)
+    write_text(link, 'new')
+    assert link.is_symlink() and real.read_text() == 'new'
+    fifo = tmp_path / 'pipe'
+    os.mkfifo(fifo)
+    received: list[str] = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_text()))
+    reader.start()
+    write_text(fifo, 'through the pipe')
+    reader.join(timeout=30)
+    assert received == ['through the pipe'] and stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['latest.csv', 'pipe', 'results']
+
+
+def test_json_to_stdout_through_a_pipe(tmp_path: Path) -> None:
+    done = subprocess.run(
+        [sys.executable, '-c', 'from pathlib import Path\n'
+         'from trust_monitor.common.output_files import write_text\n'
+         "write_text(Path('/dev/stdout'), '{}')"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == '{}' and os.path.islink('/dev/stdout')

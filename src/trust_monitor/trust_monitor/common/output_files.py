@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import stat
 import tempfile
 import threading
 from collections.abc import Iterator
@@ -55,6 +56,20 @@ def stop_signals_held() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
+def _target(path: Path) -> Path:
+    """Where writing ``path`` lands: a symbolic link's target (the link stays a link)."""
+    return Path(os.path.realpath(path)) if path.is_symlink() else path
+
+
+def _is_special(path: Path) -> bool:
+    """An existing file that is not a regular file (``/dev/stdout``, a FIFO, a device):
+    written in place, since renaming over it would replace the device itself."""
+    try:
+        return not stat.S_ISREG(os.stat(path).st_mode)
+    except FileNotFoundError:
+        return False
+
+
 @contextlib.contextmanager
 def replacing(*paths: Path) -> Iterator[tuple[Path, ...]]:
     """Temporary files beside ``paths`` (same suffixes) for the block to write.
@@ -62,34 +77,40 @@ def replacing(*paths: Path) -> Iterator[tuple[Path, ...]]:
     When the block ends normally, each temporary file is flushed to disk and renamed over
     its path, with SIGINT and SIGTERM held back from the first rename to the last (a stop
     then acts right after the whole set is in place). When the block raises, or writing
-    fails, the temporary files are removed and every path keeps what it had.
+    fails, the temporary files are removed and every path keeps what it had. A symbolic
+    link is followed (its target is replaced, the link kept); a path that exists and is not
+    a regular file (``/dev/stdout``, a FIFO) is handed to the block itself.
 
     Raises:
         OutputFileError: a file could not be created, written or renamed (a full disk, no
             permission, a missing directory that cannot be made); one line naming it.
     """
-    temporaries: list[Path] = []
+    # a special file is written through the name given (/dev/stdout -> a pipe has no path)
+    targets = [Path(path) if _is_special(Path(path)) else _target(Path(path)) for path in paths]
+    temporaries: dict[Path, Path] = {}      # target -> its temporary file
     try:
         try:
-            for path in paths:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                handle, name = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.',
-                                                suffix=f'.tmp{path.suffix}')
+            for target in targets:
+                if _is_special(target):
+                    continue
+                target.parent.mkdir(parents=True, exist_ok=True)
+                handle, name = tempfile.mkstemp(dir=target.parent, prefix=f'.{target.name}.',
+                                                suffix=f'.tmp{target.suffix}')
                 os.close(handle)
-                temporaries.append(Path(name))
-                os.chmod(name, _mode_for(path))
-            yield tuple(temporaries)
-            for temporary in temporaries:
+                temporaries[target] = Path(name)
+                os.chmod(name, _mode_for(target))
+            yield tuple(temporaries.get(target, target) for target in targets)
+            for temporary in temporaries.values():
                 with open(temporary, 'rb+') as handle_:
                     os.fsync(handle_.fileno())
             with stop_signals_held():
-                for temporary, path in zip(temporaries, paths, strict=True):
-                    os.replace(temporary, path)
+                for target, temporary in temporaries.items():
+                    os.replace(temporary, target)
         except OSError as err:
             names = ', '.join(str(p) for p in paths)
             raise OutputFileError(f'{names}: cannot write ({err.strerror or err})') from err
     finally:
-        for temporary in temporaries:
+        for temporary in temporaries.values():
             temporary.unlink(missing_ok=True)
 
 
