@@ -68,6 +68,26 @@ def test_bad_arguments_give_one_clear_line(args: list[str], message: str) -> Non
     assert 'Traceback' not in proc.stderr
 
 
+@pytest.mark.parametrize(('args', 'message'), [
+    (['--workers', '0'], "argument --workers: must be >= 1, got '0'"),
+    (['--workers', '-1'], "argument --workers: must be >= 1, got '-1'"),
+    (['--workers', 'two'], "argument --workers: expected a whole number, got 'two'"),
+    (['--traces', 'nope'], 'nope: cannot open trace (No such file or directory)'),
+    (['--results-dir', '/dev/null/x'], '--results-dir /dev/null/x: cannot create it (Not a '
+                                       'directory)'),
+])
+def test_reproduce_refuses_bad_arguments_before_any_case(args: list[str], message: str,
+                                                         tmp_path: Path) -> None:
+    results = ['--results-dir', str(tmp_path / 'results')] if '--results-dir' not in args else []
+    proc = trust_av('reproduce', '--no-progress', *results, *args)
+    assert proc.returncode == 2, proc.stderr
+    last = proc.stderr.splitlines()[-1]          # argparse prints its usage first
+    assert last.startswith('trust-av reproduce: error: ') and message in last
+    assert 'Traceback' not in proc.stderr and 'case ' not in proc.stderr
+    assert not (tmp_path / 'results' / 'cache').exists() or not list(
+        (tmp_path / 'results' / 'cache').iterdir())
+
+
 def test_help_explains() -> None:
     proc = trust_av('simulate', '--help')
     assert proc.returncode == 0 and '--alpha' in proc.stdout and 'explicability' in proc.stdout

@@ -131,6 +131,17 @@ def positive_hz(text: str) -> float:
     return value
 
 
+def positive_int(text: str) -> int:
+    """argparse type: a whole number >= 1 (a count of workers, jobs ...)."""
+    try:
+        value = int(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'expected a whole number, got {text!r}') from err
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'must be >= 1, got {text!r}')
+    return value
+
+
 def run_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
     """Params-file overrides from the command-line options."""
     planner: dict[str, object] = {}

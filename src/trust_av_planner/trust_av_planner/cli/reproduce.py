@@ -13,7 +13,7 @@ import yaml
 
 from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
-from trust_av_planner.cli.options import Progress, add_lead_preview_option
+from trust_av_planner.cli.options import Progress, add_lead_preview_option, positive_int
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PREDICTORS as KNOWN_PREDICTORS
 from trust_av_planner.study import sweep, tables
@@ -97,10 +97,16 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.results_dir or DEFAULT_RESULTS[args.profile]
     if args.lead_preview is not None and args.lead_preview != 'recorded':
         out = args.results_dir or out.with_name(f'{out.name}_{args.lead_preview}')
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise TrustAvPlannerError(f'--results-dir {out}: cannot create it '
+                                  f'({err.strerror})') from err
     if args.lead_preview is not None:
         params_file = with_lead_preview(params_file, args.lead_preview, out)
     config = load_run_config(params_file)  # validate before starting workers
+    for trace in args.traces:               # a bad trace is named before any case runs
+        load_trace(trace, config.planner.dt_s, config.trace)
     cases = sweep.sweep_cases(args.traces, args.predictors, sweep.ALPHAS)
     if args.drivers:
         cases = sweep.population_cases(cases, args.drivers, args.drivers_seed,
@@ -196,7 +202,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='comma-separated predictors (default: %(default)s)')
     parser.add_argument('--executor', choices=('local', 'ray'), default='local',
                         help='local process pool (default) or a Ray cluster')
-    parser.add_argument('--workers', type=int, default=None,
+    parser.add_argument('--workers', type=positive_int, default=None,
                         help='parallel workers (default: one per core)')
     parser.add_argument('--ray-address', default=None,
                         help='Ray cluster address (default: start a local one)')
