@@ -272,3 +272,24 @@ def test_max_steps_changes_the_length_only() -> None:
         short = truncate(whole, steps)
         part = simulate(config.for_trace(short), short).records
         assert untimed(part) == full[:steps]
+
+
+@pytest.mark.parametrize(('args', 'message'), [
+    (['run', '--no-progress', '--bag', '/dev/null/x'],
+     '/dev/null: cannot write there (--bag /dev/null/x)'),
+    (['run', '--no-progress', '--startup-timeout-s', '-1', '--bag', 'BAG'],
+     "argument --startup-timeout-s: must be > 0, got '-1'"),
+    (['train-gru', '--out', '/dev/null/m.npz'], '/dev/null/m.npz: /dev/null is not a directory'),
+    (['train-gru', '--out', 'DIR'], 'is a directory; --out needs a file name'),
+    (['eval-driver', '--data', 'DIR', '--json', 'DIR'],
+     'is a directory; --json needs a file name'),
+])
+def test_outputs_are_checked_before_the_work(tmp_path: Path, args: list[str],
+                                             message: str) -> None:
+    """A place the result cannot go is one line and exit 2 before minutes of training or a
+    graph start (it was a traceback, or a finished training with nowhere to write)."""
+    subs = {'DIR': str(tmp_path), 'BAG': str(tmp_path / 'bag')}
+    proc = trust_av(*[subs.get(a, a) for a in args])
+    assert proc.returncode == 2, proc.stderr
+    assert message in proc.stderr.splitlines()[-1] and 'Traceback' not in proc.stderr
+    assert list(tmp_path.iterdir()) == []

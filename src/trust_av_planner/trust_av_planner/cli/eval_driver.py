@@ -21,6 +21,7 @@ from human_driver_sim.evaluation import (
 from human_driver_sim.idm import TEXTBOOK_MOTORWAY, IdmParams
 from human_driver_sim.ngsim import NGSIM_VEHICLE_LENGTH_M
 from human_driver_sim.population import DRIVER_FIT_FILE, DriverFitError, fitted_idm_params
+from trust_av_planner.cli.options import output_file
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
 from trust_monitor.common import output_files
@@ -73,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
     """Load, clean, score, print (and write JSON)."""
     if not args.window_s > 0.0:
         raise TrustAvPlannerError(f'--window-s must be > 0, got {args.window_s}')
+    if args.json is not None:
+        output_file(args.json, '--json')
     scored = models(args.params_file, args.driver_fit)
     report = LoadReport()
     try:

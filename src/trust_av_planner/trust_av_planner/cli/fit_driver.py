@@ -33,7 +33,7 @@ from human_driver_sim.fitting import MPC_BOUNDS, FitResult, configured, fit_idm,
 from human_driver_sim.idm import PARAM_NAMES, TEXTBOOK_MOTORWAY, IdmParams
 from human_driver_sim.ngsim import split_by_follower
 from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
-from trust_av_planner.cli.options import Progress
+from trust_av_planner.cli.options import Progress, output_file
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
 from trust_monitor.common.output_files import replacing
@@ -173,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     if args.iterations < 1:
         raise TrustAvPlannerError(f'--iterations must be >= 1, got {args.iterations}')
+    output_file(args.out)             # before the fit: minutes of work with nowhere to go
     config = load_run_config(args.params_file).driver
     fit, held, cleaning = _load(args, config.dt_s)
     n = config.horizon_steps

@@ -69,7 +69,7 @@ def steps_value(text: str) -> int:
     return value
 
 
-def output_file(path: Path) -> Path:
+def output_file(path: Path, option: str = '--out') -> Path:
     """Check, before any work, that ``path`` can be written as a file.
 
     Raises:
@@ -77,7 +77,7 @@ def output_file(path: Path) -> Path:
             a writable directory.
     """
     if path.is_dir():
-        raise TrustAvPlannerError(f'{path}: is a directory; --out needs a file name')
+        raise TrustAvPlannerError(f'{path}: is a directory; {option} needs a file name')
     ancestor = path.parent
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent
@@ -128,6 +128,17 @@ def positive_hz(text: str) -> float:
         raise argparse.ArgumentTypeError(f'expected a rate in Hz, got {text!r}') from err
     if not value > 0.0 or value == float('inf'):
         raise argparse.ArgumentTypeError(f'must be a finite rate > 0 Hz, got {text!r}')
+    return value
+
+
+def positive_seconds(text: str) -> float:
+    """argparse type: a number > 0."""
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f'expected a number of seconds, got {text!r}') from err
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f'must be > 0, got {text!r}')
     return value
 
 

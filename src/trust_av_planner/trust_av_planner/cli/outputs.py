@@ -62,7 +62,7 @@ def prepare_outputs(bag: Path, *, overwrite: bool, option: str = '--bag') -> Run
                        (outputs.logs, 'logs directory')):
         try:
             info = os.lstat(path)
-        except FileNotFoundError:
+        except (FileNotFoundError, NotADirectoryError):   # checked below, with the parent
             continue
         if stat.S_ISLNK(info.st_mode):
             raise TrustAvPlannerError(f'{path}: the {kind} is a symbolic link; give a real '
@@ -77,9 +77,16 @@ def prepare_outputs(bag: Path, *, overwrite: bool, option: str = '--bag') -> Run
             raise TrustAvPlannerError(f'{path}: not a bag directory (no metadata.yaml or '
                                       '.mcap); refusing to replace it')
     parent = bag.parent
-    if parent.exists() and not os.access(parent, os.W_OK | os.X_OK):
-        raise TrustAvPlannerError(f'{parent}: cannot write there ({option} {bag})')
-    parent.mkdir(parents=True, exist_ok=True)
+    ancestor = parent                        # the nearest directory that exists
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir() or not os.access(ancestor, os.W_OK | os.X_OK):
+        raise TrustAvPlannerError(f'{ancestor}: cannot write there ({option} {bag})')
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise TrustAvPlannerError(f'{parent}: cannot create it ({option} {bag}: '
+                                  f'{err.strerror})') from err
     for path in (outputs.bag, outputs.logs):
         if path.is_dir():
             shutil.rmtree(path)

@@ -12,6 +12,7 @@ from trust_av_planner.cli.options import (
     Progress,
     add_run_options,
     format_metrics,
+    positive_seconds,
     run_overrides,
     steps_value,
 )
@@ -113,6 +114,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                              'a node in --namespace or a publisher on one of its topics is '
                              'already there, and stopped if one appears. Default: lease a '
                              'free, private domain that nothing else uses')
-    parser.add_argument('--startup-timeout-s', type=float, default=30.0,
+    parser.add_argument('--startup-timeout-s', type=positive_seconds, default=30.0,
                         help='how long to wait for the graph to connect (default: %(default)s)')
     parser.set_defaults(func=run)

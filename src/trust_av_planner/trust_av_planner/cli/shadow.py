@@ -10,7 +10,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from preceding_traffic.sources import load_trace
-from trust_av_planner.cli.options import add_params_file_option, alpha_value, positive_hz
+from trust_av_planner.cli.options import (
+    add_params_file_option,
+    alpha_value,
+    output_file,
+    positive_hz,
+    positive_seconds,
+)
 from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PREDICTORS
@@ -28,17 +34,6 @@ if TYPE_CHECKING:
     from trust_av_planner.graph.shadow import ShadowRun
 
 
-def positive_seconds(text: str) -> float:
-    """argparse type: a number > 0."""
-    try:
-        value = float(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f'expected a number of seconds, got {text!r}') from err
-    if not value > 0.0:
-        raise argparse.ArgumentTypeError(f'must be > 0, got {text!r}')
-    return value
-
-
 def summary_lines(result: ShadowRun) -> list[str]:
     """The run's summary: messages per topic and one jitter line per loop."""
     lines = [f'wall-clock run: {result.duration_s:g} s of wall time, recording {result.bag}']
@@ -52,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
     # imported here, as in `trust-av run`: --help and a refused option do not pay for rclpy
     from trust_av_planner.graph.shadow import run_shadow, run_wall_graph
 
+    if args.json is not None:
+        output_file(args.json, '--json')
     overrides: dict[str, dict[str, object]] = {'preceding_traffic': {'trace': str(args.bag)}}
     if args.bag_topic is not None:
         overrides['preceding_traffic']['bag_topic'] = args.bag_topic

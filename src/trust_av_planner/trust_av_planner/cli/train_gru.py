@@ -14,7 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from trust_av_planner.cli.options import Progress, add_params_file_option
+from trust_av_planner.cli.options import Progress, add_params_file_option, output_file
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors.gru import MODELS_DIR
 from trust_av_planner.study.gru_training import TrainingSettings, save_model, train_with_dagger
@@ -68,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
     :mod:`~.pinned_numerics`), which is this function again in the child."""
     config = load_run_config(args.params_files)
     settings = settings_from_args(args)
+    output_file(args.out)             # before the training: minutes of work with nowhere to go
     if not in_pinned_child():
         reason = unsupported_reason()
         if reason is not None:
