@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rosbag2_rules import check_bag_directory  # the test-side oracle module
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
@@ -26,6 +27,20 @@ from preceding_traffic.traces import TraceConfig
 REPO = Path(__file__).resolve().parents[1]
 TOPIC = '/preceding_vehicle/odom'
 CONFIG = TraceConfig(trace='x', max_sample_gap_s=5.0)
+
+
+@pytest.mark.parametrize('bag', ['commute_am', 'commute_pm', 'written'])
+def test_bags_pass_rosbag2_jazzys_reader_rules(tmp_path: Path, bag: str) -> None:
+    """The shipped commute bags and what ``trace-to-bag`` writes open in ``ros2 bag``
+    (rosbag2 Jazzy's metadata and MCAP rules, tests/rosbag2_rules.py)."""
+    path = REPO / 'bags' / bag
+    if bag == 'written':
+        path = tmp_path / 'us06_lead'
+        done = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'trace-to-bag',
+                               'us06', str(path)], capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ['us06_lead']
+    assert check_bag_directory(path) == []
 
 
 def test_round_trip_keeps_times_and_speeds(tmp_path: Path) -> None:
