@@ -268,7 +268,8 @@ def check_one_value_per_graph(built: Mapping[tuple[str, type], Any],
         if len(distinct) > 1:
             first, other = (next(n for n, v in values.items() if v == d) for d in distinct[:2])
             where = sorted({sources[n][name] for n in (first, other) if name in sources[n]})
-            raise ParamsError(f'{", ".join(where)}: {name} is {values[first]!r} for '
+            prefix = f'{", ".join(where)}: ' if where else ''
+            raise ParamsError(f'{prefix}{name} is {values[first]!r} for '
                               f'{first} but {values[other]!r} for {other}: {why}; set it '
                               'once, in /**')
 
