@@ -188,7 +188,8 @@ def test_sigterm_stops_a_sweep_and_its_workers(tmp_path: Path) -> None:
     assert not list(cache.glob('*.tmp'))
 
 
-@pytest.mark.parametrize('how', ['SIGTERM to it', 'Ctrl-C at the terminal', 'SIGKILL'])
+@pytest.mark.parametrize('how', ['SIGTERM to it', 'Ctrl-C at the terminal', 'SIGKILL',
+                                 'its child killed'])
 def test_train_gru_stops_its_pinned_child_and_workers(tmp_path: Path, how: str) -> None:
     """``trust-av train-gru`` trains in a child process (pinned numerics) with worker
     processes: a stop reaches each of them once, whichever way it comes, and nothing is
@@ -210,11 +211,20 @@ def test_train_gru_stops_its_pinned_child_and_workers(tmp_path: Path, how: str) 
         proc.send_signal(signal.SIGTERM)
     elif how == 'Ctrl-C at the terminal':
         os.killpg(proc.pid, signal.SIGINT)      # the terminal's process group
-    else:
+    elif how == 'SIGKILL':
         proc.kill()
+    else:                                       # as the OOM killer would
+        os.kill(min(children_of(proc.pid)), signal.SIGKILL)
     _out, rest = proc.communicate(timeout=120)
     if how == 'SIGKILL':
         assert proc.returncode == -signal.SIGKILL
+    elif how == 'its child killed':
+        assert proc.returncode == 2
+        # the killed child's multiprocessing resource tracker may add its own warning about
+        # the child's semaphores (Python's, printed when it notices the child is gone)
+        assert ('trust-av train-gru: error: the training process (pinned numerics) was '
+                'killed by SIGKILL; nothing was written') in rest.splitlines()
+        assert 'Traceback' not in rest
     else:
         assert proc.returncode == (143 if how == 'SIGTERM to it' else 130), rest
         what = 'stopped by SIGTERM' if how == 'SIGTERM to it' else 'interrupted'

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import signal
 import sys
 import tempfile
 import time
@@ -75,7 +76,11 @@ def run(args: argparse.Namespace) -> int:
             print(f'trust-av train-gru: warning: {reason}; training without the pinned CPU '
                   'kernels, so the model is not bit-comparable with the shipped one',
                   file=sys.stderr)
-        return run_pinned(child_arguments(args)).returncode
+        code = run_pinned(child_arguments(args)).returncode
+        if code < 0:   # killed: the child could not say why (the OOM killer sends SIGKILL)
+            raise TrustAvPlannerError(f'the training process (pinned numerics) was killed by '
+                                      f'{signal.Signals(-code).name}; nothing was written')
+        return code
     check_pinned()
     start = time.monotonic()
     bar: Progress | None = None

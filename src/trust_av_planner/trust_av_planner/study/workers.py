@@ -49,8 +49,10 @@ def _on_stop(signum: int, frame: FrameType | None) -> None:
     stop_signals.handle(signum, frame)  # raised (recorded while rclpy spins)
 
 
-def _initialize_worker() -> None:
+def _initialize_worker(parent: int) -> None:
     stop_signals.stop_with_parent()
+    if os.getppid() != parent:  # the command died before this worker was up: no signal comes
+        os._exit(128 + signal.SIGTERM)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_stop)
     sys.unraisablehook = stop_signals.unraisable_hook
@@ -77,7 +79,7 @@ class WorkerPool(ProcessPoolExecutor):
 
     def __init__(self, workers: int) -> None:
         super().__init__(workers, mp_context=multiprocessing.get_context('spawn'),
-                         initializer=_initialize_worker)
+                         initializer=_initialize_worker, initargs=(os.getpid(),))
 
     def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
         return super().submit(functools.partial(_call, fn), *args, **kwargs)
