@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rosbag2_rules import check_bag_directory  # the test-side oracle module
 from rosbags.highlevel import AnyReader
 
 from preceding_traffic.bags import TYPESTORE
@@ -54,6 +55,7 @@ def read(path: Path) -> dict[str, list[object]]:
 @pytest.mark.wall_clock
 def test_shadow_run_records_bounded_outputs_and_jitter(tmp_path: Path) -> None:
     result, out, stats = shadow(tmp_path)
+    assert check_bag_directory(out) == []          # ros2 bag opens it (rosbag2 Jazzy's rules)
     messages = read(out)
     for topic in ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_status',
                   '/trust_monitor/trust', '/preceding_vehicle/odom', '/ego/odom'):
@@ -154,6 +156,7 @@ def test_whole_graph_in_wall_mode_drives_at_real_time(tmp_path: Path) -> None:
          '--json', str(stats)], capture_output=True, text=True, timeout=120, check=False)
     after_ns = time.time_ns()
     assert result.returncode == 0, result.stdout + result.stderr
+    assert check_bag_directory(out) == []
     stamped: dict[str, list[tuple[int, object]]] = {}
     with AnyReader([out], default_typestore=TYPESTORE) as reader:
         for connection, log_ns, raw in reader.messages():
