@@ -227,6 +227,15 @@ def test_each_node_section_holds_what_the_node_declares(node: str) -> None:
     assert listed - declared <= {'SharedConfig'}, listed - declared
 
 
+def test_a_section_for_a_node_trust_av_configures_per_run_says_so(tmp_path: Path) -> None:
+    path = tmp_path / 'plant.yaml'
+    path.write_text(CORPUS['plant_section'][0])
+    assert trust_av_verdict(path) == (
+        f"{path}: section 'ego_plant': trust-av sets the ego_plant node's values for each run "
+        '(its clock settings come from /**); node sections: preceding_traffic, planner, '
+        'human_driver, trust_monitor')
+
+
 def test_one_value_per_graph_is_named_with_both_nodes(tmp_path: Path) -> None:
     path = tmp_path / 'planner_eps.yaml'
     path.write_text(CORPUS['trust_model_differs'][0])

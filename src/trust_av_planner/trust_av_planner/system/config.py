@@ -103,6 +103,10 @@ NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
 }
 _ALL = tuple({c for comps in NODE_COMPONENTS.values() for c in comps})
 
+RUN_SET_NODES = ('ego_plant', 'recorder')
+"""Nodes of the graph whose values trust-av gives them for each run (the simulated AV's
+initial state, the recorder's bag); their clock settings come from /**."""
+
 ONE_VALUE_PER_GRAPH: dict[str, str] = {
     **{f.name: 'the planner and the monitor must run the same trust model'
        for f in dataclasses.fields(TrustConfig)},
@@ -187,6 +191,11 @@ def check_sections(layers: Sequence[ParsedParams]) -> None:
             elif target in NODE_COMPONENTS:
                 check_known(values, *NODE_COMPONENTS[target],
                             where=f'{layer.where}: section {section}')
+            elif target in RUN_SET_NODES:
+                raise ParamsError(f'{layer.where}: section {section!r}: trust-av sets the '
+                                  f"{target} node's values for each run (its clock settings "
+                                  'come from /**); node sections: '
+                                  f'{", ".join(NODE_COMPONENTS)}')
             else:
                 raise ParamsError(f'{layer.where}: unknown node section {section!r} (known: '
                                   f'{", ".join(NODE_COMPONENTS)}, or a wildcard such as /** '
