@@ -227,22 +227,20 @@ def test_each_node_section_holds_what_the_node_declares(node: str) -> None:
     assert listed - declared <= {'SharedConfig'}, listed - declared
 
 
-def test_a_section_for_a_node_trust_av_configures_per_run_says_so(tmp_path: Path) -> None:
-    path = tmp_path / 'plant.yaml'
-    path.write_text(CORPUS['plant_section'][0])
-    assert trust_av_verdict(path) == (
-        f"{path}: section 'ego_plant': trust-av sets the ego_plant node's values for each run "
-        '(its clock settings come from /**); node sections: preceding_traffic, planner, '
-        'human_driver, trust_monitor')
-
-
-def test_one_value_per_graph_is_named_with_both_nodes(tmp_path: Path) -> None:
-    path = tmp_path / 'planner_eps.yaml'
-    path.write_text(CORPUS['trust_model_differs'][0])
-    assert trust_av_verdict(path) == (
-        f'{path}, {DEFAULT_PARAMS_FILE}: epsilon_mps2 is 3.0 for planner but 6.0 for '
-        'trust_monitor: the planner and the monitor must run the same trust model; set it '
-        'once, in /**')
+@pytest.mark.parametrize(('name', 'message'), [
+    ('plant_section', "{path}: section 'ego_plant': trust-av sets the ego_plant node's values "
+                      'for each run (its clock settings come from /**); node sections: '
+                      'preceding_traffic, planner, human_driver, trust_monitor'),
+    ('trust_model_differs', '{path}, {shipped}: epsilon_mps2 is 3.0 for planner but 6.0 for '
+                            'trust_monitor: the planner and the monitor must run the same '
+                            'trust model; set it once, in /**'),
+])
+def test_stricter_refusals_say_why(tmp_path: Path, name: str, message: str) -> None:
+    """What trust-av refuses beyond the nodes is explained: a node configured per run, a
+    value that must be one for the whole graph (both nodes named)."""
+    path = tmp_path / f'{name}.yaml'
+    path.write_text(CORPUS[name][0])
+    assert trust_av_verdict(path) == message.format(path=path, shipped=DEFAULT_PARAMS_FILE)
 
 
 def start(tmp_path: Path, domain: int, module: str, *args: str) -> subprocess.Popen[str]:

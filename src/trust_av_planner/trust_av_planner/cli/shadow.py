@@ -26,9 +26,7 @@ from trust_av_planner.system.config import (
     load_run_config,
 )
 from trust_monitor.common import output_files
-from trust_monitor.common.param_layers import layered_params, node_fqn, read_layers
-from trust_monitor.common.params import build_config
-from trust_monitor.common.wall_clock import WallClockConfig, format_summary
+from trust_monitor.common.wall_clock import format_summary
 
 if TYPE_CHECKING:
     from trust_av_planner.graph.shadow import ShadowRun
@@ -61,10 +59,8 @@ def run(args: argparse.Namespace) -> int:
         planner['predictor'] = args.predictor
     overrides['planner'] = planner
     config = load_run_config(args.params_files, overrides)
-    planner_section = layered_params(read_layers(config.params_files), node_fqn('/', 'planner'))
-    clock = build_config(WallClockConfig, planner_section)
-    topics = build_config(PlannerTopics, planner_section)
-    rate_hz = args.rate_hz if args.rate_hz is not None else clock.control_rate_hz
+    topics = config.planner_topics
+    rate_hz = args.rate_hz if args.rate_hz is not None else config.clock.control_rate_hz
     check_control_rate(config.planner, rate_hz)  # the planner node's rule, before any output
     if args.whole_graph and topics != PlannerTopics():
         files = ', '.join(str(p) for p in config.params_files)

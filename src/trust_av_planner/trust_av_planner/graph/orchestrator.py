@@ -128,8 +128,8 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
 
     from trust_monitor.ros.qos import QOS
 
-    if config.clock_mode != 'lockstep':
-        raise GraphError(f'clock_mode {config.clock_mode} (params file): this command steps '
+    if config.clock.wall:
+        raise GraphError(f'clock_mode {config.clock.clock_mode} (params file): this command steps '
                          'the graph on sim time (lockstep); wall-clock runs are trust-av '
                          'shadow, or the nodes started by hand')
     check_namespace(namespace)

@@ -130,8 +130,8 @@ class RunConfig:
         params_files: the params files it was read from, bottom (the shipped file) first:
             hand them to every node in this order (``--params-file`` once each).
         namespace: the namespace its node names were matched in.
-        clock_mode: the nodes' ``clock_mode`` (one for all of them): ``lockstep`` or
-            ``wall``.
+        clock: the planner's wall-clock settings (its ``clock_mode`` is every node's).
+        planner_topics: the planner's input topics.
     """
 
     shared: SharedConfig
@@ -141,7 +141,8 @@ class RunConfig:
     trust: TrustConfig
     params_files: tuple[Path, ...] = field(default=(), compare=False)
     namespace: str = '/'
-    clock_mode: str = field(default='lockstep', compare=False)
+    clock: WallClockConfig = field(default_factory=WallClockConfig, compare=False)
+    planner_topics: PlannerTopics = field(default_factory=PlannerTopics, compare=False)
 
     @property
     def min_safe_gap_m(self) -> float:
@@ -244,7 +245,8 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
     if clock.wall:
         check_control_rate(planner, clock.control_rate_hz)
     return RunConfig(
-        clock_mode=clock.clock_mode,
+        clock=clock,
+        planner_topics=built['planner', PlannerTopics],
         shared=built['preceding_traffic', SharedConfig],
         trace=built['preceding_traffic', TraceConfig],
         planner=planner,
