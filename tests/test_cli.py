@@ -293,3 +293,17 @@ def test_outputs_are_checked_before_the_work(tmp_path: Path, args: list[str],
     assert proc.returncode == 2, proc.stderr
     assert message in proc.stderr.splitlines()[-1] and 'Traceback' not in proc.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_run_refuses_a_wall_clock_params_file_at_once(tmp_path: Path) -> None:
+    """``trust-av run`` steps the graph on sim time: a wall-mode params file is one line
+    before any node starts (it used to wait 30 s for a graph that never connected)."""
+    params = tmp_path / 'wall.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    clock_mode: wall\n')
+    proc = trust_av('run', '--no-progress', '--params-file', str(params), '--bag',
+                    str(tmp_path / 'bag'))
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr == ('trust-av run: error: clock_mode wall (params file): this command '
+                           'steps the graph on sim time (lockstep); wall-clock runs are '
+                           'trust-av shadow, or the nodes started by hand\n')
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['wall.yaml']
