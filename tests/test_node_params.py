@@ -227,19 +227,25 @@ def test_each_node_section_holds_what_the_node_declares(node: str) -> None:
     assert listed - declared <= {'SharedConfig'}, listed - declared
 
 
-@pytest.mark.parametrize(('name', 'message'), [
-    ('plant_section', "{path}: section 'ego_plant': trust-av sets the ego_plant node's values "
-                      'for each run (its clock settings come from /**); node sections: '
-                      'preceding_traffic, planner, human_driver, trust_monitor'),
-    ('trust_model_differs', '{path}, {shipped}: epsilon_mps2 is 3.0 for planner but 6.0 for '
-                            'trust_monitor: the planner and the monitor must run the same '
-                            'trust model; set it once, in /**'),
-])
-def test_stricter_refusals_say_why(tmp_path: Path, name: str, message: str) -> None:
+@pytest.mark.parametrize(('text', 'message'), [
+    (CORPUS['plant_section'][0],
+     "{path}: section 'ego_plant': trust-av sets the ego_plant node's values for each run "
+     '(its clock settings come from /**); node sections: preceding_traffic, planner, '
+     'human_driver, trust_monitor'),
+    # The files come in the order the two nodes are named, whichever sorts first by path
+    # (the checkout and the temporary directory sort either way on different machines).
+    (CORPUS['trust_model_differs'][0],
+     '{path}, {shipped}: epsilon_mps2 is 3.0 for planner but 6.0 for trust_monitor: the '
+     'planner and the monitor must run the same trust model; set it once, in /**'),
+    ('trust_monitor:\n  ros__parameters:\n    epsilon_mps2: 3.0\n',
+     '{shipped}, {path}: epsilon_mps2 is 6.0 for planner but 3.0 for trust_monitor: the '
+     'planner and the monitor must run the same trust model; set it once, in /**'),
+], ids=['plant_section', 'planner_set', 'monitor_set'])
+def test_stricter_refusals_say_why(tmp_path: Path, text: str, message: str) -> None:
     """What trust-av refuses beyond the nodes is explained: a node configured per run, a
     value that must be one for the whole graph (both nodes named)."""
-    path = tmp_path / f'{name}.yaml'
-    path.write_text(CORPUS[name][0])
+    path = tmp_path / 'params.yaml'
+    path.write_text(text)
     assert trust_av_verdict(path) == message.format(path=path, shipped=DEFAULT_PARAMS_FILE)
 
 

@@ -278,7 +278,10 @@ def check_one_value_per_graph(built: Mapping[tuple[str, type], Any],
         distinct = list(dict.fromkeys(values.values()))
         if len(distinct) > 1:
             first, other = (next(n for n, v in values.items() if v == d) for d in distinct[:2])
-            where = sorted({sources[n][name] for n in (first, other) if name in sources[n]})
+            # The files in the order the nodes are named (never sorted: a path's place
+            # would then depend on where the checkout and the user's file live).
+            where = list(dict.fromkeys(sources[n][name] for n in (first, other)
+                                       if name in sources[n]))
             prefix = f'{", ".join(where)}: ' if where else ''
             raise ParamsError(f'{prefix}{name} is {values[first]!r} for '
                               f'{first} but {values[other]!r} for {other}: {why}; set it '
@@ -292,7 +295,7 @@ def _build(cls: type[T], params: Layered) -> T:
     except ParamsError as err:
         named = [f.name for f in dataclasses.fields(cls)  # type: ignore[arg-type]
                  if re.search(rf'\b{f.name}\b', str(err)) and f.name in params.sources]
-        where = sorted({params.sources[name] for name in named})
+        where = list(dict.fromkeys(params.sources[name] for name in named))
         if not where:
             raise
         raise ParamsError(f'{", ".join(where)}: {err}') from err
