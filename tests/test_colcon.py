@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from rosbag2_rules import check_bag_directory
 
 REPO = Path(__file__).resolve().parents[1]
 PARAMS = REPO / 'config' / 'trust_av.yaml'
@@ -101,13 +102,16 @@ def test_installed_executable_comes_up(install: Path, package: str, executable: 
         except queue.Empty:
             assert proc.poll() is None, ''.join(seen)
     assert proc.poll() is None, ''.join(seen)
-    os.killpg(proc.pid, signal.SIGINT)
+    # Ctrl-C; the recorder's terminal closes instead (SIGHUP): it finishes its bag either way
+    os.killpg(proc.pid, signal.SIGHUP if executable == 'recorder' else signal.SIGINT)
     proc.wait(timeout=30)
     reader.join(timeout=10)                             # the pipe is drained to its end
     while not lines.empty():
         seen.append(lines.get())
     assert proc.returncode == 0, ''.join(seen)
     assert 'Traceback' not in ''.join(seen)
+    if executable == 'recorder':
+        assert check_bag_directory(tmp_path / 'r') == []
     shutil.rmtree(tmp_path / 'ros_log', ignore_errors=True)
 
 

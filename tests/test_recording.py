@@ -309,17 +309,24 @@ def interrupted_run(bag: Path) -> subprocess.Popen[str]:
     """A run of :func:`conftest.long_trace` (written beside ``bag``) that a test stops."""
     return subprocess.Popen(run_command(bag, INTERRUPTED_RUN_STEPS,
                                         trace=str(long_trace(bag.parent))),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # its own process group, as in a terminal
 
 
-def test_sigterm_finishes_the_bag_like_sigint(tmp_path: Path) -> None:
+@pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGHUP], ids=['SIGTERM', 'SIGHUP'])
+def test_a_stop_signal_finishes_the_bag_like_sigint(tmp_path: Path, signum: int) -> None:
+    """SIGTERM to trust-av (``timeout``, ``docker stop``); SIGHUP to its process group (the
+    terminal closed)."""
     bag = tmp_path / 'term'
     proc = interrupted_run(bag)
     wait_for_steps(bag, 8, proc=proc)
-    proc.send_signal(signal.SIGTERM)
+    if signum == signal.SIGTERM:
+        proc.send_signal(signum)
+    else:
+        os.killpg(proc.pid, signum)
     _out, err = proc.communicate(timeout=120)
-    assert proc.returncode == 143, err
-    assert err.count('\n') == 1 and 'stopped by SIGTERM' in err
+    assert proc.returncode == 128 + signum, err
+    assert err.count('\n') == 1 and f'stopped by {signal.Signals(signum).name}' in err
     assert check_bag_directory(bag) == []
     assert 0 < assert_every_topic_complete(bag) < INTERRUPTED_RUN_STEPS
 

@@ -1,4 +1,4 @@
-"""A stop signal (SIGINT, SIGTERM) is never lost by ``trust-av``: not where Python discards
+"""A stop signal (SIGINT, SIGTERM, SIGHUP) is never lost by ``trust-av``: not where Python discards
 an exception (a destructor: "Exception ignored in ..."), not while rclpy's executor spins.
 
 The graph's own Ctrl-C and SIGTERM tests (tests/test_graph.py) stop real runs at chosen
@@ -105,6 +105,36 @@ def test_a_stop_while_deferred_is_raised_when_the_block_ends() -> None:
     assert signal.getsignal(signal.SIGTERM) is not stop_signals.handle  # restored
 
 
+@pytest.mark.parametrize('nohup', [False, True], ids=['terminal', 'nohup'])
+def test_a_closed_terminal_stops_a_command_unless_started_under_nohup(nohup: bool) -> None:
+    """SIGHUP (the terminal or ssh session closed) stops like SIGTERM; a command started
+    under ``nohup`` (SIGHUP ignored) keeps running, as the user asked; SIGINT inherited as
+    ignored (a shell's background job) is still taken."""
+    program = """
+    import os, signal, sys, time
+    from trust_av_planner.graph import stop_signals
+    if sys.argv[1:] == ['nohup']:
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with stop_signals.installed():
+        print('SIGINT taken:', signal.getsignal(signal.SIGINT) is stop_signals.handle)
+        try:
+            os.kill(os.getpid(), signal.SIGHUP)
+            time.sleep(0.05)
+            print('went on')
+        except stop_signals.Stopped as stop:
+            print('stopped by', signal.Signals(stop.signum).name)
+    print('after:', signal.getsignal(signal.SIGHUP) == signal.SIG_IGN)
+    """
+    done = subprocess.run([sys.executable, '-c', textwrap.dedent(program),
+                           *(['nohup'] if nohup else [])],
+                          capture_output=True, text=True, timeout=300)
+    assert done.stderr == ''
+    assert done.stdout.splitlines() == ['SIGINT taken: True',
+                                        'went on' if nohup else 'stopped by SIGHUP',
+                                        f'after: {nohup}']
+
+
 def test_a_stop_lost_in_a_destructor_stops_trust_av_simulate_at_the_next_step() -> None:
     """Through the command: exit 130, its one line, no results; the run did not go on."""
     program = SIGNAL_IN_A_DESTRUCTOR + """
@@ -156,12 +186,16 @@ def assert_all_exit(pids: set[int]) -> None:
 
 
 def trust_av(*args: str) -> subprocess.Popen[str]:
+    """``trust-av ARGS`` as the leader of its own process group (as a terminal starts it)."""
     return subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
 
 
-def test_sigterm_stops_a_sweep_and_its_workers(tmp_path: Path) -> None:
-    """SIGTERM to ``trust-av reproduce`` alone (as ``docker stop`` or systemd send it): the
+@pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGHUP], ids=['SIGTERM', 'SIGHUP'])
+def test_a_stop_ends_a_sweep_and_its_workers(tmp_path: Path, signum: int) -> None:
+    """SIGTERM to ``trust-av reproduce`` alone (as ``docker stop`` or systemd send it), or
+    SIGHUP to its whole process group (its terminal closed; the workers get it too): the
     queued cases do not run, no worker is left, every stored case is whole (a rerun
     resumes from them: tests/test_reproduce.py). A process pool's own shutdown used to run
     every queued case first."""
@@ -175,11 +209,14 @@ def test_sigterm_stops_a_sweep_and_its_workers(tmp_path: Path) -> None:
         time.sleep(0.05)
     workers = descendants(proc.pid)
     assert len(workers) >= 2                     # the two workers (and Python's helpers)
-    proc.send_signal(signal.SIGTERM)
+    if signum == signal.SIGTERM:
+        proc.send_signal(signum)
+    else:
+        os.killpg(proc.pid, signum)
     _out, err = proc.communicate(timeout=120)
-    assert proc.returncode == 143, err
-    assert err.splitlines() == ['trust-av reproduce: stopped by SIGTERM; everything it '
-                                'started was stopped and its recordings finished']
+    assert proc.returncode == 128 + signum, err
+    assert err.splitlines() == [f'trust-av reproduce: stopped by {signal.Signals(signum).name}; '
+                                'everything it started was stopped and its recordings finished']
     assert_all_exit(workers)
     stored = list(cache.glob('*.json'))
     assert 1 <= len(stored) < cases, len(stored)

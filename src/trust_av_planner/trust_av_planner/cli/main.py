@@ -56,14 +56,14 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         0 done; 2 bad input or a failed run (one line on stderr); 128 + the signal number
-        when stopped by SIGINT (130) or SIGTERM (143), after everything started was
+        when stopped by SIGINT (130), SIGTERM (143) or SIGHUP (129), after everything started was
         stopped and every recording finished.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format='%(levelname)s %(name)s: %(message)s')
-    # Ctrl-C and SIGTERM raise Stopped: long commands stop what they started and finish
+    # Ctrl-C, SIGTERM and SIGHUP raise Stopped: long commands stop what they started and finish
     # their files on the way out.
     with stop_signals.installed():
         try:

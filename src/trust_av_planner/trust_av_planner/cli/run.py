@@ -89,7 +89,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'metrics and write a plot (BAG.png) and the node logs (BAG.logs/) beside '
                     'it. However the run ends the bag is finished and readable. Exit codes: 0 '
                     'done, 2 bad input, a node failed (named) or the disk is full, 130 '
-                    'interrupted (SIGINT), 143 terminated (SIGTERM).')
+                    'interrupted (SIGINT), 143 terminated (SIGTERM), 129 its terminal closed '
+                    '(SIGHUP; not under nohup).')
     add_run_options(parser)
     parser.add_argument('--bag', type=Path, default=None,
                         help='bag directory to write (default: bags/run_<trace>_<predictor>_'

@@ -1,6 +1,7 @@
-"""SIGINT and SIGTERM in ``trust-av``: raised as :class:`Stopped` (a ``KeyboardInterrupt``)
-so that every command takes the same way out (stop what it started, finish its files), and
-never lost.
+"""SIGINT, SIGTERM and SIGHUP in ``trust-av``: raised as :class:`Stopped` (a
+``KeyboardInterrupt``) so that every command takes the same way out (stop what it started,
+finish its files), and never lost. SIGHUP (the terminal closed, e.g. an ssh session ended)
+stops a command unless it was started ignoring it (``nohup``).
 
 Python raises a signal handler's exception wherever the main thread happens to be. Two
 places lose it:
@@ -28,8 +29,9 @@ from collections.abc import Iterator
 from types import FrameType
 from typing import Any
 
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-"""The signals that stop a command (Ctrl-C; ``timeout``, ``docker stop``, systemd)."""
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""The signals that stop a command (Ctrl-C; ``timeout``, ``docker stop``, systemd; a closed
+terminal)."""
 
 _state: dict[str, int] = {'deferring': 0, 'pending': 0}
 
@@ -63,14 +65,16 @@ def unraisable_hook(unraisable: Any) -> None:
 
 @contextlib.contextmanager
 def installed() -> Iterator[None]:
-    """Inside the block, SIGINT and SIGTERM raise :class:`Stopped` (also where a background
-    start inherited SIGINT as ignored) and a stop Python could not raise is kept; the
-    previous handlers and hook are back afterwards."""
+    """Inside the block, the :data:`STOP_SIGNALS` raise :class:`Stopped` (SIGINT also where a
+    background start inherited it as ignored; SIGHUP not where it is ignored, as ``nohup``
+    asks) and a stop Python could not raise is kept; the previous handlers and hook are
+    back afterwards."""
     previous = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
     previous_hook = sys.unraisablehook
     _state['pending'] = 0
     for signum in STOP_SIGNALS:
-        signal.signal(signum, handle)
+        if not ignored_on_purpose(signum, previous[signum]):
+            signal.signal(signum, handle)
     sys.unraisablehook = unraisable_hook
     try:
         yield
@@ -78,6 +82,13 @@ def installed() -> Iterator[None]:
         sys.unraisablehook = previous_hook
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+
+
+def ignored_on_purpose(signum: int, handler: Any) -> bool:
+    """True for SIGHUP started as ignored (``nohup``): the user asked to outlive the
+    terminal. (A shell starts a background job with SIGINT ignored, which nobody asked for;
+    SIGTERM is never ignored by a launcher.)"""
+    return signum == signal.SIGHUP and handler == signal.SIG_IGN
 
 
 def deliver_pending() -> None:

@@ -13,10 +13,10 @@ case):
    signal; a worker waiting for work exits at once;
 3. waits :data:`WORKER_GRACE_S` for them, then sends SIGKILL.
 
-Workers ignore SIGINT: a Ctrl-C at the terminal reaches the whole process group, and the
-command that owns the pool decides what its workers do (the graph's node processes are
-handled the same way, in their own process groups). A worker whose command dies (even by
-SIGKILL) gets SIGTERM and stops as above.
+Workers ignore SIGINT and SIGHUP: a Ctrl-C at the terminal, or the terminal closing, reaches
+the whole process group, and the command that owns the pool decides what its workers do
+(the graph's node processes are handled the same way, in their own process groups). A
+worker whose command dies (even by SIGKILL) gets SIGTERM and stops as above.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ import signal
 import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
+from multiprocessing import resource_tracker
 from types import FrameType
 from typing import Any, TypeVar
 
@@ -53,7 +54,8 @@ def _initialize_worker(parent: int) -> None:
     stop_signals.stop_with_parent()
     if os.getppid() != parent:  # the command died before this worker was up: no signal comes
         os._exit(128 + signal.SIGTERM)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # the command passes a stop on, once
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_stop)
     sys.unraisablehook = stop_signals.unraisable_hook
 
@@ -73,11 +75,26 @@ def _call(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         _in_call['now'] = False
 
 
+def _start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker (a helper process the pool's queues need)
+    with SIGHUP blocked, as it already blocks SIGINT and SIGTERM while it starts: in the
+    terminal's process group it would otherwise die when the terminal closes, and Python
+    warns that resources may leak. (A blocked signal stays blocked across the tracker's
+    exec; one that reaches this process meanwhile is delivered when it is unblocked. The
+    tracker ends when this process does, as before.)"""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGHUP})
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 class WorkerPool(ProcessPoolExecutor):
     """A spawn-context process pool whose workers follow the rules above; use it through
     :func:`worker_pool`."""
 
     def __init__(self, workers: int) -> None:
+        _start_resource_tracker()
         super().__init__(workers, mp_context=multiprocessing.get_context('spawn'),
                          initializer=_initialize_worker, initargs=(os.getpid(),))
 

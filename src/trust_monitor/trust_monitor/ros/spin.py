@@ -159,7 +159,8 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     in ``user_errors`` (bad parameters, an unreadable trace), and a parameter override that
     neither the node nor any node of the graph has (:func:`check_overrides`), are printed as
     one line and give exit code 2; anything else propagates with its traceback, so the
-    orchestrator can name the node that died. SIGINT and SIGTERM end the node cleanly (its
+    orchestrator can name the node that died. SIGINT, SIGTERM and SIGHUP (unless ignored, as
+    under ``nohup``) end the node cleanly (its
     ``exit_code``), as does the death of the process named by :data:`PARENT_ENV`: the node
     first takes what is queued for :data:`DRAIN_S` and waits until its messages are
     acknowledged, so a recorder stopped after it holds them. While it drains, its
@@ -176,7 +177,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     Returns:
         The process exit code.
     """
-    # SIGINT and SIGTERM only *request* a stop; the loop below honours it between spins.
+    # SIGINT, SIGTERM and SIGHUP only *request* a stop; the loop below honours it between spins.
     # rclpy's own SIGINT handler shuts the context down asynchronously (which raced with the
     # next wait: "the given context is not valid"), and the EventsExecutor (C++) installs its
     # own SIGINT/SIGTERM handlers that do the same from inside spin_once. A KeyboardInterrupt
@@ -201,6 +202,8 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     executor = EventsExecutor()
     signal.signal(signal.SIGINT, request_stop)
     signal.signal(signal.SIGTERM, request_stop)
+    if signal.getsignal(signal.SIGHUP) != signal.SIG_IGN:  # nohup asks to outlive the terminal
+        signal.signal(signal.SIGHUP, request_stop)        # its terminal closed
     try:
         try:
             node = start_node(factory)
