@@ -9,7 +9,7 @@ step).
   in wall mode every ``flush_period_s``. The status carries the steps written (at most
   twice a second): the orchestrator's progress, without a per-step subscriber of its own.
 - **End**: it finishes the bag and exits by itself once it holds every message of
-  ``expected_steps`` steps (0: record until stopped); on SIGINT/SIGTERM, or when the
+  ``expected_steps`` steps (0: record until stopped); on SIGINT/SIGTERM/SIGHUP, or when the
   orchestrator that started it dies, it takes what is still queued and finishes the bag.
   A full disk finishes the bag with every complete step, one line on stderr, exit code 3.
 """

@@ -126,10 +126,10 @@ def run_pinned(args: Sequence[str], extra_env: Mapping[str, str] | None = None,
 
     ``extra_env`` is applied *before* the pin (it stands for the caller's own settings,
     which the pin overrides). ``kwargs`` go to :class:`subprocess.Popen`. The child runs in
-    its own process group and stops with this process: a stop signal here (Ctrl-C at the
-    terminal, which reaches only this group, or SIGINT/SIGTERM sent to this process) is
-    passed on to it once, then we wait for it to finish its files and return its code
-    (130, 143); if this process dies, the child gets SIGTERM.
+    its own process group and stops with this process: a stop signal here (Ctrl-C or a
+    hang-up at the terminal, which reach only this group, or SIGINT/SIGTERM/SIGHUP sent to
+    this process) is passed on to it once, then we wait for it to finish its files and
+    return its code (130, 143, 129); if this process dies, the child gets SIGTERM.
     """
     env = pinned_environment({**os.environ, **(extra_env or {})})
     with subprocess.Popen([sys.executable, *args], env=env, text=True, process_group=0,

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from trust_monitor.errors import TrustMonitorError
 
-HELD_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+HELD_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
 """Held back while a set of files is renamed into place, so a stop cannot split the set."""
 
 
@@ -44,7 +44,7 @@ def _mode_for(path: Path) -> int:
 
 @contextlib.contextmanager
 def stop_signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM wait until the block is done (blocked for the main thread, where
+    """SIGINT, SIGTERM and SIGHUP wait until the block is done (blocked for the main thread, where
     Python runs its handlers; delivered when unblocked). For a few renames, not for work."""
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -75,11 +75,12 @@ def replacing(*paths: Path) -> Iterator[tuple[Path, ...]]:
     """Temporary files beside ``paths`` (same suffixes) for the block to write.
 
     When the block ends normally, each temporary file is flushed to disk and renamed over
-    its path, with SIGINT and SIGTERM held back from the first rename to the last (a stop
-    then acts right after the whole set is in place). When the block raises, or writing
-    fails, the temporary files are removed and every path keeps what it had. A symbolic
-    link is followed (its target is replaced, the link kept); a path that exists and is not
-    a regular file (``/dev/stdout``, a FIFO) is handed to the block itself.
+    its path, with the stop signals (:data:`HELD_SIGNALS`) held back from the first rename
+    to the last (a stop then acts right after the whole set is in place). When the block
+    raises, or writing fails, the temporary files are removed and every path keeps what it
+    had. A symbolic link is followed (its target is replaced, the link kept); a path that
+    exists and is not a regular file (``/dev/stdout``, a FIFO) is handed to the block
+    itself.
 
     Raises:
         OutputFileError: a file could not be created, written or renamed (a full disk, no
