@@ -22,6 +22,7 @@ import pytest
 from conftest import children_of
 
 from trust_av_planner.graph import stop_signals
+from trust_monitor.common import output_files
 
 SIGNAL_IN_A_DESTRUCTOR = '''
 import contextlib, os, signal, sys
@@ -103,6 +104,11 @@ def test_a_stop_while_deferred_is_raised_when_the_block_ends() -> None:
         assert reached == ['end of the block'] and stopped.value.signum == signal.SIGTERM
         stop_signals.deliver_pending()          # delivered once, not again
     assert signal.getsignal(signal.SIGTERM) is not stop_signals.handle  # restored
+
+
+def test_renames_hold_back_every_stop_signal() -> None:
+    """trust_monitor cannot import this module; its own list must be the same."""
+    assert set(stop_signals.STOP_SIGNALS) == output_files.HELD_SIGNALS
 
 
 @pytest.mark.parametrize('nohup', [False, True], ids=['terminal', 'nohup'])
