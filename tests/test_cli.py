@@ -93,6 +93,25 @@ def test_help_explains() -> None:
     assert proc.returncode == 0 and '--alpha' in proc.stdout and 'explicability' in proc.stdout
 
 
+def test_every_command_and_option_says_what_it_is() -> None:
+    """`trust-av --help` lists every command with a plain one-line summary (not a docstring's
+    markup), each command's --help has a description, and every option has a help text."""
+    import argparse
+
+    from trust_av_planner.cli.main import build_parser
+
+    parser = build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    summaries = {c.dest: c.help for c in commands._choices_actions}
+    assert set(summaries) == set(commands.choices)
+    for name, sub in commands.choices.items():
+        summary = summaries[name]
+        assert summary and '``' not in summary and not summary.startswith('trust-av'), name
+        assert sub.description, name
+        for action in sub._actions:
+            assert action.help, f'trust-av {name} {"/".join(action.option_strings)}'
+
+
 def test_offline_estimator_matches_the_loop(tmp_path: Path) -> None:
     """trust-monitor-estimate on the loop's observed plans gives the loop's E and trust."""
     records = closed_loop('us06', 0.5).records[:200]

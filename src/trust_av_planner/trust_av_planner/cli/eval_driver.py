@@ -34,11 +34,13 @@ CONSTANT_SPEED = 'constant speed'
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``eval-driver`` subcommand."""
-    parser = subparsers.add_parser('eval-driver', help=__doc__, description=(
-        "Score the params file's driver MPC, the bounded IDM of the driver fit, the textbook "
-        'IDM and constant speed on a directory of OpenACC or NGSIM-chain CSVs (read only): '
-        'gap and speed NRMSE with 95 % CIs over pairs, collisions, gaps below 2 m, beside '
-        "the data's noise floor, for full runs and re-initialised windows."))
+    parser = subparsers.add_parser(
+        'eval-driver', help='score the shipped human driver on recorded car following',
+        description=(
+            "Score the params file's driver MPC, the bounded IDM of the driver fit, the "
+            'textbook IDM and constant speed on a directory of OpenACC or NGSIM-chain CSVs '
+            '(read only): gap and speed NRMSE with 95 % CIs over pairs, collisions, gaps below '
+            "2 m, beside the data's noise floor, for full runs and re-initialised windows."))
     parser.add_argument('--data', type=Path, required=True, help='directory of CSV files')
     parser.add_argument('--format', choices=FORMATS, default=None,
                         help='file layout (default: detected from the first file)')

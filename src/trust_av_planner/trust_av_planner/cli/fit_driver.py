@@ -48,7 +48,15 @@ MPC_NAMES = tuple(MPC_BOUNDS)
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``fit-driver`` subcommand."""
-    parser = subparsers.add_parser('fit-driver', help=__doc__)
+    parser = subparsers.add_parser(
+        'fit-driver', help='fit the driver MPC (W, tau_H, d_s) to human car following',
+        description=(
+            'Fit the human driver MPC (weights W, time headway tau_H, standstill gap d_s) and a '
+            'bounded IDM to OpenACC car following (part2; part3 held out) and optionally NGSIM '
+            'chains (even follower IDs; odd held out) by multi-start Nelder-Mead on the 30 s '
+            'window gap NRMSE, score both on the held-out sets against the textbook IDM and '
+            'constant speed, and write the fit with its provenance and the evaluation beside '
+            'it. The data are read from their paths, never copied.'))
     parser.add_argument('--data', type=Path, required=True,
                         help='OpenACC Vicolungo directory: part2 fits, part3 is held out '
                              '(read only, never copied)')
@@ -59,10 +67,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='weights file with provenance (default: the shipped fit, '
                              'human_driver_sim/models/driver_fit.yaml); its evaluation is '
                              'written beside it as <stem>_eval.json')
-    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE)
+    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
+                        help="ROS 2 params file whose human_driver section gives what is "
+                             "not fitted (dt_s, horizon, bounds) and the model scored as "
+                             "'MPC before' (default: the shipped)")
     parser.add_argument('--iterations', type=int, default=80,
                         help='Nelder-Mead iterations per start (default: %(default)s)')
-    parser.add_argument('--no-progress', action='store_true')
+    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(func=run)
 
 
