@@ -185,11 +185,25 @@ def test_offline_estimator_refuses_in_one_line(tmp_path: Path, data: bytes,
     assert list(tmp_path.iterdir()) == [plans]   # no output, no temporary file
 
 
+def test_a_multi_line_reason_from_a_library_is_one_line(tmp_path: Path) -> None:
+    """A bag directory whose metadata.yaml is not YAML: rosbags passes on the YAML parser's
+    message with its caret diagram (seven lines); the command prints it as one line."""
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    (bag / 'metadata.yaml').write_text('rosbag2_bagfile_information: [\n')
+    proc = trust_av('simulate', '--trace', str(bag), '--no-progress')
+    assert proc.returncode == 2
+    assert proc.stderr.count('\n') == 1 and 'Traceback' not in proc.stderr
+    assert proc.stderr.startswith(f'trust-av simulate: error: {bag}: cannot read bag (Could '
+                                  f'not load YAML from {bag}/metadata.yaml: while parsing')
+
+
 def test_offline_estimator_checks_its_output_first(tmp_path: Path) -> None:
     plans = tmp_path / 'plans.csv'
     plans.write_bytes(bytes(range(256)))   # would fail too, later
     for out, message in ((tmp_path / 'no' / 'o.csv', 'no such directory'),
-                         (tmp_path, 'is a directory; -o needs a file name')):
+                         (tmp_path, 'is a directory; -o needs a file name'),
+                         (Path('/proc/o.csv'), 'cannot write in directory /proc (No such')):
         proc = estimate(str(plans), '-o', str(out))
         assert proc.returncode == 2 and message in proc.stderr
         assert proc.stderr.count('\n') == 1
@@ -295,7 +309,17 @@ def test_max_steps_changes_the_length_only() -> None:
 
 @pytest.mark.parametrize(('args', 'message'), [
     (['run', '--no-progress', '--bag', '/dev/null/x'],
-     '/dev/null: cannot write there (--bag /dev/null/x)'),
+     '/dev/null: not a directory (--bag /dev/null/x)'),
+    # /proc is a directory that passes os.access (as root: every one does) and refuses
+    # every new entry: only trying to create one tells
+    (['run', '--no-progress', '--bag', '/proc/trust_av_bag'],
+     '/proc: cannot write there (--bag /proc/trust_av_bag: No such file or directory)'),
+    (['shadow', '--bag', 'COMMUTE', '--out', '/proc/trust_av_bag', '--duration-s', '1'],
+     '/proc: cannot write there (--out /proc/trust_av_bag: No such file or directory)'),
+    (['train-gru', '--out', '/proc/m.npz'],
+     '/proc/m.npz: cannot write in directory /proc (No such file or directory)'),
+    (['simulate', '--out', '/proc/steps.csv'],
+     '/proc/steps.csv: cannot write in directory /proc (No such file or directory)'),
     (['run', '--no-progress', '--startup-timeout-s', '-1', '--bag', 'BAG'],
      "argument --startup-timeout-s: must be > 0, got '-1'"),
     (['train-gru', '--out', '/dev/null/m.npz'], '/dev/null/m.npz: /dev/null is not a directory'),
@@ -307,7 +331,8 @@ def test_outputs_are_checked_before_the_work(tmp_path: Path, args: list[str],
                                              message: str) -> None:
     """A place the result cannot go is one line and exit 2 before minutes of training or a
     graph start (it was a traceback, or a finished training with nowhere to write)."""
-    subs = {'DIR': str(tmp_path), 'BAG': str(tmp_path / 'bag')}
+    subs = {'DIR': str(tmp_path), 'BAG': str(tmp_path / 'bag'),
+            'COMMUTE': str(Path(__file__).resolve().parents[1] / 'bags' / 'commute_am')}
     proc = trust_av(*[subs.get(a, a) for a in args])
     assert proc.returncode == 2, proc.stderr
     assert message in proc.stderr.splitlines()[-1] and 'Traceback' not in proc.stderr

@@ -24,12 +24,12 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TextIO
 
-from trust_monitor.common.output_files import replacing
+from trust_monitor.common.output_files import cannot_create_in, replacing
 from trust_monitor.common.param_layers import layer_files, layered_params, read_layers
 from trust_monitor.common.params import build_config, check_known
 from trust_monitor.common.rcl_values import ParsedParams
 from trust_monitor.common.wall_clock import WallClockConfig
-from trust_monitor.errors import TrustMonitorError
+from trust_monitor.errors import TrustMonitorError, one_line
 from trust_monitor.trust_model import TrustConfig, TrustEstimator
 
 MAX_ACCEL_MPS2 = 100.0
@@ -144,8 +144,13 @@ def check_output(out_path: Path) -> None:
     parent = out_path.parent
     if not parent.is_dir():
         raise EstimateError(f'{out_path}: no such directory {parent}')
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise EstimateError(f'{out_path}: directory {parent} is not writable')
+    if out_path.exists() and not out_path.is_file():   # a device or FIFO is written in place
+        if not os.access(out_path, os.W_OK):
+            raise EstimateError(f'{out_path}: not writable')
+        return
+    reason = cannot_create_in(parent)
+    if reason is not None:
+        raise EstimateError(f'{out_path}: cannot write in directory {parent} ({reason})')
 
 
 def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig) -> int:
@@ -212,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         count = estimate_csv(args.input, args.output, trust_config(args.params_file))
     except TrustMonitorError as err:
-        print(f'trust-monitor-estimate: error: {err}', file=sys.stderr)
+        print(f'trust-monitor-estimate: error: {one_line(err)}', file=sys.stderr)
         return 2
     print(f'wrote {count} rows to {args.output}')
     return 0

@@ -21,7 +21,7 @@ from human_driver_sim.errors import HumanDriverSimError
 from preceding_traffic.errors import PrecedingTrafficError
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph import stop_signals
-from trust_monitor.errors import TrustMonitorError
+from trust_monitor.errors import TrustMonitorError, one_line
 
 COMMAND_MODULES = (
     'trust_av_planner.cli.simulate',
@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
             return code
         except (TrustMonitorError, PrecedingTrafficError, HumanDriverSimError,
                 TrustAvPlannerError) as err:
-            print(f'trust-av {args.command}: error: {err}', file=sys.stderr)
+            print(f'trust-av {args.command}: error: {one_line(err)}', file=sys.stderr)
             return 2
         except KeyboardInterrupt as err:
             # Everything started has been stopped and every recording finished on the way.

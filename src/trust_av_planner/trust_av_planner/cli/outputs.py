@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_monitor.common.output_files import cannot_create_in
 
 
 @dataclass(frozen=True)
@@ -80,8 +81,11 @@ def prepare_outputs(bag: Path, *, overwrite: bool, option: str = '--bag') -> Run
     ancestor = parent                        # the nearest directory that exists
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent
-    if not ancestor.is_dir() or not os.access(ancestor, os.W_OK | os.X_OK):
-        raise TrustAvPlannerError(f'{ancestor}: cannot write there ({option} {bag})')
+    if not ancestor.is_dir():
+        raise TrustAvPlannerError(f'{ancestor}: not a directory ({option} {bag})')
+    reason = cannot_create_in(ancestor)
+    if reason is not None:
+        raise TrustAvPlannerError(f'{ancestor}: cannot write there ({option} {bag}: {reason})')
     try:
         parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:

@@ -119,3 +119,15 @@ def write_text(path: Path, text: str) -> None:
     """``path.write_text(text)``, whole or not at all (:func:`replacing`)."""
     with replacing(path) as (temporary,):
         temporary.write_text(text)
+
+
+def cannot_create_in(directory: Path) -> str | None:
+    """Why nothing can be created in the existing ``directory``, or ``None`` if it can:
+    tried by creating and removing an empty directory there. ``os.access`` answers for
+    permission bits only: root passes it everywhere, and a file system such as /proc
+    refuses the entry itself."""
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix='.writable-', dir=directory))
+    except OSError as err:
+        return err.strerror or type(err).__name__
+    return None

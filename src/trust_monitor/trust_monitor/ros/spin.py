@@ -22,6 +22,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from trust_monitor.common.params import ParamsError
 from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
+from trust_monitor.errors import one_line
 from trust_monitor.ros.parameters import check_overrides
 
 
@@ -196,7 +197,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     try:
         init_rclpy(args if args is not None else sys.argv)
     except ParamsError as err:
-        print(f'error: {err}', file=sys.stderr)
+        print(f'error: {one_line(err)}', file=sys.stderr)
         return 2
     node = None
     executor = EventsExecutor()
@@ -209,7 +210,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
             node = start_node(factory)
         except (*user_errors, ParamsError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
-            print(f'error: {err}', file=sys.stderr)
+            print(f'error: {one_line(err)}', file=sys.stderr)
             return 2
         executor.add_node(node)
         graph_node: GraphNode = node  # type: ignore[assignment]
