@@ -130,6 +130,26 @@ def test_bad_rate_is_one_line_before_anything_starts(tmp_path: Path, rate: str,
     assert 'Traceback' not in result.stderr and not out.exists()
 
 
+@pytest.mark.wall_clock
+@pytest.mark.parametrize('mode', [(), ('--whole-graph',)], ids=['planner_monitor', 'whole_graph'])
+def test_a_full_disk_stops_a_wall_run_with_one_line_and_a_finished_bag(
+        small_disk: Path, mode: tuple[str, ...]) -> None:
+    """On a 200 kB disk a wall-clock recording fills it within seconds: the run stops its
+    nodes and ends with one line and exit 2, and the bag holds the complete seconds and
+    passes rosbag2's reader rules. (It used to go on writing to the finished bag: a
+    traceback, EBADF.)"""
+    out = small_disk / 'shadow'
+    proc = subprocess.run(
+        [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
+         str(REPO / 'bags' / 'commute_am'), '--duration-s', '60', '--out', str(out), *mode],
+        capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert proc.stderr.startswith(f'trust-av shadow: error: {out}: disk full (No space left '
+                                  'on device) after ') and proc.stderr.count('\n') == 1
+    assert check_bag_directory(out) == []
+    assert read(out)['/ego/accel_cmd']
+
+
 def test_lead_replay_interpolates_and_integrates() -> None:
     trace = SpeedTrace('t', 1.0, np.array([0.0, 2.0, 2.0]))
     lead = LeadReplay(trace, 10.0)

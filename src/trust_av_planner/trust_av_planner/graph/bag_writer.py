@@ -236,7 +236,14 @@ class BagWriter:
         self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
 
     def write(self, topic: str, data: bytes | memoryview) -> int:
-        """Append one raw CDR message to the current step; returns its stamp (ns)."""
+        """Append one raw CDR message to the current step; returns its stamp (ns).
+
+        Raises:
+            BagWriteError: the bag is finished (after :meth:`finish`, or once
+                :meth:`end_step` returned False for a full disk)."""
+        if self.finished:
+            raise BagWriteError(f'{self.path}: written to after the bag was finished'
+                                + (f' ({self.disk_full})' if self.disk_full else ''))
         entry = self._topics[topic]
         stamp = header_stamp_ns(data, self._offsets[topic])
         self._storage_write(entry.connection, stamp, data)

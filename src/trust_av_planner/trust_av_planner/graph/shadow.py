@@ -33,7 +33,7 @@ from typing import Any
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.graph import stop_signals
-from trust_av_planner.graph.bag_writer import BagWriter
+from trust_av_planner.graph.bag_writer import BagWriter, DiskFullError
 from trust_av_planner.graph.domains import lease_domain
 from trust_av_planner.graph.orchestrator import node_specs
 from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
@@ -89,6 +89,8 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
 
     Raises:
         GraphError: the nodes did not connect in time or one died.
+        DiskFullError: the disk filled up; the nodes were stopped and the bag finished with
+            every complete second.
     """
     from trust_av_planner.graph.bag_qos import offered_qos
     from trust_monitor.ros.messages import message_class, odometry, trajectory
@@ -123,7 +125,8 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
             stats = LoopStats(period_ns)
             with BagWriter(bag) as recording:
                 def on_message(topic: str, data: bytes) -> None:
-                    recording.write(topic, data)
+                    if not recording.finished:   # finished early only by a full disk
+                        recording.write(topic, data)
 
                 for name, topic in recorded.items():
                     offered = wall_qos(topic.wall_qos, wall, publisher=True)
@@ -162,12 +165,15 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                             elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
                     pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
                     if now >= next_chunk:
-                        recording.end_step()
+                        if not recording.end_step():
+                            break                # the disk is full: stop, raised below
                         next_chunk = now + NS_PER_S
                     stats.done(time.monotonic_ns() - now)
                     next_tick += period_ns
                     graph.check_alive(set())
                 _stop_and_drain(graph, executor, SHADOW_NODES)
+                if recording.disk_full:
+                    raise DiskFullError(recording.disk_full)
                 counts = dict(recording.counts)
     loops = {'shadow_player': {'node': 'shadow_player', **stats.summary()},
              **_node_loops(graph, log_dir, SHADOW_NODES)}
@@ -206,6 +212,8 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
 
     Raises:
         GraphError: the nodes did not connect in time or one died.
+        DiskFullError: the disk filled up; the nodes were stopped and the bag finished with
+            every complete second.
     """
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import Empty
@@ -236,6 +244,8 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
             started_at: list[float] = []
             with BagWriter(bag) as recording:
                 def record(topic: str, data: bytes, info: dict[str, Any]) -> None:
+                    if recording.finished:       # finished early only by a full disk
+                        return
                     recording.write(topic, data)
                     if topic == tf_topic and not started_at:
                         tf_seen.update(t.child_frame_id for t in
@@ -282,11 +292,14 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                     stop_signals.spin_once(executor, 0.05)
                     graph.check_alive(set())
                     if time.monotonic() >= next_chunk:
-                        recording.end_step()
+                        if not recording.end_step():
+                            break                # the disk is full: stop, raised below
                         next_chunk += 1.0
                         if every_second is not None:
                             every_second(pids, time.monotonic() - started)
                 _stop_and_drain(graph, executor, WALL_GRAPH_NODES)
+                if recording.disk_full:
+                    raise DiskFullError(recording.disk_full)
                 counts = dict(recording.counts)
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts,
                      loops=_node_loops(graph, log_dir, WALL_GRAPH_NODES))
