@@ -5,6 +5,7 @@ killed orchestrator, a foreign publisher, a full disk under a real run) are at t
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import shutil
@@ -423,6 +424,30 @@ def test_a_full_disk_under_a_real_run_is_one_line(small_disk: Path) -> None:
     assert proc.stderr.count('\n') == 1 and 'disk full' in proc.stderr, proc.stderr
     assert check_bag_directory(bag) == []
     assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run.mcap']
+
+
+@pytest.mark.parametrize('free_kb', [0, 4, 24])
+def test_a_disk_full_before_the_run_is_one_line_naming_it(small_disk: Path,
+                                                          free_kb: int) -> None:
+    """With no room for the node logs (0 kB), or for the recorder's first bytes (4, 24 kB;
+    perhaps not even for its log line): one line, exit 2, that says the disk is full, and no
+    empty recording left (it was an OSError traceback, or the repair of the empty recording
+    hid why)."""
+    # 0 kB: until the disk refuses
+    with (small_disk / 'filler').open('wb', buffering=0) as handle, \
+            contextlib.suppress(OSError):
+        while shutil.disk_usage(small_disk).free > free_kb * 1024:
+            handle.write(b'\0' * 1024)
+    bag = small_disk / 'run'
+    proc = subprocess.run(run_command(bag, 20), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    full = 'No space left on device'
+    expected = ((f'{bag}.logs: cannot write the node logs and per-run parameters there '
+                 f'({full}); the disk holding {bag} has only 0 kB free',) if free_kb == 0 else
+                # the recorder's own line if it fitted on the disk, else its exit code's
+                (f'{bag}: no room to start a recording ({full})', f'{bag}: the disk filled up'))
+    assert proc.stderr in {f'trust-av run: error: {line}\n' for line in expected}, proc.stderr
+    assert not bag.exists()
 
 
 def test_a_plan_without_points_in_a_recording_is_one_line(

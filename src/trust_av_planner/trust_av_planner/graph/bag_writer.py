@@ -66,7 +66,12 @@ class BagWriteError(TrustAvPlannerError):
 
 
 class DiskFullError(BagWriteError):
-    """The disk filled up while recording; the bag was finished with the complete steps."""
+    """The disk filled up while recording; the bag was finished with the complete steps
+    (or, at the start, there was no room for a recording: nothing is left)."""
+
+    exit_code = EXIT_DISK_FULL
+    """What a node process that raised it exits with (its one line may not fit on the disk
+    either; the orchestrator knows the code)."""
 
 
 STAMP_IN_FIRST_ELEMENT = frozenset({'tf2_msgs/msg/TFMessage',
@@ -191,6 +196,7 @@ class BagWriter:
 
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
+        existed = os.path.lexists(self.path)
         try:
             self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
             self._writer.STORAGE_PLUGINS = {**Writer.STORAGE_PLUGINS,  # type: ignore[misc]
@@ -198,6 +204,11 @@ class BagWriter:
             self._writer.set_custom_data('trust_av.recorder', 'one MCAP chunk per step')
             self._writer.open()
         except (WriterError, OSError) as err:
+            if not existed:                 # what this call created: an empty .mcap at most
+                shutil.rmtree(self.path, ignore_errors=True)
+            if isinstance(err, OSError) and err.errno in (errno.ENOSPC, errno.EDQUOT):
+                raise DiskFullError(f'{self.path}: no room to start a recording '
+                                    f'({os.strerror(err.errno)})') from err
             raise BagWriteError(f'{self.path}: cannot create the bag directory ({err})') from err
         self._topics: dict[str, _Topic] = {}
         self._storage_write = self._storage.write

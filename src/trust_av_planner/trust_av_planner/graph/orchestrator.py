@@ -25,6 +25,7 @@ If this process is killed, the nodes stop by themselves and the recorder finishe
 from __future__ import annotations
 
 import contextlib
+import shutil
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -156,8 +157,22 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                 startup = time.monotonic() - started
                 start_pub.publish(Empty())
                 _follow(session, trace.steps, step_timeout_s, on_step)
-        finally:
-            _finish_recording(graph, bag)
+        except TrustAvPlannerError as err:
+            # The run failed: finish the recording, but a failure to do so must not hide
+            # why the run failed (an exception raised in a `finally` would replace it).
+            try:
+                _finish_recording(graph, bag)
+            except DiskFullError:
+                raise                       # the recorder ran out of disk: that is the cause
+            except TrustAvPlannerError as finishing:
+                raise GraphError(f'{err}; {finishing}{_low_disk(bag)}') from err
+            if not isinstance(err, DiskFullError) and _low_disk(bag):
+                raise GraphError(f'{err}{_low_disk(bag)}') from err
+            raise
+        except BaseException:
+            _finish_recording(graph, bag)   # a stop: finish the bag, then go on stopping
+            raise
+        _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
                     wall_s=time.monotonic() - started, startup_s=startup)
 
@@ -199,6 +214,21 @@ def _follow(session: Any, steps: int, step_timeout_s: float,
     session.check({RECORDER})
     if on_step is not None:
         on_step(steps, steps)
+
+
+LOW_DISK_BYTES = 1 << 20
+"""Below this much free space where the bag goes, a failed run says so: a recorder that
+could not even write its log dies without a word."""
+
+
+def _low_disk(bag: Path) -> str:
+    """``'; the disk holding BAG has only N kB free'`` when it is nearly full, else ''."""
+    try:
+        free = shutil.disk_usage(bag.parent).free
+    except OSError:
+        return ''
+    return (f'; the disk holding {bag} has only {free // 1024} kB free'
+            if free < LOW_DISK_BYTES else '')
 
 
 def _finish_recording(graph: Graph, bag: Path) -> None:

@@ -78,11 +78,13 @@ class Process:
     log: IO[bytes]
 
     def tail(self, lines: int = 6) -> str:
-        """The last lines of the node's output."""
+        """The last lines of the node's output, on one line (`` | `` between them), and
+        where the whole output is."""
         if not self.log.closed:
             self.log.flush()
-        text = self.log_path.read_text(errors='replace').strip().splitlines()
-        return '\n'.join(text[-lines:])
+        text = [line.strip() for line in self.log_path.read_text(errors='replace').splitlines()
+                if line.strip()]
+        return f"last output ({self.log_path}): {' | '.join(text[-lines:]) or 'none'}"
 
     def error_line(self) -> str:
         """The node's last ``error: ...`` line ('' if none)."""
@@ -123,11 +125,15 @@ class Graph:
         command-line ``-p``); written by :func:`~trust_monitor.common.param_layers.
         to_params_text`, so rcl reads back exactly these values and types.
         """
-        self.log_dir.mkdir(parents=True, exist_ok=True)
         run_params = self.log_dir / 'run_params.yaml'
-        run_params.write_text(to_params_text(
-            {node_fqn(self.namespace, spec.name): spec.params
-             for spec in self.specs if spec.params}))
+        try:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+            run_params.write_text(to_params_text(
+                {node_fqn(self.namespace, spec.name): spec.params
+                 for spec in self.specs if spec.params}))
+        except OSError as err:
+            raise GraphError(f'{self.log_dir}: cannot write the node logs and per-run '
+                             f'parameters there ({err.strerror})') from err
         layers = [arg for path in self.params_files for arg in ('--params-file', str(path))]
         profile_dir = os.environ.get(PROFILE_ENV)
         for spec in self.specs:
@@ -137,7 +143,11 @@ class Graph:
                        f'__node:={spec.name}', '-r', f'__ns:={self.namespace}', *layers,
                        '--params-file', str(run_params)]
             log_path = self.log_dir / f'{spec.name}.log'
-            log = log_path.open('wb')
+            try:
+                log = log_path.open('wb')
+            except OSError as err:
+                raise GraphError(f'{log_path}: cannot write the node log ({err.strerror})') \
+                    from err
             popen = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
                                      stdin=subprocess.DEVNULL, env=self.env,
                                      start_new_session=True,
@@ -158,7 +168,7 @@ class Graph:
                 continue
             raise GraphError(f'node {process.spec.name} exited with code {code}'
                              f'{" (killed by signal " + str(-code) + ")" if code < 0 else ""}; '
-                             f'last output:\n{process.tail()}')
+                             f'{process.tail()}')
 
     def stop(self, names: list[str] | None = None) -> None:
         """Stop nodes: while the recorder still runs, first the step authority (no new step

@@ -342,7 +342,7 @@ def _node_loops(graph: Graph, log_dir: Path, names: tuple[str, ...]) -> dict[str
     for process in graph.processes:
         if process.popen.returncode not in (0, None):
             raise GraphError(f'node {process.spec.name} exited with code '
-                             f'{process.popen.returncode}; last output:\n{process.tail()}')
+                             f'{process.popen.returncode}; {process.tail()}')
     loops = {}
     for name in names:
         path = log_dir / f'{name}.jitter.json'

@@ -3,6 +3,7 @@ control loop of real-vehicle mode (:class:`WallLoop`)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
@@ -210,8 +211,8 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
             node = start_node(factory)
         except (*user_errors, ParamsError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
-            print(f'error: {one_line(err)}', file=sys.stderr)
-            return 2
+            _say(f'error: {one_line(err)}')
+            return int(getattr(err, 'exit_code', 2))  # e.g. the recorder's disk-full code
         executor.add_node(node)
         graph_node: GraphNode = node  # type: ignore[assignment]
         parent = int(os.environ.get(PARENT_ENV, '0') or 0)
@@ -233,6 +234,13 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
             node.destroy_node()
         rclpy.try_shutdown()
     return 0 if node is None else int(node.exit_code)  # type: ignore[attr-defined]
+
+
+def _say(line: str) -> None:
+    """Print a node's one error line. Where even that cannot be written (its log is on the
+    disk that filled up) the exit code is the only report, and the caller returns it."""
+    with contextlib.suppress(OSError):
+        print(line, file=sys.stderr, flush=True)
 
 
 def _drain(executor: EventsExecutor, node: Node) -> None:
