@@ -231,6 +231,34 @@ def test_a_stop_ends_a_sweep_and_its_workers(tmp_path: Path, signum: int) -> Non
     assert not list(cache.glob('*.tmp'))
 
 
+CUT_OFF_RESULT = textwrap.dedent("""
+    import os, struct, sys, time
+    from trust_av_planner.study.workers import worker_pool
+    try:
+        with worker_pool(1) as pool:
+            pool.submit(time.sleep, 60)
+            time.sleep(1.0)                 # the worker is in its call
+            # what a worker stopped while sending its result leaves in the result pipe: a
+            # header promising 1000 bytes, and 10 of them
+            os.write(pool._result_queue._writer.fileno(), struct.pack('!i', 1000) + b'x' * 10)
+            time.sleep(0.5)                 # the pool's thread is inside recv() for the rest
+            raise RuntimeError('a stop')
+    except RuntimeError:
+        print('stopped', flush=True)
+    sys.exit(3)
+""")
+
+
+def test_a_result_cut_off_by_the_stop_does_not_hang_the_exit() -> None:
+    """A worker stopped while it sends its result back leaves part of a message in the pool's
+    result pipe (seen once in a suite run: `trust-av reproduce` printed its stop line after
+    SIGTERM and never exited). The pool is stopped, its thread ends and the process exits
+    (it hung at exit, joining the pool's thread)."""
+    proc = subprocess.run([sys.executable, '-c', CUT_OFF_RESULT], capture_output=True,
+                          text=True, timeout=60)
+    assert (proc.returncode, proc.stdout) == (3, 'stopped\n'), proc.stderr
+
+
 @pytest.mark.parametrize('how', ['SIGTERM to it', 'Ctrl-C at the terminal', 'SIGKILL',
                                  'its child killed'])
 def test_train_gru_stops_its_pinned_child_and_workers(tmp_path: Path, how: str) -> None:

@@ -103,10 +103,21 @@ class WorkerPool(ProcessPoolExecutor):
 
     def stop_workers(self) -> None:
         """Cancel what has not started; SIGTERM, then after the grace SIGKILL, to every
-        worker; wait for them."""
+        worker; wait for them and for the pool's own thread.
+
+        A worker stopped while it was sending a result back leaves part of a message in the
+        result pipe, and the pool's thread waits in ``recv()`` for the rest, which never
+        comes: this process holds the pipe's write end too, so no end of file either. The
+        command then printed its stop line and hung at exit, where Python joins that thread
+        (``shutdown(wait=False)`` drops it, so ``shutdown(wait=True)`` does not join it).
+        Once every worker is gone, closing this process's write end gives the thread its end
+        of file: it marks the pool broken and ends, and it is joined here."""
         # CPython 3.14 adds ProcessPoolExecutor.terminate_workers() for this; on 3.11 the
-        # workers are the executor's ``_processes`` (pid -> multiprocessing.Process).
+        # workers are the executor's ``_processes`` (pid -> multiprocessing.Process), its
+        # thread ``_executor_manager_thread`` and its result queue ``_result_queue``.
         processes = list((getattr(self, '_processes', None) or {}).values())
+        thread = getattr(self, '_executor_manager_thread', None)
+        results = getattr(self, '_result_queue', None)
         self.shutdown(wait=False, cancel_futures=True)
         for process in processes:
             if process.is_alive():
@@ -116,6 +127,10 @@ class WorkerPool(ProcessPoolExecutor):
             if process.is_alive():
                 process.kill()
                 process.join()
+        if results is not None:
+            results._writer.close()
+        if thread is not None:
+            thread.join()
         self.shutdown(wait=True)
 
 
