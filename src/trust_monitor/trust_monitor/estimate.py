@@ -24,7 +24,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TextIO
 
-from trust_monitor.common.output_files import cannot_create_in, replacing
+from trust_monitor.common.output_files import cannot_write, replacing
 from trust_monitor.common.param_layers import layer_files, layered_params, read_layers
 from trust_monitor.common.params import build_config, check_known
 from trust_monitor.common.rcl_values import ParsedParams
@@ -144,13 +144,9 @@ def check_output(out_path: Path) -> None:
     parent = out_path.parent
     if not parent.is_dir():
         raise EstimateError(f'{out_path}: no such directory {parent}')
-    if out_path.exists() and not out_path.is_file():   # a device or FIFO is written in place
-        if not os.access(out_path, os.W_OK):
-            raise EstimateError(f'{out_path}: not writable')
-        return
-    reason = cannot_create_in(parent)
-    if reason is not None:
-        raise EstimateError(f'{out_path}: cannot write in directory {parent} ({reason})')
+    problem = cannot_write(out_path, parent)
+    if problem is not None:
+        raise EstimateError(f'{out_path}: {problem}')
 
 
 def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig) -> int:

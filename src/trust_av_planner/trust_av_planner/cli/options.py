@@ -5,7 +5,6 @@ table, and the progress bar (tqdm)."""
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -19,7 +18,7 @@ from trust_av_planner.graph import stop_signals
 from trust_av_planner.nmpc import LEAD_PREVIEWS, PREDICTORS, PlannerConfig
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 from trust_av_planner.system.metrics import Metrics
-from trust_monitor.common.output_files import cannot_create_in
+from trust_monitor.common.output_files import cannot_write
 from trust_monitor.common.params import field_spec
 
 
@@ -84,13 +83,9 @@ def output_file(path: Path, option: str = '--out') -> Path:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
         raise TrustAvPlannerError(f'{path}: {ancestor} is not a directory')
-    if path.exists() and not path.is_file():   # a device or FIFO is written in place
-        if not os.access(path, os.W_OK):
-            raise TrustAvPlannerError(f'{path}: not writable')
-        return path
-    reason = cannot_create_in(ancestor)
-    if reason is not None:
-        raise TrustAvPlannerError(f'{path}: cannot write in directory {ancestor} ({reason})')
+    problem = cannot_write(path, ancestor)
+    if problem is not None:
+        raise TrustAvPlannerError(f'{path}: {problem}')
     return path
 
 

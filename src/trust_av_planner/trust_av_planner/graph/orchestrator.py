@@ -166,8 +166,9 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                 raise                       # the recorder ran out of disk: that is the cause
             except TrustAvPlannerError as finishing:
                 raise GraphError(f'{err}; {finishing}{_low_disk(bag)}') from err
-            if not isinstance(err, DiskFullError) and _low_disk(bag):
-                raise GraphError(f'{err}{_low_disk(bag)}') from err
+            low_disk = '' if isinstance(err, DiskFullError) else _low_disk(bag)
+            if low_disk:
+                raise GraphError(f'{err}{low_disk}') from err
             raise
         except BaseException:
             _finish_recording(graph, bag)   # a stop: finish the bag, then go on stopping

@@ -131,7 +131,6 @@ class WorkerPool(ProcessPoolExecutor):
             results._writer.close()
         if thread is not None:
             thread.join()
-        self.shutdown(wait=True)
 
 
 @contextlib.contextmanager

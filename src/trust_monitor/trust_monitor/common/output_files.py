@@ -121,6 +121,16 @@ def write_text(path: Path, text: str) -> None:
         temporary.write_text(text)
 
 
+def cannot_write(path: Path, directory: Path) -> str | None:
+    """Why the output file ``path`` cannot be written, or ``None`` if it can. ``directory`` is
+    where it goes (its nearest existing ancestor): a regular file (new or replaced) is
+    created there (:func:`replacing`), while a device or FIFO is written in place."""
+    if path.exists() and not path.is_file():
+        return None if os.access(path, os.W_OK) else 'not writable'
+    reason = cannot_create_in(directory)
+    return None if reason is None else f'cannot write in directory {directory} ({reason})'
+
+
 def cannot_create_in(directory: Path) -> str | None:
     """Why nothing can be created in the existing ``directory``, or ``None`` if it can:
     tried by creating and removing an empty directory there. ``os.access`` answers for

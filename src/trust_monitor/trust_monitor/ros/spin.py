@@ -198,7 +198,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     try:
         init_rclpy(args if args is not None else sys.argv)
     except ParamsError as err:
-        print(f'error: {one_line(err)}', file=sys.stderr)
+        _say(f'error: {one_line(err)}')
         return 2
     node = None
     executor = EventsExecutor()
