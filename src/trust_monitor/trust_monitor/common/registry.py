@@ -1,0 +1,122 @@
+"""Registries of the interchangeable models: plan estimators, trust models, human drivers.
+
+A component is found by name in a Python entry-point group, so a package installed with
+pip adds one without an edit to this repository. The shipped components are registered the
+same way (in the ``setup.py`` of the package that holds them). An entry point names a
+:class:`Component` object::
+
+    entry_points={'trust_av.predictors': ['cv = my_pkg.cv:COMPONENT']}
+
+What a component's ``factory`` takes and returns is fixed per group (see the group's
+interface module); the registry only finds, checks and lists components. Callers decide
+from a component's declaration (``config_type``, ``needs``), never from its name.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from typing import Any
+
+from trust_monitor.errors import TrustMonitorError, one_line
+
+PREDICTORS = 'trust_av.predictors'
+"""Entry-point group of the plan estimators (the plan the human expects, u_R^H)."""
+TRUST_MODELS = 'trust_av.trust_models'
+"""Entry-point group of the trust models (trust from the explicability score)."""
+DRIVERS = 'trust_av.drivers'
+"""Entry-point group of the human follower (driver) models."""
+GROUPS = (PREDICTORS, TRUST_MODELS, DRIVERS)
+
+FOLLOWER_STATE = 'follower_state'
+"""A need: the component uses the human follower's odometry (not only the AV's)."""
+KNOWN_NEEDS = frozenset({FOLLOWER_STATE})
+
+
+class RegistryError(TrustMonitorError):
+    """A component name is not registered, or a registered entry point is not a valid
+    :class:`Component`; the message names the group and the name."""
+
+
+@dataclass(frozen=True)
+class Component:
+    """One registered model.
+
+    Attributes:
+        name: the name it is chosen by (params files, command line); equals the entry
+            point's name.
+        factory: builds the model; its arguments are fixed by the group's interface.
+        config_type: frozen dataclass of its parameters (declared with
+            :func:`trust_monitor.common.params.param`), or None when it has none. Its
+            fields are the component's parameters, declared as ROS parameters under the
+            component's name.
+        needs: what it needs beyond the AV's own state (:data:`KNOWN_NEEDS`).
+        description: one line for ``--help``.
+    """
+
+    name: str
+    factory: Callable[..., Any]
+    config_type: type | None = None
+    needs: frozenset[str] = field(default_factory=frozenset)
+    description: str = ''
+
+    def __post_init__(self) -> None:
+        if not re.fullmatch(r'[a-z][a-z0-9_]*', self.name):
+            raise RegistryError(f'component name {self.name!r} is not a lower-case '
+                                'identifier')
+        if self.config_type is not None and not dataclasses.is_dataclass(self.config_type):
+            raise RegistryError(f'component {self.name!r}: config_type must be a dataclass')
+        unknown = set(self.needs) - KNOWN_NEEDS
+        if unknown:
+            raise RegistryError(f'component {self.name!r} needs unknown {sorted(unknown)} '
+                                f'(known: {sorted(KNOWN_NEEDS)})')
+
+
+def _group_name(group: str) -> str:
+    return group.rsplit('.', 1)[-1].rstrip('s').replace('_', ' ')
+
+
+def names(group: str) -> tuple[str, ...]:
+    """The registered names of ``group``, sorted (for ``--help`` and choices)."""
+    if group not in GROUPS:
+        raise RegistryError(f'unknown component group {group!r} (known: {list(GROUPS)})')
+    return tuple(sorted({ep.name for ep in entry_points(group=group)}))
+
+
+def get(group: str, name: str) -> Component:
+    """The component registered as ``name`` in ``group``.
+
+    Raises:
+        RegistryError: ``name`` is not registered (the message lists the registered names),
+            two distributions register it, or its entry point fails to load or is not a
+            :class:`Component` of that name.
+    """
+    if group not in GROUPS:
+        raise RegistryError(f'unknown component group {group!r} (known: {list(GROUPS)})')
+    found = [ep for ep in entry_points(group=group) if ep.name == name]
+    if not found:
+        raise RegistryError(f'unknown {_group_name(group)} {name!r} (registered: '
+                            f'{", ".join(names(group)) or "none"})')
+    if len({ep.value for ep in found}) > 1:
+        raise RegistryError(f'{_group_name(group)} {name!r} is registered twice: '
+                            f'{", ".join(sorted(ep.value for ep in found))}')
+    try:
+        obj = found[0].load()
+    except Exception as err:
+        raise RegistryError(f'{_group_name(group)} {name!r} ({found[0].value}) failed to '
+                            f'load: {one_line(err)}') from err
+    if not isinstance(obj, Component):
+        raise RegistryError(f'{_group_name(group)} {name!r} ({found[0].value}) is a '
+                            f'{type(obj).__name__}, not a Component')
+    if obj.name != name:
+        raise RegistryError(f'{_group_name(group)} {name!r} ({found[0].value}) is named '
+                            f'{obj.name!r} inside')
+    return obj
+
+
+def components(group: str) -> tuple[Component, ...]:
+    """Every registered component of ``group``, in name order."""
+    return tuple(get(group, n) for n in names(group))
