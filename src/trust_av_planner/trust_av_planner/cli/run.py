@@ -52,7 +52,10 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plot:
         from trust_av_planner.study.plots import run_overview  # matplotlib: ~1 CPU-s
 
-        run_overview(records, title, outputs.plot)
+        run_overview(records, title, outputs.plot,
+                     performance_threshold=config.trust.performance_threshold,
+                     trust_growth_rate=config.trust.trust_growth_rate,
+                     trust_initial=config.trust.trust_initial)
     print(format_metrics(metrics, title))
     print(f'wall time {result.wall_s:.1f} s (start-up {result.startup_s:.1f} s), '
           f'{trace.steps * trace.dt_s / max(result.wall_s - result.startup_s, 1e-9):.0f}x '

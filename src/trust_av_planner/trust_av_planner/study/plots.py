@@ -87,15 +87,29 @@ def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
     plt.close(fig)
 
 
-def run_overview(records: Sequence[Any], title: str, path: Path) -> None:
-    """One run: speeds, gaps, accelerations, explicability and trust against time.
+def run_overview(records: Sequence[Any], title: str, path: Path, *,
+                 performance_threshold: float, trust_growth_rate: float,
+                 trust_initial: float) -> None:
+    """One run: speeds, gaps, accelerations, E and P, and trust against time.
 
-    ``records`` are :class:`trust_av_planner.system.metrics.StepRecord` (or objects with the same
-    attributes).
+    Time runs from the start of the drive (the first record's stamp is 0 s), so a run timed
+    by a bag's epoch stamps reads like a simulated one. The P panel draws the threshold
+    P_thre (trust grows where P is above it), the trust panel the ceiling
+    ``T(0) + delta * t`` that a perfectly explicable AV (P = 1 every step) would reach.
+
+    Args:
+        records: :class:`trust_av_planner.system.metrics.StepRecord` (or objects with the
+            same attributes), one per control step, in time order.
+        title: the figure's title.
+        path: PNG to write (whole or not at all).
+        performance_threshold: P_thre of eq. (11), dimensionless.
+        trust_growth_rate: delta of eq. (10), trust units per second.
+        trust_initial: T(0), trust units.
     """
     plt = pyplot()
-    t = [r.t_s for r in records]
-    fig, axes = plt.subplots(5, 1, figsize=(9, 11), sharex=True)
+    t = drive_time_s(records)
+    step_s = t[1] - t[0] if len(t) > 1 else 1.0
+    fig, axes = plt.subplots(6, 1, figsize=(9, 12.5), sharex=True)
     axes[0].plot(t, [r.traffic_speed_mps for r in records], label='preceding traffic')
     axes[0].plot(t, [r.av_speed_mps for r in records], label='AV')
     axes[0].plot(t, [r.human_speed_mps for r in records], label='human', linestyle='--')
@@ -110,14 +124,33 @@ def run_overview(records: Sequence[Any], title: str, path: Path) -> None:
     axes[2].set_ylabel('acceleration (m/s²)')
     axes[3].plot(t, [r.explicability for r in records], color='tab:red')
     axes[3].set_ylabel('explicability E')
-    axes[4].plot(t, [r.trust for r in records], color='tab:green')
-    axes[4].set_ylabel('trust T')
-    axes[4].set_xlabel('time (s)')
-    for ax in axes:
+    axes[4].plot(t, [r.performance for r in records], color='tab:purple', label='P')
+    axes[4].axhline(performance_threshold, color='black', linestyle='--', linewidth=0.9,
+                    label=f'threshold P_thre = {performance_threshold:g}')
+    axes[4].set_ylabel('performance P')
+    # Trust is recorded after each step: after k steps of step_s, at most T(0) + delta*k*step_s.
+    ceiling = trust_initial + trust_growth_rate * (np.asarray(t) + step_s)
+    axes[5].plot(t, ceiling, color='grey', linewidth=3.0, alpha=0.45,
+                 label=f'ceiling T(0) + δ·t (δ = {trust_growth_rate:g}/s)')
+    axes[5].plot(t, [r.trust for r in records], color='tab:green', label='trust T')
+    axes[5].set_ylabel('trust T')
+    axes[5].set_xlabel('time since the start of the drive (s)')
+    for ax, corner in zip(axes, ('upper right',) * 4 + ('lower left', 'upper left'),
+                          strict=True):
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(loc='upper right', fontsize=8)
+            ax.legend(loc=corner, fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
     plt.close(fig)
+
+
+def drive_time_s(records: Sequence[Any]) -> list[float]:
+    """Each record's time since the first record's, in s (a bag's epoch stamps become 0...).
+
+    Args:
+        records: objects with a ``t_s`` attribute (s), in time order.
+    """
+    start = records[0].t_s if records else 0.0
+    return [r.t_s - start for r in records]
