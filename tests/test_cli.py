@@ -52,6 +52,21 @@ def test_simulate_prints_metrics_and_writes_table(short_trace: Path, tmp_path: P
     assert {'av_plan_mps2_0', 'expected_plan_mps2_2', 'trust', 'solver_status'} <= set(rows[0])
 
 
+def test_simulate_max_steps_is_the_start_of_the_whole_run(tmp_path: Path) -> None:
+    """--max-steps 5 writes the first 5 steps of the whole US06 run (the speed limit and the
+    preview still come from the whole trace); a negative count is one line, exit 2."""
+    out = tmp_path / 'run.csv'
+    proc = trust_av('simulate', '--trace', 'us06', '--max-steps', '5', '--out', str(out),
+                    '--no-progress')
+    assert proc.returncode == 0, proc.stderr
+    with out.open() as handle:
+        rows = list(csv.DictReader(handle))
+    whole = simulate(CONFIG, load_trace('us06', CONFIG.planner.dt_s, CONFIG.trace)).records
+    assert [float(r['trust']) for r in rows] == [r.trust for r in whole[:5]]
+    proc = trust_av('simulate', '--max-steps', '-5', '--no-progress')
+    assert proc.returncode == 2 and '--max-steps must be >= 0' in proc.stderr
+
+
 @pytest.mark.parametrize(('args', 'message'), [
     (['--alpha', '1.5'], 'alpha must be in [0, 1]'),
     (['--predictor', 'magic'], "invalid choice: 'magic'"),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from preceding_traffic.traces import truncate
 from trust_av_planner.cli.options import (
     Progress,
     add_run_options,
@@ -12,6 +13,7 @@ from trust_av_planner.cli.options import (
     output_file,
     positive_hz,
     run_overrides,
+    steps_value,
 )
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import check_control_rate, load_run_config
@@ -25,7 +27,8 @@ def run(args: argparse.Namespace) -> int:
     config = load_run_config(args.params_files, run_overrides(args))
     if args.control_rate_hz is not None:  # the planner node's rule for control_rate_hz
         check_control_rate(config.planner, args.control_rate_hz)
-    trace = control_trace(config, args.control_rate_hz)
+    # --max-steps shortens the run only: the speed limit and the preview are the whole trace's
+    trace = truncate(control_trace(config, args.control_rate_hz), args.max_steps)
     bar = Progress(f'simulate {trace.name}', trace.steps, shown=not args.no_progress)
     result = simulate(config, trace, on_step=bar.update)
     bar.close()
@@ -63,5 +66,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                              "paper's 1 Hz)")
     parser.add_argument('--out', type=Path, default=None,
                         help='write the per-step table (CSV) here')
+    parser.add_argument('--max-steps', type=steps_value, default=0,
+                        help='stop after this many control steps (default: the whole trace); '
+                             "the steps equal the first ones of the whole trace's run")
     parser.set_defaults(func=run)
 
