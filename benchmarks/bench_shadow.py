@@ -10,7 +10,8 @@ of ``benchmarks/vehicle_loop.py``: planner and monitor remapped onto a stand-in 
 delayed, lossy inputs and a 1 s lead outage), then prints and writes
 ``benchmarks/results_shadow.json``: |tick-to-tick period error| (jitter) and compute time
 p50 / p99 / max per loop, the duration used, the core count and the date. Target: p99
-jitter < 10 ms at 10 Hz. Nothing here asserts it: the figure goes in the README.
+jitter < 10 ms at 10 Hz. Nothing here asserts it: the figure goes in
+docs/operations/performance.md.
 """
 
 from __future__ import annotations

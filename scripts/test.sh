@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # The project's test command (README): set up .venv if needed, then lint (ruff), type-check
-# the pure core (mypy --strict), and run the whole test suite (pytest) on four workers for
+# the pure core (mypy --strict), build the documentation site in strict mode (mkdocs: a
+# broken link or anchor, or a generated table that cannot be built, fails), and run the whole
+# test suite (pytest) on four workers for
 # two cores (pytest-xdist, --dist loadgroup: tests/conftest.py puts the wall-clock tests,
 # which mostly wait for real time, on one worker, and the CPU-bound tests run on the other
 # three meanwhile; many of them also wait, for node start-up and stops). Extra arguments go
@@ -19,5 +21,9 @@ echo '== mypy (pure core, strict)' >&2
 mypy --exclude '(_node|cli/run|cli/shadow|setup)\.py$|/ros/|/graph/' \
   src/preceding_traffic/preceding_traffic src/trust_monitor/trust_monitor \
   src/human_driver_sim/human_driver_sim src/trust_av_planner/trust_av_planner
+echo '== docs (mkdocs build --strict)' >&2
+docs_site="$(mktemp -d)"
+NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$docs_site"
+rm -rf "$docs_site"
 echo '== pytest' >&2
 python -m pytest -n 4 --dist loadgroup "$@"

@@ -229,8 +229,8 @@ RETRAINING_TIMEOUT_S = 1200
 """The retraining test's own hang guard. It is the suite's longest test and the only one whose
 length is the host's compute speed: `trust-av train-gru` alone takes 95 s of wall and 120 s of
 CPU on an AMD EPYC in a slow period (2026-11-25: the in-process loop at 1,353 steps/s against
-the 4,153 in the README), and 302 s with the rest of the suite on the other workers, past the
-300 s every other test gets (pyproject.toml)."""
+the 4,153 of docs/CHANGELOG.md), and 302 s with the rest of the suite on the other workers,
+past the 300 s every other test gets (pyproject.toml)."""
 
 
 @pytest.mark.slow

@@ -1,4 +1,4 @@
-"""The import rule of the layout (README, "Code map"), checked on every module of the four
+"""The import rule of the layout (docs/reference/code-map.md), checked on every module of the four
 packages by walking their imports (module level and inside functions), and the pure core's
 promise that importing it never loads rclpy or a message package (HOUSE_STYLE rule 1).
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from trust_av_planner.cli.reference import parameters_markdown
 from trust_av_planner.system.config import (
     _ALL,
     DEFAULT_PARAMS_FILE,
@@ -74,7 +75,9 @@ def test_bad_values_are_named(node: str, values: dict[str, object], message: str
 
 def test_control_step_bounds_are_documented() -> None:
     assert CONTROL_STEP_RANGE_S == (0.01, 10.0)
-    assert 'control step (s, in [0.01, 10])' in (REPO / 'README.md').read_text()
+    row = next(line for line in parameters_markdown().splitlines()
+               if line.startswith('| `dt_s` |'))
+    assert '| s | [0.01, 10] |' in row            # the generated parameter reference
 
 
 def test_one_key_file_is_a_complete_configuration(tmp_path: Path) -> None:

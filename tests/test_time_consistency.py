@@ -1,5 +1,5 @@
-"""Time consistency: trust is defined per second (DESIGN section 1, "time step outside
-lock-step"; docs/MODEL.md, "Time consistency")."""
+"""Time consistency: trust is defined per second (docs/concepts/time-consistency.md;
+docs/concepts/reading-the-paper.md, "The time step outside lock-step")."""
 
 from __future__ import annotations
 

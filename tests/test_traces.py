@@ -133,8 +133,9 @@ def test_steps_are_bounded_before_allocating() -> None:
 
 
 def test_limits_are_documented() -> None:
-    readme = (Path(__file__).resolve().parents[1] / 'README.md').read_text()
-    assert f'{MAX_SPEED_MPS:g} m/s' in readme and f'{MAX_TRACE_STEPS:,}' in readme
+    page = (Path(__file__).resolve().parents[1] / 'docs' / 'tutorials' /
+            'own-trace-or-bag.md').read_text()
+    assert f'{MAX_SPEED_MPS:g} m/s' in page and f'{MAX_TRACE_STEPS:,}' in page
 
 
 def test_truncate_changes_the_length_only() -> None:

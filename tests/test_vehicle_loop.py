@@ -1,5 +1,5 @@
 """Real-vehicle mode: QoS events under the EventsExecutor, the stale-input policy, tuning on
-the road, and a vehicle in the loop (README, "Real-vehicle mode"). No timing assertions:
+the road, and a vehicle in the loop (docs/tutorials/connect-a-vehicle.md). No timing assertions:
 jitter is measured by ``benchmarks/bench_shadow.py --vehicle``."""
 
 from __future__ import annotations

@@ -9,17 +9,17 @@ vehicles' markers (``vehicle_markers``, each in its vehicle's frame). Topic name
 relative (the node's namespace). Parameters: the ``planner`` section of
 ``config/trust_av.yaml``.
 
-``clock_mode: wall`` (real-vehicle mode, README "Real-vehicle mode"): a wall-clock timer at
-``control_rate_hz`` plans from the LATEST inputs (topics from the ``*_topic`` parameters or
-remapping), the NMPC predicting on the control period's grid; outputs are stamped with the
-current time. Inputs use the sensor-data QoS with a deadline of ``input_timeout_s``: a missed
-deadline is reported by DDS (a QoS event) and marks the input stale at once; an input never
-received or received longer ago than ``input_timeout_s`` is stale too. While the lead or ego
-odometry (or a recorded preview) is stale the planner commands ``stale_decel_mps2`` with
-status ERROR naming the input; it plans again as soon as they are fresh. The human odometry
-is used when fresh; without it the plan estimator observes only the AV's own acceleration
-(enough for the CA predictor; an empty ``human_odom_topic`` requires ``predictor: ca``).
-Trust: the latest estimate, ``trust_initial`` before the first. ``alpha``, ``trust_min`` and
+``clock_mode: wall`` (real-vehicle mode, docs/tutorials/connect-a-vehicle.md): a wall-clock
+timer at ``control_rate_hz`` plans from the LATEST inputs (topics from the ``*_topic``
+parameters or remapping), the NMPC predicting on the control period's grid; outputs are stamped
+with the current time. Inputs use the sensor-data QoS with a deadline of ``input_timeout_s``: a
+missed deadline is reported by DDS (a QoS event) and marks the input stale at once; an input
+never received or received longer ago than ``input_timeout_s`` is stale too. While the lead or
+ego odometry (or a recorded preview) is stale the planner commands ``stale_decel_mps2`` with
+status ERROR naming the input; it plans again as soon as they are fresh. The human odometry is
+used when fresh; without it the plan estimator observes only the AV's own acceleration (enough
+for the CA predictor; an empty ``human_odom_topic`` requires ``predictor: ca``). Trust: the
+latest estimate, ``trust_initial`` before the first. ``alpha``, ``trust_min`` and
 ``solver_cpu_budget_s`` can be changed with ``ros2 param set`` (from the next tick).
 """
 

@@ -196,8 +196,8 @@ def trust_config(params_files: Sequence[Path]) -> TrustConfig:
     return build_config(TrustConfig, layered_params(layers, '/trust_monitor'))
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Command line entry point ``trust-monitor-estimate``."""
+def build_parser() -> argparse.ArgumentParser:
+    """The ``trust-monitor-estimate`` parser (also the source of its reference page)."""
     parser = argparse.ArgumentParser(
         prog='trust-monitor-estimate',
         description="Estimate the human follower's trust from observed AV plans and expected "
@@ -209,6 +209,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--params-file', type=Path, action='append', default=[],
                         help='ROS 2 params file over the shipped config/trust_av.yaml '
                              '(repeatable: later files over earlier ones)')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line entry point ``trust-monitor-estimate``."""
+    parser = build_parser()
     args = parser.parse_args(argv)
     try:
         count = estimate_csv(args.input, args.output, trust_config(args.params_file))

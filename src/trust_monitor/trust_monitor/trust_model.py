@@ -4,12 +4,12 @@ Everything here is pure: no ROS, no wall clock. :func:`explicability` is written
 plain arithmetic so that the same function builds the CasADi expression inside the AV's
 NMPC and evaluates floats in the monitor: the equation exists once.
 
-Reading of the paper (docs/DESIGN.md, section 1): E is the Tanimoto (extended Jaccard)
+Reading of the paper (docs/concepts/reading-the-paper.md): E is the Tanimoto (extended Jaccard)
 *distance* of the offset plans ``a = u_R + eps`` and ``b = u_R^H + eps``,
 ``E = 1 - sum(a*b) / sum(a*a + b*b - a*b)``, so that E = 0 for equal plans and E is in
 [0, 1] whenever ``a, b > 0`` (accelerations above ``-eps``).
 
-Time (DESIGN section 1, "time step outside lock-step"): trust is defined per second. The
+Time (docs/concepts/time-consistency.md): trust is defined per second. The
 growth rate delta is in trust units per second and an update over an elapsed time dt is
 ``T += delta * dt * u_T``; one 1 s step is exactly eq. (10), so the paper's 1 Hz loop is
 unchanged and the same drive gives the same trust at any control rate (docs/MODEL.md,
@@ -55,7 +55,8 @@ class TrustConfig:
 
 
 def explicability(plan: Sequence[Any], expected: Sequence[Any], epsilon_mps2: float) -> Any:
-    """Explicability score E of eq. (8), read as the Tanimoto distance (DESIGN section 1).
+    """Explicability score E of eq. (8), read as the Tanimoto distance
+    (docs/concepts/reading-the-paper.md).
 
     Works on floats (returns a float) and on CasADi symbols (returns an expression).
 

@@ -1,6 +1,6 @@
 """What a closed-loop run produced: one :class:`StepRecord` per control step, and the
-:class:`Metrics` that summarise a run (DESIGN section 1). Shared by the in-process loop, the
-graph's recordings (read back into the same records) and the study."""
+:class:`Metrics` that summarise a run (docs/concepts/reading-the-paper.md). Shared by the
+in-process loop, the graph's recordings (read back into the same records) and the study."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ class StepRecord:
 
 @dataclass(frozen=True)
 class Metrics:
-    """Summary of a run (DESIGN section 1)."""
+    """Summary of a run: final trust, mean E, prediction RMSE, gaps, fallbacks."""
 
     steps: int
     final_trust: float
@@ -58,8 +58,9 @@ class Metrics:
 
 def compute_metrics(records: list[StepRecord], min_safe_gap_m: float,
                     plan_step_s: float | None = None) -> Metrics:
-    """Metrics of DESIGN section 1; RMSE compares each value of u_R^H(t) with the
-    acceleration the AV executed at its time (:func:`expectation_errors`).
+    """The run's metrics (docs/concepts/reading-the-paper.md, "The RMSE column"); RMSE
+    compares each value of u_R^H(t) with the acceleration the AV executed at its time
+    (:func:`expectation_errors`).
 
     ``unsafe_steps`` counts steps where either gap is below ``min_safe_gap_m`` (a collision
     margin, ``standstill_gap_m - safety_gap_margin_m``); every shipped run must have none.

@@ -1,6 +1,7 @@
 """Longitudinal point-mass dynamics shared by every vehicle model (explicit time step).
 
-Paper eq. (5) written with an explicit step (docs/DESIGN.md section 1)::
+Paper eq. (5) written with an explicit step (docs/concepts/reading-the-paper.md, "Time step
+and horizon")::
 
     d[k+1] = d[k] + (v_lead[k] - v[k]) * dt
     v[k+1] = v[k] + u[k] * dt

@@ -2,7 +2,7 @@
 
 Pure Python (no rclpy import here): the nodes turn these names into publishers and
 subscriptions with the QoS profile named in each row (:mod:`trust_monitor.ros.qos`). One
-table (:data:`TOPICS`) is the source of the README's topic table and of the connection
+table (:data:`TOPICS`) is the source of the documentation's topic table and of the connection
 check the orchestrator makes before the first step.
 
 Names are relative, so a graph started in a namespace (``--ros-args -r __ns:=/car1``)
@@ -193,7 +193,7 @@ WALL_QOS_TEXT = {
 
 
 def topic_table_markdown() -> str:
-    """The README's topic table, generated from :data:`TOPICS` (a test keeps them equal)."""
+    """The topic table of docs/reference/topics-and-qos.md, generated from :data:`TOPICS`."""
     lines = ['| topic | type | publishers | subscribers | QoS (lock-step) | QoS (wall mode) | '
              'rate | units | frames |',
              '|---|---|---|---|---|---|---|---|---|']

@@ -6,7 +6,7 @@ local and deep (:data:`STEP_QOS`). Wall mode (real-vehicle mode) uses :func:`wal
 vehicle's inputs as sensor data (best effort, volatile, keep last 1, a deadline the planner is
 told about when it is missed), the acceleration command reliable, volatile, keep last 1 with a
 deadline of two control periods, everything else reliable and volatile. The reasons are in the
-README's topic table (:func:`trust_monitor.common.topics.topic_table_markdown`).
+documentation's topic table (:func:`trust_monitor.common.topics.topic_table_markdown`).
 """
 
 from __future__ import annotations
