@@ -192,7 +192,7 @@ def test_generated_cli_reference_has_every_command_and_option() -> None:
     for command in ('simulate', 'run', 'shadow', 'reproduce', 'trace-to-bag', 'repair-bag',
                     'train-gru', 'fit-driver', 'eval-driver'):
         assert f'### `trust-av {command}`' in page
-    assert '### `trust-monitor-estimate`' in page and '`-o OUTPUT`, `--output OUTPUT`' in page
+    assert '## `trust-monitor-estimate`' in page and '`-o OUTPUT`, `--output OUTPUT`' in page
     assert '`--max-steps MAX_STEPS`' in page and str(REPO) not in page
     assert 'default `config/trust_av.yaml`' in page    # paths shown relative to the repository
 

@@ -43,6 +43,7 @@ def cell(text: object) -> str:
 
 
 def _option_rows(parser: argparse.ArgumentParser) -> list[str]:
+    """One table row per option and positional of ``parser`` (not ``-h`` or subcommands)."""
     formatter = parser._get_formatter()      # argparse's own %(default)s expansion
     rows = []
     for action in parser._actions:
@@ -79,8 +80,9 @@ def shown(value: object) -> str:
     return str(value).replace(f'{REPO}/', '')
 
 
-def _command_section(title: str, parser: argparse.ArgumentParser) -> list[str]:
-    lines = [f'### `{title}`', '']
+def _command_section(title: str, parser: argparse.ArgumentParser, level: int = 3) -> list[str]:
+    """A heading of ``level`` for the command ``title``, its description and its options."""
+    lines = [f'{"#" * level} `{title}`', '']
     if parser.description:
         lines += [parser.description, '']
     rows = _option_rows(parser)
@@ -103,8 +105,7 @@ def cli_markdown() -> str:
     lines.append('')
     for name, parser in subparsers.choices.items():
         lines += _command_section(f'trust-av {name}', parser)
-    lines += ['## `trust-monitor-estimate`', '']
-    lines += _command_section('trust-monitor-estimate', estimate_parser())
+    lines += _command_section('trust-monitor-estimate', estimate_parser(), level=2)
     return '\n'.join(lines)
 
 
