@@ -200,3 +200,19 @@ def test_generated_cli_reference_has_every_command_and_option() -> None:
 def test_an_unknown_marker_is_refused() -> None:
     with pytest.raises(reference.UnknownTableError, match="no generated table 'tables'"):
         reference.fill('# x\n<!-- generated: tables -->\n')
+
+
+def test_generated_vehicle_interface_is_the_planners_view_of_the_code_table() -> None:
+    """Inputs: what the planner subscribes from outside the vehicle side; outputs: what the
+    planner and the monitor publish, each with its wall-mode QoS and frame."""
+    page = reference.fill((DOCS / 'tutorials' / 'connect-a-vehicle.md').read_text())
+    rows = {line.split(' | ')[1]: line for line in page.splitlines()
+            if line.startswith(('| in |', '| out ('))}
+    assert set(rows) == {'`/preceding_vehicle/odom`', '`/preceding_vehicle/speed_preview`',
+                         '`/ego/odom`', '`/human/odom`', '`/ego/plan`', '`/ego/expected_plan`',
+                         '`/ego/accel_cmd`', '`/ego/planner_status`', '`/trust_monitor/trust`',
+                         '`/vehicle_markers`'}
+    command = rows['`/ego/accel_cmd`']
+    assert command.startswith('| out (planner) |') and '| `ego` |' in command
+    assert 'deadline 2 control periods' in command
+    assert 'deadline input_timeout_s' in rows['`/ego/odom`']

@@ -8,7 +8,9 @@ copied by hand into a page:
   argparse parsers;
 - ``parameters``: every parameter of the shipped params file, with the description, unit
   and range of its configuration dataclass field (:func:`trust_monitor.common.params.param`);
-- ``topics``: the topic table of :mod:`trust_monitor.common.topics`.
+- ``topics``: the topic table of :mod:`trust_monitor.common.topics`;
+- ``vehicle_interface``: the part of it a vehicle connects to (the planner's inputs from
+  outside, the planner's and the trust monitor's outputs).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from collections.abc import Callable
 from trust_av_planner.cli.main import build_parser
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, NODE_COMPONENTS
 from trust_monitor.common.params import PARAM_METADATA_KEY, ParamSpec, read_params_file
-from trust_monitor.common.topics import topic_table_markdown
+from trust_monitor.common.topics import TOPICS, WALL_QOS_TEXT, topic_table_markdown
 from trust_monitor.estimate import build_parser as estimate_parser
 
 MARKER = re.compile(r'^<!-- generated: ([a-z_]+) -->$', re.MULTILINE)
@@ -165,8 +167,28 @@ def topics_markdown() -> str:
     return topic_table_markdown()
 
 
+VEHICLE_SIDE = ('planner', 'trust_monitor')
+"""The nodes a vehicle runs (everything else of the graph is simulation)."""
+
+
+def vehicle_interface_markdown() -> str:
+    """The topics a vehicle connects to: what the planner takes from outside the two
+    vehicle-side nodes, and what those two publish, with their wall-mode QoS."""
+    lines = ['| direction | topic (default name) | type | fields, units | frames | '
+             'QoS (wall mode) |', '| --- | --- | --- | --- | --- | --- |']
+    for t in TOPICS:
+        outside = not set(t.publishers) & set(VEHICLE_SIDE)
+        if outside and 'planner' not in t.subscribers:
+            continue
+        direction = 'in' if outside else f'out ({", ".join(t.publishers)})'
+        lines.append(f'| {direction} | `/{t.name}` | `{t.msgtype}` | {cell(t.units)} | '
+                     f'{cell(t.frames)} | {cell(WALL_QOS_TEXT[t.wall_qos])} |')
+    return '\n'.join(lines) + '\n'
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
-    'cli': cli_markdown, 'parameters': parameters_markdown, 'topics': topics_markdown}
+    'cli': cli_markdown, 'parameters': parameters_markdown, 'topics': topics_markdown,
+    'vehicle_interface': vehicle_interface_markdown}
 """The generated tables by marker name."""
 
 
