@@ -216,3 +216,16 @@ def test_generated_vehicle_interface_is_the_planners_view_of_the_code_table() ->
     assert command.startswith('| out (planner) |') and '| `ego` |' in command
     assert 'deadline 2 control periods' in command
     assert 'deadline input_timeout_s' in rows['`/ego/odom`']
+
+
+def test_pins_named_in_the_docs_are_the_requirements() -> None:
+    """A `pip install name==version` in a page is the version requirements.txt pins."""
+    pinned = {line.split('==')[0].lower(): line.split('==')[1].strip()
+              for line in (REPO / 'requirements.txt').read_text().splitlines()
+              if '==' in line and not line.startswith('#')}
+    named = [(page, name, version) for page in [*DOCS.rglob('*.md'), REPO / 'README.md']
+             for command in re.findall(r'pip install ([^`\n]+)', page.read_text())
+             for name, version in re.findall(r'([A-Za-z0-9_.-]+)==([0-9][\w.]*)', command)]
+    assert len(named) >= 5
+    for page, name, version in named:
+        assert pinned.get(name.lower()) == version, f'{page.name}: {name}=={version}'
