@@ -141,6 +141,10 @@ def test_readme_is_short_and_keeps_the_two_commands() -> None:
     assert len(readme.encode()) < 10_000
     assert 'bash scripts/run_main.sh' in readme and 'bash scripts/test.sh' in readme
     assert 'δ·t = 60' in readme
+    links = re.findall(r'\]\(([^)#]+)(?:#[^)]*)?\)', readme)
+    assert len(links) > 15
+    missing = [link for link in links if not (REPO / link).is_file()]
+    assert not missing, f'README links to missing files: {missing}'
 
 
 def test_docs_reference_nothing_outside_the_repository() -> None:
