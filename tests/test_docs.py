@@ -233,3 +233,15 @@ def test_pins_named_in_the_docs_are_the_requirements() -> None:
     assert len(named) >= 5
     for page, name, version in named:
         assert pinned.get(name.lower()) == version, f'{page.name}: {name}=={version}'
+
+
+def test_the_site_needs_no_internet() -> None:
+    """No web fonts (Material loads Google Fonts unless theme.font is false), no external
+    JavaScript or CSS, and strict mode on."""
+    import yaml
+
+    config = yaml.safe_load((REPO / 'mkdocs.yml').read_text())
+    assert config['theme']['font'] is False and config['strict'] is True
+    for key in ('extra_javascript', 'extra_css'):
+        assert not any('://' in str(entry) for entry in config.get(key, []))
+    assert config['hooks'] == ['docs/hooks.py']
