@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import yaml
 
 from trust_av_planner.cli import reference
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
@@ -238,8 +239,6 @@ def test_pins_named_in_the_docs_are_the_requirements() -> None:
 def test_the_site_needs_no_internet() -> None:
     """No web fonts (Material loads Google Fonts unless theme.font is false), no external
     JavaScript or CSS, and strict mode on."""
-    import yaml
-
     config = yaml.safe_load((REPO / 'mkdocs.yml').read_text())
     assert config['theme']['font'] is False and config['strict'] is True
     for key in ('extra_javascript', 'extra_css'):
