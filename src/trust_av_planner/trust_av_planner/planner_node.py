@@ -55,7 +55,7 @@ from trust_monitor.ros.messages import (
     trajectory_times,
     trajectory_values,
 )
-from trust_monitor.ros.parameters import declare_config
+from trust_monitor.ros.parameters import declare_config, declare_trust_model
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -89,9 +89,17 @@ class PlannerNode(Node):
         wall = self.clock.wall
         if wall:
             check_control_rate(self.config, self.clock.control_rate_hz)
+        trust_model = declare_trust_model(self, trust)
+        if not isinstance(trust_model.initial_state(), float):
+            # The trust topic carries T only; a model whose state is more than T (Beta
+            # counts, a Kalman variance) needs its state in the planner: in-process only.
+            raise TrustAvPlannerError(f'trust model {trust.trust_model!r} has a state beyond '
+                                      'the trust value the trust topic carries: the node '
+                                      'graph runs models whose state is T (paper, '
+                                      'asymmetric); run it in-process (trust-av simulate)')
         self.planner = AvPlanner(self.config, trust, shared.vehicle_length_m,
                                  period_s=1.0 / self.clock.control_rate_hz if wall else None,
-                                 cpu_budget=wall)
+                                 cpu_budget=wall, trust_model=trust_model)
         self.trust_initial = trust.trust_initial
         self.previous_ns: int | None = None
         self.buffer = StepBuffer([*STEP_INPUTS, 'trust'])

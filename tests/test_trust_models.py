@@ -1,0 +1,84 @@
+"""The shipped trust models beyond the contract: their equations and special cases."""
+
+from __future__ import annotations
+
+import dataclasses
+import random
+
+import pytest
+
+from trust_monitor.trust_interface import make_trust_model
+from trust_monitor.trust_model import TrustConfig, performance, trust_step
+from trust_monitor.trust_models import BetaState, OptimoConfig, OptimoModel
+
+BASE = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,
+                   trust_initial=0.0)
+
+
+def scores(n: int, seed: int) -> list[float]:
+    rng = random.Random(seed)
+    return [rng.choice((rng.uniform(0.0, 0.2), rng.uniform(0.2, 1.0))) for _ in range(n)]
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_paper_is_a_special_case_of_optimo(seed: int) -> None:
+    """w_b = 0, w_p = delta, w_d = 0, sigma = 0 and P_thre: OPTIMo's mean is eqs. (10)-(11)."""
+    special = OptimoModel(BASE, OptimoConfig(optimo_bias_rate_per_s=0.0,
+                                             optimo_performance_rate_per_s=0.1,
+                                             optimo_change_gain=0.0, optimo_noise_std=0.0,
+                                             optimo_performance_threshold=0.8))
+    state, trust = special.initial_state(), BASE.trust_initial
+    for score in scores(200, seed):
+        state = special.step(state, score, 1.0)
+        trust = trust_step(trust, score, BASE)
+        assert special.trust(state) == trust
+        assert special.variance(state) == 0.0
+    # ... and not for another w_d: the special case is a real restriction
+    other = OptimoModel(BASE, dataclasses.replace(special.params, optimo_change_gain=0.5))
+    state = other.initial_state()
+    for score in (0.0, 0.5):
+        state = other.step(state, score, 1.0)
+    assert other.trust(state) != trust_step(trust_step(0.0, 0.0, BASE), 0.5, BASE)
+
+
+def test_optimo_variance_grows_and_a_report_shrinks_it() -> None:
+    model = OptimoModel(BASE, OptimoConfig(optimo_noise_std=0.2))
+    state = model.step(model.initial_state(), 0.01, 4.0)
+    assert state.variance == pytest.approx(0.2 ** 2 * 4.0)
+    after = model.observe(state, 10.0, noise_variance=state.variance)
+    assert after.variance == pytest.approx(state.variance / 2)
+    assert after.mean == pytest.approx((state.mean + 10.0) / 2)
+
+
+def test_beta_bernoulli_updates_once_per_episode() -> None:
+    model = make_trust_model(dataclasses.replace(BASE, trust_model='beta_bernoulli'),
+                             {'beta_bernoulli_episode_s': 3.0,
+                              'beta_bernoulli_failure_weight': 2.0})
+    state = model.initial_state()
+    for _ in range(2):
+        state = model.step(state, 0.3, 1.0)
+    assert (state.alpha, state.beta) == (1.0, 1.0)  # the episode is not over
+    state = model.step(state, 0.3, 1.0)
+    p = performance(0.3)
+    assert state == BetaState(1.0 + p, 1.0 + 2.0 * (1.0 - p))
+    assert model.trust(state) == pytest.approx((1 + p) / (2 + 2 * (1 - p) + p))
+    a, b = state.alpha, state.beta
+    assert model.variance(state) == pytest.approx(a * b / ((a + b) ** 2 * (a + b + 1)))
+
+
+def test_beta_bernoulli_step_across_an_episode_end_is_split() -> None:
+    model = make_trust_model(dataclasses.replace(BASE, trust_model='beta_bernoulli'))
+    one = model.step(model.step(model.initial_state(), 0.1, 0.5), 0.9, 1.0)
+    two = model.step(model.step(model.step(model.initial_state(), 0.1, 0.5), 0.9, 0.5), 0.9,
+                     0.5)
+    assert (one.alpha, one.beta) == pytest.approx((two.alpha, two.beta))
+    p_k = (performance(0.1) + performance(0.9)) / 2  # the first episode: half and half
+    assert one.alpha == pytest.approx(1.0 + p_k)
+
+
+def test_asymmetric_loses_twice_what_it_gains() -> None:
+    model = make_trust_model(dataclasses.replace(BASE, trust_model='asymmetric'))
+    low = 0.9  # P = 1 - tanh(0.9) < 0.8: a loss
+    loss = model.step(0.0, low, 1.0)
+    assert loss == pytest.approx(2.0 * trust_step(0.0, low, BASE))
+    assert model.step(0.0, 0.01, 1.0) == trust_step(0.0, 0.01, BASE)  # gains as the paper
