@@ -245,3 +245,21 @@ def test_estimate_runs_every_model(name: str, tmp_path: Any) -> None:
         score = float(line.split(',')[1])
         state = m.step(state, score, 1.0)
         assert float(line.split(',')[3]) == m.trust(state)
+
+
+@pytest.mark.parametrize('name', NAMES)
+def test_simulate_refuses_a_bad_model_parameter_in_one_line(name: str, tmp_path: Any) -> None:
+    """trust-av simulate with the model chosen and one of its parameters out of range:
+    exit 2, one line naming the parameter, nothing written."""
+    bad = next(((f.name, bad_value(f)) for f in fields_of(name) if bad_value(f) is not None),
+               ('trust_growth_rate', -1.0))  # no own parameter: a shared one of the model
+    params = tmp_path / 'bad.yaml'
+    params.write_text(f'/**:\n  ros__parameters:\n    trust_model: {name}\n'
+                      f'    {bad[0]}: {bad[1]!r}\n')
+    out = tmp_path / 'out'
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'simulate',
+                           '--params-file', str(params), '--no-progress', '--out', str(out)],
+                          capture_output=True, text=True, check=False, timeout=120)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert proc.stderr.count('\n') == 1 and bad[0] in proc.stderr, proc.stderr
+    assert not out.exists()
