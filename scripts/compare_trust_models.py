@@ -1,7 +1,7 @@
 """Every registered trust model scored on the same runs: offline and in closed loop.
 
 Usage: python scripts/compare_trust_models.py [--trace us06] [--predictor ca] [--alpha 0.5]
-       [--params-file F ...] [--out results/trust_models]
+       [--params-file F ...] [--max-steps N] [--out results/trust_models]
 
 - **Offline**: one closed loop with the params files' trust model (default ``paper``) is
   recorded; every registered model is run over its recorded explicability scores (what
@@ -11,7 +11,8 @@ Usage: python scripts/compare_trust_models.py [--trace us06] [--predictor ca] [-
 
 Writes ``trust_models.csv`` (one row per mode and model: final trust, its variance, mean E,
 RMSE, steps where the trust constraint was active, i.e. E_max < 1) and
-``trust_models.png`` (trust over time per model, offline and closed loop) to ``--out``.
+``trust_models.png`` (trust over time per model, offline and closed loop, mean +- 2 sd
+shaded where the model has a variance) to ``--out``.
 """
 
 from __future__ import annotations
@@ -19,35 +20,40 @@ from __future__ import annotations
 import argparse
 import csv
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from preceding_traffic.traces import truncate
 from trust_av_planner.system.closed_loop import control_trace, simulate
 from trust_av_planner.system.config import load_run_config
 from trust_monitor.common.registry import TRUST_MODELS, names
 
 
-def run(files: list[Path], trace: str, predictor: str, alpha: float,
-        model: str | None) -> Any:
+def run(files: list[Path], trace: str, predictor: str, alpha: float, model: str | None,
+        max_steps: int | None) -> Any:
     overrides: dict[str, dict[str, Any]] = {
         'preceding_traffic': {'trace': trace},
         'planner': {'predictor': predictor, 'alpha': alpha}}
     if model is not None:
         overrides['/**'] = {'trust_model': model}
     config = load_run_config(files, overrides)
-    return config, simulate(config, control_trace(config))
+    speeds = control_trace(config)
+    if max_steps is not None:
+        speeds = truncate(speeds, max_steps)
+    return config, simulate(config, speeds)
 
 
-def offline(config: Any, model_name: str, scores: list[float], dt_s: float
-            ) -> tuple[list[float], float | None]:
-    from dataclasses import replace
-    model = replace(config, trust=replace(config.trust, trust_model=model_name)).trust_model()
+def replay(model: Any, scores: list[float], dt_s: float
+           ) -> tuple[list[float], list[float | None]]:
+    """Trust and variance after each step of ``model`` over recorded scores E."""
     state = model.initial_state()
-    trusts = []
+    trusts, variances = [], []
     for score in scores:
         state = model.step(state, score, dt_s)
         trusts.append(model.trust(state))
-    return trusts, model.variance(state)
+        variances.append(model.variance(state))
+    return trusts, variances
 
 
 def main() -> int:
@@ -56,32 +62,38 @@ def main() -> int:
     parser.add_argument('--predictor', default='ca')
     parser.add_argument('--alpha', type=float, default=0.5)
     parser.add_argument('--params-file', type=Path, action='append', default=[])
+    parser.add_argument('--max-steps', type=int, default=None,
+                        help='stop every run after this many steps (a quick check)')
     parser.add_argument('--out', type=Path, default=Path('results/trust_models'))
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     models = names(TRUST_MODELS)
-    base_config, recorded = run(args.params_file, args.trace, args.predictor, args.alpha, None)
+    base_config, recorded = run(args.params_file, args.trace, args.predictor, args.alpha, None,
+                                args.max_steps)
     scores = [r.explicability for r in recorded.records]
     times = [r.t_s for r in recorded.records]
     dt_s = times[1] - times[0]
     rows: list[list[object]] = []
-    curves: dict[tuple[str, str], list[float]] = {}
+    curves: dict[tuple[str, str], tuple[list[float], list[float | None]]] = {}
     m = recorded.metrics
     for name in models:
-        trusts, variance = offline(base_config, name, scores, dt_s)
-        curves['offline', name] = trusts
-        rows.append(['offline', name, trusts[-1], variance, m.mean_explicability, m.rmse_mps2,
-                     ''])
+        model = replace(base_config, trust=replace(base_config.trust,
+                                                   trust_model=name)).trust_model()
+        trusts, variances = replay(model, scores, dt_s)
+        curves['offline', name] = trusts, variances
+        rows.append(['offline', name, trusts[-1], variances[-1], m.mean_explicability,
+                     m.rmse_mps2, ''])
     for name in models:
-        config, result = run(args.params_file, args.trace, args.predictor, args.alpha, name)
-        model = config.trust_model()
-        state = model.initial_state()
-        for r in result.records:
-            state = model.step(state, r.explicability, dt_s)
-        curves['closed loop', name] = [r.trust for r in result.records]
+        config, result = run(args.params_file, args.trace, args.predictor, args.alpha, name,
+                             args.max_steps)
+        # the monitor's variance: the same model replayed over the run's own E
+        trusts, variances = replay(config.trust_model(),
+                                   [r.explicability for r in result.records], dt_s)
+        assert trusts == [r.trust for r in result.records], name  # the monitor's trust
+        curves['closed loop', name] = trusts, variances
         cm = result.metrics
         active = sum(1 for r in result.records if r.explicability_max < 1.0)
-        rows.append(['closed loop', name, cm.final_trust, model.variance(state),
+        rows.append(['closed loop', name, cm.final_trust, variances[-1],
                      cm.mean_explicability, cm.rmse_mps2, active])
     header = ['mode', 'trust_model', 'final_trust', 'final_variance', 'mean_E', 'rmse_mps2',
               'constraint_active_steps']
@@ -102,7 +114,14 @@ def main() -> int:
     for i, name in enumerate(models):
         for j, mode in enumerate(('offline', 'closed loop')):
             ax = axes[i][j]
-            ax.plot(times, curves[mode, name])
+            trusts, variances = curves[mode, name]
+            ax.plot(times, trusts)
+            if variances[-1] is not None:
+                sd = [2.0 * float(v) ** 0.5 for v in variances]  # type: ignore[arg-type]
+                ax.fill_between(times, [t - s for t, s in zip(trusts, sd, strict=True)],
+                                [t + s for t, s in zip(trusts, sd, strict=True)], alpha=0.3,
+                                label='mean +- 2 sd')
+                ax.legend(fontsize=7, loc='lower right')
             ax.set_title(f'{name}, {mode}', fontsize=9)
             ax.set_ylabel('trust')
     for ax in axes[-1]:
