@@ -1,10 +1,11 @@
 """Every registered trust model scored on the same runs: offline and in closed loop.
 
 Usage: python scripts/compare_trust_models.py [--trace us06] [--predictor ca] [--alpha 0.5]
-       [--params-file F ...] [--max-steps N] [--out results/trust_models]
+       [--params-file F ...] [--max-steps N] [--bag BAG] [--out results/trust_models]
 
 - **Offline**: one closed loop with the params files' trust model (default ``paper``) is
-  recorded; every registered model is run over its recorded explicability scores (what
+  recorded, or a node-graph recording is read (``--bag``, a ``trust-av run --bag``
+  recording); every registered model is run over its recorded explicability scores (what
   ``trust-monitor-estimate --trust-model NAME`` does on the recorded plans).
 - **Closed loop**: the same case is run once per model, the model feeding both the
   monitor and the NMPC's trust constraint (``trust_model: NAME``).
@@ -64,18 +65,27 @@ def main() -> int:
     parser.add_argument('--params-file', type=Path, action='append', default=[])
     parser.add_argument('--max-steps', type=int, default=None,
                         help='stop every run after this many steps (a quick check)')
+    parser.add_argument('--bag', type=Path, default=None,
+                        help='score the models offline on this trust-av run recording '
+                             '(default: an in-process run of the same case)')
     parser.add_argument('--out', type=Path, default=Path('results/trust_models'))
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     models = names(TRUST_MODELS)
     base_config, recorded = run(args.params_file, args.trace, args.predictor, args.alpha, None,
                                 args.max_steps)
-    scores = [r.explicability for r in recorded.records]
-    times = [r.t_s for r in recorded.records]
-    dt_s = times[1] - times[0]
+    if args.bag is not None:
+        from trust_av_planner.graph.bag_records import records_from_bag
+        from trust_av_planner.system.metrics import compute_metrics
+        records = records_from_bag(args.bag)
+        m = compute_metrics(records, base_config.min_safe_gap_m)
+    else:
+        records = recorded.records
+        m = recorded.metrics
+    scores = [r.explicability for r in records]
+    dt_s = base_config.planner.dt_s
     rows: list[list[object]] = []
     curves: dict[tuple[str, str], tuple[list[float], list[float | None]]] = {}
-    m = recorded.metrics
     for name in models:
         model = replace(base_config, trust=replace(base_config.trust,
                                                    trust_model=name)).trust_model()
@@ -115,6 +125,7 @@ def main() -> int:
         for j, mode in enumerate(('offline', 'closed loop')):
             ax = axes[i][j]
             trusts, variances = curves[mode, name]
+            times = [base_config.planner.dt_s * k for k in range(len(trusts))]
             ax.plot(times, trusts)
             if variances[-1] is not None:
                 sd = [2.0 * float(v) ** 0.5 for v in variances]  # type: ignore[arg-type]
