@@ -137,8 +137,9 @@ def main() -> int:
             ax.set_ylabel('trust')
     for ax in axes[-1]:
         ax.set_xlabel('t (s)')
+    files = ', '.join(p.name for p in args.params_file) or 'shipped config'
     fig.suptitle(f'Trust per model: {args.trace}, TAC-{args.predictor.upper()}, '
-                 f'alpha {args.alpha:g}')
+                 f'alpha {args.alpha:g} ({files})')
     fig.tight_layout()
     fig.savefig(args.out / 'trust_models.png', dpi=100)
     print(f'wrote {args.out / "trust_models.csv"} and {args.out / "trust_models.png"}')
