@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import random
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
+from trust_av_planner.study.tables import BOUND_HEADER
 from trust_monitor.trust_interface import make_trust_model
 from trust_monitor.trust_model import TrustConfig, performance, trust_step
 from trust_monitor.trust_models import BetaState, OptimoConfig, OptimoModel
@@ -82,3 +86,22 @@ def test_asymmetric_loses_twice_what_it_gains() -> None:
     loss = model.step(0.0, low, 1.0)
     assert loss == pytest.approx(2.0 * trust_step(0.0, low, BASE))
     assert model.step(0.0, 0.01, 1.0) == trust_step(0.0, 0.01, BASE)  # gains as the paper
+
+
+@pytest.mark.parametrize(('model', 'has_bound'), [('paper', True), ('asymmetric', False)])
+def test_tables_give_the_paper_bound_only_for_the_paper_model(model: str, has_bound: bool,
+                                                              tmp_path: Path) -> None:
+    """The least-final-trust column is derived from eqs. (9)-(11): another model's tables
+    leave it out (and do not crash)."""
+    params = tmp_path / 'model.yaml'
+    params.write_text(f'/**:\n  ros__parameters:\n    trust_model: {model}\n')
+    out = tmp_path / 'results'
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+                           '--traces', 'us06', '--predictors', 'ca', '--max-steps', '20',
+                           '--params-file', str(params), '--results-dir', str(out),
+                           '--workers', '1', '--no-progress'],
+                          capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    header = (out / 'table_III_tac_ca_us06.csv').read_text().splitlines()[0]
+    assert (BOUND_HEADER in header) is has_bound
+    assert header.startswith('alpha,final trust,mean E')
