@@ -58,6 +58,9 @@ class TrustModel(Protocol):
         closed_form_bound: None, or a function ``(state, trust_min, steps, dt_s)`` giving
             what :func:`numeric_bound` computes, in closed form (None: no plan is
             admissible; ``>= 1``: no restriction).
+
+    Optional: a class attribute ``paper_bound_holds = True`` declares that the model runs
+    eqs. (9)-(11) with the shared parameters (:func:`paper_bound_holds`).
     """
 
     name: str
@@ -153,6 +156,14 @@ def explicability_bound(model: TrustModel, state: Any, trust_min: float, steps: 
     if model.closed_form_bound is not None:
         return model.closed_form_bound(state, trust_min, steps, dt_s)
     return numeric_bound(model, state, trust_min, steps, dt_s)
+
+
+def paper_bound_holds(model: TrustModel) -> bool:
+    """Whether ``model`` declares that it runs eqs. (9)-(11) with the shared
+    :class:`~trust_monitor.trust_model.TrustConfig` (class attribute
+    ``paper_bound_holds = True``): the final-trust bound of :mod:`trust_monitor.trust_bound`
+    and the tables' column built on it hold only then."""
+    return getattr(model, 'paper_bound_holds', False) is True
 
 
 @functools.cache

@@ -44,6 +44,7 @@ class PaperModel:
     """Eqs. (9)-(11) of Ozkan & Ma: ``T += delta dt u_T(P(E))``; the state is T."""
 
     name = 'paper'
+    paper_bound_holds = True  # trust_bound.py's final-trust bound is derived from this update
 
     def __init__(self, config: TrustConfig, params: None = None) -> None:
         self.config = config

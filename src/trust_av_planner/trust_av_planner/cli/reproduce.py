@@ -23,7 +23,7 @@ from trust_av_planner.study.sweep import Case
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
 from trust_monitor.common import output_files
 from trust_monitor.common.params import read_params_file
-from trust_monitor.trust_models import PaperModel
+from trust_monitor.trust_interface import paper_bound_holds
 
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
             'as_reported': DEFAULT_PARAMS_FILE.with_name('paper_as_reported.yaml'),
@@ -154,9 +154,10 @@ def run(args: argparse.Namespace) -> int:
                                        ('ca', 'table_III_tac_ca_us06', TABLE_III_TAC_CA_US06)):
             if predictor in args.predictors:
                 us06_steps = load_trace('us06', config.planner.dt_s, config.trace).steps
-                # The bound column is derived from the paper's update: only for its model.
+                # The bound column is derived from the paper's update: only for a model
+                # that declares it runs that update (trust_interface.paper_bound_holds).
                 bound = ((us06_steps, config.trust)
-                         if isinstance(config.trust_model(), PaperModel) else None)
+                         if paper_bound_holds(config.trust_model()) else None)
                 tables.write_rows(out / name, *alpha_table(results, 'us06', predictor, paper,
                                                            bound))
                 written.append(f'{name}.md')
