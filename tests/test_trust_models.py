@@ -105,3 +105,20 @@ def test_tables_give_the_paper_bound_only_for_the_paper_model(model: str, has_bo
     header = (out / 'table_III_tac_ca_us06.csv').read_text().splitlines()[0]
     assert (BOUND_HEADER in header) is has_bound
     assert header.startswith('alpha,final trust,mean E')
+
+
+@pytest.mark.parametrize('values', [{'trust_model': 'asymmetric'},
+                                    {'asymmetric_loss_ratio': 3.0}])
+def test_planner_and_monitor_run_one_model(values: dict[str, object]) -> None:
+    """The model and its parameters have one value per graph: a planner section that
+    differs from the monitor's is refused, naming both nodes."""
+    from trust_av_planner.system.config import load_run_config
+    from trust_monitor.common.params import ParamsError
+    name = next(iter(values))
+    with pytest.raises(ParamsError, match=rf'{name} is .* for planner but .* for '
+                                          r'trust_monitor: the planner and the monitor must '
+                                          r'run the same trust model'):
+        load_run_config((), {'planner': values})
+    config = load_run_config((), {'/**': values})  # set once, in /**: accepted
+    assert getattr(config.trust, name, None) == values[name] or \
+        dict(config.trust_model_params)[name] == values[name]
