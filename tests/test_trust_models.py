@@ -122,3 +122,17 @@ def test_planner_and_monitor_run_one_model(values: dict[str, object]) -> None:
     config = load_run_config((), {'/**': values})  # set once, in /**: accepted
     assert getattr(config.trust, name, None) == values[name] or \
         dict(config.trust_model_params)[name] == values[name]
+
+
+def test_bound_benchmark_smoke(tmp_path: Path) -> None:
+    """benchmarks/bench_trust_models.py runs on a few calls and writes every model's figures."""
+    import json
+    out = tmp_path / 'bench.json'
+    script = Path(__file__).resolve().parents[1] / 'benchmarks' / 'bench_trust_models.py'
+    proc = subprocess.run([sys.executable, str(script), '--calls', '2', '--out', str(out)],
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr
+    results = json.loads(out.read_text())
+    from trust_monitor.common.registry import TRUST_MODELS, names
+    assert set(results['models']) == set(names(TRUST_MODELS))
+    assert results['models']['paper']['1 Hz']['closed_form'] is True
