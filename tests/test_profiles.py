@@ -25,3 +25,20 @@ def test_as_reported_changes_only_epsilon_and_the_explicability_scale() -> None:
     same = [field for field in ('alpha', 'time_headway_s', 'tracking_cost_scale_m2')
             if getattr(reported.planner, field) == getattr(default.planner, field)]
     assert len(same) == 3 and reported.driver == default.driver
+
+
+FITTED = AS_REPORTED.with_name('paper_fitted_threshold.yaml')
+
+
+def test_paper_fitted_is_as_reported_with_the_fitted_threshold_only() -> None:
+    """The fitted profile = as_reported + P_thre 0.97 (nothing else), labelled as fitted."""
+    def values(path: Path) -> dict[tuple[str, str], object]:
+        return {(section, key): value for section, params in read_layer(path).items()
+                for key, value in params.items()}
+    fitted, reported = values(FITTED), values(AS_REPORTED)
+    assert {k: v for k, v in fitted.items() if k[1] != 'performance_threshold'} == reported
+    assert fitted[('/**', 'performance_threshold')] == 0.97
+    assert 'FITTED' in FITTED.read_text() and 'hypothesis' in FITTED.read_text()
+    config = load_run_config(FITTED, {})
+    assert (config.trust.performance_threshold, config.trust.epsilon_mps2) == (0.97, 3.0)
+    assert config.trust.trust_model == 'paper'

@@ -31,5 +31,13 @@ setup(
             'trust-monitor-estimate = trust_monitor.estimate:main',
             'monitor = trust_monitor.monitor_node:main',
         ],
+        # The trust models (trust_monitor.trust_interface); a plug-in package adds its own
+        # to this group the same way (docs/concepts/trust-models.md).
+        'trust_av.trust_models': [
+            'paper = trust_monitor.trust_models:PAPER',
+            'asymmetric = trust_monitor.trust_models:ASYMMETRIC',
+            'beta_bernoulli = trust_monitor.trust_models:BETA_BERNOULLI',
+            'optimo = trust_monitor.trust_models:OPTIMO',
+        ],
     },
 )

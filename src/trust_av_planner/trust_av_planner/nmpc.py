@@ -10,8 +10,10 @@ the plan influences)::
 
 with the dynamics of :mod:`trust_monitor.common.kinematics` and E of
 :func:`trust_monitor.trust_model.explicability` (each written once). The trust constraint is
-the exact smooth equivalent of propagating eqs. (9)-(11) over the horizon, see
-:func:`trust_monitor.trust_model.explicability_bound`.
+the exact smooth equivalent of propagating the trust model's update over the horizon: the
+largest admissible E of :func:`trust_monitor.trust_interface.explicability_bound` (for
+``paper`` its closed form :func:`trust_monitor.trust_model.explicability_bound`; for other
+models the bisection on their own update).
 
 The NLP is built once (CasADi SX, ``sqpmethod`` with the ``qrqp`` active-set QP solver),
 warm-started from the shifted previous plan. A solve that fails, that (against the wall
@@ -42,7 +44,9 @@ from trust_monitor.common.params import (
     require,
 )
 from trust_monitor.common.solver import nmpc_solver_options
-from trust_monitor.trust_model import TrustConfig, explicability, explicability_bound
+from trust_monitor.trust_interface import TrustModel, make_trust_model
+from trust_monitor.trust_interface import explicability_bound as trust_bound
+from trust_monitor.trust_model import TrustConfig, explicability
 
 LOG = logging.getLogger(__name__)
 
@@ -239,9 +243,11 @@ class TrustAwareNmpc:
     """
 
     def __init__(self, config: PlannerConfig, trust: TrustConfig,
-                 period_s: float | None = None, *, cpu_budget: bool = False) -> None:
+                 period_s: float | None = None, *, cpu_budget: bool = False,
+                 trust_model: TrustModel | None = None) -> None:
         self.config = config
         self.trust = trust
+        self.trust_model = make_trust_model(trust) if trust_model is None else trust_model
         self.cpu_budget = cpu_budget
         self.grid_step_s, self.steps = prediction_grid(config, period_s)
         n, dt = self.steps, self.grid_step_s
@@ -301,7 +307,7 @@ class TrustAwareNmpc:
         return self._lower, upper
 
     def step(self, gap_m: float, speed_mps: float, lead_speeds_mps: np.ndarray,
-             expected_mps2: np.ndarray, trust: float) -> PlanResult:
+             expected_mps2: np.ndarray, trust: Any) -> PlanResult:
         """Plan the next N accelerations.
 
         Args:
@@ -311,13 +317,13 @@ class TrustAwareNmpc:
                 grid, N values, m/s.
             expected_mps2: the plan the human expects u_R^H on the prediction grid, N
                 values, m/s^2.
-            trust: current trust T(t).
+            trust: the trust model's current state (for ``paper``: T(t) itself).
 
         Returns:
             The plan and the solver's report; never raises for an infeasible problem.
         """
         c, n, dt = self.config, self.steps, self.grid_step_s
-        e_max = explicability_bound(trust, c.trust_min, self.trust, n, dt)
+        e_max = trust_bound(self.trust_model, trust, c.trust_min, n, dt)
         params = np.concatenate([[gap_m, speed_mps], lead_speeds_mps, expected_mps2, [c.alpha]])
         if e_max is None:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps, 'trust below T_min',

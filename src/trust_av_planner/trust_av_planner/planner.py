@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -22,6 +23,7 @@ from trust_av_planner.predictors.gru import GruPredictor, resolve_model
 from trust_av_planner.predictors.sampling import ModelGridPredictor
 from trust_av_planner.preview import LeadPreview, hold_on_grid
 from trust_monitor.common.kinematics import VehicleState, gap_m
+from trust_monitor.trust_interface import TrustModel
 from trust_monitor.trust_model import TrustConfig
 
 
@@ -82,11 +84,12 @@ class AvPlanner:
 
     def __init__(self, config: PlannerConfig, trust: TrustConfig, vehicle_length_m: float,
                  predictor: Predictor | None = None, period_s: float | None = None, *,
-                 cpu_budget: bool = False) -> None:
+                 cpu_budget: bool = False, trust_model: TrustModel | None = None) -> None:
         self.config = config
         self.vehicle_length_m = vehicle_length_m
         self.period_s = config.dt_s if period_s is None else period_s
-        self.nmpc = TrustAwareNmpc(config, trust, self.period_s, cpu_budget=cpu_budget)
+        self.nmpc = TrustAwareNmpc(config, trust, self.period_s, cpu_budget=cpu_budget,
+                                   trust_model=trust_model)
         self.predictor = predictor if predictor is not None else make_predictor(config)
         self.same_grid = abs(self.period_s - config.dt_s) <= 1e-12 * config.dt_s
         history = getattr(getattr(self.predictor, 'weights', None), 'history_steps', 1)
@@ -110,7 +113,7 @@ class AvPlanner:
         self.config = config
 
     def step(self, traffic: VehicleState, preview_mps: np.ndarray | None, av: VehicleState,
-             human: VehicleState | None, trust: float, t_s: float | None = None) -> PlannerOutput:
+             human: VehicleState | None, trust: Any, t_s: float | None = None) -> PlannerOutput:
         """Plan from the vehicles' odometry at the start of a step.
 
         Args:
@@ -123,7 +126,7 @@ class AvPlanner:
                 without a follower topic): the plan estimator then observes only the AV's
                 acceleration (gap, relative speed and headway NaN), which is all the CA
                 predictor uses; other predictors need the follower.
-            trust: the monitor's trust estimate T(t).
+            trust: the monitor's trust state (for ``paper``: the estimate T(t)).
             t_s: time of this step, s (default: one control period after the previous).
 
         Raises:

@@ -55,7 +55,7 @@ from trust_monitor.ros.messages import (
     trajectory_times,
     trajectory_values,
 )
-from trust_monitor.ros.parameters import declare_config
+from trust_monitor.ros.parameters import declare_config, declare_trust_model
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -89,9 +89,21 @@ class PlannerNode(Node):
         wall = self.clock.wall
         if wall:
             check_control_rate(self.config, self.clock.control_rate_hz)
+        self.trust_model = declare_trust_model(self, trust)
+        # The trust topic carries E and T. A model whose state is T takes it from there; a
+        # model with more state (Beta counts, a Kalman variance) is mirrored: in lock-step
+        # the planner steps the same model with the E the monitor scored and publishes, over
+        # the same dt_s, so its state is the monitor's (checked against T each step).
+        self.mirror = not isinstance(self.trust_model.initial_state(), float)
+        self.trust_state = self.trust_model.initial_state()
+        if self.mirror and wall:
+            raise TrustAvPlannerError(f'trust model {trust.trust_model!r} has a state beyond '
+                                      'the trust value the trust topic carries: wall mode '
+                                      'runs models whose state is T (paper, asymmetric); '
+                                      'use clock_mode lockstep or run it in-process')
         self.planner = AvPlanner(self.config, trust, shared.vehicle_length_m,
                                  period_s=1.0 / self.clock.control_rate_hz if wall else None,
-                                 cpu_budget=wall)
+                                 cpu_budget=wall, trust_model=self.trust_model)
         self.trust_initial = trust.trust_initial
         self.previous_ns: int | None = None
         self.buffer = StepBuffer([*STEP_INPUTS, 'trust'])
@@ -235,16 +247,41 @@ class PlannerNode(Node):
             if self.previous_ns is not None and not self.buffer.ready(self.previous_ns,
                                                                       ['trust']):
                 return
-            trust = (self.trust_initial if self.previous_ns is None
-                     else self.buffer.take('trust', self.previous_ns).vector.z)  # type: ignore[attr-defined]
+            if self.previous_ns is None:
+                state: object = self.trust_state
+            else:
+                msg = self.buffer.take('trust', self.previous_ns)
+                state = self.trust_input(msg.vector.x, msg.vector.z)  # type: ignore[attr-defined]
             items = self.buffer.pop(ns)
             if self.config.lead_preview != 'recorded':
                 items['preview'] = None
-            self.plan(ns, items, float(trust), None)
+            self.plan(ns, items, state, None)
             self.previous_ns = ns
 
-    def plan(self, ns: int, items: dict[str, object], trust: float, t_s: float | None) -> None:
-        """One planning step and its four outputs."""
+    def trust_input(self, score: float, trust: float) -> object:
+        """The trust model's state after the monitor's step with E = ``score`` that gave
+        T = ``trust`` (T itself, or the mirrored state).
+
+        Raises:
+            TrustAvPlannerError: the mirrored trust is not the monitor's (another model or
+                step: the constraint would use the wrong state).
+        """
+        if not self.mirror:
+            return float(trust)
+        self.trust_state = self.trust_model.step(self.trust_state, float(score),
+                                                 self.config.dt_s)
+        mirrored = self.trust_model.trust(self.trust_state)
+        if abs(mirrored - trust) > 1e-9 * (1.0 + abs(trust)):
+            raise TrustAvPlannerError(f"mirrored trust {mirrored!r} is not the monitor's "
+                                      f'{trust!r}: the planner and the monitor must run the '
+                                      'same trust model and step')
+        return self.trust_state
+
+    def plan(self, ns: int, items: dict[str, object], state: object,
+             t_s: float | None) -> None:
+        """One planning step and its four outputs (``state``: the trust model's state; for
+        a model whose state is T, T itself)."""
+        trust = float(self.trust_model.trust(state))
         step_s, steps = self.planner.grid
         preview = None
         if items['preview'] is not None:
@@ -255,7 +292,7 @@ class PlannerNode(Node):
                                 vehicle(items['ego']),  # type: ignore[arg-type]
                                 None if items['human'] is None
                                 else vehicle(items['human']),  # type: ignore[arg-type]
-                                trust, t_s)
+                                state, t_s)
         result = out.result
         self.publish(ns, result.plan_mps2, out.expected_mps2, float(result.plan_mps2[0]), trust,
                      status=result.status,

@@ -5,7 +5,12 @@ and ``expected_0 .. expected_{N-1}`` (the plan the human expects, m/s^2), one ro
 control step in time order; other columns are ignored. Plans are accelerations: a value
 outside +-:data:`MAX_ACCEL_MPS2` is refused (no vehicle accelerates at 10 g; far larger
 values would overflow eq. (8)). Output: ``t, E, P, trust`` (trust after the step's update),
-written only when every row is valid and every estimate finite.
+and ``trust_variance`` when the trust model has an uncertainty, written only when every row
+is valid and every estimate finite.
+
+The trust model is the registered one the params files' ``trust_model`` names (or
+``--trust-model``), with its own parameters from the same files
+(:mod:`trust_monitor.trust_interface`).
 
 Parameters: the trust monitor's, from the shipped params file with every ``--params-file``
 layered over it, read by rcl's rules as the ``trust_monitor`` node reads them.
@@ -22,14 +27,20 @@ import stat
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from trust_monitor.common.output_files import cannot_write, replacing
 from trust_monitor.common.param_layers import layer_files, layered_params, read_layers
 from trust_monitor.common.params import build_config, check_known
 from trust_monitor.common.rcl_values import ParsedParams
+from trust_monitor.common.registry import TRUST_MODELS, names
 from trust_monitor.common.wall_clock import WallClockConfig
 from trust_monitor.errors import TrustMonitorError, one_line
+from trust_monitor.trust_interface import (
+    TrustModel,
+    make_trust_model,
+    trust_model_config_types,
+)
 from trust_monitor.trust_model import TrustConfig, TrustEstimator
 
 MAX_ACCEL_MPS2 = 100.0
@@ -87,8 +98,8 @@ def plan_columns(path: Path, header: Sequence[str]) -> tuple[list[str], list[str
     return [plans[k] for k in range(len(plans))], [expected[k] for k in range(len(expected))]
 
 
-def _rows(path: Path, handle: TextIO,
-          config: TrustConfig) -> list[tuple[float, float, float, float]]:
+def _rows(path: Path, handle: TextIO, config: TrustConfig,
+          model: TrustModel | None) -> list[tuple[float, ...]]:
     reader = csv.reader(_lines(handle, path))
     header = next(reader, None)
     if header is None:
@@ -99,8 +110,8 @@ def _rows(path: Path, handle: TextIO,
     index = {name: i for i, name in enumerate(header)}
     wanted = [index[c] for c in ['t', *plan_cols, *exp_cols]]
     n = len(plan_cols)
-    estimator = TrustEstimator(config)
-    rows: list[tuple[float, float, float, float]] = []
+    estimator = TrustEstimator(config, model)
+    rows: list[tuple[float, ...]] = []
     last_t = -math.inf
     for line, row in enumerate(reader, start=2):
         if not row:
@@ -124,7 +135,9 @@ def _rows(path: Path, handle: TextIO,
             raise EstimateError(f'{path}:{line}: time {t} does not increase')
         last_t = t
         est = estimator.step(values[1:1 + n], values[1 + n:])
-        row_out = (t, est.explicability, est.performance, est.trust)
+        row_out: tuple[float, ...] = (t, est.explicability, est.performance, est.trust)
+        if est.variance is not None:
+            row_out = (*row_out, est.variance)
         if not all(math.isfinite(v) for v in row_out):
             raise EstimateError(f'{path}:{line}: the estimate is not finite (E, P, trust = '
                                 f'{row_out[1]}, {row_out[2]}, {row_out[3]}); check the trust '
@@ -149,8 +162,15 @@ def check_output(out_path: Path) -> None:
         raise EstimateError(f'{out_path}: {problem}')
 
 
-def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig) -> int:
+def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig,
+                 model: TrustModel | None = None) -> int:
     """Run the trust estimator over a plans CSV and write the estimates.
+
+    Args:
+        in_path: the plans CSV.
+        out_path: the estimates CSV to write.
+        config: the shared trust parameters (eps, ``trust_model``).
+        model: the trust model (None: ``config.trust_model`` with default parameters).
 
     The output is written to a temporary file beside ``out_path`` and renamed, so a failure
     leaves no partial file.
@@ -172,14 +192,15 @@ def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig) -> int:
         if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
             raise EstimateError(f'{in_path}: not a regular file')
         try:
-            rows = _rows(in_path, handle, config)
+            rows = _rows(in_path, handle, config, model)
         except UnicodeDecodeError as err:
             raise EstimateError(f'{in_path}: not UTF-8 text (expected a CSV)') from err
         except csv.Error as err:
             raise EstimateError(f'{in_path}: not CSV text ({err})') from err
     with replacing(out_path) as (temporary,), temporary.open('w', newline='') as out:
         writer = csv.writer(out)
-        writer.writerow(['t', 'E', 'P', 'trust'])
+        writer.writerow(['t', 'E', 'P', 'trust', 'trust_variance'][:len(rows[0]) if rows
+                                                                   else 4])
         writer.writerows([[repr(v) for v in r] for r in rows])
     return len(rows)
 
@@ -187,13 +208,35 @@ def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig) -> int:
 def trust_config(params_files: Sequence[Path]) -> TrustConfig:
     """The trust monitor's configuration from the shipped file and ``params_files`` over it,
     as the ``trust_monitor`` node in namespace ``/`` gets it."""
+    return trust_setup(params_files)[0]
+
+
+def trust_setup(params_files: Sequence[Path], trust_model: str | None = None,
+                ) -> tuple[TrustConfig, TrustModel]:
+    """The trust monitor's configuration and its trust model, as the ``trust_monitor``
+    node in namespace ``/`` gets them.
+
+    Args:
+        params_files: params files over the shipped one, in order.
+        trust_model: a registered model name over the files' ``trust_model`` (None: the
+            files').
+
+    Raises:
+        ParamsError: an unknown parameter, a bad value (one line).
+        RegistryError: the model is not registered.
+    """
     layers: list[ParsedParams] = read_layers(layer_files(params_files))
     for layer in layers:
-        for section, values in layer.items():
+        for section, section_values in layer.items():
             if section.rstrip('/').rsplit('/', 1)[-1] == 'trust_monitor':
-                check_known(values, TrustConfig, WallClockConfig,
+                check_known(section_values, TrustConfig, WallClockConfig,
+                            *trust_model_config_types(),
                             where=f'{layer.where}: section {section}')
-    return build_config(TrustConfig, layered_params(layers, '/trust_monitor'))
+    values: dict[str, Any] = dict(layered_params(layers, '/trust_monitor'))
+    if trust_model is not None:
+        values['trust_model'] = trust_model
+    config = build_config(TrustConfig, values)
+    return config, make_trust_model(config, values)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -209,6 +252,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--params-file', type=Path, action='append', default=[],
                         help='ROS 2 params file over the shipped config/trust_av.yaml '
                              '(repeatable: later files over earlier ones)')
+    parser.add_argument('--trust-model', default=None,
+                        help="registered trust model, over the params files' trust_model "
+                             f'(registered: {", ".join(names(TRUST_MODELS))})')
     return parser
 
 
@@ -217,7 +263,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        count = estimate_csv(args.input, args.output, trust_config(args.params_file))
+        count = estimate_csv(args.input, args.output,
+                             *trust_setup(args.params_file, args.trust_model))
     except TrustMonitorError as err:
         print(f'trust-monitor-estimate: error: {one_line(err)}', file=sys.stderr)
         return 2

@@ -30,7 +30,7 @@ from trust_monitor.common.lockstep import StepBuffer
 from trust_monitor.common.topics import NO_FRAME
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
-from trust_monitor.ros.parameters import declare_config
+from trust_monitor.ros.parameters import declare_config, declare_trust_model
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -45,7 +45,8 @@ class MonitorNode(Node):
         self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
         self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
-        self.estimator = TrustEstimator(declare_config(self, TrustConfig))
+        trust = declare_config(self, TrustConfig)
+        self.estimator = TrustEstimator(trust, declare_trust_model(self, trust))
         self.step_s = declare_config(self, MonitorConfig).dt_s
         self.clock = declare_config(self, WallClockConfig)
         self.buffer = StepBuffer(['plan', 'expected'])

@@ -19,11 +19,12 @@ unchanged and the same drive gives the same trust at any control rate (docs/MODE
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.params import ParamsError, check_fields, param
 
 SAME_MODEL = 'the planner and the monitor must run the same trust model'
 
@@ -38,6 +39,8 @@ class TrustConfig:
             step).
         performance_threshold: P_thre of eq. (11), dimensionless in (0, 1) (paper: 0.8).
         trust_initial: T(0), trust units.
+        trust_model: the registered trust model that turns E into trust
+            (``trust_av.trust_models``; ``paper`` = eqs. 9-11 with the three values above).
     """
 
     epsilon_mps2: float = param('acceleration offset eps of eq. (8)', unit='m/s^2', low=0.0,
@@ -49,9 +52,14 @@ class TrustConfig:
                                          high=1.0, low_inclusive=False, high_inclusive=False,
                                          reason=SAME_MODEL)
     trust_initial: float = param('initial trust T(0)', reason=SAME_MODEL)
+    trust_model: str = param('registered trust model (trust_av.trust_models), e.g. paper',
+                             reason=SAME_MODEL, default='paper')
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if not re.fullmatch(r'[a-z][a-z0-9_]*', self.trust_model):
+            raise ParamsError(f'trust_model must be a registered name (a lower-case '
+                              f'identifier), got {self.trust_model!r}')
 
 
 def explicability(plan: Sequence[Any], expected: Sequence[Any], epsilon_mps2: float) -> Any:
@@ -181,20 +189,41 @@ class MonitorConfig:
 
 @dataclass(frozen=True)
 class TrustEstimate:
-    """One step of the monitor: E, P and the trust *after* the update of eq. (10)."""
+    """One step of the monitor: E, P and the trust *after* the update (eq. 10 for
+    ``paper``), with its variance when the model has one."""
 
     explicability: float
     performance: float
     trust: float
+    variance: float | None = None
 
 
 class TrustEstimator:
     """Trust state of the human follower, updated once per control step from observed plans
-    (each update scaled by the time the plan is applied for)."""
+    (each update scaled by the time the plan is applied for) by a trust model
+    (:mod:`trust_monitor.trust_interface`).
 
-    def __init__(self, config: TrustConfig) -> None:
+    Attributes:
+        model: the trust model.
+        state: its state (for the NMPC's bound); ``trust`` is its trust reading.
+    """
+
+    def __init__(self, config: TrustConfig, model: Any = None) -> None:
+        """Args:
+            config: the shared trust parameters (eps, and ``trust_model``).
+            model: the :class:`~trust_monitor.trust_interface.TrustModel` to run; None
+                builds ``config.trust_model`` with its parameters' defaults.
+        """
+        # Imported here: the registered models import this module.
+        from trust_monitor.trust_interface import make_trust_model
         self.config = config
-        self.trust = config.trust_initial
+        self.model = make_trust_model(config) if model is None else model
+        self.state = self.model.initial_state()
+
+    @property
+    def trust(self) -> float:
+        """The trust estimate now."""
+        return float(self.model.trust(self.state))
 
     def step(self, plan: Iterable[float], expected: Iterable[float],
              dt_s: float = 1.0) -> TrustEstimate:
@@ -212,5 +241,5 @@ class TrustEstimator:
             raise ValueError(f'dt_s must be finite and >= 0, got {dt_s}')
         score = float(explicability(list(plan), list(expected), self.config.epsilon_mps2))
         perf = performance(score)
-        self.trust = trust_step(self.trust, score, self.config, dt_s)
-        return TrustEstimate(score, perf, self.trust)
+        self.state = self.model.step(self.state, score, dt_s)
+        return TrustEstimate(score, perf, self.trust, self.model.variance(self.state))

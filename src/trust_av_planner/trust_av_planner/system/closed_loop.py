@@ -139,10 +139,13 @@ class ClosedLoop:
         state = initial or equilibrium_start(self.config, trace)
         self.traffic, self.av, self.human = state.traffic, state.av, state.human
         self.period_s = trace.dt_s
+        # One trust model: the monitor updates it, the NMPC's constraint propagates it.
+        trust_model = self.config.trust_model()
         self.planner = AvPlanner(self.config.planner, self.config.trust,
-                                 self.config.shared.vehicle_length_m, period_s=self.period_s)
+                                 self.config.shared.vehicle_length_m, period_s=self.period_s,
+                                 trust_model=trust_model)
         self.driver = DriverMpc(self.config.driver)
-        self.monitor = TrustEstimator(self.config.trust)
+        self.monitor = TrustEstimator(self.config.trust, trust_model)
         self.step_index = 0
 
     @property
@@ -158,7 +161,7 @@ class ClosedLoop:
         self.traffic = VehicleState(self.traffic.position_m, float(self.trace.speeds_mps[t]))
         preview = (trace_preview(self.trace, t, *self.planner.grid)
                    if c.planner.lead_preview == 'recorded' else None)
-        out = self.planner.step(self.traffic, preview, self.av, self.human, self.monitor.trust,
+        out = self.planner.step(self.traffic, preview, self.av, self.human, self.monitor.state,
                                 t_s=t * dt)
         plan, expected = out.result, out.expected_mps2
         estimate = self.monitor.step(plan.plan_mps2, expected, dt)

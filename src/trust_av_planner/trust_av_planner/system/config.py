@@ -41,6 +41,7 @@ from trust_monitor.common.params import (
 from trust_monitor.common.rcl_values import ParsedParams
 from trust_monitor.common.topics import is_topic_name
 from trust_monitor.common.wall_clock import WallClockConfig
+from trust_monitor.trust_interface import TrustModel, make_trust_model, trust_model_config_types
 from trust_monitor.trust_model import MonitorConfig, TrustConfig
 
 DEFAULT_PARAMS_FILE = shipped_params_file()
@@ -95,11 +96,15 @@ T = TypeVar('T')
 # (tests/test_node_params.py reads the nodes' declare_config calls), except the values
 # trust-av sets per run, plus SharedConfig where trust-av itself reads it (the metrics'
 # margin and the gaps of the in-process loop come from the preceding_traffic section).
+# The registered trust models' own parameters belong to the planner (its trust constraint)
+# and the monitor alike.
+TRUST_MODEL_CONFIGS = trust_model_config_types()
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
     'preceding_traffic': (TraceConfig, SharedConfig, WallClockConfig),
-    'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics),
+    'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
+                *TRUST_MODEL_CONFIGS),
     'human_driver': (DriverConfig, SharedConfig, WallClockConfig),
-    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig),
+    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig, *TRUST_MODEL_CONFIGS),
 }
 _ALL = tuple({c for comps in NODE_COMPONENTS.values() for c in comps})
 
@@ -109,7 +114,7 @@ initial state, the recorder's bag); their clock settings come from /**."""
 
 ONE_VALUE_PER_GRAPH: dict[str, str] = {
     **{f.name: 'the planner and the monitor must run the same trust model'
-       for f in dataclasses.fields(TrustConfig)},
+       for c in (TrustConfig, *TRUST_MODEL_CONFIGS) for f in dataclasses.fields(c)},
     **{f.name: 'the in-process loop and every node must see one vehicle geometry and one '
                'safety margin' for f in dataclasses.fields(SharedConfig)},
     'dt_s': 'the lock-step graph has one step',
@@ -143,6 +148,11 @@ class RunConfig:
     namespace: str = '/'
     clock: WallClockConfig = field(default_factory=WallClockConfig, compare=False)
     planner_topics: PlannerTopics = field(default_factory=PlannerTopics, compare=False)
+    trust_model_params: tuple[tuple[str, Any], ...] = ()
+
+    def trust_model(self) -> TrustModel:
+        """A fresh instance of the trust model ``trust.trust_model`` with its parameters."""
+        return make_trust_model(self.trust, dict(self.trust_model_params))
 
     @property
     def min_safe_gap_m(self) -> float:
@@ -240,6 +250,12 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         for component in components:
             built[node, component] = _build(component, params)
     check_one_value_per_graph(built, sources)
+    trust: TrustConfig = built['trust_monitor', TrustConfig]
+    model_params = tuple((f.name, getattr(config, f.name))
+                         for (node, kind), config in built.items()
+                         if node == 'trust_monitor' and kind in TRUST_MODEL_CONFIGS
+                         for f in dataclasses.fields(config))
+    make_trust_model(trust, dict(model_params))  # an unregistered name: refused here
     planner: PlannerConfig = built['planner', PlannerConfig]
     clock: WallClockConfig = built['planner', WallClockConfig]
     if clock.wall:
@@ -251,7 +267,8 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         trace=built['preceding_traffic', TraceConfig],
         planner=planner,
         driver=built['human_driver', DriverConfig],
-        trust=built['trust_monitor', TrustConfig],
+        trust=trust,
+        trust_model_params=model_params,
         params_files=paths,
         namespace=namespace,
     )

@@ -161,3 +161,27 @@ def check_overrides(node: Node) -> None:
         raise ParamsError(f'{node.get_fully_qualified_name()}: unknown parameter(s) '
                           f'{", ".join(unknown)} (not a parameter of this node or of any node '
                           'of the graph)')
+
+
+def declare_trust_model(node: Node, trust: Any) -> Any:
+    """The trust model ``trust.trust_model`` names, its own parameters declared on ``node``
+    like any other (:mod:`trust_monitor.trust_interface`).
+
+    Args:
+        node: the node (planner or monitor: both run the same model).
+        trust: the node's :class:`~trust_monitor.trust_model.TrustConfig`.
+
+    Raises:
+        RegistryError: the model is not registered (one line).
+        ParamsError: a parameter of the model is refused.
+    """
+    from trust_monitor.trust_interface import TrustModel, trust_model_component
+
+    component = trust_model_component(trust.trust_model)
+    params = (None if component.config_type is None
+              else declare_config(node, component.config_type))
+    model = component.factory(trust, params)
+    if not isinstance(model, TrustModel):
+        raise ParamsError(f'trust model {component.name!r}: its factory returned a '
+                          f'{type(model).__name__}, not a TrustModel')
+    return model

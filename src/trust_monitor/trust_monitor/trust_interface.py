@@ -1,0 +1,207 @@
+"""The trust-model interface: one update rule that the monitor, the NMPC and the tables share.
+
+A trust model turns the explicability score E of each applied plan (eq. 8, scored by
+:func:`trust_monitor.trust_model.explicability`) into a trust estimate. Everything here is
+pure (no ROS, no wall clock, no randomness).
+
+**Per-second rule.** :meth:`TrustModel.step` advances the state over ``dt_s`` seconds during
+which a plan with score E is applied. It must be *time-consistent*: ten steps of 0.1 s with
+the same E give the state of one 1 s step (within rounding), and one 1 s step is the model's
+own discrete equation (the paper's eq. (10) for ``paper``). ``tests/test_trust_model_contract.py``
+holds every registered model to it.
+
+**What the NMPC needs.** The trust constraint of eq. (12), ``T^k >= T_min`` for k = 1..N on
+the NMPC's grid, depends on the plan only through E (the plan is scored once and its E
+is assumed kept over the horizon, as in the paper). :func:`numeric_bound` derives the
+largest admissible E *from the update itself*: it propagates :meth:`TrustModel.step` over
+the horizon and bisects over E in [0, 1]. A model may give a closed form
+(:attr:`TrustModel.closed_form_bound`, not None); the NMPC then uses it and the contract test
+holds it to the numeric one.
+
+**Monotonicity (assumed, checked by the contract test).** Bisection needs the admissible set
+to be an interval ``[0, E_max]``: trust after a step must not increase with E. Every
+shipped model satisfies this (the performance P = 1 - tanh E falls with E and each update
+is non-decreasing in P); the contract test checks it on a grid for every registered
+model, including plug-ins.
+
+**Registration.** A model is a :class:`trust_monitor.common.registry.Component` in the
+entry-point group ``trust_av.trust_models``; its ``factory(trust, params)`` takes the shared
+:class:`~trust_monitor.trust_model.TrustConfig` (eps, the paper's delta, P_thre, T(0)) and
+an instance of its own ``config_type`` (None when it has none) and returns a
+:class:`TrustModel`. A model's own parameters are fields of its ``config_type`` whose names
+start with the model's name (``asymmetric_loss_ratio``), declared as ROS parameters like
+every other (``docs/concepts/trust-models.md``).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol, runtime_checkable
+
+from trust_monitor.common.params import ParamsError, build_config
+from trust_monitor.common.registry import TRUST_MODELS, Component, components, get
+
+BOUND_TOLERANCE = 1e-12
+"""Bisection stops when the bracket of E_max is this narrow (E is dimensionless, < 1)."""
+
+ClosedForm = Callable[[Any, float, int, float], 'float | None']
+
+
+@runtime_checkable
+class TrustModel(Protocol):
+    """A trust model: a state, its per-second update and its readings.
+
+    Attributes:
+        name: the registered name.
+        closed_form_bound: None, or a function ``(state, trust_min, steps, dt_s)`` giving
+            what :func:`numeric_bound` computes, in closed form (None: no plan is
+            admissible; ``>= 1``: no restriction).
+
+    Optional: a class attribute ``paper_bound_holds = True`` declares that the model runs
+    eqs. (9)-(11) with the shared parameters (:func:`paper_bound_holds`).
+    """
+
+    name: str
+    closed_form_bound: ClosedForm | None
+
+    def initial_state(self) -> Any:
+        """The state before the first update (immutable: a float or a frozen dataclass)."""
+
+    def step(self, state: Any, score: float, dt_s: float) -> Any:
+        """The state after a plan with explicability ``score`` is applied for ``dt_s`` s.
+
+        Args:
+            state: the state before (not modified).
+            score: explicability E of the applied plan, dimensionless, in [0, 1].
+            dt_s: elapsed time, s (>= 0).
+        """
+
+    def trust(self, state: Any) -> float:
+        """The trust estimate of ``state``, in the model's own trust units."""
+
+    def variance(self, state: Any) -> float | None:
+        """The variance of the trust estimate (trust units squared), None if the model
+        has no uncertainty."""
+
+
+def propagate(model: TrustModel, state: Any, score: float, steps: int,
+              dt_s: float) -> list[float]:
+    """Trust after each of ``steps`` steps of ``dt_s`` if a plan with score E were kept.
+
+    Args:
+        model: the trust model.
+        state: the state now.
+        score: E kept over the horizon.
+        steps: horizon length N in steps.
+        dt_s: step of the horizon, s.
+
+    Returns:
+        T^1..T^N.
+    """
+    out = []
+    for _ in range(steps):
+        state = model.step(state, score, dt_s)
+        out.append(model.trust(state))
+    return out
+
+
+def admissible(model: TrustModel, state: Any, score: float, trust_min: float, steps: int,
+               dt_s: float) -> bool:
+    """Whether keeping E = ``score`` keeps every propagated T^k >= ``trust_min``."""
+    return min(propagate(model, state, score, steps, dt_s)) >= trust_min
+
+
+def numeric_bound(model: TrustModel, state: Any, trust_min: float, steps: int,
+                  dt_s: float) -> float | None:
+    """Largest E whose propagated trust stays >= ``trust_min`` over the horizon, by
+    bisection on the model's own update (monotone in E: see the module docstring).
+
+    Args:
+        model: the trust model.
+        state: its state now.
+        trust_min: T_min of eq. (12), trust units.
+        steps: horizon N in steps (>= 1).
+        dt_s: the horizon's step, s (> 0).
+
+    Returns:
+        An admissible E_max (the lower end of the final bracket, so the propagated update
+        at the returned value satisfies the constraint); ``math.inf`` when E = 1 is
+        admissible (no restriction, E < 1 always); None when not even E = 0 is.
+
+    Raises:
+        ValueError: ``steps`` < 1 or ``dt_s`` <= 0.
+    """
+    if steps < 1 or not dt_s > 0.0:
+        raise ValueError(f'need steps >= 1 and dt_s > 0, got {steps} and {dt_s}')
+    if not admissible(model, state, 0.0, trust_min, steps, dt_s):
+        return None
+    if admissible(model, state, 1.0, trust_min, steps, dt_s):
+        return math.inf
+    low, high = 0.0, 1.0
+    while high - low > BOUND_TOLERANCE:
+        mid = 0.5 * (low + high)
+        if admissible(model, state, mid, trust_min, steps, dt_s):
+            low = mid
+        else:
+            high = mid
+    return low
+
+
+def explicability_bound(model: TrustModel, state: Any, trust_min: float, steps: int,
+                        dt_s: float) -> float | None:
+    """What the NMPC's trust constraint uses: the model's closed form when it gives one,
+    else :func:`numeric_bound` (same arguments and meaning)."""
+    if model.closed_form_bound is not None:
+        return model.closed_form_bound(state, trust_min, steps, dt_s)
+    return numeric_bound(model, state, trust_min, steps, dt_s)
+
+
+def paper_bound_holds(model: TrustModel) -> bool:
+    """Whether ``model`` declares that it runs eqs. (9)-(11) with the shared
+    :class:`~trust_monitor.trust_model.TrustConfig` (class attribute
+    ``paper_bound_holds = True``): the final-trust bound of :mod:`trust_monitor.trust_bound`
+    and the tables' column built on it hold only then."""
+    return getattr(model, 'paper_bound_holds', False) is True
+
+
+@functools.cache
+def trust_model_component(name: str) -> Component:
+    """The registered trust model ``name`` (looked up once per process: a scan of the
+    installed distributions' entry points takes about 0.1-0.3 s).
+
+    Raises:
+        RegistryError: not registered (one line listing the registered names).
+    """
+    return get(TRUST_MODELS, name)
+
+
+@functools.cache
+def trust_model_config_types() -> tuple[type, ...]:
+    """The ``config_type`` of every registered trust model (their parameters are known
+    names in params files whichever model runs); looked up once per process."""
+    return tuple(c.config_type for c in components(TRUST_MODELS) if c.config_type is not None)
+
+
+def make_trust_model(trust: Any, values: Mapping[str, Any] | None = None) -> TrustModel:
+    """Build the model that ``trust.trust_model`` names.
+
+    Args:
+        trust: the shared :class:`~trust_monitor.trust_model.TrustConfig`.
+        values: parameter name to value for the model's own ``config_type`` (missing
+            names take the dataclass defaults); ignored keys belong to other components.
+
+    Raises:
+        RegistryError: the model is not registered.
+        ParamsError: a parameter of the model has a wrong type or is out of range.
+    """
+    component = trust_model_component(trust.trust_model)
+    params: Any = None
+    if component.config_type is not None:
+        params = build_config(component.config_type, dict(values or {}))
+    model = component.factory(trust, params)
+    if not isinstance(model, TrustModel):
+        raise ParamsError(f'trust model {component.name!r}: its factory returned a '
+                          f'{type(model).__name__}, not a TrustModel')
+    return model
