@@ -43,7 +43,9 @@ def test_batch_driver_equals_driver_mpc() -> None:
     rng = np.random.default_rng(7)
     for config in (CONFIG, dataclasses.replace(CONFIG, time_headway_s=0.6,
                                                desired_standstill_gap_m=8.0,
-                                               weight_relative_distance=0.4)):
+                                               weight_relative_distance=0.4),
+                   dataclasses.replace(CONFIG, cautious=False, av_extra_decel_mps2=0.0),
+                   dataclasses.replace(CONFIG, cautious=False, av_extra_decel_mps2=1.7)):
         count = 150
         speed = rng.uniform(0.0, 35.0, count)
         gap = rng.uniform(2.0, 70.0, count)   # some start below d_s: the constraint binds
