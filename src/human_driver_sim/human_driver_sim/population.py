@@ -37,6 +37,9 @@ def sample_population(per_pair_weights: np.ndarray, count: int, *, seed: int) ->
 
 DRIVER_FIT_FILE = Path(__file__).parent / 'models' / 'driver_fit.yaml'
 """The shipped fit of ``trust-av fit-driver`` (weights with provenance, docs/DRIVER_IRL.md)."""
+FITTED_CAUTION_FIT_FILE = Path(__file__).parent / 'models' / 'driver_fit_caution.yaml'
+"""The fit of the driver with a fitted caution (``trust-av fit-driver``; the profile
+config/human_fitted.yaml; docs/DRIVER_IRL.md)."""
 WEIGHT_NAMES = ('weight_acceleration', 'weight_desired_speed', 'weight_relative_speed',
                 'weight_relative_distance')
 """Driver-MPC parameter names of W, in the order of the weight vectors."""
