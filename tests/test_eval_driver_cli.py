@@ -84,10 +84,11 @@ def test_fit_driver_writes_fit_and_evaluation(tmp_path: Path,
     assert fit['pooled']['weight_acceleration'] == 1.0
     assert 0.0 <= fit['pooled']['av_extra_decel_mps2'] <= 3.0
     # Selected on validation: the candidate with the lowest validation loss.
-    candidates = ('MPC cautious', 'MPC fitted caution', 'MPC fitted caution, a_extra = 0')
+    candidates = ('MPC params file (cautious)', 'MPC fitted caution',
+                  'MPC fitted caution, a_extra = 0')
     assert fit['selected'] == min(candidates, key=lambda m: fit['validation_loss'][m]['mean'])
-    assert fit['pooled']['cautious'] == (fit['selected'] == 'MPC cautious')
-    assert set(fit['fits']) == {'MPC cautious', 'MPC fitted caution',
+    assert fit['pooled']['cautious'] == (fit['selected'] == candidates[0])
+    assert set(fit['fits']) == {'MPC fitted caution',
                                 'driver JRC-VC_280219:Car2', 'driver JRC-VC_280219:Car3'}
     assert set(fit['per_driver']) == {'JRC-VC_280219:Car2', 'JRC-VC_280219:Car3'}
     assert fit['idm']['comfort_decel_mps2'] <= 4.0 and fit['idm']['min_gap_m'] >= 1.0
