@@ -12,7 +12,8 @@ from synthetic_car_following import write_ngsim_chain, write_openacc
 from human_driver_sim.fitting import MPC_BOUNDS
 from trust_av_planner.cli.main import main
 
-MODELS = ('driver MPC (params file)', 'IDM, bounded fit', 'IDM, textbook motorway',
+MODELS = ('driver MPC (params file)', 'driver MPC, fitted caution (human_fitted.yaml)',
+          'IDM, bounded fit', 'IDM, textbook motorway',
           'constant speed', 'recorded speed (noise floor)')
 
 
