@@ -221,7 +221,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--drivers-seed', type=int, default=1,
                         help='seed of the driver population (default: %(default)s)')
     parser.add_argument('--driver-fit', type=Path, default=DRIVER_FIT_FILE,
-                        help='driver-fit file with per-pair weights (default: the shipped fit, '
+                        help='driver-fit file: its per-driver fits, or else its per-pair '
+                             'weights, are the population source (default: the shipped fit, '
                              'human_driver_sim/models/driver_fit.yaml)')
     parser.add_argument('--profile', choices=tuple(PROFILES), default='table_i',
                         help="which parameters: table_i = the paper's Table I (epsilon 6, "
