@@ -263,3 +263,25 @@ def test_mpc_fit_recovers_the_fitted_caution() -> None:
     assert found.params['time_headway_s'] == pytest.approx(0.6, abs=0.12), found.params
     assert found.loss < 0.03
     assert 0.0 <= found.params['av_extra_decel_mps2'] <= 3.0
+
+
+def test_splits_cut_openacc_in_time_and_ngsim_by_follower() -> None:
+    from human_driver_sim.splits import cut_in_time, ngsim_role, split_openacc
+    t = np.arange(11.0)
+    pair = FollowingPair('JRC-VC_280219_part2:1->2', 1.0, t + 20.0, t + 19.0, t + 30.0,
+                         start_s=5.0)
+    first, rest = cut_in_time(pair, 0.7)
+    assert list(first.gap_m) == list(pair.gap_m[:8]) and list(rest.gap_m) == list(pair.gap_m[7:])
+    assert (first.start_s, rest.start_s) == (5.0, 12.0) and rest.key == pair.key
+    with pytest.raises(ValueError, match='cannot be cut'):
+        cut_in_time(dataclasses.replace(pair, gap_m=t[:2]), 0.7)
+    test = dataclasses.replace(pair, name='JRC-VC_280219_part3:1->2')
+    split = split_openacc([pair, test])
+    assert [len(p.gap_m) for p in split.train + split.validation] == [8, 4]
+    assert split.test == [test]
+    with pytest.raises(CarFollowingDataError, match='part3'):
+        split_openacc([pair])
+    assert [ngsim_role(f'ngsim:{i}') for i in (4, 6, 7, 8)] == ['train', 'validation', 'test',
+                                                                 'train']
+    with pytest.raises(CarFollowingDataError, match='not an NGSIM vehicle ID'):
+        ngsim_role('JRC:Ford')
