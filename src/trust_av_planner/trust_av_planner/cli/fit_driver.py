@@ -135,8 +135,8 @@ def _load(args: argparse.Namespace, dt_s: float) -> tuple[dict[str, Split], dict
         report = LoadReport()
         splits['openacc'] = split_openacc(load_directory(args.data, 'openacc', dt_s=dt_s,
                                                          report=report))
-        cleaning['openacc'] = {'files': report.files, 'splices': [vars(s) for s in
-                                                                  report.splices]}
+        cleaning['openacc'] = {'files': [Path(f).name for f in report.files],
+                               'splices': [vars(s) for s in report.splices]}
         if args.ngsim is not None:
             report = LoadReport()
             splits['ngsim'] = split_ngsim(load_directory(args.ngsim, 'ngsim', dt_s=dt_s,
@@ -243,7 +243,7 @@ def run(args: argparse.Namespace) -> int:
     fit_time_s = time.perf_counter() - started
     document = {
         'provenance': {
-            'data': [str(args.data)] + ([str(args.ngsim)] if args.ngsim is not None else []),
+            'data': [args.data.name] + ([args.ngsim.name] if args.ngsim is not None else []),
             'split': 'OpenACC: part2 first 70 % of each segment train, the rest validation, '
                      'part3 test; NGSIM by follower ID: 0 mod 4 train, 2 mod 4 validation, '
                      'odd test. Candidates and the IDM fitted on train, the model selected '
