@@ -122,3 +122,22 @@ def test_golden_metrics() -> None:
     metrics = vars(closed_loop('us06', 0.5).metrics)
     for key, value in golden.items():
         assert metrics[key] == pytest.approx(value, rel=1e-7, abs=1e-9), key
+
+
+def test_fitted_caution_profile_follows_closer_and_the_av_keeps_d_s(run_config) -> None:
+    """The profile config/human_fitted.yaml (docs/DRIVER_IRL.md, "Closed-loop safety") on
+    NYCC, TAC-CA, alpha = 0 (where the AV departs most from the plan the human expects): the
+    human, planning its bound against the expected braking only, comes below d_s (measured
+    4.956 m; the cautious shipped driver keeps 5.000 m) and falls back to hard braking more
+    often (measured 72 steps), while the AV's own gap never goes below d_s."""
+    from trust_av_planner.system.closed_loop import simulate
+    from trust_av_planner.system.config import HUMAN_FITTED_PARAMS_FILE, load_run_config
+    config = load_run_config(HUMAN_FITTED_PARAMS_FILE,
+                             {'planner': {'alpha': 0.0, 'predictor': 'ca'}})
+    assert not config.driver.cautious
+    metrics = simulate(config, shipped_trace('nycc')).metrics
+    d_s = run_config.planner.standstill_gap_m
+    assert metrics.min_av_gap_m >= d_s - BOUND_TOLERANCE
+    assert run_config.min_safe_gap_m <= metrics.min_human_gap_m < d_s - 0.01
+    assert metrics.driver_fallback_steps > MAX_FALLBACK_STEPS
+    assert metrics.unsafe_steps == 0

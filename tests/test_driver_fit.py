@@ -43,7 +43,9 @@ def test_batch_driver_equals_driver_mpc() -> None:
     rng = np.random.default_rng(7)
     for config in (CONFIG, dataclasses.replace(CONFIG, time_headway_s=0.6,
                                                desired_standstill_gap_m=8.0,
-                                               weight_relative_distance=0.4)):
+                                               weight_relative_distance=0.4),
+                   dataclasses.replace(CONFIG, cautious=False, av_extra_decel_mps2=0.0),
+                   dataclasses.replace(CONFIG, cautious=False, av_extra_decel_mps2=1.7)):
         count = 150
         speed = rng.uniform(0.0, 35.0, count)
         gap = rng.uniform(2.0, 70.0, count)   # some start below d_s: the constraint binds
@@ -221,3 +223,65 @@ def test_shared_data_cleaned_as_documented() -> None:
     assert len({p.key for p in ngsim}) == 135 and len(ngsim_report.excluded) == 3
     floor = evaluate({}, openacc, protocols=('full',)).pooled('full', NOISE_FLOOR)
     assert floor['gap_nrmse'] < 0.05
+
+
+def test_mpc_fit_recovers_the_fitted_caution() -> None:
+    """Demonstrations by a driver whose gap bound allows for the AV braking 1.5 m/s^2 beyond
+    its expected plan (not cautious); the fit starts at 0.3 and 2.5 m/s^2 and finds it.
+
+    Close following at low speed (tau_H 0.6 s, d_s 5 m) so that the bound binds on most
+    steps: a caution the bound never meets cannot be told from the data."""
+    truth = dataclasses.replace(CONFIG, cautious=False, av_extra_decel_mps2=1.5,
+                                time_headway_s=0.6, desired_standstill_gap_m=5.0,
+                                weight_relative_distance=0.3)
+    pairs = []
+    t = np.arange(120.0)
+    for n, base in enumerate((3.0, 10.0)):
+        lead = np.maximum(0.0, base + 4.0 * np.sin(t / 7.0 + n) + 2.5 * np.sin(t / 3.0))
+        seed = FollowingPair('s', 1.0, lead, np.full(t.size, base),
+                             np.full(t.size, 0.6 * base + 6.0), pair_key=f'p{n}')
+        gap, speed = simulate(MpcFollower(truth), make_runs([seed], 'full'))[0]
+        pairs.append(FollowingPair(f'p{n}', 1.0, lead, speed, gap, pair_key=f'p{n}'))
+    runs = make_runs(pairs, 'window')
+
+    def loss(extra: float) -> float:
+        model = MpcFollower(dataclasses.replace(truth, av_extra_decel_mps2=extra))
+        return evaluate({'m': model}, pairs).pooled('window', 'm')['gap_nrmse']
+
+    # The caution shows in the data: a wrong one scores worse with every other value true.
+    assert loss(1.5) < 1e-9
+    assert min(loss(0.0), loss(3.0)) > 0.05
+    start = {'weight_desired_speed': 0.01, 'weight_relative_speed': 0.5,
+             'weight_relative_distance': 0.1, 'time_headway_s': 1.2,
+             'desired_standstill_gap_m': 7.0, 'av_extra_decel_mps2': 0.3}
+    other = {**start, 'time_headway_s': 0.9, 'av_extra_decel_mps2': 2.5}
+    # 50 iterations per start (measured: a_extra 1.527, tau_H 0.527 s, loss 0.021; with
+    # three pairs and 80 iterations 1.510, 0.575 s, 0.015).
+    found = fit_mpc(dataclasses.replace(CONFIG, cautious=False), [runs],
+                    starts=[start, other], iterations=50)
+    assert found.params['av_extra_decel_mps2'] == pytest.approx(1.5, abs=0.15), found.params
+    assert found.params['time_headway_s'] == pytest.approx(0.6, abs=0.12), found.params
+    assert found.loss < 0.03
+    assert 0.0 <= found.params['av_extra_decel_mps2'] <= 3.0
+
+
+def test_splits_cut_openacc_in_time_and_ngsim_by_follower() -> None:
+    from human_driver_sim.splits import cut_in_time, ngsim_role, split_openacc
+    t = np.arange(11.0)
+    pair = FollowingPair('JRC-VC_280219_part2:1->2', 1.0, t + 20.0, t + 19.0, t + 30.0,
+                         start_s=5.0)
+    first, rest = cut_in_time(pair, 0.7)
+    assert list(first.gap_m) == list(pair.gap_m[:8]) and list(rest.gap_m) == list(pair.gap_m[7:])
+    assert (first.start_s, rest.start_s) == (5.0, 12.0) and rest.key == pair.key
+    with pytest.raises(ValueError, match='cannot be cut'):
+        cut_in_time(dataclasses.replace(pair, gap_m=t[:2]), 0.7)
+    test = dataclasses.replace(pair, name='JRC-VC_280219_part3:1->2')
+    split = split_openacc([pair, test])
+    assert [len(p.gap_m) for p in split.train + split.validation] == [8, 4]
+    assert split.test == [test]
+    with pytest.raises(CarFollowingDataError, match='part3'):
+        split_openacc([pair])
+    assert [ngsim_role(f'ngsim:{i}') for i in (4, 6, 7, 8)] == ['train', 'validation', 'test',
+                                                                 'train']
+    with pytest.raises(CarFollowingDataError, match='not an NGSIM vehicle ID'):
+        ngsim_role('JRC:Ford')

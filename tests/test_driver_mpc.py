@@ -102,6 +102,36 @@ def test_cautious_av_speeds_by_hand(run_config) -> None:
         [10, 10, 9])
 
 
+def test_fitted_caution_av_speeds_by_hand(run_config) -> None:
+    # Not cautious: the AV at min(expected, 0) - a_extra, whatever assumed_av_accel_min says.
+    mpc = DriverMpc(safety_config(run_config, cautious=False, av_extra_decel_mps2=0.5))
+    # Expected (1, -4, x) from 10 m/s: accelerations (-0.5, -4.5): 10, 9.5, 5.
+    assert mpc.cautious_av_speeds(10.0, np.array([1.0, -4.0, 0.5])) == pytest.approx(
+        [10, 9.5, 5])
+    # a_extra = 0: the expected plan's braking only (the ablation of docs/DRIVER_IRL.md).
+    plain = DriverMpc(safety_config(run_config, cautious=False, av_extra_decel_mps2=0.0))
+    assert plain.cautious_av_speeds(10.0, np.array([1.0, -1.0, 0.5])) == pytest.approx(
+        [10, 10, 9])
+    # The shipped driver is the cautious one, and cautious ignores a_extra.
+    assert run_config.driver.cautious
+    worst = DriverMpc(safety_config(run_config, av_extra_decel_mps2=2.0))
+    assert worst.cautious_av_speeds(10.0, np.array([1.0, -4.0, 0.5])) == pytest.approx(
+        [10, 7, 3])
+
+
+def test_fitted_caution_sets_how_close_the_human_follows(run_config) -> None:
+    # Both at 20 m/s, 7 m apart, the AV expected to hold its speed: d^2 = 7 + (20 - a_extra
+    # - 20 - u_0) >= 5 needs u_0 <= 2 - a_extra. a_extra = 0 leaves the driver free; 2.5
+    # makes it brake at least 0.5 m/s^2.
+    free = DriverMpc(safety_config(run_config, cautious=False, av_extra_decel_mps2=0.0))
+    careful = DriverMpc(safety_config(run_config, cautious=False, av_extra_decel_mps2=2.5))
+    u_free = free.step(7.0, 20.0, 20.0, np.zeros(3)).plan_mps2[0]
+    u_careful = careful.step(7.0, 20.0, 20.0, np.zeros(3))
+    assert u_careful.success, u_careful.status
+    assert u_careful.plan_mps2[0] <= -0.5 + 1e-6
+    assert u_free > u_careful.plan_mps2[0] + 0.1
+
+
 def test_gap_bound_holds_against_an_av_braking_harder_than_expected(run_config) -> None:
     # Both at 20 m/s, 7 m apart; the human expects the AV to hold its speed. If the AV brakes
     # at -3 m/s^2 instead, d^2 = 7 + (17 - 20 - u_0) >= d_s = 5 needs u_0 <= -1 m/s^2, while

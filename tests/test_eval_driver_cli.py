@@ -12,7 +12,8 @@ from synthetic_car_following import write_ngsim_chain, write_openacc
 from human_driver_sim.fitting import MPC_BOUNDS
 from trust_av_planner.cli.main import main
 
-MODELS = ('driver MPC (params file)', 'IDM, bounded fit', 'IDM, textbook motorway',
+MODELS = ('driver MPC (params file)', 'driver MPC, fitted caution (human_fitted.yaml)',
+          'IDM, bounded fit', 'IDM, textbook motorway',
           'constant speed', 'recorded speed (noise floor)')
 
 
@@ -82,16 +83,24 @@ def test_fit_driver_writes_fit_and_evaluation(tmp_path: Path,
     for name, (lo, hi) in MPC_BOUNDS.items():
         assert lo <= fit['pooled'][name] <= hi
     assert fit['pooled']['weight_acceleration'] == 1.0
-    assert set(fit['fits']) == {'pooled', 'openacc', 'ngsim', 'driver JRC-VC_280219:Car2',
-                                'driver JRC-VC_280219:Car3', 'without JRC-VC_280219:Car2',
-                                'without JRC-VC_280219:Car3'}
+    assert 0.0 <= fit['pooled']['av_extra_decel_mps2'] <= 3.0
+    # Selected on validation: the candidate with the lowest validation loss.
+    candidates = ('MPC params file (cautious)', 'MPC fitted caution',
+                  'MPC fitted caution, a_extra = 0')
+    assert fit['selected'] == min(candidates, key=lambda m: fit['validation_loss'][m]['mean'])
+    assert fit['pooled']['cautious'] == (fit['selected'] == candidates[0])
+    assert set(fit['fits']) == {'MPC fitted caution',
+                                'driver JRC-VC_280219:Car2', 'driver JRC-VC_280219:Car3'}
+    assert set(fit['per_driver']) == {'JRC-VC_280219:Car2', 'JRC-VC_280219:Car3'}
     assert fit['idm']['comfort_decel_mps2'] <= 4.0 and fit['idm']['min_gap_m'] >= 1.0
     assert len(fit['per_pair_inverse_kkt']) == 2
     evaluation = json.loads((tmp_path / 'fit' / 'driver_fit_eval.json').read_text())
-    assert set(evaluation['target']) == {'openacc held out', 'ngsim held out'}
-    assert set(evaluation['sets']) == {'openacc held out', 'ngsim held out', 'openacc fit',
-                                       'ngsim fit'}
-    assert set(evaluation['per_driver_openacc_held_out']['JRC-VC_280219:Car2']['window']) == {
-        'recorded speed (noise floor)', 'MPC', 'IDM (bounded)', 'MPC without this driver',
-        'IDM without this driver', 'MPC pooled (shipped)'}
-    assert 'target openacc held out window' in capsys.readouterr().out
+    assert set(evaluation['target']) == {'openacc test', 'ngsim test'}
+    assert set(evaluation['sets']) == {'openacc test', 'ngsim test'}
+    # The three NGSIM roles hold disjoint followers: 4 trains, 2 validates, 3 and 5 test.
+    roles = evaluation['split_pairs']['ngsim']
+    assert [len(roles[r]) for r in ('train', 'validation', 'test')] == [1, 1, 2]
+    assert roles['train'][0].endswith('->4') and roles['validation'][0].endswith('->2')
+    target = evaluation['target']['ngsim test']['window']
+    assert target['paired_difference']['pairs'] == 2
+    assert 'target openacc test window' in capsys.readouterr().out

@@ -62,3 +62,28 @@ def test_params_file_driver_is_the_pooled_fit() -> None:
     driver = load_run_config().driver
     for name in (*WEIGHT_NAMES, 'time_headway_s', 'desired_standstill_gap_m'):
         assert getattr(driver, name) == pooled[name], name
+
+
+def test_fitted_caution_file_picked_on_validation_and_its_test_target() -> None:
+    """driver_fit_caution.yaml (the profile's source): the model with the lowest validation
+    loss is the one picked, and its evaluation's test target (docs/DRIVER_IRL.md, Summary)
+    is what the docs report: at most 0.9 x the best IDM on both test sets, no collision."""
+    import json
+
+    import yaml
+
+    from human_driver_sim.population import FITTED_CAUTION_FIT_FILE
+    fit = yaml.safe_load(FITTED_CAUTION_FIT_FILE.read_text())
+    losses = {m: v['mean'] for m, v in fit['validation_loss'].items() if m.startswith('MPC')}
+    assert fit['selected'] == min(losses, key=losses.__getitem__)
+    evaluation = json.loads(FITTED_CAUTION_FIT_FILE.with_name(
+        FITTED_CAUTION_FIT_FILE.stem + '_eval.json').read_text())
+    assert set(evaluation['target']) == {'openacc test', 'ngsim test'}
+    for by_protocol in evaluation['target'].values():
+        for target in by_protocol.values():
+            assert target['model'] == fit['selected']
+            assert target['met'] and target['ratio'] <= 0.9
+            assert target['mpc_collisions'] == 0 and target['mpc_steps_below_2m'] == 0
+    ngsim = evaluation['target']['ngsim test']['window']
+    assert round(ngsim['ratio'], 2) == 0.83
+    assert ngsim['paired_difference']['mean'] + ngsim['paired_difference']['ci95'] < 0.0

@@ -245,3 +245,25 @@ def test_reproduce_with_a_driver_population(tmp_path: Path) -> None:
                           '--drivers', '-1', '--results-dir', str(tmp_path)],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and '--drivers must be >= 0, got -1' in bad.stderr
+
+
+def test_human_fitted_profile_population_draws_from_its_per_driver_fits(tmp_path: Path) -> None:
+    """``--profile human_fitted --drivers K``: the fitted-caution driver, and K drivers drawn
+    from the per-driver fits of driver_fit_caution.yaml (d_s and a_extra per driver too)."""
+    import yaml
+
+    from human_driver_sim.population import FITTED_CAUTION_FIT_FILE, sample_driver_params
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+                           '--profile', 'human_fitted', '--traces', 'nycc', '--predictors',
+                           'ca', '--drivers', '2', '--max-steps', '15', '--results-dir',
+                           str(tmp_path), '--no-progress', '--workers', '2'],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rows = [r.split(',') for r in (tmp_path / 'all_runs.csv').read_text().splitlines()]
+    header = rows[0]
+    per_driver = list(yaml.safe_load(FITTED_CAUTION_FIT_FILE.read_text())['per_driver'].values())
+    drawn = sample_driver_params(per_driver, 2, seed=1)
+    for row in rows[1:]:
+        driver = drawn[int(row[header.index('driver')]) - 1]
+        for name in ('desired_standstill_gap_m', 'av_extra_decel_mps2', 'time_headway_s'):
+            assert float(row[header.index(name)]) == pytest.approx(driver[name]), name

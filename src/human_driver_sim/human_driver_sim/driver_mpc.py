@@ -13,9 +13,15 @@ subject to ``v_min <= v_H^k <= v_max``, ``u_min <= u_H <= u_max`` and the HARD g
 ``d_H^k >= d_s`` (eq. 13) for k = 2..N: the next gap d_H^1 follows from today's speeds and
 no plan can change it, so the bound applies from the first step the plan acts on. For the
 gap bound (only; the cost keeps the expected plan) the human allows for the AV braking
-harder than expected: it predicts the AV at min(u_R^H,k, ``assumed_av_accel_min_mps2``)
-at every step (the AV's braking bound, as in Gipps' 1981 car-following model), the AV's
-speed never below 0. When no plan meets the bound (even the hardest braking plan does
+harder than expected, in one of two ways (:meth:`DriverMpc.bound_av_accels`):
+
+* ``cautious`` (the worst case): the AV at min(u_R^H,k, ``assumed_av_accel_min_mps2``) at
+  every step (the AV's braking bound, as in Gipps' 1981 car-following model);
+* fitted caution: the AV at min(u_R^H,k, 0) - ``av_extra_decel_mps2`` (a_extra >= 0, fitted
+  to human drivers, docs/DRIVER_IRL.md): the expected plan's braking, never its
+  acceleration, plus a margin the human keeps for the unexpected;
+
+the AV's speed never below 0. When no plan meets the bound (even the hardest braking plan does
 not), the human brakes as hard as it can and the step counts as a driver fallback
 (docs/MODEL.md, "The human's safety gap").
 """
@@ -51,6 +57,10 @@ class DriverConfig:
         assumed_av_accel_min_mps2: for the gap bound d_H^k >= d_s the human predicts the AV
             at min(expected acceleration, this) at every step: the AV may brake this hard
             whatever the human expects, m/s^2 (<= 0; Table I's u_R,min = -3 by default).
+            Used when ``cautious``.
+        cautious: True, the worst-case bound above; False, the fitted caution.
+        av_extra_decel_mps2: a_extra >= 0, m/s^2: with ``cautious`` False the gap bound
+            predicts the AV at min(expected, 0) - a_extra at every step.
     """
 
     dt_s: float = control_step_param()
@@ -83,6 +93,13 @@ class DriverConfig:
         "the AV's braking the human allows for in its gap bound: it plans d_H >= d_s against "
         "the AV at min(expected, this) at every step (Gipps 1981); the AV's u_R,min",
         unit='m/s^2', high=0.0, default=-3.0)
+    cautious: bool = param(
+        'true: the gap bound assumes the AV brakes at min(expected, assumed_av_accel_min_mps2) '
+        '(the worst case, never below d_s); false: at min(expected, 0) - av_extra_decel_mps2 '
+        '(the fitted caution of a human driver)', default=True)
+    av_extra_decel_mps2: float = param(
+        "fitted caution a_extra: with cautious false, the braking beyond the expected plan's "
+        "that the human's gap bound allows for", unit='m/s^2', low=0.0, high=6.0, default=0.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -118,6 +135,22 @@ def features(gap_m: Any, speed_mps: Any, av_speed_mps: Any, accels_mps2: Sequenc
     f_rd = sum((d - standstill_gap_m - time_headway_s * v) ** 2
                for d, v in zip(gaps, speeds, strict=True))
     return [f_a, f_ds, f_rs, f_rd]
+
+
+def bound_av_accels(config: DriverConfig, expected_mps2: np.ndarray) -> np.ndarray:
+    """The AV accelerations the human's gap bound is planned against, m/s^2.
+
+    ``cautious``: min(expected, ``assumed_av_accel_min_mps2``); otherwise
+    min(expected, 0) - ``av_extra_decel_mps2``. Works elementwise on any shape.
+
+    Args:
+        config: The driver's parameters.
+        expected_mps2: The AV plan the human expects (any shape), m/s^2.
+    """
+    expected = np.asarray(expected_mps2, dtype=float)
+    if config.cautious:
+        return np.asarray(np.minimum(expected, config.assumed_av_accel_min_mps2), dtype=float)
+    return np.asarray(np.minimum(expected, 0.0) - config.av_extra_decel_mps2, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -173,14 +206,12 @@ class DriverMpc:
                            expected_mps2: Sequence[float] | np.ndarray) -> np.ndarray:
         """AV speeds at steps 0..N-1 that the gap bound is planned against, m/s.
 
-        The AV accelerates at min(expected, ``assumed_av_accel_min_mps2``) at every step and
-        never reverses.
+        The AV accelerates at :func:`bound_av_accels` at every step and never reverses.
         """
         c = self.config
         speeds = [max(float(av_speed_mps), 0.0)]
-        for accel in list(expected_mps2)[:-1]:
-            speeds.append(max(speeds[-1] + min(float(accel), c.assumed_av_accel_min_mps2)
-                              * c.dt_s, 0.0))
+        for accel in bound_av_accels(c, np.asarray(expected_mps2, dtype=float))[:-1]:
+            speeds.append(max(speeds[-1] + float(accel) * c.dt_s, 0.0))
         return np.array(speeds)
 
     def braking_plan(self, speed_mps: float) -> np.ndarray:

@@ -29,7 +29,7 @@ import dataclasses
 
 import numpy as np
 
-from human_driver_sim.driver_mpc import DriverConfig, DriverMpc
+from human_driver_sim.driver_mpc import DriverConfig, DriverMpc, bound_av_accels
 
 _FEASIBILITY_TOL = 1e-9
 
@@ -91,14 +91,14 @@ class BatchDriver:
         grad: np.ndarray = 2.0 * sum(self._w[j] * b[j] @ self._a[j] for j in self._a)
         plan: np.ndarray = -grad @ self._inverse.T
         speeds = speed[:, None] + plan @ self._speed_map.T
-        # DriverMpc's hard gap bound: d^2..d^N >= d_s against the cautious AV (it brakes at
-        # min(expected, assumed_av_accel_min_mps2), never reversing).
+        # DriverMpc's hard gap bound: d^2..d^N >= d_s against the AV braking as
+        # driver_mpc.bound_av_accels says, never reversing.
+        bound_accels = bound_av_accels(c, expected)
         cautious = np.empty_like(expected)
         cautious[:, 0] = np.maximum(av, 0.0)
         for k in range(1, expected.shape[1]):
-            cautious[:, k] = np.maximum(
-                cautious[:, k - 1] + np.minimum(expected[:, k - 1],
-                                                c.assumed_av_accel_min_mps2) * c.dt_s, 0.0)
+            cautious[:, k] = np.maximum(cautious[:, k - 1] + bound_accels[:, k - 1] * c.dt_s,
+                                        0.0)
         steps = np.arange(1, expected.shape[1] + 1)[None, :]
         cautious_gaps = (gap[:, None] + c.dt_s * np.cumsum(cautious, axis=1)
                          - c.dt_s * steps * speed[:, None] + plan @ self._gap_map.T)

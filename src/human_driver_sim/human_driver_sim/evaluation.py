@@ -318,6 +318,18 @@ def evaluate(models: Mapping[str, Follower], pairs: Sequence[FollowingPair], *,
     return result
 
 
+def paired_difference(result: Evaluation, protocol: str, model: str,
+                      other: str) -> dict[str, Any]:
+    """Gap NRMSE of ``model`` minus ``other`` pair by pair: mean, 95 % CI half-width (Student
+    t over pairs), the number of pairs and of pairs where ``model`` is better (lower)."""
+    mine = result.per_pair[protocol][model]
+    theirs = result.per_pair[protocol][other]
+    diffs = [mine[k].gap_nrmse - theirs[k].gap_nrmse for k in sorted(mine)]
+    mean, half = mean_ci95(diffs)
+    return {'mean': mean, 'ci95': half, 'pairs': len(diffs),
+            'better': int(sum(d < 0.0 for d in diffs))}
+
+
 def format_table(result: Evaluation, protocol: str) -> str:
     """A Markdown table of the pooled scores of one protocol."""
     lines = [f'protocol: {protocol} ({len(result.pairs)} pairs; mean over pairs ± 95 % CI)',

@@ -33,6 +33,10 @@ the paper's d_s = 5 m; :func:`fit_mpc` raises the floor to it if larger): the re
 hardly tells d_s from tau_H (docs/DRIVER_IRL.md: a fit in [1, 10] m ends at 1.14 m with a 1.6 %
 lower loss and no better held-out scores), and a human who aims inside his own hard bound
 would only press against it."""
+CAUTION_BOUNDS: dict[str, tuple[float, float]] = {'av_extra_decel_mps2': (0.0, 3.0)}
+"""Bounds of the fitted caution a_extra (fitted when the config is not ``cautious``), m/s^2:
+from the expected plan's braking alone (0) to 3 m/s^2 more (with the expected plan holding
+speed, the cautious driver's u_R,min = -3)."""
 LOG_SCALE = frozenset({'weight_desired_speed', 'weight_relative_speed',
                        'weight_relative_distance'})
 
@@ -108,12 +112,14 @@ def configured(config: DriverConfig, params: Mapping[str, float]) -> DriverConfi
 def fit_mpc(config: DriverConfig, run_sets: Sequence[Sequence[Run]], *,
             starts: Sequence[Mapping[str, float]], iterations: int = 120,
             progress: Callable[[int], None] | None = None) -> FitResult:
-    """Fit (w_ds, w_rs, w_rd, tau_H, d_s) of the driver MPC, bounded, from several starts.
+    """Fit (w_ds, w_rs, w_rd, tau_H, d_s) of the driver MPC, bounded, from several starts;
+    with ``config.cautious`` False also its caution a_extra (:data:`CAUTION_BOUNDS`).
 
     Args:
         config: The driver config (everything else is kept: bounds, N, dt, v_max).
         run_sets: Windows of each data set (:func:`evaluation.make_runs`).
-        starts: Starting parameter sets (keys of :data:`MPC_BOUNDS`).
+        starts: Starting parameter sets (keys of :data:`MPC_BOUNDS`; a missing
+            ``av_extra_decel_mps2`` starts at 1 m/s^2).
         iterations: Nelder-Mead iterations per start.
         progress: Called with the number of loss evaluations so far.
     """
@@ -121,6 +127,9 @@ def fit_mpc(config: DriverConfig, run_sets: Sequence[Sequence[Run]], *,
     lo, hi = bounds['desired_standstill_gap_m']
     lo = max(lo, config.standstill_gap_m)
     bounds['desired_standstill_gap_m'] = (lo, max(hi, lo + 1.0))
+    if not config.cautious:
+        bounds.update(CAUTION_BOUNDS)
+        starts = [{'av_extra_decel_mps2': 1.0, **start} for start in starts]
     box = BoundedBox(bounds, LOG_SCALE)
 
     def loss(params: dict[str, float]) -> float:

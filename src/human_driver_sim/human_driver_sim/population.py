@@ -37,6 +37,9 @@ def sample_population(per_pair_weights: np.ndarray, count: int, *, seed: int) ->
 
 DRIVER_FIT_FILE = Path(__file__).parent / 'models' / 'driver_fit.yaml'
 """The shipped fit of ``trust-av fit-driver`` (weights with provenance, docs/DRIVER_IRL.md)."""
+FITTED_CAUTION_FIT_FILE = Path(__file__).parent / 'models' / 'driver_fit_caution.yaml'
+"""The fit of the driver with a fitted caution (``trust-av fit-driver``; the profile
+config/human_fitted.yaml; docs/DRIVER_IRL.md)."""
 WEIGHT_NAMES = ('weight_acceleration', 'weight_desired_speed', 'weight_relative_speed',
                 'weight_relative_distance')
 """Driver-MPC parameter names of W, in the order of the weight vectors."""
@@ -89,6 +92,67 @@ def per_pair_weights(path: Path = DRIVER_FIT_FILE) -> np.ndarray:
                                  f'{len(WEIGHT_NAMES)} non-negative numbers, got {weights!r}')
         rows.append([float(w) for w in weights])
     return np.array(rows)
+
+
+SAMPLED_SCALARS: dict[str, tuple[float, float]] = {
+    'time_headway_s': (0.5, 3.0), 'desired_standstill_gap_m': (5.0, 10.0),
+    'av_extra_decel_mps2': (0.0, 3.0)}
+"""Per-driver parameters besides W that a population draws, with the fit's bounds
+(``fitting.MPC_BOUNDS``, ``fitting.CAUTION_BOUNDS``; a test keeps them equal)."""
+
+
+def per_driver_fits(path: Path = DRIVER_FIT_FILE) -> list[dict[str, float]] | None:
+    """The per-driver fits of a driver-fit file (``per_driver``), or None if it has none.
+
+    Raises:
+        DriverFitError: a driver whose fit lacks a weight or holds a bad number.
+    """
+    section = _read_fit(path).get('per_driver')
+    if section is None:
+        return None
+    if not isinstance(section, dict) or not section:
+        raise DriverFitError(f'{path}: per_driver must map drivers to their fitted parameters')
+    out = []
+    for name, params in section.items():
+        names = (*WEIGHT_NAMES, *(n for n in SAMPLED_SCALARS if isinstance(params, dict)
+                                  and n in params))
+        if not isinstance(params, dict) or any(
+                not isinstance(params.get(n), int | float) or params[n] < 0 for n in names):
+            raise DriverFitError(f'{path}: per_driver[{name!r}] must hold '
+                                 f'{", ".join(WEIGHT_NAMES)} as non-negative numbers')
+        out.append({n: float(params[n]) for n in names})
+    return out
+
+
+def sample_driver_params(per_driver: list[dict[str, float]], count: int, *,
+                         seed: int) -> list[dict[str, float]]:
+    """``count`` drivers drawn from per-driver fits: W as :func:`sample_population` does
+    (log-normal), each of :data:`SAMPLED_SCALARS` that every fit holds from a normal with the
+    fits' mean and standard deviation (floor 1 % of its range), clipped to its bounds.
+
+    Args:
+        per_driver: The fits (:func:`per_driver_fits`), at least one.
+        count: Number of drivers K.
+        seed: RNG seed (same seed, same population).
+
+    Raises:
+        ValueError: No fits or count < 1.
+    """
+    if not per_driver or count < 1:
+        raise ValueError('need at least one per-driver fit and count >= 1')
+    weights = sample_population(np.array([[f[n] for n in WEIGHT_NAMES] for f in per_driver]),
+                                count, seed=seed)
+    drawn: list[dict[str, float]] = [dict(zip(WEIGHT_NAMES, (float(w) for w in row),
+                                              strict=True)) for row in weights]
+    rng = np.random.default_rng([seed, 1])
+    for name, (lo, hi) in SAMPLED_SCALARS.items():
+        if not all(name in f for f in per_driver):
+            continue
+        values = np.array([f[name] for f in per_driver])
+        std = max(float(values.std()), 0.01 * (hi - lo))
+        for row, value in zip(drawn, rng.normal(values.mean(), std, size=count), strict=True):
+            row[name] = float(np.clip(value, lo, hi))
+    return drawn
 
 
 def fitted_idm_params(path: Path = DRIVER_FIT_FILE) -> dict[str, float]:

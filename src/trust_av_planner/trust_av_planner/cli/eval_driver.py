@@ -23,10 +23,15 @@ from human_driver_sim.ngsim import NGSIM_VEHICLE_LENGTH_M
 from human_driver_sim.population import DRIVER_FIT_FILE, DriverFitError, fitted_idm_params
 from trust_av_planner.cli.options import output_file
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.system.config import (
+    DEFAULT_PARAMS_FILE,
+    HUMAN_FITTED_PARAMS_FILE,
+    load_run_config,
+)
 from trust_monitor.common import output_files
 
 SHIPPED = 'driver MPC (params file)'
+FITTED = 'driver MPC, fitted caution (human_fitted.yaml)'
 BOUNDED_IDM = 'IDM, bounded fit'
 TEXTBOOK_IDM = 'IDM, textbook motorway'
 CONSTANT_SPEED = 'constant speed'
@@ -37,7 +42,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser = subparsers.add_parser(
         'eval-driver', help='score the shipped human driver on recorded car following',
         description=(
-            "Score the params file's driver MPC, the bounded IDM of the driver fit, the "
+            "Score the params file's driver MPC, the same with the fitted-caution profile "
+            '(config/human_fitted.yaml) layered over it, the bounded IDM of the driver fit, the '
             'textbook IDM and constant speed on a directory of OpenACC or NGSIM-chain CSVs '
             '(read only): gap and speed NRMSE with 95 % CIs over pairs, collisions, gaps below '
             "2 m, beside the data's noise floor, for full runs and re-initialised windows."))
@@ -58,17 +64,21 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 
 def models(params_file: Path, driver_fit: Path) -> dict[str, Follower]:
-    """The four scored models.
+    """The five scored models: the params file's driver, the same with the fitted-caution
+    profile layered over it, the bounded IDM of the driver fit, the textbook IDM and
+    constant speed.
 
     Raises:
         TrustAvPlannerError: Bad driver-fit file (ParamsError propagates for a bad params file).
     """
     config = load_run_config(params_file).driver
+    fitted = load_run_config([params_file, HUMAN_FITTED_PARAMS_FILE]).driver
     try:
         idm = IdmParams(**fitted_idm_params(driver_fit))
     except (DriverFitError, ValueError) as err:
         raise TrustAvPlannerError(str(err)) from err
-    return {SHIPPED: MpcFollower(config), BOUNDED_IDM: IdmFollower(idm),
+    return {SHIPPED: MpcFollower(config), FITTED: MpcFollower(fitted),
+            BOUNDED_IDM: IdmFollower(idm),
             TEXTBOOK_IDM: IdmFollower(TEXTBOOK_MOTORWAY), CONSTANT_SPEED: ConstantSpeed()}
 
 

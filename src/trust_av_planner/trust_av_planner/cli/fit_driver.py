@@ -1,8 +1,9 @@
-"""``trust-av fit-driver``: fit the driver MPC (W, tau_H, d_s) to human car following."""
+"""``trust-av fit-driver``: fit the driver MPC (W, tau_H, d_s, caution) to human car following."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import json
 import subprocess
@@ -15,58 +16,69 @@ import numpy as np
 import yaml
 
 from human_driver_sim import irl
-from human_driver_sim.car_following import CarFollowingDataError, FollowingPair, LoadReport
+from human_driver_sim.car_following import CarFollowingDataError, LoadReport
 from human_driver_sim.datasets import load_directory
-from human_driver_sim.driver_mpc import DriverConfig
 from human_driver_sim.evaluation import (
     ConstantSpeed,
     Evaluation,
     Follower,
     IdmFollower,
     MpcFollower,
-    Run,
     evaluate,
     format_table,
     make_runs,
+    paired_difference,
 )
 from human_driver_sim.fitting import MPC_BOUNDS, FitResult, configured, fit_idm, fit_mpc
 from human_driver_sim.idm import PARAM_NAMES, TEXTBOOK_MOTORWAY, IdmParams
-from human_driver_sim.ngsim import split_by_follower
-from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
+from human_driver_sim.population import FITTED_CAUTION_FIT_FILE, WEIGHT_NAMES
+from human_driver_sim.splits import Split, split_ngsim, split_openacc
 from trust_av_planner.cli.options import Progress, output_file
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
 from trust_monitor.common.output_files import replacing
 
-FIT_PART = 'JRC-VC_280219_part2'
-TEST_PART = 'JRC-VC_280219_part3'
-SHIPPED = 'MPC pooled (shipped)'
 TARGET_RATIO = 0.9
-"""The target: the driver's held-out gap NRMSE at most 0.9 x the best IDM's."""
+"""The target: the driver's test gap NRMSE at most 0.9 x the best IDM's."""
 MPC_NAMES = tuple(MPC_BOUNDS)
+CANDIDATES: dict[str, dict[str, Any]] = {
+    'MPC fitted caution': {'cautious': False},
+}
+"""Driver-MPC candidates fitted on the training split; the validation split picks one of
+them, :data:`ABLATION` and the params file's (cautious) driver, :data:`PARAMS_FILE_MPC`.
+The cautious driver is not refitted (its fit binds the gap bound on many NGSIM steps and
+takes most of the time): the params file's was fitted on part2 and the even NGSIM IDs,
+training and validation together, so its validation score is if anything optimistic."""
+ABLATION = 'MPC fitted caution, a_extra = 0'
+"""The fitted-caution driver with its caution removed (the bound against min(u_R^H, 0))."""
+PARAMS_FILE_MPC = 'MPC params file (cautious)'
+IDM_POOLED = 'IDM pooled (bounded)'
+IDM_TEXTBOOK = 'IDM textbook'
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``fit-driver`` subcommand."""
     parser = subparsers.add_parser(
-        'fit-driver', help='fit the driver MPC (W, tau_H, d_s) to human car following',
+        'fit-driver', help='fit the driver MPC (W, tau_H, d_s, caution) to human car following',
         description=(
-            'Fit the human driver MPC (weights W, time headway tau_H, standstill gap d_s) and a '
-            'bounded IDM to OpenACC car following (part2; part3 held out) and optionally NGSIM '
-            'chains (even follower IDs; odd held out) by multi-start Nelder-Mead on the 30 s '
-            'window gap NRMSE, score both on the held-out sets against the textbook IDM and '
-            'constant speed, and write the fit with its provenance and the evaluation beside '
-            'it. The data are read from their paths, never copied.'))
+            'Fit the human driver MPC (weights W, time headway tau_H, standstill gap d_s; '
+            'cautious, or with a fitted caution a_extra) and a bounded IDM on a training split '
+            'of OpenACC car following (part2, first 70 %%) and optionally NGSIM chains (follower '
+            'ID 0 mod 4), pick the driver candidate on the validation split (the rest of part2; '
+            'NGSIM 2 mod 4), score every model once on the test split (part3; odd NGSIM IDs) '
+            'against the IDMs, constant speed and the noise floor, and write the fit with its '
+            'provenance and the evaluation beside it. The data are read from their paths, never '
+            'copied.'))
     parser.add_argument('--data', type=Path, required=True,
-                        help='OpenACC Vicolungo directory: part2 fits, part3 is held out '
-                             '(read only, never copied)')
+                        help='OpenACC Vicolungo directory: part2 trains and validates, part3 '
+                             'is the test set (read only, never copied)')
     parser.add_argument('--ngsim', type=Path, default=None,
-                        help='NGSIM I-80 chain directory: even follower IDs fit, odd are held '
-                             'out (optional)')
-    parser.add_argument('--out', type=Path, default=DRIVER_FIT_FILE,
-                        help='weights file with provenance (default: the shipped fit, '
-                             'human_driver_sim/models/driver_fit.yaml); its evaluation is '
-                             'written beside it as <stem>_eval.json')
+                        help='NGSIM I-80 chain directory: split by follower ID (optional)')
+    parser.add_argument('--out', type=Path, default=FITTED_CAUTION_FIT_FILE,
+                        help='fit file with provenance (default: '
+                             'human_driver_sim/models/driver_fit_caution.yaml, the profile '
+                             'config/human_fitted.yaml); its evaluation is written beside it '
+                             'as <stem>_eval.json')
     parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
                         help="ROS 2 params file whose human_driver section gives what is "
                              "not fitted (dt_s, horizon, bounds) and the model scored as "
@@ -84,35 +96,6 @@ def _code_version() -> str:
         return out.stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return 'unknown'
-
-
-def _load(args: argparse.Namespace, dt_s: float) -> tuple[dict[str, list[FollowingPair]],
-                                                         dict[str, list[FollowingPair]],
-                                                         dict[str, Any]]:
-    """Fit and held-out pairs per data set, and what cleaning did."""
-    cleaning: dict[str, Any] = {}
-    try:
-        report = LoadReport()
-        openacc = load_directory(args.data, 'openacc', dt_s=dt_s, report=report)
-        fit = {'openacc': [p for p in openacc if p.key.startswith(FIT_PART + ':')]}
-        held = {'openacc': [p for p in openacc if p.key.startswith(TEST_PART + ':')]}
-        if not fit['openacc'] or not held['openacc']:
-            raise TrustAvPlannerError(f'{args.data}: needs {FIT_PART}.csv and {TEST_PART}.csv')
-        cleaning['openacc'] = {'files': report.files, 'splices': [vars(s) for s in
-                                                                  report.splices]}
-        if args.ngsim is not None:
-            report = LoadReport()
-            fit['ngsim'], held['ngsim'] = split_by_follower(
-                load_directory(args.ngsim, 'ngsim', dt_s=dt_s, report=report))
-            cleaning['ngsim'] = {'files': len(report.files), 'excluded': report.excluded,
-                                 'duplicates_merged': report.duplicates_merged,
-                                 'vehicle_length_m': report.vehicle_length_m}
-    except CarFollowingDataError as err:
-        raise TrustAvPlannerError(str(err)) from err
-    for name, pairs in (*fit.items(), *held.items()):
-        if not pairs:
-            raise TrustAvPlannerError(f'no {name} pairs left to fit or hold out')
-    return fit, held, cleaning
 
 
 def _mpc_starts(kkt: np.ndarray) -> list[dict[str, float]]:
@@ -133,29 +116,6 @@ def _mpc_starts(kkt: np.ndarray) -> list[dict[str, float]]:
              'desired_standstill_gap_m': 8.0}]
 
 
-def _fits(config: DriverConfig, fit: Mapping[str, list[FollowingPair]],
-          starts: list[dict[str, float]],
-          iterations: int, progress: Any) -> dict[str, tuple[FitResult, FitResult, float]]:
-    """(IDM, MPC, seconds) fitted pooled, per data set, per OpenACC driver and on OpenACC
-    without each driver (leave-one-driver-out)."""
-    windows = {name: make_runs(pairs, 'window') for name, pairs in fit.items()}
-    groups: dict[str, list[Sequence[Run]]] = {'pooled': list(windows.values())}
-    if len(windows) > 1:
-        groups.update({name: [runs] for name, runs in windows.items()})
-    for driver in sorted({p.driver for p in fit['openacc']}):
-        groups[f'driver {driver}'] = [make_runs([p for p in fit['openacc']
-                                                 if p.driver == driver], 'window')]
-        groups[f'without {driver}'] = [make_runs([p for p in fit['openacc']
-                                                  if p.driver != driver], 'window')]
-    out = {}
-    for name, sets in groups.items():
-        started = time.perf_counter()
-        idm = fit_idm(sets, iterations=iterations, progress=progress)
-        mpc = fit_mpc(config, sets, starts=starts, iterations=iterations, progress=progress)
-        out[name] = (idm, mpc, time.perf_counter() - started)
-    return out
-
-
 def compact(value: Any) -> Any:
     """``value`` with every float rounded to 6 significant digits (a smaller JSON)."""
     if isinstance(value, float):
@@ -167,122 +127,181 @@ def compact(value: Any) -> Any:
     return value
 
 
-def _target(evaluation: Evaluation, protocol: str, idm_models: Sequence[str]) -> dict[str, Any]:
-    """The shipped MPC against the best IDM (lowest held-out gap NRMSE) of one protocol."""
-    mpc = evaluation.pooled(protocol, SHIPPED)
+def _load(args: argparse.Namespace, dt_s: float) -> tuple[dict[str, Split], dict[str, Any]]:
+    """Train / validation / test pairs per data set, and what cleaning did."""
+    cleaning: dict[str, Any] = {}
+    splits: dict[str, Split] = {}
+    try:
+        report = LoadReport()
+        splits['openacc'] = split_openacc(load_directory(args.data, 'openacc', dt_s=dt_s,
+                                                         report=report))
+        cleaning['openacc'] = {'files': [Path(f).name for f in report.files],
+                               'splices': [vars(s) for s in report.splices]}
+        if args.ngsim is not None:
+            report = LoadReport()
+            splits['ngsim'] = split_ngsim(load_directory(args.ngsim, 'ngsim', dt_s=dt_s,
+                                                         report=report))
+            cleaning['ngsim'] = {'files': len(report.files), 'excluded': report.excluded,
+                                 'duplicates_merged': report.duplicates_merged,
+                                 'vehicle_length_m': report.vehicle_length_m}
+    except CarFollowingDataError as err:
+        raise TrustAvPlannerError(f'{args.data}: {err}') from err
+    for name, split in splits.items():
+        for role, pairs in split._asdict().items():
+            if not pairs:
+                raise TrustAvPlannerError(f'no {name} pairs left for the {role} split')
+    return splits, cleaning
+
+
+def _validation_loss(follower: Follower, splits: Mapping[str, Split]) -> dict[str, float]:
+    """The fitting loss on the validation split, per data set and their mean."""
+    out = {name: float(np.mean([s.gap_nrmse for s in evaluate(
+        {'m': follower}, split.validation, protocols=('window',)).per_pair['window']['m']
+        .values()])) for name, split in splits.items()}
+    out['mean'] = float(np.mean(list(out.values())))
+    return out
+
+
+def _target(evaluation: Evaluation, protocol: str, model: str,
+            idm_models: Sequence[str]) -> dict[str, Any]:
+    """The selected MPC against the best IDM (lowest test gap NRMSE) of one protocol, with
+    the paired difference over pairs (MPC - IDM, mean and 95 % CI half-width)."""
+    mpc = evaluation.pooled(protocol, model)
     best = min(idm_models, key=lambda m: evaluation.pooled(protocol, m)['gap_nrmse'])
     idm = evaluation.pooled(protocol, best)
     ratio = mpc['gap_nrmse'] / idm['gap_nrmse']
-    return {'mpc_gap_nrmse': mpc['gap_nrmse'], 'mpc_ci95': mpc['gap_nrmse_ci95'],
-            'best_idm': best, 'idm_gap_nrmse': idm['gap_nrmse'],
-            'idm_ci95': idm['gap_nrmse_ci95'], 'ratio': ratio,
-            'met': bool(ratio <= TARGET_RATIO)}
+    diff = paired_difference(evaluation, protocol, model, best)
+    return {'model': model, 'mpc_gap_nrmse': mpc['gap_nrmse'],
+            'mpc_ci95': mpc['gap_nrmse_ci95'], 'best_idm': best,
+            'idm_gap_nrmse': idm['gap_nrmse'], 'idm_ci95': idm['gap_nrmse_ci95'],
+            'ratio': ratio, 'paired_difference': diff, 'met': bool(ratio <= TARGET_RATIO),
+            'mpc_collisions': mpc['collisions'], 'mpc_steps_below_2m': mpc['steps_below_2m'],
+            'mpc_min_gap_m': mpc['min_gap_m']}
 
 
 def run(args: argparse.Namespace) -> int:
-    """Fit, evaluate on the held-out sets, write the fit file and its evaluation."""
+    """Fit on train, select on validation, score once on test, write the fit and evaluation."""
     started = time.perf_counter()
     if args.iterations < 1:
         raise TrustAvPlannerError(f'--iterations must be >= 1, got {args.iterations}')
     output_file(args.out)             # before the fit: minutes of work with nowhere to go
-    config = load_run_config(args.params_file).driver
-    fit, held, cleaning = _load(args, config.dt_s)
-    n = config.horizon_steps
-    kkt = irl.fit_inverse_kkt(config, [d for p in fit['openacc']
-                                       for d in irl.demonstrations(p, n)])
+    base = load_run_config(args.params_file).driver
+    splits, cleaning = _load(args, base.dt_s)
+    n = base.horizon_steps
+    train = {name: make_runs(split.train, 'window') for name, split in splits.items()}
+    kkt = irl.fit_inverse_kkt(base, [d for p in splits['openacc'].train
+                                     for d in irl.demonstrations(p, n)])
     starts = _mpc_starts(kkt)
-    groups = 1 + (len(fit) if len(fit) > 1 else 0) + 2 * len({p.driver
-                                                              for p in fit['openacc']})
-    bar = Progress('fit-driver', groups * (len(starts) + 3) * int(1.5 * args.iterations + 6),
-                   shown=not args.no_progress)
-    fits = _fits(config, fit, starts, args.iterations, bar.update)
+    drivers = sorted({p.driver for p in splits['openacc'].train})
+    bar = Progress('fit-driver', (len(CANDIDATES) * len(starts) + 3 + len(drivers))
+                   * int(1.5 * args.iterations + 7), shown=not args.no_progress)
+    fits: dict[str, FitResult] = {}
+    seconds: dict[str, float] = {}
+    for name, changes in CANDIDATES.items():
+        clock = time.perf_counter()
+        fits[name] = fit_mpc(dataclasses.replace(base, **changes), list(train.values()),
+                             starts=starts, iterations=args.iterations, progress=bar.update)
+        seconds[name] = time.perf_counter() - clock
+    clock = time.perf_counter()
+    idm = fit_idm(list(train.values()), iterations=args.iterations, progress=bar.update)
+    seconds[IDM_POOLED] = time.perf_counter() - clock
+    candidates = {name: configured(dataclasses.replace(base, **CANDIDATES[name]),
+                                   fits[name].params) for name in CANDIDATES}
+    candidates[ABLATION] = dataclasses.replace(candidates['MPC fitted caution'],
+                                               av_extra_decel_mps2=0.0)
+    candidates[PARAMS_FILE_MPC] = base
+    validation = {name: _validation_loss(MpcFollower(cfg), splits)
+                  for name, cfg in candidates.items()}
+    for name, follower in ((IDM_POOLED, IdmFollower(IdmParams(**idm.params))),
+                           (IDM_TEXTBOOK, IdmFollower(TEXTBOOK_MOTORWAY))):
+        validation[name] = _validation_loss(follower, splits)
+    selected = min(candidates, key=lambda m: validation[m]['mean'])
+    chosen = candidates[selected]
+    chosen_params = {k: float(getattr(chosen, k)) for k in (*MPC_NAMES,
+                                                             'av_extra_decel_mps2')}
+    per_driver: dict[str, dict[str, float]] = {}
+    for driver in drivers:
+        clock = time.perf_counter()
+        own = fit_mpc(chosen, [make_runs([p for p in splits['openacc'].train
+                                          if p.driver == driver], 'window')],
+                      starts=[chosen_params], iterations=args.iterations,
+                      progress=bar.update)
+        seconds[f'driver {driver}'] = time.perf_counter() - clock
+        per_driver[driver] = {'weight_acceleration': 1.0, **own.params}
+        fits[f'driver {driver}'] = own
     bar.close()
-    pooled_idm, pooled_mpc, _ = fits['pooled']
-    shipped = configured(config, pooled_mpc.params)
-    per_pair = {p.key: irl.fit_inverse_kkt(shipped, irl.demonstrations(p, n))
-                for p in fit['openacc']}
-    models: dict[str, Follower] = {SHIPPED: MpcFollower(shipped),
-                                   'MPC before (params file)': MpcFollower(config)}
-    idm_models = []
-    for name, (idm, mpc, _) in fits.items():
-        if name.startswith(('driver', 'without')):
-            continue
-        if name != 'pooled':
-            models[f'MPC {name}'] = MpcFollower(configured(config, mpc.params))
-        models[f'IDM {name} (bounded)'] = IdmFollower(IdmParams(**idm.params))
-        idm_models.append(f'IDM {name} (bounded)')
-    models['IDM textbook'] = IdmFollower(TEXTBOOK_MOTORWAY)
+    per_pair = {p.key: irl.fit_inverse_kkt(chosen, irl.demonstrations(p, n))
+                for p in splits['openacc'].train}
+    models: dict[str, Follower] = {name: MpcFollower(cfg) for name, cfg in candidates.items()}
+    models[IDM_POOLED] = IdmFollower(IdmParams(**idm.params))
+    models[IDM_TEXTBOOK] = IdmFollower(TEXTBOOK_MOTORWAY)
     models['constant speed'] = ConstantSpeed()
-    idm_models.append('IDM textbook')
-    evaluations = {f'{name} held out': evaluate(models, pairs) for name, pairs in held.items()}
-    evaluations.update({f'{name} fit': evaluate(models, pairs) for name, pairs in fit.items()})
-    per_driver = {}
-    for driver in sorted({p.driver for p in fit['openacc']}):
-        own_idm, own_mpc, _ = fits[f'driver {driver}']
-        other_idm, other_mpc, _ = fits[f'without {driver}']
-        per_driver[driver] = evaluate({
-            'MPC': MpcFollower(configured(config, own_mpc.params)),
-            'IDM (bounded)': IdmFollower(IdmParams(**own_idm.params)),
-            'MPC without this driver': MpcFollower(configured(config, other_mpc.params)),
-            'IDM without this driver': IdmFollower(IdmParams(**other_idm.params)),
-            SHIPPED: MpcFollower(shipped)},
-            [p for p in held['openacc'] if p.driver == driver]).to_dict(per_pair=False)
-    targets = {name: {protocol: _target(ev, protocol, idm_models)
-                      for protocol in ('full', 'window')}
-               for name, ev in evaluations.items() if name.endswith('held out')}
+    # The test split, scored once.
+    tests = {f'{name} test': evaluate(models, split.test) for name, split in splits.items()}
+    targets = {name: {protocol: _target(ev, protocol, selected, (IDM_POOLED, IDM_TEXTBOOK))
+                      for protocol in ('full', 'window')} for name, ev in tests.items()}
     fit_time_s = time.perf_counter() - started
-
-    def mpc_dict(result: FitResult) -> dict[str, float]:
-        return {'weight_acceleration': 1.0, **result.params}
-
     document = {
         'provenance': {
-            'data': [str(args.data / f'{FIT_PART}.csv'), str(args.data / f'{TEST_PART}.csv')
-                     + ' (held out)'] + ([f'{args.ngsim} (even follower IDs fit, odd held '
-                                          f'out)'] if args.ngsim is not None else []),
+            'data': [args.data.name] + ([args.ngsim.name] if args.ngsim is not None else []),
+            'split': 'OpenACC: part2 first 70 % of each segment train, the rest validation, '
+                     'part3 test; NGSIM by follower ID: 0 mod 4 train, 2 mod 4 validation, '
+                     'odd test. Candidates and the IDM fitted on train, the model selected '
+                     'on validation, test scored once',
             'licence': 'JRC OpenACC database, CC BY 4.0, (c) European Union; NGSIM I-80, US '
                        'DOT FHWA (public), chains from Keke-Long/PERL_planning (Apache-2.0). '
                        'Changed: speeds from GNSS along-track positions, splices cut, '
                        'resampled to dt_s; NGSIM windows merged, 4.5 m leaders assumed',
             'method': 'bounded multi-start Nelder-Mead on the mean window (30 s) gap NRMSE, '
-                      'averaged over data sets, of W, tau_H and the desired standstill gap '
-                      'd_s (w_a = 1); IDM fitted the same way inside physical bounds; '
-                      'per-pair inverse KKT at the fitted tau_H and d_s (population)',
+                      'averaged over data sets, of W, tau_H, the desired standstill gap d_s '
+                      'and (not cautious) the caution a_extra (w_a = 1); IDM fitted the same '
+                      'way inside physical bounds; per-driver fits of the selected model from '
+                      'the pooled one (population); per-pair inverse KKT at the selected model',
             'expected_leader_plan': 'constant acceleration at the last observed one',
             'integrator': 'explicit Euler (longitudinal.step), as the MPC and the simulator',
-            'dt_s': config.dt_s, 'horizon_steps': n,
+            'dt_s': base.dt_s, 'horizon_steps': n,
             'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
             'code_version': _code_version(), 'fit_time_s': round(fit_time_s, 1),
             'iterations': args.iterations},
-        'pooled': {k: float(v) for k, v in mpc_dict(pooled_mpc).items()},
-        'fit_loss': pooled_mpc.loss,
+        'selected': selected,
+        'pooled': {'weight_acceleration': 1.0, **chosen_params, 'cautious': chosen.cautious},
+        'fit_loss': fits[selected].loss if selected in fits else None,
+        'validation_loss': validation,
         'mpc_starts': starts,
+        'per_driver': per_driver,
         'pooled_inverse_kkt': {k: float(v) for k, v in zip(WEIGHT_NAMES, kkt, strict=True)},
         'per_pair_inverse_kkt': {name: [float(x) for x in w] for name, w in per_pair.items()},
-        'fits': {name: {'mpc': mpc_dict(mpc), 'mpc_loss': mpc.loss,
-                        'mpc_start_losses': mpc.start_losses,
-                        'idm': idm.params, 'idm_loss': idm.loss,
-                        'idm_start_losses': idm.start_losses, 'seconds': round(seconds, 1)}
-                 for name, (idm, mpc, seconds) in fits.items()},
-        'idm': {k: float(pooled_idm.params[k]) for k in PARAM_NAMES},
+        'fits': {name: {'params': {'weight_acceleration': 1.0, **f.params}, 'loss': f.loss,
+                        'start_losses': f.start_losses, 'seconds': round(seconds[name], 1)}
+                 for name, f in fits.items()},
+        'idm': {k: float(idm.params[k]) for k in PARAM_NAMES},
+        'idm_loss': idm.loss, 'idm_start_losses': idm.start_losses,
         'idm_textbook': {k: float(getattr(TEXTBOOK_MOTORWAY, k)) for k in PARAM_NAMES},
         'target': targets}
     eval_path = args.out.with_name(args.out.stem + '_eval.json')
     with replacing(args.out, eval_path) as (fit_file, eval_file):  # both or neither
         fit_file.write_text(yaml.safe_dump(document, sort_keys=False))
         eval_file.write_text(json.dumps(compact({
-            'cleaning': cleaning, 'target': targets,
-            'sets': {k: v.to_dict(per_pair=k.endswith('held out'))
-                     for k, v in evaluations.items()},
-            'per_driver_openacc_held_out': per_driver}), indent=1))
-    for name, evaluation in evaluations.items():
+            'cleaning': cleaning, 'split_pairs': {
+                name: {role: sorted({p.key for p in pairs})
+                       for role, pairs in split._asdict().items()}
+                for name, split in splits.items()},
+            'selected': selected, 'validation_loss': validation, 'target': targets,
+            'sets': {k: v.to_dict() for k, v in tests.items()}}), indent=1))
+    for name, losses in validation.items():
+        print(f'validation {name}: ' + ', '.join(f'{k} {v:.4f}' for k, v in losses.items()))
+    print(f'selected on validation: {selected}')
+    for name, evaluation in tests.items():
         for protocol in ('full', 'window'):
             print(f'\n{name}, ' + format_table(evaluation, protocol))
     for name, by_protocol in targets.items():
         for protocol, t in by_protocol.items():
-            print(f'target {name} {protocol}: MPC {t["mpc_gap_nrmse"]:.3f} / {t["best_idm"]} '
-                  f'{t["idm_gap_nrmse"]:.3f} = {t["ratio"]:.3f} '
-                  f'({"met" if t["met"] else "not met"}, <= {TARGET_RATIO})')
-    print(f'shipped: {document["pooled"]}; fit time {fit_time_s:.1f} s; wrote {args.out} and '
-          f'{eval_path}')
+            d = t['paired_difference']
+            print(f'target {name} {protocol}: {selected} {t["mpc_gap_nrmse"]:.3f} / '
+                  f'{t["best_idm"]} {t["idm_gap_nrmse"]:.3f} = {t["ratio"]:.3f} '
+                  f'({"met" if t["met"] else "not met"}, <= {TARGET_RATIO}); paired '
+                  f'difference {d["mean"]:+.3f} ± {d["ci95"]:.3f} (MPC better on '
+                  f'{d["better"]} of {d["pairs"]})')
+    print(f'selected: {document["pooled"]}; fit time {fit_time_s:.1f} s; wrote {args.out} '
+          f'and {eval_path}')
     return 0

@@ -11,7 +11,7 @@ from typing import Any
 
 import yaml
 
-from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
+from human_driver_sim.population import DRIVER_FIT_FILE, FITTED_CAUTION_FIT_FILE, WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
 from trust_av_planner.cli.options import Progress, add_lead_preview_option, positive_int
 from trust_av_planner.errors import TrustAvPlannerError
@@ -20,19 +20,29 @@ from trust_av_planner.study import sweep, tables
 from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_av_planner.study.plots import speed_profiles, trust_over_time
 from trust_av_planner.study.sweep import Case
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.system.config import (
+    DEFAULT_PARAMS_FILE,
+    HUMAN_FITTED_PARAMS_FILE,
+    load_run_config,
+)
 from trust_monitor.common import output_files
 from trust_monitor.common.params import read_params_file
 from trust_monitor.trust_interface import paper_bound_holds
 
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
             'as_reported': DEFAULT_PARAMS_FILE.with_name('paper_as_reported.yaml'),
-            'paper_fitted': DEFAULT_PARAMS_FILE.with_name('paper_fitted_threshold.yaml')}
-"""Parameter profiles: the paper's Table I, the reading its printed mean E imply, and that
-reading with P_thre fitted to its final trusts (a hypothesis: docs/concepts/trust-models.md)."""
+            'paper_fitted': DEFAULT_PARAMS_FILE.with_name('paper_fitted_threshold.yaml'),
+            'human_fitted': HUMAN_FITTED_PARAMS_FILE}
+"""Parameter profiles: the paper's Table I, the reading its printed mean E imply, that
+reading with P_thre fitted to its final trusts (a hypothesis: docs/concepts/trust-models.md),
+and Table I with the human follower of the fitted caution (docs/DRIVER_IRL.md)."""
 DEFAULT_RESULTS = {'table_i': Path('results/paper'),
                    'as_reported': Path('results/paper_as_reported'),
-                   'paper_fitted': Path('results/paper_fitted')}
+                   'paper_fitted': Path('results/paper_fitted'),
+                   'human_fitted': Path('results/human_fitted')}
+DRIVER_FITS = {'human_fitted': FITTED_CAUTION_FIT_FILE}
+"""The driver-fit file a profile's population (``--drivers K``) draws from; the shipped fit
+for the others."""
 
 
 def with_lead_preview(params_file: Path, lead_preview: str, out: Path) -> Path:
@@ -114,7 +124,8 @@ def run(args: argparse.Namespace) -> int:
     cases = sweep.sweep_cases(args.traces, args.predictors, sweep.ALPHAS)
     if args.drivers:
         cases = sweep.population_cases(cases, args.drivers, args.drivers_seed,
-                                       args.driver_fit)
+                                       args.driver_fit or DRIVER_FITS.get(args.profile,
+                                                                          DRIVER_FIT_FILE))
     executor: sweep.Executor
     if args.executor == 'ray':
         executor = sweep.RayExecutor(args.ray_address, args.workers)
@@ -132,7 +143,8 @@ def run(args: argparse.Namespace) -> int:
     with output_files.replacing(out / 'all_runs.csv') as (table,), \
             table.open('w', newline='') as handle:
         writer = csv.writer(handle)
-        driver_names = (*WEIGHT_NAMES, 'time_headway_s')
+        driver_names = (*WEIGHT_NAMES, 'time_headway_s', 'desired_standstill_gap_m',
+                        'av_extra_decel_mps2')
         writer.writerow(['trace', 'predictor', 'alpha', 'driver', *driver_names,
                          *results[cases[0]]['metrics']])
         for case in cases:
@@ -229,19 +241,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                              "(default: 0, the params file's driver)")
     parser.add_argument('--drivers-seed', type=int, default=1,
                         help='seed of the driver population (default: %(default)s)')
-    parser.add_argument('--driver-fit', type=Path, default=DRIVER_FIT_FILE,
-                        help='driver-fit file with per-pair weights (default: the shipped fit, '
-                             'human_driver_sim/models/driver_fit.yaml)')
+    parser.add_argument('--driver-fit', type=Path, default=None,
+                        help='driver-fit file: its per-driver fits, or else its per-pair '
+                             'weights, are the population source (default: '
+                             'human_driver_sim/models/driver_fit_caution.yaml for the '
+                             'human_fitted profile, the shipped driver_fit.yaml otherwise)')
     parser.add_argument('--profile', choices=tuple(PROFILES), default='table_i',
                         help="which parameters: table_i = the paper's Table I (epsilon 6, "
                              "config/trust_av.yaml), as_reported = what the paper's printed "
                              'mean E imply (epsilon 3, config/paper_as_reported.yaml; '
                              'docs/RESULTS.md), paper_fitted = as_reported with P_thre 0.97 '
                              "FITTED to the paper's final trusts (a hypothesis; "
-                             'config/paper_fitted_threshold.yaml); default: %(default)s')
+                             'config/paper_fitted_threshold.yaml), human_fitted = Table I with '
+                             'the human driver of the fitted caution (config/human_fitted.yaml; '
+                             'docs/DRIVER_IRL.md); default: %(default)s')
     parser.add_argument('--results-dir', type=Path, default=None,
                         help='where tables, figures and the cache go (default: results/paper '
-                             'for table_i, results/paper_<profile> for the others)')
+                             'for table_i, results/paper_<profile> for as_reported and '
+                             'paper_fitted, results/human_fitted for human_fitted)')
     parser.add_argument('--params-file', type=Path, default=None,
                         help="ROS 2 params file instead of a profile's (default: the "
                              "profile's)")

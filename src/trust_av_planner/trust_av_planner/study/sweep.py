@@ -29,7 +29,9 @@ from human_driver_sim.population import (
     DRIVER_FIT_FILE,
     WEIGHT_NAMES,
     fitted_time_headway_s,
+    per_driver_fits,
     per_pair_weights,
+    sample_driver_params,
     sample_population,
 )
 from preceding_traffic.sources import load_trace
@@ -245,9 +247,12 @@ def population_cases(cases: Sequence[Case], drivers: int, seed: int,
                      driver_fit: Path = DRIVER_FIT_FILE) -> list[Case]:
     """Each case once per driver of a seeded population of ``drivers`` sampled drivers.
 
-    The population is :func:`human_driver_sim.population.sample_population` of the per-pair
-    fitted weights in ``driver_fit`` (the same seed gives the same drivers), each with the
-    fit's time headway tau_H when the fit has one.
+    With per-driver fits in ``driver_fit`` (``per_driver``, written by ``fit-driver``) the
+    population is :func:`human_driver_sim.population.sample_driver_params` of them (W,
+    tau_H, d_s and the caution a_extra per driver); otherwise
+    :func:`human_driver_sim.population.sample_population` of the per-pair fitted weights,
+    each with the fit's time headway tau_H when the fit has one. The same seed gives the
+    same drivers.
 
     Raises:
         TrustAvPlannerError: ``drivers`` < 1, or an unreadable driver-fit file.
@@ -255,13 +260,18 @@ def population_cases(cases: Sequence[Case], drivers: int, seed: int,
     if drivers < 1:
         raise TrustAvPlannerError(f'the number of drivers must be >= 1, got {drivers}')
     try:
-        population = sample_population(per_pair_weights(driver_fit), drivers, seed=seed)
-        time_headway_s = fitted_time_headway_s(driver_fit)
+        per_driver = per_driver_fits(driver_fit)
+        if per_driver is not None:
+            params = [tuple(row.items()) for row in
+                      sample_driver_params(per_driver, drivers, seed=seed)]
+        else:
+            population = sample_population(per_pair_weights(driver_fit), drivers, seed=seed)
+            time_headway_s = fitted_time_headway_s(driver_fit)
+            extra = () if time_headway_s is None else (('time_headway_s', time_headway_s),)
+            params = [tuple(zip(WEIGHT_NAMES, (float(w) for w in weights), strict=True))
+                      + extra for weights in population]
     except ValueError as err:
         raise TrustAvPlannerError(str(err)) from err
-    extra = () if time_headway_s is None else (('time_headway_s', time_headway_s),)
-    params = [tuple(zip(WEIGHT_NAMES, (float(w) for w in weights), strict=True)) + extra
-              for weights in population]
     return [dataclasses.replace(case, driver=k + 1, driver_params=params[k])
             for case in cases for k in range(drivers)]
 
