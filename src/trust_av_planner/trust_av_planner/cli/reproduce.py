@@ -15,13 +15,12 @@ from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
 from trust_av_planner.cli.options import Progress, add_lead_preview_option, positive_int
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.nmpc import PREDICTORS as KNOWN_PREDICTORS
 from trust_av_planner.study import sweep, tables
 from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_av_planner.study.plots import speed_profiles, trust_over_time
 from trust_av_planner.study.sweep import Case
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_monitor.common import output_files
+from trust_monitor.common import output_files, registry
 from trust_monitor.common.params import read_params_file
 
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
@@ -82,10 +81,10 @@ def trend_checks(results: dict[Case, dict[str, Any]], traces: list[str],
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av reproduce``."""
-    unknown = [p for p in args.predictors if p not in KNOWN_PREDICTORS]
+    known = registry.names(registry.PREDICTORS)
+    unknown = [p for p in args.predictors if p not in known]
     if unknown:
-        raise TrustAvPlannerError(f'unknown predictor(s) {unknown}; available: '
-                                  f'{list(KNOWN_PREDICTORS)}')
+        raise TrustAvPlannerError(f'unknown predictor(s) {unknown}; registered: {list(known)}')
     if args.max_steps < 0:
         raise TrustAvPlannerError(f'--max-steps must be >= 0, got {args.max_steps}')
     if args.drivers < 0:
@@ -177,10 +176,11 @@ def run(args: argparse.Namespace) -> int:
               'mean ± 95 % CI over drivers; trends and Figure 3 use the means)')
     for line in trend_checks(summary, args.traces, args.predictors):
         print(f'  {line}')
+    components = '; '.join(f'{name}: {params}' for name, params in config.predictor_configs)
     print(f'\nProfile {args.profile} ({params_file}): epsilon_mps2 = '
           f'{config.trust.epsilon_mps2:g}, explicability_scale = '
-          f'{config.planner.explicability_scale:g}; TAC-GRU uses {config.planner.gru_model} '
-          '(trained behind the default profile)')
+          f'{config.planner.explicability_scale:g}; plan estimator parameters: '
+          f'{components or "none"} (the GRU was trained behind the default profile)')
     print(f'{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; outputs in {out}/: '
           + ', '.join(written))
     if args.graph:
@@ -198,7 +198,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'by a hash of case, params file and code, so a rerun only runs what changed.')
     parser.add_argument('--traces', type=csv_list, default=list(sweep.TRACES),
                         help='comma-separated traces (default: %(default)s)')
-    parser.add_argument('--predictors', type=csv_list, default=list(sweep.PREDICTORS),
+    parser.add_argument('--predictors', type=csv_list, default=list(sweep.PAPER_PREDICTORS),
                         help='comma-separated predictors (default: %(default)s)')
     parser.add_argument('--executor', choices=('local', 'ray'), default='local',
                         help='local process pool (default) or a Ray cluster')

@@ -44,7 +44,9 @@ from trust_monitor.common import output_files
 LOG = logging.getLogger(__name__)
 
 TRACES = ('us06', 'nycc', 'commute_am', 'commute_pm')
-PREDICTORS = ('gru', 'ca')
+PAPER_PREDICTORS = ('gru', 'ca')
+"""The paper's plan estimators (TAC-GRU, TAC-CA): ``reproduce``'s default axis; any
+registered names may be given instead."""
 ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 METRICS = ('final_trust', 'mean_explicability', 'rmse_mps2')
 PACKAGES = ('preceding_traffic', 'trust_monitor', 'human_driver_sim', 'trust_av_planner')
@@ -235,7 +237,7 @@ class RayExecutor:
                 ray.shutdown()
 
 
-def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PREDICTORS,
+def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PAPER_PREDICTORS,
                 alphas: Iterable[float] = ALPHAS) -> list[Case]:
     """Every combination, in table order."""
     return [Case(t, p, a) for t in traces for p in predictors for a in alphas]

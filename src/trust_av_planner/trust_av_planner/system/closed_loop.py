@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from human_driver_sim.driver_mpc import DriverMpc
+from human_driver_sim.followers import make_follower
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.planner import AvPlanner
@@ -140,8 +140,10 @@ class ClosedLoop:
         self.traffic, self.av, self.human = state.traffic, state.av, state.human
         self.period_s = trace.dt_s
         self.planner = AvPlanner(self.config.planner, self.config.trust,
-                                 self.config.shared.vehicle_length_m, period_s=self.period_s)
-        self.driver = DriverMpc(self.config.driver)
+                                 self.config.shared.vehicle_length_m, period_s=self.period_s,
+                                 predictor_params=self.config.predictor_params)
+        self.driver = make_follower(self.config.driver, self.config.follower,
+                                    self.config.driver_params)
         self.monitor = TrustEstimator(self.config.trust)
         self.step_index = 0
 

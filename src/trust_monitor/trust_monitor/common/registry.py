@@ -120,3 +120,31 @@ def get(group: str, name: str) -> Component:
 def components(group: str) -> tuple[Component, ...]:
     """Every registered component of ``group``, in name order."""
     return tuple(get(group, n) for n in names(group))
+
+
+def config_types(group: str) -> tuple[type, ...]:
+    """The ``config_type`` of every registered component of ``group`` that has parameters,
+    in name order (their fields are parameters of the node that runs the group)."""
+    return tuple(c.config_type for c in components(group) if c.config_type is not None)
+
+
+def config_of(component: Component, params: Any = None) -> Any:
+    """The parameters to build ``component`` with: ``params``, or its defaults
+    (``config_type()``); None when it has no parameters.
+
+    Raises:
+        RegistryError: ``params`` is given but is not a ``config_type`` instance, or the
+            component has no parameters yet ``params`` is given.
+    """
+    if component.config_type is None:
+        if params is not None:
+            raise RegistryError(f'component {component.name!r} has no parameters, got a '
+                                f'{type(params).__name__}')
+        return None
+    if params is None:
+        return component.config_type()
+    if not isinstance(params, component.config_type):
+        raise RegistryError(f'component {component.name!r}: parameters must be a '
+                            f'{component.config_type.__name__}, got a '
+                            f'{type(params).__name__}')
+    return params
