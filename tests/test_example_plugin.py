@@ -89,6 +89,22 @@ def test_node_graph_runs_the_plugin(plugin_env: dict[str, str], trace_csv: Path,
     assert 'predictor ses' in planner_log
 
 
+def test_study_runs_the_plugin(plugin_env: dict[str, str], trace_csv: Path,
+                              tmp_path: Path) -> None:
+    out = tmp_path / 'study'
+    proc = trust_av(plugin_env, 'reproduce', '--traces', str(trace_csv), '--predictors',
+                    'ses,ca', '--alphas', '0,1', '--max-steps', '6', '--results-dir', str(out),
+                    '--workers', '2', '--no-progress', cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rows = (out / 'all_runs.csv').read_text().splitlines()
+    header = rows[0].split(',')
+    predictor, damping = header.index('predictor'), header.index('ses_damping')
+    ses = [r.split(',') for r in rows[1:] if r.split(',')[predictor] == 'ses']
+    assert len(ses) == 2 and all(r[damping] == '0.8' for r in ses)   # its declared default
+    table = (out / 'table_IV_max_improvements.csv').read_text()
+    assert f'TAC-SES,{trace_csv},' in table
+
+
 def test_plugin_passes_the_component_contract(plugin_env: dict[str, str],
                                               tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, '-m', 'pytest', '-n', '0', '-q', '-p',
