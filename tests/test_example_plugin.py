@@ -121,3 +121,28 @@ def test_no_file_under_src_names_the_plugin() -> None:
         if path.is_file() and path.suffix in {'.py', '.cfg', '.xml', '.yaml', '.toml'}:
             text = path.read_text()
             assert 'trust_av_example_plugin' not in text and 'ses_damping' not in text, path
+
+
+def test_tutorial_includes_the_example_files() -> None:
+    """The tutorial's code blocks are the package's real files (MkDocs snippets), so they
+    cannot drift from what the tests install and run."""
+    import re
+
+    text = (REPO / 'docs' / 'tutorials' / 'write-a-plugin.md').read_text()
+    included = re.findall(r'^--8<-- "([^"]+)"$', text, flags=re.MULTILINE)
+    assert set(included) == {
+        'examples/trust_av_example_plugin/pyproject.toml',
+        'examples/trust_av_example_plugin/trust_av_example_plugin/smoothing.py'}
+    for path in included:
+        assert (REPO / path).is_file(), path
+
+
+def test_components_reference_lists_every_shipped_component() -> None:
+    from trust_monitor.common import registry
+
+    text = (REPO / 'docs' / 'reference' / 'components.md').read_text()
+    for group in (registry.PREDICTORS, registry.DRIVERS):
+        for component in registry.components(group):
+            if component.factory.__module__.split('.')[0] in ('trust_av_planner',
+                                                              'human_driver_sim'):
+                assert f'| `{component.name}` |' in text, component.name
