@@ -187,6 +187,31 @@ def test_bad_parameter_is_refused_in_one_line(group: str, name: str, tmp_path: P
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
+@pytest.mark.parametrize('name', registry.names(registry.PREDICTORS))
+def test_the_declared_needs_decide_what_runs_without_the_follower(name: str,
+                                                                  tmp_path: Path) -> None:
+    """Without the follower's odometry the planner and ``trust-av shadow`` refuse exactly
+    the estimators that declare ``follower_state``, whatever their name."""
+    from trust_av_planner.planner import AvPlanner
+    from trust_monitor.common.kinematics import VehicleState
+
+    needs = registry.FOLLOWER_STATE in registry.get(registry.PREDICTORS, name).needs
+    config = load_run_config(overrides={'planner': {'predictor': name}})
+    planner = AvPlanner(config.planner, config.trust, config.shared.vehicle_length_m,
+                        predictor_params=config.predictor_params)
+    lead, av = VehicleState(40.0, 10.0), VehicleState(0.0, 10.0)
+    preview = [10.0] * config.planner.horizon_steps
+    if needs:
+        with pytest.raises(ValueError, match=f'predictor {name} needs the human follower'):
+            planner.step(lead, preview, av, None, 0.0)
+    else:
+        planner.step(lead, preview, av, None, 0.0)
+    proc = cli('shadow', '--bag', str(tmp_path / 'missing_bag'), '--predictor', name,
+               '--out', str(tmp_path / 'out'), cwd=tmp_path)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert ('has no human follower state' in proc.stderr) == needs, proc.stderr
+
+
 def assert_same_records(graph: list[StepRecord], ref: list[StepRecord]) -> None:
     assert len(graph) == len(ref) == GRAPH_STEPS
     for g, r in zip(graph, ref, strict=True):
