@@ -105,6 +105,22 @@ def test_study_runs_the_plugin(plugin_env: dict[str, str], trace_csv: Path,
     assert f'TAC-SES,{trace_csv},' in table
 
 
+def test_study_cache_keys_on_the_plugins_code(plugin_env: dict[str, str],
+                                              tmp_path: Path) -> None:
+    """A cached case must not outlive a change of the plug-in's code: its module is part of
+    the sweep's code fingerprint."""
+    code = ('from trust_av_planner.study import sweep; '
+            'print([p.name for p in sweep.plugin_sources()]); print(sweep.code_fingerprint())')
+    def run(env: dict[str, str]) -> list[str]:
+        proc = subprocess.run([sys.executable, '-c', code], env=env, cwd=tmp_path,
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        return proc.stdout.splitlines()
+    with_plugin, without = run(plugin_env), run(dict(os.environ))
+    assert with_plugin[0] == "['smoothing.py']" and without[0] == '[]'
+    assert with_plugin[1] != without[1]
+
+
 def test_plugin_passes_the_component_contract(plugin_env: dict[str, str],
                                               tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, '-m', 'pytest', '-n', '0', '-q', '-p',

@@ -19,6 +19,7 @@ import json
 import logging
 import os
 import shutil
+import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +41,7 @@ from trust_av_planner.study.workers import worker_pool
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import RunConfig, load_run_config
 from trust_av_planner.system.metrics import StepRecord, compute_metrics
-from trust_monitor.common import output_files
+from trust_monitor.common import output_files, registry
 
 LOG = logging.getLogger(__name__)
 
@@ -52,7 +53,7 @@ ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 METRICS = ('final_trust', 'mean_explicability', 'rmse_mps2')
 PACKAGES = ('preceding_traffic', 'trust_monitor', 'human_driver_sim', 'trust_av_planner')
 RUNNERS = ('in-process', 'graph')
-PRESENTATION_MODULES = ('plots.py', 'paper_results.py', 'tables.py')
+PRESENTATION_MODULES = ('plots.py', 'paper_results.py', 'tables.py', 'frame.py')
 """Files that cannot change a run's numbers: left out of the cache key (so is ``cli/``)."""
 
 
@@ -96,9 +97,25 @@ class Case:
         return dataclasses.replace(self, driver=0, driver_params=())
 
 
+def plugin_sources() -> list[Path]:
+    """The source files of the registered components from outside the four packages (the
+    installed plug-ins' modules), in name order."""
+    files = set()
+    for group in registry.GROUPS:
+        for component in registry.components(group):
+            module = sys.modules[component.factory.__module__]
+            if module.__name__.split('.')[0] not in PACKAGES and module.__file__:
+                files.add(Path(module.__file__))
+    return sorted(files)
+
+
 def code_fingerprint() -> str:
-    """Hash of the source and data files of the four packages that results depend on."""
+    """Hash of the source and data files of the four packages that results depend on, and
+    of the installed plug-ins' component modules."""
     digest = hashlib.sha256()
+    for path in plugin_sources():
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
     for package in PACKAGES:
         module = __import__(package)
         root = Path(next(iter(module.__path__)))
