@@ -67,6 +67,8 @@ from typing import Any
 import numpy as np
 from soak_wall_checks import STOP_EDGE, Sequences, growth_checks, read_bag, topic_checks
 
+from trust_monitor.common import registry
+
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 TRIPS = (REPO / 'bags' / 'commute_am', REPO / 'bags' / 'commute_pm')
@@ -276,8 +278,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--rss-limit-mb', type=float, default=20.0)
     parser.add_argument('--max-gap-s', type=float, default=1.0)
     parser.add_argument('--rate-hz', type=float, default=10.0)
-    parser.add_argument('--predictor', default='ca', choices=('ca', 'gru'),
-                        help='plan estimator (default: %(default)s, the shipped default)')
+    parser.add_argument('--predictor', default='ca',
+                        choices=registry.names(registry.PREDICTORS),
+                        help='registered plan estimator (default: %(default)s, the shipped '
+                             'default)')
     parser.add_argument('--out', type=Path, default=HERE / 'soak_wall_results.json')
     parser.add_argument('--keep', type=Path, default=None,
                         help='keep the recording, the chained bag and the node logs here')

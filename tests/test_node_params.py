@@ -25,7 +25,6 @@ from trust_av_planner.system.config import (
     load_run_config,
 )
 from trust_monitor.common.param_layers import to_params_text
-from trust_monitor.trust_interface import trust_model_config_types
 
 # name: (file over the shipped one, trust-av accepts, every node accepts)
 CORPUS: dict[str, tuple[str, bool, bool]] = {
@@ -210,16 +209,13 @@ PER_RUN = {'TrafficRunConfig': 'the trace and steps of the run',
 
 
 def declared_components(path: Path) -> set[str]:
-    """The configuration classes a node module passes to ``declare_config``, and every
-    registered trust model's when it calls ``declare_trust_model`` (which declares the
-    chosen model's with ``declare_config``)."""
+    """The configuration classes a node module passes to ``declare_config`` by name (the
+    registered components' classes, trust models included, are declared by the node that
+    runs their group: ``system.config.COMPONENT_GROUPS``, checked by the contract tests)."""
     calls = [call for call in ast.walk(ast.parse(path.read_text()))
              if isinstance(call, ast.Call) and isinstance(call.func, ast.Name)]
-    out = {call.args[1].id for call in calls
-           if call.func.id == 'declare_config' and isinstance(call.args[1], ast.Name)}
-    if any(call.func.id == 'declare_trust_model' for call in calls):
-        out |= {c.__name__ for c in trust_model_config_types()}
-    return out
+    return {call.args[1].id for call in calls
+            if call.func.id == 'declare_config' and isinstance(call.args[1], ast.Name)}
 
 
 @pytest.mark.parametrize('node', sorted(NODE_MODULES))

@@ -36,6 +36,7 @@ ROSDEP_KEYS = {
     'casadi': 'casadi-pip',
     'rosbags': 'python3-rosbags-pip',
     'mcap': 'mcap-ros2-support',
+    'pandas': 'python3-pandas',
 }
 """Python module -> rosdep key (rosdistro rosdep/python.yaml; see the module docstring)."""
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python',

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import subprocess
 import sys
 from pathlib import Path
@@ -237,8 +238,9 @@ def test_reproduce_with_a_driver_population(tmp_path: Path) -> None:
     assert '10 cases (in-process)' in proc.stdout
     assert 'a population of 2 drivers, seed 1' in proc.stdout
     rows = (tmp_path / 'all_runs.csv').read_text().splitlines()
-    assert rows[0].startswith('trace,predictor,alpha,driver,weight_acceleration,')
-    assert sorted({r.split(',')[3] for r in rows[1:]}) == ['1', '2']
+    assert rows[0].startswith('trace,predictor,trust_model,driver_model,alpha,driver,'
+                              'weight_acceleration,')
+    assert sorted({r.split(',')[5] for r in rows[1:]}) == ['1', '2']
     table = (tmp_path / 'table_IV_max_improvements.md').read_text()
     assert table.count(' ± ') == 3
     bad = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
@@ -267,3 +269,69 @@ def test_human_fitted_profile_population_draws_from_its_per_driver_fits(tmp_path
         driver = drawn[int(row[header.index('driver')]) - 1]
         for name in ('desired_standstill_gap_m', 'av_extra_decel_mps2', 'time_headway_s'):
             assert float(row[header.index(name)]) == pytest.approx(driver[name]), name
+
+
+def reproduce(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+                           '--no-progress', *args], capture_output=True, text=True,
+                          timeout=600, stdin=subprocess.DEVNULL)
+
+
+def test_study_of_any_registered_parts(tmp_path: Path, short_trace: str) -> None:
+    """A predictor the paper did not print (cv) on US06 and on a CSV, two followers, two
+    alphas: every run is one row of the tidy table, the paper's tables hold only the paper's
+    cases (no KeyError ('cv', 'us06')), and from Python the same table is a DataFrame."""
+    import pandas as pd
+
+    from trust_av_planner.study.frame import study
+
+    out = tmp_path / 'study'
+    proc = reproduce('--traces', f'us06,{short_trace}', '--predictors', 'cv,ca',
+                     '--alphas', '0,1', '--driver-models', 'mpc,idm', '--max-steps', '4',
+                     '--results-dir', str(out), '--workers', '2')
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    runs = pd.read_csv(out / 'all_runs.csv', keep_default_na=False)
+    assert len(runs) == 16
+    assert list(runs.columns[:6]) == ['trace', 'predictor', 'trust_model', 'driver_model',
+                                      'alpha', 'driver']
+    assert {'final_trust', 'mean_explicability', 'rmse_mps2', 'idm_time_headway_s',
+            'runner', 'max_steps'} <= set(runs.columns)
+    settings = set(zip(runs.predictor, runs.driver_model, runs.alpha, strict=True))
+    assert settings == {(p, d, a) for p in ('ca', 'cv') for d in ('idm', 'mpc')
+                        for a in (0.0, 1.0)}
+    assert (runs[runs.driver_model == 'mpc'].idm_time_headway_s == '').all()
+    table = (out / 'table_IV_max_improvements.csv').read_text().splitlines()
+    cv_us06 = next(r for r in table if r.startswith('TAC-CV,us06,'))
+    assert cv_us06.endswith('—,—,—,—')      # the paper printed no TAC-CV
+    assert (out / 'table_III_tac_ca_us06.md').exists()
+    assert not (out / 'table_II_tac_gru_us06.md').exists()
+    inline = InlineExecutor()
+    frame = study(['us06', short_trace], ['cv', 'ca'], [0.0, 1.0],
+                  driver_models=['mpc', 'idm'], results_dir=out, executor=inline, max_steps=4)
+    assert inline.ran == []                 # every case came from the cache
+    # the same table: the CSV read back equals the DataFrame written and read back alike
+    pd.testing.assert_frame_equal(pd.read_csv(out / 'all_runs.csv'),
+                                  pd.read_csv(io.StringIO(frame.to_csv(index=False))))
+
+
+def test_params_files_layer_in_reproduce(tmp_path: Path, short_trace: str) -> None:
+    """``--params-file A --params-file B`` layers B over A over the shipped file, as in run
+    and simulate (it used to read B alone)."""
+    first, second = tmp_path / 'a.yaml', tmp_path / 'b.yaml'
+    first.write_text('/**/planner:\n  ros__parameters:\n    explicability_scale: 0.02\n')
+    second.write_text('/**:\n  ros__parameters:\n    epsilon_mps2: 3.0\n')
+    proc = reproduce('--params-file', str(first), '--params-file', str(second), '--traces',
+                     short_trace, '--predictors', 'ca', '--alphas', '0', '--max-steps', '3',
+                     '--results-dir', str(tmp_path / 'out'), '--workers', '1')
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert 'epsilon_mps2 = 3, explicability_scale = 0.02' in proc.stdout
+
+
+def test_unregistered_names_are_refused_in_one_line(tmp_path: Path) -> None:
+    for option, value, message in (('--predictors', 'ca,nope', "unknown predictor(s) ['nope']"),
+                                   ('--driver-models', 'nope', 'unknown driver model(s)'),
+                                   ('--trust-models', 'nope', 'unknown trust model(s)'),
+                                   ('--alphas', '0,2', 'alpha must be in [0, 1]')):
+        proc = reproduce(option, value, '--results-dir', str(tmp_path))
+        assert proc.returncode == 2, proc.stderr
+        assert message in proc.stderr and 'Traceback' not in proc.stderr, proc.stderr

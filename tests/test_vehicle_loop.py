@@ -295,11 +295,11 @@ def test_vehicle_in_the_loop_outage_decelerates_then_recovers(
     assert len(late) >= 200 and late[-1]['trust'] > late[0]['trust'] > 0.0  # trust goes on
 
 
-def test_reproduce_with_lead_preview_derives_the_params_file(tmp_path: Path) -> None:
-    from trust_av_planner.cli.reproduce import with_lead_preview
+def test_reproduce_with_lead_preview_adds_a_params_layer(tmp_path: Path) -> None:
+    from trust_av_planner.cli.reproduce import lead_preview_layer
 
-    path = with_lead_preview(DEFAULT_PARAMS_FILE, 'constant_speed', tmp_path)
-    derived, shipped = load_run_config(path), load_run_config()
+    path = lead_preview_layer('constant_speed', tmp_path)
+    derived, shipped = load_run_config([DEFAULT_PARAMS_FILE, path]), load_run_config()
     assert derived.planner.lead_preview == 'constant_speed'
     assert shipped.planner.lead_preview == 'recorded'
     assert derived.planner == dataclasses.replace(shipped.planner, lead_preview='constant_speed')

@@ -79,5 +79,5 @@ def test_planner_core_without_follower_observes_the_av_only(run_config) -> None:
     assert second.expected_mps2 == pytest.approx([first.result.plan_mps2[0]] * 3)
     gru = AvPlanner(dataclasses.replace(run_config.planner, predictor='gru'),
                     run_config.trust, 4.5)
-    with pytest.raises(ValueError, match='predictor ca'):
+    with pytest.raises(ValueError, match='predictor gru needs the human follower state'):
         gru.step(lead, [10.0, 10.0, 10.0], av, None, 0.0)

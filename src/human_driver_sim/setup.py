@@ -21,5 +21,10 @@ setup(
         'console_scripts': [
             'driver = human_driver_sim.driver_node:main',
         ],
+        # The follower models, registered like any plug-in (trust_monitor.common.registry).
+        'trust_av.drivers': [
+            'idm = human_driver_sim.idm:COMPONENT',
+            'mpc = human_driver_sim.driver_mpc:COMPONENT',
+        ],
     },
 )

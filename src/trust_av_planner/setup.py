@@ -32,5 +32,11 @@ setup(
             'ego_plant = trust_av_planner.ego_plant_node:main',
             'recorder = trust_av_planner.graph.recorder_node:main',
         ],
+        # The plan estimators, registered like any plug-in (trust_monitor.common.registry).
+        'trust_av.predictors': [
+            'ca = trust_av_planner.predictors.ca:COMPONENT',
+            'cv = trust_av_planner.predictors.cv:COMPONENT',
+            'gru = trust_av_planner.predictors.gru:COMPONENT',
+        ],
     },
 )

@@ -39,6 +39,7 @@ import numpy as np
 
 from trust_monitor.common import kinematics
 from trust_monitor.common.params import check_fields, control_step_param, param, require
+from trust_monitor.common.registry import Component
 from trust_monitor.common.solver import sqp_options
 
 LOG = logging.getLogger(__name__)
@@ -294,3 +295,15 @@ class DriverMpc:
         self._previous = None
         return DriverResult(plan, f'fallback: {stats["return_status"]}', False, iterations,
                             elapsed)
+
+
+def build(config: DriverConfig, params: None) -> DriverMpc:
+    """The fitted MPC follower: its weights are the ``human_driver`` section's
+    (:class:`DriverConfig`), so it declares no parameters of its own."""
+    return DriverMpc(config)
+
+
+COMPONENT = Component(
+    name='mpc', factory=build,
+    description='MPC follower of eq. (13) with the IRL-fitted feature weights (the paper)')
+"""Registered as ``mpc`` in ``trust_av.drivers`` (human_driver_sim's setup.py)."""

@@ -29,7 +29,9 @@ from std_msgs.msg import Empty
 from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
-from human_driver_sim.driver_mpc import DriverConfig, DriverMpc
+from human_driver_sim.driver_mpc import DriverConfig
+from human_driver_sim.followers import FollowerConfig, make_follower
+from trust_monitor.common import registry
 from trust_monitor.common.grids import hold_at
 from trust_monitor.common.kinematics import advance
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
@@ -65,7 +67,8 @@ class FollowerState:
 
 
 class DriverNode(Node):
-    """Thin adapter over :class:`human_driver_sim.driver_mpc.DriverMpc`."""
+    """Thin adapter over the follower model ``driver_model`` names
+    (:func:`human_driver_sim.followers.make_follower`; the fitted MPC by default)."""
 
     def __init__(self) -> None:
         super().__init__('human_driver')
@@ -73,9 +76,14 @@ class DriverNode(Node):
         self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.config = declare_config(self, DriverConfig)
+        self.model = declare_config(self, FollowerConfig)
+        # Every registered follower's parameters are declared (and checked), the chosen
+        # one's are used: as trust-av's node_components reads the section.
+        params = {c.name: declare_config(self, c.config_type)
+                  for c in registry.components(registry.DRIVERS) if c.config_type is not None}
         self.follower = declare_config(self, FollowerState)
         self.clock = declare_config(self, WallClockConfig)
-        self.mpc = DriverMpc(self.config)
+        self.mpc = make_follower(self.config, self.model, params.get(self.model.driver_model))
         self.position_m = self.follower.initial_position_m
         self.speed_mps = self.follower.initial_speed_mps
         self.buffer = StepBuffer(['expected', 'ego'])
@@ -103,7 +111,8 @@ class DriverNode(Node):
         if self.clock.wall:
             self.create_subscription(Empty, 'sim/start', self.on_start, QOS['LATCHED'])
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
-        self.get_logger().info(f'ready ({self.clock.clock_mode}): weights '
+        self.get_logger().info(f'ready ({self.clock.clock_mode}): follower '
+                               f'{self.model.driver_model}, weights '
                                f'{self.config.weights.tolist()}')
 
     def publish_odometry(self, ns: int) -> None:

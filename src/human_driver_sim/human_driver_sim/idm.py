@@ -6,9 +6,14 @@ bounds of a fit, :data:`FIT_BOUNDS`. The fit itself is in :mod:`human_driver_sim
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
+
+from human_driver_sim.driver_mpc import DriverConfig, DriverResult
+from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.registry import Component
 
 
 @dataclass(frozen=True)
@@ -62,3 +67,100 @@ def idm_accel(params: IdmParams, gap_m: float, speed_mps: float, leader_speed_mp
                                                    * params.comfort_decel_mps2)))
     ratio = (speed_mps / params.desired_speed_mps) ** 4
     return float(params.max_accel_mps2 * (1.0 - ratio - (star / max(gap_m, 0.1)) ** 2))
+
+
+_REASON = 'the follower model is built at start-up'
+
+
+@dataclass(frozen=True)
+class IdmConfig:
+    """Parameters of the IDM follower (``driver_model: idm``), in the ``human_driver``
+    section; defaults :data:`TEXTBOOK_MOTORWAY`, ranges :data:`FIT_BOUNDS`."""
+
+    idm_desired_speed_mps: float = param('IDM desired speed v0', unit='m/s',
+                                         low=FIT_BOUNDS['desired_speed_mps'][0],
+                                         high=FIT_BOUNDS['desired_speed_mps'][1],
+                                         default=TEXTBOOK_MOTORWAY.desired_speed_mps,
+                                         reason=_REASON)
+    idm_time_headway_s: float = param('IDM time headway T', unit='s',
+                                      low=FIT_BOUNDS['time_headway_s'][0],
+                                      high=FIT_BOUNDS['time_headway_s'][1],
+                                      default=TEXTBOOK_MOTORWAY.time_headway_s, reason=_REASON)
+    idm_min_gap_m: float = param('IDM standstill gap s0', unit='m',
+                                 low=FIT_BOUNDS['min_gap_m'][0], high=FIT_BOUNDS['min_gap_m'][1],
+                                 default=TEXTBOOK_MOTORWAY.min_gap_m, reason=_REASON)
+    idm_max_accel_mps2: float = param('IDM maximum acceleration a', unit='m/s^2',
+                                      low=FIT_BOUNDS['max_accel_mps2'][0],
+                                      high=FIT_BOUNDS['max_accel_mps2'][1],
+                                      default=TEXTBOOK_MOTORWAY.max_accel_mps2, reason=_REASON)
+    idm_comfort_decel_mps2: float = param('IDM comfortable deceleration b', unit='m/s^2',
+                                          low=FIT_BOUNDS['comfort_decel_mps2'][0],
+                                          high=FIT_BOUNDS['comfort_decel_mps2'][1],
+                                          default=TEXTBOOK_MOTORWAY.comfort_decel_mps2,
+                                          reason=_REASON)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    @property
+    def params(self) -> IdmParams:
+        """As :class:`IdmParams`."""
+        return IdmParams(self.idm_desired_speed_mps, self.idm_time_headway_s,
+                         self.idm_min_gap_m, self.idm_max_accel_mps2,
+                         self.idm_comfort_decel_mps2)
+
+
+class IdmFollower:
+    """The IDM as a follower model: at each of the N model steps the IDM acceleration
+    against the AV predicted with the plan the human expects, clipped to the human's
+    acceleration bounds and to what keeps its speed within ``[speed_min_mps,
+    speed_max_mps]``. The first value is applied; it has no state between steps.
+
+    Args:
+        config: the ``human_driver`` section (step, horizon, bounds).
+        idm: the IDM's parameters.
+    """
+
+    def __init__(self, config: DriverConfig, idm: IdmConfig) -> None:
+        self.config = config
+        self.params = idm.params
+
+    def reset(self) -> None:
+        """Nothing to forget."""
+
+    def step(self, gap_m: float, speed_mps: float, av_speed_mps: float,
+             expected_mps2: np.ndarray) -> DriverResult:
+        """The IDM plan over the horizon (status ``idm``; never a fallback).
+
+        Args:
+            gap_m: gap from the human's front bumper to the AV's rear bumper, m.
+            speed_mps: human's speed, m/s.
+            av_speed_mps: AV's current speed, m/s.
+            expected_mps2: the AV plan the human expects, N values, m/s^2.
+        """
+        start = time.perf_counter()
+        c, dt = self.config, self.config.dt_s
+        gap, speed, av_speed = float(gap_m), float(speed_mps), float(av_speed_mps)
+        plan = np.empty(c.horizon_steps)
+        for k in range(c.horizon_steps):
+            accel = idm_accel(self.params, gap, speed, av_speed)
+            low = max(c.accel_min_mps2, (c.speed_min_mps - speed) / dt)
+            high = min(c.accel_max_mps2, (c.speed_max_mps - speed) / dt)
+            accel = max(low, min(accel, high))
+            plan[k] = accel
+            av_accel = max(float(expected_mps2[k]), -av_speed / dt)
+            gap += (av_speed - speed) * dt + 0.5 * (av_accel - accel) * dt * dt
+            speed += accel * dt
+            av_speed += av_accel * dt
+        return DriverResult(plan, 'idm', True, 0, time.perf_counter() - start)
+
+
+def build(config: DriverConfig, params: IdmConfig) -> IdmFollower:
+    """The IDM follower with ``params`` on the ``human_driver`` section's grid and bounds."""
+    return IdmFollower(config, params)
+
+
+COMPONENT = Component(
+    name='idm', factory=build, config_type=IdmConfig,
+    description='Intelligent Driver Model (Treiber et al. 2000) against the expected AV plan')
+"""Registered as ``idm`` in ``trust_av.drivers`` (human_driver_sim's setup.py)."""

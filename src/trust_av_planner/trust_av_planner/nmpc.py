@@ -35,7 +35,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from trust_monitor.common import kinematics
+from trust_monitor.common import kinematics, registry
 from trust_monitor.common.params import (
     PARAM_METADATA_KEY,
     check_fields,
@@ -49,9 +49,6 @@ from trust_monitor.trust_interface import explicability_bound as trust_bound
 from trust_monitor.trust_model import TrustConfig, explicability
 
 LOG = logging.getLogger(__name__)
-
-PREDICTORS = ('ca', 'gru')
-"""Names of the plan estimators (parameter ``predictor``)."""
 
 LEAD_PREVIEWS = ('recorded', 'constant_speed', 'constant_acceleration')
 """Where the lead's speed over the horizon comes from (parameter ``lead_preview``)."""
@@ -120,13 +117,12 @@ class PlannerConfig:
                                             unit='1/s^2', reason=SAFETY)
     fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
                                              unit='1/s', reason=SAFETY)
-    predictor: str = param('estimator of the plan the human expects', choices=PREDICTORS,
+    predictor: str = param('estimator of the plan the human expects: a registered plan '
+                           'estimator (entry-point group trust_av.predictors)',
                            reason=ESTIMATOR)
     time_headway_cap_s: float = param('cap of the time headway d_H / v_H when the human is '
                                       'stopped', unit='s', low=0.0, low_inclusive=False,
                                       reason=ESTIMATOR)
-    gru_model: str = param('GRU weights: a file in trust_av_planner/models/ or a path',
-                           reason=ESTIMATOR)
     lead_preview: str = param("the lead's speed over the horizon: the recorded preview topic, "
                               'or built from its odometry (constant speed or constant '
                               'acceleration)', choices=LEAD_PREVIEWS, default='recorded',
@@ -150,7 +146,9 @@ class PlannerConfig:
         require(self.speed_min_mps < self.speed_max_mps,
                 f'need 0 <= speed_min_mps < speed_max_mps, got {self.speed_min_mps}, '
                 f'{self.speed_max_mps}')
-        require(bool(self.gru_model), 'gru_model must name a weights file')
+        predictors = registry.names(registry.PREDICTORS)
+        require(self.predictor in predictors,
+                f'predictor must be one of {list(predictors)}, got {self.predictor!r}')
         require(self.stale_decel_mps2 >= self.accel_min_mps2,
                 f'stale_decel_mps2 must be >= accel_min_mps2 = {self.accel_min_mps2:g}, got '
                 f'{self.stale_decel_mps2:g}')

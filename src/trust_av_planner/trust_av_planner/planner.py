@@ -18,24 +18,32 @@ import numpy as np
 
 from trust_av_planner.nmpc import PlannerConfig, PlanResult, TrustAwareNmpc
 from trust_av_planner.predictors import Observation, Predictor
-from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
-from trust_av_planner.predictors.gru import GruPredictor, resolve_model
 from trust_av_planner.predictors.sampling import ModelGridPredictor
 from trust_av_planner.preview import LeadPreview, hold_on_grid
+from trust_monitor.common import registry
 from trust_monitor.common.kinematics import VehicleState, gap_m
 from trust_monitor.trust_interface import TrustModel
 from trust_monitor.trust_model import TrustConfig
 
 
-def make_predictor(config: PlannerConfig) -> Predictor:
-    """The plan estimator named by the ``predictor`` parameter."""
-    if config.predictor == 'ca':
-        return ConstantAccelerationPredictor(config.horizon_steps, config.accel_min_mps2,
-                                             config.accel_max_mps2)
-    if config.predictor == 'gru':
-        return GruPredictor.from_file(resolve_model(config.gru_model), config.horizon_steps,
-                                      config.dt_s, config.accel_min_mps2, config.accel_max_mps2)
-    raise ValueError(f'unknown predictor {config.predictor!r}')
+def make_predictor(config: PlannerConfig, params: Any = None) -> Predictor:
+    """The plan estimator registered under the ``predictor`` parameter's name.
+
+    Args:
+        config: the planner's parameters (horizon, step, acceleration bounds).
+        params: the estimator's own parameters (its ``config_type``; None: its defaults).
+
+    Raises:
+        RegistryError: the name is not registered or its entry point is broken.
+    """
+    component = registry.get(registry.PREDICTORS, config.predictor)
+    predictor: Predictor = component.factory(config, registry.config_of(component, params))
+    return predictor
+
+
+def needs_follower_state(config: PlannerConfig) -> bool:
+    """Whether the configured plan estimator declares that it needs the follower's state."""
+    return registry.FOLLOWER_STATE in registry.get(registry.PREDICTORS, config.predictor).needs
 
 
 def observe(av: VehicleState, human: VehicleState, av_accel_mps2: float, length_m: float,
@@ -75,6 +83,8 @@ class AvPlanner:
         trust: the trust model.
         vehicle_length_m: odometry position to bumper-to-bumper gap, m.
         predictor: the plan estimator on the model grid (default: :func:`make_predictor`).
+        predictor_params: the registered estimator's parameters (its ``config_type``;
+            None: its defaults), when ``predictor`` is None.
         period_s: the control period, s (None = ``dt_s``, the paper's loop). At another
             period the NMPC predicts on :func:`~trust_av_planner.nmpc.prediction_grid` and
             the estimator is fed 1 s samples (:class:`ModelGridPredictor`).
@@ -84,15 +94,18 @@ class AvPlanner:
 
     def __init__(self, config: PlannerConfig, trust: TrustConfig, vehicle_length_m: float,
                  predictor: Predictor | None = None, period_s: float | None = None, *,
-                 cpu_budget: bool = False, trust_model: TrustModel | None = None) -> None:
+                 cpu_budget: bool = False, predictor_params: Any = None,
+                 trust_model: TrustModel | None = None) -> None:
         self.config = config
         self.vehicle_length_m = vehicle_length_m
         self.period_s = config.dt_s if period_s is None else period_s
         self.nmpc = TrustAwareNmpc(config, trust, self.period_s, cpu_budget=cpu_budget,
                                    trust_model=trust_model)
-        self.predictor = predictor if predictor is not None else make_predictor(config)
+        self.predictor = (predictor if predictor is not None
+                          else make_predictor(config, predictor_params))
+        self.needs_follower = needs_follower_state(config)
         self.same_grid = abs(self.period_s - config.dt_s) <= 1e-12 * config.dt_s
-        history = getattr(getattr(self.predictor, 'weights', None), 'history_steps', 1)
+        history = int(getattr(self.predictor, 'history_steps', 1))
         self.sampler = None if self.same_grid else ModelGridPredictor(
             self.predictor, config.dt_s, history)
         self.lead = (None if config.lead_preview == 'recorded'
@@ -124,18 +137,19 @@ class AvPlanner:
             av: the AV's odometry.
             human: the human follower's odometry; None when it is not known (wall mode
                 without a follower topic): the plan estimator then observes only the AV's
-                acceleration (gap, relative speed and headway NaN), which is all the CA
-                predictor uses; other predictors need the follower.
+                acceleration (gap, relative speed and headway NaN), which is enough for an
+                estimator that does not declare the ``follower_state`` need.
             trust: the monitor's trust state (for ``paper``: the estimate T(t)).
             t_s: time of this step, s (default: one control period after the previous).
 
         Raises:
-            ValueError: ``human`` is None and the predictor is not the CA predictor; a
-                recorded preview is missing, or given while the planner builds its own.
+            ValueError: ``human`` is None and the plan estimator needs the follower's state;
+                a recorded preview is missing, or given while the planner builds its own.
         """
         t_s = self._t_s if t_s is None else t_s
-        if human is None and not isinstance(self.predictor, ConstantAccelerationPredictor):
-            raise ValueError('planning without the human follower state needs predictor ca')
+        if human is None and self.needs_follower:
+            raise ValueError(f'predictor {self.config.predictor} needs the human follower '
+                             "state (it declares the need 'follower_state')")
         expected_model, age_s = self.expect(av, human, t_s)
         step_s, steps = self.grid
         expected = hold_on_grid(expected_model, self.config.dt_s, step_s, steps, age_s)
@@ -149,14 +163,13 @@ class AvPlanner:
              t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """A step without the NMPC (an input is stale): ``accel_mps2`` is commanded; the
         estimator still observes what it can (nothing without the AV's odometry, nothing
-        without the follower's unless it is the CA predictor).
+        without the follower's when it needs the follower's state).
 
         Returns:
             The plan (``accel_mps2`` over the prediction grid) and the expected plan on the
             prediction grid.
         """
-        usable = av is not None and (human is not None
-                                     or isinstance(self.predictor, ConstantAccelerationPredictor))
+        usable = av is not None and (human is not None or not self.needs_follower)
         expected_model, age_s = self.expect(av if usable else None, human, t_s)
         step_s, steps = self.grid
         self.commanded(accel_mps2, t_s)

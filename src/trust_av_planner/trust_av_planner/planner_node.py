@@ -18,8 +18,9 @@ never received or received longer ago than ``input_timeout_s`` is stale too. Whi
 ego odometry (or a recorded preview) is stale the planner commands ``stale_decel_mps2`` with
 status ERROR naming the input; it plans again as soon as they are fresh. The human odometry is
 used when fresh; without it the plan estimator observes only the AV's own acceleration (enough
-for the CA predictor; an empty ``human_odom_topic`` requires ``predictor: ca``). Trust: the
-latest estimate, ``trust_initial`` before the first. ``alpha``, ``trust_min`` and
+for an estimator that does not declare the ``follower_state`` need, such as CA or CV; an empty
+``human_odom_topic`` requires such an estimator). Trust: the latest estimate,
+``trust_initial`` before the first. ``alpha``, ``trust_min`` and
 ``solver_cpu_budget_s`` can be changed with ``ros2 param set`` (from the next tick).
 """
 
@@ -41,6 +42,7 @@ from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PlannerConfig
 from trust_av_planner.planner import AvPlanner
 from trust_av_planner.system.config import PlannerTopics, SharedConfig, check_control_rate
+from trust_monitor.common import registry
 from trust_monitor.common.grids import interp_at
 from trust_monitor.common.kinematics import VehicleState
 from trust_monitor.common.lockstep import StepBuffer
@@ -86,6 +88,11 @@ class PlannerNode(Node):
         shared = declare_config(self, SharedConfig)
         self.clock = declare_config(self, WallClockConfig)
         topics = declare_config(self, PlannerTopics)
+        # Every registered plan estimator's parameters are declared (and checked), the
+        # chosen one's are used: as trust-av's node_components reads the section.
+        params = {c.name: declare_config(self, c.config_type)
+                  for c in registry.components(registry.PREDICTORS)
+                  if c.config_type is not None}
         wall = self.clock.wall
         if wall:
             check_control_rate(self.config, self.clock.control_rate_hz)
@@ -103,20 +110,25 @@ class PlannerNode(Node):
                                       'use clock_mode lockstep or run it in-process')
         self.planner = AvPlanner(self.config, trust, shared.vehicle_length_m,
                                  period_s=1.0 / self.clock.control_rate_hz if wall else None,
-                                 cpu_budget=wall, trust_model=self.trust_model)
+                                 cpu_budget=wall, trust_model=self.trust_model,
+                                 predictor_params=params.get(self.config.predictor))
         self.trust_initial = trust.trust_initial
         self.previous_ns: int | None = None
         self.buffer = StepBuffer([*STEP_INPUTS, 'trust'])
         self.latest = LatestInputs([*STEP_INPUTS, 'trust'])
         self.has_human = bool(topics.human_odom_topic)
-        if not self.has_human and (not wall or self.config.predictor != 'ca'):
+        if not self.has_human and (not wall or self.planner.needs_follower):
             raise ValueError('parameter human_odom_topic: may be empty only with '
-                             'clock_mode wall and predictor ca')
+                             'clock_mode wall and a predictor that does not need the '
+                             f'follower state ({self.config.predictor} does)'
+                             if self.planner.needs_follower else
+                             'parameter human_odom_topic: may be empty only with clock_mode '
+                             'wall')
         recorded = self.config.lead_preview == 'recorded'
         self.required = ['traffic', 'preview', 'ego'] if recorded else ['traffic', 'ego']
-        if self.config.predictor != 'ca':
-            # the GRU's inputs include the follower's gap and speed: without a fresh human
-            # odometry it cannot predict, so the stale-input policy applies
+        if self.planner.needs_follower:
+            # the estimator's inputs include the follower's gap and speed: without a fresh
+            # human odometry it cannot predict, so the stale-input policy applies
             self.required.append('human')
         self.missed: dict[str, int] = {}  # input -> deadline events since its last message
         self.stale_reason = ''

@@ -15,9 +15,10 @@ from tqdm import tqdm
 from preceding_traffic.traces import SHIPPED_TRACES
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph import stop_signals
-from trust_av_planner.nmpc import LEAD_PREVIEWS, PREDICTORS, PlannerConfig
+from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 from trust_av_planner.system.metrics import Metrics
+from trust_monitor.common import registry
 from trust_monitor.common.output_files import cannot_write
 from trust_monitor.common.params import field_spec
 
@@ -107,8 +108,14 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help='its message type (default: preceding_traffic.bag_message_type)')
     parser.add_argument('--alpha', type=alpha_value, default=None,
                         help="explicability weight in [0, 1] (default: the params file's)")
-    parser.add_argument('--predictor', choices=PREDICTORS, default=None,
-                        help='estimator of the plan the human expects (default: params file)')
+    parser.add_argument('--predictor', choices=registry.names(registry.PREDICTORS),
+                        default=None,
+                        help='registered estimator of the plan the human expects (default: '
+                             "the params file's predictor)")
+    parser.add_argument('--driver-model', choices=registry.names(registry.DRIVERS),
+                        default=None,
+                        help="registered human follower model (default: the params file's "
+                             'human_driver.driver_model)')
     add_lead_preview_option(parser)
     add_params_file_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
@@ -172,7 +179,10 @@ def run_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
         traffic['bag_topic'] = args.bag_topic
     if args.bag_type is not None:
         traffic['bag_message_type'] = args.bag_type
-    return {'planner': planner, 'preceding_traffic': traffic}
+    driver: dict[str, object] = {}
+    if getattr(args, 'driver_model', None) is not None:
+        driver['driver_model'] = args.driver_model
+    return {'planner': planner, 'preceding_traffic': traffic, 'human_driver': driver}
 
 
 def format_metrics(metrics: Metrics, title: str) -> str:

@@ -21,7 +21,7 @@ import re
 from collections.abc import Callable
 
 from trust_av_planner.cli.main import build_parser
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, NODE_COMPONENTS
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, NODE_COMPONENTS, node_components
 from trust_monitor.common.params import PARAM_METADATA_KEY, ParamSpec, read_params_file
 from trust_monitor.common.topics import TOPICS, WALL_QOS_TEXT, topic_table_markdown
 from trust_monitor.estimate import build_parser as estimate_parser
@@ -114,8 +114,8 @@ def cli_markdown() -> str:
 def field_specs() -> dict[str, tuple[ParamSpec, tuple[str, ...]]]:
     """Parameter name -> its field's :class:`ParamSpec` and the nodes that read it."""
     specs: dict[str, tuple[ParamSpec, tuple[str, ...]]] = {}
-    for node, classes in NODE_COMPONENTS.items():
-        for cls in classes:
+    for node in NODE_COMPONENTS:
+        for cls in node_components(node):
             for field in dataclasses.fields(cls):
                 spec = field.metadata.get(PARAM_METADATA_KEY)
                 if isinstance(spec, ParamSpec):

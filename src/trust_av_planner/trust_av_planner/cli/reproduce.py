@@ -1,9 +1,11 @@
-"""``trust-av reproduce``: the paper's Tables II-IV and Figures 2-3 from one command."""
+"""``trust-av reproduce``: a study of any registered parts (traces x plan estimators x trust
+models x followers x alpha) as one tidy table, and the paper's Tables II-IV and Figures 2-3
+for the cases that are the paper's, from one command."""
 
 from __future__ import annotations
 
 import argparse
-import csv
+import dataclasses
 import itertools
 import time
 from pathlib import Path
@@ -11,12 +13,23 @@ from typing import Any
 
 import yaml
 
-from human_driver_sim.population import DRIVER_FIT_FILE, FITTED_CAUTION_FIT_FILE, WEIGHT_NAMES
+from human_driver_sim.population import DRIVER_FIT_FILE, FITTED_CAUTION_FIT_FILE
 from preceding_traffic.sources import load_trace
-from trust_av_planner.cli.options import Progress, add_lead_preview_option, positive_int
+from trust_av_planner.cli.options import (
+    Progress,
+    add_lead_preview_option,
+    add_params_file_option,
+    alpha_value,
+    positive_int,
+)
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.nmpc import PREDICTORS as KNOWN_PREDICTORS
 from trust_av_planner.study import sweep, tables
+from trust_av_planner.study.frame import (
+    TRUST_MODEL_PARAMETER,
+    check_axes,
+    tidy_rows,
+    write_tidy_csv,
+)
 from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_av_planner.study.plots import speed_profiles, trust_over_time
 from trust_av_planner.study.sweep import Case
@@ -25,8 +38,7 @@ from trust_av_planner.system.config import (
     HUMAN_FITTED_PARAMS_FILE,
     load_run_config,
 )
-from trust_monitor.common import output_files
-from trust_monitor.common.params import read_params_file
+from trust_monitor.common import output_files, registry
 from trust_monitor.trust_interface import paper_bound_holds
 
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
@@ -45,15 +57,12 @@ DRIVER_FITS = {'human_fitted': FITTED_CAUTION_FIT_FILE}
 for the others."""
 
 
-def with_lead_preview(params_file: Path, lead_preview: str, out: Path) -> Path:
-    """A copy of ``params_file`` in ``out`` whose planner has ``lead_preview`` (the sweep's
+def lead_preview_layer(lead_preview: str, out: Path) -> Path:
+    """A params-file layer in ``out`` that sets the planner's ``lead_preview`` (the sweep's
     cache keys on the params text, so each preview has its own cases)."""
-    sections = read_params_file(params_file)
-    sections.setdefault('planner', {})['lead_preview'] = lead_preview
     path = out / f'params_lead_preview_{lead_preview}.yaml'
-    output_files.write_text(path, yaml.safe_dump({node: {'ros__parameters': values}
-                                                 for node, values in sections.items()},
-                                                sort_keys=False))
+    output_files.write_text(path, yaml.safe_dump(
+        {'/**/planner': {'ros__parameters': {'lead_preview': lead_preview}}}))
     return path
 
 
@@ -62,13 +71,39 @@ def csv_list(text: str) -> list[str]:
     return [t.strip() for t in text.split(',') if t.strip()]
 
 
+def alpha_list(text: str) -> list[float]:
+    """argparse type: comma-separated alphas, each in [0, 1]."""
+    return [alpha_value(t) for t in csv_list(text)]
+
+
+def paper_cases(results: dict[Case, dict[str, Any]], cases: list[Case],
+                defaults: tuple[str, str]) -> dict[Case, dict[str, Any]]:
+    """The results of the cases that run the params file's follower and trust model (the
+    configuration the paper's tables describe), keyed without those two axes.
+
+    Args:
+        results: every result.
+        cases: the cases to take them from.
+        defaults: the params file's (driver_model, trust_model).
+    """
+    out = {}
+    for case in cases:
+        if case.driver_model in ('', defaults[0]) and case.trust_model in ('', defaults[1]):
+            out[dataclasses.replace(case, driver_model='', trust_model='')] = results[case]
+    return out
+
+
 def trend_checks(results: dict[Case, dict[str, Any]], traces: list[str],
-                 predictors: list[str]) -> list[str]:
-    """The paper's trends (Tables II-IV), one line each: 'ok' or what broke."""
-    lines = []
+                 predictors: list[str], alphas: list[float]) -> list[str]:
+    """The paper's trends (Tables II-IV), one line each: 'ok' or what broke (none with fewer
+    than two alphas)."""
+    lines: list[str] = []
+    alphas = sorted(alphas)
+    if len(alphas) < 2:
+        return lines
     for predictor in predictors:
         for trace in traces:
-            m = [results[Case(trace, predictor, a)]['metrics'] for a in sweep.ALPHAS]
+            m = [results[Case(trace, predictor, a)]['metrics'] for a in alphas]
             trust = [x['final_trust'] for x in m]
             score = [x['mean_explicability'] for x in m]
             rmse = [x['rmse_mps2'] for x in m]
@@ -80,11 +115,12 @@ def trend_checks(results: dict[Case, dict[str, Any]], traces: list[str],
             if any(b > a * 1.01 for a, b in itertools.pairwise(rmse)):
                 problems.append('RMSE increases')
             if not (trust[-1] > trust[0] and score[-1] < score[0] and rmse[-1] < rmse[0]):
-                problems.append('alpha = 1 not strictly better than alpha = 0')
+                problems.append(f'alpha = {alphas[-1]:g} not strictly better than alpha = '
+                                f'{alphas[0]:g}')
             status = 'ok' if not problems else '; '.join(problems)
             lines.append(f'TAC-{predictor.upper()} {trace}: {status}')
     if {'gru', 'ca'} <= set(predictors) and 'us06' in traces:
-        worse = [a for a in sweep.ALPHAS
+        worse = [a for a in alphas
                  if not (results[Case('us06', 'gru', a)]['metrics']['final_trust']
                          > results[Case('us06', 'ca', a)]['metrics']['final_trust']
                          and results[Case('us06', 'gru', a)]['metrics']['mean_explicability']
@@ -96,18 +132,15 @@ def trend_checks(results: dict[Case, dict[str, Any]], traces: list[str],
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av reproduce``."""
-    unknown = [p for p in args.predictors if p not in KNOWN_PREDICTORS]
-    if unknown:
-        raise TrustAvPlannerError(f'unknown predictor(s) {unknown}; available: '
-                                  f'{list(KNOWN_PREDICTORS)}')
+    check_axes(args.predictors, args.driver_models, args.trust_models, args.alphas)
     if args.max_steps < 0:
         raise TrustAvPlannerError(f'--max-steps must be >= 0, got {args.max_steps}')
     if args.drivers < 0:
         raise TrustAvPlannerError(f'--drivers must be >= 0, got {args.drivers}')
-    if args.profile != 'table_i' and args.params_file is not None:
+    if args.profile != 'table_i' and args.params_files:
         raise TrustAvPlannerError('--profile and --params-file both choose the parameters: give '
                                   'one of them')
-    params_file = args.params_file or PROFILES[args.profile]
+    files: list[Path] = list(args.params_files) or [PROFILES[args.profile]]
     out: Path = args.results_dir or DEFAULT_RESULTS[args.profile]
     if args.lead_preview is not None and args.lead_preview != 'recorded':
         out = args.results_dir or out.with_name(f'{out.name}_{args.lead_preview}')
@@ -117,11 +150,12 @@ def run(args: argparse.Namespace) -> int:
         raise TrustAvPlannerError(f'--results-dir {out}: cannot create it '
                                   f'({err.strerror})') from err
     if args.lead_preview is not None:
-        params_file = with_lead_preview(params_file, args.lead_preview, out)
-    config = load_run_config(params_file)  # validate before starting workers
+        files.append(lead_preview_layer(args.lead_preview, out))
+    config = load_run_config(files)  # validate before starting workers
     for trace in args.traces:               # a bad trace is named before any case runs
         load_trace(trace, config.planner.dt_s, config.trace)
-    cases = sweep.sweep_cases(args.traces, args.predictors, sweep.ALPHAS)
+    cases = sweep.sweep_cases(args.traces, args.predictors, args.alphas, args.driver_models,
+                              args.trust_models)
     if args.drivers:
         cases = sweep.population_cases(cases, args.drivers, args.drivers_seed,
                                        args.driver_fit or DRIVER_FITS.get(args.profile,
@@ -134,25 +168,19 @@ def run(args: argparse.Namespace) -> int:
     bar = Progress('reproduce', len(cases), shown=not args.no_progress)
     start = time.monotonic()
     runner = 'graph' if args.graph else 'in-process'
-    results = sweep.run_sweep(cases, params_file, out, executor,
-                              bar.update, runner=runner,
-                              max_steps=args.max_steps)
+    every = sweep.run_sweep(cases, [str(f) for f in files], out, executor,
+                            bar.update, runner=runner, max_steps=args.max_steps)
     bar.close()
     elapsed = time.monotonic() - start
-
-    with output_files.replacing(out / 'all_runs.csv') as (table,), \
-            table.open('w', newline='') as handle:
-        writer = csv.writer(handle)
-        driver_names = (*WEIGHT_NAMES, 'time_headway_s', 'desired_standstill_gap_m',
-                        'av_extra_decel_mps2')
-        writer.writerow(['trace', 'predictor', 'alpha', 'driver', *driver_names,
-                         *results[cases[0]]['metrics']])
-        for case in cases:
-            driver = {**{name: getattr(config.driver, name) for name in driver_names},
-                      **dict(case.driver_params)}
-            writer.writerow([case.trace, case.predictor, case.alpha, case.driver,
-                             *(driver[name] for name in driver_names),
-                             *results[case]['metrics'].values()])
+    write_tidy_csv(out / 'all_runs.csv', tidy_rows(cases, every))
+    trust_model = sweep.parameter_value(config, TRUST_MODEL_PARAMETER)
+    results = paper_cases(every, cases, (config.follower.driver_model, trust_model or ''))
+    written = ['all_runs.csv']
+    if not results:
+        print(f'{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; no case runs the '
+              "params file's follower and trust model, so no paper table: every run is in "
+              f'{out / "all_runs.csv"}')
+        return 0
     if args.drivers:
         alpha_table, improvement_table = (tables.population_alpha_table,
                                           tables.population_improvement_table)
@@ -160,7 +188,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         alpha_table, improvement_table = tables.alpha_table, tables.improvement_table
         summary = results
-    written = []
     if 'us06' in args.traces:
         for predictor, name, paper in (('gru', 'table_II_tac_gru_us06', TABLE_II_TAC_GRU_US06),
                                        ('ca', 'table_III_tac_ca_us06', TABLE_III_TAC_CA_US06)):
@@ -182,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
     if 'us06' in args.traces:
         series = {f'TAC-{p.upper()}': {a: (summary[Case('us06', p, a)]['time_s'],
                                            summary[Case('us06', p, a)]['trust'])
-                                       for a in sweep.ALPHAS}
+                                       for a in args.alphas}
                   for p in args.predictors}
         trust_over_time(series, 'us06', out / 'figure_3_trust_us06.png',
                         config.trust.trust_growth_rate)
@@ -195,13 +222,14 @@ def run(args: argparse.Namespace) -> int:
     if args.drivers:
         print(f'(a population of {args.drivers} drivers, seed {args.drivers_seed}: tables give '
               'mean ± 95 % CI over drivers; trends and Figure 3 use the means)')
-    for line in trend_checks(summary, args.traces, args.predictors):
+    for line in trend_checks(summary, args.traces, args.predictors, args.alphas):
         print(f'  {line}')
-    print(f'\nProfile {args.profile} ({params_file}): epsilon_mps2 = '
+    components = '; '.join(f'{name}: {params}' for name, params in config.predictor_configs)
+    print(f'\nProfile {args.profile} ({", ".join(str(f) for f in files)}): epsilon_mps2 = '
           f'{config.trust.epsilon_mps2:g}, performance_threshold = '
           f'{config.trust.performance_threshold:g}, explicability_scale = '
-          f'{config.planner.explicability_scale:g}; TAC-GRU uses {config.planner.gru_model} '
-          '(trained behind the default profile)')
+          f'{config.planner.explicability_scale:g}; plan estimator parameters: '
+          f'{components or "none"} (the GRU was trained behind the default profile)')
     print(f'{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; outputs in {out}/: '
           + ', '.join(written))
     if args.graph:
@@ -211,16 +239,34 @@ def run(args: argparse.Namespace) -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``reproduce`` to ``trust-av``."""
+    predictors = ', '.join(registry.names(registry.PREDICTORS))
+    drivers = ', '.join(registry.names(registry.DRIVERS))
+    trust_models = ', '.join(registry.names(registry.TRUST_MODELS)) or 'none yet'
     parser = subparsers.add_parser(
-        'reproduce', help="the paper's Tables II-IV and Figures 2-3",
-        description='Sweep traces x predictors x alpha in {0, 0.25, 0.5, 0.75, 1} with one '
-                    'configuration, in parallel, and write Tables II-IV (Markdown and CSV, '
-                    "ours beside the paper's) and Figures 2-3 (PNG). Finished cases are cached "
-                    'by a hash of case, params file and code, so a rerun only runs what changed.')
+        'reproduce', help="a study of any registered parts; the paper's Tables II-IV and "
+                          'Figures 2-3',
+        description='Run every combination of traces x predictors x trust models x driver '
+                    'models x alphas with one configuration, in parallel, and write '
+                    'all_runs.csv (one row per run, every setting and metric a column); for '
+                    "the cases with the params file's follower and trust model also Tables "
+                    "II-IV (Markdown and CSV, ours beside the paper's where it printed the "
+                    'case) and Figures 2-3 (PNG). Finished cases are cached by a hash of case, '
+                    'params files and code, so a rerun only runs what changed.')
     parser.add_argument('--traces', type=csv_list, default=list(sweep.TRACES),
-                        help='comma-separated traces (default: %(default)s)')
-    parser.add_argument('--predictors', type=csv_list, default=list(sweep.PREDICTORS),
-                        help='comma-separated predictors (default: %(default)s)')
+                        help='comma-separated traces: shipped names, CSV files or rosbag2 bags '
+                             '(default: %(default)s)')
+    parser.add_argument('--predictors', type=csv_list, default=list(sweep.PAPER_PREDICTORS),
+                        help=f'comma-separated registered plan estimators ({predictors}; '
+                             'default: %(default)s)')
+    parser.add_argument('--alphas', type=alpha_list, default=list(sweep.ALPHAS),
+                        help='comma-separated explicability weights in [0, 1] (default: '
+                             '%(default)s)')
+    parser.add_argument('--driver-models', type=csv_list, default=[''],
+                        help=f'comma-separated registered follower models ({drivers}; '
+                             "default: the params file's driver_model)")
+    parser.add_argument('--trust-models', type=csv_list, default=[''],
+                        help=f'comma-separated registered trust models ({trust_models}), set '
+                             "as the trust_model parameter (default: the params file's)")
     parser.add_argument('--executor', choices=('local', 'ray'), default='local',
                         help='local process pool (default) or a Ray cluster')
     parser.add_argument('--workers', type=positive_int, default=None,
@@ -259,9 +305,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='where tables, figures and the cache go (default: results/paper '
                              'for table_i, results/paper_<profile> for as_reported and '
                              'paper_fitted, results/human_fitted for human_fitted)')
-    parser.add_argument('--params-file', type=Path, default=None,
-                        help="ROS 2 params file instead of a profile's (default: the "
-                             "profile's)")
+    add_params_file_option(parser)  # repeatable, layered as in run and simulate
     add_lead_preview_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(func=run)

@@ -19,13 +19,13 @@ from trust_av_planner.cli.options import (
 )
 from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.nmpc import PREDICTORS
+from trust_av_planner.planner import needs_follower_state
 from trust_av_planner.system.config import (
     PlannerTopics,
     check_control_rate,
     load_run_config,
 )
-from trust_monitor.common import output_files
+from trust_monitor.common import output_files, registry
 from trust_monitor.common.wall_clock import format_summary
 
 if TYPE_CHECKING:
@@ -67,10 +67,10 @@ def run(args: argparse.Namespace) -> int:
         raise TrustAvPlannerError('--whole-graph runs the simulated nodes on the standard topics; '
                                   f'the params files ({files}) remap the planner inputs: '
                                   f'{topics}')
-    if not args.whole_graph and config.planner.predictor != 'ca':
-        raise TrustAvPlannerError('trust-av shadow has no human follower state: it needs '
-                                  f'predictor ca (got {config.planner.predictor}) or '
-                                  '--whole-graph')
+    if not args.whole_graph and needs_follower_state(config.planner):
+        raise TrustAvPlannerError('trust-av shadow has no human follower state: predictor '
+                                  f'{config.planner.predictor} needs it (follower_state); '
+                                  'use one that does not or --whole-graph')
     trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
     whole_s = trace.steps * trace.dt_s
     duration_s = whole_s if args.duration_s is None else min(args.duration_s, whole_s)
@@ -105,7 +105,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'MCAP (log time = wall time) and print loop jitter p50/p99/max per node. '
                     'With --whole-graph every node runs in wall mode instead: the traffic node '
                     'replays the bag, ego_plant and human_driver simulate the two vehicles '
-                    '(so the GRU predictor works), and every topic is recorded. '
+                    '(so a predictor that needs the follower state works), and every topic '
+                    'is recorded. '
                     'Exit codes: 0 done, 2 bad input or a node failed (named), 130 interrupted.')
     parser.add_argument('--bag', type=Path, required=True,
                         help='rosbag2 bag (MCAP or sqlite3) whose lead vehicle is replayed')
@@ -124,8 +125,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="control rate, Hz (default: the params file's control_rate_hz)")
     parser.add_argument('--alpha', type=alpha_value, default=None,
                         help="explicability weight in [0, 1] (default: the params file's)")
-    parser.add_argument('--predictor', choices=PREDICTORS, default=None,
-                        help="plan estimator (default: the params file's)")
+    parser.add_argument('--predictor', choices=registry.names(registry.PREDICTORS),
+                        default=None,
+                        help="registered plan estimator (default: the params file's)")
     parser.add_argument('--whole-graph', action='store_true',
                         help='run all five nodes in wall mode (simulated ego and human '
                              'follower) instead of the planner and monitor alone')

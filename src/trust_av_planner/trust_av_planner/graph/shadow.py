@@ -8,8 +8,8 @@ vehicle's odometry and speed preview (:class:`~preceding_traffic.replay.LeadRepl
 stamps = now) and the ego odometry, which is *simulated*: the latest ``/ego/accel_cmd``
 integrated over the real elapsed time (:func:`trust_monitor.common.kinematics.integrate`), because
 the commute bags hold only the lead vehicle. There is no human follower: the planner runs
-with ``human_odom_topic: ''`` (its CA plan estimator observes only the AV's acceleration;
-the GRU needs the follower, so a shadow run requires ``predictor: ca``). Every
+with ``human_odom_topic: ''`` (its plan estimator observes only the AV's acceleration, so a
+shadow run requires one that does not declare the ``follower_state`` need, e.g. ca or cv). Every
 message on the recorded topics is written with log time = its header stamp = the wall time
 it was published (not sim time). The player publishes on the planner's configured input
 topics (``lead_odom_topic``, ``lead_preview_topic``, ``ego_odom_topic``), so a params file
@@ -18,7 +18,7 @@ that remaps them is exercised end to end.
 :func:`run_wall_graph` (``trust-av shadow --whole-graph``) runs every node in wall mode
 instead: ``preceding_traffic`` replays the bag at real time after ``/sim/start``,
 ``ego_plant`` and ``human_driver`` simulate the two vehicles over real elapsed time, and this
-process only records every topic. With a follower, the GRU predictor may be used.
+process only records every topic. With a follower, any plan estimator may be used.
 """
 
 from __future__ import annotations

@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from trust_av_planner.predictors import Observation
+from trust_monitor.common.registry import Component
+
+if TYPE_CHECKING:
+    from trust_av_planner.nmpc import PlannerConfig
 
 
 class ConstantAccelerationPredictor:
@@ -34,3 +40,15 @@ class ConstantAccelerationPredictor:
     def observe(self, observation: Observation) -> None:
         """Keep the executed acceleration."""
         self._last = observation.av_accel_mps2
+
+
+def build(planner: PlannerConfig, params: None) -> ConstantAccelerationPredictor:
+    """The CA estimator on the planner's horizon and acceleration bounds (no parameters)."""
+    return ConstantAccelerationPredictor(planner.horizon_steps, planner.accel_min_mps2,
+                                         planner.accel_max_mps2)
+
+
+COMPONENT = Component(
+    name='ca', factory=build,
+    description="constant acceleration: the AV's last executed acceleration, held (TAC-CA)")
+"""Registered as ``ca`` in ``trust_av.predictors`` (trust_av_planner's setup.py)."""

@@ -18,11 +18,17 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors import Observation
+from trust_monitor.common.params import check_fields, param, require
+from trust_monitor.common.registry import FOLLOWER_STATE, Component
+
+if TYPE_CHECKING:
+    from trust_av_planner.nmpc import PlannerConfig
 
 MODELS_DIR = Path(__file__).resolve().parents[1] / 'models'
 FEATURES = ('gap_m', 'relative_speed_mps', 'time_headway_s', 'av_accel_mps2')
@@ -141,6 +147,19 @@ def features(observation: Observation) -> np.ndarray:
                      observation.time_headway_s, observation.av_accel_mps2])
 
 
+@dataclass(frozen=True)
+class GruConfig:
+    """Parameters of the GRU plan estimator (declared in the planner's section)."""
+
+    gru_model: str = param('GRU weights: a file in trust_av_planner/models/ or a path',
+                           default='gru_plan_estimator.npz',
+                           reason='the plan estimator and its history are built at start-up')
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        require(bool(self.gru_model), 'gru_model must name a weights file')
+
+
 class GruPredictor:
     """GRU plan estimator with its history buffer (part of the predictor's state)."""
 
@@ -158,6 +177,11 @@ class GruPredictor:
         predictor."""
         return cls(load_weights(path, horizon_steps, dt_s=dt_s), accel_min_mps2,
                    accel_max_mps2)
+
+    @property
+    def history_steps(self) -> int:
+        """H: how many model steps of history a prediction uses."""
+        return self.weights.history_steps
 
     def reset(self) -> None:
         """Forget the history."""
@@ -178,3 +202,20 @@ class GruPredictor:
             plan = gru_forward(w, inputs)
         clipped: np.ndarray = np.clip(plan, self.accel_min_mps2, self.accel_max_mps2)
         return clipped
+
+
+def build(planner: PlannerConfig, params: GruConfig) -> GruPredictor:
+    """The GRU estimator of ``params.gru_model`` on the planner's horizon, step and bounds.
+
+    Raises:
+        ModelError: the weights file is missing or does not fit (:func:`load_weights`).
+    """
+    return GruPredictor.from_file(resolve_model(params.gru_model), planner.horizon_steps,
+                                  planner.dt_s, planner.accel_min_mps2, planner.accel_max_mps2)
+
+
+COMPONENT = Component(
+    name='gru', factory=build, config_type=GruConfig, needs=frozenset({FOLLOWER_STATE}),
+    description='GRU trained on the 10 s history of gap, relative speed, headway and the '
+                "AV's acceleration (TAC-GRU, eqs. 6-7)")
+"""Registered as ``gru`` in ``trust_av.predictors`` (trust_av_planner's setup.py)."""

@@ -27,7 +27,7 @@ import numpy as np
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TRAINING_TRACES
 from trust_av_planner.planner import observe
-from trust_av_planner.predictors.gru import FEATURES, GruWeights, gru_forward
+from trust_av_planner.predictors.gru import FEATURES, GruConfig, GruWeights, gru_forward
 from trust_av_planner.study.pinned_numerics import numerics_report
 from trust_av_planner.study.workers import worker_pool
 from trust_av_planner.system.closed_loop import simulate
@@ -97,8 +97,11 @@ def run_samples(config: RunConfig, settings: TrainingSettings, trace_name: str, 
     trace = load_trace(trace_name, config.planner.dt_s, config.trace)
     cut = int(trace.steps * (1.0 - settings.validation_fraction))
     run_config = dataclasses.replace(config, planner=dataclasses.replace(
-        config.planner, alpha=alpha, predictor=predictor,
-        gru_model=gru_model or config.planner.gru_model))
+        config.planner, alpha=alpha, predictor=predictor))
+    if gru_model is not None:
+        run_config = dataclasses.replace(run_config, predictor_configs=(
+            *((n, c) for n, c in config.predictor_configs if n != 'gru'),
+            ('gru', GruConfig(gru_model))))
     records = simulate(run_config, trace).records
     x, y, steps, ca = samples_from_run(records, settings.history_steps,
                                        config.planner.horizon_steps,

@@ -1,4 +1,5 @@
-"""Reproduce the paper's sweep: traces x predictors x alpha, cached, on a pluggable executor.
+"""A sweep of closed loops: traces x predictors x trust models x followers x alpha, cached,
+on a pluggable executor (the paper's sweep is traces x TAC-GRU/TAC-CA x alpha).
 
 Every case is one closed loop: in-process by default, or through the ROS 2 node graph
 (:class:`RunSettings`, ``--graph``; each case then leaves its MCAP recording in
@@ -18,6 +19,7 @@ import json
 import logging
 import os
 import shutil
+import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,19 +41,21 @@ from preceding_traffic.traces import truncate
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.study.workers import worker_pool
 from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.config import RunConfig, load_run_config
 from trust_av_planner.system.metrics import StepRecord, compute_metrics
-from trust_monitor.common import output_files
+from trust_monitor.common import output_files, registry
 
 LOG = logging.getLogger(__name__)
 
 TRACES = ('us06', 'nycc', 'commute_am', 'commute_pm')
-PREDICTORS = ('gru', 'ca')
+PAPER_PREDICTORS = ('gru', 'ca')
+"""The paper's plan estimators (TAC-GRU, TAC-CA): ``reproduce``'s default axis; any
+registered names may be given instead."""
 ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 METRICS = ('final_trust', 'mean_explicability', 'rmse_mps2')
 PACKAGES = ('preceding_traffic', 'trust_monitor', 'human_driver_sim', 'trust_av_planner')
 RUNNERS = ('in-process', 'graph')
-PRESENTATION_MODULES = ('plots.py', 'paper_results.py', 'tables.py')
+PRESENTATION_MODULES = ('plots.py', 'paper_results.py', 'tables.py', 'frame.py')
 """Files that cannot change a run's numbers: left out of the cache key (so is ``cli/``)."""
 
 
@@ -60,10 +64,16 @@ class Case:
     """One closed loop of the sweep.
 
     Attributes:
+        trace: a shipped trace's name, a CSV or a bag.
+        predictor: a registered plan estimator.
+        alpha: the explicability weight.
         driver: 0 for the human driver of the params file; k >= 1 for the k-th driver of a
             sampled population (``--drivers K``), whose parameters are ``driver_params``.
         driver_params: (name, value) pairs that replace the params file's ``human_driver``
             values for that driver (its weights W and the fitted tau_H); empty for driver 0.
+        driver_model: a registered follower model ('' = the params file's).
+        trust_model: a registered trust model, set as the ``trust_model`` parameter ('' =
+            the params file's).
     """
 
     trace: str
@@ -71,22 +81,43 @@ class Case:
     alpha: float
     driver: int = 0
     driver_params: tuple[tuple[str, float], ...] = ()
+    driver_model: str = ''
+    trust_model: str = ''
 
     @property
     def label(self) -> str:
-        """``us06/TAC-CA/alpha=0.5`` (``.../driver=3`` for a population member)."""
+        """``us06/TAC-CA/alpha=0.5`` (``.../driver=3`` for a population member, then the
+        follower and trust model when they are not the params file's)."""
         label = f'{self.trace}/TAC-{self.predictor.upper()}/alpha={self.alpha:g}'
-        return label + (f'/driver={self.driver}' if self.driver else '')
+        label += f'/driver={self.driver}' if self.driver else ''
+        label += f'/follower={self.driver_model}' if self.driver_model else ''
+        return label + (f'/trust_model={self.trust_model}' if self.trust_model else '')
 
     @property
     def base(self) -> Case:
-        """The same trace, predictor and alpha with the params file's driver."""
-        return Case(self.trace, self.predictor, self.alpha)
+        """The same case with the params file's driver (population members grouped)."""
+        return dataclasses.replace(self, driver=0, driver_params=())
+
+
+def plugin_sources() -> list[Path]:
+    """The source files of the registered components from outside the four packages (the
+    installed plug-ins' modules), in name order."""
+    files = set()
+    for group in registry.GROUPS:
+        for component in registry.components(group):
+            module = sys.modules[component.factory.__module__]
+            if module.__name__.split('.')[0] not in PACKAGES and module.__file__:
+                files.add(Path(module.__file__))
+    return sorted(files)
 
 
 def code_fingerprint() -> str:
-    """Hash of the source and data files of the four packages that results depend on."""
+    """Hash of the source and data files of the four packages that results depend on, and
+    of the installed plug-ins' component modules."""
     digest = hashlib.sha256()
+    for path in plugin_sources():
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
     for package in PACKAGES:
         module = __import__(package)
         root = Path(next(iter(module.__path__)))
@@ -133,21 +164,80 @@ def case_key(case: Case, params_text: str, fingerprint: str,
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
-def run_case(case: Case, params_file: str,
+ParamsFiles = str | Path | Sequence[str | Path]
+"""One params file, or several layered in order (each over the shipped file)."""
+
+
+def layers(params_files: ParamsFiles) -> tuple[str, ...]:
+    """The params files as a tuple of paths, bottom first."""
+    if isinstance(params_files, (str, Path)):
+        return (str(params_files),)
+    return tuple(str(p) for p in params_files)
+
+
+def parameter_value(config: RunConfig, name: str) -> Any:
+    """The value of parameter ``name`` in the run configuration (None when no component
+    declares it): the trust-model axis reads ``trust_model`` this way."""
+    for field in dataclasses.fields(config):
+        value = getattr(config, field.name)
+        if dataclasses.is_dataclass(value) and any(f.name == name
+                                                   for f in dataclasses.fields(value)):
+            return getattr(value, name)
+    return None
+
+
+def case_settings(case: Case, config: RunConfig, settings: RunSettings) -> dict[str, Any]:
+    """Every setting of a run as it ran (the params files resolved): the tidy table's
+    leading columns, then the chosen components' own parameters."""
+    trust_model = parameter_value(config, 'trust_model')
+    out: dict[str, Any] = {
+        'trace': case.trace, 'predictor': config.planner.predictor,
+        'trust_model': '' if trust_model is None else trust_model,
+        'driver_model': config.follower.driver_model, 'alpha': case.alpha,
+        'driver': case.driver,
+        **{name: getattr(config.driver, name)
+           for name in (*WEIGHT_NAMES, 'time_headway_s', 'desired_standstill_gap_m', 'cautious',
+                        'av_extra_decel_mps2')},
+        **{name: getattr(config.trust, name)
+           for name in ('epsilon_mps2', 'trust_growth_rate', 'performance_threshold',
+                        'trust_initial')},
+        'runner': settings.runner, 'max_steps': settings.max_steps}
+    for params in (config.predictor_params, config.driver_params):
+        if params is not None:
+            out.update(dataclasses.asdict(params))
+    # the chosen trust model's own parameters (each named after its model)
+    out.update((name, value) for name, value in config.trust_model_params
+               if name.startswith(f'{config.trust.trust_model}_'))
+    return out
+
+
+def run_case(case: Case, params_file: ParamsFiles,
              settings: RunSettings = RunSettings()) -> dict[str, Any]:
-    """Run one case and return its metrics and the series the figures need."""
+    """Run one case and return its settings, metrics and the series the figures need.
+
+    Args:
+        case: the case.
+        params_file: the params file(s), layered in order over the shipped one.
+        settings: how it runs.
+    """
     overrides: dict[str, dict[str, Any]] = {
         'planner': {'alpha': case.alpha, 'predictor': case.predictor}}
-    if case.driver_params:
-        overrides['human_driver'] = dict(case.driver_params)
-    config = load_run_config(params_file, overrides)
+    driver: dict[str, Any] = dict(case.driver_params)
+    if case.driver_model:
+        driver['driver_model'] = case.driver_model
+    if driver:
+        overrides['human_driver'] = driver
+    if case.trust_model:
+        overrides['/**'] = {'trust_model': case.trust_model}
+    config = load_run_config(layers(params_file), overrides)
     trace = truncate(load_trace(case.trace, config.planner.dt_s, config.trace),
                      settings.max_steps)
     records: list[StepRecord]
     if settings.runner == 'graph':
         # Imported here: the in-process sweep never loads rclpy.
         from trust_av_planner.graph.orchestrator import run_graph_records
-        bag = Path(settings.bags_dir) / (f'{Path(case.trace).stem}_{case.predictor}_'
+        models = ''.join(f'_{m}' for m in (case.driver_model, case.trust_model) if m)
+        bag = Path(settings.bags_dir) / (f'{Path(case.trace).stem}_{case.predictor}{models}_'
                                          f'alpha{case.alpha:g}')
         bag.parent.mkdir(parents=True, exist_ok=True)
         # Left by an interrupted sweep (its case is not cached): the bag, its logs.
@@ -160,6 +250,7 @@ def run_case(case: Case, params_file: str,
     metrics = compute_metrics(records, config.min_safe_gap_m)
     return {
         'case': dataclasses.asdict(case),
+        'settings': case_settings(case, config, settings),
         'runner': settings.runner,
         'metrics': dataclasses.asdict(metrics),
         'time_s': [r.t_s for r in records],
@@ -171,7 +262,7 @@ def run_case(case: Case, params_file: str,
 class Executor(Protocol):
     """Runs cases somewhere and reports each result as it arrives."""
 
-    def run(self, cases: Sequence[Case], params_file: str,
+    def run(self, cases: Sequence[Case], params_file: ParamsFiles,
             on_result: Callable[[Case, dict[str, Any]], None],
             settings: RunSettings = RunSettings()) -> None:
         """Run every case (:func:`run_case`); call ``on_result`` in the calling process."""
@@ -183,7 +274,7 @@ class LocalExecutor:
     def __init__(self, workers: int | None = None) -> None:
         self.workers = workers or os.cpu_count() or 1
 
-    def run(self, cases: Sequence[Case], params_file: str,
+    def run(self, cases: Sequence[Case], params_file: ParamsFiles,
             on_result: Callable[[Case, dict[str, Any]], None],
             settings: RunSettings = RunSettings()) -> None:
         """Run the cases on the pool; the first failure, or a stop signal, stops the sweep
@@ -208,7 +299,7 @@ class RayExecutor:
         self.address = address
         self.num_cpus = num_cpus
 
-    def run(self, cases: Sequence[Case], params_file: str,
+    def run(self, cases: Sequence[Case], params_file: ParamsFiles,
             on_result: Callable[[Case, dict[str, Any]], None],
             settings: RunSettings = RunSettings()) -> None:
         """Submit one Ray task per case and collect them as they finish."""
@@ -237,10 +328,13 @@ class RayExecutor:
                 ray.shutdown()
 
 
-def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PREDICTORS,
-                alphas: Iterable[float] = ALPHAS) -> list[Case]:
-    """Every combination, in table order."""
-    return [Case(t, p, a) for t in traces for p in predictors for a in alphas]
+def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PAPER_PREDICTORS,
+                alphas: Iterable[float] = ALPHAS, driver_models: Iterable[str] = ('',),
+                trust_models: Iterable[str] = ('',)) -> list[Case]:
+    """Every combination, in table order ('' in a model axis: the params file's)."""
+    alphas, driver_models, trust_models = list(alphas), list(driver_models), list(trust_models)
+    return [Case(t, p, a, driver_model=d, trust_model=m) for t in traces for p in predictors
+            for m in trust_models for d in driver_models for a in alphas]
 
 
 def population_cases(cases: Sequence[Case], drivers: int, seed: int,
@@ -300,19 +394,23 @@ def population_mean(results: dict[Case, dict[str, Any]]) -> dict[Case, dict[str,
     return out
 
 
-def run_sweep(cases: Sequence[Case], params_file: Path, results_dir: Path, executor: Executor,
+def run_sweep(cases: Sequence[Case], params_file: ParamsFiles, results_dir: Path,
+              executor: Executor,
               on_progress: Callable[[int, int], None] | None = None, *,
               runner: str = 'in-process', max_steps: int = 0) -> dict[Case, dict[str, Any]]:
     """Run the cases that are not cached, read the others back; return every result.
 
     A result is written to the cache as soon as it arrives, so an interrupted sweep resumes
-    where it stopped. ``runner`` and ``max_steps`` are :class:`RunSettings`'; graph runs
-    record to ``<results_dir>/graph_bags/``.
+    where it stopped. ``params_file``: one file or several, layered in order over the shipped
+    one (the cache key holds every layer's text). ``runner`` and ``max_steps`` are
+    :class:`RunSettings`'; graph runs record to ``<results_dir>/graph_bags/``.
     """
     settings = RunSettings(runner, max_steps, str(Path(results_dir).resolve() / 'graph_bags'))
     cache = results_dir / 'cache'
     cache.mkdir(parents=True, exist_ok=True)
-    params_text = Path(params_file).read_text()
+    files = layers(params_file)
+    params_text = (Path(files[0]).read_text() if len(files) == 1 else
+                   json.dumps([Path(f).read_text() for f in files]))
     fingerprint = code_fingerprint()
     keys = {case: case_key(case, params_text, fingerprint, settings) for case in cases}
     results: dict[Case, dict[str, Any]] = {}
@@ -331,5 +429,5 @@ def run_sweep(cases: Sequence[Case], params_file: Path, results_dir: Path, execu
         if on_progress is not None:
             on_progress(len(results), len(cases))
 
-    executor.run(todo, str(params_file), store, settings)
+    executor.run(todo, files if len(files) > 1 else files[0], store, settings)
     return results

@@ -1,10 +1,14 @@
 """The paper's tables from a sweep's results: Tables II/III (one trace and predictor over
 alpha, ours beside the paper's), Table IV (maximum improvements), their driver-population
-versions (mean and 95 % confidence interval over drivers), and CSV/Markdown writing."""
+versions (mean and 95 % confidence interval over drivers), and CSV/Markdown writing.
+
+Any case lays out: a (predictor, trace) the paper did not print gets empty paper cells
+(:data:`NO_VALUE`), an alpha axis without 0 or without a larger alpha no improvements."""
 
 from __future__ import annotations
 
 import csv
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -13,10 +17,13 @@ import numpy as np
 
 from trust_av_planner.study.paper_results import MAX_IMPROVEMENT_PERCENT
 from trust_av_planner.study.stats import mean_ci95
-from trust_av_planner.study.sweep import ALPHAS, METRICS, Case, by_driver
+from trust_av_planner.study.sweep import METRICS, Case, by_driver
 from trust_monitor.common.output_files import replacing
 from trust_monitor.trust_bound import row_bound
 from trust_monitor.trust_model import TrustConfig
+
+NO_VALUE = '—'
+"""A cell with nothing to show (no paper value for the case, no improvement over alpha 0)."""
 
 BOUND_HEADER = 'least final trust eqs. 9-11 allow for the paper mean E'
 """Column beside each paper row: the bound T_M >= T_0 + delta M (1 - c mean E) of
@@ -40,22 +47,34 @@ def paper_bound_cell(final_trust: float, mean_score: float, steps: int,
 
 
 def improvement_percent(metric: str, base: float, value: float) -> float:
-    """Improvement of ``value`` over ``base`` (trust up, E and RMSE down), percent."""
+    """Improvement of ``value`` over ``base`` (trust up, E and RMSE down), percent; NaN when
+    ``base`` is 0 (no relative change to give)."""
+    if base == 0.0:
+        return math.nan
     if metric == 'final_trust':
         return 100.0 * (value - base) / abs(base)
     return 100.0 * (base - value) / base
 
 
+def alphas_of(results: dict[Case, dict[str, Any]], trace: str, predictor: str) -> list[float]:
+    """The alphas the results hold for ``trace`` and ``predictor``, in order."""
+    return sorted({c.alpha for c in results if c.trace == trace and c.predictor == predictor})
+
+
 def max_improvements(results: dict[Case, dict[str, Any]], trace: str,
-                     predictor: str) -> tuple[float, float, float]:
-    """Largest improvement over alpha = 0 among the alphas, for each metric (Tables II-IV)."""
+                     predictor: str) -> tuple[float, float, float] | None:
+    """Largest improvement over alpha = 0 among the alphas, for each metric (Tables II-IV);
+    None when the results hold no alpha = 0 or no larger alpha for the case."""
     by_alpha = {c.alpha: r['metrics'] for c, r in results.items()
                 if c.trace == trace and c.predictor == predictor}
-    base = by_alpha[0.0]
+    base = by_alpha.get(0.0)
+    if base is None or not any(a > 0.0 for a in by_alpha):
+        return None
     out = []
     for metric in METRICS:
-        out.append(max(improvement_percent(metric, base[metric], m[metric])
-                       for a, m in by_alpha.items() if a > 0.0))
+        values = [improvement_percent(metric, base[metric], m[metric])
+                  for a, m in by_alpha.items() if a > 0.0]
+        out.append(max((v for v in values if not math.isnan(v)), default=math.nan))
     return out[0], out[1], out[2]
 
 
@@ -69,6 +88,30 @@ def write_rows(path: Path, header: Sequence[str], rows: Sequence[Sequence[object
             writer.writerow(header)
             writer.writerows(rows)
         md_path.write_text('\n'.join(lines) + '\n')
+
+
+def _percent(values: Sequence[float] | None) -> list[str]:
+    if values is None:
+        return [NO_VALUE] * 3
+    return [NO_VALUE if math.isnan(v) else f'{v:.2f} %' for v in values]
+
+
+def _ratios(ours: Sequence[float] | None, paper: tuple[float, float, float] | None) -> str:
+    if ours is None or paper is None:
+        return NO_VALUE
+    return ', '.join(NO_VALUE if math.isnan(o) else f'{o / p:.2f}'
+                     for o, p in zip(ours, paper, strict=True))
+
+
+def _paper_cells(paper: dict[float, tuple[float, float, float]], alpha: float,
+                 bound: tuple[int, TrustConfig] | None) -> list[object]:
+    """The paper's row at ``alpha`` (and its bound), or empty cells if it printed none."""
+    if alpha not in paper:
+        return [NO_VALUE] * (4 if bound is not None else 3)
+    cells: list[object] = [f'{v:g}' for v in paper[alpha]]
+    if bound is not None:
+        cells.append(paper_bound_cell(paper[alpha][0], paper[alpha][1], *bound))
+    return cells
 
 
 def alpha_table(results: dict[Case, dict[str, Any]], trace: str, predictor: str,
@@ -91,19 +134,17 @@ def alpha_table(results: dict[Case, dict[str, Any]], trace: str, predictor: str,
         if bound is not None:
             header.append(BOUND_HEADER)
     rows: list[list[object]] = []
-    for alpha in ALPHAS:
+    for alpha in alphas_of(results, trace, predictor):
         m = results[Case(trace, predictor, alpha)]['metrics']
         row: list[object] = [f'{alpha:g}', f"{m['final_trust']:.3f}",
                              f"{m['mean_explicability']:.4f}", f"{m['rmse_mps2']:.3f}"]
         if paper is not None:
-            row += [f'{v:g}' for v in paper[alpha]]
-            if bound is not None:
-                row.append(paper_bound_cell(paper[alpha][0], paper[alpha][1], *bound))
+            row += _paper_cells(paper, alpha, bound)
         rows.append(row)
-    ours = max_improvements(results, trace, predictor)
-    summary: list[object] = ['max improvement', *(f'{v:.2f} %' for v in ours)]
+    summary: list[object] = ['max improvement',
+                             *_percent(max_improvements(results, trace, predictor))]
     if paper is not None:
-        summary += [f'{v:.2f} %' for v in MAX_IMPROVEMENT_PERCENT[(predictor, trace)]]
+        summary += _percent(MAX_IMPROVEMENT_PERCENT.get((predictor, trace)))
         if bound is not None:
             summary.append('')
     rows.append(summary)
@@ -119,14 +160,16 @@ def improvement_table(results: dict[Case, dict[str, Any]], traces: Sequence[str]
     for predictor in predictors:
         for trace in traces:
             ours = max_improvements(results, trace, predictor)
-            paper = MAX_IMPROVEMENT_PERCENT[(predictor, trace)]
-            ratios = ', '.join(f'{o / p:.2f}' for o, p in zip(ours, paper, strict=True))
-            rows.append([f'TAC-{predictor.upper()}', trace, *[f'{v:.2f} %' for v in ours],
-                         *[f'{v:.2f} %' for v in paper], ratios])
+            paper = MAX_IMPROVEMENT_PERCENT.get((predictor, trace))
+            rows.append([f'TAC-{predictor.upper()}', trace, *_percent(ours), *_percent(paper),
+                         _ratios(ours, paper)])
     return header, rows
 
 
 def _cell(values: Sequence[float], digits: int, suffix: str = '') -> str:
+    values = [v for v in values if not math.isnan(v)]
+    if not values:
+        return NO_VALUE
     mean, half = mean_ci95(values)
     return f'{mean:.{digits}f} ± {half:.{digits}f}{suffix}'
 
@@ -147,25 +190,30 @@ def population_alpha_table(results: dict[Case, dict[str, Any]], trace: str, pred
         if bound is not None:
             header.append(BOUND_HEADER)
     rows: list[list[object]] = []
-    for alpha in ALPHAS:
+    for alpha in alphas_of(results, trace, predictor):
         per = [d[Case(trace, predictor, alpha)]['metrics'] for d in drivers.values()]
         row: list[object] = [f'{alpha:g}', _cell([m['final_trust'] for m in per], 3),
                              _cell([m['mean_explicability'] for m in per], 4),
                              _cell([m['rmse_mps2'] for m in per], 3)]
         if paper is not None:
-            row += [f'{v:g}' for v in paper[alpha]]
-            if bound is not None:
-                row.append(paper_bound_cell(paper[alpha][0], paper[alpha][1], *bound))
+            row += _paper_cells(paper, alpha, bound)
         rows.append(row)
-    improvements = [max_improvements(d, trace, predictor) for d in drivers.values()]
-    summary: list[object] = ['max improvement', *(_cell([imp[i] for imp in improvements], 2,
-                                                        ' %') for i in range(3))]
+    summary: list[object] = ['max improvement', *_improvement_cells(
+        [max_improvements(d, trace, predictor) for d in drivers.values()])]
     if paper is not None:
-        summary += [f'{v:.2f} %' for v in MAX_IMPROVEMENT_PERCENT[(predictor, trace)]]
+        summary += _percent(MAX_IMPROVEMENT_PERCENT.get((predictor, trace)))
         if bound is not None:
             summary.append('')
     rows.append(summary)
     return header, rows
+
+
+def _improvement_cells(improvements: Sequence[tuple[float, float, float] | None]) -> list[str]:
+    """Per-driver maximum improvements as mean ± 95 % CI cells (empty without any)."""
+    known = [imp for imp in improvements if imp is not None]
+    if not known:
+        return [NO_VALUE] * 3
+    return [_cell([imp[i] for imp in known], 2, ' %') for i in range(3)]
 
 
 def population_improvement_table(results: dict[Case, dict[str, Any]], traces: Sequence[str],
@@ -179,10 +227,10 @@ def population_improvement_table(results: dict[Case, dict[str, Any]], traces: Se
     for predictor in predictors:
         for trace in traces:
             improvements = [max_improvements(d, trace, predictor) for d in drivers.values()]
-            means = [float(np.mean([imp[i] for imp in improvements])) for i in range(3)]
-            paper = MAX_IMPROVEMENT_PERCENT[(predictor, trace)]
-            ratios = ', '.join(f'{o / p:.2f}' for o, p in zip(means, paper, strict=True))
-            rows.append([f'TAC-{predictor.upper()}', trace,
-                         *[_cell([imp[i] for imp in improvements], 2, ' %') for i in range(3)],
-                         *[f'{v:.2f} %' for v in paper], ratios])
+            known = [imp for imp in improvements if imp is not None]
+            means = ([float(np.mean([imp[i] for imp in known])) for i in range(3)]
+                     if known else None)
+            paper = MAX_IMPROVEMENT_PERCENT.get((predictor, trace))
+            rows.append([f'TAC-{predictor.upper()}', trace, *_improvement_cells(improvements),
+                         *_percent(paper), _ratios(means, paper)])
     return header, rows

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from human_driver_sim.driver_mpc import DriverMpc
+from human_driver_sim.followers import make_follower
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.planner import AvPlanner
@@ -143,8 +143,10 @@ class ClosedLoop:
         trust_model = self.config.trust_model()
         self.planner = AvPlanner(self.config.planner, self.config.trust,
                                  self.config.shared.vehicle_length_m, period_s=self.period_s,
+                                 predictor_params=self.config.predictor_params,
                                  trust_model=trust_model)
-        self.driver = DriverMpc(self.config.driver)
+        self.driver = make_follower(self.config.driver, self.config.follower,
+                                    self.config.driver_params)
         self.monitor = TrustEstimator(self.config.trust, trust_model)
         self.step_index = 0
 

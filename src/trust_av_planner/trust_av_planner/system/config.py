@@ -18,8 +18,10 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from human_driver_sim.driver_mpc import DriverConfig
+from human_driver_sim.followers import FollowerConfig
 from preceding_traffic.traces import SpeedTrace, TraceConfig
 from trust_av_planner.nmpc import PlannerConfig, prediction_grid
+from trust_monitor.common import registry
 from trust_monitor.common.param_layers import (
     Layered,
     layer_files,
@@ -100,17 +102,39 @@ T = TypeVar('T')
 # (tests/test_node_params.py reads the nodes' declare_config calls), except the values
 # trust-av sets per run, plus SharedConfig where trust-av itself reads it (the metrics'
 # margin and the gaps of the in-process loop come from the preceding_traffic section).
-# The registered trust models' own parameters belong to the planner (its trust constraint)
-# and the monitor alike.
+# The parameters of the registered components come on top (node_components); the trust
+# models' own parameters belong to the planner (its trust constraint) and the monitor alike.
 TRUST_MODEL_CONFIGS = trust_model_config_types()
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
     'preceding_traffic': (TraceConfig, SharedConfig, WallClockConfig),
-    'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
-                *TRUST_MODEL_CONFIGS),
-    'human_driver': (DriverConfig, SharedConfig, WallClockConfig),
-    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig, *TRUST_MODEL_CONFIGS),
+    'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics),
+    'human_driver': (DriverConfig, FollowerConfig, SharedConfig, WallClockConfig),
+    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig),
 }
-_ALL = tuple({c for comps in NODE_COMPONENTS.values() for c in comps})
+
+COMPONENT_GROUPS: dict[str, tuple[str, ...]] = {
+    'planner': (registry.PREDICTORS, registry.TRUST_MODELS),
+    'human_driver': (registry.DRIVERS,),
+    'trust_monitor': (registry.TRUST_MODELS,),
+}
+"""Node name -> the registry groups whose components it runs: it declares the parameters of
+every registered component of them (each validated, so a typo fails whichever is chosen)."""
+
+
+def node_components(node: str) -> tuple[type, ...]:
+    """The configuration classes of ``node``'s section: :data:`NODE_COMPONENTS` and the
+    ``config_type`` of every registered component the node runs.
+
+    Raises:
+        RegistryError: a registered component fails to load.
+    """
+    return NODE_COMPONENTS[node] + tuple(
+        cls for group in COMPONENT_GROUPS.get(node, ()) for cls in registry.config_types(group))
+
+
+def all_components() -> tuple[type, ...]:
+    """Every configuration class of any node section (what a ``/**`` key may belong to)."""
+    return tuple(dict.fromkeys(c for node in NODE_COMPONENTS for c in node_components(node)))
 
 RUN_SET_NODES = ('ego_plant', 'recorder')
 """Nodes of the graph whose values trust-av gives them for each run (the simulated AV's
@@ -141,6 +165,10 @@ class RunConfig:
         namespace: the namespace its node names were matched in.
         clock: the planner's wall-clock settings (its ``clock_mode`` is every node's).
         planner_topics: the planner's input topics.
+        follower: which follower model drives behind the AV.
+        predictor_configs: (name, parameters) of every registered plan estimator that has
+            parameters (its ``config_type``, read from the planner's section).
+        driver_configs: the same for the follower models (the human_driver section).
     """
 
     shared: SharedConfig
@@ -153,10 +181,23 @@ class RunConfig:
     clock: WallClockConfig = field(default_factory=WallClockConfig, compare=False)
     planner_topics: PlannerTopics = field(default_factory=PlannerTopics, compare=False)
     trust_model_params: tuple[tuple[str, Any], ...] = ()
+    follower: FollowerConfig = field(default_factory=FollowerConfig)
+    predictor_configs: tuple[tuple[str, Any], ...] = ()
+    driver_configs: tuple[tuple[str, Any], ...] = ()
 
     def trust_model(self) -> TrustModel:
         """A fresh instance of the trust model ``trust.trust_model`` with its parameters."""
         return make_trust_model(self.trust, dict(self.trust_model_params))
+
+    @property
+    def predictor_params(self) -> Any:
+        """The chosen plan estimator's parameters (None: it has none, or its defaults)."""
+        return dict(self.predictor_configs).get(self.planner.predictor)
+
+    @property
+    def driver_params(self) -> Any:
+        """The chosen follower model's parameters (None: it has none, or its defaults)."""
+        return dict(self.driver_configs).get(self.follower.driver_model)
 
     @property
     def min_safe_gap_m(self) -> float:
@@ -198,13 +239,14 @@ def check_sections(layers: Sequence[ParsedParams]) -> None:
     Raises:
         ParamsError: one line naming the file, the section and the unknown name.
     """
+    every = all_components()
     for layer in layers:
         for section, values in layer.items():
             target = section_target(section)
             if target is None:
-                check_known(values, *_ALL, where=f'{layer.where}: section {section}')
+                check_known(values, *every, where=f'{layer.where}: section {section}')
             elif target in NODE_COMPONENTS:
-                check_known(values, *NODE_COMPONENTS[target],
+                check_known(values, *node_components(target),
                             where=f'{layer.where}: section {section}')
             elif target in RUN_SET_NODES:
                 raise ParamsError(f'{layer.where}: section {section!r}: trust-av sets the '
@@ -248,10 +290,10 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
     # Every component each node will declare, built once (a node refuses what fails here).
     built: dict[tuple[str, type], Any] = {}
     sources: dict[str, Mapping[str, str]] = {}
-    for node, components in NODE_COMPONENTS.items():
+    for node in NODE_COMPONENTS:
         params = layered_params(layers, node_fqn(namespace, node))
         sources[node] = params.sources
-        for component in components:
+        for component in node_components(node):
             built[node, component] = _build(component, params)
     check_one_value_per_graph(built, sources)
     trust: TrustConfig = built['trust_monitor', TrustConfig]
@@ -261,6 +303,10 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
                          for f in dataclasses.fields(config))
     make_trust_model(trust, dict(model_params))  # an unregistered name: refused here
     planner: PlannerConfig = built['planner', PlannerConfig]
+    configs = {group: tuple((c.name, built[node, c.config_type])
+                            for c in registry.components(group) if c.config_type is not None)
+               for node, groups in COMPONENT_GROUPS.items() for group in groups
+               if group != registry.TRUST_MODELS}
     clock: WallClockConfig = built['planner', WallClockConfig]
     if clock.wall:
         check_control_rate(planner, clock.control_rate_hz)
@@ -275,6 +321,9 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         trust_model_params=model_params,
         params_files=paths,
         namespace=namespace,
+        follower=built['human_driver', FollowerConfig],
+        predictor_configs=configs[registry.PREDICTORS],
+        driver_configs=configs[registry.DRIVERS],
     )
 
 
