@@ -21,6 +21,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from example_plugin import install_example_plugin
 
 from trust_av_planner.cli import reference
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
@@ -31,6 +32,8 @@ REPO = Path(__file__).resolve().parents[1]
 DOCS = REPO / 'docs'
 TUTORIALS = sorted((DOCS / 'tutorials').glob('*.md'))
 WALL_CLOCK_PAGES = {'connect-a-vehicle.md'}      # trust-av shadow runs at real time
+PLUGIN_PAGES = {'write-a-plugin.md'}     # run with the example plug-in installed
+INCLUDE = '--8<-- '                      # a block that includes a repository file
 RUN = ('bash', 'python')
 FENCE = re.compile(r'^(?P<skip><!-- not run: (?P<reason>[^>]+) -->\n)?```(?P<lang>[a-z]*)'
                    r'(?P<attrs>[^\n]*)\n(?P<body>.*?)^```\s*$', re.MULTILINE | re.DOTALL)
@@ -70,8 +73,8 @@ def scratch(tmp_path: Path) -> Path:
     return work
 
 
-def run_block(block: Block, page: Path, work: Path) -> None:
-    env = {**os.environ, 'PATH': f'{Path(sys.executable).parent}{os.pathsep}'
+def run_block(block: Block, page: Path, work: Path, base_env: dict[str, str]) -> None:
+    env = {**base_env, 'PATH': f'{Path(sys.executable).parent}{os.pathsep}'
                                  f'{os.environ.get("PATH", "")}'}
     command = ['bash', '-euo', 'pipefail', '-c', block.body] if block.lang == 'bash' \
         else [sys.executable, '-c', block.body]
@@ -87,9 +90,16 @@ def run_block(block: Block, page: Path, work: Path) -> None:
     for p in TUTORIALS])
 def test_tutorial_blocks_run(page: Path, tmp_path: Path) -> None:
     work = scratch(tmp_path)
+    env = (install_example_plugin(tmp_path / 'plugin') if page.name in PLUGIN_PAGES
+           else dict(os.environ))
     ran = 0
     for block in blocks(page):
         if block.skip_reason:
+            continue
+        if block.body.startswith(INCLUDE):
+            # the page shows a repository file; the blocks after it run that file
+            included = REPO / block.body[len(INCLUDE):].strip().strip('"')
+            assert included.is_file(), f'{page.name}:{block.line}: no file {included}'
             continue
         if block.title:
             target = work / block.title
@@ -97,7 +107,7 @@ def test_tutorial_blocks_run(page: Path, tmp_path: Path) -> None:
             if block.lang == 'yaml' and 'ros__parameters' in block.body:
                 load_run_config(target)           # a params file a tutorial gives is valid
         elif block.lang in RUN:
-            run_block(block, page, work)
+            run_block(block, page, work, env)
             ran += 1
     assert ran, f'{page.name} has no runnable block'
 

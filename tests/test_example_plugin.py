@@ -5,35 +5,21 @@ the study, and passes the component contract; adding it needed no file under src
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from example_plugin import install_example_plugin
 
 REPO = Path(__file__).resolve().parents[1]
-PLUGIN = REPO / 'examples' / 'trust_av_example_plugin'
 STEPS = 12
 
 
 @pytest.fixture(scope='module')
 def plugin_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """The environment of a user who installed the plug-in: ``pip install`` of a copy of the
-    example package into a directory on PYTHONPATH (so this test leaves the project's
-    environment as it was; the node processes inherit the variable like any other)."""
-    root = tmp_path_factory.mktemp('plugin')
-    source = root / 'source'
-    shutil.copytree(PLUGIN, source, ignore=shutil.ignore_patterns('build', '*.egg-info'))
-    target = root / 'site'
-    proc = subprocess.run([sys.executable, '-m', 'pip', 'install', '--quiet', '--no-deps',
-                           '--no-build-isolation', '--disable-pip-version-check',
-                           '--no-index', '--target', str(target), str(source)],
-                          capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    env = dict(os.environ)
-    env['PYTHONPATH'] = os.pathsep.join(p for p in (str(target), env.get('PYTHONPATH')) if p)
-    return env
+    """The environment of a user who installed the plug-in (:mod:`example_plugin`)."""
+    return install_example_plugin(tmp_path_factory.mktemp('plugin'))
 
 
 @pytest.fixture(scope='module')
