@@ -163,13 +163,24 @@ class _StepStorage(McapWriter):
 
     def close_step_chunk(self) -> None:
         """Write the pending chunk to the file; on an error cut the file back to where the
-        chunk began, drop the chunk and re-raise."""
+        chunk began, drop the chunk and re-raise.
+
+        A pending chunk without messages (only the schema and channel records of topics
+        added since the last chunk) is written as those records, outside any chunk: the
+        mcap C++ reader that rosbag2 Jazzy uses refuses a time-ordered read of a file whose
+        first chunk has no message index (``reader.inl`` of ``foxglove/mcap``
+        ``releases/cpp/v1.3.0``, ``IndexedMessageReader``), and rosbag2 reads in time order.
+        """
         if not self.chunk.bio.tell():
             return
         start, indexed = self.bio.tell(), len(self.chunks)
         self.bio.gather()
         try:
-            self.close_chunk()
+            if self.chunk.msgs:
+                self.close_chunk()
+            else:
+                self.bio.write(self.chunk.bio.getbuffer())
+                self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
             self.bio.commit()
         except OSError:
             self.bio.truncate(start)
@@ -311,6 +322,12 @@ class BagWriter:
             return
         if any(entry.step_count for entry in self._topics.values()) and not self.end_step():
             return  # the disk filled up: end_step finished the bag
+        try:
+            self._storage.close_step_chunk()   # topics added after the last message
+        except OSError as err:
+            if err.errno not in (errno.ENOSPC, errno.EDQUOT):
+                raise
+            self._storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
         self._close()
 
     def __enter__(self) -> BagWriter:
