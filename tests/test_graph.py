@@ -186,10 +186,10 @@ def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
     assert_records_equal(records, in_process(len(records), trace))
 
 
-def test_readme_topic_table_is_the_code_table() -> None:
+def test_docs_topic_table_is_the_code_table() -> None:
     from trust_monitor.common.topics import topic_table_markdown
-    readme = (Path(__file__).resolve().parents[1] / 'README.md').read_text()
-    assert topic_table_markdown() in readme
+    page = (Path(__file__).resolve().parents[1] / 'docs/reference/topics.md').read_text()
+    assert topic_table_markdown() in page
 
 
 @pytest.mark.parametrize('moment', ['at the first steps', 'mid-run'])

@@ -12,9 +12,11 @@ relative (the node's namespace). Parameters: the ``planner`` section of
 ``clock_mode: wall`` (real-vehicle mode, README "Real-vehicle mode"): a wall-clock timer at
 ``control_rate_hz`` plans from the LATEST inputs (topics from the ``*_topic`` parameters or
 remapping), the NMPC predicting on the control period's grid; outputs are stamped with the
-current time. Inputs use the sensor-data QoS with a deadline of ``input_timeout_s``: a missed
-deadline is reported by DDS (a QoS event) and marks the input stale at once; an input never
-received or received longer ago than ``input_timeout_s`` is stale too. While the lead or ego
+current time. Inputs use the sensor-data QoS (best effort, volatile, keep last 1) without a
+deadline, so they match any vehicle stack's publishers; an input never received or received
+longer ago than ``input_timeout_s`` is stale. With ``input_deadline_qos`` they also request a
+deadline of ``input_timeout_s`` (only publishers offering one match): a missed deadline is
+reported by DDS (a QoS event) and marks the input stale at once. While the lead or ego
 odometry (or a recorded preview) is stale the planner commands ``stale_decel_mps2`` with
 status ERROR naming the input; it plans again as soon as they are fresh. The human odometry
 is used when fresh; without it the plan estimator observes only the AV's own acceleration
@@ -160,9 +162,10 @@ class PlannerNode(Node):
 
         def on_incompatible(info: object, n: str = name) -> None:
             policy = getattr(info, 'last_policy_kind', '?')
+            need = ('a deadline <= input_timeout_s (or set input_deadline_qos false)'
+                    if self.clock.input_deadline_qos else 'a compatible profile')
             self.get_logger().error(f'input {n}: a publisher with incompatible QoS ({policy}) '
-                                    'is not connected; vehicle inputs need a deadline <= '
-                                    'input_timeout_s (or set input_deadline_qos false)',
+                                    f'is not connected; vehicle inputs need {need}',
                                     throttle_duration_sec=5.0)
 
         return SubscriptionEventCallbacks(deadline=on_deadline, incompatible_qos=on_incompatible)

@@ -182,8 +182,10 @@ LOCKSTEP_QOS_TEXT = {'STEP': 'reliable, transient local, keep last 1000',
 """The lock-step profiles (``qos`` column): nothing lost, late joiners served (determinism)."""
 
 WALL_QOS_TEXT = {
-    'SENSOR': 'best effort, volatile, keep last 1, deadline input_timeout_s (sensor data: only '
-              'the newest sample counts; the deadline tells the planner an input stopped)',
+    'SENSOR': 'best effort, volatile, keep last 1; subscriptions request no deadline unless '
+              'input_deadline_qos (then input_timeout_s), publishers offer 2 control periods '
+              "(sensor data: only the newest sample counts; matches any vehicle stack's "
+              'publisher; an input older than input_timeout_s is stale)',
     'COMMAND': 'reliable, volatile, keep last 1, deadline 2 control periods (a command: the '
                'newest or none, never a backlog or an old one to a late joiner)',
     'STATE': 'reliable, volatile, keep last 10',
