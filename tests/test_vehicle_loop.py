@@ -162,10 +162,13 @@ def test_default_inputs_match_vehicle_stack_publishers(reliability: str,
 def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None:
     """The planner in wall mode with the installed defaults, its inputs published at 30 Hz
     with Autoware's kinematic-state QoS (reliable, volatile, keep last 1, no deadline): it
-    plans (solver status), not the stale-input deceleration; when they stop it is stale
-    again (receive times)."""
+    plans (solver status), not the stale-input deceleration, and commands in the AV's body
+    frame as its odometry names it (``base_link``); a lead odometry in ``map`` while the AV's
+    is in ``odom`` is not used (the reason names the frames); when the inputs stop they are
+    stale (receive times)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import AccelStamped
     from nav_msgs.msg import Odometry
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -199,15 +202,21 @@ def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None
                                  lambda m: statuses.append(diagnostic_values(m)),
                                  topic_qos('ego/planner_status',
                                            WallClockConfig(clock_mode='wall')))
+        frames: list[str] = []
+        node.create_subscription(AccelStamped, '/ego/accel_cmd',
+                                 lambda m: frames.append(m.header.frame_id),
+                                 topic_qos('ego/accel_cmd', WallClockConfig(clock_mode='wall')))
         lead = node.create_publisher(Odometry, '/preceding_vehicle/odom', autoware)
         ego = node.create_publisher(Odometry, '/ego/odom', autoware)
 
-        def spin(seconds: float, publish: bool) -> None:
+        def spin(seconds: float, publish: bool, lead_frame: str = 'odom') -> None:
             end = time.monotonic() + seconds
             while time.monotonic() < end:
                 if publish:
                     ns = time.time_ns()
-                    lead.publish(odometry(ns, 30.0, 10.0, 'lead'))
+                    lead_msg = odometry(ns, 30.0, 10.0, 'lead')
+                    lead_msg.header.frame_id = lead_frame
+                    lead.publish(lead_msg)
                     ego.publish(odometry(ns, 0.0, 10.0, 'base_link'))
                 executor.spin_once(timeout_sec=1 / 30)
 
@@ -220,6 +229,12 @@ def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None
             spin(3.0, publish=True)
             planned = [v['status'] for v in statuses]
             assert planned and planned[-1] == 'Solve_Succeeded', planned[-5:]
+            assert frames and frames[-1] == 'base_link'
+            statuses.clear()
+            spin(1.0, publish=True, lead_frame='map')
+            assert statuses[-1]['status'] == 'stale_inputs'
+            assert statuses[-1]['reason'] == ("positions in different frames: traffic in "
+                                              "'map', ego in 'odom'"), statuses[-1]
             statuses.clear()
             spin(1.5, publish=False)
             assert statuses and statuses[-1]['status'] == 'stale_inputs'

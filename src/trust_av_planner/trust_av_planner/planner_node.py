@@ -4,10 +4,11 @@ Subscribes the preceding vehicle's odometry and speed preview, the ego and human
 and the monitor's trust; per step (inputs paired by header stamp) it runs
 :class:`trust_av_planner.planner.AvPlanner` (plan estimator + NMPC) and publishes the
 plan, the expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``),
-all three in the AV's frame ``ego``, the solver status (``DiagnosticArray``) and the three
-vehicles' markers (``vehicle_markers``, each in its vehicle's frame). Topic names are
-relative (the node's namespace). Parameters: the ``planner`` section of
-``config/trust_av.yaml``.
+all three in the AV's body frame (the ``child_frame_id`` of its odometry: ``ego`` in the
+simulated graph; ``base_frame_id``, default ``base_link``, before the first), the solver
+status (``DiagnosticArray``) and the three vehicles' markers (``vehicle_markers``, each in
+its vehicle's frame). Topic names are relative (the node's namespace). Parameters: the
+``planner`` section of ``config/trust_av.yaml``.
 
 ``clock_mode: wall`` (real-vehicle mode, README "Real-vehicle mode"): a wall-clock timer at
 ``control_rate_hz`` plans from the LATEST inputs (topics from the ``*_topic`` parameters or
@@ -21,6 +22,10 @@ odometry (or a recorded preview) is stale the planner commands ``stale_decel_mps
 status ERROR naming the input; it plans again as soon as they are fresh. The human odometry
 is used when fresh; without it the plan estimator observes only the AV's own acceleration
 (enough for the CA predictor; an empty ``human_odom_topic`` requires ``predictor: ca``).
+Positions: the lead's and the AV's (and the follower's) ``pose.position.x`` are distances
+along the road only in one world-fixed frame: inputs whose ``header.frame_id`` is not
+``odom_frame_id`` or ``map_frame_id``, or differ, are unusable (the stale-input policy names
+them; a follower in another frame is ignored).
 Trust: the latest estimate, ``trust_initial`` before the first. ``alpha``, ``trust_min`` and
 ``solver_cpu_budget_s`` can be changed with ``ros2 param set`` (from the next tick).
 """
@@ -43,10 +48,10 @@ from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PlannerConfig
 from trust_av_planner.planner import AvPlanner
 from trust_av_planner.system.config import PlannerTopics, SharedConfig, check_control_rate
+from trust_monitor.common.frames import FrameConfig, body_frame, position_frame_problem
 from trust_monitor.common.grids import interp_at
 from trust_monitor.common.kinematics import VehicleState
 from trust_monitor.common.lockstep import StepBuffer
-from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import (
     TrajectoryBytes,
@@ -88,6 +93,7 @@ class PlannerNode(Node):
         shared = declare_config(self, SharedConfig)
         self.clock = declare_config(self, WallClockConfig)
         topics = declare_config(self, PlannerTopics)
+        self.frames = declare_config(self, FrameConfig)
         wall = self.clock.wall
         if wall:
             check_control_rate(self.config, self.clock.control_rate_hz)
@@ -110,10 +116,9 @@ class PlannerNode(Node):
             self.required.append('human')
         self.missed: dict[str, int] = {}  # input -> deadline events since its last message
         self.stale_reason = ''
-        self.frame = VEHICLE_FRAMES['ego_plant']
+        self.frame = ''
+        self.set_frame(self.frames.base_frame_id)
         self.markers = VehicleMarkers(shared.vehicle_length_m)
-        self.plan_bytes = TrajectoryBytes('accelerations', self.frame)
-        self.command_bytes = accel_command_bytes(self.frame)
         self.pub_plan = self.create_publisher(JointTrajectory, 'ego/plan',
                                               topic_qos('ego/plan', self.clock))
         self.pub_expected = self.create_publisher(JointTrajectory, 'ego/expected_plan',
@@ -146,6 +151,13 @@ class PlannerNode(Node):
                                f'lead preview {self.config.lead_preview}, inputs '
                                f'{", ".join(t for _, _, t in inputs if t)}')
 
+    def set_frame(self, frame: str) -> None:
+        """The frame_id of the plans and the command from now on (the AV's body frame)."""
+        if frame != self.frame:
+            self.frame = frame
+            self.plan_bytes = TrajectoryBytes('accelerations', frame)
+            self.command_bytes = accel_command_bytes(frame)
+
     def retune(self, config: PlannerConfig) -> None:
         """A validated run-time parameter change: effective at the next tick."""
         self.planner.retune(config)
@@ -174,13 +186,24 @@ class PlannerNode(Node):
         """Wall mode: keep the latest message of each input with its receive time."""
         self.latest.put(name, time.monotonic_ns(), msg)
         self.missed.pop(name, None)
+        if name == 'ego':
+            self.set_frame(body_frame(msg.child_frame_id, self.frames))  # type: ignore[union-attr]
 
     def problems(self, now_mono_ns: int) -> str:
         """Wall mode: why the required inputs cannot be used ('' when they can)."""
         missed = [n for n in self.required if n in self.missed]
         polled = self.latest.problems(now_mono_ns, self.clock.input_timeout_s, self.required)
         event = f'deadline missed (QoS event): {", ".join(missed)}' if missed else ''
-        return '; '.join(p for p in (event, polled) if p)
+        frames = '' if polled else self.frame_problem(
+            [n for n in self.required if n in ('traffic', 'ego', 'human')])
+        return '; '.join(p for p in (event, polled, frames) if p)
+
+    def frame_problem(self, names: list[str]) -> str:
+        """Why the positions of the latest ``names`` odometry cannot be compared ('' if
+        they can: one world-fixed frame)."""
+        latest = {n: self.latest.get(n) for n in names}
+        return position_frame_problem(
+            {n: m.header.frame_id for n, m in latest.items() if m is not None}, self.frames)
 
     def wall_step(self) -> None:
         """Wall mode: one planning step from the latest inputs, stamped now; the stale-input
@@ -189,7 +212,8 @@ class PlannerNode(Node):
         t_s = mono / NS_PER_S
         why = self.problems(mono)
         human_ok = self.has_human and not self.latest.problems(
-            mono, self.clock.input_timeout_s, ['human'])
+            mono, self.clock.input_timeout_s, ['human']) and not self.frame_problem(
+            ['ego', 'human'])
         human = self.latest.get('human') if human_ok else None
         trust_msg = self.latest.get('trust')
         trust = self.trust_initial if trust_msg is None else float(trust_msg.vector.z)
@@ -230,6 +254,8 @@ class PlannerNode(Node):
     def on_input(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Store an input; plan every step whose inputs are complete, in order."""
         self.buffer.put(name, msg_ns(msg.header.stamp), msg)
+        if name == 'ego':
+            self.set_frame(body_frame(msg.child_frame_id, self.frames))  # type: ignore[union-attr]
         self.try_plan()
 
     def try_plan(self) -> None:

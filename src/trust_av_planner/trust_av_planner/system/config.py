@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 from human_driver_sim.driver_mpc import DriverConfig
 from preceding_traffic.traces import SpeedTrace, TraceConfig
 from trust_av_planner.nmpc import PlannerConfig, prediction_grid
+from trust_monitor.common.frames import FrameConfig
 from trust_monitor.common.param_layers import (
     Layered,
     layer_files,
@@ -97,7 +98,8 @@ T = TypeVar('T')
 # margin and the gaps of the in-process loop come from the preceding_traffic section).
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
     'preceding_traffic': (TraceConfig, SharedConfig, WallClockConfig),
-    'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics),
+    'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
+                FrameConfig),
     'human_driver': (DriverConfig, SharedConfig, WallClockConfig),
     'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig),
 }

@@ -96,6 +96,8 @@ NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_mon
 
 _ODOM_UNITS = 'pose.position.x: m along the road (front bumper); twist.linear.x: m/s'
 _STATUS_FRAMES = "'' (not spatial)"
+_AV_BODY = ("the AV's body frame: its odometry's child_frame_id (`ego` here), `base_frame_id` "
+            '(default `base_link`) before the first')
 
 TOPICS: tuple[Topic, ...] = (
     Topic('clock', 'rosgraph_msgs/msg/Clock', ('preceding_traffic',), ('recorder',),
@@ -113,13 +115,13 @@ TOPICS: tuple[Topic, ...] = (
           initial=1, wall_qos='SENSOR'),
     Topic('ego/plan', 'trajectory_msgs/msg/JointTrajectory', ('planner',),
           ('trust_monitor', 'recorder'), 'STEP', 'once per step',
-          'N points, accelerations[0]: m/s^2', '`ego`'),
+          'N points, accelerations[0]: m/s^2', _AV_BODY),
     Topic('ego/expected_plan', 'trajectory_msgs/msg/JointTrajectory', ('planner',),
           ('trust_monitor', 'human_driver', 'recorder'), 'STEP', 'once per step',
-          'u_R^H: N points, accelerations[0]: m/s^2', '`ego`'),
+          'u_R^H: N points, accelerations[0]: m/s^2', _AV_BODY),
     Topic('ego/accel_cmd', 'geometry_msgs/msg/AccelStamped', ('planner',),
           ('ego_plant', 'recorder'), 'STEP', 'once per step', 'accel.linear.x: m/s^2',
-          '`ego`', wall_qos='COMMAND'),
+          _AV_BODY, wall_qos='COMMAND'),
     Topic('ego/planner_status', 'diagnostic_msgs/msg/DiagnosticArray', ('planner',),
           ('preceding_traffic', 'recorder'), 'STEP', 'once per step',
           'solver status, iterations, solve time (s), fallback, gap bounds relaxed, E_max',
