@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import sys
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -134,6 +135,8 @@ class RunConfig:
         namespace: the namespace its node names were matched in.
         clock: the planner's wall-clock settings (its ``clock_mode`` is every node's).
         planner_topics: the planner's input topics.
+        ignored: one line per wildcard-section parameter that no node of the graph has
+            (accepted: a shared bring-up file feeds other stacks' nodes too).
     """
 
     shared: SharedConfig
@@ -145,6 +148,7 @@ class RunConfig:
     namespace: str = '/'
     clock: WallClockConfig = field(default_factory=WallClockConfig, compare=False)
     planner_topics: PlannerTopics = field(default_factory=PlannerTopics, compare=False)
+    ignored: tuple[str, ...] = field(default=(), compare=False)
 
     @property
     def min_safe_gap_m(self) -> float:
@@ -179,17 +183,30 @@ def check_control_rate(planner: PlannerConfig, control_rate_hz: float) -> None:
         raise ParamsError(f'control_rate_hz {control_rate_hz:g}: {err}') from err
 
 
-def check_sections(layers: Sequence[ParsedParams]) -> None:
+def check_sections(layers: Sequence[ParsedParams]) -> list[str]:
     """Every section names a node of the graph (or is a wildcard) and holds only parameters
-    of that node's components (a wildcard: of any component).
+    of that node's components. A wildcard section of a file may hold other names (a shared
+    bring-up file feeds other stacks' nodes too; rclpy ignores what a node does not
+    declare): they are returned, one line each; on the command line they are typos.
+
+    Returns:
+        One line per file and wildcard section naming the parameters no node has.
 
     Raises:
         ParamsError: one line naming the file, the section and the unknown name.
     """
+    ignored = []
     for layer in layers:
         for section, values in layer.items():
             target = section_target(section)
-            if target is None:
+            if target is None and layer.where != OVERRIDES_WHERE:
+                known = {f.name for c in _ALL for f in dataclasses.fields(c)}
+                unknown = sorted(set(values) - known)
+                if unknown:
+                    ignored.append(f'{layer.where}: section {section}: ignoring '
+                                   f'{", ".join(unknown)} (not a parameter of any node of '
+                                   'the graph)')
+            elif target is None:
                 check_known(values, *_ALL, where=f'{layer.where}: section {section}')
             elif target in NODE_COMPONENTS:
                 check_known(values, *NODE_COMPONENTS[target],
@@ -203,6 +220,7 @@ def check_sections(layers: Sequence[ParsedParams]) -> None:
                 raise ParamsError(f'{layer.where}: unknown node section {section!r} (known: '
                                   f'{", ".join(NODE_COMPONENTS)}, or a wildcard such as /** '
                                   'or /**/planner)')
+    return ignored
 
 
 def load_run_config(files: str | Path | Iterable[str | Path] = (),
@@ -232,7 +250,9 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         layers.append(text_layer(
             {(name if section_target(name) is None else node_fqn(namespace, name)): values
              for name, values in overrides.items() if values}, OVERRIDES_WHERE))
-    check_sections(layers)
+    ignored = check_sections(layers)
+    for line in ignored:
+        print(f'warning: {line}', file=sys.stderr)
     # Every component each node will declare, built once (a node refuses what fails here).
     built: dict[tuple[str, type], Any] = {}
     sources: dict[str, Mapping[str, str]] = {}
@@ -256,6 +276,7 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         trust=built['trust_monitor', TrustConfig],
         params_files=paths,
         namespace=namespace,
+        ignored=tuple(ignored),
     )
 
 
