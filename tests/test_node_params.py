@@ -287,8 +287,8 @@ def test_hand_started_nodes(tmp_path: Path) -> None:
     os.killpg(alone.pid, signal.SIGINT)
     rest, _ = alone.communicate(timeout=60)
     assert alone.returncode == 0 and 'ready (lock-step)' in ''.join(seen), ''.join(seen) + rest
-    assert ('ignoring parameter(s) wheel_base of a wildcard section: not parameters of this '
-            'node') in ''.join(seen) + rest
+    assert ('ignoring parameter(s) wheel_base of a wildcard section: not parameters of any '
+            'node of the graph') in ''.join(seen) + rest
     for name, proc in procs.items():
         outputs[name] = proc.communicate(timeout=120)[0]
         assert proc.returncode == 2, outputs[name]

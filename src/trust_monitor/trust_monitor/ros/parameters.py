@@ -22,8 +22,8 @@ unit and (closed) range from the field's :class:`~trust_monitor.common.params.Pa
 section written for the node (``planner``, ``/**/planner``, ``/car1/planner``) or from
 ``-p`` on the command line: a typo. A wildcard section (``/**``, ``/*``) feeds every node of
 a bring-up, each taking the keys it declares (rclpy ignores undeclared overrides), so an
-unknown name there is only a warning in the node's log (none for the names of the shipped
-file, which the graph's other nodes declare).
+unknown name there is only a warning in the node's log. The shipped file's names are never
+refused (parameters of the graph's other nodes).
 """
 
 from __future__ import annotations
@@ -210,8 +210,9 @@ def override_origins(args: Sequence[str], fqn: str) -> tuple[dict[str, str], set
 
 
 def check_overrides(node: Node, args: Sequence[str] = ()) -> None:
-    """Refuse a parameter override that ``node`` does not declare, unless it comes only from
-    wildcard sections (then log a warning, except for the shipped file's names).
+    """Refuse a parameter override that neither ``node`` declares nor the shipped params
+    file holds (a name of another node of the graph), unless it comes only from wildcard
+    sections (then log a warning).
 
     Args:
         node: the node, with its parameters declared.
@@ -222,7 +223,8 @@ def check_overrides(node: Node, args: Sequence[str] = ()) -> None:
             ``-p``, or from nowhere the command line shows.
     """
     declared = set(node.list_parameters([], 0).names)  # depth 0: every declared name
-    unknown = set(node_overrides(node)) - declared
+    # the shipped file's names are parameters of the graph's nodes: never a typo
+    unknown = set(node_overrides(node)) - declared - shipped_names()
     if not unknown:
         return
     fqn = node.get_fully_qualified_name()
@@ -233,7 +235,5 @@ def check_overrides(node: Node, args: Sequence[str] = ()) -> None:
         where = f' (from {"; ".join(places)})' if places else ''
         raise ParamsError(f'{fqn}: unknown parameter(s) {", ".join(refused)} (not a parameter '
                           f'of this node or of any node of the graph){where}')
-    ignored = sorted(unknown - shipped_names())
-    if ignored:
-        node.get_logger().warning(f'ignoring parameter(s) {", ".join(ignored)} of a wildcard '
-                                  'section: not parameters of this node')
+    node.get_logger().warning(f'ignoring parameter(s) {", ".join(sorted(unknown))} of a '
+                              'wildcard section: not parameters of any node of the graph')
