@@ -554,7 +554,9 @@ def check_mcap(path: Path, where: str, problems: list[str]) -> McapFacts | None:
                             schema.name if schema else None,
                             f'channel {channel.topic} topic_type_hash')
         topic = facts.topics.setdefault(channel.topic, {'message_count': 0, 'types': set(),
-                                                        'formats': set(), 'qos': qos})
+                                                        'formats': set(), 'qos': qos,
+                                                        'hash': channel.metadata.get(
+                                                            'topic_type_hash')})
         topic['message_count'] += stats.channel_message_counts.get(channel_id, 0)
         topic['types'].add(schema.name if schema else None)
         topic['formats'].add(channel.message_encoding)
@@ -689,7 +691,8 @@ def _compare_topics(problems: list[str], where: str, topics: list[dict[str, Any]
     for facts in files:
         for name, info in facts.topics.items():
             slot = merged.setdefault(name, {'message_count': 0, 'types': set(),
-                                            'formats': set(), 'qos': info['qos']})
+                                            'formats': set(), 'qos': info['qos'],
+                                            'hash': info.get('hash')})
             slot['message_count'] += info['message_count']
             slot['types'] |= info['types']
             slot['formats'] |= info['formats']
@@ -716,6 +719,11 @@ def _compare_topics(problems: list[str], where: str, topics: list[dict[str, Any]
                 info['formats'] != {topic['serialization_format']}:
             problems.append(f'{where}: topic {name}: serialization_format differs from the '
                             'MCAP message encoding (mcap_storage.cpp L480)')
+        if info.get('hash') is not None and topic.get('type_description_hash') is not None \
+                and info['hash'] != topic['type_description_hash']:
+            problems.append(f'{where}: topic {name}: topic_type_hash of the MCAP channel differs '
+                            'from type_description_hash in metadata.yaml (rosbag2 writes the '
+                            'same hash to both: mcap_storage.cpp L938, yaml.hpp L137-138)')
         if topic.get('qos') is not None and info['qos'] is not None and \
                 topic['qos'] != info['qos']:
             problems.append(f'{where}: topic {name}: offered_qos_profiles differ between '

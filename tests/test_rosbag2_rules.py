@@ -306,3 +306,38 @@ def test_the_recorder_never_writes_a_chunk_without_messages(tmp_path: Path) -> N
     assert all(index.message_index_length for index in summary.chunk_indexes)
     assert {channel.topic for channel in summary.channels.values()} == {
         '/ego/odom', '/trust_monitor/trust', '/late'}
+
+
+def test_the_recorder_writes_type_hashes_and_a_profile_per_publisher(tmp_path: Path) -> None:
+    """As rosbag2 Jazzy writes them: the MCAP channel's ``topic_type_hash`` is the type's
+    RIHS01 hash (the installed type description's, and metadata.yaml's
+    type_description_hash: mcap_storage.cpp create_topic L933-938), and a topic with three
+    publishers has three offered profiles, in the channel and in metadata.yaml."""
+    from rosbag2_rules import installed_type_hash
+
+    from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
+
+    path = tmp_path / 'run'
+    qos = qos_profile(reliable=True, transient_local=True, depth=1000)
+    with BagWriter(path) as bag:
+        bag.add_topic('/ego/odom', 'nav_msgs/msg/Odometry', qos)
+        bag.add_topic('/tf', 'tf2_msgs/msg/TFMessage', [qos, qos, qos])
+        bag.write('/ego/odom', _odometry(T0_NS, 20.0))
+        bag.end_step()
+    assert check_bag_directory(path) == []
+    with (path / 'run.mcap').open('rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    meta = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    listed = {t['topic_metadata']['name']: t['topic_metadata']
+              for t in meta['topics_with_message_count']}
+    for channel in summary.channels.values():
+        schema = summary.schemas[channel.schema_id].name
+        wanted = installed_type_hash(schema)
+        assert wanted is not None and channel.metadata['topic_type_hash'] == wanted
+        assert listed[channel.topic]['type_description_hash'] == wanted
+        profiles = decode_qos_string(Decoder('ch'), channel.metadata['offered_qos_profiles'],
+                                     'qos')
+        assert profiles is not None
+        assert len(profiles) == len(listed[channel.topic]['offered_qos_profiles']) == (
+            3 if channel.topic == '/tf' else 1)

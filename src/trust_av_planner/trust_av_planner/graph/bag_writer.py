@@ -40,7 +40,13 @@ from rosbags.interfaces import (
     QosTime,
 )
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
-from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
+from rosbags.rosbag2.storage_mcap import (
+    Channel,
+    McapWriter,
+    PendingChunk,
+    write_channel,
+    write_string,
+)
 from rosbags.typesys import Stores, get_typestore
 
 from trust_av_planner.errors import TrustAvPlannerError
@@ -161,6 +167,23 @@ class _StepStorage(McapWriter):
         self.bio.close()
         self.bio = _WholeWrites(self.path, offset)
 
+    def add_connection(self, connection: Any, offered_qos_profiles: str) -> None:
+        """A channel with the metadata rosbag2 Jazzy's MCAP plugin writes: the offered QoS
+        profiles and the type hash (``topic_type_hash``: the RIHS01 hash of the type, as
+        in metadata.yaml's ``type_description_hash``; ``rosbag2_storage_mcap``
+        ``mcap_storage.cpp`` ``create_topic``, jazzy L933-938). rosbags writes the first
+        only."""
+        metadata = BytesIO()
+        for key, value in (('offered_qos_profiles', offered_qos_profiles),
+                           ('topic_type_hash', connection.digest)):
+            write_string(metadata, key)
+            write_string(metadata, value)
+        self.channels.append(Channel(connection.id, connection.msgtype, connection.topic,
+                                     connection.ext.serialization_format,
+                                     metadata.getvalue()))
+        self.channel_stats[connection.id] = 0
+        write_channel(self.chunk.bio, self.channels[-1], self.schemas)
+
     def close_step_chunk(self) -> None:
         """Write the pending chunk to the file; on an error cut the file back to where the
         chunk began, drop the chunk and re-raise.
@@ -250,10 +273,12 @@ class BagWriter:
         entry = self._topics[topic]
         return entry.count + entry.step_count
 
-    def add_topic(self, topic: str, msgtype: str, qos: Qos) -> None:
-        """Register a topic with its type and the QoS its publisher offers."""
+    def add_topic(self, topic: str, msgtype: str, qos: Qos | list[Qos]) -> None:
+        """Register a topic with its type and the QoS its publishers offer: one profile per
+        publisher, as ``ros2 bag record`` writes them (a profile alone: one publisher)."""
+        profiles = qos if isinstance(qos, list) else [qos]
         connection = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
-                                                 offered_qos_profiles=[qos])
+                                                 offered_qos_profiles=profiles)
         self._topics[topic] = _Topic(connection)
         self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
 
