@@ -44,9 +44,16 @@ def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert 'Summary: 4 packages finished' in proc.stdout
     install = work / 'install'
+    # each package installs the config files it holds (real files, no links out of it)
+    share = install / 'trust_monitor' / 'share' / 'trust_monitor' / 'config'
+    assert (share / 'trust_av.yaml').read_text() == PARAMS.read_text()
+    layout = install / 'trust_av_planner' / 'share' / 'trust_av_planner' / 'config'
+    assert (layout / 'foxglove_layout.json').read_text() == \
+        (REPO / 'config' / 'foxglove_layout.json').read_text()
     for package in ('trust_monitor', 'trust_av_planner'):
-        assert (install / package / 'share' / package / 'config' / 'trust_av.yaml').read_text() \
-            == PARAMS.read_text()
+        config = REPO / 'src' / package / package / 'config'
+        assert config.is_dir() and not config.is_symlink()
+        assert not any(path.is_symlink() for path in config.iterdir())
     return install
 
 
