@@ -23,6 +23,7 @@ raises :class:`RawInputError` naming the type and topic.
 
 from __future__ import annotations
 
+import os
 import struct
 from collections.abc import Callable
 from typing import Any
@@ -31,6 +32,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
+INPUTS_ENV = 'TRUST_AV_INPUTS'
+"""Set to ``rclpy`` to take every input as an rclpy message instead (how
+``benchmarks/bench_graph.py --rclpy-inputs`` measures what the readers save)."""
 ENCAPSULATION_BYTES = 4
 BYTE_ORDER = {b'\x00\x01': '<', b'\x00\x00': '>'}
 """Encapsulation kind (plain CDR: CDR_LE, CDR_BE) -> struct byte order. Other kinds
@@ -239,7 +243,7 @@ def subscribe(node: Node, msg_class: Any, topic: str, callback: Callable[[Any], 
     """
     name = type_name(msg_class)
     reader = READERS.get(name)
-    if reader is None:
+    if reader is None or os.environ.get(INPUTS_ENV) == 'rclpy':
         return node.create_subscription(msg_class, topic, callback, qos, **options)
 
     def on_bytes(data: bytes) -> None:
