@@ -163,3 +163,25 @@ def test_node_rejects_bad_parameters_at_start_up(tmp_path: Path, args: list[str]
                           text=True, timeout=60, env=env)
     assert proc.returncode == 2
     assert message in proc.stderr and 'Traceback' not in proc.stderr
+
+
+@pytest.mark.parametrize('package', ['preceding_traffic', 'human_driver_sim', 'trust_monitor',
+                                     'trust_av_planner'])
+def test_colcon_test_runs_each_package_s_tests(install: Path, package: str,
+                                               tmp_path: Path) -> None:
+    """``colcon test`` runs pytest (the package's ``test`` extra) on the package's modules of
+    tests/ (its setup.cfg); collected only here, the suite itself runs them."""
+    colcon = Path(sys.executable).parent / 'colcon'
+    work = install.parent
+    env = dict(os.environ, PATH=f'{Path(sys.executable).parent}:{os.environ["PATH"]}')
+    proc = subprocess.run([str(colcon), '--log-base', str(tmp_path / 'log'), 'test',
+                           '--base-paths', str(REPO / 'src'), '--build-base',
+                           str(work / 'build'), '--install-base', str(install),
+                           '--packages-select', package, '--pytest-args', '--collect-only',
+                           '-q'], cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                          env=env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    log = (tmp_path / 'log' / 'latest_test' / package / 'stdout_stderr.log').read_text()
+    collected = [line for line in log.splitlines() if line.endswith(' tests collected')
+                 or ' tests collected in ' in line]
+    assert collected and int(collected[-1].split()[0]) > 0, log[-2000:]

@@ -18,7 +18,7 @@ setup(
         ('share/' + package_name + '/config', sorted(glob(package_name + '/config/*.json'))),
     ],
     install_requires=['setuptools'],
-    extras_require={'ray': ['ray==2.60.0']},
+    extras_require={'ray': ['ray==2.60.0'], 'test': ['pytest']},
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',

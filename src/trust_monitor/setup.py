@@ -18,6 +18,7 @@ setup(
                                                      + glob(package_name + '/config/*.xml'))),
     ],
     install_requires=['setuptools'],
+    extras_require={'test': ['pytest']},  # colcon test runs pytest (setup.cfg)
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',
