@@ -123,14 +123,27 @@ def test_installed_executable_comes_up(install: Path, package: str, executable: 
 
 
 def test_installed_node_names_what_it_misses(install: Path, tmp_path: Path) -> None:
-    """ego_plant has per-run values and no shipped default for them: one line naming the
-    parameter and how to pass it, exit 2."""
+    """The three executables with per-run values and no shipped default for them (ego_plant,
+    driver, recorder): one line naming every value a run must supply and how to pass it,
+    exit 2; the other three start from the installed params file alone (above)."""
     exe = install / 'trust_av_planner' / 'lib' / 'trust_av_planner' / 'ego_plant'
     proc = in_install(install, f'{exe} --ros-args -p initial_speed_mps:=0.0', tmp_path)
     assert proc.returncode == 2
     errors = [line for line in proc.stderr.splitlines() if line.startswith('error:')]
-    assert errors == ['error: parameter initial_position_m is missing (PlantConfig): pass '
-                      '--ros-args -p initial_position_m:=VALUE'], proc.stderr
+    assert errors == ['error: parameters initial_position_m, start_time_s are missing '
+                      '(PlantConfig): pass --ros-args -p initial_position_m:=VALUE -p '
+                      'start_time_s:=VALUE'], proc.stderr
+    for package, executable, line in (
+            ('human_driver_sim', 'driver', 'parameters initial_position_m, initial_speed_mps, '
+             'start_time_s are missing (FollowerState): pass --ros-args -p '
+             'initial_position_m:=VALUE -p initial_speed_mps:=VALUE -p start_time_s:=VALUE'),
+            ('trust_av_planner', 'recorder', 'parameter bag_path is missing (RecorderConfig): '
+             'pass --ros-args -p bag_path:=VALUE')):
+        exe = install / package / 'lib' / package / executable
+        proc = in_install(install, str(exe), tmp_path)
+        assert proc.returncode == 2
+        errors = [line for line in proc.stderr.splitlines() if line.startswith('error:')]
+        assert errors == [f'error: {line}'], proc.stderr
 
 
 def test_installed_trust_monitor_estimate(install: Path, tmp_path: Path) -> None:

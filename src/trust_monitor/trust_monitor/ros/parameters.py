@@ -122,14 +122,15 @@ def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None
         extra: values for fields that the node computes itself (not declared).
 
     Raises:
-        ParamsError: a value of the wrong type, out of range, or a field with no value in
-            the overrides, the shipped file or the dataclass (the message says which file to
-            pass).
+        ParamsError: a value of the wrong type, out of range, or fields with no value in
+            the overrides, the shipped file or the dataclass (the message names all of them
+            and how to pass them).
     """
     hints = typing.get_type_hints(cls)
     overrides = node_overrides(node)
     shipped, shipped_path = _shipped(node.get_fully_qualified_name())
     values: dict[str, Any] = dict(extra or {})
+    missing: list[str] = []
     for field in dataclasses.fields(cls):  # type: ignore[arg-type]
         name = field.name
         if name in values:
@@ -143,10 +144,14 @@ def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None
         elif name in shipped:
             values[name] = check_type(name, shipped[name], hints[name])
         elif field.default is dataclasses.MISSING:
-            hint = (f'pass --ros-args -p {name}:=VALUE' if shipped_path else
-                    'the shipped params file was not found: pass --ros-args --params-file '
-                    'config/trust_av.yaml of the trust-av sources')
-            raise ParamsError(f'parameter {name} is missing ({cls.__name__}): {hint}')
+            missing.append(name)
+    if missing:   # every value a run must supply, in one line
+        hint = ('pass --ros-args ' + ' '.join(f'-p {name}:=VALUE' for name in missing)
+                if shipped_path else 'the shipped params file was not found: pass --ros-args '
+                '--params-file config/trust_av.yaml of the trust-av sources')
+        plural = 's' if len(missing) > 1 else ''
+        raise ParamsError(f'parameter{plural} {", ".join(missing)} '
+                          f'{"are" if plural else "is"} missing ({cls.__name__}): {hint}')
     config = build_config(cls, values)
     for field in dataclasses.fields(cls):  # type: ignore[arg-type]
         name = field.name
