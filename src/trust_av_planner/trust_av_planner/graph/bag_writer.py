@@ -184,6 +184,10 @@ class _StepStorage(McapWriter):
         self.channel_stats[connection.id] = 0
         write_channel(self.chunk.bio, self.channels[-1], self.schemas)
 
+    def discard_chunk(self) -> None:
+        """Start a new, empty pending chunk (what was pending is dropped)."""
+        self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+
     def close_step_chunk(self) -> None:
         """Write the pending chunk to the file; on an error cut the file back to where the
         chunk began, drop the chunk and re-raise.
@@ -203,12 +207,18 @@ class _StepStorage(McapWriter):
                 self.close_chunk()
             else:
                 self.bio.write(self.chunk.bio.getbuffer())
-                self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+                self.discard_chunk()
             self.bio.commit()
         except OSError:
             self.bio.truncate(start)
             del self.chunks[indexed:]   # close_chunk indexed the chunk the file lacks
             raise
+
+
+class _StepWriter(Writer):
+    """rosbags' Writer with :class:`_StepStorage` as its MCAP storage plugin."""
+
+    STORAGE_PLUGINS = {**Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: _StepStorage}  # noqa: RUF012
 
 
 @dataclass
@@ -232,9 +242,7 @@ class BagWriter:
         self.path = Path(path)
         existed = os.path.lexists(self.path)
         try:
-            self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-            self._writer.STORAGE_PLUGINS = {**Writer.STORAGE_PLUGINS,  # type: ignore[misc]
-                                            StoragePlugin.MCAP: _StepStorage}
+            self._writer = _StepWriter(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
             self._writer.set_custom_data('trust_av.recorder', 'one MCAP chunk per step')
             self._writer.open()
         except (WriterError, OSError) as err:
@@ -319,7 +327,7 @@ class BagWriter:
             for entry in self._topics.values():
                 entry.step_count = 0
             self._step_first, self._step_last = 2**63 - 1, -1
-            self._storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+            self._storage.discard_chunk()
             self._finish_after_disk_full(err)
             return False
         self._chunks += 1
@@ -352,7 +360,7 @@ class BagWriter:
         except OSError as err:
             if err.errno not in (errno.ENOSPC, errno.EDQUOT):
                 raise
-            self._storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+            self._storage.discard_chunk()
         self._close()
 
     def __enter__(self) -> BagWriter:
