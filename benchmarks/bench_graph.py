@@ -11,7 +11,10 @@ floor of the medians. Also the in-process loop on the same trace: per-step overh
 the largest difference of the first graph run's recording to it. Writes
 benchmarks/results_graph.json (or --out) with the core count, date and load averages.
 
-    python benchmarks/bench_graph.py [--trace us06] [--repeats 3] [--quick]
+    python benchmarks/bench_graph.py [--trace us06] [--repeats 3] [--quick] [--rclpy-inputs]
+
+``--rclpy-inputs``: the graph's nodes take every input as an rclpy message (rclpy's own
+deserialisation) instead of reading the bytes (``trust_monitor.ros.raw_inputs``).
 """
 
 from __future__ import annotations
@@ -93,7 +96,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--repeats', type=int, help='runs of each, interleaved (default 3)')
     parser.add_argument('--out', type=Path,
                         default=Path(__file__).parent / 'results_graph.json')
+    parser.add_argument('--rclpy-inputs', action='store_true',
+                        help="the nodes read their inputs with rclpy's deserialisation")
     args = parser.parse_args(argv)
+    if args.rclpy_inputs:
+        from trust_monitor.ros.raw_inputs import INPUTS_ENV
+        os.environ[INPUTS_ENV] = 'rclpy'   # the graph's node processes inherit it
     repeats = args.repeats if args.repeats is not None else 1 if args.quick else 3
     if repeats < 1:
         print(f'error: --repeats must be >= 1, got {repeats}', file=sys.stderr)
@@ -140,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
         'cpu_count': os.cpu_count(), 'trace': trace.name, 'steps': trace.steps,
         'repeats': repeats, 'load_average': load(),
+        'inputs': 'rclpy' if args.rclpy_inputs else 'raw_inputs',
         'ratio_graph_to_floor': ratio, 'ratio_per_pair': summary(pairs),
         'cpu_ratio_graph_to_floor': cpu_ratio,
         'graph': graph, 'floor': floor,

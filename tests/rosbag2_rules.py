@@ -11,6 +11,15 @@ it mirrors; line numbers are those of ``ros2/rosbag2`` branch ``jazzy`` at 64717
 * ``R`` = ``rosbag2_cpp/src/rosbag2_cpp/readers/sequential_reader.cpp``,
 * ``T`` = ``rosbag2_transport/src/rosbag2_transport/recorder.cpp`` (what the recorder writes).
 
+The MCAP itself is read the way rosbag2's plugin reads it: through the mcap C++ library that
+Jazzy's ``mcap_vendor/CMakeLists.txt`` pins (``foxglove/mcap`` tag ``releases/cpp/v1.3.0``),
+always in log-time order: R sets its ``read_order_`` on the storage when it opens (L113),
+whose default is ``ReadOrder{}`` (``rosbag2_cpp/readers/sequential_reader.hpp`` L215) =
+``ReceivedTimestamp``, ascending (``rosbag2_storage/storage_interfaces/
+base_read_interface.hpp`` L30-47); M ``set_read_order`` (L723-748) maps it to
+``ReadMessageOptions::ReadOrder::LogTimeOrder`` and ``read_next`` (L634-667) reads with it.
+``RI`` = ``cpp/mcap/include/mcap/reader.inl`` at that tag; see :func:`time_ordered_read`.
+
 YAML values are decoded as yaml-cpp 0.8.0 (Jazzy's ``yaml_cpp_vendor`` on Ubuntu 24.04)
 decodes them: ``as<std::string>()`` takes any scalar and turns a null into ``"null"``
 (``node/impl.h as_if<std::string>``), integers are read by ``std::stringstream`` with the
@@ -24,6 +33,7 @@ from __future__ import annotations
 
 import json
 import re
+import struct
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -421,6 +431,63 @@ def decode_qos_string(dec: Decoder, text: str | None, path: str) -> list[dict[st
     return decode_qos_list(dec, node, path)
 
 
+def time_ordered_read(path: Path) -> tuple[int, str]:
+    """The messages the pinned mcap C++ reader returns from ``path`` in log-time order.
+
+    RI ``IndexedMessageReader::IndexedMessageReader`` (L1799-1846) takes the summary's chunk
+    indexes, kept sorted by chunk start offset (RI ``CompareChunkIndexes`` L14-16, L458-470),
+    and refuses the whole read ("cannot read MCAP in time order with no message indexes",
+    L1814-1817) when there is none or the FIRST has ``message_index_length`` 0 -- as a chunk
+    holding only schema and channel records does. It then queues each chunk whose message
+    index offsets name a channel (L1825-1846) and reads, from the chunk start to the end of
+    its message indexes, only Chunk and MessageIndex records (anything else is
+    ``InvalidRecord``, L1903-1943), one message per message-index entry (L1944-1970).
+
+    Returns:
+        (messages read, the reader's refusal or '' if none).
+    """
+    from mcap.reader import make_reader as _make_reader
+
+    data = path.read_bytes()
+    with path.open('rb') as stream:
+        summary = _make_reader(stream).get_summary()
+    indexes = sorted(summary.chunk_indexes if summary else [],
+                     key=lambda index: index.chunk_start_offset)
+    if not indexes or indexes[0].message_index_length == 0:
+        return 0, 'cannot read MCAP in time order with no message indexes'
+    channels = set(summary.channels) if summary else set()
+    read = 0
+    for index in indexes:
+        if not channels & set(index.message_index_offsets):
+            continue
+        records = b''
+        pos = index.chunk_start_offset
+        end = pos + index.chunk_length + index.message_index_length
+        while pos < end:
+            opcode, length = data[pos], struct.unpack_from('<Q', data, pos + 1)[0]
+            body, pos = data[pos + 9:pos + 9 + length], pos + 9 + length
+            if opcode == 0x06:                  # Chunk: times, sizes, crc, compression
+                size = struct.unpack_from('<I', body, 28)[0]
+                compression = body[32:32 + size].decode()
+                if compression:
+                    return read, f'compressed chunk ({compression}) not checked here'
+                records = body[32 + size + 8:]
+            elif opcode == 0x07:                # MessageIndex: channel, (time, offset)*
+                channel = struct.unpack_from('<H', body, 0)[0]
+                entries = struct.unpack_from('<I', body, 2)[0] // 16
+                for number in range(entries):
+                    stamp, offset = struct.unpack_from('<QQ', body, 6 + 16 * number)
+                    if records[offset:offset + 1] != b'\x05' or \
+                            struct.unpack_from('<HIQ', records, offset + 9)[::2] != \
+                            (channel, stamp):
+                        return read, 'a message index entry does not point at its message'
+                    read += 1
+            else:
+                return read, ('expected only chunks and message indices, found opcode '
+                              f'{opcode:#04x}')
+    return read, ''
+
+
 @dataclass
 class McapFacts:
     """What rosbag2's MCAP plugin reads from one file (M ``read_metadata`` L414-504)."""
@@ -457,6 +524,13 @@ def check_mcap(path: Path, where: str, problems: list[str]) -> McapFacts | None:
                         '(mcap_storage.cpp open_impl L363-379)')
         return None
     cite_stats = 'MCAP Statistics record vs the messages; mcap_storage.cpp L459-463'
+    if stats.message_count:
+        read, refusal = time_ordered_read(path)
+        if refusal or read != stats.message_count:
+            dec.fail('time-ordered read', f'{read} of {stats.message_count} messages come '
+                     f'back{f" ({refusal})" if refusal else ""}', 'mcap C++ v1.3.0 '
+                     'reader.inl IndexedMessageReader L1799-1846, as mcap_storage.cpp '
+                     'read_next L634-667 reads')
     if stats.message_count != sum(counts.values()):
         dec.fail('statistics.message_count', f'{stats.message_count} but the file holds '
                  f'{sum(counts.values())} messages', cite_stats)
@@ -480,7 +554,9 @@ def check_mcap(path: Path, where: str, problems: list[str]) -> McapFacts | None:
                             schema.name if schema else None,
                             f'channel {channel.topic} topic_type_hash')
         topic = facts.topics.setdefault(channel.topic, {'message_count': 0, 'types': set(),
-                                                        'formats': set(), 'qos': qos})
+                                                        'formats': set(), 'qos': qos,
+                                                        'hash': channel.metadata.get(
+                                                            'topic_type_hash')})
         topic['message_count'] += stats.channel_message_counts.get(channel_id, 0)
         topic['types'].add(schema.name if schema else None)
         topic['formats'].add(channel.message_encoding)
@@ -615,7 +691,8 @@ def _compare_topics(problems: list[str], where: str, topics: list[dict[str, Any]
     for facts in files:
         for name, info in facts.topics.items():
             slot = merged.setdefault(name, {'message_count': 0, 'types': set(),
-                                            'formats': set(), 'qos': info['qos']})
+                                            'formats': set(), 'qos': info['qos'],
+                                            'hash': info.get('hash')})
             slot['message_count'] += info['message_count']
             slot['types'] |= info['types']
             slot['formats'] |= info['formats']
@@ -642,6 +719,11 @@ def _compare_topics(problems: list[str], where: str, topics: list[dict[str, Any]
                 info['formats'] != {topic['serialization_format']}:
             problems.append(f'{where}: topic {name}: serialization_format differs from the '
                             'MCAP message encoding (mcap_storage.cpp L480)')
+        if info.get('hash') is not None and topic.get('type_description_hash') is not None \
+                and info['hash'] != topic['type_description_hash']:
+            problems.append(f'{where}: topic {name}: topic_type_hash of the MCAP channel differs '
+                            'from type_description_hash in metadata.yaml (rosbag2 writes the '
+                            'same hash to both: mcap_storage.cpp L938, yaml.hpp L137-138)')
         if topic.get('qos') is not None and info['qos'] is not None and \
                 topic['qos'] != info['qos']:
             problems.append(f'{where}: topic {name}: offered_qos_profiles differ between '

@@ -44,9 +44,16 @@ def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert 'Summary: 4 packages finished' in proc.stdout
     install = work / 'install'
+    # each package installs the config files it holds (real files, no links out of it)
+    share = install / 'trust_monitor' / 'share' / 'trust_monitor' / 'config'
+    assert (share / 'trust_av.yaml').read_text() == PARAMS.read_text()
+    layout = install / 'trust_av_planner' / 'share' / 'trust_av_planner' / 'config'
+    assert (layout / 'foxglove_layout.json').read_text() == \
+        (REPO / 'config' / 'foxglove_layout.json').read_text()
     for package in ('trust_monitor', 'trust_av_planner'):
-        assert (install / package / 'share' / package / 'config' / 'trust_av.yaml').read_text() \
-            == PARAMS.read_text()
+        config = REPO / 'src' / package / package / 'config'
+        assert config.is_dir() and not config.is_symlink()
+        assert not any(path.is_symlink() for path in config.iterdir())
     return install
 
 
@@ -116,14 +123,27 @@ def test_installed_executable_comes_up(install: Path, package: str, executable: 
 
 
 def test_installed_node_names_what_it_misses(install: Path, tmp_path: Path) -> None:
-    """ego_plant has per-run values and no shipped default for them: one line naming the
-    parameter and how to pass it, exit 2."""
+    """The three executables with per-run values and no shipped default for them (ego_plant,
+    driver, recorder): one line naming every value a run must supply and how to pass it,
+    exit 2; the other three start from the installed params file alone (above)."""
     exe = install / 'trust_av_planner' / 'lib' / 'trust_av_planner' / 'ego_plant'
     proc = in_install(install, f'{exe} --ros-args -p initial_speed_mps:=0.0', tmp_path)
     assert proc.returncode == 2
     errors = [line for line in proc.stderr.splitlines() if line.startswith('error:')]
-    assert errors == ['error: parameter initial_position_m is missing (PlantConfig): pass '
-                      '--ros-args -p initial_position_m:=VALUE'], proc.stderr
+    assert errors == ['error: parameters initial_position_m, start_time_s are missing '
+                      '(PlantConfig): pass --ros-args -p initial_position_m:=VALUE -p '
+                      'start_time_s:=VALUE'], proc.stderr
+    for package, executable, line in (
+            ('human_driver_sim', 'driver', 'parameters initial_position_m, initial_speed_mps, '
+             'start_time_s are missing (FollowerState): pass --ros-args -p '
+             'initial_position_m:=VALUE -p initial_speed_mps:=VALUE -p start_time_s:=VALUE'),
+            ('trust_av_planner', 'recorder', 'parameter bag_path is missing (RecorderConfig): '
+             'pass --ros-args -p bag_path:=VALUE')):
+        exe = install / package / 'lib' / package / executable
+        proc = in_install(install, str(exe), tmp_path)
+        assert proc.returncode == 2
+        errors = [line for line in proc.stderr.splitlines() if line.startswith('error:')]
+        assert errors == [f'error: {line}'], proc.stderr
 
 
 def test_installed_trust_monitor_estimate(install: Path, tmp_path: Path) -> None:
@@ -156,3 +176,25 @@ def test_node_rejects_bad_parameters_at_start_up(tmp_path: Path, args: list[str]
                           text=True, timeout=60, env=env)
     assert proc.returncode == 2
     assert message in proc.stderr and 'Traceback' not in proc.stderr
+
+
+@pytest.mark.parametrize('package', ['preceding_traffic', 'human_driver_sim', 'trust_monitor',
+                                     'trust_av_planner'])
+def test_colcon_test_runs_each_package_s_tests(install: Path, package: str,
+                                               tmp_path: Path) -> None:
+    """``colcon test`` runs pytest (the package's ``test`` extra) on the package's modules of
+    tests/ (its setup.cfg); collected only here, the suite itself runs them."""
+    colcon = Path(sys.executable).parent / 'colcon'
+    work = install.parent
+    env = dict(os.environ, PATH=f'{Path(sys.executable).parent}:{os.environ["PATH"]}')
+    proc = subprocess.run([str(colcon), '--log-base', str(tmp_path / 'log'), 'test',
+                           '--base-paths', str(REPO / 'src'), '--build-base',
+                           str(work / 'build'), '--install-base', str(install),
+                           '--packages-select', package, '--pytest-args', '--collect-only',
+                           '-q'], cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                          env=env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    log = (tmp_path / 'log' / 'latest_test' / package / 'stdout_stderr.log').read_text()
+    collected = [line for line in log.splitlines() if line.endswith(' tests collected')
+                 or ' tests collected in ' in line]
+    assert collected and int(collected[-1].split()[0]) > 0, log[-2000:]

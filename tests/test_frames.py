@@ -52,7 +52,10 @@ def test_every_row_is_relative_and_names_its_frames() -> None:
     assert set(TOPIC['tf'].publishers) == set(VEHICLE_FRAMES) == {
         p for t in odometry for p in t.publishers}
     assert TOPIC['tf'].messages(7) == sum(t.messages(7) for t in odometry)
-    assert TOPIC['ego/accel_cmd'].frames == '`ego`'          # not base_link: the AV is `ego`
+    # the AV's plans and command: its body frame as its odometry names it (`ego` here)
+    for name in ('ego/accel_cmd', 'ego/plan', 'ego/expected_plan'):
+        assert f'`{VEHICLE_FRAMES["ego_plant"]}` here' in TOPIC[name].frames
+        assert '`base_link`' in TOPIC[name].frames
 
 
 def test_qualified_names_and_topic_name_rules() -> None:
@@ -163,3 +166,23 @@ def test_serialised_messages_have_their_exact_cdr_length() -> None:
         store.deserialize_cdr(data, msgtype)            # raises on a size mismatch
         with pytest.raises(SerdeError, match='size mismatch'):
             store.deserialize_cdr(data + bytes(4), msgtype)
+
+
+def test_frame_ids_are_rep105_parameters_and_positions_must_share_one() -> None:
+    from trust_monitor.common.frames import FrameConfig, body_frame, position_frame_problem
+    from trust_monitor.common.params import ParamsError
+
+    config = FrameConfig()
+    assert (config.map_frame_id, config.odom_frame_id, config.base_frame_id) == (
+        'map', 'odom', 'base_link')
+    assert position_frame_problem({'traffic': 'odom', 'ego': 'odom'}, config) == ''
+    assert position_frame_problem({'traffic': 'map', 'ego': 'map'}, config) == ''
+    assert position_frame_problem({'traffic': 'map', 'ego': 'odom'}, config) == (
+        "positions in different frames: traffic in 'map', ego in 'odom'")
+    assert position_frame_problem({'traffic': 'odom', 'ego': 'base_link'}, config) == (
+        "frame_id not 'odom' or 'map': ego in 'base_link'")
+    assert position_frame_problem({'ego': 'world'}, FrameConfig(odom_frame_id='world')) == ''
+    assert body_frame('', config) == 'base_link' and body_frame('ego', config) == 'ego'
+    for bad in ('', '/odom', ' odom'):
+        with pytest.raises((ValueError, ParamsError), match='odom_frame_id must be a tf2'):
+            FrameConfig(odom_frame_id=bad)

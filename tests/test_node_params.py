@@ -37,7 +37,11 @@ CORPUS: dict[str, tuple[str, bool, bool]] = {
     'null_is_a_string': ('/**/planner:\n  ros__parameters:\n    gru_model: null\n', True, True),
     'alias': ('/**/planner:\n  ros__parameters:\n    a: &a 0.5\n    alpha: *a\n', False, False),
     'unknown_in_node_section': ('planner:\n  ros__parameters:\n    alhpa: 0.5\n', False, False),
-    'unknown_in_wildcard': ('/**:\n  ros__parameters:\n    speed_limit: 3.0\n', False, False),
+    # a shared bring-up file: other stacks' keys in /** are ignored (a warning), a typo in a
+    # section written for a node of the graph is refused
+    'unknown_in_wildcard': ('/**:\n  ros__parameters:\n    speed_limit: 3.0\n', True, True),
+    'unknown_in_node_wildcard_section': ('/**/planner:\n  ros__parameters:\n'
+                                         '    alhpa: 0.5\n', False, False),
     'double_for_integer': ('/**/planner:\n  ros__parameters:\n    horizon_steps: 4.0\n',
                            False, False),
     'out_of_range': ('/**/planner:\n  ros__parameters:\n    alpha: 1.5\n', False, False),
@@ -102,15 +106,16 @@ from trust_monitor.ros.spin import init_rclpy, start_node
 
 results = {}
 for name, args in json.loads(sys.argv[1]).items():
+    command_line = ['probe', '--ros-args', *args]
     try:
-        init_rclpy(['probe', '--ros-args', *args])
+        init_rclpy(command_line)
     except ParamsError as err:   # every node of this command line stops here
         results[name] = {'rcl': 'refused: ' + str(err)}
         continue
     verdicts = {}
     for cls in (TrafficNode, PlannerNode, DriverNode, MonitorNode, EgoPlantNode):
         try:
-            node = start_node(cls)
+            node = start_node(cls, command_line)
         except (ValueError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
             verdicts[cls.__name__] = 'refused: ' + str(err)
@@ -259,16 +264,20 @@ def start(tmp_path: Path, domain: int, module: str, *args: str) -> subprocess.Po
 
 
 def test_hand_started_nodes(tmp_path: Path) -> None:
-    """As a user starts them: an unknown parameter from -p or from a params file is one line
-    naming it and exit 2; with no params file at all a node runs on the shipped values and
-    takes an integer for a double from -p."""
+    """As a user starts them: an unknown parameter from -p or from the node's section of a
+    params file is one line naming it and where it came from, and exit 2; one in a wildcard
+    section is a warning; with no params file of the graph a node runs on the shipped
+    values and takes an integer for a double from -p."""
     typo = tmp_path / 'typo.yaml'
     typo.write_text('trust_monitor:\n  ros__parameters:\n    epsilon: 3.0\n')
+    shared = tmp_path / 'bringup.yaml'     # another stack's keys in the wildcard section
+    shared.write_text('/**:\n  ros__parameters:\n    wheel_base: 2.79\n')
     procs = {
         'p_typo': start(tmp_path, 226, 'trust_monitor.monitor_node', '-p', 'alhpa:=3'),
         'file_typo': start(tmp_path, 227, 'trust_monitor.monitor_node', '--params-file',
                            str(typo)),
-        'alone': start(tmp_path, 228, 'trust_av_planner.planner_node', '-p', 'dt_s:=1'),
+        'alone': start(tmp_path, 228, 'trust_av_planner.planner_node', '-p', 'dt_s:=1',
+                       '--params-file', str(shared)),
     }
     outputs = {}
     alone = procs.pop('alone')
@@ -281,6 +290,8 @@ def test_hand_started_nodes(tmp_path: Path) -> None:
     os.killpg(alone.pid, signal.SIGINT)
     rest, _ = alone.communicate(timeout=60)
     assert alone.returncode == 0 and 'ready (lock-step)' in ''.join(seen), ''.join(seen) + rest
+    assert ('ignoring parameter(s) wheel_base of a wildcard section: not parameters of any '
+            'node of the graph') in ''.join(seen) + rest
     for name, proc in procs.items():
         outputs[name] = proc.communicate(timeout=120)[0]
         assert proc.returncode == 2, outputs[name]
@@ -288,6 +299,8 @@ def test_hand_started_nodes(tmp_path: Path) -> None:
     errors = {name: [line for line in out.splitlines() if line.startswith('error:')]
               for name, out in outputs.items()}
     assert errors['p_typo'] == ['error: /trust_monitor: unknown parameter(s) alhpa (not a '
-                                'parameter of this node or of any node of the graph)']
+                                'parameter of this node or of any node of the graph) (from '
+                                'the command line (-p))']
     assert errors['file_typo'] == ['error: /trust_monitor: unknown parameter(s) epsilon (not a '
-                                   'parameter of this node or of any node of the graph)']
+                                   'parameter of this node or of any node of the graph) (from '
+                                   f'{typo}: section trust_monitor)']

@@ -124,3 +124,29 @@ def test_package_xml_is_what_rosdep_reads(package: str) -> None:
     manifest = parse_package(SRC / package / 'package.xml', warnings=warnings)
     assert (manifest.name, manifest.package_format, warnings) == (package, 3, [])
     assert {d.name for d in manifest.exec_depends} == declared(package)
+
+
+REPOSITORY_TESTS = {'test_colcon', 'test_suite_groups', 'test_layout', 'test_benchmarks',
+                    'test_packages'}
+"""Test modules about the repository as a whole (the packages together, the suite, the
+benchmarks), which no single package's ``colcon test`` runs."""
+
+
+def test_each_test_module_is_one_package_s_or_the_repository_s() -> None:
+    """``colcon test`` runs pytest in each package's directory; its setup.cfg points pytest at
+    that package's modules of tests/ (``testpaths``). Every module is in exactly one list,
+    or is one of the repository's own (:data:`REPOSITORY_TESTS`)."""
+    import configparser
+
+    owners: dict[str, list[str]] = {}
+    for package in PACKAGES:
+        config = configparser.ConfigParser()
+        config.read(SRC / package / 'setup.cfg')
+        paths = config['tool:pytest']['testpaths'].split()
+        for path in paths:
+            module = (SRC / package / path).resolve()
+            assert module.is_file(), f'{package}/setup.cfg: {path} does not exist'
+            owners.setdefault(module.stem, []).append(package)
+    modules = {path.stem for path in (SRC.parent / 'tests').glob('test_*.py')}
+    assert {m: o for m, o in owners.items() if len(o) > 1} == {}
+    assert modules - set(owners) == REPOSITORY_TESTS

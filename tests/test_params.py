@@ -65,6 +65,8 @@ def test_shipped_file_names_every_parameter_of_the_graph_once() -> None:
     ('planner', {'predictor': 'lstm'}, r"predictor must be one of .*'lstm'"),
     ('planner', {'alpha': 'high'}, r'parameter alpha: expected a number'),
     ('planner', {'alhpa': 0.5}, r'unknown parameter\(s\) alhpa'),
+    ('/**', {'alhpa': 0.5}, r'command-line options: section /\*\*: unknown parameter\(s\) '
+                            r'alhpa'),     # a typo on the command line, even for every node
     ('planner', {'horizon_steps': 3.0}, r'parameter horizon_steps: expected an integer'),
     ('/**', {'horizon_steps': 4.0}, r'horizon_steps = 4.0 would not reach .* rcl keeps the '
                                     r'integer written for it in an earlier file; write an '
@@ -77,6 +79,27 @@ def test_shipped_file_names_every_parameter_of_the_graph_once() -> None:
 def test_bad_values_are_named(node: str, values: dict[str, object], message: str) -> None:
     with pytest.raises(ParamsError, match=message):
         load_run_config(DEFAULT_PARAMS_FILE, {node: values})
+
+
+def test_unknown_names_of_wildcard_sections_are_ignored_with_a_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A shared bring-up file's /** section feeds other stacks' nodes too: names no node of
+    the graph has are accepted with one warning line; in a section written for a node of the
+    graph (any namespace) they are typos, refused with one line."""
+    shared = tmp_path / 'bringup.yaml'
+    shared.write_text('/**:\n  ros__parameters:\n    use_sim_time: false\n'
+                      '    wheel_base: 2.79\n    alpha: 0.3\n'
+                      '/**/planner:\n  ros__parameters:\n    alpha: 0.25\n')
+    config = load_run_config(shared)
+    line = (f'{shared}: section /**: ignoring use_sim_time, wheel_base (not a parameter of '
+            'any node of the graph)')
+    assert config.ignored == (line,) and config.planner.alpha == 0.25
+    assert capsys.readouterr().err == f'warning: {line}\n'
+    typo = tmp_path / 'typo.yaml'
+    typo.write_text('/**/planner:\n  ros__parameters:\n    alhpa: 0.25\n')
+    with pytest.raises(ParamsError, match=r'section /\*\*/planner: unknown parameter\(s\) '
+                                          r'alhpa$'):
+        load_run_config(typo)
 
 
 def test_control_step_bounds_are_documented() -> None:

@@ -24,6 +24,7 @@ from rosbag2_rules import (
     compose,
     decode_qos_list,
     decode_qos_string,
+    time_ordered_read,
 )
 from rosbags.interfaces import (
     Qos,
@@ -258,3 +259,85 @@ def test_the_project_s_recorder_writes_what_rosbag2_reads(tmp_path: Path) -> Non
     (path / 'metadata.yaml').unlink()
     problems = check_bag_directory(path)
     assert 'metadata.yaml: missing' in problems[0]
+
+
+def test_a_first_chunk_without_messages_cannot_be_read_in_time_order(tmp_path: Path) -> None:
+    """The mcap C++ reader rosbag2 Jazzy pins (v1.3.0) refuses a time-ordered read when the
+    first chunk index has no message index: a chunk of schema and channel records only.
+    Nothing comes back, though every Python reader reads the file."""
+    path = tmp_path / 'first_chunk_empty'
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        odom = writer.add_connection('/ego/odom', 'nav_msgs/msg/Odometry', typestore=TYPESTORE,
+                                     offered_qos_profiles=[STEP_QOS])
+        writer.storage.close_chunk()  # type: ignore[union-attr]  # the schema/channel chunk
+        for step in range(STEPS):
+            writer.write(odom, T0_NS + step, _odometry(T0_NS + step, 20.0))
+    count, refusal = time_ordered_read(path / 'first_chunk_empty.mcap')
+    assert (count, refusal) == (0, 'cannot read MCAP in time order with no message indexes')
+    problems = check_bag_directory(path)
+    assert len(problems) == 1 and f'0 of {STEPS} messages come back' in problems[0], problems
+
+
+def test_the_recorder_never_writes_a_chunk_without_messages(tmp_path: Path) -> None:
+    """Steps without messages, a topic added mid-recording and one added after the last
+    message: every message reads back in time order under the pinned reader's rule, and
+    every chunk has a message index."""
+    from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
+
+    path = tmp_path / 'run'
+    qos = qos_profile(reliable=True, transient_local=False, depth=1)
+    with BagWriter(path) as bag:
+        bag.add_topic('/ego/odom', 'nav_msgs/msg/Odometry', qos)
+        bag.end_step()                                   # a tick before the first message
+        for step in range(STEPS):
+            if step == 2:
+                bag.add_topic('/trust_monitor/trust', 'geometry_msgs/msg/Vector3Stamped', qos)
+                bag.end_step()
+            bag.write('/ego/odom', _odometry(T0_NS + step * 10**9, 20.0))
+            if step >= 2:
+                bag.write('/trust_monitor/trust', _trust(T0_NS + step * 10**9, 0.5))
+            bag.end_step()
+        bag.add_topic('/late', 'geometry_msgs/msg/Vector3Stamped', qos)
+    assert check_bag_directory(path) == []
+    assert time_ordered_read(path / 'run.mcap') == (2 * STEPS - 2, '')
+    with (path / 'run.mcap').open('rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None and len(summary.chunk_indexes) == STEPS
+    assert all(index.message_index_length for index in summary.chunk_indexes)
+    assert {channel.topic for channel in summary.channels.values()} == {
+        '/ego/odom', '/trust_monitor/trust', '/late'}
+
+
+def test_the_recorder_writes_type_hashes_and_a_profile_per_publisher(tmp_path: Path) -> None:
+    """As rosbag2 Jazzy writes them: the MCAP channel's ``topic_type_hash`` is the type's
+    RIHS01 hash (the installed type description's, and metadata.yaml's
+    type_description_hash: mcap_storage.cpp create_topic L933-938), and a topic with three
+    publishers has three offered profiles, in the channel and in metadata.yaml."""
+    from rosbag2_rules import installed_type_hash
+
+    from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
+
+    path = tmp_path / 'run'
+    qos = qos_profile(reliable=True, transient_local=True, depth=1000)
+    with BagWriter(path) as bag:
+        bag.add_topic('/ego/odom', 'nav_msgs/msg/Odometry', qos)
+        bag.add_topic('/tf', 'tf2_msgs/msg/TFMessage', [qos, qos, qos])
+        bag.write('/ego/odom', _odometry(T0_NS, 20.0))
+        bag.end_step()
+    assert check_bag_directory(path) == []
+    with (path / 'run.mcap').open('rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    meta = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    listed = {t['topic_metadata']['name']: t['topic_metadata']
+              for t in meta['topics_with_message_count']}
+    for channel in summary.channels.values():
+        schema = summary.schemas[channel.schema_id].name
+        wanted = installed_type_hash(schema)
+        assert wanted is not None and channel.metadata['topic_type_hash'] == wanted
+        assert listed[channel.topic]['type_description_hash'] == wanted
+        profiles = decode_qos_string(Decoder('ch'), channel.metadata['offered_qos_profiles'],
+                                     'qos')
+        assert profiles is not None
+        assert len(profiles) == len(listed[channel.topic]['offered_qos_profiles']) == (
+            3 if channel.topic == '/tf' else 1)

@@ -116,6 +116,138 @@ def test_stale_decel_is_bounded_by_the_acceleration_bound() -> None:
         PlannerConfig(**{**config.__dict__, 'stale_decel_mps2': 0.0})
 
 
+VEHICLE_STACK_QOS = [(reliability, durability)
+                     for reliability in ('RELIABLE', 'BEST_EFFORT')
+                     for durability in ('VOLATILE', 'TRANSIENT_LOCAL')]
+"""Publishers of vehicle stacks: keep last 1, no deadline, either reliability, either
+durability. Autoware's EKF localizer publishes its kinematic state with
+``create_publisher<nav_msgs::msg::Odometry>("ekf_odom", 1)`` (autowarefoundation/
+autoware.universe, localization/ekf_localizer/src/ekf_localizer.cpp): rclcpp's ``QoS(1)``,
+i.e. reliable, volatile, keep last 1, no deadline."""
+
+
+@pytest.mark.parametrize(('reliability', 'durability'), VEHICLE_STACK_QOS)
+def test_default_inputs_match_vehicle_stack_publishers(reliability: str,
+                                                       durability: str) -> None:
+    """rmw's own compatibility check (rclpy ``qos_check_compatible`` ->
+    ``rmw_qos_profile_check_compatible``): the planner's input subscription matches each
+    vehicle-stack publisher by default; requesting a deadline (``input_deadline_qos``) does
+    not match a publisher that offers none ("Subscription has a deadline, but publisher
+    does not"), and matches this project's publishers."""
+    from rclpy.qos import (
+        DurabilityPolicy,
+        QoSCompatibility,
+        QoSProfile,
+        ReliabilityPolicy,
+        qos_check_compatible,
+    )
+
+    from trust_monitor.ros.qos import topic_qos
+
+    stack = QoSProfile(depth=1, reliability=ReliabilityPolicy[reliability],
+                       durability=DurabilityPolicy[durability])
+    default = WallClockConfig(clock_mode='wall')
+    assert default.input_deadline_qos is False
+    for topic in ('ego/odom', 'preceding_vehicle/odom', 'human/odom'):
+        verdict, reason = qos_check_compatible(stack, topic_qos(topic, default))
+        assert verdict != QoSCompatibility.ERROR, reason
+    strict = WallClockConfig(clock_mode='wall', input_deadline_qos=True)
+    verdict, reason = qos_check_compatible(stack, topic_qos('ego/odom', strict))
+    assert verdict == QoSCompatibility.ERROR and 'deadline' in reason
+    ours = topic_qos('ego/odom', strict, publisher=True)
+    assert qos_check_compatible(ours, topic_qos('ego/odom', strict))[0] != \
+        QoSCompatibility.ERROR
+
+
+def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None:
+    """The planner in wall mode with the installed defaults, its inputs published at 30 Hz
+    with Autoware's kinematic-state QoS (reliable, volatile, keep last 1, no deadline): it
+    plans (solver status), not the stale-input deceleration, and commands in the AV's body
+    frame as its odometry names it (``base_link``); a lead odometry in ``map`` while the AV's
+    is in ``odom`` is not used (the reason names the frames); when the inputs stop they are
+    stale (receive times)."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import AccelStamped
+    from nav_msgs.msg import Odometry
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile
+
+    from trust_av_planner.graph.domains import lease_domain
+    from trust_monitor.ros.messages import diagnostic_values, odometry
+    from trust_monitor.ros.qos import topic_qos
+
+    params = tmp_path / 'run.yaml'
+    params.write_text("planner:\n  ros__parameters:\n    clock_mode: wall\n"
+                      "    human_odom_topic: ''\n    lead_preview: constant_speed\n"
+                      '    speed_max_from_trace: false\n')
+    autoware = QoSProfile(depth=1)     # rclcpp QoS(1): reliable, volatile, no deadline
+    with lease_domain() as domain:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
+                   ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+                   RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
+        log = (tmp_path / 'planner.log').open('wb')
+        planner = subprocess.Popen(node_command('trust_av_planner.planner_node', 'planner',
+                                                [DEFAULT_PARAMS_FILE, params], {}),
+                                   stdout=log, stderr=subprocess.STDOUT, env=env,
+                                   start_new_session=True)
+        context = Context()
+        rclpy.init(context=context, domain_id=domain)
+        node = rclpy.create_node('autoware_like', context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        statuses: list[dict[str, str]] = []
+        node.create_subscription(DiagnosticArray, '/ego/planner_status',
+                                 lambda m: statuses.append(diagnostic_values(m)),
+                                 topic_qos('ego/planner_status',
+                                           WallClockConfig(clock_mode='wall')))
+        frames: list[str] = []
+        node.create_subscription(AccelStamped, '/ego/accel_cmd',
+                                 lambda m: frames.append(m.header.frame_id),
+                                 topic_qos('ego/accel_cmd', WallClockConfig(clock_mode='wall')))
+        lead = node.create_publisher(Odometry, '/preceding_vehicle/odom', autoware)
+        ego = node.create_publisher(Odometry, '/ego/odom', autoware)
+
+        def spin(seconds: float, publish: bool, lead_frame: str = 'odom') -> None:
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                if publish:
+                    ns = time.time_ns()
+                    lead_msg = odometry(ns, 30.0, 10.0, 'lead')
+                    lead_msg.header.frame_id = lead_frame
+                    lead.publish(lead_msg)
+                    ego.publish(odometry(ns, 0.0, 10.0, 'base_link'))
+                executor.spin_once(timeout_sec=1 / 30)
+
+        try:
+            deadline = time.monotonic() + 60.0
+            while not statuses and time.monotonic() < deadline:
+                spin(0.2, publish=False)
+            assert statuses, 'the planner never published a status'
+            statuses.clear()
+            spin(3.0, publish=True)
+            planned = [v['status'] for v in statuses]
+            assert planned and planned[-1] == 'Solve_Succeeded', planned[-5:]
+            assert frames and frames[-1] == 'base_link'
+            statuses.clear()
+            spin(1.0, publish=True, lead_frame='map')
+            assert statuses[-1]['status'] == 'stale_inputs'
+            assert statuses[-1]['reason'] == ("positions in different frames: traffic in "
+                                              "'map', ego in 'odom'"), statuses[-1]
+            statuses.clear()
+            spin(1.5, publish=False)
+            assert statuses and statuses[-1]['status'] == 'stale_inputs'
+            assert 'stale' in statuses[-1]['reason']
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+            stop(planner)
+            log.close()
+    assert 'incompatible QoS' not in (tmp_path / 'planner.log').read_text()
+
+
 @pytest.mark.parametrize('predictor', ['ca', 'gru'])
 def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
         tmp_path: Path, predictor: str) -> None:
@@ -140,11 +272,12 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
     params = tmp_path / 'run.yaml'
     human_topic = "    human_odom_topic: ''\n" if predictor == 'ca' else ''
     params.write_text('planner:\n  ros__parameters:\n    clock_mode: wall\n'
+                      '    input_deadline_qos: true\n'
                       f'{human_topic}    predictor: {predictor}\n'
                       '    lead_preview: constant_speed\n'
                       '    speed_max_from_trace: false\n')
     inputs = 'traffic, ego' if predictor == 'ca' else 'traffic, ego, human'
-    clock = WallClockConfig(clock_mode='wall')
+    clock = WallClockConfig(clock_mode='wall', input_deadline_qos=True)
     with lease_domain() as domain:
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
                    ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
@@ -277,7 +410,10 @@ def test_vehicle_in_the_loop_outage_decelerates_then_recovers(
     assert stale, 'the lead outage produced no ERROR status'
     assert all(s['status'] == 'stale_inputs' and 'traffic' in s['reason']
                and s['command_mps2'] == -2.0 for s in stale)
-    assert any('QoS event' in s['reason'] for s in stale)
+    # the default inputs request no QoS deadline (they match any vehicle's publisher): the
+    # outage is found from the receive times (the deadline events: the test above)
+    assert any('stale: traffic' in s['reason'] for s in stale)
+    assert not any('QoS event' in s['reason'] for s in stale)
     # Before the first inputs arrive the planner already ticks: 'missing' inputs, the same
     # deceleration (start-up, not the outage); after its first plan only the outage is stale.
     first_plan = min(s['t_s'] for s in statuses if s['level'] == 0)

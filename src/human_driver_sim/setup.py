@@ -12,6 +12,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
     ],
     install_requires=['setuptools'],
+    extras_require={'test': ['pytest']},  # colcon test runs pytest (setup.cfg)
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',

@@ -13,13 +13,12 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        # the shipped params files and the Foxglove layout (package_name/config links to the
-        # repository's config/)
-        ('share/' + package_name + '/config', sorted(glob(package_name + '/config/*.yaml')
-                                                     + glob(package_name + '/config/*.json'))),
+        # the Foxglove layout, kept in the package (the repository's config/ links here);
+        # the params files are trust_monitor's (share/trust_monitor/config)
+        ('share/' + package_name + '/config', sorted(glob(package_name + '/config/*.json'))),
     ],
     install_requires=['setuptools'],
-    extras_require={'ray': ['ray==2.60.0']},
+    extras_require={'ray': ['ray==2.60.0'], 'test': ['pytest']},
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',

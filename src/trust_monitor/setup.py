@@ -12,12 +12,13 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        # the shipped params files and the graph's Fast DDS profile (package_name/config
-        # links to the repository's config/)
+        # the shipped params files and the graph's Fast DDS profile, kept in the package
+        # (the repository's config/ links here)
         ('share/' + package_name + '/config', sorted(glob(package_name + '/config/*.yaml')
                                                      + glob(package_name + '/config/*.xml'))),
     ],
     install_requires=['setuptools'],
+    extras_require={'test': ['pytest']},  # colcon test runs pytest (setup.cfg)
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',

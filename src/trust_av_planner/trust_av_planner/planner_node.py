@@ -4,23 +4,30 @@ Subscribes the preceding vehicle's odometry and speed preview, the ego and human
 and the monitor's trust; per step (inputs paired by header stamp) it runs
 :class:`trust_av_planner.planner.AvPlanner` (plan estimator + NMPC) and publishes the
 plan, the expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``),
-all three in the AV's frame ``ego``, the solver status (``DiagnosticArray``) and the three
-vehicles' markers (``vehicle_markers``, each in its vehicle's frame). Topic names are
-relative (the node's namespace). Parameters: the ``planner`` section of
-``config/trust_av.yaml``.
+all three in the AV's body frame (the ``child_frame_id`` of its odometry: ``ego`` in the
+simulated graph; ``base_frame_id``, default ``base_link``, before the first), the solver
+status (``DiagnosticArray``) and the three vehicles' markers (``vehicle_markers``, each in
+its vehicle's frame). Topic names are relative (the node's namespace). Parameters: the
+``planner`` section of ``config/trust_av.yaml``.
 
-``clock_mode: wall`` (real-vehicle mode, docs/tutorials/connect-a-vehicle.md): a wall-clock
-timer at ``control_rate_hz`` plans from the LATEST inputs (topics from the ``*_topic``
-parameters or remapping), the NMPC predicting on the control period's grid; outputs are stamped
-with the current time. Inputs use the sensor-data QoS with a deadline of ``input_timeout_s``: a
-missed deadline is reported by DDS (a QoS event) and marks the input stale at once; an input
-never received or received longer ago than ``input_timeout_s`` is stale too. While the lead or
-ego odometry (or a recorded preview) is stale the planner commands ``stale_decel_mps2`` with
-status ERROR naming the input; it plans again as soon as they are fresh. The human odometry is
-used when fresh; without it the plan estimator observes only the AV's own acceleration (enough
-for an estimator that does not declare the ``follower_state`` need, such as CA or CV; an empty
-``human_odom_topic`` requires such an estimator). Trust: the latest estimate,
-``trust_initial`` before the first. ``alpha``, ``trust_min`` and
+``clock_mode: wall`` (real-vehicle mode, docs/operations/real-vehicle.md): a wall-clock timer
+at ``control_rate_hz`` plans from the LATEST inputs (topics from the ``*_topic`` parameters or
+remapping), the NMPC predicting on the control period's grid; outputs are stamped with the
+current time. Inputs use the sensor-data QoS (best effort, volatile, keep last 1) without a
+deadline, so they match any vehicle stack's publishers; an input never received or received
+longer ago than ``input_timeout_s`` is stale. With ``input_deadline_qos`` they also request a
+deadline of ``input_timeout_s`` (only publishers offering one match): a missed deadline is
+reported by DDS (a QoS event) and marks the input stale at once. While the lead or ego
+odometry (or a recorded preview) is stale the planner commands ``stale_decel_mps2`` with
+status ERROR naming the input; it plans again as soon as they are fresh. The human odometry
+is used when fresh; without it the plan estimator observes only the AV's own acceleration
+(enough for an estimator that does not declare the ``follower_state`` need, such as CA or
+CV; an empty ``human_odom_topic`` requires such an estimator).
+Positions: the lead's and the AV's (and the follower's) ``pose.position.x`` are distances
+along the road only in one world-fixed frame: inputs whose ``header.frame_id`` is not
+``odom_frame_id`` or ``map_frame_id``, or differ, are unusable (the stale-input policy names
+them; a follower in another frame is ignored).
+Trust: the latest estimate, ``trust_initial`` before the first. ``alpha``, ``trust_min`` and
 ``solver_cpu_budget_s`` can be changed with ``ros2 param set`` (from the next tick).
 """
 
@@ -43,10 +50,10 @@ from trust_av_planner.nmpc import PlannerConfig
 from trust_av_planner.planner import AvPlanner
 from trust_av_planner.system.config import PlannerTopics, SharedConfig, check_control_rate
 from trust_monitor.common import registry
+from trust_monitor.common.frames import FrameConfig, body_frame, position_frame_problem
 from trust_monitor.common.grids import interp_at
 from trust_monitor.common.kinematics import VehicleState
 from trust_monitor.common.lockstep import StepBuffer
-from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import (
     TrajectoryBytes,
@@ -88,6 +95,7 @@ class PlannerNode(Node):
         shared = declare_config(self, SharedConfig)
         self.clock = declare_config(self, WallClockConfig)
         topics = declare_config(self, PlannerTopics)
+        self.frames = declare_config(self, FrameConfig)
         # Every registered plan estimator's parameters are declared (and checked), the
         # chosen one's are used: as trust-av's node_components reads the section.
         params = {c.name: declare_config(self, c.config_type)
@@ -132,10 +140,9 @@ class PlannerNode(Node):
             self.required.append('human')
         self.missed: dict[str, int] = {}  # input -> deadline events since its last message
         self.stale_reason = ''
-        self.frame = VEHICLE_FRAMES['ego_plant']
+        self.frame = ''
+        self.set_frame(self.frames.base_frame_id)
         self.markers = VehicleMarkers(shared.vehicle_length_m)
-        self.plan_bytes = TrajectoryBytes('accelerations', self.frame)
-        self.command_bytes = accel_command_bytes(self.frame)
         self.pub_plan = self.create_publisher(JointTrajectory, 'ego/plan',
                                               topic_qos('ego/plan', self.clock))
         self.pub_expected = self.create_publisher(JointTrajectory, 'ego/expected_plan',
@@ -168,6 +175,13 @@ class PlannerNode(Node):
                                f'lead preview {self.config.lead_preview}, inputs '
                                f'{", ".join(t for _, _, t in inputs if t)}')
 
+    def set_frame(self, frame: str) -> None:
+        """The frame_id of the plans and the command from now on (the AV's body frame)."""
+        if frame != self.frame:
+            self.frame = frame
+            self.plan_bytes = TrajectoryBytes('accelerations', frame)
+            self.command_bytes = accel_command_bytes(frame)
+
     def retune(self, config: PlannerConfig) -> None:
         """A validated run-time parameter change: effective at the next tick."""
         self.planner.retune(config)
@@ -184,9 +198,10 @@ class PlannerNode(Node):
 
         def on_incompatible(info: object, n: str = name) -> None:
             policy = getattr(info, 'last_policy_kind', '?')
+            need = ('a deadline <= input_timeout_s (or set input_deadline_qos false)'
+                    if self.clock.input_deadline_qos else 'a compatible profile')
             self.get_logger().error(f'input {n}: a publisher with incompatible QoS ({policy}) '
-                                    'is not connected; vehicle inputs need a deadline <= '
-                                    'input_timeout_s (or set input_deadline_qos false)',
+                                    f'is not connected; vehicle inputs need {need}',
                                     throttle_duration_sec=5.0)
 
         return SubscriptionEventCallbacks(deadline=on_deadline, incompatible_qos=on_incompatible)
@@ -195,13 +210,24 @@ class PlannerNode(Node):
         """Wall mode: keep the latest message of each input with its receive time."""
         self.latest.put(name, time.monotonic_ns(), msg)
         self.missed.pop(name, None)
+        if name == 'ego':
+            self.set_frame(body_frame(msg.child_frame_id, self.frames))  # type: ignore[union-attr]
 
     def problems(self, now_mono_ns: int) -> str:
         """Wall mode: why the required inputs cannot be used ('' when they can)."""
         missed = [n for n in self.required if n in self.missed]
         polled = self.latest.problems(now_mono_ns, self.clock.input_timeout_s, self.required)
         event = f'deadline missed (QoS event): {", ".join(missed)}' if missed else ''
-        return '; '.join(p for p in (event, polled) if p)
+        frames = '' if polled else self.frame_problem(
+            [n for n in self.required if n in ('traffic', 'ego', 'human')])
+        return '; '.join(p for p in (event, polled, frames) if p)
+
+    def frame_problem(self, names: list[str]) -> str:
+        """Why the positions of the latest ``names`` odometry cannot be compared ('' if
+        they can: one world-fixed frame)."""
+        latest = {n: self.latest.get(n) for n in names}
+        return position_frame_problem(
+            {n: m.header.frame_id for n, m in latest.items() if m is not None}, self.frames)
 
     def wall_step(self) -> None:
         """Wall mode: one planning step from the latest inputs, stamped now; the stale-input
@@ -210,7 +236,8 @@ class PlannerNode(Node):
         t_s = mono / NS_PER_S
         why = self.problems(mono)
         human_ok = self.has_human and not self.latest.problems(
-            mono, self.clock.input_timeout_s, ['human'])
+            mono, self.clock.input_timeout_s, ['human']) and not self.frame_problem(
+            ['ego', 'human'])
         human = self.latest.get('human') if human_ok else None
         trust_msg = self.latest.get('trust')
         trust = self.trust_initial if trust_msg is None else float(trust_msg.vector.z)
@@ -251,6 +278,8 @@ class PlannerNode(Node):
     def on_input(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Store an input; plan every step whose inputs are complete, in order."""
         self.buffer.put(name, msg_ns(msg.header.stamp), msg)
+        if name == 'ego':
+            self.set_frame(body_frame(msg.child_frame_id, self.frames))  # type: ignore[union-attr]
         self.try_plan()
 
     def try_plan(self) -> None:

@@ -15,3 +15,10 @@ def offered_qos(profile: QoSProfile) -> Qos:
     return qos_profile(reliable=profile.reliability == ReliabilityPolicy.RELIABLE,
                        transient_local=profile.durability == DurabilityPolicy.TRANSIENT_LOCAL,
                        depth=profile.depth, deadline_ns=int(profile.deadline.nanoseconds))
+
+
+def offered_profiles(profile: QoSProfile, publishers: int) -> list[Qos]:
+    """A topic's ``offered_qos_profiles`` as ``ros2 bag record`` writes them: one profile
+    per publisher it found (rosbag2_transport ``recorder.cpp`` collects the offered QoS of
+    every publisher of the topic), here ``publishers`` publishers of ``profile``."""
+    return [offered_qos(profile)] * max(1, publishers)

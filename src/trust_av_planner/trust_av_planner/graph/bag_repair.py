@@ -102,8 +102,7 @@ def repair_bag(path: Path) -> int:
                 continue
             qos = _offered_qos(channel)
             writer.add_topic(channel.topic, schema.name,
-                             qos[0] if qos else qos_profile(reliable=True,
-                                                            transient_local=False, depth=10))
+                             qos or qos_profile(reliable=True, transient_local=False, depth=10))
             by_id[cid] = channel.topic
         step_time = None
         for message in sorted(messages, key=lambda m: m.log_time):

@@ -40,7 +40,13 @@ from rosbags.interfaces import (
     QosTime,
 )
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
-from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
+from rosbags.rosbag2.storage_mcap import (
+    Channel,
+    McapWriter,
+    PendingChunk,
+    write_channel,
+    write_string,
+)
 from rosbags.typesys import Stores, get_typestore
 
 from trust_av_planner.errors import TrustAvPlannerError
@@ -161,20 +167,58 @@ class _StepStorage(McapWriter):
         self.bio.close()
         self.bio = _WholeWrites(self.path, offset)
 
+    def add_connection(self, connection: Any, offered_qos_profiles: str) -> None:
+        """A channel with the metadata rosbag2 Jazzy's MCAP plugin writes: the offered QoS
+        profiles and the type hash (``topic_type_hash``: the RIHS01 hash of the type, as
+        in metadata.yaml's ``type_description_hash``; ``rosbag2_storage_mcap``
+        ``mcap_storage.cpp`` ``create_topic``, jazzy L933-938). rosbags writes the first
+        only."""
+        metadata = BytesIO()
+        for key, value in (('offered_qos_profiles', offered_qos_profiles),
+                           ('topic_type_hash', connection.digest)):
+            write_string(metadata, key)
+            write_string(metadata, value)
+        self.channels.append(Channel(connection.id, connection.msgtype, connection.topic,
+                                     connection.ext.serialization_format,
+                                     metadata.getvalue()))
+        self.channel_stats[connection.id] = 0
+        write_channel(self.chunk.bio, self.channels[-1], self.schemas)
+
+    def discard_chunk(self) -> None:
+        """Start a new, empty pending chunk (what was pending is dropped)."""
+        self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+
     def close_step_chunk(self) -> None:
         """Write the pending chunk to the file; on an error cut the file back to where the
-        chunk began, drop the chunk and re-raise."""
+        chunk began, drop the chunk and re-raise.
+
+        A pending chunk without messages (only the schema and channel records of topics
+        added since the last chunk) is written as those records, outside any chunk: the
+        mcap C++ reader that rosbag2 Jazzy uses refuses a time-ordered read of a file whose
+        first chunk has no message index (``reader.inl`` of ``foxglove/mcap``
+        ``releases/cpp/v1.3.0``, ``IndexedMessageReader``), and rosbag2 reads in time order.
+        """
         if not self.chunk.bio.tell():
             return
         start, indexed = self.bio.tell(), len(self.chunks)
         self.bio.gather()
         try:
-            self.close_chunk()
+            if self.chunk.msgs:
+                self.close_chunk()
+            else:
+                self.bio.write(self.chunk.bio.getbuffer())
+                self.discard_chunk()
             self.bio.commit()
         except OSError:
             self.bio.truncate(start)
             del self.chunks[indexed:]   # close_chunk indexed the chunk the file lacks
             raise
+
+
+class _StepWriter(Writer):
+    """rosbags' Writer with :class:`_StepStorage` as its MCAP storage plugin."""
+
+    STORAGE_PLUGINS = {**Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: _StepStorage}  # noqa: RUF012
 
 
 @dataclass
@@ -198,9 +242,7 @@ class BagWriter:
         self.path = Path(path)
         existed = os.path.lexists(self.path)
         try:
-            self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-            self._writer.STORAGE_PLUGINS = {**Writer.STORAGE_PLUGINS,  # type: ignore[misc]
-                                            StoragePlugin.MCAP: _StepStorage}
+            self._writer = _StepWriter(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
             self._writer.set_custom_data('trust_av.recorder', 'one MCAP chunk per step')
             self._writer.open()
         except (WriterError, OSError) as err:
@@ -239,10 +281,12 @@ class BagWriter:
         entry = self._topics[topic]
         return entry.count + entry.step_count
 
-    def add_topic(self, topic: str, msgtype: str, qos: Qos) -> None:
-        """Register a topic with its type and the QoS its publisher offers."""
+    def add_topic(self, topic: str, msgtype: str, qos: Qos | list[Qos]) -> None:
+        """Register a topic with its type and the QoS its publishers offer: one profile per
+        publisher, as ``ros2 bag record`` writes them (a profile alone: one publisher)."""
+        profiles = qos if isinstance(qos, list) else [qos]
         connection = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
-                                                 offered_qos_profiles=[qos])
+                                                 offered_qos_profiles=profiles)
         self._topics[topic] = _Topic(connection)
         self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
 
@@ -283,7 +327,7 @@ class BagWriter:
             for entry in self._topics.values():
                 entry.step_count = 0
             self._step_first, self._step_last = 2**63 - 1, -1
-            self._storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+            self._storage.discard_chunk()
             self._finish_after_disk_full(err)
             return False
         self._chunks += 1
@@ -311,6 +355,12 @@ class BagWriter:
             return
         if any(entry.step_count for entry in self._topics.values()) and not self.end_step():
             return  # the disk filled up: end_step finished the bag
+        try:
+            self._storage.close_step_chunk()   # topics added after the last message
+        except OSError as err:
+            if err.errno not in (errno.ENOSPC, errno.EDQUOT):
+                raise
+            self._storage.discard_chunk()
         self._close()
 
     def __enter__(self) -> BagWriter:

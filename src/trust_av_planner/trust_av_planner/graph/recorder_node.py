@@ -24,7 +24,7 @@ from pathlib import Path
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
-from trust_av_planner.graph.bag_qos import offered_qos
+from trust_av_planner.graph.bag_qos import offered_profiles
 from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, BagWriter
 from trust_monitor.common.params import check_fields, param
 from trust_monitor.common.topics import TOPICS
@@ -73,7 +73,8 @@ class RecorderNode(Node):
             if 'recorder' not in topic.subscribers:
                 continue
             name = self.resolve_topic_name(topic.name)  # the bag holds full names
-            self.bag.add_topic(name, topic.msgtype, offered_qos(QOS[topic.qos]))
+            self.bag.add_topic(name, topic.msgtype,
+                               offered_profiles(QOS[topic.qos], len(topic.publishers)))
             self.publishers_needed[name] = len(topic.publishers)
             if steps:
                 self.needed[name] = topic.messages(steps)

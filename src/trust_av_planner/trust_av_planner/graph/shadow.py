@@ -92,7 +92,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
         DiskFullError: the disk filled up; the nodes were stopped and the bag finished with
             every complete second.
     """
-    from trust_av_planner.graph.bag_qos import offered_qos
+    from trust_av_planner.graph.bag_qos import offered_profiles
     from trust_monitor.ros.messages import message_class, odometry, trajectory
     from trust_monitor.ros.qos import RECORD_QOS, record_qos, wall_qos
 
@@ -130,7 +130,8 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
 
                 for name, topic in recorded.items():
                     offered = wall_qos(topic.wall_qos, wall, publisher=True)
-                    recording.add_topic(name, topic.msgtype, offered_qos(offered))
+                    recording.add_topic(name, topic.msgtype,
+                                        offered_profiles(offered, len(topic.publishers)))
                     node.create_subscription(message_class(topic.msgtype), name,
                                              lambda d, t=name: on_message(t, d),
                                              record_qos(topic.wall_qos), raw=True)
@@ -219,7 +220,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
     from std_msgs.msg import Empty
     from tf2_msgs.msg import TFMessage
 
-    from trust_av_planner.graph.bag_qos import offered_qos
+    from trust_av_planner.graph.bag_qos import offered_profiles
     from trust_monitor.ros.messages import message_class
     from trust_monitor.ros.qos import QOS, record_qos
 
@@ -256,7 +257,8 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                 subscriptions = []
                 for topic in recorded:
                     name = qualified(topic.name)
-                    recording.add_topic(name, topic.msgtype, offered_qos(QOS[topic.qos]))
+                    recording.add_topic(name, topic.msgtype, offered_profiles(
+                        QOS[topic.qos], len(topic.publishers)))
                     subscriptions.append(node.create_subscription(
                         message_class(topic.msgtype), name,
                         lambda d, info, t=name: record(t, d, info), record_qos(topic.wall_qos),

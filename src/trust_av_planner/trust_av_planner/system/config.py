@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import sys
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,7 @@ from human_driver_sim.followers import FollowerConfig
 from preceding_traffic.traces import SpeedTrace, TraceConfig
 from trust_av_planner.nmpc import PlannerConfig, prediction_grid
 from trust_monitor.common import registry
+from trust_monitor.common.frames import FrameConfig
 from trust_monitor.common.param_layers import (
     Layered,
     layer_files,
@@ -107,7 +109,8 @@ T = TypeVar('T')
 TRUST_MODEL_CONFIGS = trust_model_config_types()
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
     'preceding_traffic': (TraceConfig, SharedConfig, WallClockConfig),
-    'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics),
+    'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
+                FrameConfig),
     'human_driver': (DriverConfig, FollowerConfig, SharedConfig, WallClockConfig),
     'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig),
 }
@@ -169,6 +172,8 @@ class RunConfig:
         predictor_configs: (name, parameters) of every registered plan estimator that has
             parameters (its ``config_type``, read from the planner's section).
         driver_configs: the same for the follower models (the human_driver section).
+        ignored: one line per wildcard-section parameter that no node of the graph has
+            (accepted: a shared bring-up file feeds other stacks' nodes too).
     """
 
     shared: SharedConfig
@@ -181,6 +186,7 @@ class RunConfig:
     clock: WallClockConfig = field(default_factory=WallClockConfig, compare=False)
     planner_topics: PlannerTopics = field(default_factory=PlannerTopics, compare=False)
     trust_model_params: tuple[tuple[str, Any], ...] = ()
+    ignored: tuple[str, ...] = field(default=(), compare=False)
     follower: FollowerConfig = field(default_factory=FollowerConfig)
     predictor_configs: tuple[tuple[str, Any], ...] = ()
     driver_configs: tuple[tuple[str, Any], ...] = ()
@@ -232,18 +238,31 @@ def check_control_rate(planner: PlannerConfig, control_rate_hz: float) -> None:
         raise ParamsError(f'control_rate_hz {control_rate_hz:g}: {err}') from err
 
 
-def check_sections(layers: Sequence[ParsedParams]) -> None:
+def check_sections(layers: Sequence[ParsedParams]) -> list[str]:
     """Every section names a node of the graph (or is a wildcard) and holds only parameters
-    of that node's components (a wildcard: of any component).
+    of that node's components. A wildcard section of a file may hold other names (a shared
+    bring-up file feeds other stacks' nodes too; rclpy ignores what a node does not
+    declare): they are returned, one line each; on the command line they are typos.
+
+    Returns:
+        One line per file and wildcard section naming the parameters no node has.
 
     Raises:
         ParamsError: one line naming the file, the section and the unknown name.
     """
     every = all_components()
+    ignored = []
     for layer in layers:
         for section, values in layer.items():
             target = section_target(section)
-            if target is None:
+            if target is None and layer.where != OVERRIDES_WHERE:
+                known = {f.name for c in every for f in dataclasses.fields(c)}
+                unknown = sorted(set(values) - known)
+                if unknown:
+                    ignored.append(f'{layer.where}: section {section}: ignoring '
+                                   f'{", ".join(unknown)} (not a parameter of any node of '
+                                   'the graph)')
+            elif target is None:
                 check_known(values, *every, where=f'{layer.where}: section {section}')
             elif target in NODE_COMPONENTS:
                 check_known(values, *node_components(target),
@@ -257,6 +276,7 @@ def check_sections(layers: Sequence[ParsedParams]) -> None:
                 raise ParamsError(f'{layer.where}: unknown node section {section!r} (known: '
                                   f'{", ".join(NODE_COMPONENTS)}, or a wildcard such as /** '
                                   'or /**/planner)')
+    return ignored
 
 
 def load_run_config(files: str | Path | Iterable[str | Path] = (),
@@ -286,7 +306,9 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         layers.append(text_layer(
             {(name if section_target(name) is None else node_fqn(namespace, name)): values
              for name, values in overrides.items() if values}, OVERRIDES_WHERE))
-    check_sections(layers)
+    ignored = check_sections(layers)
+    for line in ignored:
+        print(f'warning: {line}', file=sys.stderr)
     # Every component each node will declare, built once (a node refuses what fails here).
     built: dict[tuple[str, type], Any] = {}
     sources: dict[str, Mapping[str, str]] = {}
@@ -324,6 +346,7 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         follower=built['human_driver', FollowerConfig],
         predictor_configs=configs[registry.PREDICTORS],
         driver_configs=configs[registry.DRIVERS],
+        ignored=tuple(ignored),
     )
 
 

@@ -96,6 +96,8 @@ NODES = ('preceding_traffic', 'planner', 'ego_plant', 'human_driver', 'trust_mon
 
 _ODOM_UNITS = 'pose.position.x: m along the road (front bumper); twist.linear.x: m/s'
 _STATUS_FRAMES = "'' (not spatial)"
+_AV_BODY = ("the AV's body frame: its odometry's child_frame_id (`ego` here), `base_frame_id` "
+            '(default `base_link`) before the first')
 
 TOPICS: tuple[Topic, ...] = (
     Topic('clock', 'rosgraph_msgs/msg/Clock', ('preceding_traffic',), ('recorder',),
@@ -113,13 +115,13 @@ TOPICS: tuple[Topic, ...] = (
           initial=1, wall_qos='SENSOR'),
     Topic('ego/plan', 'trajectory_msgs/msg/JointTrajectory', ('planner',),
           ('trust_monitor', 'recorder'), 'STEP', 'once per step',
-          'N points, accelerations[0]: m/s^2', '`ego`'),
+          'N points, accelerations[0]: m/s^2', _AV_BODY),
     Topic('ego/expected_plan', 'trajectory_msgs/msg/JointTrajectory', ('planner',),
           ('trust_monitor', 'human_driver', 'recorder'), 'STEP', 'once per step',
-          'u_R^H: N points, accelerations[0]: m/s^2', '`ego`'),
+          'u_R^H: N points, accelerations[0]: m/s^2', _AV_BODY),
     Topic('ego/accel_cmd', 'geometry_msgs/msg/AccelStamped', ('planner',),
           ('ego_plant', 'recorder'), 'STEP', 'once per step', 'accel.linear.x: m/s^2',
-          '`ego`', wall_qos='COMMAND'),
+          _AV_BODY, wall_qos='COMMAND'),
     Topic('ego/planner_status', 'diagnostic_msgs/msg/DiagnosticArray', ('planner',),
           ('preceding_traffic', 'recorder'), 'STEP', 'once per step',
           'solver status, iterations, solve time (s), fallback, gap bounds relaxed, E_max',
@@ -182,8 +184,10 @@ LOCKSTEP_QOS_TEXT = {'STEP': 'reliable, transient local, keep last 1000',
 """The lock-step profiles (``qos`` column): nothing lost, late joiners served (determinism)."""
 
 WALL_QOS_TEXT = {
-    'SENSOR': 'best effort, volatile, keep last 1, deadline input_timeout_s (sensor data: only '
-              'the newest sample counts; the deadline tells the planner an input stopped)',
+    'SENSOR': 'best effort, volatile, keep last 1; subscriptions request no deadline unless '
+              'input_deadline_qos (then input_timeout_s), publishers offer 2 control periods '
+              "(sensor data: only the newest sample counts; matches any vehicle stack's "
+              'publisher; an input older than input_timeout_s is stale)',
     'COMMAND': 'reliable, volatile, keep last 1, deadline 2 control periods (a command: the '
                'newest or none, never a backlog or an old one to a late joiner)',
     'STATE': 'reliable, volatile, keep last 10',

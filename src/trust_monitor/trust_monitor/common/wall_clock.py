@@ -32,9 +32,13 @@ class WallClockConfig:
         jitter_report_path: wall mode: JSON file the loop statistics are written to at
             shutdown ('' = only the node log).
         jitter_log_period_s: wall mode: how often p50/p99 are logged, s (> 0).
-        input_deadline_qos: wall mode: vehicle inputs carry a QoS deadline of
-            ``input_timeout_s`` (publishers must offer one at least as short); false for
-            publishers that cannot, then staleness is found by the receive times alone.
+        input_deadline_qos: wall mode: vehicle inputs request a QoS deadline of
+            ``input_timeout_s``, so that a silent publisher is reported by a DDS deadline
+            event at once. Off by default: a subscription that requests a deadline matches
+            only publishers that offer one at least as short, and ordinary vehicle stacks
+            offer none (rmw ``rmw_qos_profile_check_compatible``: "Subscription has a
+            deadline, but publisher does not"). Either way an input received longer ago
+            than ``input_timeout_s`` is stale (receive times).
     """
 
     clock_mode: str = param('lockstep (sim time, inputs paired by stamp) or wall (timer, '
@@ -51,8 +55,9 @@ class WallClockConfig:
                                        low=0.0, low_inclusive=False, default=10.0,
                                        reason=STARTUP)
     input_deadline_qos: bool = param('wall mode: vehicle inputs request a QoS deadline of '
-                                     'input_timeout_s (their publishers must offer one)',
-                                     default=True, reason=STARTUP)
+                                     'input_timeout_s (then only publishers that offer one '
+                                     'match); false: staleness from receive times alone',
+                                     default=False, reason=STARTUP)
 
     def __post_init__(self) -> None:
         check_fields(self)

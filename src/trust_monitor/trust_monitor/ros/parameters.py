@@ -18,9 +18,12 @@ the value is converted and the parameter declared as DOUBLE 1.0, so ``ros2 param
 shows the type the field has. Every parameter is declared read-only with its description,
 unit and (closed) range from the field's :class:`~trust_monitor.common.params.ParamSpec`.
 
-:func:`check_overrides` refuses an override that neither the node declares nor the shipped
-file holds (a typo, or a parameter of no node of the graph); the shipped file's names stay
-allowed because a ``/**`` section feeds every node, each taking the keys it declares.
+:func:`check_overrides` refuses an override the node does not declare when it comes from a
+section written for the node (``planner``, ``/**/planner``, ``/car1/planner``) or from
+``-p`` on the command line: a typo. A wildcard section (``/**``, ``/*``) feeds every node of
+a bring-up, each taking the keys it declares (rclpy ignores undeclared overrides), so an
+unknown name there is only a warning in the node's log. The shipped file's names are never
+refused (parameters of the graph's other nodes).
 """
 
 from __future__ import annotations
@@ -28,13 +31,19 @@ from __future__ import annotations
 import dataclasses
 import functools
 import typing
+from collections.abc import Sequence
 from typing import Any, TypeVar
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from trust_monitor.common.param_layers import layered_params, read_layer, shipped_params_file
+from trust_monitor.common.param_layers import (
+    layered_params,
+    read_layer,
+    section_target,
+    shipped_params_file,
+)
 from trust_monitor.common.params import (
     PARAM_METADATA_KEY,
     ParamsError,
@@ -42,6 +51,7 @@ from trust_monitor.common.params import (
     build_config,
     check_type,
 )
+from trust_monitor.common.rcl_yaml import node_matches
 
 T = TypeVar('T')
 
@@ -112,14 +122,15 @@ def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None
         extra: values for fields that the node computes itself (not declared).
 
     Raises:
-        ParamsError: a value of the wrong type, out of range, or a field with no value in
-            the overrides, the shipped file or the dataclass (the message says which file to
-            pass).
+        ParamsError: a value of the wrong type, out of range, or fields with no value in
+            the overrides, the shipped file or the dataclass (the message names all of them
+            and how to pass them).
     """
     hints = typing.get_type_hints(cls)
     overrides = node_overrides(node)
     shipped, shipped_path = _shipped(node.get_fully_qualified_name())
     values: dict[str, Any] = dict(extra or {})
+    missing: list[str] = []
     for field in dataclasses.fields(cls):  # type: ignore[arg-type]
         name = field.name
         if name in values:
@@ -133,10 +144,14 @@ def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None
         elif name in shipped:
             values[name] = check_type(name, shipped[name], hints[name])
         elif field.default is dataclasses.MISSING:
-            hint = (f'pass --ros-args -p {name}:=VALUE' if shipped_path else
-                    'the shipped params file was not found: pass --ros-args --params-file '
-                    'config/trust_av.yaml of the trust-av sources')
-            raise ParamsError(f'parameter {name} is missing ({cls.__name__}): {hint}')
+            missing.append(name)
+    if missing:   # every value a run must supply, in one line
+        hint = ('pass --ros-args ' + ' '.join(f'-p {name}:=VALUE' for name in missing)
+                if shipped_path else 'the shipped params file was not found: pass --ros-args '
+                '--params-file config/trust_av.yaml of the trust-av sources')
+        plural = 's' if len(missing) > 1 else ''
+        raise ParamsError(f'parameter{plural} {", ".join(missing)} '
+                          f'{"are" if plural else "is"} missing ({cls.__name__}): {hint}')
     config = build_config(cls, values)
     for field in dataclasses.fields(cls):  # type: ignore[arg-type]
         name = field.name
@@ -148,19 +163,85 @@ def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None
     return config
 
 
-def check_overrides(node: Node) -> None:
-    """Refuse a parameter override that ``node`` does not declare and that no section of the
-    shipped params file holds (a typo, from any params file or ``-p``).
+def ros_args_sources(args: Sequence[str]) -> tuple[list[str], list[str]]:
+    """The params files and the ``-p`` names of a command line's ``--ros-args`` parts.
+
+    rcl reads ``--params-file FILE`` and ``-p``/``--param name:=value`` between
+    ``--ros-args`` and ``--`` (or the end), any number of such parts (rcl ``arguments.c``).
+
+    Returns:
+        (params files in order, parameter names set with ``-p``).
+    """
+    files: list[str] = []
+    names: list[str] = []
+    inside = False
+    items = iter(args)
+    for item in items:
+        if item == '--ros-args':
+            inside = True
+        elif item == '--':
+            inside = False
+        elif inside and item == '--params-file':
+            files.append(next(items, ''))
+        elif inside and item in ('-p', '--param'):
+            names.append(next(items, '').split(':=', 1)[0])
+    return files, names
+
+
+def override_origins(args: Sequence[str], fqn: str) -> tuple[dict[str, str], set[str]]:
+    """Where the overrides of node ``fqn`` were written.
+
+    Returns:
+        (name -> the place of a section written for this node or ``-p``: refused if
+        unknown; the names written in wildcard sections that apply to it).
+    """
+    files, names = ros_args_sources(args)
+    own = {name: 'the command line (-p)' for name in names}
+    wildcard: set[str] = set()
+    for path in files:
+        try:
+            layer = read_layer(path)
+        except ParamsError:
+            continue   # rcl read it (the node is up); the names stay unplaced: refused
+        for section, values in layer.items():
+            if not node_matches(section, fqn):
+                continue
+            if section_target(section) is None:
+                wildcard.update(values)
+            else:
+                for name in values:
+                    own.setdefault(name, f'{path}: section {section}')
+    return own, wildcard
+
+
+def check_overrides(node: Node, args: Sequence[str] = ()) -> None:
+    """Refuse a parameter override that neither ``node`` declares nor the shipped params
+    file holds (a name of another node of the graph), unless it comes only from wildcard
+    sections (then log a warning).
+
+    Args:
+        node: the node, with its parameters declared.
+        args: the command line the node was started with (its ``--ros-args``).
 
     Raises:
-        ParamsError: one line naming the parameter(s).
+        ParamsError: one line naming the parameter(s): from the node's own section, from
+            ``-p``, or from nowhere the command line shows.
     """
     declared = set(node.list_parameters([], 0).names)  # depth 0: every declared name
-    unknown = sorted(set(node_overrides(node)) - declared - shipped_names())
-    if unknown:
-        raise ParamsError(f'{node.get_fully_qualified_name()}: unknown parameter(s) '
-                          f'{", ".join(unknown)} (not a parameter of this node or of any node '
-                          'of the graph)')
+    # the shipped file's names are parameters of the graph's nodes: never a typo
+    unknown = set(node_overrides(node)) - declared - shipped_names()
+    if not unknown:
+        return
+    fqn = node.get_fully_qualified_name()
+    own, wildcard = override_origins(args, fqn)
+    refused = sorted(name for name in unknown if name in own or name not in wildcard)
+    if refused:
+        places = sorted({own[name] for name in refused if name in own})
+        where = f' (from {"; ".join(places)})' if places else ''
+        raise ParamsError(f'{fqn}: unknown parameter(s) {", ".join(refused)} (not a parameter '
+                          f'of this node or of any node of the graph){where}')
+    node.get_logger().warning(f'ignoring parameter(s) {", ".join(sorted(unknown))} of a '
+                              'wildcard section: not parameters of any node of the graph')
 
 
 def declare_trust_model(node: Node, trust: Any) -> Any:

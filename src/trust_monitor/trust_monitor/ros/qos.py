@@ -3,8 +3,9 @@
 
 Lock-step (sim time) keeps what determinism needs: every per-step topic reliable, transient
 local and deep (:data:`STEP_QOS`). Wall mode (real-vehicle mode) uses :func:`wall_qos`: the
-vehicle's inputs as sensor data (best effort, volatile, keep last 1, a deadline the planner is
-told about when it is missed), the acceleration command reliable, volatile, keep last 1 with a
+vehicle's inputs as sensor data (best effort, volatile, keep last 1, no deadline unless
+``input_deadline_qos``: they match every publisher, reliable or best effort, volatile or
+transient local), the acceleration command reliable, volatile, keep last 1 with a
 deadline of two control periods, everything else reliable and volatile. The reasons are in the
 documentation's topic table (:func:`trust_monitor.common.topics.topic_table_markdown`).
 """
@@ -86,16 +87,22 @@ def sensor_deadline_s(clock: WallClockConfig, publisher: bool) -> float:
 def wall_qos(kind: str, clock: WallClockConfig, publisher: bool = False) -> QoSProfile:
     """The wall-mode profile of a topic kind (the ``wall_qos`` column of the topic table).
 
-    DDS matches a subscription that requests a deadline only with publishers that offer one
-    at least as short (a publisher without a deadline does not match): vehicle inputs are
-    requested with ``input_timeout_s`` and offered by this project's publishers with two
-    control periods; the command is offered and requested with two control periods.
+    The compatibility rules are rmw's (``rmw_qos_profile_check_compatible``, rmw
+    ``qos_profiles.h``; implemented for the DDS middlewares in rmw_dds_common ``qos.cpp``):
+    a best-effort subscription matches reliable and best-effort publishers, a volatile one
+    volatile and transient-local publishers, and one that requests a deadline only
+    publishers that offer one at least as short (a publisher without a deadline does not
+    match). So vehicle inputs request no deadline by default and match the publishers of
+    vehicle stacks (e.g. Autoware's kinematic state: reliable, volatile, keep last 1, no
+    deadline); with ``input_deadline_qos`` they request ``input_timeout_s``, which this
+    project's publishers offer (two control periods). The command is offered and requested
+    with two control periods.
 
     Args:
         kind: ``SENSOR`` (vehicle inputs: best effort, volatile, keep last 1, a deadline
-            unless ``input_deadline_qos`` is false), ``COMMAND`` (reliable, volatile, keep
-            last 1, deadline two control periods), ``STATE`` (reliable, volatile, keep last
-            :data:`STATE_DEPTH`) or ``LATCHED``.
+            only with ``input_deadline_qos``; publishers always offer one), ``COMMAND``
+            (reliable, volatile, keep last 1, deadline two control periods), ``STATE``
+            (reliable, volatile, keep last :data:`STATE_DEPTH`) or ``LATCHED``.
         clock: the node's wall-clock settings (rate, input timeout).
         publisher: the profile of a publisher (the offered deadline) rather than of a
             subscription (the requested one).
@@ -107,7 +114,7 @@ def wall_qos(kind: str, clock: WallClockConfig, publisher: bool = False) -> QoSP
         profile = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                              reliability=ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.VOLATILE)
-        if clock.input_deadline_qos:
+        if publisher or clock.input_deadline_qos:
             profile.deadline = Duration(seconds=sensor_deadline_s(clock, publisher))
         return profile
     if kind == 'COMMAND':

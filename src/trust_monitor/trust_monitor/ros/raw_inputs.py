@@ -11,7 +11,8 @@ Other types are taken as rclpy messages.
 The bytes are CDR as ROS 2 serialises them (rmw_fastrtps: XCDR1 with a 4-byte
 encapsulation header, little- or big-endian by its second byte; primitives aligned to their
 size from the end of that header; a string is a uint32 length including the NUL, then the
-bytes; a sequence a uint32 count, then the elements; fixed arrays have no count). Every
+bytes -- or a length of 0 and no bytes, which rclpy reads as ''; a sequence a uint32
+count, then the elements, none for a count of 0; fixed arrays have no count). Every
 field of these types is read (covariances are skipped by their fixed size), so a message
 from any publisher -- the graph's own serialised templates, another DDS vendor, a real
 vehicle -- reads to the same values as rclpy's own deserialisation (tests/test_raw_inputs.py
@@ -22,6 +23,7 @@ raises :class:`RawInputError` naming the type and topic.
 
 from __future__ import annotations
 
+import os
 import struct
 from collections.abc import Callable
 from typing import Any
@@ -30,6 +32,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
+INPUTS_ENV = 'TRUST_AV_INPUTS'
+"""Set to ``rclpy`` to take every input as an rclpy message instead (how
+``benchmarks/bench_graph.py --rclpy-inputs`` measures what the readers save)."""
 ENCAPSULATION_BYTES = 4
 BYTE_ORDER = {b'\x00\x01': '<', b'\x00\x00': '>'}
 """Encapsulation kind (plain CDR: CDR_LE, CDR_BE) -> struct byte order. Other kinds
@@ -112,9 +117,14 @@ class _Cursor:
             raise RawInputError(f'ends at byte {len(self.data)}, needs {self.at}')
 
     def string(self) -> str:
+        """A CDR string: a uint32 length counting the NUL, then the bytes. A length of 0
+        (no bytes at all, as some CDR writers send an empty string) reads as '' as in
+        rclpy's deserialisation (Fast CDR ``deserialize(std::string&)``)."""
         length = self.uint32()
+        if length == 0:
+            return ''
         end = self.at + length
-        if length == 0 or end > len(self.data) or self.data[end - 1] != 0:
+        if end > len(self.data) or self.data[end - 1] != 0:
             raise RawInputError(f'bad string of length {length} at byte {self.at}')
         text = bytes(self.data[self.at:end - 1]).decode('utf-8')
         self.at = end
@@ -233,7 +243,7 @@ def subscribe(node: Node, msg_class: Any, topic: str, callback: Callable[[Any], 
     """
     name = type_name(msg_class)
     reader = READERS.get(name)
-    if reader is None:
+    if reader is None or os.environ.get(INPUTS_ENV) == 'rclpy':
         return node.create_subscription(msg_class, topic, callback, qos, **options)
 
     def on_bytes(data: bytes) -> None:

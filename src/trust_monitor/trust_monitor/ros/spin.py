@@ -128,17 +128,21 @@ def init_rclpy(args: list[str]) -> None:
         raise ParamsError(f'rcl refused the command line: {first.rstrip(", ")}') from err
 
 
-def start_node(factory: Callable[[], Node]) -> Node:
-    """Build a node and refuse it if it got a parameter override that neither it nor any node
-    of the graph has (:func:`trust_monitor.ros.parameters.check_overrides`); needs
-    ``rclpy.init`` first.
+def start_node(factory: Callable[[], Node], args: list[str] | None = None) -> Node:
+    """Build a node and refuse it if it got an unknown parameter from its own section or
+    ``-p`` (:func:`trust_monitor.ros.parameters.check_overrides`); needs ``rclpy.init``
+    first.
+
+    Args:
+        factory: builds the node.
+        args: the command line given to ``rclpy.init`` (default: ``sys.argv``).
 
     Raises:
         ParamsError: a bad or unknown parameter (the node is closed and destroyed).
     """
     node = factory()
     try:
-        check_overrides(node)
+        check_overrides(node, sys.argv if args is None else args)
     except ParamsError:
         node.close()  # type: ignore[attr-defined]
         node.destroy_node()
@@ -208,7 +212,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
         signal.signal(signal.SIGHUP, request_stop)        # its terminal closed
     try:
         try:
-            node = start_node(factory)
+            node = start_node(factory, args)
         except (*user_errors, ParamsError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
             _say(f'error: {one_line(err)}')
