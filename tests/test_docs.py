@@ -126,13 +126,14 @@ def test_block_parsing_sees_titles_and_skips(tmp_path: Path) -> None:
 def test_a_failing_block_fails_the_test(tmp_path: Path) -> None:
     page = tmp_path / 'page.md'
     with pytest.raises(AssertionError, match=r'page\.md:3: exit 3'):
-        run_block(Block('bash', 'exit 3\n', 3), page, tmp_path)
+        run_block(Block('bash', 'exit 3\n', 3), page, tmp_path, dict(os.environ))
 
 
 def test_every_tutorial_in_the_nav_and_the_readme_exists() -> None:
     nav = (REPO / 'mkdocs.yml').read_text()
     readme = (REPO / 'README.md').read_text()
-    for name in ('reproduce-the-paper', 'own-trace-or-bag', 'connect-a-vehicle'):
+    for name in ('reproduce-the-paper', 'own-trace-or-bag', 'connect-a-vehicle',
+                 'write-a-plugin'):
         assert f'tutorials/{name}.md' in nav and f'docs/tutorials/{name}.md' in readme
         assert (DOCS / 'tutorials' / f'{name}.md').is_file()
 
@@ -228,9 +229,9 @@ def test_generated_vehicle_interface_is_the_planners_view_of_the_code_table() ->
                          '`/ego/accel_cmd`', '`/ego/planner_status`', '`/trust_monitor/trust`',
                          '`/vehicle_markers`'}
     command = rows['`/ego/accel_cmd`']
-    assert command.startswith('| out (planner) |') and '| `ego` |' in command
+    assert command.startswith('| out (planner) |') and "the AV's body frame" in command
     assert 'deadline 2 control periods' in command
-    assert 'deadline input_timeout_s' in rows['`/ego/odom`']
+    assert 'no deadline unless input_deadline_qos' in rows['`/ego/odom`']
 
 
 def test_pins_named_in_the_docs_are_the_requirements() -> None:

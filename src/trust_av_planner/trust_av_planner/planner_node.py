@@ -64,11 +64,12 @@ from trust_monitor.ros.messages import (
     trajectory_times,
     trajectory_values,
 )
-from trust_monitor.ros.parameters import declare_config, declare_trust_model
+from trust_monitor.ros.parameters import declare_component_params, declare_config
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 from trust_monitor.ros.tuning import Tunable, enable_tuning
+from trust_monitor.trust_interface import build_trust_model
 from trust_monitor.trust_model import TrustConfig
 
 STEP_INPUTS = ('traffic', 'preview', 'ego', 'human')
@@ -104,7 +105,8 @@ class PlannerNode(Node):
         wall = self.clock.wall
         if wall:
             check_control_rate(self.config, self.clock.control_rate_hz)
-        self.trust_model = declare_trust_model(self, trust)
+        self.trust_model = build_trust_model(
+            trust, declare_component_params(self, registry.TRUST_MODELS, trust.trust_model))
         # The trust topic carries E and T. A model whose state is T takes it from there; a
         # model with more state (Beta counts, a Kalman variance) is mirrored: in lock-step
         # the planner steps the same model with the E the monitor scored and publishes, over

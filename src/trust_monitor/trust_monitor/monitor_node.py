@@ -27,13 +27,15 @@ from trajectory_msgs.msg import JointTrajectory
 
 from trust_monitor.common.grids import hold_at
 from trust_monitor.common.lockstep import StepBuffer
+from trust_monitor.common.registry import TRUST_MODELS
 from trust_monitor.common.topics import NO_FRAME
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
-from trust_monitor.ros.parameters import declare_config, declare_trust_model
+from trust_monitor.ros.parameters import declare_component_params, declare_config
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
+from trust_monitor.trust_interface import build_trust_model
 from trust_monitor.trust_model import MonitorConfig, TrustConfig, TrustEstimator
 
 
@@ -46,7 +48,8 @@ class MonitorNode(Node):
         self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         trust = declare_config(self, TrustConfig)
-        self.estimator = TrustEstimator(trust, declare_trust_model(self, trust))
+        self.estimator = TrustEstimator(trust, build_trust_model(
+            trust, declare_component_params(self, TRUST_MODELS, trust.trust_model)))
         self.step_s = declare_config(self, MonitorConfig).dt_s
         self.clock = declare_config(self, WallClockConfig)
         self.buffer = StepBuffer(['plan', 'expected'])

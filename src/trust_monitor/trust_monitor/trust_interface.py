@@ -200,6 +200,18 @@ def make_trust_model(trust: Any, values: Mapping[str, Any] | None = None) -> Tru
     params: Any = None
     if component.config_type is not None:
         params = build_config(component.config_type, dict(values or {}))
+    return build_trust_model(trust, params)
+
+
+def build_trust_model(trust: Any, params: Any) -> TrustModel:
+    """The model ``trust.trust_model`` names, from its parameters already built (a node
+    declares them: :func:`trust_monitor.ros.parameters.declare_component_params`).
+
+    Raises:
+        RegistryError: the model is not registered.
+        ParamsError: its factory returned no :class:`TrustModel`.
+    """
+    component = trust_model_component(trust.trust_model)
     model = component.factory(trust, params)
     if not isinstance(model, TrustModel):
         raise ParamsError(f'trust model {component.name!r}: its factory returned a '

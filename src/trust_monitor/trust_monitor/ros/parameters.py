@@ -38,6 +38,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from trust_monitor.common import registry
 from trust_monitor.common.param_layers import (
     layered_params,
     read_layer,
@@ -244,25 +245,16 @@ def check_overrides(node: Node, args: Sequence[str] = ()) -> None:
                               'wildcard section: not parameters of any node of the graph')
 
 
-def declare_trust_model(node: Node, trust: Any) -> Any:
-    """The trust model ``trust.trust_model`` names, its own parameters declared on ``node``
-    like any other (:mod:`trust_monitor.trust_interface`).
 
-    Args:
-        node: the node (planner or monitor: both run the same model).
-        trust: the node's :class:`~trust_monitor.trust_model.TrustConfig`.
+def declare_component_params(node: Node, group: str, name: str) -> Any:
+    """The parameters of the registered component ``name`` of ``group``
+    (:mod:`trust_monitor.common.registry`), declared on ``node`` like any other; None when
+    the component has none.
 
     Raises:
-        RegistryError: the model is not registered (one line).
-        ParamsError: a parameter of the model is refused.
+        RegistryError: ``name`` is not registered (one line listing the registered names).
+        ParamsError: a parameter value is refused.
     """
-    from trust_monitor.trust_interface import TrustModel, trust_model_component
-
-    component = trust_model_component(trust.trust_model)
-    params = (None if component.config_type is None
-              else declare_config(node, component.config_type))
-    model = component.factory(trust, params)
-    if not isinstance(model, TrustModel):
-        raise ParamsError(f'trust model {component.name!r}: its factory returned a '
-                          f'{type(model).__name__}, not a TrustModel')
-    return model
+    component = registry.get(group, name)
+    return None if component.config_type is None else declare_config(node,
+                                                                      component.config_type)
