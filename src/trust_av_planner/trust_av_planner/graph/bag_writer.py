@@ -239,6 +239,10 @@ class BagWriter:
         entry = self._topics[topic]
         return entry.count + entry.step_count
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Set one ``custom_data`` entry of ``metadata.yaml`` (written when finished)."""
+        self._writer.set_custom_data(key, value)
+
     def add_topic(self, topic: str, msgtype: str, qos: Qos) -> None:
         """Register a topic with its type and the QoS its publisher offers."""
         connection = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
