@@ -266,8 +266,9 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                             found = link.pending.pop(stamp, None)
                             for old in [s for s in link.pending if s < stamp]:
                                 del link.pending[old]
-                        if found is not None:
+                        if found is not None:     # the odometry it led to came first
                             state['ack'] = (found[0], found[1], time.time_ns())
+                            send_state()
                     elif topic in VEHICLE_TOPICS:
                         odom = deserialize_message(data, message_class(
                             'nav_msgs/msg/Odometry'))

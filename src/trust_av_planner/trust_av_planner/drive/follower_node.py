@@ -12,7 +12,8 @@ see the person exactly as they see the simulated driver:
   input);
 - ``human/accel_applied`` (``AccelStamped``): the command just applied, its header stamp
   unchanged (the drive pairs it with the page's sample for the latency figure), the
-  applied acceleration in ``accel.linear.x``;
+  applied acceleration in ``accel.linear.x``; published right after the odometry the
+  command led to;
 - ``human/driver_status`` (``diagnostic_msgs/msg/DiagnosticArray``) on each tick: the
   phase of :func:`trust_av_planner.drive.follower.applied_accel` (``hold``, ``coast``,
   ``brake``, ``waiting``); WARN while the participant is gone.
@@ -131,10 +132,10 @@ class FollowerPlantNode(Node):
         self.advance_to(mono)
         self.command, self.command_at_ns = float(msg.accel.linear.x), mono
         self.accel, self.phase = applied_accel(self.config, self.command, 0.0)
-        echo = AccelStamped(header=msg.header)
+        self.publish()
+        echo = AccelStamped(header=msg.header)   # after the odometry it led to
         echo.accel.linear.x = self.accel
         self.pub_applied.publish(echo)
-        self.publish()
 
     def tick(self) -> None:
         """Timer: integrate, apply the fallback if the person is gone, publish."""
