@@ -141,7 +141,7 @@ def test_paper_model_is_the_trust_estimator_over_the_plans() -> None:
     series = DriveSeries(times, plans, expected, np.full(3, np.nan))
     estimator = TrustEstimator(config)
     by_hand = [estimator.step(p, e, dt).trust for p, e, dt in zip(plans, expected,
-                                                                   [0.1, 0.2, 0.0])]
+                                                                   [0.1, 0.2, 0.0], strict=True)]
     np.testing.assert_allclose(paper_model(config)(series), by_hand)
     # with no trust model registered in the registry, the comparison uses the paper's
     assert [name for name, _ in registered_models(config)] == ['paper']
@@ -215,7 +215,7 @@ def test_bad_drive_settings_are_named(tmp_path: Path, text: str, message: str) -
     key = text.split(':')[0]
     kept = [line for line in lines if not line.strip().startswith(key + ':')]
     path = tmp_path / 'drive.yaml'
-    path.write_text('\n'.join(kept + [f'    {text}']) + '\n')
+    path.write_text('\n'.join([*kept, f'    {text}']) + '\n')
     with pytest.raises(ParamsError, match=message):
         load_drive_settings(path)
 
@@ -249,6 +249,7 @@ def test_drive_demonstrations_hold_out_whole_participants() -> None:
     assert {p.driver for p in fit} == {'drive:P1', 'drive:P3'}
     assert {p.driver for p in held} == {'drive:P2'}
     fit, held = split_by_participant([pair('P1', k) for k in range(4)])
-    assert len(fit) == len(held) == 2 and not set(fit) & set(held)
+    assert len(fit) == len(held) == 2
+    assert not {p.name for p in fit} & {p.name for p in held}
     with pytest.raises(DriveBagError, match='at least two drives'):
         split_by_participant([pair('P1', 0)])
