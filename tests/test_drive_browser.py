@@ -1,6 +1,6 @@
 """Driver in the loop through the real page: Debian's chromium, headless, driven by
 Playwright; ``trust-av drive`` runs the node graph in wall mode and serves the page. A
-synthetic participant (tests/drive_participant.py: an IDM computing its pedal from the
+synthetic participant (trust_av_planner.drive.synthetic: an IDM computing its pedal from the
 page's own displayed state, held on the page's pointer pedal) drives whole sessions.
 
 Checked: the bags hold every topic, the ratings and the questionnaire are recorded on the
@@ -27,11 +27,16 @@ from typing import Any
 
 import numpy as np
 import pytest
-from drive_participant import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
 from rosbag2_rules import check_bag_directory
 
-from trust_av_planner.drive.bag_data import custom_data, demonstration, read_drive
+from trust_av_planner.drive.bag_data import (
+    custom_data,
+    demonstration,
+    drive_bag_pairs,
+    read_drive,
+)
 from trust_av_planner.drive.sessions import balanced_latin_square_row
+from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
 from trust_av_planner.drive.trust_rating import questionnaire_score
 
 pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
@@ -189,6 +194,9 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
     summary = (study / 'P01' / 'summary.csv').read_text().splitlines()
     assert len(summary) == 3 and ',done,' in summary[1] and ',done,' in summary[2]
     assert 'rmse' in output and 'paper' in output
+    # trust-av fit-driver --drives: one participant, so every second drive is held out
+    fit, held, read = drive_bag_pairs(study, 1.0, 4.5)
+    assert len(fit) == len(held) == 1 and read['participants'] == ['drive:P01']
 
 
 def test_a_lost_connection_and_a_closed_tab_behave_as_documented(

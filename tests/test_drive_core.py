@@ -253,3 +253,9 @@ def test_drive_demonstrations_hold_out_whole_participants() -> None:
     assert not {p.name for p in fit} & {p.name for p in held}
     with pytest.raises(DriveBagError, match='at least two drives'):
         split_by_participant([pair('P1', 0)])
+
+
+def test_fit_driver_refuses_a_study_without_complete_drives(tmp_path: Path) -> None:
+    from trust_av_planner.drive.bag_data import DriveBagError, drive_bag_pairs
+    with pytest.raises(DriveBagError, match='no complete drive'):
+        drive_bag_pairs(tmp_path, 1.0, 4.5)

@@ -63,6 +63,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--ngsim', type=Path, default=None,
                         help='NGSIM I-80 chain directory: even follower IDs fit, odd are held '
                              'out (optional)')
+    parser.add_argument('--drives', type=Path, default=None,
+                        help='a trust-av drive study directory: its complete drives (the '
+                             'person following the AV) are demonstrations too; every second '
+                             'participant is held out (optional)')
     parser.add_argument('--out', type=Path, default=DRIVER_FIT_FILE,
                         help='weights file with provenance (default: the shipped fit, '
                              'human_driver_sim/models/driver_fit.yaml); its evaluation is '
@@ -107,6 +111,10 @@ def _load(args: argparse.Namespace, dt_s: float) -> tuple[dict[str, list[Followi
             cleaning['ngsim'] = {'files': len(report.files), 'excluded': report.excluded,
                                  'duplicates_merged': report.duplicates_merged,
                                  'vehicle_length_m': report.vehicle_length_m}
+        if args.drives is not None:      # driver-in-the-loop demonstrations
+            from trust_av_planner.drive.bag_data import drive_bag_pairs
+            fit['drive'], held['drive'], cleaning['drive'] = drive_bag_pairs(
+                args.drives, dt_s, load_run_config(args.params_file).shared.vehicle_length_m)
     except CarFollowingDataError as err:
         raise TrustAvPlannerError(str(err)) from err
     for name, pairs in (*fit.items(), *held.items()):

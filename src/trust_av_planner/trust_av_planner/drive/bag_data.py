@@ -170,3 +170,20 @@ def split_by_participant(pairs: list[FollowingPair]) -> tuple[list[FollowingPair
         return [p for p in pairs if p.driver not in held], [p for p in pairs if p.driver in held]
     ordered = sorted(pairs, key=lambda p: p.name)
     return ordered[0::2], ordered[1::2]
+
+
+def drive_bag_pairs(study: Path, dt_s: float, vehicle_length_m: float) -> tuple[
+        list[FollowingPair], list[FollowingPair], dict[str, Any]]:
+    """``trust-av fit-driver --drives``: the fit and held-out demonstrations of a study's
+    complete drives (:func:`split_by_participant`) and what was read.
+
+    Raises:
+        DriveBagError: no complete drive, fewer than two, or one unreadable (named).
+    """
+    bags = drive_bags(study)
+    if not bags:
+        raise DriveBagError(f'{study}: no complete drive (status done) to fit to')
+    pairs = [demonstration(read_drive(bag), dt_s, vehicle_length_m) for bag in bags]
+    fit, held = split_by_participant(pairs)
+    return fit, held, {'bags': [str(b) for b in bags],
+                       'participants': sorted({p.driver for p in pairs})}

@@ -1,4 +1,6 @@
-"""A synthetic participant for the driver-in-the-loop page, driven through Playwright.
+"""A synthetic participant for the driver-in-the-loop page, driven through Playwright (the
+tests and ``benchmarks/bench_drive.py``; Playwright is not imported here: the caller passes
+its page).
 
 It reads the state the page itself displays (``#gap``, ``#speed``, ``#av-speed``: their
 ``data-`` values), computes its pedal with an IDM (Treiber & Kesting's motorway parameters,
@@ -65,7 +67,7 @@ def drive_once(page: Any, who: Participant, *, rating: int = 70, until_s: float 
     started = time.monotonic()
     deadline = started + until_s
     while time.monotonic() < deadline:
-        phase = page.evaluate('window.drive.phase')
+        phase = str(page.evaluate('window.drive.phase'))
         if phase != 'driving':
             break
         if stop_after_s is not None and time.monotonic() - started > stop_after_s:
