@@ -37,7 +37,7 @@ JIAN_ITEMS = (
     'I can trust the system.',
     'I am familiar with the system.',
 )
-"""The 12 items, in the published order (Jian, Bisantz & Drury 2000, Table 4)."""
+"""The 12 items of the checklist, in the published order (Jian, Bisantz & Drury 2000)."""
 JIAN_REVERSED = frozenset(range(5))
 """Zero-based indices of the distrust items (items 1-5), reverse-scored."""
 JIAN_SCALE = (1, 7)

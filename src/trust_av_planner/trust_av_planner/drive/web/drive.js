@@ -233,7 +233,7 @@ function draw(nowMs) {
   ctx.fillStyle = '#3a3f47'; ctx.fillRect(0, 0, W, H);
   ctx.fillStyle = '#555b64'; ctx.fillRect(0, H / 2 - 50, W, 100);
   if (s && s.you) {
-    const scale = 6;                               // px per m
+    const scale = 8;                               // px per m
     const origin = W * 0.2;                        // your front bumper
     const toX = (x) => origin + (x - s.you[0]) * scale;
     ctx.strokeStyle = '#ddd'; ctx.lineWidth = 3; ctx.setLineDash([30, 30]);
@@ -247,9 +247,9 @@ function draw(nowMs) {
       if (!v) continue;
       const x = toX(v[0]);
       ctx.fillStyle = colour;
-      ctx.fillRect(x - VEHICLE_LENGTH_M * scale, H / 2 - 14, VEHICLE_LENGTH_M * scale, 28);
+      ctx.fillRect(x - VEHICLE_LENGTH_M * scale, H / 2 - 9, VEHICLE_LENGTH_M * scale, 18);
       ctx.fillStyle = '#fff'; ctx.font = '14px sans-serif';
-      ctx.fillText(label, x - VEHICLE_LENGTH_M * scale, H / 2 - 20);
+      ctx.fillText(label, x - VEHICLE_LENGTH_M * scale, H / 2 - 16);
     }
     $('speed').textContent = `${(s.you[1] * 3.6).toFixed(1)} km/h`;
     $('speed').dataset.mps = s.you[1].toFixed(3);
