@@ -267,7 +267,7 @@ function draw(nowMs) {
     const left = Math.max(0, drive.durationS - (nowMs - drive.drivingSinceMs) / 1000);
     $('time-left').textContent = `${left.toFixed(0)} s`;
     if (drive.nextRatingMs !== null && nowMs >= drive.nextRatingMs) {
-      showRating(nowMs);
+      if ($('rating').hidden) showRating(nowMs);   // one still open stays as it is
       drive.nextRatingMs = nowMs + drive.ratingPeriodS * 1000;
     }
   }
