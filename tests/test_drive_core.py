@@ -259,3 +259,44 @@ def test_fit_driver_refuses_a_study_without_complete_drives(tmp_path: Path) -> N
     from trust_av_planner.drive.bag_data import DriveBagError, drive_bag_pairs
     with pytest.raises(DriveBagError, match='no complete drive'):
         drive_bag_pairs(tmp_path, 1.0, 4.5)
+
+
+@pytest.mark.parametrize(('args', 'message'), [
+    (['--participant', 'Jane Doe'], 'participant id'),
+    (['--participant', 'P01', '--drive-file', 'missing.yaml'], 'missing.yaml'),
+    (['--participant', 'P01', '--port', '70000'], '--port must be in'),
+])
+def test_bad_drive_input_is_one_line_and_writes_nothing(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str],
+        message: str) -> None:
+    from trust_av_planner.cli.main import main
+    study = tmp_path / 'study'
+    args = [a if a != 'missing.yaml' else str(tmp_path / a) for a in args]
+    assert main(['drive', '--study', str(study), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith('trust-av drive: error:') and message in err and '\n' not in err
+    assert not study.exists()
+
+
+def test_a_taken_port_is_one_line_and_enrols_nobody(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import socket
+
+    from trust_av_planner.cli.main import main
+    with socket.socket() as taken:
+        taken.bind(('127.0.0.1', 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        study = tmp_path / 'study'
+        assert main(['drive', '--study', str(study), '--participant', 'P01', '--port',
+                     str(port)]) == 2
+    err = capsys.readouterr().err
+    assert 'cannot serve on 127.0.0.1' in err and not study.exists()
+
+
+def test_withdrawal_from_the_command_line(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    from trust_av_planner.cli.main import main
+    enrol(tmp_path, 'P07', CONDITIONS)
+    assert main(['drive', '--study', str(tmp_path), '--participant', 'P07', '--withdraw']) == 0
+    assert not (tmp_path / 'P07').exists() and 'every file deleted' in capsys.readouterr().out

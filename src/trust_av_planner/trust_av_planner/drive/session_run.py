@@ -21,7 +21,7 @@ from trust_av_planner.drive.study import (
     record_drive,
 )
 from trust_av_planner.drive.trust_rating import registered_models
-from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.config import check_control_rate, load_run_config
 from trust_monitor.common import output_files
 from trust_monitor.common.params import ParamsError
 
@@ -46,8 +46,7 @@ def run_session(args: argparse.Namespace) -> int:
         configs[listed.name] = load_run_config(args.params_files, {'planner': {
             'alpha': listed.alpha, 'predictor': listed.predictor}})
         load_trace(listed.trace, base.planner.dt_s, base.trace)
-    session = plan_session(args.study, args.participant, conditions,
-                           practice=drive.practice and not args.no_practice)
+        check_control_rate(configs[listed.name].planner, rate_hz)
     by_name = {c.name: c for c in conditions}
     link = DriveLink()
     server = DriveServer(link.on_message, lambda: server.send(
@@ -56,7 +55,13 @@ def run_session(args: argparse.Namespace) -> int:
          'accel_max_mps2': follower.accel_max_mps2, 'accel_min_mps2': follower.accel_min_mps2,
          **{k: v for k, v in link.greet.items() if k != 'type'}}),
         host=drive.host, port=drive.port)
-    url = server.start()
+    url = server.start()         # before any file is written: a taken port writes nothing
+    try:
+        session = plan_session(args.study, args.participant, conditions,
+                               practice=drive.practice and not args.no_practice)
+    except BaseException:
+        server.stop()
+        raise
     print(f'drive: participant {args.participant}, order {", ".join(session.order)}; open '
           f'{url}', flush=True)
     models = registered_models(base.trust)
