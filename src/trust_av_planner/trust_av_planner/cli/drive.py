@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
         print(f'participant {args.participant}: ' + ('every file deleted' if gone else
                                                      'no data in this study'))
         return 0
-    from trust_av_planner.drive.session_run import run_session
+    from trust_av_planner.study.drive_session import run_session
     try:
         return run_session(args)
     except SessionError as err:

@@ -8,7 +8,6 @@ import dataclasses
 from typing import Any
 
 from preceding_traffic.sources import load_trace
-from trust_av_planner.drive.drive_run import DriveLink, code_version, run_drive
 from trust_av_planner.drive.server import DriveServer
 from trust_av_planner.drive.sessions import DriveRecord
 from trust_av_planner.drive.study import (
@@ -21,6 +20,7 @@ from trust_av_planner.drive.study import (
     record_drive,
 )
 from trust_av_planner.drive.trust_rating import registered_models
+from trust_av_planner.graph.drive import DriveLink, code_version, run_drive
 from trust_av_planner.system.config import check_control_rate, load_run_config
 from trust_monitor.common import output_files
 from trust_monitor.common.params import ParamsError
