@@ -2,6 +2,7 @@
 state back on the page.
 
     python benchmarks/bench_drive.py [--duration-s 60] [--out benchmarks/results_drive.json]
+                                     [--study DIR]
 
 Runs ``trust-av drive`` (one participant, one drive of each shipped condition, no practice)
 with the synthetic participant of :mod:`trust_av_planner.drive.synthetic` in Debian's
@@ -65,14 +66,19 @@ def main() -> int:
     parser.add_argument('--duration-s', type=float, default=60.0,
                         help='wall time of each drive, s (default: %(default)s)')
     parser.add_argument('--out', type=Path, default=HERE / 'results_drive.json')
+    parser.add_argument('--study', type=Path, default=None,
+                        help='keep the study (bags, summary) in this new directory')
     args = parser.parse_args()
+    if args.study is not None and args.study.exists():
+        print(f'bench_drive: --study {args.study} exists', file=sys.stderr)
+        return 2
     shipped = (REPO / 'config' / 'drive.yaml').read_text()
     with tempfile.TemporaryDirectory() as tmp:
         settings = Path(tmp) / 'drive.yaml'
         settings.write_text(re.sub(r'drive_duration_s: [0-9.]+',
                                    f'drive_duration_s: {args.duration_s}', shipped)
                             .replace('port: 8765', 'port: 0'))
-        study = Path(tmp) / 'study'
+        study = args.study if args.study is not None else Path(tmp) / 'study'
         process = subprocess.Popen(
             [sys.executable, '-m', 'trust_av_planner.cli', 'drive', '--study', str(study),
              '--participant', 'BENCH', '--drive-file', str(settings), '--no-practice'],

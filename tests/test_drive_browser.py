@@ -180,7 +180,9 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
         assert drive_data.questionnaire[:12] == ANSWERS
         assert drive_data.questionnaire[12] == pytest.approx(questionnaire_score(ANSWERS))
         # the ratings sit on the drive's clock, inside the drive, beside the monitor's trust
-        assert drive_data.rating_times_s.min() > 0 and drive_data.rating_times_s.max() < DRIVE_S
+        # (one may be given as the nodes stop)
+        assert drive_data.rating_times_s.min() > 0
+        assert drive_data.rating_times_s.max() < DRIVE_S + 5.0
         assert np.isfinite(drive_data.series.monitor_trust).any()
         # the person drove: the follower moved, and the drive is a demonstration for the fit
         you = drive_data.odometry['/human/odom']

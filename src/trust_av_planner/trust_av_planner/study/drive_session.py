@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 from typing import Any
 
 from preceding_traffic.sources import load_trace
@@ -49,6 +50,9 @@ def run_session(args: argparse.Namespace) -> int:
         check_control_rate(configs[listed.name].planner, rate_hz)
     by_name = {c.name: c for c in conditions}
     link = DriveLink()
+    # The page's server thread and the recording loop share the GIL: a 1 ms switch interval
+    # (Python's default is 5 ms) lets a pedal sample or a state frame through sooner.
+    sys.setswitchinterval(0.001)
     server = DriveServer(link.on_message, lambda: server.send(
         {'type': 'hello', 'rating_period_s': drive.rating_period_s,
          'control_rate_hz': rate_hz, 'participant': args.participant,
