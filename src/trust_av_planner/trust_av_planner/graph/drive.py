@@ -25,6 +25,7 @@ latency percentiles.
 
 from __future__ import annotations
 
+import logging
 import queue
 import subprocess
 import threading
@@ -58,6 +59,7 @@ from trust_av_planner.system.config import RunConfig
 from trust_monitor.common.topics import TOPICS, qualified
 from trust_monitor.common.wall_clock import NS_PER_S
 
+LOG = logging.getLogger(__name__)
 DRIVE_NODES = ('preceding_traffic', 'planner', 'ego_plant', 'follower_plant', 'trust_monitor')
 DRIVER_TOPICS = {'/human/accel_cmd': 'geometry_msgs/msg/AccelStamped',
                  '/human/accel_applied': 'geometry_msgs/msg/AccelStamped',
@@ -148,9 +150,12 @@ class DriveLink:
                 try:
                     accel = float(message['accel_mps2'])
                     seq = int(message['seq'])
-                except (KeyError, TypeError, ValueError):
+                except (KeyError, TypeError, ValueError) as err:
+                    LOG.warning('a pedal sample without a number dropped: %r (%s)', message,
+                                err)
                     return                    # a malformed sample is not a command
                 if not np.isfinite(accel):
+                    LOG.warning('a non-finite pedal sample dropped: %r', message)
                     return
                 msg = _accel_msg(arrived_ns, accel)
                 with self.lock:
@@ -335,7 +340,8 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                             value = rating_value(message.get('value'))
                             response_s = max(0.0, (float(message['answered_ms'])
                                                    - float(message['shown_ms'])) / 1e3)
-                        except (RatingError, KeyError, TypeError, ValueError):
+                        except (RatingError, KeyError, TypeError, ValueError) as err:
+                            LOG.warning('a bad rating from the page dropped: %s', err)
                             return            # the page sends only valid ratings
                         write_own('/driver/rating', _vector_msg(arrived, value, response_s,
                                                                 value * 100.0))
@@ -345,7 +351,8 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                             trip = float(message['round_trip_ms']) / 1e3
                             graph_s = float(message['graph_ms']) / 1e3
                             back = float(message['back_ms']) / 1e3
-                        except (KeyError, TypeError, ValueError):
+                        except (KeyError, TypeError, ValueError) as err:
+                            LOG.warning('a bad latency report dropped: %s', err)
                             return
                         write_own('/driver/latency', _vector_msg(arrived, trip, graph_s, back))
                         outcome.latency_s.append((trip, graph_s, back))
@@ -414,13 +421,18 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                         time.sleep(0.02)
                         drain()
                     answers = state.get('answers')
-                    try:
-                        msg = questionnaire_msg(time.time_ns(), answers)  # type: ignore[arg-type]
-                    except (RatingError, TypeError):
-                        msg = None
+                    msg = None
+                    if not isinstance(answers, list):
+                        LOG.warning('no questionnaire answered within %g s',
+                                    questionnaire_timeout_s)
+                    else:
+                        try:
+                            msg = questionnaire_msg(time.time_ns(), answers)
+                        except RatingError as err:
+                            LOG.warning('no questionnaire recorded: %s', err)
                     if msg is not None:
                         write_own('/driver/questionnaire', msg, joint_state_cdr(msg))
-                        outcome.questionnaire = [int(a) for a in answers]  # type: ignore[union-attr]
+                        outcome.questionnaire = [int(a) for a in answers]
                 latency = outcome.latency_ms()
                 recording.set_custom_data('trust_av.drive.status', outcome.status)
                 recording.set_custom_data('trust_av.drive.driven_s', f'{outcome.driven_s:.3f}')
