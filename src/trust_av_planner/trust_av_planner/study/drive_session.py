@@ -21,7 +21,8 @@ from trust_av_planner.drive.study import (
     record_drive,
 )
 from trust_av_planner.drive.trust_rating import registered_models
-from trust_av_planner.graph.drive import DriveLink, code_version, run_drive
+from trust_av_planner.graph.drive import run_drive
+from trust_av_planner.graph.drive_link import DriveLink, code_version
 from trust_av_planner.system.config import check_control_rate, load_run_config
 from trust_monitor.common import output_files
 from trust_monitor.common.params import ParamsError
