@@ -65,12 +65,14 @@ SETTINGS = f"""/**/drive:
 class Drive:
     """``trust-av drive`` in a subprocess; its output lines in a queue."""
 
-    def __init__(self, study: Path, participant: str, settings: Path) -> None:
+    def __init__(self, study: Path, participant: str, settings: Path,
+                 practice: bool = False) -> None:
         self.lines: queue.Queue[str] = queue.Queue()
         self.output: list[str] = []
         self.process = subprocess.Popen(
             [sys.executable, '-m', 'trust_av_planner.cli', 'drive', '--study', str(study),
-             '--participant', participant, '--drive-file', str(settings), '--no-practice'],
+             '--participant', participant, '--drive-file', str(settings),
+             *([] if practice else ['--no-practice'])],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
             env={**os.environ, 'PYTHONUNBUFFERED': '1'})
         threading.Thread(target=self._read, daemon=True).start()
@@ -143,12 +145,14 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
     settings = tmp_path / 'drive.yaml'
     settings.write_text(SETTINGS)
     study = tmp_path / 'study'
-    drive = Drive(study, 'P01', settings)
+    drive = Drive(study, 'P01', settings, practice=True)
     who = Participant()
     try:
         page = browser.new_page(viewport={'width': 1000, 'height': 760})
         page.goto(drive.url)
-        for _ in range(2):
+        page.wait_for_selector('#start:not([hidden])', timeout=120_000)
+        assert page.text_content('#title') == 'Practice drive'
+        for _ in range(3):
             assert drive_once(page, who, rating=70, answers=ANSWERS) in ('ready', 'finished',
                                                                           'questionnaire')
         page.wait_for_function("window.drive.phase === 'finished'", timeout=120_000)
@@ -158,15 +162,21 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
     session = json.loads((study / 'P01' / 'session.json').read_text())
     assert session['order'] == [['low_alpha', 'high_alpha'][i]
                                 for i in balanced_latin_square_row(2, 0)]
-    assert [d['status'] for d in session['drives']] == ['done', 'done']
-    assert who.questionnaires == 2 and len(who.ratings) >= 4
+    assert [d['condition'] for d in session['drives']] == ['practice', *session['order']]
+    assert [d['status'] for d in session['drives']] == ['done', 'done', 'done']
+    assert who.questionnaires == 2 and len(who.ratings) >= 5
     ratings_recorded = 0
     for record in session['drives']:
         bag = study / record['bag']
         assert check_bag_directory(bag) == []
         counts = _counts(bag)
-        assert all(counts.values()), counts               # every topic holds messages
-        assert counts['/driver/questionnaire'] == 1
+        practice = record['condition'] == 'practice'
+        # every topic holds messages (the practice drive has no questionnaire)
+        assert all(n for t, n in counts.items() if t != '/driver/questionnaire'), counts
+        assert counts['/driver/questionnaire'] == (0 if practice else 1)
+        if practice:
+            ratings_recorded += counts['/driver/rating']
+            continue
         meta = custom_data(bag)
         assert meta['trust_av.participant'] == 'P01'
         assert meta['trust_av.condition'] == record['condition']
@@ -194,7 +204,7 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
     assert comparison[0].startswith('drive,condition,model,ratings,rmse,correlation')
     assert len(comparison) == 3 and all(',paper,' in line for line in comparison[1:])
     summary = (study / 'P01' / 'summary.csv').read_text().splitlines()
-    assert len(summary) == 3 and ',done,' in summary[1] and ',done,' in summary[2]
+    assert len(summary) == 4 and all(',done,' in line for line in summary[1:])
     assert 'rmse' in output and 'paper' in output
     # trust-av fit-driver --drives: one participant, so every second drive is held out
     fit, held, read = drive_bag_pairs(study, 1.0, 4.5)

@@ -15,8 +15,9 @@ import pytest
 from trust_av_planner.drive.server import DriveServer
 from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
 
-pytestmark = pytest.mark.skipif(not Path(CHROMIUM).exists(),
-                                reason='Debian chromium not installed (scripts/bootstrap.sh)')
+pytestmark = [pytest.mark.wall_clock,
+              pytest.mark.skipif(not Path(CHROMIUM).exists(),
+                                 reason='Debian chromium not installed (scripts/bootstrap.sh)')]
 
 HELLO = {'type': 'hello', 'rating_period_s': 1.0, 'control_rate_hz': 20.0,
          'accel_max_mps2': 2.5, 'accel_min_mps2': -6.0}

@@ -56,7 +56,7 @@ from trust_av_planner.graph.shadow import _node_loops, _stop_and_drain, _wait_to
 from trust_av_planner.system.closed_loop import equilibrium_start
 from trust_av_planner.system.config import RunConfig
 from trust_monitor.common.topics import TOPICS, qualified
-from trust_monitor.common.wall_clock import NS_PER_S
+from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
 
 LOG = logging.getLogger(__name__)
 DRIVE_NODES = ('preceding_traffic', 'planner', 'ego_plant', 'follower_plant', 'trust_monitor')
@@ -121,7 +121,6 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
         with graph_session(graph, 'drive') as session:
             node, executor = session.node, session.executor
             start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
-            from trust_monitor.common.wall_clock import WallClockConfig
             clock = WallClockConfig(clock_mode='wall', control_rate_hz=rate_hz)
             state_qos = wall_qos('STATE', clock, publisher=True)
             command_pub = node.create_publisher(message_class(DRIVER_TOPICS['/human/accel_cmd']),
@@ -287,6 +286,8 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                     outcome.driven_s = time.monotonic() - begin
                 with link.lock:
                     link.publisher = None
+                link.greet = {'type': 'phase', 'phase': 'wait'}
+                server.send(link.greet)
                 _stop_and_drain(graph, executor, DRIVE_NODES)
                 drain()
                 if questionnaire and outcome.status == 'done' and not recording.finished:

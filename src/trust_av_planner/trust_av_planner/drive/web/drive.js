@@ -84,8 +84,10 @@ function setPhase(msg) {
   } else {
     stopInput();
     $('message').hidden = false;
-    $('message').textContent = msg.phase === 'finished' ? 'Thank you: the session is complete.'
-      : 'The session is paused. The experimenter will resume it.';
+    $('message').textContent = {
+      finished: 'Thank you: the session is complete.',
+      wait: 'Drive complete. Please wait a moment.',
+    }[msg.phase] || 'The session is paused. The experimenter will resume it.';
     setStatus(msg.phase);
   }
   if (msg.phase !== 'driving') { drive.drivingSinceMs = null; hideRating(); }
