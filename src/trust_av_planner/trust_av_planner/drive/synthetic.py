@@ -21,6 +21,15 @@ CHROMIUM = '/usr/bin/chromium'
 CHROMIUM_ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic',
                  '--no-first-run', '--disable-background-networking',
                  '--disable-component-update', '--disable-sync']
+READ_DISPLAY = """() => ({
+    phase: window.drive.phase,
+    gap: document.getElementById('gap').dataset.m,
+    speed: document.getElementById('speed').dataset.mps,
+    av: document.getElementById('av-speed').dataset.mps,
+    max: window.drive.accelMax, min: window.drive.accelMin,
+    rating: !document.getElementById('rating').hidden})"""
+"""The displayed gap (m), own and AV speed (m/s), the pedal's range and whether the rating
+card is open, as the page shows them."""
 DRIVER = IdmParams(desired_speed_mps=36.0, time_headway_s=1.2, min_gap_m=3.0,
                    max_accel_mps2=2.0, comfort_decel_mps2=2.5)
 
@@ -67,28 +76,27 @@ def drive_once(page: Any, who: Participant, *, rating: int = 70, until_s: float 
     started = time.monotonic()
     deadline = started + until_s
     while time.monotonic() < deadline:
-        phase = str(page.evaluate('window.drive.phase'))
+        # what the page displays, read in one call (a person looks once, not five times)
+        seen = page.evaluate(READ_DISPLAY)
+        phase = str(seen['phase'])
         if phase != 'driving':
             break
         if stop_after_s is not None and time.monotonic() - started > stop_after_s:
             return phase
-        gap = page.locator('#gap').get_attribute('data-m')
-        speed = page.locator('#speed').get_attribute('data-mps')
-        av = page.locator('#av-speed').get_attribute('data-mps')
-        if gap and speed and av:
-            accel = idm_accel(DRIVER, float(gap), float(speed), float(av))
-            limits = page.evaluate('[window.drive.accelMax, window.drive.accelMin]')
-            value = pedal_height(accel, *limits)
+        if seen['gap'] and seen['speed'] and seen['av']:
+            accel = idm_accel(DRIVER, float(seen['gap']), float(seen['speed']),
+                              float(seen['av']))
+            value = pedal_height(accel, float(seen['max']), float(seen['min']))
             page.mouse.move(x, box['y'] + box['height'] * (1 - value) / 2)
             who.pedal_moves += 1
-        if page.locator('#rating').is_visible():
+        if seen['rating']:
             page.mouse.up()          # one hand: let go of the pedal for a moment
             page.locator('#rating-slider').fill(str(rating))
             page.click('#rating-submit')
             who.ratings.append(rating)
             page.mouse.move(x, box['y'] + box['height'] / 2)
             page.mouse.down()
-        page.wait_for_timeout(50)
+        page.wait_for_timeout(100)   # about one look per control period
     page.mouse.up()
     page.wait_for_function("['questionnaire', 'ready', 'finished', 'paused']"
                            '.includes(window.drive.phase)', timeout=60_000)
