@@ -278,3 +278,33 @@ def test_a_lost_connection_and_a_closed_tab_behave_as_documented(
     session = json.loads((study / 'P02' / 'session.json').read_text())
     assert [d['status'] for d in session['drives']] == ['done', 'abandoned', 'done']
     assert (study / session['drives'][1]['bag']).is_dir()   # nothing recorded is lost
+
+
+def test_a_session_resumes_after_the_command_is_killed(tmp_path: Path, browser: Any) -> None:
+    import signal
+    settings = tmp_path / 'drive.yaml'
+    settings.write_text(SETTINGS)
+    study = tmp_path / 'study'
+    drive = Drive(study, 'P03', settings)
+    try:
+        page = browser.new_page()
+        page.goto(drive.url)
+        first = drive.wait_for(r'drive 1 \((\w+)\): waiting').group(1)
+        drive_once(page, Participant(), stop_after_s=4.0)
+        drive.process.send_signal(signal.SIGKILL)         # a crash: nothing finished
+        drive.process.wait(timeout=30)
+        page.wait_for_function("document.getElementById('status').textContent"
+                               ".includes('connection lost')", timeout=10_000)
+    finally:
+        drive.kill()
+    session = json.loads((study / 'P03' / 'session.json').read_text())
+    assert session['drives'] == []                        # the killed drive is not counted
+    again = Drive(study, 'P03', settings)
+    try:
+        assert again.wait_for(r'drive 1 \((\w+)\): waiting').group(1) == first
+        # the killed drive's directory is kept beside the new attempt, not overwritten
+        kept = study / 'P03' / f'drive_01_{first}.attempt1'
+        assert kept.is_dir() and any(kept.glob('*.mcap'))
+    finally:
+        again.kill()
+    assert again.process.returncode == 128 + signal.SIGTERM
