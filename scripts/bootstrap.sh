@@ -31,5 +31,12 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   "$venv/bin/python" -c 'import tf2_msgs.msg' 2>/dev/null || bash "$root/scripts/build_tf2_msgs.sh" "$venv"
   echo "$want" > "$stamp"
 fi
+# The driver-in-the-loop tests drive Debian's chromium through Playwright (never a downloaded
+# browser); installed when absent and when this runs as root (CI), quietly.
+if [ ! -x /usr/bin/chromium ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  echo "[bootstrap] installing Debian's chromium for the browser tests" >&2
+  { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } \
+    >/dev/null 2>&1 || echo "[bootstrap] chromium could not be installed: the browser tests skip" >&2
+fi
 export PATH="$venv/bin:$PATH"
 export VIRTUAL_ENV="$venv"

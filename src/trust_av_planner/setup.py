@@ -9,7 +9,8 @@ setup(
     version='0.1.0',
     packages=find_packages(exclude=['test']),
     package_data={package_name: ['py.typed', 'models/*.npz', 'models/*.json',
-                                 'models/*.md', 'models/*.png']},
+                                 'models/*.md', 'models/*.png',
+                                 'drive/web/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -30,6 +31,7 @@ setup(
             'planner = trust_av_planner.planner_node:main',
             'ego_plant = trust_av_planner.ego_plant_node:main',
             'recorder = trust_av_planner.graph.recorder_node:main',
+            'follower_plant = trust_av_planner.drive.follower_node:main',
         ],
         # The plan estimators, registered like any plug-in (trust_monitor.common.registry).
         'trust_av.predictors': [

@@ -74,6 +74,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                              'is the test set (read only, never copied)')
     parser.add_argument('--ngsim', type=Path, default=None,
                         help='NGSIM I-80 chain directory: split by follower ID (optional)')
+    parser.add_argument('--drives', type=Path, default=None,
+                        help='a trust-av drive study directory: its complete drives (a person '
+                             'following the AV) are demonstrations too, split by participant '
+                             'into train, validation and test like NGSIM (optional)')
     parser.add_argument('--out', type=Path, default=FITTED_CAUTION_FIT_FILE,
                         help='fit file with provenance (default: '
                              'human_driver_sim/models/driver_fit_caution.yaml, the profile '
@@ -146,6 +150,10 @@ def _load(args: argparse.Namespace, dt_s: float) -> tuple[dict[str, Split], dict
                                  'vehicle_length_m': report.vehicle_length_m}
     except CarFollowingDataError as err:
         raise TrustAvPlannerError(f'{args.data}: {err}') from err
+    if args.drives is not None:          # driver-in-the-loop demonstrations
+        from trust_av_planner.drive.bag_data import drive_bag_pairs
+        splits['drive'], cleaning['drive'] = drive_bag_pairs(
+            args.drives, dt_s, load_run_config(args.params_file).shared.vehicle_length_m)
     for name, split in splits.items():
         for role, pairs in split._asdict().items():
             if not pairs:

@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     'trust_av_planner.cli.simulate',
     'trust_av_planner.cli.run',
     'trust_av_planner.cli.shadow',
+    'trust_av_planner.cli.drive',
     'trust_av_planner.cli.reproduce',
     'trust_av_planner.cli.bags',
     'trust_av_planner.cli.repair_bag',

@@ -281,6 +281,10 @@ class BagWriter:
         entry = self._topics[topic]
         return entry.count + entry.step_count
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Set one ``custom_data`` entry of ``metadata.yaml`` (written when finished)."""
+        self._writer.set_custom_data(key, value)
+
     def add_topic(self, topic: str, msgtype: str, qos: Qos | list[Qos]) -> None:
         """Register a topic with its type and the QoS its publishers offer: one profile per
         publisher, as ``ros2 bag record`` writes them (a profile alone: one publisher)."""

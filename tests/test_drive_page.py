@@ -1,0 +1,131 @@
+"""The drive page's inputs in headless chromium, against the drive's web server alone (no
+graph): keyboard ramps, the pointer pedal, a gamepad, stamped samples at the control rate,
+the non-blocking rating and reconnection. The state stream is played by the test."""
+
+from __future__ import annotations
+
+import queue
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from trust_av_planner.drive.server import DriveServer
+from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+
+pytestmark = [pytest.mark.wall_clock,
+              pytest.mark.skipif(not Path(CHROMIUM).exists(),
+                                 reason='Debian chromium not installed (scripts/bootstrap.sh)')]
+
+HELLO = {'type': 'hello', 'rating_period_s': 1.0, 'control_rate_hz': 20.0,
+         'accel_max_mps2': 2.5, 'accel_min_mps2': -6.0}
+FAKE_PAD = """
+navigator.getGamepads = () => [window.fakePad || null];
+"""
+
+
+@pytest.fixture
+def served() -> Iterator[tuple[DriveServer, queue.Queue[dict[str, Any]]]]:
+    inbox: queue.Queue[dict[str, Any]] = queue.Queue()
+    holder: list[DriveServer] = []
+    server = DriveServer(lambda m, _ns: inbox.put(m), lambda: holder[0].send(HELLO), port=0)
+    holder.append(server)
+    server.start()
+    try:
+        yield server, inbox
+    finally:
+        server.stop()
+
+
+@pytest.fixture
+def page(served: tuple[DriveServer, Any]) -> Iterator[Any]:
+    from playwright.sync_api import sync_playwright
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            tab = browser.new_page()
+            tab.add_init_script(FAKE_PAD)
+            tab.goto(served[0].url)
+            tab.wait_for_function('window.drive.ws && window.drive.ws.readyState === 1')
+            yield tab
+        finally:
+            browser.close()
+
+
+def _inputs(inbox: queue.Queue[dict[str, Any]], wait_s: float) -> list[dict[str, Any]]:
+    out, end = [], time.monotonic() + wait_s
+    while time.monotonic() < end:
+        try:
+            message = inbox.get(timeout=0.05)
+        except queue.Empty:
+            continue
+        if message['type'] == 'input':
+            out.append(message)
+    return out
+
+
+def _drive(server: DriveServer, page: Any) -> None:
+    server.send({'type': 'phase', 'phase': 'driving', 'duration_s': 60.0})
+    page.wait_for_function("window.drive.phase === 'driving'")
+    for k in range(5):      # a state stream, so the page has something to draw
+        server.send({'type': 'state', 't_s': k * 0.1, 'trust': 0.5, 'vehicles': {
+            'lead': [60.0 + k, 10.0], 'av': [30.0 + k, 10.0], 'you': [float(k), 10.0]}})
+    page.wait_for_function("document.getElementById('gap').dataset.m !== undefined")
+
+
+def test_keyboard_pointer_and_gamepad_drive_the_pedal(
+        served: tuple[DriveServer, queue.Queue[dict[str, Any]]], page: Any) -> None:
+    server, inbox = served
+    _drive(server, page)
+    assert page.locator('#gap').get_attribute('data-m') is not None
+    page.keyboard.down('ArrowUp')
+    gas = _inputs(inbox, 1.0)
+    page.keyboard.up('ArrowUp')
+    assert gas[-1]['accel_mps2'] > gas[0]['accel_mps2'] and gas[-1]['accel_mps2'] > 1.0
+    _inputs(inbox, 0.6)                                   # released: back to zero
+    page.keyboard.down('KeyS')
+    brake = _inputs(inbox, 0.6)
+    page.keyboard.up('KeyS')
+    assert brake[-1]['accel_mps2'] < -3.0
+    # each sample is stamped in the page and numbered; about control_rate_hz of them a second
+    seqs = [m['seq'] for m in gas + brake]
+    assert seqs == sorted(seqs) and all(m['page_ms'] > 0 for m in gas)
+    assert 10 <= len(gas) <= 30
+    # the pointer pedal: held at the top is full gas, at the bottom full brake
+    box = page.locator('#pedal').bounding_box()
+    page.mouse.move(box['x'] + box['width'] / 2, box['y'] + 1)
+    page.mouse.down()
+    assert _inputs(inbox, 0.4)[-1]['accel_mps2'] == pytest.approx(2.5, abs=0.1)
+    page.mouse.move(box['x'] + box['width'] / 2, box['y'] + box['height'] - 1)
+    assert _inputs(inbox, 0.4)[-1]['accel_mps2'] == pytest.approx(-6.0, abs=0.2)
+    page.mouse.up()
+    # a gamepad's right trigger (the Gamepad API; a stand-in pad, headless has none)
+    page.evaluate('window.fakePad = {buttons: Array.from({length: 8}, (_, i) => '
+                  '({value: i === 7 ? 0.5 : 0})), axes: [0, 0]}')
+    assert _inputs(inbox, 0.4)[-1]['accel_mps2'] == pytest.approx(1.25)
+
+
+def test_rating_prompt_does_not_stop_the_input_and_reconnection_resumes(
+        served: tuple[DriveServer, queue.Queue[dict[str, Any]]], page: Any) -> None:
+    server, inbox = served
+    _drive(server, page)
+    page.wait_for_selector('#rating:not([hidden])', timeout=5000)
+    assert len(_inputs(inbox, 0.5)) >= 5                  # samples go on under the prompt
+    page.locator('#rating-slider').fill('83')
+    page.click('#rating-submit')
+    ratings = []
+    end = time.monotonic() + 5
+    while not ratings and time.monotonic() < end:
+        message = inbox.get(timeout=5)
+        if message['type'] == 'rating':
+            ratings.append(message)
+    assert ratings[0]['value'] == 83 and ratings[0]['answered_ms'] >= ratings[0]['shown_ms']
+    server.close_clients()                                # the connection is lost
+    page.wait_for_function("document.getElementById('status').textContent"
+                           ".includes('connection lost')", timeout=5000)
+    server.send({'type': 'phase', 'phase': 'driving', 'duration_s': 60.0})
+    page.wait_for_function('window.drive.ws.readyState === 1', timeout=10_000)
+    server.send({'type': 'phase', 'phase': 'driving', 'duration_s': 60.0})
+    assert _inputs(inbox, 1.0)                            # and the input comes back
