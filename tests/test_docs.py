@@ -133,7 +133,7 @@ def test_every_tutorial_in_the_nav_and_the_readme_exists() -> None:
     nav = (REPO / 'mkdocs.yml').read_text()
     readme = (REPO / 'README.md').read_text()
     for name in ('reproduce-the-paper', 'own-trace-or-bag', 'connect-a-vehicle',
-                 'write-a-plugin'):
+                 'write-a-plugin', 'driver-in-the-loop'):
         assert f'tutorials/{name}.md' in nav and f'docs/tutorials/{name}.md' in readme
         assert (DOCS / 'tutorials' / f'{name}.md').is_file()
 
