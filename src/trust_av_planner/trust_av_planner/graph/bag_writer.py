@@ -27,6 +27,7 @@ import shutil
 import struct
 from collections import defaultdict
 from dataclasses import dataclass
+from importlib.metadata import version
 from io import BytesIO
 from pathlib import Path
 from typing import Any
@@ -40,7 +41,7 @@ from rosbags.interfaces import (
     QosTime,
 )
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
-from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
+from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk, write_record, write_string
 from rosbags.typesys import Stores, get_typestore
 
 from trust_av_planner.errors import TrustAvPlannerError
@@ -55,6 +56,10 @@ RESERVE_PER_CHUNK_BYTES = 256
 RESERVE_STEP_CHUNKS = 64
 """The reserve grows by this many chunks' worth at a time (one fallocate per 64 steps)."""
 RESERVE_NAME = '.reserve'
+RECORDER_LIBRARY = 'trust_av.bag_writer'
+"""What the MCAP header's ``library`` field of a bag this project wrote starts with (followed
+by `` (rosbags-VERSION)``): how :mod:`~trust_av_planner.graph.bag_repair` tells its own
+recordings, whose log time is the header stamp, from another tool's."""
 EXIT_DISK_FULL = 3
 """Exit code of a recorder that stopped because the disk was full (the bag is finished)."""
 MAX_INFINITE = QosTime(2147483647, 4294967295)
@@ -154,8 +159,18 @@ class _StepStorage(McapWriter):
     """rosbags' MCAP storage, writing through an unbuffered file (so a closed chunk is on
     disk) and able to cut off a chunk that failed half-written."""
 
+    library = RECORDER_LIBRARY
+    """The MCAP header's ``library`` (followed by `` (rosbags-VERSION)``)."""
+
     def __init__(self, path: Path, compression: Any) -> None:
         super().__init__(path, compression)
+        self.bio.seek(0)                    # the same magic and header, naming this writer
+        self.bio.truncate(0)
+        self.bio.write(b'\x89MCAP\x30\r\n')
+        header = BytesIO()
+        write_string(header, 'ros2')
+        write_string(header, f'{self.library} (rosbags-{version("rosbags")})')
+        write_record(self.bio, 0x01, header)
         self.bio.flush()
         offset = self.bio.tell()
         self.bio.close()
@@ -189,19 +204,29 @@ class BagWriter:
 
     Args:
         path: the bag directory to create (it must not exist).
+        copy_of: for a repaired copy of another tool's recording (its log times are not
+            header stamps): that tool's MCAP ``library``; the copy is then not marked as
+            this project's recording (:data:`RECORDER_LIBRARY`, ``trust_av.recorder``).
 
     Raises:
         BagWriteError: the directory exists or cannot be created.
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, *, copy_of: str | None = None) -> None:
         self.path = Path(path)
         existed = os.path.lexists(self.path)
+        storage: type[_StepStorage] = _StepStorage
+        if copy_of is not None:
+            storage = type('_CopyStorage', (_StepStorage,),
+                           {'library': f'trust_av.bag_repair of {copy_of or "unknown"}'})
         try:
             self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
             self._writer.STORAGE_PLUGINS = {**Writer.STORAGE_PLUGINS,  # type: ignore[misc]
-                                            StoragePlugin.MCAP: _StepStorage}
-            self._writer.set_custom_data('trust_av.recorder', 'one MCAP chunk per step')
+                                            StoragePlugin.MCAP: storage}
+            if copy_of is None:
+                self._writer.set_custom_data('trust_av.recorder', 'one MCAP chunk per step')
+            else:
+                self._writer.set_custom_data('trust_av.repaired_copy_of', copy_of or 'unknown')
             self._writer.open()
         except (WriterError, OSError) as err:
             if not existed:                 # what this call created: an empty .mcap at most
@@ -246,8 +271,14 @@ class BagWriter:
         self._topics[topic] = _Topic(connection)
         self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
 
-    def write(self, topic: str, data: bytes | memoryview) -> int:
-        """Append one raw CDR message to the current step; returns its stamp (ns).
+    def write(self, topic: str, data: bytes | memoryview, log_time_ns: int | None = None) -> int:
+        """Append one raw CDR message to the current step; returns its log time (ns).
+
+        Args:
+            topic: a topic added with :meth:`add_topic`.
+            data: the message, CDR with its 4-byte encapsulation header.
+            log_time_ns: its log time, ns (default: the stamp of its header, which the
+                graph's messages carry first).
 
         Raises:
             BagWriteError: the bag is finished (after :meth:`finish`, or once
@@ -256,7 +287,8 @@ class BagWriter:
             raise BagWriteError(f'{self.path}: written to after the bag was finished'
                                 + (f' ({self.disk_full})' if self.disk_full else ''))
         entry = self._topics[topic]
-        stamp = header_stamp_ns(data, self._offsets[topic])
+        stamp = (header_stamp_ns(data, self._offsets[topic]) if log_time_ns is None
+                 else log_time_ns)
         self._storage_write(entry.connection, stamp, data)
         entry.step_count += 1
         if stamp < self._step_first:
