@@ -26,6 +26,7 @@ from rosbags.highlevel import AnyReader
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
+from trust_av_planner.cli.outputs import MARKER
 from trust_av_planner.graph.bag_records import message_stamp, records_from_bag
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
@@ -109,7 +110,7 @@ def test_recording_is_a_rosbag2_bag_by_rosbag2s_rules(graph_run: tuple[Path, str
     rosbags' own rosbag2 reader opens the directory."""
     from rosbags.rosbag2 import Reader
     bag, _ = graph_run
-    assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'us06.mcap']
+    assert sorted(p.name for p in bag.iterdir()) == [MARKER, 'metadata.yaml', 'us06.mcap']
     assert check_bag_directory(bag) == []
     with Reader(bag) as reader:
         assert reader.message_count == sum(RECORDED.values())

@@ -17,7 +17,6 @@ import hashlib
 import json
 import logging
 import os
-import shutil
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -144,15 +143,17 @@ def run_case(case: Case, params_file: str,
     records: list[StepRecord]
     if settings.runner == 'graph':
         # Imported here: the in-process sweep never loads rclpy.
+        from trust_av_planner.cli.outputs import replacing_outputs
         from trust_av_planner.graph.orchestrator import run_graph_records
         bag = Path(settings.bags_dir) / (f'{Path(case.trace).stem}_{case.predictor}_'
                                          f'alpha{case.alpha:g}')
-        bag.parent.mkdir(parents=True, exist_ok=True)
-        # Left by an interrupted sweep (its case is not cached): the bag, its logs.
-        for stale in (bag, bag.with_name(bag.name + '.logs')):
-            shutil.rmtree(stale, ignore_errors=True)
-        _, records = run_graph_records(config, case.trace, trace, bag,
-                                       max_steps=settings.max_steps)
+        # A bag and logs left by an interrupted sweep (its case is not cached) are replaced,
+        # if its marker proves a trust-av command wrote them (cli.outputs).
+        with replacing_outputs(bag, overwrite=True, command='reproduce',
+                               option='--results-dir') as outputs:
+            _, records = run_graph_records(config, case.trace, trace, outputs.bag,
+                                           max_steps=settings.max_steps,
+                                           log_dir=outputs.logs)
     else:
         records = simulate(config, trace).records
     metrics = compute_metrics(records, config.min_safe_gap_m)
