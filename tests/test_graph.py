@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import os
 import signal
 import subprocess
@@ -102,6 +103,17 @@ def test_every_node_stops_with_its_messages_acknowledged(graph_run: tuple[Path, 
                                       'human_driver', 'trust_monitor', 'recorder'}
     for log in logs:
         assert 'not acknowledged' not in log.read_text(), log.read_text()
+
+
+def test_the_graphs_own_ego_odometry_replays_as_a_lead(graph_run: tuple[Path, str]) -> None:
+    """The ego plant never reports a negative speed (it reported -2e-18 m/s, and -0.0, when
+    braked exactly to a stop), so its /ego/odom loads as a preceding-vehicle trace."""
+    bag, _ = graph_run
+    config = load_run_config(overrides={'preceding_traffic': {'bag_topic': '/ego/odom'}})
+    trace = load_trace(str(bag), config.planner.dt_s, config.trace)
+    assert trace.steps >= STEPS - 1
+    speeds = [float(v) for v in trace.speeds_mps]
+    assert min(speeds) >= 0.0 and not any(math.copysign(1.0, v) < 0 for v in speeds)
 
 
 def test_recording_is_a_rosbag2_bag_by_rosbag2s_rules(graph_run: tuple[Path, str]) -> None:

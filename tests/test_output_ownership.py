@@ -100,7 +100,7 @@ def test_replacing_puts_the_previous_outputs_back_on_a_failure_or_a_stop(
     previous_run(bag)
     before = snapshot(tmp_path)
     words = (r"^the graph failed; the previous outputs are back in place, this run's were "
-             r'moved to \S*/run\.incomplete, \S*/run\.incomplete\.logs$')
+             r'moved to \S*/run\.incomplete$')      # logs holding only the marker: removed
     with pytest.raises(TrustAvPlannerError, match=words), \
             replacing_outputs(bag, overwrite=True, command='run') as outputs:
         assert not outputs.bag.exists() and not outputs.plot.exists()
@@ -111,14 +111,15 @@ def test_replacing_puts_the_previous_outputs_back_on_a_failure_or_a_stop(
     kept = {name: data for name, data in snapshot(tmp_path).items()
             if not name.startswith('run.incomplete')}
     assert kept == before                                      # byte for byte, markers too
-    assert incomplete.bag.is_dir() and (incomplete.logs / MARKER).is_file()
+    assert incomplete.bag.is_dir() and (incomplete.bag / MARKER).is_file()
+    assert not incomplete.logs.exists()
     with pytest.raises(KeyboardInterrupt), \
             replacing_outputs(bag, overwrite=True, command='run'):
         raise KeyboardInterrupt
     kept = {name: data for name, data in snapshot(tmp_path).items()
             if not name.startswith('run.incomplete')}
     assert kept == before
-    assert (tmp_path / 'run.incomplete-2.logs').is_dir()       # the second failed run's logs
+    assert not (tmp_path / 'run.incomplete-2').exists()        # that one wrote nothing
 
 
 def test_replacing_deletes_the_previous_outputs_only_after_success(tmp_path: Path) -> None:

@@ -31,7 +31,7 @@ import yaml
 
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_monitor.common import output_files
-from trust_monitor.common.output_files import cannot_create_in, stop_signals_held
+from trust_monitor.common.output_files import cannot_create_in, odd_path, stop_signals_held
 
 MARKER = '.trust_av_output'
 """The marker file a command writes into each output directory it creates."""
@@ -115,10 +115,15 @@ def prepare_outputs(bag: Path, *, overwrite: bool, option: str = '--bag') -> Run
         The outputs (some may exist: only with ``overwrite`` and proven ours).
 
     Raises:
-        TrustAvPlannerError: a path is a link, exists without ``overwrite``, is not proven
+        TrustAvPlannerError: an odd path (:func:`~trust_monitor.common.output_files.odd_path`:
+            a NUL or newline in it, ``.``), a path is a link, exists without ``overwrite``, is
+            not proven
             written by this project (no marker), is left over from a killed ``--overwrite``
             run, or its parent cannot be written.
     """
+    odd = odd_path(bag)
+    if odd is not None:
+        raise TrustAvPlannerError(f'{option} {str(bag)!r}: {odd}')
     if bag.suffix == '.mcap':
         raise TrustAvPlannerError(f'{option} {bag}: a recording is a rosbag2 bag directory, '
                                   f'not an .mcap file; name the directory (e.g. '
@@ -177,6 +182,13 @@ def _mark(outputs: RunOutputs, command: str) -> None:
     for directory in (outputs.bag, outputs.logs):
         if directory.is_dir() and marked_outputs(directory) != names:
             write_marker(directory, command, names)
+
+
+def _remove_if_unused(logs: Path) -> None:
+    """Remove the logs directory this command created if nothing but its marker is in it
+    (a run refused before any node started leaves nothing behind)."""
+    if logs.is_dir() and not logs.is_symlink() and [p.name for p in logs.iterdir()] == [MARKER]:
+        shutil.rmtree(logs)
 
 
 def _mark_after_failure(outputs: RunOutputs, command: str) -> str:
@@ -245,6 +257,7 @@ def replacing_outputs(bag: Path, *, overwrite: bool, command: str,
     try:
         yield outputs
     except TrustAvPlannerError as err:
+        _remove_if_unused(outputs.logs)
         unmarked = _mark_after_failure(outputs, command)
         moved = _put_back(outputs, aside)
         if not moved and not unmarked:
@@ -255,6 +268,7 @@ def replacing_outputs(bag: Path, *, overwrite: bool, command: str,
     except BaseException:
         # A stop (or a bug): its own line or traceback is what is printed; a bag the
         # marker could not be written into is left unmarked (never replaced by --overwrite).
+        _remove_if_unused(outputs.logs)
         _mark_after_failure(outputs, command)
         _put_back(outputs, aside)
         raise

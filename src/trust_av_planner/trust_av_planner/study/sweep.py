@@ -17,6 +17,7 @@ import hashlib
 import json
 import logging
 import os
+import socket
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -200,10 +201,49 @@ class LocalExecutor:
                 on_result(case, result)
 
 
+RAY_CONNECT_TIMEOUT_S = 5.0
+"""How long a Ray cluster's address may take to accept a TCP connection (``ray.init`` itself
+retries an unreachable address for minutes)."""
+
+
+def check_ray_address(address: str | None, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """Refuse, within ``timeout_s``, a Ray cluster address nothing listens on.
+
+    ``None``, ``auto`` and ``local`` are Ray's own choices (a local cluster, or the one in
+    ``RAY_ADDRESS``) and are not probed. ``HOST:PORT`` and ``ray://HOST:PORT`` are.
+
+    Args:
+        address: ``--ray-address``.
+        timeout_s: connect timeout, s.
+
+    Raises:
+        TrustAvPlannerError: not HOST:PORT, or nothing accepts a connection there.
+    """
+    if address is None or address in ('auto', 'local'):
+        return
+    text = address.removeprefix('ray://')
+    host, _, port_text = text.rpartition(':')
+    if not host or not port_text.isdigit() or not 0 < int(port_text) < 65536:
+        raise TrustAvPlannerError(f'--ray-address {address!r}: expected HOST:PORT, '
+                                  'ray://HOST:PORT, auto or local')
+    try:
+        with socket.create_connection((host.strip('[]'), int(port_text)), timeout=timeout_s):
+            pass
+    except OSError as err:
+        reason = err.strerror or str(err) or type(err).__name__
+        raise TrustAvPlannerError(f'--ray-address {address}: cannot connect within '
+                                  f'{timeout_s:g} s ({reason})') from err
+
+
 class RayExecutor:
-    """The same cases as Ray tasks (``pip install ray``; local cluster unless ``address``)."""
+    """The same cases as Ray tasks (``pip install ray``; local cluster unless ``address``).
+
+    Raises:
+        TrustAvPlannerError: ``address`` is unreachable (:func:`check_ray_address`).
+    """
 
     def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
+        check_ray_address(address)
         self.address = address
         self.num_cpus = num_cpus
 

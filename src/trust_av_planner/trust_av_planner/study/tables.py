@@ -5,6 +5,7 @@ versions (mean and 95 % confidence interval over drivers), and CSV/Markdown writ
 from __future__ import annotations
 
 import csv
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -40,7 +41,11 @@ def paper_bound_cell(final_trust: float, mean_score: float, steps: int,
 
 
 def improvement_percent(metric: str, base: float, value: float) -> float:
-    """Improvement of ``value`` over ``base`` (trust up, E and RMSE down), percent."""
+    """Improvement of ``value`` over ``base`` (trust up, E and RMSE down), percent; NaN when
+    ``base`` is 0 (a relative change from nothing, e.g. trust still at T(0) = 0 after a
+    few steps of ``reproduce --max-steps``)."""
+    if base == 0.0:
+        return math.nan
     if metric == 'final_trust':
         return 100.0 * (value - base) / abs(base)
     return 100.0 * (base - value) / base
@@ -54,8 +59,10 @@ def max_improvements(results: dict[Case, dict[str, Any]], trace: str,
     base = by_alpha[0.0]
     out = []
     for metric in METRICS:
-        out.append(max(improvement_percent(metric, base[metric], m[metric])
-                       for a, m in by_alpha.items() if a > 0.0))
+        changes = [improvement_percent(metric, base[metric], m[metric])
+                   for a, m in by_alpha.items() if a > 0.0]
+        defined = [change for change in changes if not math.isnan(change)]
+        out.append(max(defined) if defined else math.nan)
     return out[0], out[1], out[2]
 
 
@@ -127,7 +134,12 @@ def improvement_table(results: dict[Case, dict[str, Any]], traces: Sequence[str]
 
 
 def _cell(values: Sequence[float], digits: int, suffix: str = '') -> str:
-    mean, half = mean_ci95(values)
+    """Mean ± 95 % CI of the defined values (an improvement over a zero base is NaN), or
+    ``n/a`` when none is."""
+    defined = [value for value in values if not math.isnan(value)]
+    if not defined:
+        return 'n/a'
+    mean, half = mean_ci95(defined)
     return f'{mean:.{digits}f} ± {half:.{digits}f}{suffix}'
 
 
@@ -179,7 +191,9 @@ def population_improvement_table(results: dict[Case, dict[str, Any]], traces: Se
     for predictor in predictors:
         for trace in traces:
             improvements = [max_improvements(d, trace, predictor) for d in drivers.values()]
-            means = [float(np.mean([imp[i] for imp in improvements])) for i in range(3)]
+            means = [float(np.nanmean([imp[i] for imp in improvements]))
+                     if any(not math.isnan(imp[i]) for imp in improvements) else math.nan
+                     for i in range(3)]
             paper = MAX_IMPROVEMENT_PERCENT[(predictor, trace)]
             ratios = ', '.join(f'{o / p:.2f}' for o, p in zip(means, paper, strict=True))
             rows.append([f'TAC-{predictor.upper()}', trace,
