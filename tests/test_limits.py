@@ -8,20 +8,29 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import importlib
 import io
 import math
 import os
 import pkgutil
+import resource
 import signal
+import subprocess
+import sys
 import typing
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from rosbag2_rules import check_bag_directory
+from rosbags.rosbag2 import Reader
+from test_recording import record
 
 from trust_av_planner.cli.main import main
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph import bag_writer
+from trust_av_planner.graph.bag_writer import BagWriter
 from trust_av_planner.study.sweep import check_ray_address
 from trust_monitor.common.kinematics import VehicleState, advance, integrate
 from trust_monitor.common.params import PARAM_METADATA_KEY
@@ -192,3 +201,69 @@ def test_the_plant_never_reports_a_negative_speed() -> None:
     _, speed = advance(0.0, 1.0, -1.0, 1.0)
     assert math.copysign(1.0, speed) == 1.0
     assert integrate(VehicleState(0.0, 1.0), 0.5, 1.0) == VehicleState(1.0, 1.5)
+
+
+FILE_LIMIT_CHILD = """
+import sys
+from pathlib import Path
+sys.path.insert(0, sys.argv[2])
+from test_recording import record
+from trust_av_planner.graph.bag_writer import BagWriter
+writer = BagWriter(Path(sys.argv[1]))
+record(writer, 100_000, finish=False)
+print(writer.steps)
+print(writer.disk_full)
+"""
+
+
+def _file_size_limit(limit: int) -> None:
+    """In the child before exec: a file-size limit, and SIGXFSZ ignored (as a shell's
+    ``ulimit -f`` with ``trap '' XFSZ``)."""
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+
+
+def test_a_file_size_limit_ends_the_recording_like_a_full_disk(tmp_path: Path) -> None:
+    """EFBIG (RLIMIT_FSIZE): the recorder died with a traceback and left the bag unfinished;
+    now the bag is finished with every complete step before the MCAP reaches the limit."""
+    bag = tmp_path / 'limited'
+    limit = 256 * 1024
+    proc = subprocess.run([sys.executable, '-c', FILE_LIMIT_CHILD, str(bag),
+                           str(Path(__file__).parent)], capture_output=True, text=True,
+                          timeout=120, preexec_fn=lambda: _file_size_limit(limit))
+    assert proc.returncode == 0, proc.stderr
+    steps_text, line = proc.stdout.splitlines()
+    steps = int(steps_text)
+    assert line == (f'{bag}: file-size limit of {limit} bytes (RLIMIT_FSIZE) after {steps} '
+                    'complete steps; the bag holds them and is finished')
+    assert steps > 10
+    assert check_bag_directory(bag) == []
+    with Reader(bag) as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == {'/a/odom': steps,
+                                                                     '/b/odom': steps}
+    assert all(p.stat().st_size <= limit for p in bag.iterdir())
+
+
+def test_any_other_write_error_ends_the_recording_like_a_full_disk(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """EIO (a failing disk) writing step 31's chunk: one line naming it, the 30 complete
+    steps kept and the bag finished."""
+    commit = bag_writer._WholeWrites.commit
+    commits = []
+
+    def failing_once(handle: bag_writer._WholeWrites) -> None:
+        commits.append(1)
+        if len(commits) == 31:
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        commit(handle)
+
+    monkeypatch.setattr(bag_writer._WholeWrites, 'commit', failing_once)
+    bag = tmp_path / 'eio'
+    writer = BagWriter(bag)
+    record(writer, 200, finish=False)
+    assert writer.finished and writer.steps == 30
+    assert writer.disk_full == (f'{bag}: cannot write (Input/output error) after 30 complete '
+                                'steps; the bag holds them and is finished')
+    assert check_bag_directory(bag) == []
+    with Reader(bag) as reader:
+        assert {c.msgcount for c in reader.connections} == {30}

@@ -221,7 +221,8 @@ def repair_bag(path: Path) -> int:
             in_chunk += 1
         writer.finish()
         if writer.disk_full:
-            raise BagWriteError(f'{target}: no room to repair the bag')
+            raise BagWriteError(f'{target}: no room to repair the bag ({writer.disk_full}); '
+                                'nothing was changed')
         _verify(staging, expected)
         _swap_into_place(path, staging, target, workspace / 'old')
     finally:

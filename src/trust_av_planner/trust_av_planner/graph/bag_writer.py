@@ -23,8 +23,11 @@ from __future__ import annotations
 
 import errno
 import os
+import resource
 import shutil
+import signal
 import struct
+import threading
 from collections import defaultdict
 from dataclasses import dataclass
 from importlib.metadata import version
@@ -56,6 +59,9 @@ RESERVE_PER_CHUNK_BYTES = 256
 RESERVE_STEP_CHUNKS = 64
 """The reserve grows by this many chunks' worth at a time (one fallocate per 64 steps)."""
 RESERVE_NAME = '.reserve'
+CHUNK_OVERHEAD_BYTES = 4096
+"""Room a step's chunk record may need beyond twice its messages' bytes (record headers,
+message indexes), for the file-size limit check."""
 RECORDER_LIBRARY = 'trust_av.bag_writer'
 """What the MCAP header's ``library`` field of a bag this project wrote starts with (followed
 by `` (rosbags-VERSION)``): how :mod:`~trust_av_planner.graph.bag_repair` tells its own
@@ -104,6 +110,12 @@ def qos_profile(*, reliable: bool, transient_local: bool, depth: int,
                QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
                QosDurability.TRANSIENT_LOCAL if transient_local else QosDurability.VOLATILE,
                deadline, MAX_INFINITE, QosLiveliness.AUTOMATIC, MAX_INFINITE, False)
+
+
+def _file_size_limit() -> int | None:
+    """This process's file-size limit (soft ``RLIMIT_FSIZE``), bytes; ``None`` if none."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    return None if soft == resource.RLIM_INFINITY else int(soft)
 
 
 class _WholeWrites:
@@ -214,6 +226,9 @@ class BagWriter:
 
     def __init__(self, path: Path, *, copy_of: str | None = None) -> None:
         self.path = Path(path)
+        if threading.current_thread() is threading.main_thread():
+            # past a file-size limit a write fails with EFBIG instead of killing the process
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         existed = os.path.lexists(self.path)
         storage: type[_StepStorage] = _StepStorage
         if copy_of is not None:
@@ -301,22 +316,26 @@ class BagWriter:
         """Write the current step to disk as one chunk.
 
         Returns:
-            True while recording goes on; False once the disk is full: the partial step (if
-            any) was cut off and the bag was finished with every complete step (see
+            True while recording goes on; False once the bag cannot grow (a full disk, the
+            file-size limit ``RLIMIT_FSIZE``, or any other write error): the partial step
+            (if any) was cut off and the bag was finished with every complete step (see
             :attr:`disk_full`).
         """
         if self.finished:
             return False
+        limit = _file_size_limit()
+        if limit is not None and (self._storage.bio.tell() + 2 * self._storage.chunk.bio.tell()
+                                  + CHUNK_OVERHEAD_BYTES + self._needed_reserve() > limit):
+            # the step and the summary would not fit under the limit: end before it does
+            self._drop_pending_step()
+            self._finish_after_write_error(OSError(errno.EFBIG, os.strerror(errno.EFBIG)),
+                                           f'file-size limit of {limit} bytes (RLIMIT_FSIZE)')
+            return False
         try:
             self._storage.close_step_chunk()
         except OSError as err:
-            if err.errno not in (errno.ENOSPC, errno.EDQUOT):
-                raise
-            for entry in self._topics.values():
-                entry.step_count = 0
-            self._step_first, self._step_last = 2**63 - 1, -1
-            self._storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
-            self._finish_after_disk_full(err)
+            self._drop_pending_step()
+            self._finish_after_write_error(err)
             return False
         self._chunks += 1
         for entry in self._topics.values():
@@ -331,11 +350,15 @@ class BagWriter:
             try:
                 self._grow_reserve()
             except OSError as err:
-                if err.errno not in (errno.ENOSPC, errno.EDQUOT):
-                    raise
-                self._finish_after_disk_full(err)
+                self._finish_after_write_error(err)
                 return False
         return True
+
+    def _drop_pending_step(self) -> None:
+        for entry in self._topics.values():
+            entry.step_count = 0
+        self._step_first, self._step_last = 2**63 - 1, -1
+        self._storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
 
     def finish(self) -> None:
         """Write the pending step, the MCAP summary and metadata.yaml; remove the reserve."""
@@ -370,11 +393,14 @@ class BagWriter:
             os.close(fd)
         self._reserved = size
 
-    def _finish_after_disk_full(self, err: OSError) -> None:
-        """Finish on the reserve with the complete steps; say so in :attr:`disk_full`."""
-        self.disk_full = (f'{self.path}: disk full ({os.strerror(err.errno or errno.ENOSPC)}) '
-                          f'after {self.steps} complete steps; the bag holds them and is '
-                          'finished')
+    def _finish_after_write_error(self, err: OSError, what: str = '') -> None:
+        """Finish on the reserve with the complete steps; say why in :attr:`disk_full`
+        (``disk full`` for ENOSPC and EDQUOT, else the error or ``what``)."""
+        reason = os.strerror(err.errno) if err.errno else str(err)
+        if err.errno in (errno.ENOSPC, errno.EDQUOT):
+            what = f'disk full ({reason})'
+        self.disk_full = (f'{self.path}: {what or f"cannot write ({reason})"} after '
+                          f'{self.steps} complete steps; the bag holds them and is finished')
         self._close()
 
     def _close(self) -> None:
