@@ -267,3 +267,26 @@ def test_any_other_write_error_ends_the_recording_like_a_full_disk(
     assert check_bag_directory(bag) == []
     with Reader(bag) as reader:
         assert {c.msgcount for c in reader.connections} == {30}
+
+
+def test_the_smallest_control_step_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``dt_s: 0.01`` (the bottom of its range) runs the closed loop."""
+    monkeypatch.chdir(tmp_path)
+    Path('trace.csv').write_text(TINY_TRACE)
+    Path('fine.yaml').write_text('/**:\n  ros__parameters:\n    dt_s: 0.01\n')
+    code, err = trust_av('simulate', '--trace', 'trace.csv', '--params-file', 'fine.yaml',
+                         '--out', 'run.csv', '--no-progress')
+    assert code == 0, err
+    assert len(Path('run.csv').read_text().splitlines()) == 1 + 300      # 3 s at 100 Hz
+
+
+@pytest.mark.parametrize('steps', [1, 6])
+def test_reproduce_a_few_steps(tmp_path: Path, steps: int) -> None:
+    """``reproduce --max-steps 1..6`` divided by the alpha = 0 trust, still 0 (T(0))."""
+    results = tmp_path / 'results'
+    code, err = trust_av('reproduce', '--traces', 'nycc', '--predictors', 'ca', '--workers',
+                         '1', '--max-steps', str(steps), '--results-dir', str(results),
+                         '--no-progress')
+    assert code == 0, err
+    table = (results / 'table_IV_max_improvements.md').read_text()
+    assert '| TAC-CA | nycc |' in table
