@@ -272,9 +272,12 @@ def replacing_outputs(bag: Path, *, overwrite: bool, command: str,
         _mark_after_failure(outputs, command)
         _put_back(outputs, aside)
         raise
-    _mark(outputs, command)
-    for _, hidden in aside:
-        _remove(hidden)
+    with stop_signals_held():           # a stop here would leave both sets behind
+        try:
+            _mark(outputs, command)
+        finally:                        # the new outputs are complete either way
+            for _, hidden in aside:
+                _remove(hidden)
 
 
 def _put_back(outputs: RunOutputs, aside: list[tuple[Path, Path]]) -> list[Path]:
