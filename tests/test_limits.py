@@ -290,3 +290,15 @@ def test_reproduce_a_few_steps(tmp_path: Path, steps: int) -> None:
     assert code == 0, err
     table = (results / 'table_IV_max_improvements.md').read_text()
     assert '| TAC-CA | nycc |' in table
+
+
+def test_a_rate_of_1e308_is_one_line() -> None:
+    """It was an OverflowError traceback (an infinite prediction step count)."""
+    from trust_av_planner.system.config import check_control_rate, load_run_config
+    from trust_monitor.common.params import ParamsError
+    for argv in (['shadow', '--bag', 'x', '--out', 'y', '--rate-hz', '1e308'],
+                 ['simulate', '--control-rate-hz', '1e308']):
+        code, err = trust_av(*argv)
+        assert code == 2 and "must be <= 1000 Hz, got '1e308'" in err, err
+    with pytest.raises(ParamsError, match=r'^control_rate_hz 1e\+308: '):
+        check_control_rate(load_run_config().planner, 1e308)

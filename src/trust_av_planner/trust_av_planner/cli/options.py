@@ -21,6 +21,7 @@ from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 from trust_av_planner.system.metrics import Metrics
 from trust_monitor.common.output_files import cannot_write, odd_path
 from trust_monitor.common.params import field_spec
+from trust_monitor.common.wall_clock import WallClockConfig
 
 
 def alpha_value(text: str) -> float:
@@ -158,13 +159,16 @@ def add_lead_preview_option(parser: argparse.ArgumentParser) -> None:
 
 
 def positive_hz(text: str) -> float:
-    """argparse type: a rate in Hz, > 0."""
+    """argparse type: a rate in Hz, > 0 and at most ``control_rate_hz``'s maximum."""
     try:
         value = float(text)
     except ValueError as err:
         raise argparse.ArgumentTypeError(f'expected a rate in Hz, got {text!r}') from err
     if not value > 0.0 or value == float('inf'):
         raise argparse.ArgumentTypeError(f'must be a finite rate > 0 Hz, got {text!r}')
+    spec = field_spec(WallClockConfig, 'control_rate_hz')
+    if spec is not None and spec.high is not None and value > spec.high:
+        raise argparse.ArgumentTypeError(f'must be <= {spec.high:g} Hz, got {text!r}')
     return value
 
 

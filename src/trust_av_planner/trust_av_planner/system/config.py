@@ -174,7 +174,7 @@ def check_control_rate(planner: PlannerConfig, control_rate_hz: float) -> None:
     """
     try:
         prediction_grid(planner, 1.0 / control_rate_hz)
-    except ValueError as err:
+    except (ValueError, ArithmeticError) as err:    # 1e308 Hz: an infinite step count
         raise ParamsError(f'control_rate_hz {control_rate_hz:g}: {err}') from err
 
 
