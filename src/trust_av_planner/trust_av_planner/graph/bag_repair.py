@@ -5,6 +5,7 @@ replaces the recording only once it is whole."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import struct
 from dataclasses import dataclass, field
@@ -15,6 +16,7 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Footer, Header, Message, Schema
 from mcap.stream_reader import StreamReader
 from rosbags.interfaces import Qos
+from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import parse_qos
 
 from trust_av_planner.graph.bag_writer import (
@@ -25,6 +27,7 @@ from trust_av_planner.graph.bag_writer import (
     qos_profile,
 )
 from trust_monitor.common.output_files import stop_signals_held
+from trust_monitor.errors import one_line
 
 FOREIGN_CHUNK_MESSAGES = 1000
 """Messages per chunk in the repaired copy of another tool's bag (it has no steps)."""
@@ -63,7 +66,11 @@ def _complete_records(path: Path) -> _Records:
     found = _Records()
     try:
         with path.open('rb') as handle:
-            for record in StreamReader(handle, skip_magic=False).records:
+            # no record is longer than the file: a damaged length is an error, not an
+            # allocation of up to 4 GiB
+            size = max(os.fstat(handle.fileno()).st_size, 1)
+            for record in StreamReader(handle, skip_magic=False,
+                                       record_size_limit=size).records:
                 if isinstance(record, Schema):
                     found.schemas[record.id] = record
                 elif isinstance(record, Channel):
@@ -74,15 +81,32 @@ def _complete_records(path: Path) -> _Records:
                     found.library = record.library
                 elif isinstance(record, Footer):
                     found.complete = True
-    except (McapError, struct.error, EOFError, ValueError, OSError) as err:
+    except (McapError, struct.error, EOFError, ValueError, OSError, MemoryError) as err:
+        # MemoryError: a damaged chunk whose stated uncompressed size cannot be allocated
         found.problem = str(err) or type(err).__name__
         found.complete = False
     return found
 
 
-def _offered_qos(channel: Channel) -> list[Qos]:
+def _offered_qos(source: Path, channel: Channel) -> list[Qos]:
+    """The QoS profiles a channel's publishers offered (rosbag2's YAML in its metadata).
+
+    Raises:
+        BagWriteError: the YAML is damaged (nothing is changed: the repair refuses rather
+            than invent a profile).
+    """
     text = channel.metadata.get('offered_qos_profiles', '')
-    return parse_qos(text) if text else []
+    try:
+        profiles = parse_qos(text) if text else []
+        for profile in profiles:     # a policy rmw has no name for (rosbag2 would refuse it)
+            for policy in ('history', 'reliability', 'durability', 'liveliness'):
+                if getattr(profile, policy).name == 'UNKNOWN':
+                    raise ValueError(f'{policy} is not a policy rmw knows')
+    except (ReaderError, LookupError, TypeError, ValueError, AttributeError) as err:
+        raise BagWriteError(f'{source}: cannot repair topic {channel.topic!r} (its '
+                            f'offered_qos_profiles cannot be read: {one_line(err)}); nothing '
+                            'was changed') from err
+    return profiles
 
 
 def written_here(bag: Path, library: str) -> bool:
@@ -128,7 +152,7 @@ def _topics(source: Path, found: _Records) -> dict[int, tuple[str, str, list[Qos
             raise BagWriteError(f'{source}: cannot repair topic {channel.topic!r} ({why}); '
                                 'nothing was changed')
         assert schema is not None
-        topics[cid] = (channel.topic, schema.name, _offered_qos(channel))
+        topics[cid] = (channel.topic, schema.name, _offered_qos(source, channel))
     return topics
 
 
