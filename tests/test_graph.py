@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import os
 import signal
 import subprocess
@@ -26,6 +27,7 @@ from rosbags.highlevel import AnyReader
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
+from trust_av_planner.cli.outputs import MARKER
 from trust_av_planner.graph.bag_records import message_stamp, records_from_bag
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
@@ -103,13 +105,24 @@ def test_every_node_stops_with_its_messages_acknowledged(graph_run: tuple[Path, 
         assert 'not acknowledged' not in log.read_text(), log.read_text()
 
 
+def test_the_graphs_own_ego_odometry_replays_as_a_lead(graph_run: tuple[Path, str]) -> None:
+    """The ego plant never reports a negative speed (it reported -2e-18 m/s, and -0.0, when
+    braked exactly to a stop), so its /ego/odom loads as a preceding-vehicle trace."""
+    bag, _ = graph_run
+    config = load_run_config(overrides={'preceding_traffic': {'bag_topic': '/ego/odom'}})
+    trace = load_trace(str(bag), config.planner.dt_s, config.trace)
+    assert trace.steps >= STEPS - 1
+    speeds = [float(v) for v in trace.speeds_mps]
+    assert min(speeds) >= 0.0 and not any(math.copysign(1.0, v) < 0 for v in speeds)
+
+
 def test_recording_is_a_rosbag2_bag_by_rosbag2s_rules(graph_run: tuple[Path, str]) -> None:
     """metadata.yaml and the MCAP pass the rules of rosbag2 Jazzy's reader
     (tests/rosbag2_rules.py, derived from rosbag2_storage yaml.hpp and the MCAP plugin), and
     rosbags' own rosbag2 reader opens the directory."""
     from rosbags.rosbag2 import Reader
     bag, _ = graph_run
-    assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'us06.mcap']
+    assert sorted(p.name for p in bag.iterdir()) == [MARKER, 'metadata.yaml', 'us06.mcap']
     assert check_bag_directory(bag) == []
     with Reader(bag) as reader:
         assert reader.message_count == sum(RECORDED.values())

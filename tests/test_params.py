@@ -71,7 +71,8 @@ def test_shipped_file_names_every_parameter_of_the_graph_once() -> None:
     ('/**', {'horizon_steps': 4.0}, r'horizon_steps = 4.0 would not reach .* rcl keeps the '
                                     r'integer written for it in an earlier file; write an '
                                     r'integer here'),
-    ('human_driver', {'weight_relative_speed': -1.0}, r'weight_relative_speed must be >= 0'),
+    ('human_driver', {'weight_relative_speed': -1.0},
+     r'weight_relative_speed must be in \[0, 1e\+06\]'),
     ('nonsense_node', {'x': 1}, r"unknown node section '/nonsense_node'"),
     ('trust_monitor', {'performance_threshold': 1.0}, r'performance_threshold must be in'),
     ('planner', {'dt_s': 1e-9}, r'dt_s must be in \[0.01, 10\]'),

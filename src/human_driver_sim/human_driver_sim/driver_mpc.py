@@ -66,34 +66,39 @@ class DriverConfig:
 
     dt_s: float = control_step_param()
     horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
-    standstill_gap_m: float = param('standstill gap d_s: the bound d_H >= d_s', unit='m')
-    speed_min_mps: float = param('lower speed bound', unit='m/s', low=0.0)
+    standstill_gap_m: float = param('standstill gap d_s: the bound d_H >= d_s', unit='m',
+                                     low=0.0, high=1000.0)
+    speed_min_mps: float = param('lower speed bound', unit='m/s', low=0.0, high=100.0)
     speed_max_mps: float = param('upper speed bound (the orchestrator passes max(v_PT))',
-                                 unit='m/s')
+                                 unit='m/s', low=0.0, high=100.0)
     weight_acceleration: float = param('driver feature weight: acceleration', low=0.0,
-                                       low_inclusive=False)
-    weight_desired_speed: float = param('driver feature weight: desired speed', low=0.0)
-    weight_relative_speed: float = param('driver feature weight: relative speed', low=0.0)
+                                       low_inclusive=False, high=1e6)
+    weight_desired_speed: float = param('driver feature weight: desired speed', low=0.0,
+                                        high=1e6)
+    weight_relative_speed: float = param('driver feature weight: relative speed', low=0.0,
+                                         high=1e6)
     weight_relative_distance: float = param('driver feature weight: relative distance',
-                                            low=0.0)
+                                            low=0.0, high=1e6)
     time_headway_s: float = param("human's time headway tau_H in the relative-distance "
-                                  'feature', unit='s')
-    accel_min_mps2: float = param("human's lower acceleration bound", unit='m/s^2', high=0.0,
-                                  high_inclusive=False)
+                                  'feature', unit='s', low=0.0, high=100.0)
+    accel_min_mps2: float = param("human's lower acceleration bound", unit='m/s^2', low=-100.0,
+                                  high=0.0, high_inclusive=False)
     accel_max_mps2: float = param("human's upper acceleration bound", unit='m/s^2', low=0.0,
-                                  low_inclusive=False)
-    solver_max_iter: int = param('SQP iterations before the step falls back', low=1)
+                                  low_inclusive=False, high=100.0)
+    solver_max_iter: int = param('SQP iterations before the step falls back', low=1,
+                                 high=10_000)
     fallback_gap_gain_per_s2: float = param('gap gain of the fallback controller',
-                                            unit='1/s^2')
+                                            unit='1/s^2', low=0.0, high=1000.0)
     fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
-                                             unit='1/s')
+                                             unit='1/s', low=0.0, high=1000.0)
     desired_standstill_gap_m: float = param(
         'the d_s inside the relative-distance feature f_rd, fitted to human drivers '
-        '(docs/DRIVER_IRL.md); the hard gap bound uses standstill_gap_m', unit='m', low=0.0)
+        '(docs/DRIVER_IRL.md); the hard gap bound uses standstill_gap_m', unit='m', low=0.0,
+        high=1000.0)
     assumed_av_accel_min_mps2: float = param(
         "the AV's braking the human allows for in its gap bound: it plans d_H >= d_s against "
         "the AV at min(expected, this) at every step (Gipps 1981); the AV's u_R,min",
-        unit='m/s^2', high=0.0, default=-3.0)
+        unit='m/s^2', low=-100.0, high=0.0, default=-3.0)
     cautious: bool = param(
         'true: the gap bound assumes the AV brakes at min(expected, assumed_av_accel_min_mps2) '
         '(the worst case, never below d_s); false: at min(expected, 0) - av_extra_decel_mps2 '

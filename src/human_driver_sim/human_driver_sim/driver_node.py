@@ -35,7 +35,13 @@ from trust_monitor.common import registry
 from trust_monitor.common.grids import hold_at
 from trust_monitor.common.kinematics import advance
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
-from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.params import (
+    MAX_POSITION_M,
+    MAX_STAMP_S,
+    MAX_VEHICLE_LENGTH_M,
+    check_fields,
+    param,
+)
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import (
@@ -57,10 +63,13 @@ class FollowerState:
     """The human's initial odometry and the geometry that turns positions into gaps."""
 
     vehicle_length_m: float = param('vehicle length: odometry position to bumper-to-bumper gap',
-                                    unit='m', low=0.0)
-    initial_position_m: float = param("the human's initial position", unit='m')
-    initial_speed_mps: float = param("the human's initial speed", unit='m/s', low=0.0)
-    start_time_s: float = param('time of the initial odometry (the first step)', unit='s')
+                                    unit='m', low=0.0, high=MAX_VEHICLE_LENGTH_M)
+    initial_position_m: float = param("the human's initial position", unit='m',
+                                      low=-MAX_POSITION_M, high=MAX_POSITION_M)
+    initial_speed_mps: float = param("the human's initial speed", unit='m/s', low=0.0,
+                                     high=100.0)
+    start_time_s: float = param('time of the initial odometry (the first step)', unit='s',
+                                low=0.0, high=MAX_STAMP_S)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -36,6 +36,7 @@ from preceding_traffic.traces import (
     check_sample,
     resample,
 )
+from trust_monitor.common.input_files import not_regular
 
 ODOMETRY = 'nav_msgs/msg/Odometry'
 TWIST_STAMPED = 'geometry_msgs/msg/TwistStamped'
@@ -79,6 +80,15 @@ def read_bag_samples(path: Path, topic: str, msgtype: str,
                        f'{", ".join(SPEED_TYPES)}')
     if not path.exists():
         raise BagError(f'{path}: no such bag')
+    try:
+        inputs = sorted(p for p in path.iterdir() if p.suffix in ('.mcap', '.db3', '.yaml')) \
+            if path.is_dir() else [path]
+    except OSError as err:
+        raise BagError(f'{path}: cannot read the bag ({err.strerror})') from err
+    for item in inputs:                  # checked before opening: a FIFO blocks the open
+        kind = not_regular(item)
+        if kind is not None:
+            raise BagError(f'{item}: not a regular file ({kind}; expected a rosbag2 bag)')
     times: list[float] = []
     speeds: list[float] = []
     try:

@@ -22,11 +22,15 @@ from typing import TextIO
 import numpy as np
 
 from preceding_traffic.errors import PrecedingTrafficError
-from trust_monitor.common.params import ParamsError, check_fields, param
+from trust_monitor.common.input_files import not_regular
+from trust_monitor.common.params import MAX_STAMP_S, ParamsError, check_fields, param
 
 MAX_SPEED_MPS = 100.0
 """Fastest speed a trace may hold, m/s (360 km/h: above any road vehicle; a faster sample is
 a unit or column mistake)."""
+MAX_TIME_S = MAX_STAMP_S
+"""Latest sample time a trace may hold, s: a run stamps its messages with the trace's time
+(:data:`trust_monitor.common.params.MAX_STAMP_S`)."""
 MAX_TRACE_STEPS = 200_000
 """Most control steps a trace may have (55 h at 1 s, 5.5 h at 0.1 s): the in-process loop
 keeps one record per step (2.9 kB measured on US06), so this bounds it to about 0.6 GB."""
@@ -58,7 +62,7 @@ class TraceConfig:
 
     trace: str = param('shipped trace name, time_s,speed_mps CSV or rosbag2 bag')
     max_sample_gap_s: float = param('longest hole in a trace that is interpolated', unit='s',
-                                    low=0.0, low_inclusive=False)
+                                    low=0.0, low_inclusive=False, high=3600.0)
     bag_topic: str = param('topic replayed when trace is a bag',
                            default='/preceding_vehicle/odom')
     bag_message_type: str = param('its type: nav_msgs/msg/Odometry or '
@@ -150,12 +154,19 @@ def check_sample(where: str, t: float, v: float, previous_t: float | None,
         config: ``max_sample_gap_s``.
 
     Raises:
-        TraceError: NaN or infinite value, negative speed, a speed above
+        TraceError: NaN or infinite value, a time before 0 or after :data:`MAX_TIME_S`,
+            negative speed, a speed above
             :data:`MAX_SPEED_MPS`, time not increasing, or a hole longer than
             ``max_sample_gap_s``.
     """
     if not (math.isfinite(t) and math.isfinite(v)):
         raise TraceError(f'{where}: NaN or infinite value')
+    if t < 0.0:
+        raise TraceError(f'{where}: time {t:g} s is before 0 (a run stamps its messages with '
+                         "the trace's time, and ROS time starts at 0)")
+    if t > MAX_TIME_S:
+        raise TraceError(f'{where}: time {t:g} s is beyond {MAX_TIME_S} s (a ROS 2 time stamp '
+                         'holds int32 seconds; an hour is left for the run)')
     if v < 0.0:
         raise TraceError(f'{where}: negative speed {v:g} m/s')
     if v > MAX_SPEED_MPS:
@@ -180,6 +191,10 @@ def read_samples(path: Path, config: TraceConfig) -> tuple[np.ndarray, np.ndarra
         TraceError: missing or unreadable file, not a regular file, not UTF-8 text, not CSV,
             wrong columns, empty, non-numeric, or a sample that breaks :func:`check_sample`.
     """
+    kind = not_regular(path)
+    if kind is not None:                # checked before opening: a FIFO blocks the open
+        raise TraceError(f'{path}: not a regular file ({kind}; expected a time_s,speed_mps '
+                         'CSV)')
     try:
         handle = path.open(newline='', encoding='utf-8-sig')
     except OSError as err:

@@ -38,7 +38,7 @@ from preceding_traffic.replay import LeadReplay
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig, truncate
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
-from trust_monitor.common.params import check_fields, control_step_param, param
+from trust_monitor.common.params import MAX_POSITION_M, check_fields, control_step_param, param
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
 from trust_monitor.ros.messages import TrajectoryBytes, VehicleOdometry, msg_ns, time_msg
@@ -62,9 +62,10 @@ class TrafficRunConfig:
     dt_s: float = control_step_param()
     horizon_steps: int = param('prediction horizon N', unit='steps', low=1, high=50)
     initial_position_m: float = param("the preceding vehicle's position at the first step",
-                                      unit='m', default=0.0)
+                                      unit='m', low=-MAX_POSITION_M, high=MAX_POSITION_M,
+                                      default=0.0)
     max_steps: int = param('stop after this many steps (0: the whole trace)', low=0,
-                           default=0)
+                           high=10_000_000, default=0)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -30,7 +30,13 @@ from tf2_msgs.msg import TFMessage
 
 from trust_monitor.common.kinematics import VehicleState, advance, integrate
 from trust_monitor.common.lockstep import stamp_ns
-from trust_monitor.common.params import check_fields, control_step_param, param
+from trust_monitor.common.params import (
+    MAX_POSITION_M,
+    MAX_STAMP_S,
+    check_fields,
+    control_step_param,
+    param,
+)
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.messages import VehicleOdometry, msg_ns
@@ -45,9 +51,11 @@ class PlantConfig:
     """A simulated vehicle: step and initial odometry (the orchestrator computes these)."""
 
     dt_s: float = control_step_param()
-    initial_position_m: float = param("the AV's initial position", unit='m')
-    initial_speed_mps: float = param("the AV's initial speed", unit='m/s', low=0.0)
-    start_time_s: float = param('time of the initial odometry (the first step)', unit='s')
+    initial_position_m: float = param("the AV's initial position", unit='m',
+                                      low=-MAX_POSITION_M, high=MAX_POSITION_M)
+    initial_speed_mps: float = param("the AV's initial speed", unit='m/s', low=0.0, high=100.0)
+    start_time_s: float = param('time of the initial odometry (the first step)', unit='s',
+                                low=0.0, high=MAX_STAMP_S)
 
     def __post_init__(self) -> None:
         check_fields(self)

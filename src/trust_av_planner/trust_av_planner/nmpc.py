@@ -87,56 +87,62 @@ class PlannerConfig:
                                             'start-up')
     horizon_steps: int = param('prediction horizon N in model steps (horizon = N dt_s)',
                                unit='steps', low=1, high=50, reason=BUILT)
-    standstill_gap_m: float = param('standstill gap d_s', unit='m', reason=BUILT)
+    standstill_gap_m: float = param('standstill gap d_s', unit='m', low=0.0, high=1000.0,
+                                     reason=BUILT)
     time_headway_s: float = param('desired time headway tau_R of the CTH policy', unit='s',
-                                  low=0.0, reason=BUILT)
+                                  low=0.0, high=100.0, reason=BUILT)
     gap_min_m: float = param('minimum gap to the preceding traffic d_R,min', unit='m', low=0.0,
-                             reason=SAFETY)
+                             high=10_000.0, reason=SAFETY)
     gap_max_m: float = param('maximum gap to the preceding traffic d_R,max', unit='m',
-                             reason=SAFETY)
-    speed_min_mps: float = param('lower speed bound', unit='m/s', low=0.0, reason=SAFETY)
+                             low=0.0, high=10_000.0, reason=SAFETY)
+    speed_min_mps: float = param('lower speed bound', unit='m/s', low=0.0, high=100.0,
+                                 reason=SAFETY)
     speed_max_mps: float = param('upper speed bound (the orchestrator passes max(v_PT))',
-                                 unit='m/s', reason=SAFETY)
-    accel_min_mps2: float = param('lower acceleration bound u_R,min', unit='m/s^2', high=0.0,
-                                  high_inclusive=False, reason=SAFETY)
+                                 unit='m/s', low=0.0, high=100.0, reason=SAFETY)
+    accel_min_mps2: float = param('lower acceleration bound u_R,min', unit='m/s^2', low=-100.0,
+                                  high=0.0, high_inclusive=False, reason=SAFETY)
     accel_max_mps2: float = param('upper acceleration bound u_R,max', unit='m/s^2', low=0.0,
-                                  low_inclusive=False, reason=SAFETY)
-    trust_min: float = param('minimum trust T_min over the horizon, eq. (12)', read_only=False)
+                                  low_inclusive=False, high=100.0, reason=SAFETY)
+    trust_min: float = param('minimum trust T_min over the horizon, eq. (12)', low=-1e6,
+                             high=1e6, read_only=False)
     alpha: float = param('relative weight of explicability in the cost, eq. (4)', low=0.0,
                          high=1.0, read_only=False)
     tracking_cost_scale_m2: float = param('scale of the CTH tracking cost', unit='m^2', low=0.0,
-                                          low_inclusive=False, reason=BUILT)
+                                          low_inclusive=False, high=1e12, reason=BUILT)
     explicability_scale: float = param('scale of the explicability cost', low=0.0,
-                                       low_inclusive=False, reason=BUILT)
+                                       low_inclusive=False, high=1e12, reason=BUILT)
     solver_max_iter: int = param('SQP iterations before the step falls back', low=1,
-                                 reason=BUILT)
+                                 high=10_000, reason=BUILT)
     solver_cpu_budget_s: float = param('wall mode: CPU time per solve before the step falls '
                                        'back', unit='s', low=0.0, low_inclusive=False,
-                                       read_only=False)
+                                       high=60.0, read_only=False)
     fallback_gap_gain_per_s2: float = param('gap gain of the fallback controller',
-                                            unit='1/s^2', reason=SAFETY)
+                                            unit='1/s^2', low=0.0, high=1000.0,
+                                            reason=SAFETY)
     fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
-                                             unit='1/s', reason=SAFETY)
+                                             unit='1/s', low=0.0, high=1000.0,
+                                             reason=SAFETY)
     predictor: str = param('estimator of the plan the human expects: a registered plan '
                            'estimator (entry-point group trust_av.predictors)',
                            reason=ESTIMATOR)
     time_headway_cap_s: float = param('cap of the time headway d_H / v_H when the human is '
                                       'stopped', unit='s', low=0.0, low_inclusive=False,
-                                      reason=ESTIMATOR)
+                                      high=1000.0, reason=ESTIMATOR)
     lead_preview: str = param("the lead's speed over the horizon: the recorded preview topic, "
                               'or built from its odometry (constant speed or constant '
                               'acceleration)', choices=LEAD_PREVIEWS, default='recorded',
                               reason='selects the input topics at start-up')
     lead_accel_window_s: float = param("constant_acceleration: the lead's acceleration is its "
                                        'speed change over this window', unit='s', low=0.0,
-                                       low_inclusive=False, default=1.0, reason=SAFETY)
+                                       low_inclusive=False, high=3600.0, default=1.0,
+                                       reason=SAFETY)
     prediction_grid: str = param('NMPC grid: control_period (N = horizon / period) or '
                                  'model_step (dt_s, sampled-data control)',
                                  choices=PREDICTION_GRIDS, default='control_period',
                                  reason=BUILT)
     stale_decel_mps2: float = param('wall mode: acceleration commanded while an input is '
                                     'missing or stale (>= accel_min_mps2)', unit='m/s^2',
-                                    high=0.0, high_inclusive=False, default=-2.0,
+                                    low=-100.0, high=0.0, high_inclusive=False, default=-2.0,
                                     reason=SAFETY)
 
     def __post_init__(self) -> None:

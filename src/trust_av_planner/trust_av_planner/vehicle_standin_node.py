@@ -36,7 +36,12 @@ from preceding_traffic.replay import LeadReplay
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig
 from trust_monitor.common.kinematics import advance
-from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.params import (
+    MAX_STAMP_S,
+    MAX_VEHICLE_LENGTH_M,
+    check_fields,
+    param,
+)
 from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
 from trust_monitor.ros.messages import diagnostic_values, msg_ns, odometry
 from trust_monitor.ros.parameters import declare_config
@@ -54,17 +59,18 @@ class StandinConfig:
 
     trace: str = param('lead vehicle: shipped trace, CSV or bag', default='commute_am')
     duration_s: float = param('wall time driven', unit='s', low=0.0, low_inclusive=False,
-                              default=60.0)
+                              high=MAX_STAMP_S, default=60.0)
     drop_fraction: float = param('probability that a measurement message is dropped',
                                  low=0.0, high=1.0, default=0.05)
     outage_start_s: float = param('start of the lead-input outage', unit='s', low=0.0,
-                                  default=30.0)
+                                  high=MAX_STAMP_S, default=30.0)
     outage_s: float = param('length of the lead-input outage (0: none)', unit='s', low=0.0,
-                            default=1.0)
-    seed: int = param('seed of the drops', default=1)
+                            high=MAX_STAMP_S, default=1.0)
+    seed: int = param('seed of the drops', low=0, high=2**32 - 1, default=1)
     initial_gap_m: float = param('initial bumper-to-bumper gap', unit='m', low=0.0,
-                                 default=5.0)
-    vehicle_length_m: float = param('vehicle length', unit='m', low=0.0, default=4.5)
+                                 high=10_000.0, default=5.0)
+    vehicle_length_m: float = param('vehicle length', unit='m', low=0.0,
+                                    high=MAX_VEHICLE_LENGTH_M, default=4.5)
     report_path: str = param('JSON report written at the end', default='')
 
     def __post_init__(self) -> None:

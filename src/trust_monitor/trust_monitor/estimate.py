@@ -29,7 +29,8 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
-from trust_monitor.common.output_files import cannot_write, replacing
+from trust_monitor.common.input_files import not_regular
+from trust_monitor.common.output_files import cannot_write, odd_path, replacing
 from trust_monitor.common.param_layers import layer_files, layered_params, read_layers
 from trust_monitor.common.params import build_config, check_known
 from trust_monitor.common.rcl_values import ParsedParams
@@ -150,8 +151,12 @@ def check_output(out_path: Path) -> None:
     """Refuse an output path that cannot be written, before any work.
 
     Raises:
-        EstimateError: a directory, or a parent that is missing or not a directory.
+        EstimateError: an odd path (a NUL or newline in it, ``.``), a directory, or a
+            parent that is missing or not a directory.
     """
+    odd = odd_path(out_path)
+    if odd is not None:
+        raise EstimateError(f'-o {str(out_path)!r}: {odd}')
     if out_path.is_dir():
         raise EstimateError(f'{out_path}: is a directory; -o needs a file name')
     parent = out_path.parent
@@ -184,6 +189,9 @@ def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig,
         OutputFileError: the output cannot be written (the file there before is kept).
     """
     check_output(out_path)
+    kind = not_regular(in_path)
+    if kind is not None:                # checked before opening: a FIFO blocks the open
+        raise EstimateError(f'{in_path}: not a regular file ({kind})')
     try:
         handle = in_path.open(newline='', encoding='utf-8-sig')
     except OSError as err:

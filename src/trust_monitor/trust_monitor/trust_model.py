@@ -44,14 +44,15 @@ class TrustConfig:
     """
 
     epsilon_mps2: float = param('acceleration offset eps of eq. (8)', unit='m/s^2', low=0.0,
-                                low_inclusive=False, reason=SAME_MODEL)
+                                low_inclusive=False, high=1000.0, reason=SAME_MODEL)
     trust_growth_rate: float = param('trust growth rate delta of eq. (10), per second',
                                      unit='1/s', low=0.0, low_inclusive=False,
-                                     reason=SAME_MODEL)
+                                     high=1000.0, reason=SAME_MODEL)
     performance_threshold: float = param('performance threshold P_thre of eq. (11)', low=0.0,
                                          high=1.0, low_inclusive=False, high_inclusive=False,
                                          reason=SAME_MODEL)
-    trust_initial: float = param('initial trust T(0)', reason=SAME_MODEL)
+    trust_initial: float = param('initial trust T(0)', low=-1e6, high=1e6,
+                                 reason=SAME_MODEL)
     trust_model: str = param('registered trust model (trust_av.trust_models), e.g. paper',
                              reason=SAME_MODEL, default='paper')
 
@@ -180,7 +181,7 @@ class MonitorConfig:
     """
 
     dt_s: float = param('control step: the time each scored plan is applied for in '
-                        'lock-step', unit='s', low=0.0, low_inclusive=False,
+                        'lock-step', unit='s', low=0.0, low_inclusive=False, high=10.0,
                         reason='the step of a deterministic run')
 
     def __post_init__(self) -> None:

@@ -33,7 +33,7 @@ from human_driver_sim.fitting import MPC_BOUNDS, FitResult, configured, fit_idm,
 from human_driver_sim.idm import PARAM_NAMES, TEXTBOOK_MOTORWAY, IdmParams
 from human_driver_sim.population import FITTED_CAUTION_FIT_FILE, WEIGHT_NAMES
 from human_driver_sim.splits import Split, split_ngsim, split_openacc
-from trust_av_planner.cli.options import Progress, output_file
+from trust_av_planner.cli.options import MAX_ITERATIONS, Progress, bounded_int, output_file
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
 from trust_monitor.common.output_files import replacing
@@ -87,7 +87,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help="ROS 2 params file whose human_driver section gives what is "
                              "not fitted (dt_s, horizon, bounds) and the model scored as "
                              "'MPC before' (default: the shipped)")
-    parser.add_argument('--iterations', type=int, default=80,
+    parser.add_argument('--iterations', type=bounded_int('--iterations', 1, MAX_ITERATIONS),
+                        default=80,
                         help='Nelder-Mead iterations per start (default: %(default)s)')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(func=run)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
 
@@ -19,8 +20,9 @@ from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 from trust_av_planner.system.metrics import Metrics
 from trust_monitor.common import registry
-from trust_monitor.common.output_files import cannot_write
+from trust_monitor.common.output_files import cannot_write, odd_path
 from trust_monitor.common.params import field_spec
+from trust_monitor.common.wall_clock import WallClockConfig
 
 
 def alpha_value(text: str) -> float:
@@ -57,26 +59,61 @@ def add_params_file_option(parser: argparse.ArgumentParser) -> None:
     parser.set_defaults(params_files=[], params_file=DEFAULT_PARAMS_FILE)
 
 
-def steps_value(text: str) -> int:
-    """argparse type for ``--max-steps``: a whole number >= 0."""
-    try:
-        value = int(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f'--max-steps must be a whole number, got {text!r}') \
-            from err
-    if value < 0:
-        raise argparse.ArgumentTypeError(f'--max-steps must be >= 0 (0: the whole trace), got '
-                                         f'{value}')
-    return value
+MAX_STEPS = 10_000_000
+"""``--max-steps`` at most: 116 days at the paper's 1 Hz, 11.6 days at 10 Hz; every shipped
+trace is far shorter and a bag's stamps end at 2^31 s."""
+MAX_WORKERS = 256
+"""``--workers`` and ``--jobs`` at most (processes on one machine or Ray cluster)."""
+MAX_DRIVERS = 1000
+"""``reproduce --drivers`` at most: every case runs once per driver (1000 drivers x 40
+cases of US06 is about a CPU-day)."""
+MAX_ITERATIONS = 100_000
+"""``--epochs``, ``--dagger-rounds`` and ``--iterations`` at most."""
+MAX_SEED = 2**32 - 1
+"""Seeds are 0 .. 2^32 - 1 (what numpy's and torch's generators take)."""
+
+
+def bounded_int(option: str, minimum: int, maximum: int,
+                meaning: str = '') -> Callable[[str], int]:
+    """argparse type: a whole number in ``minimum .. maximum`` (one line naming ``option``
+    otherwise).
+
+    Args:
+        option: the option, for messages.
+        minimum: the smallest value allowed.
+        maximum: the largest value allowed (a documented maximum).
+        meaning: what the smallest value means, e.g. ``'0: the whole trace'``.
+    """
+    def value_of(text: str) -> int:
+        try:
+            value = int(text, 10)
+        except ValueError as err:
+            raise argparse.ArgumentTypeError(f'{option} must be a whole number, got '
+                                             f'{text!r}') from err
+        if value < minimum:
+            note = f' ({meaning})' if meaning else ''
+            raise argparse.ArgumentTypeError(f'{option} must be >= {minimum}{note}, got '
+                                             f'{value}')
+        if value > maximum:
+            raise argparse.ArgumentTypeError(f'{option} must be <= {maximum}, got {value}')
+        return value
+    return value_of
+
+
+steps_value = bounded_int('--max-steps', 0, MAX_STEPS, '0: the whole trace')
+"""argparse type for ``--max-steps``: a whole number in 0 .. :data:`MAX_STEPS`."""
 
 
 def output_file(path: Path, option: str = '--out') -> Path:
     """Check, before any work, that ``path`` can be written as a file.
 
     Raises:
-        TrustAvPlannerError: ``path`` is a directory, or its nearest existing ancestor is not
-            a writable directory.
+        TrustAvPlannerError: ``path`` is odd (a NUL or newline in it, ``.``), a directory,
+            or its nearest existing ancestor is not a writable directory.
     """
+    odd = odd_path(path)
+    if odd is not None:
+        raise TrustAvPlannerError(f'{option} {str(path)!r}: {odd}')
     if path.is_dir():
         raise TrustAvPlannerError(f'{path}: is a directory; {option} needs a file name')
     ancestor = path.parent
@@ -129,13 +166,16 @@ def add_lead_preview_option(parser: argparse.ArgumentParser) -> None:
 
 
 def positive_hz(text: str) -> float:
-    """argparse type: a rate in Hz, > 0."""
+    """argparse type: a rate in Hz, > 0 and at most ``control_rate_hz``'s maximum."""
     try:
         value = float(text)
     except ValueError as err:
         raise argparse.ArgumentTypeError(f'expected a rate in Hz, got {text!r}') from err
     if not value > 0.0 or value == float('inf'):
         raise argparse.ArgumentTypeError(f'must be a finite rate > 0 Hz, got {text!r}')
+    spec = field_spec(WallClockConfig, 'control_rate_hz')
+    if spec is not None and spec.high is not None and value > spec.high:
+        raise argparse.ArgumentTypeError(f'must be <= {spec.high:g} Hz, got {text!r}')
     return value
 
 
@@ -151,13 +191,15 @@ def positive_seconds(text: str) -> float:
 
 
 def positive_int(text: str) -> int:
-    """argparse type: a whole number >= 1 (a count of workers, jobs ...)."""
+    """argparse type: a whole number in 1 .. :data:`MAX_WORKERS` (a count of workers, jobs)."""
     try:
-        value = int(text)
+        value = int(text, 10)
     except ValueError as err:
         raise argparse.ArgumentTypeError(f'expected a whole number, got {text!r}') from err
     if value < 1:
         raise argparse.ArgumentTypeError(f'must be >= 1, got {text!r}')
+    if value > MAX_WORKERS:
+        raise argparse.ArgumentTypeError(f'must be <= {MAX_WORKERS}, got {text!r}')
     return value
 
 

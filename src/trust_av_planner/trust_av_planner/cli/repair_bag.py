@@ -16,6 +16,8 @@ def run(args: argparse.Namespace) -> int:
     path: Path = args.path
     if not path.exists():
         raise TrustAvPlannerError(f'{path}: no such bag directory or .mcap file')
+    if not (path.is_dir() or path.is_file()):       # a FIFO or a device: reading would block
+        raise TrustAvPlannerError(f'{path}: not a bag directory or a regular .mcap file')
     kept = repair_bag(path)
     target = path if path.is_dir() else path.with_suffix('')
     print(f'{target}: repaired, {kept} messages kept')
@@ -30,7 +32,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'killed recorder) into a complete rosbag2 bag directory, in place: every '
                     'message of every complete MCAP chunk is kept (the graph writes one chunk '
                     'per step) and metadata.yaml is written. PATH is a bag directory, or a '
-                    'lone .mcap file (it becomes a bag directory of the same stem). Exit '
-                    'codes: 0 repaired, 2 nothing readable.')
+                    'lone .mcap file (it becomes a bag directory of the same stem). A '
+                    "recording this project wrote is cut into one chunk per step again (log "
+                    "time = header stamp); another tool's keeps its log times (publish time "
+                    'becomes the log time); a topic that cannot be written again (no schema, '
+                    'not CDR, not a ROS 2 Jazzy type) is refused, not dropped. The recording '
+                    'is replaced only once the repaired bag is complete and reads back whole. '
+                    "Exit codes: 0 repaired, 2 nothing readable, no complete message, another "
+                    "tool's complete bag, or the copy failed (nothing is changed then).")
     parser.add_argument('path', type=Path, metavar='PATH', help='bag directory or .mcap file')
     parser.set_defaults(func=run)

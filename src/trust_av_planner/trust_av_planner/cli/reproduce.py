@@ -16,11 +16,16 @@ import yaml
 from human_driver_sim.population import DRIVER_FIT_FILE, FITTED_CAUTION_FIT_FILE
 from preceding_traffic.sources import load_trace
 from trust_av_planner.cli.options import (
+    MAX_DRIVERS,
+    MAX_SEED,
+    MAX_WORKERS,
     Progress,
     add_lead_preview_option,
     add_params_file_option,
     alpha_value,
+    bounded_int,
     positive_int,
+    steps_value,
 )
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.study import sweep, tables
@@ -133,10 +138,6 @@ def trend_checks(results: dict[Case, dict[str, Any]], traces: list[str],
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av reproduce``."""
     check_axes(args.predictors, args.driver_models, args.trust_models, args.alphas)
-    if args.max_steps < 0:
-        raise TrustAvPlannerError(f'--max-steps must be >= 0, got {args.max_steps}')
-    if args.drivers < 0:
-        raise TrustAvPlannerError(f'--drivers must be >= 0, got {args.drivers}')
     if args.profile != 'table_i' and args.params_files:
         raise TrustAvPlannerError('--profile and --params-file both choose the parameters: give '
                                   'one of them')
@@ -144,14 +145,9 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.results_dir or DEFAULT_RESULTS[args.profile]
     if args.lead_preview is not None and args.lead_preview != 'recorded':
         out = args.results_dir or out.with_name(f'{out.name}_{args.lead_preview}')
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise TrustAvPlannerError(f'--results-dir {out}: cannot create it '
-                                  f'({err.strerror})') from err
-    if args.lead_preview is not None:
-        files.append(lead_preview_layer(args.lead_preview, out))
-    config = load_run_config(files)  # validate before starting workers
+    # everything is checked before anything is written (the results directory included)
+    config = load_run_config(files, None if args.lead_preview is None else
+                             {'planner': {'lead_preview': args.lead_preview}})
     for trace in args.traces:               # a bad trace is named before any case runs
         load_trace(trace, config.planner.dt_s, config.trace)
     cases = sweep.sweep_cases(args.traces, args.predictors, args.alphas, args.driver_models,
@@ -160,6 +156,15 @@ def run(args: argparse.Namespace) -> int:
         cases = sweep.population_cases(cases, args.drivers, args.drivers_seed,
                                        args.driver_fit or DRIVER_FITS.get(args.profile,
                                                                           DRIVER_FIT_FILE))
+    if args.executor == 'ray':
+        sweep.check_ray_address(args.ray_address)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise TrustAvPlannerError(f'--results-dir {out}: cannot create it '
+                                  f'({err.strerror})') from err
+    if args.lead_preview is not None:
+        files.append(lead_preview_layer(args.lead_preview, out))
     executor: sweep.Executor
     if args.executor == 'ray':
         executor = sweep.RayExecutor(args.ray_address, args.workers)
@@ -270,22 +275,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--executor', choices=('local', 'ray'), default='local',
                         help='local process pool (default) or a Ray cluster')
     parser.add_argument('--workers', type=positive_int, default=None,
-                        help='parallel workers (default: one per core)')
+                        help=f'parallel workers, 1..{MAX_WORKERS} (default: one per core)')
     parser.add_argument('--ray-address', default=None,
                         help='Ray cluster address (default: start a local one)')
     parser.add_argument('--graph', action='store_true',
                         help='run every case through the ROS 2 node graph (six processes in '
                              'lock-step, recorded to MCAP under RESULTS_DIR/graph_bags/) '
                              'instead of in-process; same numbers, about 10 s per case')
-    parser.add_argument('--max-steps', type=int, default=0,
+    parser.add_argument('--max-steps', type=steps_value, default=0,
                         help='stop every case after this many steps, for a quick check '
                              "(default: whole traces; tables then differ from the paper's)")
-    parser.add_argument('--drivers', type=int, default=0, metavar='K',
+    parser.add_argument('--drivers', type=bounded_int('--drivers', 0, MAX_DRIVERS),
+                        default=0, metavar='K',
                         help='run every case for K human drivers sampled from the fitted '
                              "per-pair weights (seeded) instead of the params file's driver; "
                              'tables then give mean ± 95 %% confidence interval per cell '
-                             "(default: 0, the params file's driver)")
-    parser.add_argument('--drivers-seed', type=int, default=1,
+                             f"(default: 0, the params file's driver; at most {MAX_DRIVERS})")
+    parser.add_argument('--drivers-seed', type=bounded_int('--drivers-seed', 0, MAX_SEED),
+                        default=1,
                         help='seed of the driver population (default: %(default)s)')
     parser.add_argument('--driver-fit', type=Path, default=None,
                         help='driver-fit file: its per-driver fits, or else its per-pair '

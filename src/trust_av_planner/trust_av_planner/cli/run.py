@@ -16,7 +16,7 @@ from trust_av_planner.cli.options import (
     run_overrides,
     steps_value,
 )
-from trust_av_planner.cli.outputs import prepare_outputs
+from trust_av_planner.cli.outputs import replacing_outputs
 from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import compute_metrics
@@ -35,27 +35,27 @@ def run(args: argparse.Namespace) -> int:
                      args.max_steps)
     bag: Path = args.bag or Path('bags') / (
         f'run_{trace.name}_{config.planner.predictor}_alpha{config.planner.alpha:g}')
-    outputs = prepare_outputs(bag, overwrite=args.overwrite)
-    bar = Progress(f'graph {trace.name}', trace.steps, shown=not args.no_progress)
-    try:
-        result, records = run_graph_records(
-            config, config.trace.trace, trace, outputs.bag,
-            max_steps=args.max_steps, startup_timeout_s=args.startup_timeout_s,
-            log_dir=outputs.logs, on_step=bar.update,
-            namespace=namespace, domain_id=domain_id)
-    finally:
-        bar.close()
-    metrics = compute_metrics(records, config.min_safe_gap_m)
-    title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
-             f'alpha = {config.planner.alpha:g} (ROS 2 graph, domain {result.domain_id}'
-             f'{"" if namespace == "/" else ", namespace " + namespace})')
-    if not args.no_plot:
-        from trust_av_planner.study.plots import run_overview  # matplotlib: ~1 CPU-s
+    with replacing_outputs(bag, overwrite=args.overwrite, command='run') as outputs:
+        bar = Progress(f'graph {trace.name}', trace.steps, shown=not args.no_progress)
+        try:
+            result, records = run_graph_records(
+                config, config.trace.trace, trace, outputs.bag,
+                max_steps=args.max_steps, startup_timeout_s=args.startup_timeout_s,
+                log_dir=outputs.logs, on_step=bar.update,
+                namespace=namespace, domain_id=domain_id)
+        finally:
+            bar.close()
+        metrics = compute_metrics(records, config.min_safe_gap_m)
+        title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
+                 f'alpha = {config.planner.alpha:g} (ROS 2 graph, domain {result.domain_id}'
+                 f'{"" if namespace == "/" else ", namespace " + namespace})')
+        if not args.no_plot:
+            from trust_av_planner.study.plots import run_overview  # matplotlib: ~1 CPU-s
 
-        run_overview(records, title, outputs.plot,
-                     performance_threshold=config.trust.performance_threshold,
-                     trust_growth_rate=config.trust.trust_growth_rate,
-                     trust_initial=config.trust.trust_initial)
+            run_overview(records, title, outputs.plot,
+                         performance_threshold=config.trust.performance_threshold,
+                         trust_growth_rate=config.trust.trust_growth_rate,
+                         trust_initial=config.trust.trust_initial)
     print(format_metrics(metrics, title))
     print(f'wall time {result.wall_s:.1f} s (start-up {result.startup_s:.1f} s), '
           f'{trace.steps * trace.dt_s / max(result.wall_s - result.startup_s, 1e-9):.0f}x '
@@ -99,7 +99,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='bag directory to write (default: bags/run_<trace>_<predictor>_'
                              'alpha<alpha>)')
     parser.add_argument('--overwrite', action='store_true',
-                        help='replace an existing bag directory, plot and logs')
+                        help='replace an existing bag directory, plot and logs, only if an '
+                             'earlier trust-av run wrote them (its .trust_av_output marker); '
+                             'they are replaced once the new ones are complete, and put back '
+                             'if the run fails or is stopped')
     parser.add_argument('--no-plot', action='store_true',
                         help='do not draw BAG.png (saves about 1 CPU-s per run in scripted '
                              'batches; the metrics are printed either way)')

@@ -17,7 +17,7 @@ from trust_av_planner.cli.options import (
     positive_hz,
     positive_seconds,
 )
-from trust_av_planner.cli.outputs import prepare_outputs
+from trust_av_planner.cli.outputs import replacing_outputs
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.planner import needs_follower_state
 from trust_av_planner.system.config import (
@@ -74,18 +74,19 @@ def run(args: argparse.Namespace) -> int:
     trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
     whole_s = trace.steps * trace.dt_s
     duration_s = whole_s if args.duration_s is None else min(args.duration_s, whole_s)
-    outputs = prepare_outputs(args.out, overwrite=args.overwrite, option='--out')
     nodes = 'every node' if args.whole_graph else 'planner and trust_monitor'
-    print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '
-          f'{nodes} at {rate_hz:g} Hz', flush=True)
-    if args.whole_graph:
-        result = run_wall_graph(config, str(args.bag), trace, outputs.bag,
-                                duration_s=duration_s, rate_hz=rate_hz,
+    with replacing_outputs(args.out, overwrite=args.overwrite, command='shadow',
+                           option='--out') as outputs:
+        print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '
+              f'{nodes} at {rate_hz:g} Hz', flush=True)
+        if args.whole_graph:
+            result = run_wall_graph(config, str(args.bag), trace, outputs.bag,
+                                    duration_s=duration_s, rate_hz=rate_hz,
+                                    startup_timeout_s=args.startup_timeout_s)
+        else:
+            result = run_shadow(config, trace, outputs.bag, duration_s=duration_s,
+                                rate_hz=rate_hz, topics=topics,
                                 startup_timeout_s=args.startup_timeout_s)
-    else:
-        result = run_shadow(config, trace, outputs.bag, duration_s=duration_s,
-                            rate_hz=rate_hz, topics=topics,
-                            startup_timeout_s=args.startup_timeout_s)
     print('\n'.join(summary_lines(result)))
     if args.json is not None:
         output_files.write_text(args.json, json.dumps(
@@ -118,7 +119,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--out', type=Path, required=True,
                         help='bag directory to write (rosbag2: metadata.yaml + MCAP)')
     parser.add_argument('--overwrite', action='store_true',
-                        help='replace an existing --out bag directory')
+                        help='replace an existing --out bag directory and its logs, only if '
+                             'an earlier trust-av command wrote them (its .trust_av_output '
+                             'marker); put back if this run fails or is stopped')
     parser.add_argument('--duration-s', type=positive_seconds, default=None,
                         help='wall time to replay, s (default: the whole bag)')
     parser.add_argument('--rate-hz', type=positive_hz, default=None,

@@ -15,7 +15,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from trust_av_planner.cli.options import Progress, add_params_file_option, output_file
+from trust_av_planner.cli.options import (
+    MAX_ITERATIONS,
+    MAX_SEED,
+    Progress,
+    add_params_file_option,
+    bounded_int,
+    output_file,
+    positive_int,
+)
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors.gru import MODELS_DIR
 from trust_av_planner.study.gru_training import TrainingSettings, save_model, train_with_dagger
@@ -129,12 +137,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'about 1e-4 (docs/GRU.md). The default output replaces the shipped model.')
     parser.add_argument('--out', type=Path, default=MODELS_DIR / 'gru_plan_estimator.npz',
                         help='weights file to write (default: the shipped model)')
-    parser.add_argument('--epochs', type=int, default=None, help='override the epochs')
-    parser.add_argument('--seed', type=int, default=None, help='override the seed')
-    parser.add_argument('--dagger-rounds', type=int, default=None,
+    parser.add_argument('--epochs', type=bounded_int('--epochs', 1, MAX_ITERATIONS),
+                        default=None, help=f'override the epochs (1..{MAX_ITERATIONS})')
+    parser.add_argument('--seed', type=bounded_int('--seed', 0, MAX_SEED), default=None,
+                        help=f'override the seed (0..{MAX_SEED})')
+    parser.add_argument('--dagger-rounds', type=bounded_int('--dagger-rounds', 0, MAX_ITERATIONS),
+                        default=None,
                         help='override the number of DAgger rounds (default: '
                              f'{TrainingSettings().dagger_rounds})')
-    parser.add_argument('--jobs', type=int, default=None,
+    parser.add_argument('--jobs', type=positive_int, default=None,
                         help='processes for the closed-loop runs (default: the usable CPUs; '
                              'the result does not depend on it)')
     add_params_file_option(parser)

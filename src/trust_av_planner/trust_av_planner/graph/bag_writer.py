@@ -23,10 +23,14 @@ from __future__ import annotations
 
 import errno
 import os
+import resource
 import shutil
+import signal
 import struct
+import threading
 from collections import defaultdict
 from dataclasses import dataclass
+from importlib.metadata import version
 from io import BytesIO
 from pathlib import Path
 from typing import Any
@@ -45,6 +49,7 @@ from rosbags.rosbag2.storage_mcap import (
     McapWriter,
     PendingChunk,
     write_channel,
+    write_record,
     write_string,
 )
 from rosbags.typesys import Stores, get_typestore
@@ -61,6 +66,13 @@ RESERVE_PER_CHUNK_BYTES = 256
 RESERVE_STEP_CHUNKS = 64
 """The reserve grows by this many chunks' worth at a time (one fallocate per 64 steps)."""
 RESERVE_NAME = '.reserve'
+CHUNK_OVERHEAD_BYTES = 4096
+"""Room a step's chunk record may need beyond twice its messages' bytes (record headers,
+message indexes), for the file-size limit check."""
+RECORDER_LIBRARY = 'trust_av.bag_writer'
+"""What the MCAP header's ``library`` field of a bag this project wrote starts with (followed
+by `` (rosbags-VERSION)``): how :mod:`~trust_av_planner.graph.bag_repair` tells its own
+recordings, whose log time is the header stamp, from another tool's."""
 EXIT_DISK_FULL = 3
 """Exit code of a recorder that stopped because the disk was full (the bag is finished)."""
 MAX_INFINITE = QosTime(2147483647, 4294967295)
@@ -105,6 +117,12 @@ def qos_profile(*, reliable: bool, transient_local: bool, depth: int,
                QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
                QosDurability.TRANSIENT_LOCAL if transient_local else QosDurability.VOLATILE,
                deadline, MAX_INFINITE, QosLiveliness.AUTOMATIC, MAX_INFINITE, False)
+
+
+def _file_size_limit() -> int | None:
+    """This process's file-size limit (soft ``RLIMIT_FSIZE``), bytes; ``None`` if none."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    return None if soft == resource.RLIM_INFINITY else int(soft)
 
 
 class _WholeWrites:
@@ -160,8 +178,18 @@ class _StepStorage(McapWriter):
     """rosbags' MCAP storage, writing through an unbuffered file (so a closed chunk is on
     disk) and able to cut off a chunk that failed half-written."""
 
+    library = RECORDER_LIBRARY
+    """The MCAP header's ``library`` (followed by `` (rosbags-VERSION)``)."""
+
     def __init__(self, path: Path, compression: Any) -> None:
         super().__init__(path, compression)
+        self.bio.seek(0)                    # the same magic and header, naming this writer
+        self.bio.truncate(0)
+        self.bio.write(b'\x89MCAP\x30\r\n')
+        header = BytesIO()
+        write_string(header, 'ros2')
+        write_string(header, f'{self.library} (rosbags-{version("rosbags")})')
+        write_record(self.bio, 0x01, header)
         self.bio.flush()
         offset = self.bio.tell()
         self.bio.close()
@@ -233,17 +261,34 @@ class BagWriter:
 
     Args:
         path: the bag directory to create (it must not exist).
+        copy_of: for a repaired copy of another tool's recording (its log times are not
+            header stamps): that tool's MCAP ``library``; the copy is then not marked as
+            this project's recording (:data:`RECORDER_LIBRARY`, ``trust_av.recorder``).
 
     Raises:
         BagWriteError: the directory exists or cannot be created.
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, *, copy_of: str | None = None) -> None:
         self.path = Path(path)
+        if threading.current_thread() is threading.main_thread():
+            # past a file-size limit a write fails with EFBIG instead of killing the process
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         existed = os.path.lexists(self.path)
+        storage: type[_StepStorage] = _StepStorage
+        if copy_of is not None:
+            storage = type('_CopyStorage', (_StepStorage,),
+                           {'library': f'trust_av.bag_repair of {copy_of or "unknown"}'})
         try:
-            self._writer = _StepWriter(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-            self._writer.set_custom_data('trust_av.recorder', 'one MCAP chunk per step')
+            writer: type[_StepWriter] = _StepWriter
+            if storage is not _StepStorage:
+                writer = type('_CopyWriter', (_StepWriter,), {'STORAGE_PLUGINS': {
+                    **Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: storage}})
+            self._writer = writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            if copy_of is None:
+                self._writer.set_custom_data('trust_av.recorder', 'one MCAP chunk per step')
+            else:
+                self._writer.set_custom_data('trust_av.repaired_copy_of', copy_of or 'unknown')
             self._writer.open()
         except (WriterError, OSError) as err:
             if not existed:                 # what this call created: an empty .mcap at most
@@ -294,8 +339,14 @@ class BagWriter:
         self._topics[topic] = _Topic(connection)
         self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
 
-    def write(self, topic: str, data: bytes | memoryview) -> int:
-        """Append one raw CDR message to the current step; returns its stamp (ns).
+    def write(self, topic: str, data: bytes | memoryview, log_time_ns: int | None = None) -> int:
+        """Append one raw CDR message to the current step; returns its log time (ns).
+
+        Args:
+            topic: a topic added with :meth:`add_topic`.
+            data: the message, CDR with its 4-byte encapsulation header.
+            log_time_ns: its log time, ns (default: the stamp of its header, which the
+                graph's messages carry first).
 
         Raises:
             BagWriteError: the bag is finished (after :meth:`finish`, or once
@@ -304,7 +355,8 @@ class BagWriter:
             raise BagWriteError(f'{self.path}: written to after the bag was finished'
                                 + (f' ({self.disk_full})' if self.disk_full else ''))
         entry = self._topics[topic]
-        stamp = header_stamp_ns(data, self._offsets[topic])
+        stamp = (header_stamp_ns(data, self._offsets[topic]) if log_time_ns is None
+                 else log_time_ns)
         self._storage_write(entry.connection, stamp, data)
         entry.step_count += 1
         if stamp < self._step_first:
@@ -317,22 +369,26 @@ class BagWriter:
         """Write the current step to disk as one chunk.
 
         Returns:
-            True while recording goes on; False once the disk is full: the partial step (if
-            any) was cut off and the bag was finished with every complete step (see
+            True while recording goes on; False once the bag cannot grow (a full disk, the
+            file-size limit ``RLIMIT_FSIZE``, or any other write error): the partial step
+            (if any) was cut off and the bag was finished with every complete step (see
             :attr:`disk_full`).
         """
         if self.finished:
             return False
+        limit = _file_size_limit()
+        if limit is not None and (self._storage.bio.tell() + 2 * self._storage.chunk.bio.tell()
+                                  + CHUNK_OVERHEAD_BYTES + self._needed_reserve() > limit):
+            # the step and the summary would not fit under the limit: end before it does
+            self._drop_pending_step()
+            self._finish_after_write_error(OSError(errno.EFBIG, os.strerror(errno.EFBIG)),
+                                           f'file-size limit of {limit} bytes (RLIMIT_FSIZE)')
+            return False
         try:
             self._storage.close_step_chunk()
         except OSError as err:
-            if err.errno not in (errno.ENOSPC, errno.EDQUOT):
-                raise
-            for entry in self._topics.values():
-                entry.step_count = 0
-            self._step_first, self._step_last = 2**63 - 1, -1
-            self._storage.discard_chunk()
-            self._finish_after_disk_full(err)
+            self._drop_pending_step()
+            self._finish_after_write_error(err)
             return False
         self._chunks += 1
         for entry in self._topics.values():
@@ -347,11 +403,15 @@ class BagWriter:
             try:
                 self._grow_reserve()
             except OSError as err:
-                if err.errno not in (errno.ENOSPC, errno.EDQUOT):
-                    raise
-                self._finish_after_disk_full(err)
+                self._finish_after_write_error(err)
                 return False
         return True
+
+    def _drop_pending_step(self) -> None:
+        for entry in self._topics.values():
+            entry.step_count = 0
+        self._step_first, self._step_last = 2**63 - 1, -1
+        self._storage.discard_chunk()
 
     def finish(self) -> None:
         """Write the pending step, the MCAP summary and metadata.yaml; remove the reserve."""
@@ -392,11 +452,14 @@ class BagWriter:
             os.close(fd)
         self._reserved = size
 
-    def _finish_after_disk_full(self, err: OSError) -> None:
-        """Finish on the reserve with the complete steps; say so in :attr:`disk_full`."""
-        self.disk_full = (f'{self.path}: disk full ({os.strerror(err.errno or errno.ENOSPC)}) '
-                          f'after {self.steps} complete steps; the bag holds them and is '
-                          'finished')
+    def _finish_after_write_error(self, err: OSError, what: str = '') -> None:
+        """Finish on the reserve with the complete steps; say why in :attr:`disk_full`
+        (``disk full`` for ENOSPC and EDQUOT, else the error or ``what``)."""
+        reason = os.strerror(err.errno) if err.errno else str(err)
+        if err.errno in (errno.ENOSPC, errno.EDQUOT):
+            what = f'disk full ({reason})'
+        self.disk_full = (f'{self.path}: {what or f"cannot write ({reason})"} after '
+                          f'{self.steps} complete steps; the bag holds them and is finished')
         self._close()
 
     def _close(self) -> None:

@@ -18,7 +18,7 @@ import hashlib
 import json
 import logging
 import os
-import shutil
+import socket
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -235,16 +235,18 @@ def run_case(case: Case, params_file: ParamsFiles,
     records: list[StepRecord]
     if settings.runner == 'graph':
         # Imported here: the in-process sweep never loads rclpy.
+        from trust_av_planner.cli.outputs import replacing_outputs
         from trust_av_planner.graph.orchestrator import run_graph_records
         models = ''.join(f'_{m}' for m in (case.driver_model, case.trust_model) if m)
         bag = Path(settings.bags_dir) / (f'{Path(case.trace).stem}_{case.predictor}{models}_'
                                          f'alpha{case.alpha:g}')
-        bag.parent.mkdir(parents=True, exist_ok=True)
-        # Left by an interrupted sweep (its case is not cached): the bag, its logs.
-        for stale in (bag, bag.with_name(bag.name + '.logs')):
-            shutil.rmtree(stale, ignore_errors=True)
-        _, records = run_graph_records(config, case.trace, trace, bag,
-                                       max_steps=settings.max_steps)
+        # A bag and logs left by an interrupted sweep (its case is not cached) are replaced,
+        # if its marker proves a trust-av command wrote them (cli.outputs).
+        with replacing_outputs(bag, overwrite=True, command='reproduce',
+                               option='--results-dir') as outputs:
+            _, records = run_graph_records(config, case.trace, trace, outputs.bag,
+                                           max_steps=settings.max_steps,
+                                           log_dir=outputs.logs)
     else:
         records = simulate(config, trace).records
     metrics = compute_metrics(records, config.min_safe_gap_m)
@@ -292,10 +294,49 @@ class LocalExecutor:
                 on_result(case, result)
 
 
+RAY_CONNECT_TIMEOUT_S = 5.0
+"""How long a Ray cluster's address may take to accept a TCP connection (``ray.init`` itself
+retries an unreachable address for minutes)."""
+
+
+def check_ray_address(address: str | None, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """Refuse, within ``timeout_s``, a Ray cluster address nothing listens on.
+
+    ``None``, ``auto`` and ``local`` are Ray's own choices (a local cluster, or the one in
+    ``RAY_ADDRESS``) and are not probed. ``HOST:PORT`` and ``ray://HOST:PORT`` are.
+
+    Args:
+        address: ``--ray-address``.
+        timeout_s: connect timeout, s.
+
+    Raises:
+        TrustAvPlannerError: not HOST:PORT, or nothing accepts a connection there.
+    """
+    if address is None or address in ('auto', 'local'):
+        return
+    text = address.removeprefix('ray://')
+    host, _, port_text = text.rpartition(':')
+    if not host or not port_text.isdigit() or not 0 < int(port_text) < 65536:
+        raise TrustAvPlannerError(f'--ray-address {address!r}: expected HOST:PORT, '
+                                  'ray://HOST:PORT, auto or local')
+    try:
+        with socket.create_connection((host.strip('[]'), int(port_text)), timeout=timeout_s):
+            pass
+    except OSError as err:
+        reason = err.strerror or str(err) or type(err).__name__
+        raise TrustAvPlannerError(f'--ray-address {address}: cannot connect within '
+                                  f'{timeout_s:g} s ({reason})') from err
+
+
 class RayExecutor:
-    """The same cases as Ray tasks (``pip install ray``; local cluster unless ``address``)."""
+    """The same cases as Ray tasks (``pip install ray``; local cluster unless ``address``).
+
+    Raises:
+        TrustAvPlannerError: ``address`` is unreachable (:func:`check_ray_address`).
+    """
 
     def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
+        check_ray_address(address)
         self.address = address
         self.num_cpus = num_cpus
 

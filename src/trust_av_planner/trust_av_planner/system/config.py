@@ -35,6 +35,7 @@ from trust_monitor.common.param_layers import (
     text_layer,
 )
 from trust_monitor.common.params import (
+    MAX_VEHICLE_LENGTH_M,
     ParamsError,
     build_config,
     check_fields,
@@ -62,11 +63,11 @@ class SharedConfig:
     """Parameters in the ``/**`` section that are not owned by one component."""
 
     vehicle_length_m: float = param('vehicle length: odometry position to bumper-to-bumper gap',
-                                    unit='m', low=0.0)
+                                    unit='m', low=0.0, high=MAX_VEHICLE_LENGTH_M)
     speed_max_from_trace: bool = param('use max(v_PT) of the trace as the speed bound '
                                        '(Table I)')
     safety_gap_margin_m: float = param('a gap below d_s minus this margin is counted as unsafe',
-                                       unit='m', low=0.0)
+                                       unit='m', low=0.0, high=1000.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -234,7 +235,7 @@ def check_control_rate(planner: PlannerConfig, control_rate_hz: float) -> None:
     """
     try:
         prediction_grid(planner, 1.0 / control_rate_hz)
-    except ValueError as err:
+    except (ValueError, ArithmeticError) as err:    # 1e308 Hz: an infinite step count
         raise ParamsError(f'control_rate_hz {control_rate_hz:g}: {err}') from err
 
 

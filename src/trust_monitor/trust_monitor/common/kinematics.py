@@ -30,9 +30,12 @@ class VehicleState:
 
 
 def integrate(state: VehicleState, accel_mps2: float, dt_s: float) -> VehicleState:
-    """One explicit Euler step: x += v dt, v += a dt."""
+    """One explicit Euler step: x += v dt, v += a dt, the speed never below 0 (no
+    reversing; a command that brakes exactly to a stop, a = -v / dt, leaves rounding such as
+    -2e-18 m/s or -0.0, which is reported as 0.0)."""
+    speed = state.speed_mps + accel_mps2 * dt_s
     return VehicleState(state.position_m + state.speed_mps * dt_s,
-                        state.speed_mps + accel_mps2 * dt_s)
+                        0.0 if speed <= 0.0 else speed)   # NaN stays NaN
 
 
 def gap_m(lead: VehicleState, follower: VehicleState, vehicle_length_m: float) -> float:
@@ -43,16 +46,17 @@ def gap_m(lead: VehicleState, follower: VehicleState, vehicle_length_m: float) -
 def advance(position_m: float, speed_mps: float, accel_mps2: float,
             dt_s: float) -> tuple[float, float]:
     """A simulated vehicle over ``dt_s`` of wall time (wall mode of ``ego_plant`` and
-    ``human_driver``): explicit Euler like :func:`integrate`, x += v dt, v += a dt, except
-    that the speed stops at 0 (a vehicle braking to a stop does not reverse within a long
-    tick). Returns (position_m, speed_mps).
+    ``human_driver``): explicit Euler like :func:`integrate`, x += v dt, v += a dt, the
+    speed stopping at 0 (a vehicle braking to a stop does not reverse within a long tick).
+    Returns (position_m, speed_mps).
 
     Raises:
         ValueError: ``dt_s`` is negative.
     """
     if dt_s < 0.0:
         raise ValueError(f'dt_s must be >= 0, got {dt_s}')
-    return position_m + speed_mps * dt_s, max(speed_mps + accel_mps2 * dt_s, 0.0)
+    speed = speed_mps + accel_mps2 * dt_s
+    return position_m + speed_mps * dt_s, 0.0 if speed <= 0.0 else speed   # -0.0 too
 
 
 def step(gap_m: Any, speed_mps: Any, lead_speed_mps: Any, accel_mps2: Any,

@@ -121,6 +121,24 @@ def write_text(path: Path, text: str) -> None:
         temporary.write_text(text)
 
 
+def odd_path(path: str | Path) -> str | None:
+    """Why ``path`` is no name for an output, or ``None``: a NUL (no system call takes it),
+    a newline or another control character (a file name that breaks every listing and log
+    line), or no name at all (``.``, ``..``, ``/``, empty).
+
+    Args:
+        path: an output path as the user gave it.
+    """
+    text = str(path)
+    if '\x00' in text:
+        return 'the path holds a NUL character'
+    if any(ord(char) < 32 or ord(char) == 127 for char in text):
+        return 'the path holds a newline or another control character'
+    if Path(text).name in ('', '.', '..'):
+        return 'names no file or directory of its own (., .., / or empty)'
+    return None
+
+
 def cannot_write(path: Path, directory: Path) -> str | None:
     """Why the output file ``path`` cannot be written, or ``None`` if it can. ``directory`` is
     where it goes (its nearest existing ancestor): a regular file (new or replaced) is

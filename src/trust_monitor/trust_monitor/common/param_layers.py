@@ -27,6 +27,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from trust_monitor.common.input_files import not_regular
 from trust_monitor.common.params import ParamsError
 from trust_monitor.common.rcl_values import ParsedParams
 from trust_monitor.common.rcl_yaml import params_for_node, parse_params_text
@@ -109,6 +110,9 @@ def read_layer(path: str | Path) -> ParsedParams:
             the file, line and key, never the file's content).
     """
     path = Path(path)
+    kind = not_regular(path)
+    if kind is not None:                # checked before opening: a FIFO blocks the open
+        raise ParamsError(f'{path}: cannot read params file (not a regular file: {kind})')
     try:
         with path.open('rb') as handle:
             if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):

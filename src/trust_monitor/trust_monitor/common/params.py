@@ -24,6 +24,7 @@ from typing import Any, TypeVar
 
 import yaml
 
+from trust_monitor.common.input_files import not_regular
 from trust_monitor.errors import TrustMonitorError
 
 WILDCARD = '/**'
@@ -117,6 +118,15 @@ def param(description: str, *, unit: str = '', low: float | None = None,
     return dataclasses.field(default=default, metadata={PARAM_METADATA_KEY: spec})
 
 
+MAX_STAMP_S = 2**31 - 3600
+"""Latest time a run may stamp, s: a ROS 2 ``builtin_interfaces/Time`` holds int32 seconds
+(below 2^31 s); an hour is left for a horizon and the end of a run. Start times and trace
+times are refused beyond it, and before 0."""
+MAX_POSITION_M = 1e7
+"""Largest initial position along the road, m (10,000 km)."""
+MAX_VEHICLE_LENGTH_M = 100.0
+"""Longest vehicle, m."""
+
 CONTROL_STEP_RANGE_S = (0.01, 10.0)
 """Allowed control step dt_s, s: 100 Hz to one step per 10 s (the paper's is 1 s). Together
 with ``preceding_traffic.traces.MAX_TRACE_STEPS`` it bounds a run's length in steps."""
@@ -181,6 +191,9 @@ def read_params_file(path: str | Path) -> dict[str, dict[str, Any]]:
         ParamsError: the file is missing, not YAML, or not in params-file format.
     """
     path = Path(path)
+    kind = not_regular(path)
+    if kind is not None:                # a FIFO would block the read
+        raise ParamsError(f'{path}: cannot read params file (not a regular file: {kind})')
     try:
         text = path.read_text()
     except OSError as err:

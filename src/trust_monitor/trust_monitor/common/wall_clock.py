@@ -45,15 +45,17 @@ class WallClockConfig:
                             'latest inputs)', choices=CLOCK_MODES, default='lockstep',
                             reason=STARTUP)
     control_rate_hz: float = param('wall mode: control loop rate', unit='Hz', low=0.0,
-                                   low_inclusive=False, default=10.0, reason=STARTUP)
+                                   low_inclusive=False, high=1000.0, default=10.0,
+                                   reason=STARTUP)
     input_timeout_s: float = param('wall mode: an input received longer ago than this is '
-                                   'stale', unit='s', low=0.0, low_inclusive=False, default=0.5,
+                                   'stale', unit='s', low=0.0, low_inclusive=False, high=3600.0,
+                                   default=0.5,
                                    reason=STARTUP)
     jitter_report_path: str = param("wall mode: JSON file for the loop's jitter statistics at "
                                     "shutdown ('' = log only)", default='', reason=STARTUP)
     jitter_log_period_s: float = param('wall mode: period of the jitter log line', unit='s',
-                                       low=0.0, low_inclusive=False, default=10.0,
-                                       reason=STARTUP)
+                                       low=0.0, low_inclusive=False, high=86_400.0,
+                                       default=10.0, reason=STARTUP)
     input_deadline_qos: bool = param('wall mode: vehicle inputs request a QoS deadline of '
                                      'input_timeout_s (then only publishers that offer one '
                                      'match); false: staleness from receive times alone',
