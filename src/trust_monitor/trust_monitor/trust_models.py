@@ -83,7 +83,8 @@ class AsymmetricConfig:
 
     asymmetric_loss_ratio: float = param('trust loss rate as a multiple of the gain rate '
                                          'delta (asymmetric model)', low=0.0,
-                                         low_inclusive=False, reason=SAME_MODEL, default=2.0)
+                                         low_inclusive=False, reason=SAME_MODEL, default=2.0,
+                                         high=1000.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -135,19 +136,19 @@ class BetaBernoulliConfig:
 
     beta_bernoulli_alpha0: float = param('prior alpha of the Beta trust distribution',
                                          low=0.0, low_inclusive=False, reason=SAME_MODEL,
-                                         default=1.0)
+                                         default=1.0, high=1e6)
     beta_bernoulli_beta0: float = param('prior beta of the Beta trust distribution',
                                         low=0.0, low_inclusive=False, reason=SAME_MODEL,
-                                        default=1.0)
+                                        default=1.0, high=1e6)
     beta_bernoulli_success_weight: float = param('w_s: alpha gained per episode of full '
                                                  'performance', low=0.0, reason=SAME_MODEL,
-                                                 default=1.0)
+                                                 default=1.0, high=1e6)
     beta_bernoulli_failure_weight: float = param('w_f: beta gained per episode of zero '
                                                  'performance', low=0.0, reason=SAME_MODEL,
-                                                 default=1.0)
+                                                 default=1.0, high=1e6)
     beta_bernoulli_episode_s: float = param('length of one interaction episode', unit='s',
                                             low=0.0, low_inclusive=False, reason=SAME_MODEL,
-                                            default=1.0)
+                                            default=1.0, high=3600.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -228,16 +229,17 @@ class OptimoConfig:
     """
 
     optimo_bias_rate_per_s: float = param('w_b: trust drift', unit='1/s', reason=SAME_MODEL,
-                                          default=0.0)
+                                          default=0.0, low=-1000.0, high=1000.0)
     optimo_performance_rate_per_s: float = param('w_p: trust gain per unit performance',
                                                  unit='1/s', low=0.0, reason=SAME_MODEL,
-                                                 default=0.1)
+                                                 default=0.1, high=1000.0)
     optimo_change_gain: float = param('w_d: trust gain per unit change of performance',
-                                      low=0.0, reason=SAME_MODEL, default=0.0)
+                                      low=0.0, reason=SAME_MODEL, default=0.0, high=1000.0)
     optimo_noise_std: float = param('sigma: process noise of trust per sqrt(second)',
-                                    unit='1/sqrt(s)', low=0.0, reason=SAME_MODEL, default=0.1)
+                                    unit='1/sqrt(s)', low=0.0, reason=SAME_MODEL, default=0.1,
+                                    high=1000.0)
     optimo_initial_std: float = param('standard deviation of the initial trust', low=0.0,
-                                      reason=SAME_MODEL, default=0.0)
+                                      reason=SAME_MODEL, default=0.0, high=1e6)
     optimo_performance_threshold: float = param('p = P at or above this, P - 1 below (eq. 11)',
                                                 low=0.0, high=1.0, high_inclusive=False,
                                                 reason=SAME_MODEL, default=0.8)

@@ -40,16 +40,16 @@ class FollowerConfig:
     """
 
     accel_max_mps2: float = param('full gas', unit='m/s^2', low=0.0, low_inclusive=False,
-                                  default=2.5)
+                                  default=2.5, high=20.0)
     accel_min_mps2: float = param('full brake', unit='m/s^2', high=0.0,
-                                  high_inclusive=False, default=-6.0)
+                                  high_inclusive=False, default=-6.0, low=-20.0)
     input_timeout_s: float = param('no command for this long: the participant is gone',
-                                   unit='s', low=0.0, low_inclusive=False, default=0.5)
+                                   unit='s', low=0.0, low_inclusive=False, default=0.5, high=60.0)
     coast_s: float = param('after the timeout the car coasts (0 m/s^2) this long', unit='s',
-                           low=0.0, default=1.0)
+                           low=0.0, default=1.0, high=60.0)
     fallback_brake_mps2: float = param('then it brakes at this rate until it stops',
                                        unit='m/s^2', high=0.0, high_inclusive=False,
-                                       default=-2.0)
+                                       default=-2.0, low=-20.0)
 
     def __post_init__(self) -> None:
         check_fields(self)

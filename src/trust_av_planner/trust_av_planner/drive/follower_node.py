@@ -58,9 +58,9 @@ class FollowerStart:
     """Where the participant's car starts (the drive computes it)."""
 
     initial_position_m: float = param("the participant's car's initial position", unit='m',
-                                      default=0.0)
+                                      default=0.0, low=-1e7, high=1e7)
     initial_speed_mps: float = param("the participant's car's initial speed", unit='m/s',
-                                     low=0.0, default=0.0)
+                                     low=0.0, default=0.0, high=100.0)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -50,26 +50,27 @@ CONDITION_KEYS = ('condition_names', 'condition_alphas', 'condition_predictors',
 class DriveConfig:
     """The study's settings (``config/drive.yaml``)."""
 
-    drive_duration_s: float = param('wall time of one drive', unit='s', low=1.0, default=120.0)
+    drive_duration_s: float = param('wall time of one drive', unit='s', low=1.0, default=120.0,
+    high=86400.0)
     practice: bool = param('start each new session with a practice drive', default=True)
     practice_duration_s: float = param('wall time of the practice drive', unit='s', low=1.0,
-                                       default=60.0)
+                                       default=60.0, high=86400.0)
     rating_period_s: float = param('the in-drive trust rating is asked this often', unit='s',
-                                   low=1.0, default=15.0)
+                                   low=1.0, default=15.0, high=3600.0)
     abandon_after_s: float = param('a drive ends as abandoned when no pedal sample came for '
-                                   'this long', unit='s', low=0.5, default=10.0)
+                                   'this long', unit='s', low=0.5, default=10.0, high=3600.0)
     start_timeout_s: float = param("how long a drive waits for the participant's start",
-                                   unit='s', low=1.0, default=900.0)
+                                   unit='s', low=1.0, default=900.0, high=86400.0)
     questionnaire_timeout_s: float = param('how long the questionnaire waits for its answers',
-                                           unit='s', low=1.0, default=900.0)
+                                           unit='s', low=1.0, default=900.0, high=86400.0)
     host: str = param('address the page is served on (127.0.0.1: this machine only)',
                       default='127.0.0.1')
     port: int = param('TCP port of the page (0: any free port)', low=0, high=65535,
                       default=8765)
     seed: int = param("the study's seed, recorded with every drive (drive k: seed + k)",
-                      low=0, default=0)
+                      low=0, default=0, high=4294967295)
     max_lag_s: float = param('largest lag tried when comparing ratings with a model',
-                             unit='s', low=0.0, default=10.0)
+                             unit='s', low=0.0, default=10.0, high=600.0)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -45,9 +45,9 @@ class RecorderConfig:
 
     bag_path: str = param('rosbag2 bag directory to create (it must not exist)')
     expected_steps: int = param('the run is complete after this many steps (0: record until '
-                                'stopped)', low=0, default=0)
+                                'stopped)', low=0, default=0, high=10_000_000)
     flush_period_s: float = param('wall mode: a chunk is written at least this often',
-                                  unit='s', low=0.0, low_inclusive=False, default=1.0)
+                                  unit='s', low=0.0, low_inclusive=False, default=1.0, high=3600.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
