@@ -208,7 +208,7 @@ def test_shipped_drive_settings_load() -> None:
 
 
 @pytest.mark.parametrize(('text', 'message'), [
-    ('rating_period_s: 0.5', 'rating_period_s must be >= 1'),
+    ('rating_period_s: 0.5', 'rating_period_s must be in \\[1, 3600\\]'),
     ('colour: red', 'unknown parameter'),
     ('condition_alphas: [0.0]', 'arrays of one length'),
     ('condition_alphas: [0.0, 2.0]', 'alpha must be in'),

@@ -324,7 +324,8 @@ def test_params_files_layer_in_reproduce(tmp_path: Path, short_trace: str) -> No
                      short_trace, '--predictors', 'ca', '--alphas', '0', '--max-steps', '3',
                      '--results-dir', str(tmp_path / 'out'), '--workers', '1')
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert 'epsilon_mps2 = 3, performance_threshold = 0.8, explicability_scale = 0.02' in proc.stdout
+    assert ('epsilon_mps2 = 3, performance_threshold = 0.8, explicability_scale = 0.02'
+            in proc.stdout)
 
 
 def test_unregistered_names_are_refused_in_one_line(tmp_path: Path) -> None:
