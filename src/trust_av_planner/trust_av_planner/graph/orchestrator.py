@@ -47,6 +47,7 @@ from trust_av_planner.graph.session import (
 from trust_av_planner.system.closed_loop import InitialState, equilibrium_start
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
+from trust_monitor.common.record_window import window_steps
 
 
 def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: InitialState,
@@ -70,7 +71,8 @@ def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: In
                   'lead_preview': cfg.planner.lead_preview}),
         NodeSpec('preceding_traffic', 'preceding_traffic.traffic_node',
                  {'trace': trace_arg, 'initial_position_m': initial.traffic.position_m,
-                  'max_steps': max_steps, 'bag_topic': config.trace.bag_topic,
+                  'max_steps': max_steps, 'recorder_window_steps': window_steps(),
+                  'bag_topic': config.trace.bag_topic,
                   'bag_message_type': config.trace.bag_message_type,
                   'max_sample_gap_s': config.trace.max_sample_gap_s}),
     ]

@@ -1,0 +1,135 @@
+"""A recording loses nothing whatever the load: the step authority runs at most a window of
+steps ahead of what the recorder acknowledges (trust_monitor.common.record_window), so a
+recorder that is suspended (SIGSTOP) or writes slowly holds the graph back instead of
+dropping messages from an overflowing DDS history."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import assert_every_topic_complete, children_of, long_trace, recorded_chunks
+from rosbags.rosbag2 import Reader
+
+from trust_monitor.common.record_window import (
+    ACK_EVERY_STEPS,
+    HISTORY_DEPTH,
+    held_steps,
+    may_start,
+    recorded_topics,
+    window_steps,
+)
+from trust_monitor.common.topics import TOPICS, Topic
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from rosbag2_rules import check_bag_directory  # the test-side oracle module
+
+
+def test_the_window_keeps_every_topic_within_half_the_history() -> None:
+    window = window_steps()
+    assert window > ACK_EVERY_STEPS
+    for row in recorded_topics():
+        # messages published but not yet taken by the recorder, at most (module docstring)
+        assert row.per_step * window <= HISTORY_DEPTH // 2, row.name
+    assert {t.name for t in recorded_topics()} == {
+        t.name for t in TOPICS if 'recorder' in t.subscribers and t.per_step}
+    tf = next(t for t in TOPICS if t.name == 'tf')
+    assert tf.per_step == 3 and window == HISTORY_DEPTH // 6
+
+
+def test_a_window_that_cannot_be_acknowledged_is_refused() -> None:
+    with pytest.raises(ValueError, match='acknowledgement period'):
+        window_steps(depth=6 * ACK_EVERY_STEPS)
+
+
+def test_held_steps_is_the_least_complete_topic() -> None:
+    table = (Topic('a', 'x/msg/A', ('p',), ('recorder',), 'STEP', '', '', ''),
+             Topic('tf', 'x/msg/B', ('p', 'q', 'r'), ('recorder',), 'STEP', '', '', '',
+                   per_step=3, initial=2),
+             Topic('s', 'x/msg/C', ('o',), ('p',), 'LATCHED', '', '', '', per_step=0))
+    assert held_steps({}, table) == 0
+    assert held_steps({'a': 10, 'tf': 2 + 3 * 7 + 2}, table) == 7
+    assert held_steps({'a': 4, 'tf': 2 + 3 * 7}, table) == 4
+    assert may_start(0, 0, 10) and may_start(9, 0, 10) and not may_start(10, 0, 10)
+    assert may_start(10, 1, 10) and may_start(10**6, 0, 0)
+
+
+# --- the whole graph ------------------------------------------------------------------------
+
+STEPS = 1200
+
+
+def run(bag: Path, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    trace = long_trace(bag.parent)
+    return subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
+                             str(trace), '--max-steps', str(STEPS), '--bag', str(bag),
+                             '--no-progress', '--no-plot'], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def recorder_pid(run_pid: int) -> int:
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        for pid in children_of(run_pid):
+            try:
+                command = Path(f'/proc/{pid}/cmdline').read_bytes()
+            except OSError:
+                continue
+            if b'trust_av_planner.graph.recorder_node' in command:
+                return pid
+        time.sleep(0.1)
+    raise AssertionError('no recorder process')
+
+
+def assert_lossless(bag: Path) -> dict[str, int]:
+    """Every message of every step of every recorded topic is in the bag."""
+    assert check_bag_directory(bag) == []
+    with Reader(bag) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    expected = {f'/{t.name}': t.messages(STEPS) for t in TOPICS if 'recorder' in t.subscribers}
+    assert counts == expected
+    assert assert_every_topic_complete(bag) == STEPS
+    return counts
+
+
+@pytest.mark.wall_clock
+def test_a_recorder_suspended_for_seconds_mid_run_loses_nothing(tmp_path: Path) -> None:
+    """SIGSTOP the recorder for 6 s after 100 steps: without back-pressure the graph ran on
+    (~350 steps/s) and the topics' histories (1000 samples, 333 steps of /tf) overflowed."""
+    bag = tmp_path / 'stopped'
+    proc = run(bag)
+    recorder = recorder_pid(proc.pid)
+    mcap = bag / f'{bag.name}.mcap'
+    deadline = time.monotonic() + 120
+    while recorded_chunks(mcap) < 100 and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.02)
+    os.kill(recorder, signal.SIGSTOP)
+    try:
+        stalled_at = recorded_chunks(mcap)
+        time.sleep(6.0)
+        assert proc.poll() is None          # the run waits for its recorder
+    finally:
+        os.kill(recorder, signal.SIGCONT)
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, out + err
+    assert stalled_at < STEPS - window_steps()
+    counts = assert_lossless(bag)
+    print(f'recorder stopped for 6 s at step {stalled_at} of {STEPS}: '
+          f'{sum(counts.values())} messages recorded, none lost')
+
+
+@pytest.mark.wall_clock
+def test_a_slow_disk_holds_the_graph_back_and_loses_nothing(tmp_path: Path) -> None:
+    """Every chunk write of the recorder sleeps 8 ms (the test-only slow disk): the graph,
+    about three times faster, waits for it."""
+    bag = tmp_path / 'slow'
+    proc = run(bag, dict(os.environ, TRUST_AV_TEST_WRITE_DELAY_S='0.008'))
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, out + err
+    assert_lossless(bag)
