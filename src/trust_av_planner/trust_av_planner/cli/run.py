@@ -7,7 +7,7 @@ import argparse
 from pathlib import Path
 
 from preceding_traffic.sources import load_trace
-from preceding_traffic.traces import truncate
+from preceding_traffic.traces import SpeedTrace, truncate
 from trust_av_planner.cli.options import (
     Progress,
     add_run_options,
@@ -18,16 +18,15 @@ from trust_av_planner.cli.options import (
 )
 from trust_av_planner.cli.outputs import prepare_outputs
 from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
-from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.config import RunConfig, load_run_config
 from trust_av_planner.system.metrics import compute_metrics
+from trust_monitor.common.output_lock import hold_output_lock
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av run``."""
-    # imported here: rclpy, rosbags and matplotlib cost about 1 CPU-s, which --help and a
-    # refused option do not need to pay
-    from trust_av_planner.graph.orchestrator import run_graph_records
-
+    # rclpy, rosbags and matplotlib are imported later: they cost about 1 CPU-s, which
+    # --help and a refused option do not need to pay
     namespace = check_namespace(args.namespace, '--namespace')
     domain_id = None if args.domain_id is None else domain_id_value(args.domain_id)
     config = load_run_config(args.params_files, run_overrides(args))
@@ -35,6 +34,16 @@ def run(args: argparse.Namespace) -> int:
                      args.max_steps)
     bag: Path = args.bag or Path('bags') / (
         f'run_{trace.name}_{config.planner.predictor}_alpha{config.planner.alpha:g}')
+    with hold_output_lock(bag):     # a second run on this bag is refused before it writes
+        return _record(args, config, trace, bag, namespace, domain_id)
+
+
+def _record(args: argparse.Namespace, config: RunConfig, trace: SpeedTrace, bag: Path,
+            namespace: str, domain_id: int | None) -> int:
+    """Prepare the outputs, run the graph into ``bag``, print the metrics (the lock on
+    ``bag`` held)."""
+    from trust_av_planner.graph.orchestrator import run_graph_records
+
     outputs = prepare_outputs(bag, overwrite=args.overwrite)
     bar = Progress(f'graph {trace.name}', trace.steps, shown=not args.no_progress)
     try:

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.cli.options import (
     add_params_file_option,
     alpha_value,
@@ -22,10 +23,12 @@ from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PREDICTORS
 from trust_av_planner.system.config import (
     PlannerTopics,
+    RunConfig,
     check_control_rate,
     load_run_config,
 )
 from trust_monitor.common import output_files
+from trust_monitor.common.output_lock import hold_output_lock
 from trust_monitor.common.wall_clock import format_summary
 
 if TYPE_CHECKING:
@@ -42,9 +45,6 @@ def summary_lines(result: ShadowRun) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av shadow``."""
-    # imported here, as in `trust-av run`: --help and a refused option do not pay for rclpy
-    from trust_av_planner.graph.shadow import run_shadow, run_wall_graph
-
     if args.json is not None:
         output_file(args.json, '--json')
     overrides: dict[str, dict[str, object]] = {'preceding_traffic': {'trace': str(args.bag)}}
@@ -74,6 +74,17 @@ def run(args: argparse.Namespace) -> int:
     trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
     whole_s = trace.steps * trace.dt_s
     duration_s = whole_s if args.duration_s is None else min(args.duration_s, whole_s)
+    with hold_output_lock(args.out):    # a second run on --out is refused before it writes
+        return _record(args, config, trace, duration_s, whole_s, rate_hz, topics)
+
+
+def _record(args: argparse.Namespace, config: RunConfig, trace: SpeedTrace,
+            duration_s: float, whole_s: float, rate_hz: float, topics: PlannerTopics) -> int:
+    """Prepare the outputs, replay into ``--out``, print the loop statistics (the lock on
+    ``--out`` held)."""
+    # imported here, as in `trust-av run`: --help and a refused option do not pay for rclpy
+    from trust_av_planner.graph.shadow import run_shadow, run_wall_graph
+
     outputs = prepare_outputs(args.out, overwrite=args.overwrite, option='--out')
     nodes = 'every node' if args.whole_graph else 'planner and trust_monitor'
     print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 
 from trust_av_planner.cli.options import (
@@ -16,6 +17,7 @@ from trust_av_planner.cli.options import (
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import check_control_rate, load_run_config
 from trust_monitor.common.output_files import replacing
+from trust_monitor.common.output_lock import hold_output_lock
 
 
 def run(args: argparse.Namespace) -> int:
@@ -26,11 +28,14 @@ def run(args: argparse.Namespace) -> int:
     if args.control_rate_hz is not None:  # the planner node's rule for control_rate_hz
         check_control_rate(config.planner, args.control_rate_hz)
     trace = control_trace(config, args.control_rate_hz)
-    bar = Progress(f'simulate {trace.name}', trace.steps, shown=not args.no_progress)
-    result = simulate(config, trace, on_step=bar.update)
-    bar.close()
-    if args.out is not None:
-        write_table(result, args.out)
+    with contextlib.ExitStack() as stack:
+        if args.out is not None:   # a second command on --out is refused before it writes
+            stack.enter_context(hold_output_lock(args.out))
+        bar = Progress(f'simulate {trace.name}', trace.steps, shown=not args.no_progress)
+        result = simulate(config, trace, on_step=bar.update)
+        bar.close()
+        if args.out is not None:
+            write_table(result, args.out)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
              f'alpha = {config.planner.alpha:g} (in-process, {1.0 / trace.dt_s:g} Hz)')
     print(format_metrics(result.metrics, title))

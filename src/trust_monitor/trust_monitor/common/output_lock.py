@@ -1,0 +1,135 @@
+"""One command at a time per output: a lock on an output path, taken before anything of it
+is created or replaced (:func:`hold_output_lock`).
+
+The lock is ``fcntl.flock`` on a lock file beside the output, ``<output>.lock``, holding the
+holder's pid. The kernel releases it when the holder exits, however it exits (SIGKILL
+included), so a lock file left behind never blocks anyone; the holder removes the file on
+a normal exit. A second command aimed at the same output, even one started at the same
+instant, fails to take it at once and is refused with one line naming the path and the
+holder's pid.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+from trust_monitor.errors import TrustMonitorError
+
+PID_WAIT_S = 0.5
+"""How long a refused command waits for the holder to write its pid into the lock file
+(it does so right after taking the lock)."""
+
+
+class OutputLockedError(TrustMonitorError):
+    """Another process holds the lock on an output (the message names it and the pid)."""
+
+
+def lock_path(output: Path) -> Path:
+    """The lock file of ``output``: ``<output>.lock`` beside it."""
+    return output.with_name(output.name + '.lock')
+
+
+@contextlib.contextmanager
+def hold_output_lock(output: Path) -> Iterator[Path]:
+    """Hold the lock on ``output`` for the block; yields the lock file.
+
+    Missing parent directories of ``output`` are created (and removed again on exit if they
+    are still empty, so a refused command leaves nothing behind).
+
+    Args:
+        output: the path a command is about to write (a bag directory, an output file).
+
+    Raises:
+        OutputLockedError: another process holds the lock (the line names the path and
+            the holder's pid).
+        TrustMonitorError: the lock file cannot be created (the line names it and why).
+    """
+    path = lock_path(Path(output))
+    created = _make_parents(path.parent)
+    try:
+        fd = _take(path)
+        try:
+            yield path
+        finally:
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()       # still holding it: no one can take this file meanwhile
+            os.close(fd)
+    finally:
+        for directory in reversed(created):
+            with contextlib.suppress(OSError):
+                directory.rmdir()   # only if empty
+
+
+def _make_parents(directory: Path) -> list[Path]:
+    """Create ``directory`` and its missing parents; the ones created, outermost first."""
+    missing = []
+    while not os.path.lexists(directory) and directory != directory.parent:
+        missing.append(directory)
+        directory = directory.parent
+    created: list[Path] = []
+    for path in reversed(missing):
+        try:
+            path.mkdir()
+        except FileExistsError:
+            continue
+        except OSError as err:
+            for done in reversed(created):
+                with contextlib.suppress(OSError):
+                    done.rmdir()
+            raise TrustMonitorError(f'{path}: cannot create it ({err.strerror})') from err
+        created.append(path)
+    return created
+
+
+def _take(path: Path) -> int:
+    """Open and lock ``path`` (not through a symbolic link); the open descriptor.
+
+    A lock file removed by its holder between our open and our lock is a stale name: we
+    would hold a lock on a file no one else opens. So the lock counts only if ``path``
+    still names the file we locked; otherwise we try again.
+    """
+    while True:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+        except OSError as err:
+            reason = ('a symbolic link' if err.errno == errno.ELOOP else err.strerror)
+            raise TrustMonitorError(f'{path}: cannot create the lock file ({reason})') \
+                from err
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _holder(fd)
+            os.close(fd)
+            output = path.with_name(path.name[:-len('.lock')])
+            raise OutputLockedError(
+                f'{output}: another run is writing it ({holder}; lock {path})') from None
+        except OSError as err:
+            os.close(fd)
+            raise TrustMonitorError(f'{path}: cannot lock it ({err.strerror})') from err
+        try:
+            same = os.stat(path, follow_symlinks=False).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            os.ftruncate(fd, 0)
+            os.write(fd, f'{os.getpid()}\n'.encode())
+            return fd
+        os.close(fd)
+
+
+def _holder(fd: int) -> str:
+    """'pid N' of the lock's holder, read from the lock file."""
+    deadline = time.monotonic() + PID_WAIT_S
+    while True:
+        text = os.pread(fd, 32, 0).decode(errors='replace').strip()
+        if text.isdigit():
+            return f'pid {text}'
+        if time.monotonic() >= deadline:
+            return 'pid unknown'
+        time.sleep(0.02)
