@@ -16,6 +16,7 @@ import pytest
 from conftest import assert_every_topic_complete, children_of, long_trace, recorded_chunks
 from rosbags.rosbag2 import Reader
 
+from trust_av_planner.graph.bag_records import records_from_bag
 from trust_monitor.common.output_lock import OutputLockedError, hold_output_lock, lock_path
 from trust_monitor.common.record_window import (
     ACK_EVERY_STEPS,
@@ -221,3 +222,89 @@ def test_two_runs_started_together_on_one_bag_one_records(tmp_path: Path) -> Non
     assert counts == {f'/{t.name}': t.messages(300) for t in TOPICS
                       if 'recorder' in t.subscribers}
     assert not lock_path(bag).exists()
+
+
+# --- the stall detector -----------------------------------------------------------------------
+
+SUSPENDED_S = 33.0
+"""Longer than the stall timeout of a run (30 s without a recorded step)."""
+
+
+def wait_for_chunks(bag: Path, steps: int, proc: subprocess.Popen[str]) -> None:
+    mcap = bag / f'{bag.name}.mcap'
+    deadline = time.monotonic() + 120
+    while recorded_chunks(mcap) < steps and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.02)
+
+
+@pytest.mark.wall_clock
+def test_a_run_suspended_for_longer_than_the_stall_timeout_succeeds(tmp_path: Path) -> None:
+    """Ctrl-Z, 33 s, ``fg``: SIGSTOP here (what Ctrl-Z's SIGTSTP does to it; a process group
+    without a terminal ignores SIGTSTP). The nodes go on meanwhile; the run then reports
+    success and its metrics, not a stall."""
+    bag = tmp_path / 'own'
+    proc = run(bag)
+    wait_for_chunks(bag, 50, proc)
+    proc.send_signal(signal.SIGSTOP)
+    try:
+        time.sleep(SUSPENDED_S)
+    finally:
+        proc.send_signal(signal.SIGCONT)
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, out + err
+    assert 'final trust' in out and err == ''
+    assert_lossless(bag)
+
+
+@pytest.mark.wall_clock
+def test_a_recorder_suspended_for_longer_than_the_stall_timeout_is_waited_for(
+        tmp_path: Path) -> None:
+    """A node stopped by a signal is not a stalled graph: the run waits for it."""
+    bag = tmp_path / 'waited'
+    proc = run(bag)
+    recorder = recorder_pid(proc.pid)
+    wait_for_chunks(bag, 50, proc)
+    os.kill(recorder, signal.SIGSTOP)
+    try:
+        time.sleep(SUSPENDED_S)
+        assert proc.poll() is None
+    finally:
+        os.kill(recorder, signal.SIGCONT)
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, out + err
+    assert_lossless(bag)
+
+
+# --- a stop is complete whatever signals arrive --------------------------------------------------
+
+@pytest.mark.wall_clock
+def test_sigint_sigterm_sigint_in_quick_succession_stop_everything(tmp_path: Path) -> None:
+    """Each further signal escalates the stop (SIGTERM, then SIGKILL of the nodes, the bag
+    finished from its chunks); the command returns only once every node is gone, and says
+    so."""
+    bag = tmp_path / 'signals'
+    proc = subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
+                             str(long_trace(tmp_path)), '--bag', str(bag), '--no-progress',
+                             '--no-plot'], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    wait_for_chunks(bag, 20, proc)
+    nodes = children_of(proc.pid)
+    assert len(nodes) == 6
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGINT):
+        proc.send_signal(signum)
+        time.sleep(0.15)
+    _out, err = proc.communicate(timeout=120)
+    alive = [pid for pid in nodes if Path(f'/proc/{pid}').exists()]
+    assert alive == []
+    assert proc.returncode == 128 + signal.SIGINT, err
+    assert err == ('trust-av run: interrupted; everything it started was stopped and its '
+                   'recordings finished\n')
+    assert (bag / 'metadata.yaml').is_file()
+    assert check_bag_directory(bag) == []
+    # reads fully: every message the metadata lists, and whole steps (the nodes killed by
+    # the escalation may leave the last steps of some topics short)
+    with Reader(bag) as reader:
+        listed = sum(c.msgcount for c in reader.connections)
+        assert sum(1 for _ in reader.messages()) == listed > 0
+    assert 0 < len(records_from_bag(bag)) < 3000

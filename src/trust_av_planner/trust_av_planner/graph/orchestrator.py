@@ -164,10 +164,14 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
             # why the run failed (an exception raised in a `finally` would replace it).
             try:
                 _finish_recording(graph, bag)
+                lost = (missing_messages(bag, trace.steps, namespace)
+                        if isinstance(err, IncompleteRecordingError) else '')
             except DiskFullError:
                 raise                       # the recorder ran out of disk: that is the cause
             except TrustAvPlannerError as finishing:
                 raise GraphError(f'{err}; {finishing}{_low_disk(bag)}') from err
+            if lost:
+                raise GraphError(f'{err}; the bag lacks {lost} messages') from err
             low_disk = '' if isinstance(err, DiskFullError) else _low_disk(bag)
             if low_disk:
                 raise GraphError(f'{err}{low_disk}') from err
@@ -195,28 +199,82 @@ def _domain(domain_id: int | None, namespace: str) -> Iterator[int]:
     yield domain_id
 
 
+OWN_PAUSE_S = 2.0
+"""A turn of the follow loop (a spin of at most 0.05 s) that took longer than this means this
+process itself was suspended (Ctrl-Z then ``fg``, SIGSTOP) or not scheduled at all: that
+time was not the graph's and does not count towards a stall."""
+
+
+class IncompleteRecordingError(GraphError):
+    """The graph finished every step but the recorder did not receive every message."""
+
+
 def _follow(session: Any, steps: int, step_timeout_s: float,
             on_step: Callable[[int, int], None] | None) -> None:
-    """Until the recorder has every step and exits: health, privacy, progress, stalls."""
-    recorder = session.graph.by_name(RECORDER).popen
+    """Until the recorder has every step and exits: health, privacy, progress, stalls.
+
+    A stall is ``step_timeout_s`` without a step recorded, not counting the time this
+    process was suspended itself (a loop turn longer than :data:`OWN_PAUSE_S`) nor the time
+    a node of the graph was (stopped by a signal: it goes on when it is continued; the
+    step authority waits for a suspended or slow recorder, see
+    :mod:`trust_monitor.common.record_window`).
+    """
+    graph = session.graph
+    recorder = graph.by_name(RECORDER)
     last, last_change = -1, time.monotonic()
-    while recorder.poll() is None:
+    turn = last_change
+    while recorder.popen.poll() is None:
         session.spin(0.05)
+        now = time.monotonic()
+        if now - turn > OWN_PAUSE_S:
+            last_change += now - turn      # this process was suspended, not the graph
+        turn = now
         session.check({RECORDER})
         if session.recorder_steps != last:
-            last, last_change = session.recorder_steps, time.monotonic()
+            last, last_change = session.recorder_steps, now
             if on_step is not None:
                 on_step(min(last, steps), steps)
-        elif time.monotonic() - last_change > step_timeout_s:
-            what = ('node recorder did not receive every message of the run'
-                    if last >= steps else f'no progress after {last} steps')
-            raise GraphError(f'{what} in {step_timeout_s:g} s; node logs in '
-                             f'{session.graph.log_dir}')
-    if recorder.returncode == EXIT_DISK_FULL:
+        elif graph.suspended():
+            last_change = now              # a suspended node is not a stalled graph
+        elif now - last_change > step_timeout_s:
+            if last >= steps:
+                raise IncompleteRecordingError(
+                    f'node recorder did not receive every message of the run in '
+                    f'{step_timeout_s:g} s; node logs in {graph.log_dir}')
+            why = ('the recorder is blocked writing to its disk' if recorder.state() == 'D'
+                   else 'the graph stalled')
+            raise GraphError(f'no progress after {last} steps in {step_timeout_s:g} s '
+                             f'({why}); node logs in {graph.log_dir}')
+    if recorder.popen.returncode == EXIT_DISK_FULL:
         return
     session.check({RECORDER})
     if on_step is not None:
         on_step(steps, steps)
+
+
+def missing_messages(bag: Path, steps: int, namespace: str = '/') -> str:
+    """What a finished bag of a ``steps``-step run lacks, as ``'/tf 43 of 1802, ...'`` (''
+    when it holds every message of every step).
+
+    Raises:
+        TrustAvPlannerError: the bag cannot be read.
+    """
+    from rosbags.rosbag2 import Reader, ReaderError
+
+    from trust_monitor.common.topics import TOPICS, qualified
+
+    try:
+        with Reader(bag) as reader:
+            counts = {c.topic: c.msgcount for c in reader.connections}
+    except (ReaderError, OSError) as err:
+        raise TrustAvPlannerError(f'{bag}: cannot read the recording ({err})') from err
+    lacking = []
+    for row in TOPICS:
+        if 'recorder' in row.subscribers:
+            name, expected = qualified(row.name, namespace), row.messages(steps)
+            if counts.get(name, 0) < expected:
+                lacking.append(f'{name} {expected - counts.get(name, 0)} of {expected}')
+    return ', '.join(lacking)
 
 
 LOW_DISK_BYTES = 1 << 20
