@@ -17,6 +17,7 @@ from conftest import assert_every_topic_complete, children_of, long_trace, recor
 from rosbags.rosbag2 import Reader
 
 from trust_av_planner.graph.bag_records import records_from_bag
+from trust_av_planner.graph.bag_writer import qos_profile
 from trust_monitor.common.output_lock import OutputLockedError, hold_output_lock, lock_path
 from trust_monitor.common.record_window import (
     ACK_EVERY_STEPS,
@@ -31,6 +32,8 @@ from trust_monitor.errors import TrustMonitorError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from rosbag2_rules import check_bag_directory  # the test-side oracle module
+
+QOS_RECORDED = qos_profile(reliable=True, transient_local=True, depth=HISTORY_DEPTH)
 
 
 def test_the_window_keeps_every_topic_within_half_the_history() -> None:
@@ -60,6 +63,29 @@ def test_held_steps_is_the_least_complete_topic() -> None:
     assert held_steps({'a': 4, 'tf': 2 + 3 * 7}, table) == 4
     assert may_start(0, 0, 10) and may_start(9, 0, 10) and not may_start(10, 0, 10)
     assert may_start(10, 1, 10) and may_start(10**6, 0, 0)
+
+
+def test_a_bag_short_of_messages_is_named_topic_by_topic(tmp_path: Path) -> None:
+    """What the run says when the recorder did not receive every message."""
+    from test_recording import odometry
+
+    from trust_av_planner.graph.bag_writer import BagWriter
+    from trust_av_planner.graph.orchestrator import missing_messages
+
+    bag = tmp_path / 'short'
+    writer = BagWriter(bag)
+    for topic in ('/ego/odom', '/human/odom'):
+        writer.add_topic(topic, 'nav_msgs/msg/Odometry', QOS_RECORDED)
+    for step in range(6):           # the initial state and 5 steps
+        writer.write('/ego/odom', odometry(step * 10**9, 1.0))
+        if step < 4:
+            writer.write('/human/odom', odometry(step * 10**9, 1.0))
+        writer.end_step()
+    writer.finish()
+    lacking = missing_messages(bag, 5)
+    assert '/human/odom 2 of 6' in lacking and '/ego/odom' not in lacking
+    assert '/clock 5 of 5' in lacking and '/tf 17 of 17' in lacking
+    assert missing_messages(bag, 5, '/car1').startswith('/car1/clock 5 of 5')
 
 
 # --- the whole graph ------------------------------------------------------------------------
