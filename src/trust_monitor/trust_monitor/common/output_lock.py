@@ -1,12 +1,12 @@
 """One command at a time per output: a lock on an output path, taken before anything of it
 is created or replaced (:func:`hold_output_lock`).
 
-The lock is ``fcntl.flock`` on a lock file beside the output, ``<output>.lock``, holding the
-holder's pid. The kernel releases it when the holder exits, however it exits (SIGKILL
-included), so a lock file left behind never blocks anyone; the holder removes the file on
-a normal exit. A second command aimed at the same output, even one started at the same
-instant, fails to take it at once and is refused with one line naming the path and the
-holder's pid.
+The lock is ``fcntl.flock`` on an empty lock file beside the output, ``<output>.lock`` (empty:
+it takes no block of a nearly full disk); the holder's pid is the kernel's (``/proc/locks``).
+The kernel releases it when the holder exits, however it exits (SIGKILL included), so a lock
+file left behind never blocks anyone; the holder removes the file on a normal exit. A second
+command aimed at the same output, even one started at the same instant, fails to take it at
+once and is refused with one line naming the path and the holder's pid.
 """
 
 from __future__ import annotations
@@ -21,9 +21,8 @@ from pathlib import Path
 
 from trust_monitor.errors import TrustMonitorError
 
-PID_WAIT_S = 0.5
-"""How long a refused command waits for the holder to write its pid into the lock file
-(it does so right after taking the lock)."""
+PID_WAIT_S = 0.2
+"""How long a refused command looks for the holder's entry in the kernel's lock table."""
 
 
 class OutputLockedError(TrustMonitorError):
@@ -96,7 +95,7 @@ def _take(path: Path) -> int:
     """
     while True:
         try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+            fd = os.open(path, os.O_RDONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
         except OSError as err:
             reason = ('a symbolic link' if err.errno == errno.ELOOP else err.strerror)
             raise TrustMonitorError(f'{path}: cannot create the lock file ({reason})') \
@@ -117,19 +116,26 @@ def _take(path: Path) -> int:
         except FileNotFoundError:
             same = False
         if same:
-            os.ftruncate(fd, 0)
-            os.write(fd, f'{os.getpid()}\n'.encode())
             return fd
         os.close(fd)
 
 
-def _holder(fd: int) -> str:
-    """'pid N' of the lock's holder, read from the lock file."""
+def _holder(fd: int, locks: Path = Path('/proc/locks')) -> str:
+    """'pid N' of the process holding the flock on the open file ``fd``, from the kernel's
+    table of locks (``/proc/locks``: ``1: FLOCK ADVISORY WRITE <pid> <major>:<minor>:<inode>
+    0 EOF``, device numbers in hex); 'pid unknown' if it is not there (gone meanwhile)."""
+    info = os.fstat(fd)
+    key = f'{os.major(info.st_dev):02x}:{os.minor(info.st_dev):02x}:{info.st_ino}'
     deadline = time.monotonic() + PID_WAIT_S
     while True:
-        text = os.pread(fd, 32, 0).decode(errors='replace').strip()
-        if text.isdigit():
-            return f'pid {text}'
+        try:
+            table = locks.read_text()
+        except OSError:
+            return 'pid unknown'
+        for line in table.splitlines():
+            fields = line.split()
+            if len(fields) >= 6 and fields[1] == 'FLOCK' and fields[5] == key:
+                return f'pid {fields[4]}'
         if time.monotonic() >= deadline:
             return 'pid unknown'
         time.sleep(0.02)
