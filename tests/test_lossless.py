@@ -210,18 +210,27 @@ def test_a_lock_left_by_a_killed_holder_does_not_block(tmp_path: Path) -> None:
     assert not lock_path(bag).exists()
 
 
-def test_a_lock_file_that_is_a_link_or_unwritable_is_one_line(tmp_path: Path) -> None:
+def test_a_lock_file_that_is_a_link_or_a_directory_is_one_line(tmp_path: Path) -> None:
     target = tmp_path / 'elsewhere'
     lock_path(tmp_path / 'bag').symlink_to(target)
     link = r'bag.lock: cannot create the lock file \(a symbolic link\)'
     with pytest.raises(TrustMonitorError, match=link), hold_output_lock(tmp_path / 'bag'):
         pass
     assert not target.exists()
-    (tmp_path / 'file').write_text('')
-    under_a_file = tmp_path / 'file' / 'bag'
-    with pytest.raises(TrustMonitorError, match='cannot create the lock file'), \
-            hold_output_lock(under_a_file):
+    lock_path(tmp_path / 'other').mkdir()
+    with pytest.raises(TrustMonitorError, match=r'other\.lock: cannot create the lock file'), \
+            hold_output_lock(tmp_path / 'other'):
         pass
+
+
+def test_where_nothing_can_be_written_the_command_s_own_check_speaks(tmp_path: Path) -> None:
+    """Under a file (or in /proc, read-only places): no lock file, no output either; the
+    block runs unlocked and the command's output checks name the reason."""
+    (tmp_path / 'file').write_text('')
+    for output in (tmp_path / 'file' / 'bag', tmp_path / 'file' / 'a' / 'bag'):
+        with hold_output_lock(output) as lock:
+            assert lock is None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['file']
 
 
 @pytest.mark.wall_clock
@@ -286,19 +295,39 @@ def test_a_run_suspended_for_longer_than_the_stall_timeout_succeeds(tmp_path: Pa
 @pytest.mark.wall_clock
 def test_a_recorder_suspended_for_longer_than_the_stall_timeout_is_waited_for(
         tmp_path: Path) -> None:
-    """A node stopped by a signal is not a stalled graph: the run waits for it."""
+    """A node stopped by a signal is not a stalled graph: the run waits for it. In process,
+    with a 4 s stall timeout and the recorder stopped for 8 s (shorter than Fast DDS's
+    participant lease, 20 s: a participant suspended longer is dropped by its peers, see
+    docs/operations/recording.md)."""
+    import threading
+
+    from preceding_traffic.sources import load_trace
+    from preceding_traffic.traces import truncate
+    from trust_av_planner.graph.orchestrator import run_graph
+    from trust_av_planner.system.config import load_run_config
+
+    config = load_run_config()
+    trace_path = long_trace(tmp_path)
+    trace = truncate(load_trace(str(trace_path), config.planner.dt_s, config.trace), STEPS)
     bag = tmp_path / 'waited'
-    proc = run(bag)
-    recorder = recorder_pid(proc.pid)
-    wait_for_chunks(bag, 50, proc)
-    os.kill(recorder, signal.SIGSTOP)
+    stopped: list[int] = []
+    timers: list[threading.Timer] = []
+
+    def on_step(done: int, _total: int) -> None:
+        if done >= 50 and not stopped:
+            pid = recorder_pid(os.getpid())
+            os.kill(pid, signal.SIGSTOP)
+            stopped.append(done)
+            timers.append(threading.Timer(8.0, os.kill, (pid, signal.SIGCONT)))
+            timers[0].start()
+
     try:
-        time.sleep(SUSPENDED_S)
-        assert proc.poll() is None
+        run_graph(config, str(trace_path), trace, bag, max_steps=STEPS, step_timeout_s=4.0,
+                  on_step=on_step)
     finally:
-        os.kill(recorder, signal.SIGCONT)
-    out, err = proc.communicate(timeout=300)
-    assert proc.returncode == 0, out + err
+        for timer in timers:
+            timer.join()
+    assert stopped
     assert_lossless(bag)
 
 

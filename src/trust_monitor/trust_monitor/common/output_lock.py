@@ -35,11 +35,15 @@ def lock_path(output: Path) -> Path:
 
 
 @contextlib.contextmanager
-def hold_output_lock(output: Path) -> Iterator[Path]:
+def hold_output_lock(output: Path) -> Iterator[Path | None]:
     """Hold the lock on ``output`` for the block; yields the lock file.
 
     Missing parent directories of ``output`` are created (and removed again on exit if they
-    are still empty, so a refused command leaves nothing behind).
+    are still empty, so a refused command leaves nothing behind). Where the file system
+    refuses them or the lock file itself (:data:`REFUSING`: not a directory, no permission,
+    read-only), no output can be written there either: the block runs without a lock
+    (yields None) and the command's own output checks name the reason, as they would have
+    without the lock.
 
     Args:
         output: the path a command is about to write (a bag directory, an output file).
@@ -47,12 +51,16 @@ def hold_output_lock(output: Path) -> Iterator[Path]:
     Raises:
         OutputLockedError: another process holds the lock (the line names the path and
             the holder's pid).
-        TrustMonitorError: the lock file cannot be created (the line names it and why).
+        TrustMonitorError: the lock file cannot be created for another reason (a symbolic
+            link or a directory in its place, a full disk: the line names it and why).
     """
     path = lock_path(Path(output))
-    created = _make_parents(path.parent)
+    created: list[Path] = []
     try:
-        fd = _take(path)
+        fd = _take(path, created)
+        if fd is None:
+            yield None
+            return
         try:
             yield path
         finally:
@@ -65,38 +73,51 @@ def hold_output_lock(output: Path) -> Iterator[Path]:
                 directory.rmdir()   # only if empty
 
 
-def _make_parents(directory: Path) -> list[Path]:
-    """Create ``directory`` and its missing parents; the ones created, outermost first."""
+REFUSING = frozenset({errno.ENOTDIR, errno.ENOENT, errno.EACCES, errno.EPERM, errno.EROFS})
+"""Errors of creating an entry that any output in that place would meet too."""
+
+
+def _make_parents(directory: Path, created: list[Path]) -> bool:
+    """Create ``directory`` and its missing parents, appending each one made to ``created``
+    (outermost first); False where the file system refuses them (:data:`REFUSING`).
+
+    Raises:
+        TrustMonitorError: a directory cannot be created for another reason.
+    """
     missing = []
     while not os.path.lexists(directory) and directory != directory.parent:
         missing.append(directory)
         directory = directory.parent
-    created: list[Path] = []
     for path in reversed(missing):
         try:
             path.mkdir()
         except FileExistsError:
             continue
         except OSError as err:
-            for done in reversed(created):
-                with contextlib.suppress(OSError):
-                    done.rmdir()
+            if err.errno in REFUSING:
+                return False
             raise TrustMonitorError(f'{path}: cannot create it ({err.strerror})') from err
         created.append(path)
-    return created
+    return True
 
 
-def _take(path: Path) -> int:
-    """Open and lock ``path`` (not through a symbolic link); the open descriptor.
+def _take(path: Path, created: list[Path]) -> int | None:
+    """Create the missing parents of ``path`` (into ``created``), open and lock ``path``
+    (not through a symbolic link); the open descriptor, None where the file system refuses
+    them (:data:`REFUSING`).
 
     A lock file removed by its holder between our open and our lock is a stale name: we
     would hold a lock on a file no one else opens. So the lock counts only if ``path``
     still names the file we locked; otherwise we try again.
     """
+    if not _make_parents(path.parent, created):
+        return None
     while True:
         try:
             fd = os.open(path, os.O_RDONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
         except OSError as err:
+            if err.errno in REFUSING:
+                return None
             reason = ('a symbolic link' if err.errno == errno.ELOOP else err.strerror)
             raise TrustMonitorError(f'{path}: cannot create the lock file ({reason})') \
                 from err
