@@ -205,6 +205,11 @@ process itself was suspended (Ctrl-Z then ``fg``, SIGSTOP) or not scheduled at a
 time was not the graph's and does not count towards a stall."""
 
 
+SUSPENSION_PROBE_S = 0.5
+"""How often the follow loop reads the nodes' states (``/proc``) for a suspended one: not
+every turn, which comes with every step where a benchmark follows the clock."""
+
+
 class IncompleteRecordingError(GraphError):
     """The graph finished every step but the recorder did not receive every message."""
 
@@ -222,7 +227,7 @@ def _follow(session: Any, steps: int, step_timeout_s: float,
     graph = session.graph
     recorder = graph.by_name(RECORDER)
     last, last_change = -1, time.monotonic()
-    turn = last_change
+    turn = next_probe = last_change
     while recorder.popen.poll() is None:
         session.spin(0.05)
         now = time.monotonic()
@@ -230,11 +235,14 @@ def _follow(session: Any, steps: int, step_timeout_s: float,
             last_change += now - turn      # this process was suspended, not the graph
         turn = now
         session.check({RECORDER})
+        probe = now >= next_probe          # the nodes' states: twice a second
+        if probe:
+            next_probe = now + SUSPENSION_PROBE_S
         if session.recorder_steps != last:
             last, last_change = session.recorder_steps, now
             if on_step is not None:
                 on_step(min(last, steps), steps)
-        elif graph.suspended():
+        elif probe and graph.suspended():
             last_change = now              # a suspended node is not a stalled graph
         elif now - last_change > step_timeout_s:
             if last >= steps:
