@@ -235,11 +235,12 @@ def test_where_nothing_can_be_written_the_command_s_own_check_speaks(tmp_path: P
 
 @pytest.mark.wall_clock
 def test_two_runs_started_together_on_one_bag_one_records(tmp_path: Path) -> None:
-    """Both started at the same instant: exactly one records the whole run, the other is
+    """Both started at the same instant (600 steps: the first is still running when the
+    second has loaded): exactly one records the whole run, the other is
     refused with one line, exit 2, before it writes anything."""
     bag = tmp_path / 'shared'
     command = [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
-               '--max-steps', '300', '--bag', str(bag), '--no-progress', '--no-plot']
+               '--max-steps', '600', '--bag', str(bag), '--no-progress', '--no-plot']
     runs = [subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                              text=True) for _ in range(2)]
     outputs = [p.communicate(timeout=300) for p in runs]
@@ -254,7 +255,7 @@ def test_two_runs_started_together_on_one_bag_one_records(tmp_path: Path) -> Non
     assert check_bag_directory(bag) == []
     with Reader(bag) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-    assert counts == {f'/{t.name}': t.messages(300) for t in TOPICS
+    assert counts == {f'/{t.name}': t.messages(600) for t in TOPICS
                       if 'recorder' in t.subscribers}
     assert not lock_path(bag).exists()
 
