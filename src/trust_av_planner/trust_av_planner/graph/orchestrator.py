@@ -264,6 +264,11 @@ def missing_messages(bag: Path, steps: int, namespace: str = '/') -> str:
     """What a finished bag of a ``steps``-step run lacks, as ``'/tf 43 of 1802, ...'`` (''
     when it holds every message of every step).
 
+    Args:
+        bag: the bag directory.
+        steps: the steps of the run.
+        namespace: the run's namespace (the recorded topic names are in it).
+
     Raises:
         TrustAvPlannerError: the bag cannot be read.
     """

@@ -30,7 +30,11 @@ class OutputLockedError(TrustMonitorError):
 
 
 def lock_path(output: Path) -> Path:
-    """The lock file of ``output``: ``<output>.lock`` beside it."""
+    """The lock file of an output: ``<output>.lock`` beside it.
+
+    Args:
+        output: the path a command writes.
+    """
     return output.with_name(output.name + '.lock')
 
 

@@ -37,7 +37,11 @@ holds (latched: the newest only)."""
 
 
 def recorded_topics(topics: Iterable[Topic] = TOPICS) -> tuple[Topic, ...]:
-    """The per-step topics the recorder records."""
+    """The per-step topics the recorder records.
+
+    Args:
+        topics: the topic table.
+    """
     return tuple(t for t in topics if RECORDER in t.subscribers and t.per_step > 0)
 
 
@@ -74,6 +78,11 @@ def held_steps(counts: Mapping[str, int], topics: Iterable[Topic] = TOPICS) -> i
 
 
 def may_start(step: int, acked: int, window: int) -> bool:
-    """Whether the step authority may start ``step`` (0-based) with ``acked`` steps
-    acknowledged by the recorder; ``window`` 0: no recorder to wait for."""
+    """Whether the step authority may start a step.
+
+    Args:
+        step: the step to start (0-based).
+        acked: complete steps the recorder has acknowledged.
+        window: steps the graph may run ahead of ``acked`` (0: no recorder to wait for).
+    """
     return window == 0 or step < acked + window
