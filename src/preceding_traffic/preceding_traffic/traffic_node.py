@@ -7,10 +7,13 @@ odometry ``preceding_vehicle/odom`` with its transform on ``tf`` (``odom`` ->
 namespace). It starts after ``sim/start`` and
 advances to t + 1 only when the step's outputs are in: ego and human odometry stamped
 t + dt, the trust and the planner status stamped t (lock-step, see
-:mod:`trust_monitor.graph_interface`). Once asked to stop it completes the step in
-progress and starts no other. After the last step it logs ``done`` and keeps its
-publishers alive until it is stopped: a writer that exits takes the samples a slow
-subscriber (the recorder) has not acknowledged yet with it.
+:mod:`trust_monitor.graph_interface`), and, with ``recorder_window_steps`` > 0 (a recorded
+run), only while the recorder has acknowledged (``recorder/ack``) every step but the last
+``recorder_window_steps``: back-pressure, so that a suspended or slow recorder holds the
+graph back instead of losing messages (:mod:`trust_monitor.common.record_window`). Once
+asked to stop it completes the step in progress and starts no other. After the last step
+it logs ``done`` and keeps its publishers alive until it is stopped: a writer that exits
+takes the samples a slow subscriber (the recorder) has not acknowledged yet with it.
 
 ``clock_mode: wall``: no ``clock`` and no stepping; after ``sim/start`` the trace (or bag)
 is replayed at real-time speed (:class:`preceding_traffic.replay.LeadReplay`: speed
@@ -30,7 +33,7 @@ from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Empty
+from std_msgs.msg import Empty, UInt64
 from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
@@ -39,6 +42,7 @@ from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig, truncate
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
 from trust_monitor.common.params import MAX_POSITION_M, check_fields, control_step_param, param
+from trust_monitor.common.record_window import ACK_TOPIC, may_start, window_steps
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
 from trust_monitor.ros.messages import TrajectoryBytes, VehicleOdometry, msg_ns, time_msg
@@ -66,6 +70,9 @@ class TrafficRunConfig:
                                       default=0.0)
     max_steps: int = param('stop after this many steps (0: the whole trace)', low=0,
                            high=10_000_000, default=0)
+    recorder_window_steps: int = param(
+        'lock-step: start a step only while the recorder has acknowledged all but this many '
+        '(0: no recorder to wait for)', unit='steps', low=0, high=window_steps(), default=0)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -101,6 +108,10 @@ class TrafficNode(Node):
             JointTrajectory, 'preceding_vehicle/speed_preview',
             topic_qos('preceding_vehicle/speed_preview', self.clock, publisher=True))
         self.create_subscription(Empty, 'sim/start', self.on_start, QOS['LATCHED'])
+        self.acked = 0          # steps the recorder holds (recorder/ack)
+        self.waiting = -1       # a step ready to start but held back for the recorder
+        if self.run.recorder_window_steps and not self.clock.wall:
+            self.create_subscription(UInt64, ACK_TOPIC, self.on_ack, QOS['LATCHED'])
         self.replay = LeadReplay(trace, self.run.initial_position_m)
         self.start_ns: int | None = None
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
@@ -166,6 +177,25 @@ class TrafficNode(Node):
             ns, self.run.dt_s, self.trace.preview(step, self.run.horizon_steps).tolist()))
         self.pub_tf.publish(tf)  # after the planner's inputs: not on the chain
 
+    def on_ack(self, msg: UInt64) -> None:
+        """The recorder holds ``msg.data`` steps: start a step held back for it."""
+        self.acked = max(self.acked, int(msg.data))
+        if self.waiting >= 0:
+            self.advance(self.waiting)
+
+    def advance(self, step: int) -> None:
+        """Start ``step`` unless a stop was asked for or the recorder is a window behind
+        (then ``on_ack`` starts it)."""
+        if self.stopping:
+            self.get_logger().info(f'stopped after step {step - 1}')
+            self.done = True
+            self.waiting = -1
+        elif may_start(step, self.acked, self.run.recorder_window_steps):
+            self.waiting = -1
+            self.publish_step(step)
+        else:
+            self.waiting = step
+
     def on_done(self, name: str, msg: Odometry | Vector3Stamped | DiagnosticArray,
                 offset: int) -> None:
         """Collect a step output; advance when the current step is complete.
@@ -183,11 +213,8 @@ class TrafficNode(Node):
             if self.step + 1 >= self.trace.steps:
                 self.get_logger().info(f'done: {self.trace.steps} steps')
                 self.done = True
-            elif self.stopping:
-                self.get_logger().info(f'stopped after step {self.step}')
-                self.done = True
             else:
-                self.publish_step(self.step + 1)
+                self.advance(self.step + 1)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -32,6 +32,7 @@ import yaml
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_monitor.common import output_files
 from trust_monitor.common.output_files import cannot_create_in, odd_path, stop_signals_held
+from trust_monitor.common.output_lock import hold_output_lock
 
 MARKER = '.trust_av_output'
 """The marker file a command writes into each output directory it creates."""
@@ -214,6 +215,22 @@ def _free_name(path: Path) -> Path:
 @contextlib.contextmanager
 def replacing_outputs(bag: Path, *, overwrite: bool, command: str,
                       option: str = '--bag') -> Iterator[RunOutputs]:
+    """The outputs for the block to write (:func:`_replacing_outputs`), with the lock on
+    ``bag`` held throughout (:func:`~trust_monitor.common.output_lock.hold_output_lock`): a
+    second command aimed at the same outputs is refused before either writes.
+
+    Raises:
+        TrustAvPlannerError: as :func:`_replacing_outputs`.
+        OutputLockedError: another command holds the lock (the line names it).
+    """
+    with hold_output_lock(bag), _replacing_outputs(bag, overwrite=overwrite, command=command,
+                                                   option=option) as outputs:
+        yield outputs
+
+
+@contextlib.contextmanager
+def _replacing_outputs(bag: Path, *, overwrite: bool, command: str,
+                       option: str = '--bag') -> Iterator[RunOutputs]:
     """:func:`prepare_outputs`, then the outputs for the block to write, with the previous
     ones put back unless it ends normally.
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 
 from preceding_traffic.traces import truncate
@@ -18,6 +19,7 @@ from trust_av_planner.cli.options import (
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import check_control_rate, load_run_config
 from trust_monitor.common.output_files import replacing
+from trust_monitor.common.output_lock import hold_output_lock
 
 
 def run(args: argparse.Namespace) -> int:
@@ -29,11 +31,14 @@ def run(args: argparse.Namespace) -> int:
         check_control_rate(config.planner, args.control_rate_hz)
     # --max-steps shortens the run only: the speed limit and the preview are the whole trace's
     trace = truncate(control_trace(config, args.control_rate_hz), args.max_steps)
-    bar = Progress(f'simulate {trace.name}', trace.steps, shown=not args.no_progress)
-    result = simulate(config, trace, on_step=bar.update)
-    bar.close()
-    if args.out is not None:
-        write_table(result, args.out)
+    with contextlib.ExitStack() as stack:
+        if args.out is not None:   # a second command on --out is refused before it writes
+            stack.enter_context(hold_output_lock(args.out))
+        bar = Progress(f'simulate {trace.name}', trace.steps, shown=not args.no_progress)
+        result = simulate(config, trace, on_step=bar.update)
+        bar.close()
+        if args.out is not None:
+            write_table(result, args.out)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
              f'alpha = {config.planner.alpha:g} (in-process, {1.0 / trace.dt_s:g} Hz)')
     print(format_metrics(result.metrics, title))

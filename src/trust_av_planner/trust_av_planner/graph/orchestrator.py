@@ -47,6 +47,7 @@ from trust_av_planner.graph.session import (
 from trust_av_planner.system.closed_loop import InitialState, equilibrium_start
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
+from trust_monitor.common.record_window import window_steps
 
 
 def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: InitialState,
@@ -71,7 +72,8 @@ def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: In
                   'lead_preview': cfg.planner.lead_preview}),
         NodeSpec('preceding_traffic', 'preceding_traffic.traffic_node',
                  {'trace': trace_arg, 'initial_position_m': initial.traffic.position_m,
-                  'max_steps': max_steps, 'bag_topic': config.trace.bag_topic,
+                  'max_steps': max_steps, 'recorder_window_steps': window_steps(),
+                  'bag_topic': config.trace.bag_topic,
                   'bag_message_type': config.trace.bag_message_type,
                   'max_sample_gap_s': config.trace.max_sample_gap_s}),
     ]
@@ -163,10 +165,14 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
             # why the run failed (an exception raised in a `finally` would replace it).
             try:
                 _finish_recording(graph, bag)
+                lost = (missing_messages(bag, trace.steps, namespace)
+                        if isinstance(err, IncompleteRecordingError) else '')
             except DiskFullError:
                 raise                       # the recorder ran out of disk: that is the cause
             except TrustAvPlannerError as finishing:
                 raise GraphError(f'{err}; {finishing}{_low_disk(bag)}') from err
+            if lost:
+                raise GraphError(f'{err}; the bag lacks {lost} messages') from err
             low_disk = '' if isinstance(err, DiskFullError) else _low_disk(bag)
             if low_disk:
                 raise GraphError(f'{err}{low_disk}') from err
@@ -194,28 +200,95 @@ def _domain(domain_id: int | None, namespace: str) -> Iterator[int]:
     yield domain_id
 
 
+OWN_PAUSE_S = 2.0
+"""A turn of the follow loop (a spin of at most 0.05 s) that took longer than this means this
+process itself was suspended (Ctrl-Z then ``fg``, SIGSTOP) or not scheduled at all: that
+time was not the graph's and does not count towards a stall."""
+
+
+SUSPENSION_PROBE_S = 0.5
+"""How often the follow loop reads the nodes' states (``/proc``) for a suspended one: not
+every turn, which comes with every step where a benchmark follows the clock."""
+
+
+class IncompleteRecordingError(GraphError):
+    """The graph finished every step but the recorder did not receive every message."""
+
+
 def _follow(session: Any, steps: int, step_timeout_s: float,
             on_step: Callable[[int, int], None] | None) -> None:
-    """Until the recorder has every step and exits: health, privacy, progress, stalls."""
-    recorder = session.graph.by_name(RECORDER).popen
+    """Until the recorder has every step and exits: health, privacy, progress, stalls.
+
+    A stall is ``step_timeout_s`` without a step recorded, not counting the time this
+    process was suspended itself (a loop turn longer than :data:`OWN_PAUSE_S`) nor the time
+    a node of the graph was (stopped by a signal: it goes on when it is continued; the
+    step authority waits for a suspended or slow recorder, see
+    :mod:`trust_monitor.common.record_window`).
+    """
+    graph = session.graph
+    recorder = graph.by_name(RECORDER)
     last, last_change = -1, time.monotonic()
-    while recorder.poll() is None:
+    turn = next_probe = last_change
+    while recorder.popen.poll() is None:
         session.spin(0.05)
+        now = time.monotonic()
+        if now - turn > OWN_PAUSE_S:
+            last_change += now - turn      # this process was suspended, not the graph
+        turn = now
         session.check({RECORDER})
+        probe = now >= next_probe          # the nodes' states: twice a second
+        if probe:
+            next_probe = now + SUSPENSION_PROBE_S
         if session.recorder_steps != last:
-            last, last_change = session.recorder_steps, time.monotonic()
+            last, last_change = session.recorder_steps, now
             if on_step is not None:
                 on_step(min(last, steps), steps)
-        elif time.monotonic() - last_change > step_timeout_s:
-            what = ('node recorder did not receive every message of the run'
-                    if last >= steps else f'no progress after {last} steps')
-            raise GraphError(f'{what} in {step_timeout_s:g} s; node logs in '
-                             f'{session.graph.log_dir}')
-    if recorder.returncode == EXIT_DISK_FULL:
+        elif probe and graph.suspended():
+            last_change = now              # a suspended node is not a stalled graph
+        elif now - last_change > step_timeout_s:
+            if last >= steps:
+                raise IncompleteRecordingError(
+                    f'node recorder did not receive every message of the run in '
+                    f'{step_timeout_s:g} s; node logs in {graph.log_dir}')
+            why = ('the recorder is blocked writing to its disk' if recorder.state() == 'D'
+                   else 'the graph stalled')
+            raise GraphError(f'no progress after {last} steps in {step_timeout_s:g} s '
+                             f'({why}); node logs in {graph.log_dir}')
+    if recorder.popen.returncode == EXIT_DISK_FULL:
         return
     session.check({RECORDER})
     if on_step is not None:
         on_step(steps, steps)
+
+
+def missing_messages(bag: Path, steps: int, namespace: str = '/') -> str:
+    """What a finished bag of a ``steps``-step run lacks, as ``'/tf 43 of 1802, ...'`` (''
+    when it holds every message of every step).
+
+    Args:
+        bag: the bag directory.
+        steps: the steps of the run.
+        namespace: the run's namespace (the recorded topic names are in it).
+
+    Raises:
+        TrustAvPlannerError: the bag cannot be read.
+    """
+    from rosbags.rosbag2 import Reader, ReaderError
+
+    from trust_monitor.common.topics import TOPICS, qualified
+
+    try:
+        with Reader(bag) as reader:
+            counts = {c.topic: c.msgcount for c in reader.connections}
+    except (ReaderError, OSError) as err:
+        raise TrustAvPlannerError(f'{bag}: cannot read the recording ({err})') from err
+    lacking = []
+    for row in TOPICS:
+        if 'recorder' in row.subscribers:
+            name, expected = qualified(row.name, namespace), row.messages(steps)
+            if counts.get(name, 0) < expected:
+                lacking.append(f'{name} {expected - counts.get(name, 0)} of {expected}')
+    return ', '.join(lacking)
 
 
 LOW_DISK_BYTES = 1 << 20

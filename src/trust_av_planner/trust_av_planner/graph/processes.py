@@ -86,6 +86,17 @@ class Process:
                 if line.strip()]
         return f"last output ({self.log_path}): {' | '.join(text[-lines:]) or 'none'}"
 
+    def state(self) -> str:
+        """The kernel's one-letter state of the process (``/proc/PID/stat``: R running, S
+        sleeping, D waiting for a disk, T/t stopped by a signal or a debugger); '' once it is
+        gone."""
+        try:
+            stat = Path(f'/proc/{self.popen.pid}/stat').read_text()
+        except OSError:
+            return ''
+        fields = stat.rsplit(')', 1)[-1].split()
+        return fields[0] if fields else ''
+
     def error_line(self) -> str:
         """The node's last ``error: ...`` line ('' if none)."""
         if not self.log.closed:
@@ -158,6 +169,10 @@ class Graph:
         """The process of a node."""
         return next(p for p in self.processes if p.spec.name == name)
 
+    def suspended(self) -> list[str]:
+        """The nodes stopped by a signal (SIGSTOP, SIGTSTP) or a debugger."""
+        return [p.spec.name for p in self.processes if p.state() in ('T', 't')]
+
     def check_alive(self, allowed_done: set[str]) -> None:
         """Raise :class:`GraphError` naming a node that exited when it should not have."""
         for process in self.processes:
@@ -175,7 +190,12 @@ class Graph:
         starts), then the other nodes (each takes what is queued and waits until the recorder
         has acknowledged its messages), then the recorder (it finishes the bag); once the
         recorder is gone, all at once. Each group: SIGINT, then SIGTERM, then SIGKILL after
-        grace periods."""
+        grace periods; a stop signal to this process meanwhile moves on to the next one at
+        once, and none interrupts the stop (:func:`stop_signals.stopping`)."""
+        with stop_signals.stopping():   # further signals escalate this stop, never end it
+            self._stop(names)
+
+    def _stop(self, names: list[str] | None) -> None:
         targets = [p for p in self.processes if names is None or p.spec.name in names]
         recorder = [p for p in targets if p.spec.name == RECORDER and p.popen.poll() is None]
         if recorder:
@@ -185,25 +205,39 @@ class Graph:
         else:
             groups = [targets]
         for group in groups:
-            _stop_group(group)
+            _stop_group(group, recorder=group is not targets and group == recorder)
         for process in targets:
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(process.popen.pid, signal.SIGKILL)  # stray children of the group
             process.log.close()
 
 
-def _stop_group(group: list[Process]) -> None:
-    for sig, grace in ((signal.SIGINT, GRACE_S['SIGINT']),
-                       (signal.SIGTERM, GRACE_S['SIGTERM']), (signal.SIGKILL, 5.0)):
+STOP_LADDER = ((signal.SIGINT, GRACE_S['SIGINT']), (signal.SIGTERM, GRACE_S['SIGTERM']),
+               (signal.SIGKILL, 5.0))
+"""The signals a group of nodes gets, each after the previous one's grace period, s."""
+
+
+def _stop_group(group: list[Process], recorder: bool = False) -> None:
+    """Stop a group of nodes along :data:`STOP_LADDER`; every further stop signal this process
+    gets meanwhile (:func:`stop_signals.escalations`) moves on to the next rung at once, and
+    a group stopped after two of them starts at SIGKILL; the ``recorder`` is first given
+    SIGTERM and its grace period to finish the bag (a signal during that grace kills it,
+    and the bag is then repaired from its chunks). Returns once every node is gone."""
+    rung = min(stop_signals.escalations(), 1 if recorder else len(STOP_LADDER) - 1)
+    while rung < len(STOP_LADDER):
+        sig, grace = STOP_LADDER[rung]
         alive = [p for p in group if p.popen.poll() is None]
         if not alive:
             break
         for process in alive:
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(process.popen.pid, sig)
+        seen = stop_signals.escalations()
         deadline = time.monotonic() + grace
-        while time.monotonic() < deadline and any(p.popen.poll() is None for p in alive):
+        while (time.monotonic() < deadline and stop_signals.escalations() == seen
+               and any(p.popen.poll() is None for p in alive)):
             time.sleep(0.02)
+        rung += 1
     for process in group:
         if process.popen.poll() is None:
             process.popen.wait()

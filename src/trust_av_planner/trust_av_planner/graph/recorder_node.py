@@ -8,6 +8,13 @@ step).
 - **Steps**: in lock-step a chunk is written at every ``clock`` (the step authority's tick);
   in wall mode every ``flush_period_s``. The status carries the steps written (at most
   twice a second): the orchestrator's progress, without a per-step subscriber of its own.
+- **Back-pressure** (lock-step): it acknowledges the complete steps it holds on
+  ``recorder/ack`` (every :data:`~trust_monitor.common.record_window.ACK_EVERY_STEPS`
+  steps); the step authority runs at most a window of steps ahead of it, so a recorder that
+  is suspended or slow holds the graph back instead of losing messages
+  (:mod:`trust_monitor.common.record_window` says why nothing can be lost).
+- **Slow disk** (tests only): the environment variable :data:`WRITE_DELAY_ENV` makes every
+  chunk write sleep that many seconds first.
 - **End**: it finishes the bag and exits by itself once it holds every message of
   ``expected_steps`` steps (0: record until stopped); on SIGINT/SIGTERM/SIGHUP, or when the
   orchestrator that started it dies, it takes what is still queued and finishes the bag.
@@ -16,6 +23,7 @@ step).
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -23,10 +31,12 @@ from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
+from std_msgs.msg import UInt64
 
 from trust_av_planner.graph.bag_qos import offered_profiles
 from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, BagWriter
 from trust_monitor.common.params import check_fields, param
+from trust_monitor.common.record_window import ACK_EVERY_STEPS, ACK_TOPIC, recorded_topics
 from trust_monitor.common.topics import TOPICS
 from trust_monitor.common.wall_clock import WallClockConfig
 from trust_monitor.ros.messages import diagnostics, message_class
@@ -37,6 +47,8 @@ from trust_monitor.ros.spin import spin_node
 STATUS_TOPIC = 'recorder/status'
 STATUS_PERIOD_S = 0.5
 READY_CHECK_PERIOD_S = 0.05
+WRITE_DELAY_ENV = 'TRUST_AV_TEST_WRITE_DELAY_S'
+"""Tests only: seconds every chunk write of the recorder sleeps first (a slow disk)."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +76,7 @@ class RecorderNode(Node):
         self.config = declare_config(self, RecorderConfig)
         self.clock = declare_config(self, WallClockConfig)
         self.bag = BagWriter(Path(self.config.bag_path))
+        self.write_delay_s = float(os.environ.get(WRITE_DELAY_ENV, '0') or 0)
         self.needed: dict[str, int] = {}
         self.publishers_needed: dict[str, int] = {}
         self.subscriptions_by_topic = {}
@@ -85,6 +98,14 @@ class RecorderNode(Node):
         self.step_topic = self.resolve_topic_name(
             next(t.name for t in TOPICS if t.msgtype == 'rosgraph_msgs/msg/Clock'))
         self.pub_status = self.create_publisher(DiagnosticArray, STATUS_TOPIC, QOS['LATCHED'])
+        # back-pressure (lock-step): complete steps held per topic, acknowledged to the
+        # step authority
+        self.ack_rows = {self.resolve_topic_name(t.name): (t.per_step, t.initial)
+                         for t in recorded_topics()}
+        self.held = dict.fromkeys(self.ack_rows, 0)
+        self.acked = 0
+        self.pub_ack = (None if self.clock.wall else
+                        self.create_publisher(UInt64, ACK_TOPIC, QOS['LATCHED']))
         self.ready = False
         self.last_status_s = 0.0
         self.ready_timer = self.create_timer(READY_CHECK_PERIOD_S, self.check_ready)
@@ -115,10 +136,13 @@ class RecorderNode(Node):
         """Write one raw message; a ``clock`` tick closes the step before it."""
         if self.finished:
             return
-        if topic == self.step_topic and not self.bag.end_step():
+        if topic == self.step_topic and not self.end_step():
             self.stop_disk_full()
             return
         self.bag.write(topic, data)
+        row = self.ack_rows.get(topic)
+        if row is not None and self.pub_ack is not None:
+            self.acknowledge(topic, row)
         needed = self.needed.get(topic)
         if needed is not None and self.bag.count(topic) == needed:
             self.incomplete -= 1
@@ -128,10 +152,30 @@ class RecorderNode(Node):
         if time.monotonic() - self.last_status_s >= STATUS_PERIOD_S and self.ready:
             self.publish_status('recording')
 
+    def acknowledge(self, topic: str, row: tuple[int, int]) -> None:
+        """Count one message of a recorded per-step topic; acknowledge the complete steps
+        held on every topic once they have grown by ``ACK_EVERY_STEPS``."""
+        per_step, initial = row
+        held = (self.bag.count(topic) - initial) // per_step
+        if held <= self.held[topic]:
+            return
+        self.held[topic] = held
+        steps = min(self.held.values())
+        if steps >= self.acked + ACK_EVERY_STEPS:
+            self.acked = steps
+            self.pub_ack.publish(UInt64(data=steps))  # type: ignore[union-attr]
+
     def flush(self) -> None:
         """Wall mode: write what arrived since the last chunk."""
-        if not self.finished and not self.bag.end_step():
+        if not self.finished and not self.end_step():
             self.stop_disk_full()
+
+    def end_step(self) -> bool:
+        """Write the step's chunk (after the test-only delay of a slow disk); False once
+        the disk is full."""
+        if self.write_delay_s:
+            time.sleep(self.write_delay_s)
+        return self.bag.end_step()
 
     def complete(self) -> None:
         """Every message of every expected step is in: finish the bag and end."""

@@ -17,6 +17,13 @@ handler only records it, and a ``KeyboardInterrupt`` that Python discarded as un
 recorded by :func:`sys.unraisablehook` instead of printed. :func:`deliver_pending` raises a
 recorded stop; it runs after every spin, at every progress update of the long in-process
 commands, and when a command returns.
+
+A stop is carried out to its end whatever number and mix of signals arrive: once a stop has
+been raised (the command is stopping what it started and finishing its files), or inside a
+:func:`stopping` block (a graph being stopped), a further signal raises nothing. It
+*escalates* the stop instead (:func:`escalations` counts them): the graph's stop goes on to
+its next, harsher signal at once (SIGINT, SIGTERM, SIGKILL of its nodes, then finishing the
+bag from what was recorded), and never abandons what it started.
 """
 
 from __future__ import annotations
@@ -33,7 +40,8 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 """The signals that stop a command (Ctrl-C; ``timeout``, ``docker stop``, systemd; a closed
 terminal)."""
 
-_state: dict[str, int] = {'deferring': 0, 'pending': 0}
+_state: dict[str, int] = {'deferring': 0, 'pending': 0, 'raised': 0, 'quiet': 0,
+                          'escalations': 0}
 
 
 class Stopped(KeyboardInterrupt):
@@ -45,12 +53,42 @@ class Stopped(KeyboardInterrupt):
 
 
 def handle(signum: int, _frame: FrameType | None) -> None:
-    """The signal handler: raise :class:`Stopped`, or record it inside :func:`deferred`."""
+    """The signal handler: raise :class:`Stopped`; record it inside :func:`deferred`; count
+    it as an escalation once a stop is under way (raised, or a :func:`stopping` block)."""
+    if _state['raised'] or _state['quiet']:
+        _state['escalations'] += 1
+        if not _state['raised'] and not _state['pending']:
+            _state['pending'] = signum      # raised once the stopping block is done
+        return
     if _state['deferring']:
         _state['pending'] = signum
         return
+    _raise(signum)
+
+
+def _raise(signum: int) -> None:
     _state['pending'] = 0
+    _state['raised'] = signum
     raise Stopped(signum)
+
+
+def escalations() -> int:
+    """Stop signals that arrived while a stop was under way (each asks for a harsher one)."""
+    return _state['escalations']
+
+
+@contextlib.contextmanager
+def stopping() -> Iterator[None]:
+    """A stop in progress (nodes being stopped): a stop signal inside the block does not
+    interrupt it but escalates it (:func:`escalations`); one that is not yet being carried
+    out is raised when the block ends."""
+    _state['quiet'] += 1
+    try:
+        yield
+    finally:
+        _state['quiet'] -= 1
+    if not _state['quiet'] and not _state['deferring']:
+        deliver_pending()
 
 
 def unraisable_hook(unraisable: Any) -> None:
@@ -59,6 +97,7 @@ def unraisable_hook(unraisable: Any) -> None:
     error = unraisable.exc_value
     if isinstance(error, KeyboardInterrupt):
         _state['pending'] = getattr(error, 'signum', signal.SIGINT)
+        _state['raised'] = 0                # discarded: not being carried out
         return
     sys.__unraisablehook__(unraisable)
 
@@ -71,7 +110,7 @@ def installed() -> Iterator[None]:
     back afterwards."""
     previous = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
     previous_hook = sys.unraisablehook
-    _state['pending'] = 0
+    _state.update(pending=0, raised=0, escalations=0)
     for signum in STOP_SIGNALS:
         if not ignored_on_purpose(signum, previous[signum]):
             signal.signal(signum, handle)
@@ -82,6 +121,7 @@ def installed() -> Iterator[None]:
         sys.unraisablehook = previous_hook
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        _state.update(raised=0, escalations=0)
 
 
 def ignored_on_purpose(signum: int, handler: Any) -> bool:
@@ -92,10 +132,13 @@ def ignored_on_purpose(signum: int, handler: Any) -> bool:
 
 
 def deliver_pending() -> None:
-    """Raise the stop that arrived where it could not be raised, if any."""
+    """Raise the stop that arrived where it could not be raised, if any (not inside a
+    :func:`stopping` block: there it waits for the block's end)."""
+    if _state['quiet']:
+        return
     signum, _state['pending'] = _state['pending'], 0
     if signum:
-        raise Stopped(signum)
+        _raise(signum)
 
 
 @contextlib.contextmanager

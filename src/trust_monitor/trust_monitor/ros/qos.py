@@ -15,13 +15,15 @@ from __future__ import annotations
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from trust_monitor.common.record_window import HISTORY_DEPTH as RECORD_HISTORY_DEPTH
 from trust_monitor.common.topics import TOPIC
 from trust_monitor.common.wall_clock import WallClockConfig
 
-HISTORY_DEPTH = 1000
-"""Samples kept per topic on both sides. The recorder is not part of the lock-step, so it may
-fall behind the graph while the machine is busy; a reader whose history overflows drops
-samples even on a reliable topic (seen with depth 10 on a loaded machine: 6 steps lost)."""
+HISTORY_DEPTH = RECORD_HISTORY_DEPTH
+"""Samples kept per topic on both sides. A reader whose history overflows drops samples even
+on a reliable topic (seen with depth 10 on a loaded machine: 6 steps lost); the recorder may
+fall behind the graph, which therefore runs at most a window of steps ahead of it
+(:mod:`trust_monitor.common.record_window`: the window keeps within half this depth)."""
 
 STEP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE,
