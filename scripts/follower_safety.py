@@ -10,7 +10,7 @@ For every case (us06 and nycc x predictor x alpha, the in-process closed loop of
 ``trust-av simulate`` / ``study.sweep.run_case``) it records the human's smallest gap, the
 number of steps whose human gap is below d_s - ``safety_gap_margin_m`` (and below 2 m and
 0 m), when the first of them happens and the AV's own smallest gap; then the same for K
-drivers drawn from ``--driver-fit`` (``study.sweep.population_cases``: per-driver fits when
+drivers drawn from ``--driver-fit`` (``study.population.population_cases``: per-driver fits when
 the file has them). Prints Markdown tables and writes JSON. The figures of
 docs/DRIVER_IRL.md, "Closed-loop safety", come from this script.
 """
@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from preceding_traffic.sources import load_trace
-from trust_av_planner.study.sweep import Case, population_cases
+from trust_av_planner.study.population import population_cases
+from trust_av_planner.study.sweep import Case
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
 

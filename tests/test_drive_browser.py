@@ -39,6 +39,7 @@ from trust_av_planner.drive.bag_data import (
 from trust_av_planner.drive.sessions import balanced_latin_square_row
 from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
 from trust_av_planner.drive.trust_rating import questionnaire_score
+from trust_monitor.common.registry import TRUST_MODELS, names
 
 pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),
@@ -203,7 +204,10 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
     assert ratings_recorded == len(who.ratings)
     comparison = (study / 'P01' / 'comparison.csv').read_text().splitlines()
     assert comparison[0].startswith('drive,condition,model,ratings,rmse,correlation')
-    assert len(comparison) == 3 and all(',paper,' in line for line in comparison[1:])
+    # every registered trust model, for each of the two drives
+    models = names(TRUST_MODELS)
+    assert len(comparison) == 1 + 2 * len(models)
+    assert sorted(line.split(',')[2] for line in comparison[1:]) == sorted(models * 2)
     summary = (study / 'P01' / 'summary.csv').read_text().splitlines()
     assert len(summary) == 4 and all(',done,' in line for line in summary[1:])
     assert 'rmse' in output and 'paper' in output

@@ -27,11 +27,11 @@ from rosbags.highlevel import AnyReader
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.cli.outputs import MARKER
 from trust_av_planner.graph.bag_records import message_stamp, records_from_bag
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import StepRecord
+from trust_av_planner.system.outputs import MARKER
 from trust_monitor.common.topics import TOPICS, qualified
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

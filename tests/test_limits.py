@@ -29,7 +29,7 @@ from test_recording import record
 
 from trust_av_planner.cli.main import main
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph import bag_writer
+from trust_av_planner.graph import mcap_steps
 from trust_av_planner.graph.bag_writer import BagWriter
 from trust_av_planner.study.sweep import check_ray_address
 from trust_monitor.common.kinematics import VehicleState, advance, integrate
@@ -248,16 +248,16 @@ def test_any_other_write_error_ends_the_recording_like_a_full_disk(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """EIO (a failing disk) writing step 31's chunk: one line naming it, the 30 complete
     steps kept and the bag finished."""
-    commit = bag_writer._WholeWrites.commit
+    commit = mcap_steps.WholeWrites.commit
     commits = []
 
-    def failing_once(handle: bag_writer._WholeWrites) -> None:
+    def failing_once(handle: mcap_steps.WholeWrites) -> None:
         commits.append(1)
         if len(commits) == 31:
             raise OSError(errno.EIO, os.strerror(errno.EIO))
         commit(handle)
 
-    monkeypatch.setattr(bag_writer._WholeWrites, 'commit', failing_once)
+    monkeypatch.setattr(mcap_steps.WholeWrites, 'commit', failing_once)
     bag = tmp_path / 'eio'
     writer = BagWriter(bag)
     record(writer, 200, finish=False)

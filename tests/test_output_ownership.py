@@ -14,15 +14,15 @@ import pytest
 from test_recording import record
 
 from trust_av_planner.cli.main import main
-from trust_av_planner.cli.outputs import (
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph.bag_writer import BagWriter
+from trust_av_planner.system.outputs import (
     MARKER,
     RunOutputs,
     marked_outputs,
     prepare_outputs,
     replacing_outputs,
 )
-from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph.bag_writer import BagWriter
 
 
 def snapshot(directory: Path) -> dict[str, bytes]:

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from trust_av_planner.study import sweep, tables
+from trust_av_planner.study import population, sweep, tables
 from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_av_planner.study.sweep import Case
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
@@ -189,9 +189,9 @@ def test_run_settings_are_checked() -> None:
 
 def test_population_cases_are_seeded_and_named() -> None:
     cases = sweep.sweep_cases(['us06'], ['gru'], [0.0, 1.0])
-    first = sweep.population_cases(cases, 3, seed=4)
-    again = sweep.population_cases(cases, 3, seed=4)
-    other = sweep.population_cases(cases, 3, seed=5)
+    first = population.population_cases(cases, 3, seed=4)
+    again = population.population_cases(cases, 3, seed=4)
+    other = population.population_cases(cases, 3, seed=5)
     assert first == again and first != other
     assert len(first) == 6 and [c.driver for c in first] == [1, 2, 3, 1, 2, 3]
     # The same driver k for every alpha, so improvements over alpha = 0 are per driver.
@@ -204,7 +204,7 @@ def test_population_cases_are_seeded_and_named() -> None:
     assert first[4].base == Case('us06', 'gru', 1.0)
     from trust_av_planner.errors import TrustAvPlannerError
     with pytest.raises(TrustAvPlannerError, match='number of drivers must be >= 1, got 0'):
-        sweep.population_cases(cases, 0, seed=1)
+        population.population_cases(cases, 0, seed=1)
 
 
 def test_population_tables_give_mean_and_95_percent_interval() -> None:
@@ -223,7 +223,7 @@ def test_population_tables_give_mean_and_95_percent_interval() -> None:
     # Max trust improvement per driver: 25 % and 23.81 %; E and RMSE the same for both.
     assert rows[-1][2:] == ['50.00 ± 0.00 %', '28.57 ± 0.00 %']
     assert rows[-1][1].startswith('24.40 ± 7.5')
-    mean = sweep.population_mean(results)
+    mean = population.population_mean(results)
     assert mean[Case('us06', 'ca', 1.0)]['metrics']['final_trust'] == pytest.approx(51.0)
     assert mean[Case('us06', 'ca', 1.0)]['trust'] == pytest.approx([0.0, 51.0])
 

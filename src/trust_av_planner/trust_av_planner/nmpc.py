@@ -11,16 +11,14 @@ the plan influences)::
 with the dynamics of :mod:`trust_monitor.common.kinematics` and E of
 :func:`trust_monitor.trust_model.explicability` (each written once). The trust constraint is
 the exact smooth equivalent of propagating the trust model's update over the horizon: the
-largest admissible E of :func:`trust_monitor.trust_interface.explicability_bound` (for
-``paper`` its closed form :func:`trust_monitor.trust_model.explicability_bound`; for other
-models the bisection on their own update).
+largest admissible E of :func:`trust_monitor.trust_interface.explicability_bound` (a closed
+form for ``paper``, a bisection on their own update for the others).
 
 The NLP is built once (CasADi SX, ``sqpmethod`` with the ``qrqp`` active-set QP solver),
 warm-started from the shifted previous plan. A solve that fails, that (against the wall
 clock only: ``cpu_budget``) uses more thread CPU time than ``solver_cpu_budget_s``, or whose
 plan breaks a bound by more than :data:`BOUND_TOLERANCE`, is replaced by the documented
-fallback plan
-(:func:`trust_monitor.common.kinematics.hold_gap_plan`) and reported in the status.
+fallback plan (:func:`trust_monitor.common.kinematics.hold_gap_plan`), reported in the status.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from trust_av_planner.cli.options import (
     steps_value,
 )
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.study import sweep, tables
+from trust_av_planner.study import population, sweep, tables
 from trust_av_planner.study.frame import (
     TRUST_MODEL_PARAMETER,
     check_axes,
@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     cases = sweep.sweep_cases(args.traces, args.predictors, args.alphas, args.driver_models,
                               args.trust_models)
     if args.drivers:
-        cases = sweep.population_cases(cases, args.drivers, args.drivers_seed,
+        cases = population.population_cases(cases, args.drivers, args.drivers_seed,
                                        args.driver_fit or DRIVER_FITS.get(args.profile,
                                                                           DRIVER_FIT_FILE))
     if args.executor == 'ray':
@@ -189,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
     if args.drivers:
         alpha_table, improvement_table = (tables.population_alpha_table,
                                           tables.population_improvement_table)
-        summary = sweep.population_mean(results)  # trends and Figure 3 on the means
+        summary = population.population_mean(results)  # trends and Figure 3 on the means
     else:
         alpha_table, improvement_table = tables.alpha_table, tables.improvement_table
         summary = results

@@ -16,10 +16,10 @@ from trust_av_planner.cli.options import (
     run_overrides,
     steps_value,
 )
-from trust_av_planner.cli.outputs import replacing_outputs
 from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import compute_metrics
+from trust_av_planner.system.outputs import replacing_outputs
 
 
 def run(args: argparse.Namespace) -> int:

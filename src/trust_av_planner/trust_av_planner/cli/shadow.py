@@ -17,7 +17,6 @@ from trust_av_planner.cli.options import (
     positive_hz,
     positive_seconds,
 )
-from trust_av_planner.cli.outputs import replacing_outputs
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.planner import needs_follower_state
 from trust_av_planner.system.config import (
@@ -25,6 +24,7 @@ from trust_av_planner.system.config import (
     check_control_rate,
     load_run_config,
 )
+from trust_av_planner.system.outputs import replacing_outputs
 from trust_monitor.common import output_files, registry
 from trust_monitor.common.wall_clock import format_summary
 

@@ -25,16 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-import numpy as np
-
 from human_driver_sim.population import (
-    DRIVER_FIT_FILE,
     WEIGHT_NAMES,
-    fitted_time_headway_s,
-    per_driver_fits,
-    per_pair_weights,
-    sample_driver_params,
-    sample_population,
 )
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
@@ -235,13 +227,13 @@ def run_case(case: Case, params_file: ParamsFiles,
     records: list[StepRecord]
     if settings.runner == 'graph':
         # Imported here: the in-process sweep never loads rclpy.
-        from trust_av_planner.cli.outputs import replacing_outputs
         from trust_av_planner.graph.orchestrator import run_graph_records
+        from trust_av_planner.system.outputs import replacing_outputs
         models = ''.join(f'_{m}' for m in (case.driver_model, case.trust_model) if m)
         bag = Path(settings.bags_dir) / (f'{Path(case.trace).stem}_{case.predictor}{models}_'
                                          f'alpha{case.alpha:g}')
         # A bag and logs left by an interrupted sweep (its case is not cached) are replaced,
-        # if its marker proves a trust-av command wrote them (cli.outputs).
+        # if its marker proves a trust-av command wrote them (system.outputs).
         with replacing_outputs(bag, overwrite=True, command='reproduce',
                                option='--results-dir') as outputs:
             _, records = run_graph_records(config, case.trace, trace, outputs.bag,
@@ -376,63 +368,6 @@ def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PAPE
     alphas, driver_models, trust_models = list(alphas), list(driver_models), list(trust_models)
     return [Case(t, p, a, driver_model=d, trust_model=m) for t in traces for p in predictors
             for m in trust_models for d in driver_models for a in alphas]
-
-
-def population_cases(cases: Sequence[Case], drivers: int, seed: int,
-                     driver_fit: Path = DRIVER_FIT_FILE) -> list[Case]:
-    """Each case once per driver of a seeded population of ``drivers`` sampled drivers.
-
-    With per-driver fits in ``driver_fit`` (``per_driver``, written by ``fit-driver``) the
-    population is :func:`human_driver_sim.population.sample_driver_params` of them (W,
-    tau_H, d_s and the caution a_extra per driver); otherwise
-    :func:`human_driver_sim.population.sample_population` of the per-pair fitted weights,
-    each with the fit's time headway tau_H when the fit has one. The same seed gives the
-    same drivers.
-
-    Raises:
-        TrustAvPlannerError: ``drivers`` < 1, or an unreadable driver-fit file.
-    """
-    if drivers < 1:
-        raise TrustAvPlannerError(f'the number of drivers must be >= 1, got {drivers}')
-    try:
-        per_driver = per_driver_fits(driver_fit)
-        if per_driver is not None:
-            params = [tuple(row.items()) for row in
-                      sample_driver_params(per_driver, drivers, seed=seed)]
-        else:
-            population = sample_population(per_pair_weights(driver_fit), drivers, seed=seed)
-            time_headway_s = fitted_time_headway_s(driver_fit)
-            extra = () if time_headway_s is None else (('time_headway_s', time_headway_s),)
-            params = [tuple(zip(WEIGHT_NAMES, (float(w) for w in weights), strict=True))
-                      + extra for weights in population]
-    except ValueError as err:
-        raise TrustAvPlannerError(str(err)) from err
-    return [dataclasses.replace(case, driver=k + 1, driver_params=params[k])
-            for case in cases for k in range(drivers)]
-
-
-def by_driver(results: dict[Case, dict[str, Any]]) -> dict[int, dict[Case, dict[str, Any]]]:
-    """Results split per driver, each keyed by the base case (trace, predictor, alpha)."""
-    out: dict[int, dict[Case, dict[str, Any]]] = {}
-    for case, result in results.items():
-        out.setdefault(case.driver, {})[case.base] = result
-    return out
-
-
-def population_mean(results: dict[Case, dict[str, Any]]) -> dict[Case, dict[str, Any]]:
-    """Per base case, the mean over drivers of every metric and of the trust series."""
-    groups: dict[Case, list[dict[str, Any]]] = {}
-    for case, result in results.items():
-        groups.setdefault(case.base, []).append(result)
-    out = {}
-    for case, members in groups.items():
-        out[case] = {
-            'metrics': {name: float(np.mean([m['metrics'][name] for m in members]))
-                        for name in members[0]['metrics']},
-            'time_s': members[0]['time_s'],
-            'trust': np.mean([m['trust'] for m in members], axis=0).tolist(),
-            'drivers': len(members)}
-    return out
 
 
 def run_sweep(cases: Sequence[Case], params_file: ParamsFiles, results_dir: Path,

@@ -16,8 +16,9 @@ from typing import Any
 import numpy as np
 
 from trust_av_planner.study.paper_results import MAX_IMPROVEMENT_PERCENT
+from trust_av_planner.study.population import by_driver
 from trust_av_planner.study.stats import mean_ci95
-from trust_av_planner.study.sweep import METRICS, Case, by_driver
+from trust_av_planner.study.sweep import METRICS, Case
 from trust_monitor.common.output_files import replacing
 from trust_monitor.trust_bound import row_bound
 from trust_monitor.trust_model import TrustConfig
