@@ -25,7 +25,8 @@ from test_recording import QOS, TYPESTORE, odometry, record
 from trust_av_planner.cli.main import main
 from trust_av_planner.graph import bag_repair
 from trust_av_planner.graph.bag_repair import repair_bag, written_here
-from trust_av_planner.graph.bag_writer import RECORDER_LIBRARY, BagWriteError, BagWriter
+from trust_av_planner.graph.bag_writer import BagWriteError, BagWriter
+from trust_av_planner.graph.mcap_steps import RECORDER_LIBRARY
 
 FOREIGN_LIBRARY = 'mcap-cpp; rosbag2 jazzy'
 

@@ -19,13 +19,8 @@ from rosbags.interfaces import Qos
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.metadata import parse_qos
 
-from trust_av_planner.graph.bag_writer import (
-    RECORDER_LIBRARY,
-    TYPESTORE,
-    BagWriteError,
-    BagWriter,
-    qos_profile,
-)
+from trust_av_planner.graph.bag_writer import TYPESTORE, BagWriteError, BagWriter, qos_profile
+from trust_av_planner.graph.mcap_steps import RECORDER_LIBRARY
 from trust_monitor.common.output_files import stop_signals_held
 from trust_monitor.errors import one_line
 
@@ -111,7 +106,7 @@ def _offered_qos(source: Path, channel: Channel) -> list[Qos]:
 
 def written_here(bag: Path, library: str) -> bool:
     """Whether this project's recorder wrote the recording: its MCAP header names
-    :data:`~trust_av_planner.graph.bag_writer.RECORDER_LIBRARY`, or its ``metadata.yaml``
+    :data:`~trust_av_planner.graph.mcap_steps.RECORDER_LIBRARY`, or its ``metadata.yaml``
     carries the ``trust_av.recorder`` custom data the writer sets. Its log times are then
     the messages' header stamps; another tool's are kept as they are."""
     if library.startswith(RECORDER_LIBRARY):

@@ -125,7 +125,8 @@ class BagWriter:
         path: the bag directory to create (it must not exist).
         copy_of: for a repaired copy of another tool's recording (its log times are not
             header stamps): that tool's MCAP ``library``; the copy is then not marked as
-            this project's recording (:data:`RECORDER_LIBRARY`, ``trust_av.recorder``).
+            this project's recording (:data:`~trust_av_planner.graph.mcap_steps.RECORDER_LIBRARY`,
+            ``trust_av.recorder``).
 
     Raises:
         BagWriteError: the directory exists or cannot be created.
