@@ -213,7 +213,8 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
     assert 'rmse' in output and 'paper' in output
     # trust-av fit-driver --drives: two complete drives cannot fill train, validation and
     # test; the refusal names the count (the split itself: test_drive_core)
-    with pytest.raises(DriveBagError, match='at least three drives, got 2'):
+    with pytest.raises(DriveBagError,
+                       match='at least three drives to train, validate and test, got 2'):
         drive_bag_pairs(study, 1.0, 4.5)
 
 

@@ -8,11 +8,13 @@ also started as their own processes, as a user would start them by hand."""
 from __future__ import annotations
 
 import ast
+import contextlib
 import json
 import os
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -283,11 +285,19 @@ def test_hand_started_nodes(tmp_path: Path) -> None:
     alone = procs.pop('alone')
     assert alone.stdout is not None
     seen = []
-    for line in alone.stdout:   # until it is up (or ends)
-        seen.append(line)
-        if 'ready' in line:
-            break
-    os.killpg(alone.pid, signal.SIGINT)
+    # until it is up and has checked its overrides (the check follows the node's 'ready'
+    # line), or ends; a node that never warns is stopped after 60 s
+    watchdog = threading.Timer(60.0, os.killpg, (alone.pid, signal.SIGINT))
+    watchdog.start()
+    try:
+        for line in alone.stdout:
+            seen.append(line)
+            if 'ignoring parameter' in line:
+                break
+    finally:
+        watchdog.cancel()
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(alone.pid, signal.SIGINT)
     rest, _ = alone.communicate(timeout=60)
     assert alone.returncode == 0 and 'ready (lock-step)' in ''.join(seen), ''.join(seen) + rest
     assert ('ignoring parameter(s) wheel_base of a wildcard section: not parameters of any '

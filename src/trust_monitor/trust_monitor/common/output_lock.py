@@ -19,6 +19,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+from trust_monitor.common.output_files import odd_path
 from trust_monitor.errors import TrustMonitorError
 
 PID_WAIT_S = 0.2
@@ -45,9 +46,9 @@ def hold_output_lock(output: Path) -> Iterator[Path | None]:
     Missing parent directories of ``output`` are created (and removed again on exit if they
     are still empty, so a refused command leaves nothing behind). Where the file system
     refuses them or the lock file itself (:data:`REFUSING`: not a directory, no permission,
-    read-only), no output can be written there either: the block runs without a lock
-    (yields None) and the command's own output checks name the reason, as they would have
-    without the lock.
+    read-only), or where ``output`` is no name for an output (``odd_path``: a NUL, ``.``),
+    no output can be written there either: the block runs without a lock (yields None) and
+    the command's own output checks name the reason, as they would have without the lock.
 
     Args:
         output: the path a command is about to write (a bag directory, an output file).
@@ -58,6 +59,9 @@ def hold_output_lock(output: Path) -> Iterator[Path | None]:
         TrustMonitorError: the lock file cannot be created for another reason (a symbolic
             link or a directory in its place, a full disk: the line names it and why).
     """
+    if odd_path(output) is not None:    # no name to put a lock beside: the command's own
+        yield None                      # output check refuses it in one line
+        return
     path = lock_path(Path(output))
     created: list[Path] = []
     try:
