@@ -103,7 +103,8 @@ def test_study_cache_keys_on_the_plugins_code(plugin_env: dict[str, str],
         assert proc.returncode == 0, proc.stderr
         return proc.stdout.splitlines()
     with_plugin, without = run(plugin_env), run(dict(os.environ))
-    assert with_plugin[0] == "['smoothing.py']" and without[0] == '[]'
+    # both of its registered modules: the plan estimator and the trust model
+    assert with_plugin[0] == "['leaky_trust.py', 'smoothing.py']" and without[0] == '[]'
     assert with_plugin[1] != without[1]
 
 
@@ -116,6 +117,21 @@ def test_plugin_passes_the_component_contract(plugin_env: dict[str, str],
                           timeout=600, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert '6 passed' in proc.stdout, proc.stdout
+
+
+def test_plugin_trust_model_passes_the_trust_model_contract(plugin_env: dict[str, str],
+                                                            tmp_path: Path) -> None:
+    """``leaky``, registered by the installed package only, is held to every rule of
+    tests/test_trust_model_contract.py, the node graph == in-process run included."""
+    proc = subprocess.run([sys.executable, '-m', 'pytest', '-n', '0', '-v', '-p',
+                           'no:cacheprovider', '-k', 'leaky',
+                           str(REPO / 'tests' / 'test_trust_model_contract.py')],
+                          env=plugin_env, cwd=tmp_path, capture_output=True, text=True,
+                          timeout=600, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert 'test_graph_equals_in_process[leaky] PASSED' in proc.stdout, proc.stdout
+    assert 'test_numeric_bound_keeps_trust_above_the_minimum[3-1.0-leaky] PASSED' in \
+        proc.stdout, proc.stdout
 
 
 def test_no_file_under_src_names_the_plugin() -> None:

@@ -3,8 +3,10 @@
 Parametrised from the registry (``trust_av.trust_models``), so a package that registers a
 model is held to the same rules: time consistency, determinism, a monotone update (what
 the numeric NMPC bound assumes), a numeric bound that keeps T >= T_min on the propagated
-update, the closed form equal to the numeric one, and a one-line refusal of a bad
-parameter value.
+update, the closed form equal to the numeric one, a one-line refusal of a bad parameter
+value, and graph == in-process: 30 lock-step steps of ``trust-av run`` with the model chosen
+by ``trust_model`` equal the in-process loop (trust, E, plans), with T_min set above the
+model's initial trust so that the NMPC's trust constraint binds.
 """
 
 from __future__ import annotations
@@ -14,10 +16,16 @@ import itertools
 import math
 import subprocess
 import sys
+from pathlib import Path
 from typing import Any
 
 import pytest
+from test_component_contract import GRAPH_STEPS, assert_same_records, cli, trace_csv
 
+from preceding_traffic.sources import load_trace
+from preceding_traffic.traces import truncate
+from trust_av_planner.system.closed_loop import simulate
+from trust_av_planner.system.config import load_run_config
 from trust_monitor.common import registry
 from trust_monitor.common.params import ParamsError, build_config
 from trust_monitor.trust_interface import (
@@ -30,6 +38,7 @@ from trust_monitor.trust_interface import (
 from trust_monitor.trust_model import TrustConfig
 
 NAMES = registry.names(registry.TRUST_MODELS)
+__all__ = ['trace_csv']  # the 30-step trace of test_component_contract, a fixture here too
 BASE = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,
                    trust_initial=0.0)
 SCORES = (0.0, 0.001, 0.02, 0.15, 0.2027, 0.21, 0.4, 0.9)
@@ -263,3 +272,38 @@ def test_simulate_refuses_a_bad_model_parameter_in_one_line(name: str, tmp_path:
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert proc.stderr.count('\n') == 1 and bad[0] in proc.stderr, proc.stderr
     assert not out.exists()
+
+
+TRUST_MIN_ABOVE_INITIAL = 0.1
+"""T_min - T(0) in the graph test: above the initial trust, so the NMPC starts on its
+fallback and then plans under a binding E_max while trust climbs past T_min (for the
+shipped models on a 0-1 scale: 2 to 5 of the 30 steps bind)."""
+
+
+@pytest.mark.parametrize('name', NAMES)
+def test_graph_equals_in_process(name: str, tmp_path: Path, trace_csv: Path) -> None:
+    """``trust-av run`` (the node graph, lock-step) with ``trust_model: NAME`` equals
+    ``system.closed_loop.simulate`` over 30 steps: every recorded field (trust, E, E_max,
+    the plans) but the solve times."""
+    from trust_av_planner.graph.bag_records import records_from_bag
+
+    shipped = load_run_config().trust
+    m = make_trust_model(dataclasses.replace(shipped, trust_model=name))
+    trust_min = m.trust(m.initial_state()) + TRUST_MIN_ABOVE_INITIAL
+    params = tmp_path / 'model.yaml'
+    params.write_text(f'/**:\n  ros__parameters:\n    trust_model: {name}\n'
+                      f'/**/planner:\n  ros__parameters:\n    trust_min: {trust_min!r}\n')
+    config = load_run_config([params])
+    assert config.trust.trust_model == name and config.planner.trust_min == trust_min
+    trace = truncate(load_trace(str(trace_csv), config.planner.dt_s, config.trace),
+                     GRAPH_STEPS)
+    reference = simulate(config, trace).records
+    binding = [r.t_s for r in reference if 0.0 < r.explicability_max < 1.0]
+    assert len(binding) >= 2, f'{name}: the trust constraint must bind for this test to mean ' \
+                              f'anything (E_max < 1 at t = {binding})'
+    bag = tmp_path / 'run'
+    proc = cli('run', '--trace', str(trace_csv), '--params-file', str(params),
+               '--max-steps', str(GRAPH_STEPS), '--bag', str(bag), '--no-plot',
+               '--no-progress', cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert_same_records(records_from_bag(bag), reference)

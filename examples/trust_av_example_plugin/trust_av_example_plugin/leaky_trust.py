@@ -7,10 +7,10 @@ one 1 s step to rounding (the contract of ``trust_monitor.trust_interface``), an
 model's own discrete equation is that 1 s step. No closed form for the NMPC bound is given:
 the planner bisects on :meth:`LeakyTrustModel.step`.
 
-Registered by the package's ``setup.py``::
+Registered by the package's ``pyproject.toml``::
 
-    entry_points={'trust_av.trust_models': [
-        'leaky = trust_av_example_plugin.leaky_trust:COMPONENT']}
+    [project.entry-points."trust_av.trust_models"]
+    leaky = "trust_av_example_plugin.leaky_trust:COMPONENT"
 
 then ``trust_model: leaky`` in a params file (and ``leaky_time_constant_s`` beside it).
 """
