@@ -35,13 +35,12 @@ every other (``docs/concepts/trust-models.md``).
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
 from trust_monitor.common.params import ParamsError, build_config
-from trust_monitor.common.registry import TRUST_MODELS, Component, components, get
+from trust_monitor.common.registry import TRUST_MODELS, Component, config_types, get
 
 BOUND_TOLERANCE = 1e-12
 """Bisection stops when the bracket of E_max is this narrow (E is dimensionless, < 1)."""
@@ -166,10 +165,9 @@ def paper_bound_holds(model: TrustModel) -> bool:
     return getattr(model, 'paper_bound_holds', False) is True
 
 
-@functools.cache
 def trust_model_component(name: str) -> Component:
-    """The registered trust model ``name`` (looked up once per process: a scan of the
-    installed distributions' entry points takes about 0.1-0.3 s).
+    """The registered trust model ``name`` (the registry scans the entry points once per
+    process).
 
     Raises:
         RegistryError: not registered (one line listing the registered names).
@@ -177,11 +175,10 @@ def trust_model_component(name: str) -> Component:
     return get(TRUST_MODELS, name)
 
 
-@functools.cache
 def trust_model_config_types() -> tuple[type, ...]:
     """The ``config_type`` of every registered trust model (their parameters are known
-    names in params files whichever model runs); looked up once per process."""
-    return tuple(c.config_type for c in components(TRUST_MODELS) if c.config_type is not None)
+    names in params files whichever model runs)."""
+    return config_types(TRUST_MODELS)
 
 
 def make_trust_model(trust: Any, values: Mapping[str, Any] | None = None) -> TrustModel:
