@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from test_graph import assert_records_equal
 
 from human_driver_sim.followers import FollowerConfig, make_follower
 from preceding_traffic.sources import load_trace
@@ -213,16 +214,8 @@ def test_the_declared_needs_decide_what_runs_without_the_follower(name: str,
 
 
 def assert_same_records(graph: list[StepRecord], ref: list[StepRecord]) -> None:
-    assert len(graph) == len(ref) == GRAPH_STEPS
-    for g, r in zip(graph, ref, strict=True):
-        for field in dataclasses.fields(StepRecord):
-            if 'solve_time' in field.name:
-                continue
-            a, b = getattr(g, field.name), getattr(r, field.name)
-            if isinstance(b, (tuple, float)):
-                assert a == pytest.approx(b, abs=1e-9), (r.t_s, field.name)
-            else:
-                assert a == b, (r.t_s, field.name)
+    assert len(ref) == GRAPH_STEPS
+    assert_records_equal(graph, ref)
 
 
 @pytest.mark.parametrize(('group', 'name'), CASES, ids=IDS)
