@@ -40,7 +40,7 @@ import numpy as np
 from trust_monitor.common import kinematics
 from trust_monitor.common.params import check_fields, control_step_param, param, require
 from trust_monitor.common.registry import Component
-from trust_monitor.common.solver import sqp_options
+from trust_monitor.common.solver import solve, sqp_options
 
 LOG = logging.getLogger(__name__)
 
@@ -280,8 +280,8 @@ class DriverMpc:
             guess = np.concatenate([self._previous[1:], self._previous[-1:]])
         params = np.concatenate([[gap_m, speed_mps, av_speed_mps], expected_mps2, c.weights,
                                  cautious])
-        sol = self._solver(x0=guess, p=params, lbx=self._lbx, ubx=self._ubx, lbg=lbg,
-                           ubg=self._ubg)
+        sol = solve(self._solver, x0=guess, p=params, lbx=self._lbx, ubx=self._ubx, lbg=lbg,
+                    ubg=self._ubg)
         elapsed = time.perf_counter() - start
         stats = self._solver.stats()
         iterations = int(stats.get('iter_count', 0))

@@ -41,7 +41,7 @@ from trust_monitor.common.params import (
     param,
     require,
 )
-from trust_monitor.common.solver import nmpc_solver_options
+from trust_monitor.common.solver import nmpc_solver_options, solve
 from trust_monitor.trust_interface import TrustModel, make_trust_model
 from trust_monitor.trust_interface import explicability_bound as trust_bound
 from trust_monitor.trust_model import TrustConfig, explicability
@@ -375,14 +375,14 @@ class TrustAwareNmpc:
         """One solve with these constraint bounds, retried cold when a warm start fails:
         the solution, the solver's stats and the SQP iterations of both calls."""
         c = self.config
-        sol = self._solver(x0=guess, p=params, lbx=c.accel_min_mps2, ubx=c.accel_max_mps2,
-                           lbg=lower[1:], ubg=upper[1:])
+        sol = solve(self._solver, x0=guess, p=params, lbx=c.accel_min_mps2,
+                    ubx=c.accel_max_mps2, lbg=lower[1:], ubg=upper[1:])
         stats = self._solver.stats()
         iterations = int(stats.get('iter_count', 0))
         if not stats['success'] and self._previous is not None:
             # A warm start can stall SQP on degenerate corners (standstill at d_min): retry cold.
-            sol = self._solver(x0=np.zeros(self.steps), p=params, lbx=c.accel_min_mps2,
-                               ubx=c.accel_max_mps2, lbg=lower[1:], ubg=upper[1:])
+            sol = solve(self._solver, x0=np.zeros(self.steps), p=params, lbx=c.accel_min_mps2,
+                        ubx=c.accel_max_mps2, lbg=lower[1:], ubg=upper[1:])
             stats = self._solver.stats()
             iterations += int(stats.get('iter_count', 0))
         return sol, stats, iterations

@@ -11,6 +11,9 @@ places lose it:
   end and exited 0 after a Ctrl-C;
 - rclpy's executor, where an exception raised half-way through ``spin_once`` can leave it
   inconsistent (the nodes avoid it the same way, ``trust_monitor/ros/spin.py``).
+- a CasADi solve, which polls for signals and turns the handler's exception into its own
+  error or a failed solve: the solves hold the stop signals until they return
+  (``trust_monitor/common/held_stops.py``).
 
 So a stop that could not be raised is kept: while rclpy spins (:func:`spin_once`) the
 handler only records it, and a ``KeyboardInterrupt`` that Python discarded as unraisable is
@@ -36,9 +39,7 @@ from collections.abc import Iterator
 from types import FrameType
 from typing import Any
 
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-"""The signals that stop a command (Ctrl-C; ``timeout``, ``docker stop``, systemd; a closed
-terminal)."""
+from trust_monitor.common.held_stops import STOP_SIGNALS
 
 _state: dict[str, int] = {'deferring': 0, 'pending': 0, 'raised': 0, 'quiet': 0,
                           'escalations': 0}

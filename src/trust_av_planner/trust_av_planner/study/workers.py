@@ -27,6 +27,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from multiprocessing import resource_tracker
@@ -34,6 +35,7 @@ from types import FrameType
 from typing import Any, TypeVar
 
 from trust_av_planner.graph import stop_signals
+from trust_monitor.common.held_stops import STOP_SIGNALS, held
 
 T = TypeVar('T')
 
@@ -43,6 +45,13 @@ case stops its nodes in at most 13 s: graph/processes.py)."""
 
 _in_call = {'now': False}
 
+_STOPS = STOP_SIGNALS
+"""Blocked while a worker starts; unblocked when its handlers are installed."""
+
+WORKER_START_TIMEOUT_S = 120.0
+"""How long the pool waits for a worker to start (import the study's modules) on a loaded
+2-core machine before it gives up with an error."""
+
 
 def _on_stop(signum: int, frame: FrameType | None) -> None:
     if not _in_call['now']:
@@ -50,7 +59,7 @@ def _on_stop(signum: int, frame: FrameType | None) -> None:
     stop_signals.handle(signum, frame)  # raised (recorded while rclpy spins)
 
 
-def _initialize_worker(parent: int) -> None:
+def _initialize_worker(parent: int, ready: Any) -> None:
     stop_signals.stop_with_parent()
     if os.getppid() != parent:  # the command died before this worker was up: no signal comes
         os._exit(128 + signal.SIGTERM)
@@ -58,6 +67,8 @@ def _initialize_worker(parent: int) -> None:
     signal.signal(signal.SIGHUP, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_stop)
     sys.unraisablehook = stop_signals.unraisable_hook
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOPS)  # one that came meanwhile runs now
+    ready.release()
 
 
 def _call(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
@@ -89,14 +100,60 @@ def _start_resource_tracker() -> None:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
+@contextlib.contextmanager
+def _starting_worker() -> Iterator[None]:
+    """Start a worker inside the block: it inherits the stop signals blocked (its
+    initializer unblocks them once its handlers are in place), and a stop that reaches this
+    process meanwhile is handled after the block, once the worker has its start-up data.
+    (Blocking them in this thread is not enough: another thread, a worker's or torch's,
+    takes the signal and Python runs the handler in the main thread at once, which cut the
+    start-up data short and left the worker an ``EOFError``.)"""
+    with held(_STOPS):
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS)
+        try:
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+
 class WorkerPool(ProcessPoolExecutor):
     """A spawn-context process pool whose workers follow the rules above; use it through
     :func:`worker_pool`."""
 
     def __init__(self, workers: int) -> None:
         _start_resource_tracker()
-        super().__init__(workers, mp_context=multiprocessing.get_context('spawn'),
-                         initializer=_initialize_worker, initargs=(os.getpid(),))
+        context = multiprocessing.get_context('spawn')
+        ready = context.Semaphore(0)
+        super().__init__(workers, mp_context=context, initializer=_initialize_worker,
+                         initargs=(os.getpid(), ready))
+        try:
+            self._start_workers(workers, ready)
+        except BaseException:
+            self.stop_workers()
+            raise
+
+    def _start_workers(self, workers: int, ready: Any) -> None:
+        """Start all ``workers`` now, each with the stop signals blocked, and wait until
+        each has installed its handlers. (A spawn-context pool on 3.11 would start them one
+        per submitted call, ``_adjust_process_count``; with all of them in ``_processes``
+        it starts no more.)"""
+        for _ in range(workers):
+            with _starting_worker():
+                self._spawn_process()  # type: ignore[attr-defined]
+        processes = list(self._processes.values())
+        deadline = time.monotonic() + WORKER_START_TIMEOUT_S
+        up = 0
+        while up < workers:
+            if ready.acquire(timeout=0.1):
+                up += 1
+                continue
+            for process in processes:
+                if process.exitcode is not None:
+                    raise RuntimeError(f'worker process {process.pid} ended while it was '
+                                       f'starting (exit code {process.exitcode})')
+            if time.monotonic() > deadline:
+                raise RuntimeError(f'{workers - up} of {workers} worker processes did not '
+                                   f'start within {WORKER_START_TIMEOUT_S:.0f} s')
 
     def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
         return super().submit(functools.partial(_call, fn), *args, **kwargs)
@@ -111,13 +168,19 @@ class WorkerPool(ProcessPoolExecutor):
         command then printed its stop line and hung at exit, where Python joins that thread
         (``shutdown(wait=False)`` drops it, so ``shutdown(wait=True)`` does not join it).
         Once every worker is gone, closing this process's write end gives the thread its end
-        of file: it marks the pool broken and ends, and it is joined here."""
+        of file: it marks the pool broken and ends, and it is joined here.
+
+        The pool's queues are held until the workers are gone: ``shutdown`` drops them, and
+        a queue's last reference unlinks its named semaphores, so a worker still starting
+        (its stop signals blocked until its handlers are in place) failed to rebuild them
+        with ``FileNotFoundError``."""
         # CPython 3.14 adds ProcessPoolExecutor.terminate_workers() for this; on 3.11 the
         # workers are the executor's ``_processes`` (pid -> multiprocessing.Process), its
         # thread ``_executor_manager_thread`` and its result queue ``_result_queue``.
         processes = list((getattr(self, '_processes', None) or {}).values())
         thread = getattr(self, '_executor_manager_thread', None)
         results = getattr(self, '_result_queue', None)
+        held = (getattr(self, '_call_queue', None), getattr(self, '_initargs', None))
         self.shutdown(wait=False, cancel_futures=True)
         for process in processes:
             if process.is_alive():
@@ -131,6 +194,7 @@ class WorkerPool(ProcessPoolExecutor):
             results._writer.close()
         if thread is not None:
             thread.join()
+        del held
 
 
 @contextlib.contextmanager
