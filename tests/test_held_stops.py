@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
+import textwrap
 import threading
 from typing import Any
 
@@ -110,3 +113,37 @@ def test_the_solves_of_both_mpcs_go_through_the_hold() -> None:
         source = inspect.getsource(module)
         assert 'self._solver(' not in source, module.__name__
         assert 'solve(self._solver' in source, module.__name__
+
+
+RENAMES_WITH_ANOTHER_THREAD = textwrap.dedent("""
+    import os, signal, threading, time
+    from trust_av_planner.graph import stop_signals
+    from trust_monitor.common.output_files import stop_signals_held
+
+    done = threading.Event()
+    other = threading.Thread(target=done.wait)
+    other.start()
+    steps = []
+    try:
+        with stop_signals.installed(), stop_signals_held():
+            os.kill(os.getpid(), signal.SIGTERM)
+            until = time.monotonic() + 0.2     # bytecodes, where a handler would run
+            while time.monotonic() < until:
+                steps.append('renamed')
+            steps.append('all renamed')
+    except stop_signals.Stopped:
+        print('stopped after', steps[-1])
+    finally:
+        done.set()
+        other.join()
+""")
+
+
+def test_the_renames_hold_a_stop_while_other_threads_run() -> None:
+    """The outputs' renames (``output_files.stop_signals_held``) with another thread alive,
+    as torch's and rclpy's are: the stop waits for the block (blocking the signal for the
+    main thread only let that thread take it, and the handler ran inside the block). In a
+    fresh process: pytest's own threads and handlers are not part of the case."""
+    proc = subprocess.run([sys.executable, '-c', RENAMES_WITH_ANOTHER_THREAD],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.stdout == 'stopped after all renamed\n', proc.stderr

@@ -13,16 +13,15 @@ from __future__ import annotations
 
 import contextlib
 import os
-import signal
 import stat
 import tempfile
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+from trust_monitor.common.held_stops import STOP_SIGNALS, held
 from trust_monitor.errors import TrustMonitorError
 
-HELD_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+HELD_SIGNALS = set(STOP_SIGNALS)
 """Held back while a set of files is renamed into place, so a stop cannot split the set."""
 
 
@@ -44,16 +43,14 @@ def _mode_for(path: Path) -> int:
 
 @contextlib.contextmanager
 def stop_signals_held() -> Iterator[None]:
-    """SIGINT, SIGTERM and SIGHUP wait until the block is done (blocked for the main thread, where
-    Python runs its handlers; delivered when unblocked). For a few renames, not for work."""
-    if threading.current_thread() is not threading.main_thread():
+    """SIGINT, SIGTERM and SIGHUP wait until the block is done, then run their handlers
+    (:func:`~trust_monitor.common.held_stops.held`). For a few renames, not for work.
+
+    Blocking them for the main thread did not hold them: another thread (torch's, rclpy's,
+    a worker pool's) took the signal, and Python ran the handler in the main thread at its
+    next bytecode."""
+    with held(STOP_SIGNALS):
         yield
-        return
-    before = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
 def _target(path: Path) -> Path:
