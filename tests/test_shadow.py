@@ -213,3 +213,45 @@ def test_advance_stops_at_zero_speed() -> None:
     assert advance(10.0, 1.0, -3.0, 0.5) == pytest.approx((10.5, 0.0))  # would be -0.5 m/s
     with pytest.raises(ValueError, match='dt_s'):
         advance(0.0, 0.0, 0.0, -0.1)
+
+
+@pytest.mark.wall_clock
+def test_a_wall_recorder_that_falls_behind_names_what_it_lost(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Wall mode does not wait for the recorder: one stalled for 2 s with room for only 3
+    samples per topic (its subscriptions' depth, patched in this process; the nodes keep
+    theirs) loses messages, and the run says which in one error naming every publisher,
+    with a finished bag holding the rest. Checked against the nodes' own counts: for each
+    publisher that starts after the recording, recorded + lost = published."""
+    import trust_monitor.ros.qos as qos
+    from preceding_traffic.sources import load_trace
+    from trust_av_planner.graph.publication_ledger import RecordingLossError
+    from trust_av_planner.graph.shadow import AFTER_START, run_wall_graph
+    from trust_av_planner.system.config import load_run_config
+
+    monkeypatch.setattr(qos, 'HISTORY_DEPTH', 3)
+    trace_csv = tmp_path / 'steady.csv'
+    trace_csv.write_text('time_s,speed_mps\n' + ''.join(f'{t},10.0\n' for t in range(61)))
+    config = load_run_config((), {'preceding_traffic': {'trace': str(trace_csv)}})
+    trace = load_trace(str(trace_csv), config.planner.dt_s, config.trace)
+    stalls: list[float] = []
+
+    def stall(_pids: dict[str, int], elapsed_s: float) -> None:
+        if not stalls:
+            stalls.append(elapsed_s)
+            time.sleep(2.0)            # the recording loop takes nothing meanwhile
+
+    bag = tmp_path / 'wall'
+    with pytest.raises(RecordingLossError) as lost:
+        run_wall_graph(config, str(trace_csv), trace, bag, duration_s=5.0, rate_hz=10.0,
+                       every_second=stall)
+    assert stalls and '\n' not in str(lost.value)
+    assert check_bag_directory(bag) == []
+    recorded = {topic: len(messages) for topic, messages in read(bag).items()}
+    losses = {(loss.topic, loss.node): loss.count for loss in lost.value.losses}
+    reports = {path.name.split('.')[0]: json.loads(path.read_text())['published']
+               for path in (tmp_path / 'wall.logs').glob('*.jitter.json')}
+    for topic in AFTER_START:           # each has one publisher
+        node = next(t.publishers[0] for t in TOPICS if qualified(t.name) == topic)
+        assert losses.get((topic, node), 0) > 0, (topic, losses)   # 2 s at 10 Hz > 3
+        assert recorded[topic] + losses[(topic, node)] == reports[node][topic], topic

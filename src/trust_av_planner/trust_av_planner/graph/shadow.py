@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -37,6 +37,12 @@ from trust_av_planner.graph.bag_writer import BagWriter, DiskFullError
 from trust_av_planner.graph.domains import lease_domain
 from trust_av_planner.graph.orchestrator import node_specs
 from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
+from trust_av_planner.graph.publication_ledger import (
+    Lost,
+    PublicationLedger,
+    Publisher,
+    check_lossless,
+)
 from trust_av_planner.graph.session import graph_session
 from trust_av_planner.system.closed_loop import equilibrium_start
 from trust_av_planner.system.config import PlannerTopics, RunConfig
@@ -64,6 +70,8 @@ class ShadowRun:
     duration_s: float
     counts: dict[str, int]
     loops: dict[str, dict[str, Any]]
+    losses: tuple[Lost, ...] = ()
+    """What the recording lost (only ``run_wall_graph(..., lossless=False)`` returns any)."""
 
 
 def shadow_specs(config: RunConfig, trace: SpeedTrace, rate_hz: float,
@@ -88,6 +96,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
     """Replay ``trace`` for ``duration_s`` of wall time at ``rate_hz`` into the two nodes.
 
     Raises:
+        RecordingLossError: messages were lost; the bag holds the rest.
         GraphError: the nodes did not connect in time or one died.
         DiskFullError: the disk filled up; the nodes were stopped and the bag finished with
             every complete second.
@@ -123,17 +132,23 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                                             topics.ego_odom_topic, sensor)
             command = {'accel_mps2': 0.0}
             stats = LoopStats(period_ns)
+            ledger = PublicationLedger()
+            # the node that publishes each recorded topic (the inputs: this player)
+            publisher = {name: 'shadow_player' if name not in OUTPUTS else topic.publishers[0]
+                         for name, topic in recorded.items()}
             with BagWriter(bag) as recording:
-                def on_message(topic: str, data: bytes) -> None:
+                def on_message(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     if not recording.finished:   # finished early only by a full disk
                         recording.write(topic, data)
+                        ledger.received(topic, publisher[topic],
+                                        int(info['publication_sequence_number']))
 
                 for name, topic in recorded.items():
                     offered = wall_qos(topic.wall_qos, wall, publisher=True)
                     recording.add_topic(name, topic.msgtype,
                                         offered_profiles(offered, len(topic.publishers)))
                     node.create_subscription(message_class(topic.msgtype), name,
-                                             lambda d, t=name: on_message(t, d),
+                                             lambda d, info, t=name: on_message(t, d, info),
                                              record_qos(topic.wall_qos), raw=True)
 
                 def on_command(msg: Any) -> None:
@@ -165,6 +180,8 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                         velocities=lead.preview(
                             elapsed_s, cfg.planner.horizon_steps, cfg.planner.dt_s).tolist()))
                     pub_ego.publish(odometry(stamp, ego.position_m, ego.speed_mps, 'ego'))
+                    for sent in (pub_lead, pub_preview, pub_ego):
+                        stats.publish(sent.topic_name)
                     if now >= next_chunk:
                         if not recording.end_step():
                             break                # the disk is full: stop, raised below
@@ -178,6 +195,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                 counts = dict(recording.counts)
     loops = {'shadow_player': {'node': 'shadow_player', **stats.summary()},
              **_node_loops(graph, log_dir, SHADOW_NODES)}
+    check_lossless(ledger, _published(loops, recorded))
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops)
 
 
@@ -198,7 +216,8 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                    duration_s: float, rate_hz: float,
                    startup_timeout_s: float = 30.0,
                    every_second: Callable[[dict[str, int], float], None] | None = None,
-                   on_message: Callable[[str, int, bytes], None] | None = None) -> ShadowRun:
+                   on_message: Callable[[str, int, bytes], None] | None = None,
+                   lossless: bool = True) -> ShadowRun:
     """Every node in wall mode for ``duration_s`` of wall time after ``/sim/start``; every
     topic recorded to the bag directory ``bag`` (log time = header stamp = wall time).
 
@@ -209,9 +228,12 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
     since ``/sim/start`` (s); it runs in the recording loop, so it must return quickly.
     ``on_message``, if given, is called for every recorded message with its topic, its DDS
     publication sequence number (the publisher's count of messages, from 1) and its
-    serialized bytes (which tell the publishers of one topic apart).
+    serialized bytes (which tell the publishers of one topic apart). Every recorded
+    message is accounted for (:mod:`~trust_av_planner.graph.publication_ledger`); with
+    ``lossless`` False, what was lost is returned in the result's ``losses`` instead.
 
     Raises:
+        RecordingLossError: messages were lost (``lossless``); the bag holds the rest.
         GraphError: the nodes did not connect in time or one died.
         DiskFullError: the disk filled up; the nodes were stopped and the bag finished with
             every complete second.
@@ -243,14 +265,24 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                                if n != 'preceding_traffic'}
             tf_seen: set[str] = set()     # child frames heard on tf before /sim/start
             started_at: list[float] = []
+            ledger = PublicationLedger()
+            vehicle_node = {frame: name for name, frame in VEHICLE_FRAMES.items()}
             with BagWriter(bag) as recording:
                 def record(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     if recording.finished:       # finished early only by a full disk
                         return
                     recording.write(topic, data)
-                    if topic == tf_topic and not started_at:
-                        tf_seen.update(t.child_frame_id for t in
-                                       deserialize_message(data, TFMessage).transforms)
+                    sequence = int(info['publication_sequence_number'])
+                    if topic == tf_topic:        # three publishers: told apart by frame
+                        frames = [t.child_frame_id for t in
+                                  deserialize_message(data, TFMessage).transforms]
+                        if not started_at:
+                            tf_seen.update(frames)
+                        for name in {vehicle_node.get(frame, frame) for frame in frames}:
+                            ledger.received(topic, name, sequence)
+                    else:
+                        ledger.received(topic, TOPIC[topic.lstrip('/')].publishers[0],
+                                        sequence)
                     if on_message is not None:
                         on_message(topic, int(info['publication_sequence_number']), data)
 
@@ -303,8 +335,31 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                 if recording.disk_full:
                     raise DiskFullError(recording.disk_full)
                 counts = dict(recording.counts)
-    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts,
-                     loops=_node_loops(graph, log_dir, WALL_GRAPH_NODES))
+    loops = _node_loops(graph, log_dir, WALL_GRAPH_NODES)
+    # the publishers that start only once /sim/start has come: every message is the run's
+    from_first = {(name, node) for name in AFTER_START
+                  for node in TOPIC[name.lstrip('/')].publishers}
+    from_first.add((tf_topic, 'preceding_traffic'))
+    published = _published(loops, {qualified(t.name) for t in recorded})
+    # + what each vehicle node publishes before its loop starts (the table's initial
+    # messages, one per vehicle node; the traffic node publishes nothing before /sim/start)
+    for topic in recorded:
+        vehicles = [n for n in topic.publishers if n != 'preceding_traffic']
+        for name in vehicles if topic.initial else ():
+            key = (qualified(topic.name), name)
+            published[key] = published.get(key, 0) + topic.initial // len(vehicles)
+    sensors = {(qualified(t.name), n) for t in recorded if t.wall_qos == 'SENSOR'
+               for n in t.publishers}
+    if lossless:
+        check_lossless(ledger, published, from_first, stop_edge=sensors)
+    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops,
+                     losses=tuple(ledger.lost(published, from_first, stop_edge=sensors)))
+
+
+def _published(loops: dict[str, Any], recorded: Collection[str]) -> dict[Publisher, int]:
+    """(topic, node) -> messages the node reported publishing, for the recorded topics."""
+    return {(topic, node): int(count) for node, loop in loops.items()
+            for topic, count in loop.get('published', {}).items() if topic in recorded}
 
 
 def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
