@@ -302,3 +302,22 @@ def test_a_rate_of_1e308_is_one_line() -> None:
         assert code == 2 and "must be <= 1000 Hz, got '1e308'" in err, err
     with pytest.raises(ParamsError, match=r'^control_rate_hz 1e\+308: '):
         check_control_rate(load_run_config().planner, 1e308)
+
+
+@pytest.mark.parametrize('path', ['', '/', '\x00x'])
+def test_repair_bag_of_no_name_is_one_line(path: str) -> None:
+    """An empty PATH, the root or a NUL: one line, exit 2 (an empty one was a traceback:
+    the repair's work directory beside a path with no name)."""
+    code, err = trust_av('repair-bag', path)
+    assert code == 2 and err.count('\n') == 1 and 'Traceback' not in err, err
+
+
+def test_repair_bag_dot_inside_the_bag_repairs_it(tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """``trust-av repair-bag .`` in the bag directory repairs that bag, as its path would."""
+    bag = tmp_path / 'rec'
+    record(BagWriter(bag), 5, finish=False)
+    monkeypatch.chdir(bag)
+    code, err = trust_av('repair-bag', '.')
+    assert (code, err) == (0, '')
+    assert check_bag_directory(bag) == []

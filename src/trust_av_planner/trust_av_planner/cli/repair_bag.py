@@ -13,7 +13,14 @@ def run(args: argparse.Namespace) -> int:
     """Run ``trust-av repair-bag``."""
     from trust_av_planner.graph.bag_repair import repair_bag  # rosbags: only when repairing
 
-    path: Path = args.path
+    raw: str = args.path
+    if raw == '' or '\x00' in raw:
+        raise TrustAvPlannerError(f'{raw!r}: names no bag directory or .mcap file')
+    path = Path(raw)
+    if path.name in ('', '.', '..'):    # `repair-bag .` inside the bag directory
+        path = path.resolve()
+        if path.name == '':
+            raise TrustAvPlannerError(f'{raw}: the root directory is not a bag directory')
     if not path.exists():
         raise TrustAvPlannerError(f'{path}: no such bag directory or .mcap file')
     if not (path.is_dir() or path.is_file()):       # a FIFO or a device: reading would block
@@ -40,5 +47,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'is replaced only once the repaired bag is complete and reads back whole. '
                     "Exit codes: 0 repaired, 2 nothing readable, no complete message, another "
                     "tool's complete bag, or the copy failed (nothing is changed then).")
-    parser.add_argument('path', type=Path, metavar='PATH', help='bag directory or .mcap file')
+    parser.add_argument('path', metavar='PATH', help='bag directory or .mcap file')
     parser.set_defaults(func=run)
