@@ -3,20 +3,18 @@ the AV NMPC's choice of QP solver by grid size, and the one way they call a solv
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
-
-import casadi as ca
 
 from trust_monitor.common.held_stops import held
 
 
-def solve(solver: ca.Function, **arguments: Any) -> dict[str, Any]:
-    """``solver(**arguments)`` with the stop signals held until it returns
-    (:func:`~trust_monitor.common.held_stops.held`): a Ctrl-C or SIGTERM during the solve
-    stops the program after it, instead of failing the solve inside CasADi."""
+def solve(solver: Callable[..., dict[str, Any]], **arguments: Any) -> dict[str, Any]:
+    """``solver(**arguments)`` (a CasADi ``Function``) with the stop signals held until it
+    returns (:func:`~trust_monitor.common.held_stops.held`): a Ctrl-C or SIGTERM during the
+    solve stops the program after it, instead of failing the solve inside CasADi."""
     with held():
-        result: dict[str, Any] = solver(**arguments)
-    return result
+        return solver(**arguments)
 
 
 def sqp_options(max_iter: int) -> dict[str, Any]:
