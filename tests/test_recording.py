@@ -5,8 +5,10 @@ killed orchestrator, a foreign publisher, a full disk under a real run) are at t
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import errno
+import importlib
 import os
 import shutil
 import signal
@@ -23,6 +25,7 @@ from conftest import (
     long_trace,
     wait_for_steps,
 )
+from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
@@ -197,6 +200,89 @@ def test_a_real_full_disk(small_disk: Path) -> None:
     assert 'disk full' in writer.disk_full and writer.steps > 10
     assert check_bag_directory(bag) == []
     assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run.mcap']
+
+
+def test_a_failed_step_with_a_new_topic_keeps_every_complete_step(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The step that fails is the first of a topic added late, and another topic was added
+    with it: the writer that finishes the bag is rebuilt from the file's complete steps
+    (the failed step's messages never reach the summary), and both late topics are in it
+    with no messages."""
+    commit = mcap_steps.WholeWrites.commit
+    commits = []
+
+    def failing_fourth(handle: mcap_steps.WholeWrites) -> None:
+        commits.append(1)
+        if len(commits) == 4:
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        commit(handle)
+
+    monkeypatch.setattr(mcap_steps.WholeWrites, 'commit', failing_fourth)
+    bag = tmp_path / 'late'
+    writer = BagWriter(bag)
+    record(writer, 3, ('/a/odom',), finish=False)
+    writer.add_topic('/late/odom', 'nav_msgs/msg/Odometry', QOS)
+    writer.add_topic('/late/text', 'std_msgs/msg/String', [QOS, QOS])
+    writer.write('/a/odom', odometry(103 * 10**9, 3.0))
+    writer.write('/late/odom', odometry(103 * 10**9, 3.0))
+    assert writer.counts == {'/a/odom': 4, '/late/odom': 1, '/late/text': 0}
+    assert not writer.end_step()
+    assert writer.steps == 3 and 'cannot write (Input/output error)' in writer.disk_full
+    assert check_bag_directory(bag) == []
+    assert counts(bag) == {'/a/odom': 3, '/late/odom': 0, '/late/text': 0}
+    with (bag / 'late.mcap').open('rb') as handle:
+        summary = make_reader(handle).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert summary.statistics.message_count == 3 and summary.statistics.chunk_count == 3
+    assert summary.statistics.message_end_time == 102 * 10**9
+    assert sorted(c.topic for c in summary.channels.values()) == ['/a/odom', '/late/odom',
+                                                                   '/late/text']
+    assert sorted(p.name for p in bag.iterdir()) == ['late.mcap', 'metadata.yaml']
+
+
+PUBLIC_ONLY = ('bag_writer', 'bag_metadata', 'mcap_steps')
+"""The bag writer's modules: public library API only."""
+
+
+def _internal(module: str) -> str:
+    """Why ``module`` is not public API of its library ('' if it is): a part starting with
+    ``_``, or a package whose ``__all__`` does not name the next part."""
+    parts = module.split('.')
+    for number, part in enumerate(parts):
+        if part.startswith('_'):
+            return f'{module}: {part} is private'
+        if number:
+            package = importlib.import_module('.'.join(parts[:number]))
+            names = getattr(package, '__all__', None)
+            if names is not None and part not in names:
+                return f'{module}: {package.__name__}.__all__ does not name {part}'
+    return ''
+
+
+@pytest.mark.parametrize('name', PUBLIC_ONLY)
+def test_the_bag_writer_uses_public_library_api_only(name: str) -> None:
+    """No attribute starting with ``_`` of anything but the writer's own objects, no
+    internal module, no name a module's ``__all__`` leaves out (rosbags, mcap, ruamel)."""
+    source = Path(bag_writer.__file__).with_name(f'{name}.py')
+    problems = []
+    for node in ast.walk(ast.parse(source.read_text())):
+        if isinstance(node, ast.Attribute) and node.attr.startswith('_') \
+                and not node.attr.startswith('__') \
+                and not (isinstance(node.value, ast.Name) and node.value.id == 'self'):
+            problems.append(f'line {node.lineno}: .{node.attr}')
+        elif isinstance(node, ast.ImportFrom) and node.module \
+                and node.module.split('.')[0] in ('rosbags', 'mcap', 'ruamel'):
+            why = _internal(node.module)
+            names = getattr(importlib.import_module(node.module), '__all__', None)
+            for alias in node.names:
+                if alias.name.startswith('_') or (names is not None
+                                                  and alias.name not in names):
+                    why = why or f'{node.module}.{alias.name} is not in its __all__'
+            if why:
+                problems.append(f'line {node.lineno}: {why}')
+    assert problems == []
+    assert _internal('rosbags.rosbag2.storage_mcap')     # what it used before is caught
+    assert _internal('mcap._chunk_builder')
 
 
 def test_outputs_are_checked_before_a_run(tmp_path: Path) -> None:
