@@ -202,6 +202,31 @@ def test_a_real_full_disk(small_disk: Path) -> None:
     assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run.mcap']
 
 
+def test_the_reserve_always_pays_for_the_summary_and_grows_every_64_steps(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """After every step the reserve holds the summary of every chunk written; it is grown
+    (one fallocate) once per RESERVE_STEP_CHUNKS steps, not at every step."""
+    grown = []
+    fallocate = os.posix_fallocate
+
+    def counted(fd: int, offset: int, length: int) -> None:
+        grown.append(length)
+        fallocate(fd, offset, length)
+
+    monkeypatch.setattr(os, 'posix_fallocate', counted)
+    bag = tmp_path / 'reserve'
+    writer = BagWriter(bag)
+    writer.add_topic('/a/odom', 'nav_msgs/msg/Odometry', QOS)
+    for step in range(200):
+        writer.write('/a/odom', odometry((100 + step) * 10**9, 1.0))
+        assert writer.end_step()
+        assert (bag / bag_writer.RESERVE_NAME).stat().st_size >= (
+            bag_writer.RESERVE_BASE_BYTES + bag_writer.RESERVE_PER_CHUNK_BYTES * (step + 1))
+    assert len(grown) == 1 + 200 // (bag_writer.RESERVE_STEP_CHUNKS + 1)
+    writer.finish()
+    assert not (bag / bag_writer.RESERVE_NAME).exists() and check_bag_directory(bag) == []
+
+
 def test_a_failed_step_with_a_new_topic_keeps_every_complete_step(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The step that fails is the first of a topic added late, and another topic was added

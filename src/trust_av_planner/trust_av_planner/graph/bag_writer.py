@@ -303,8 +303,8 @@ class BagWriter:
                            max(self._times[1], self._step_last))
         self._step_first, self._step_last = 2**63 - 1, -1
         self.steps += 1
-        if self._reserved < self._needed_reserve():
-            try:
+        if self._reserved < RESERVE_BASE_BYTES + RESERVE_PER_CHUNK_BYTES * self._chunks:
+            try:   # the reserve no longer pays for the summary: room for 64 more chunks
                 self._grow_reserve()
             except OSError as err:
                 self._finish_after_write_error(self._stream.tell(), err)
@@ -331,6 +331,8 @@ class BagWriter:
         self.finish()
 
     def _needed_reserve(self) -> int:
+        """The reserve's size when grown: the summary of the chunks so far and of
+        :data:`RESERVE_STEP_CHUNKS` more, and metadata.yaml (bytes)."""
         return RESERVE_BASE_BYTES + RESERVE_PER_CHUNK_BYTES * (self._chunks + RESERVE_STEP_CHUNKS)
 
     def _grow_reserve(self) -> None:
