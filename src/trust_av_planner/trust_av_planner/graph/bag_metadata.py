@@ -1,8 +1,10 @@
 """A bag directory's ``metadata.yaml`` and the YAML a bag's MCAP keeps of it, as rosbag2
 Jazzy reads them (version 9).
 
-Written with ruamel.yaml's public safe dumper, field for field as rosbags' ``Writer.close``
-wrote them before (``rosbags/rosbag2/writer.py``, rosbags 0.11.9), which is what rosbag2's
+Written with PyYAML's ``safe_dump`` (block style, keys sorted), field for field as rosbags'
+``Writer.close`` wrote them before (``rosbags/rosbag2/writer.py``, rosbags 0.11.9; the only
+difference in the text: a long value, the type hash, is no longer folded onto the next
+line), which is what rosbag2's
 ``rosbag2_storage/src/rosbag2_storage/metadata_io.cpp`` (jazzy) reads: the fields are
 checked against that reader's rules by ``tests/rosbag2_rules.py``. An offered QoS profile is
 written as rosbag2's ``rosbag2_storage/src/rosbag2_storage/qos.cpp`` (jazzy) encodes a
@@ -15,27 +17,23 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from io import StringIO
 from pathlib import Path
 from typing import Any
 
+import yaml
 from rosbags.interfaces import Qos
-from ruamel.yaml import YAML
 
 METADATA_VERSION = 9
 """rosbag2 metadata version written (Jazzy's)."""
 ROS_DISTRO = 'jazzy'
-"""``ros_distro`` of the metadata: the distribution whose rosbag2 rules the bag follows
-(rosbag2 reads the field as information only)."""
+"""``ros_distro`` of the metadata: what rosbag2 on Jazzy writes there (the ``ROS_DISTRO``
+environment variable: ros2/rosbag2 ``rosbag2_cpp/src/rosbag2_cpp/writers/sequential_writer.cpp``
+``open``); rosbag2 reads the field as information only."""
 
 
 def dump_yaml(document: Any) -> str:
-    """``document`` as block-style YAML (ruamel.yaml's safe dumper, as rosbags wrote it)."""
-    yaml = YAML(typ='safe')
-    yaml.default_flow_style = False
-    text = StringIO()
-    yaml.dump(document, text)
-    return text.getvalue()
+    """``document`` as block-style YAML, keys sorted (as rosbags wrote it)."""
+    return yaml.safe_dump(document, default_flow_style=False, sort_keys=True)
 
 
 def qos_document(profiles: list[Qos]) -> list[dict[str, Any]]:

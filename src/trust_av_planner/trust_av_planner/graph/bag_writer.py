@@ -3,7 +3,7 @@
 A recording is a rosbag2 bag directory (``metadata.yaml`` + one MCAP file), written through
 public library API only: the MCAP file by the ``mcap`` library's ``mcap.writer.Writer``
 (:mod:`~trust_av_planner.graph.mcap_steps`), ``metadata.yaml`` and the MCAP's ``rosbag2``
-metadata record by :mod:`~trust_av_planner.graph.bag_metadata` (ruamel.yaml), the types'
+metadata record by :mod:`~trust_av_planner.graph.bag_metadata` (PyYAML), the types'
 definitions and RIHS01 hashes by the public ``Typestore.generate_msgdef`` and
 ``Typestore.hash_rihs01`` of rosbags' ``ROS2_JAZZY`` typestore, QoS profiles as
 ``rosbags.interfaces.Qos``. No private attribute and no internal module of a library is
