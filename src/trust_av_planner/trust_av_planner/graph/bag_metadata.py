@@ -33,7 +33,7 @@ environment variable: ros2/rosbag2 ``rosbag2_cpp/src/rosbag2_cpp/writers/sequent
 
 def dump_yaml(document: Any) -> str:
     """``document`` as block-style YAML, keys sorted (as rosbags wrote it)."""
-    return yaml.safe_dump(document, default_flow_style=False, sort_keys=True)
+    return str(yaml.safe_dump(document, default_flow_style=False, sort_keys=True))
 
 
 def qos_document(profiles: list[Qos]) -> list[dict[str, Any]]:
