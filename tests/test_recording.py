@@ -265,6 +265,30 @@ def test_a_failed_step_with_a_new_topic_keeps_every_complete_step(
     assert sorted(p.name for p in bag.iterdir()) == ['late.mcap', 'metadata.yaml']
 
 
+def test_the_rebuilt_writer_must_end_where_the_complete_steps_end(tmp_path: Path) -> None:
+    """The writer rebuilt from a file (after a failed step) writes the same bytes as the one
+    that wrote it, checked: it refuses a file cut inside a step, a size that is not the
+    file's, or a header naming another writer."""
+    bag = tmp_path / 'cut'
+    record(BagWriter(bag), 3, finish=False)
+    mcap = bag / 'cut.mcap'
+    size = mcap.stat().st_size
+    rebuilt = mcap_steps.replay(mcap, size, mcap_steps.RECORDER_LIBRARY)
+    assert (rebuilt.stream.position, rebuilt.schemas, rebuilt.channels) == (size, 1, 2)
+    with pytest.raises(ValueError, match=f'ends at byte {size}, not {size + 1}'):
+        mcap_steps.replay(mcap, size + 1, mcap_steps.RECORDER_LIBRARY)
+    with pytest.raises(ValueError, match='its header names'):
+        mcap_steps.replay(mcap, size, 'another.writer')
+    with mcap.open('ab') as handle:                     # a record longer than the file
+        handle.write(b'\x05' + b'\xff' * 8)
+    with pytest.raises(ValueError, match=f'cannot be read to byte {size + 9}'):
+        mcap_steps.replay(mcap, size + 9, mcap_steps.RECORDER_LIBRARY)
+    with mcap.open('r+b') as handle:
+        handle.truncate(size - 100)                     # in the last step's message indexes
+    with pytest.raises(ValueError, match=rf'replay to \d+ bytes, not {size - 100}'):
+        mcap_steps.replay(mcap, size - 100, mcap_steps.RECORDER_LIBRARY)
+
+
 PUBLIC_ONLY = ('bag_writer', 'bag_metadata', 'mcap_steps')
 """The bag writer's modules: public library API only."""
 

@@ -12,11 +12,12 @@ read needs: ``tests/rosbag2_rules.py`` ``time_ordered_read``). Chunks are uncomp
 from __future__ import annotations
 
 import os
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, cast
 
-from mcap.exceptions import EndOfFile
+from mcap.exceptions import EndOfFile, McapError
 from mcap.records import Channel, Header, Message, MessageIndex, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
@@ -163,7 +164,9 @@ def replay(path: Path, end: int, library: str) -> Replayed:
                 schemas, channels = _give(writer, library, record, schemas, channels)
         except EndOfFile:          # the end of the complete steps: the file ends there
             if handle.tell() != end:
-                raise ValueError(f'it ends in a record at byte {handle.tell()}') from None
+                raise ValueError(f'it ends at byte {handle.tell()}, not {end}') from None
+        except (McapError, struct.error) as err:   # a record cut off or damaged
+            raise ValueError(f'it cannot be read to byte {end} ({err})') from err
     if stream.position != end:
         raise ValueError(f'its complete steps replay to {stream.position} bytes, not {end}')
     return Replayed(writer, stream, schemas, channels)
