@@ -5,8 +5,10 @@ killed orchestrator, a foreign publisher, a full disk under a real run) are at t
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import errno
+import importlib
 import os
 import shutil
 import signal
@@ -23,6 +25,7 @@ from conftest import (
     long_trace,
     wait_for_steps,
 )
+from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
@@ -197,6 +200,138 @@ def test_a_real_full_disk(small_disk: Path) -> None:
     assert 'disk full' in writer.disk_full and writer.steps > 10
     assert check_bag_directory(bag) == []
     assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run.mcap']
+
+
+def test_the_reserve_always_pays_for_the_summary_and_grows_every_64_steps(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """After every step the reserve holds the summary of every chunk written; it is grown
+    (one fallocate) once per RESERVE_STEP_CHUNKS steps, not at every step."""
+    grown = []
+    fallocate = os.posix_fallocate
+
+    def counted(fd: int, offset: int, length: int) -> None:
+        grown.append(length)
+        fallocate(fd, offset, length)
+
+    monkeypatch.setattr(os, 'posix_fallocate', counted)
+    bag = tmp_path / 'reserve'
+    writer = BagWriter(bag)
+    writer.add_topic('/a/odom', 'nav_msgs/msg/Odometry', QOS)
+    for step in range(200):
+        writer.write('/a/odom', odometry((100 + step) * 10**9, 1.0))
+        assert writer.end_step()
+        assert (bag / bag_writer.RESERVE_NAME).stat().st_size >= (
+            bag_writer.RESERVE_BASE_BYTES + bag_writer.RESERVE_PER_CHUNK_BYTES * (step + 1))
+    assert len(grown) == 1 + 200 // (bag_writer.RESERVE_STEP_CHUNKS + 1)
+    writer.finish()
+    assert not (bag / bag_writer.RESERVE_NAME).exists() and check_bag_directory(bag) == []
+
+
+def test_a_failed_step_with_a_new_topic_keeps_every_complete_step(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The step that fails is the first of a topic added late, and another topic was added
+    with it: the writer that finishes the bag is rebuilt from the file's complete steps
+    (the failed step's messages never reach the summary), and both late topics are in it
+    with no messages."""
+    commit = mcap_steps.WholeWrites.commit
+    commits = []
+
+    def failing_fourth(handle: mcap_steps.WholeWrites) -> None:
+        commits.append(1)
+        if len(commits) == 4:
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        commit(handle)
+
+    monkeypatch.setattr(mcap_steps.WholeWrites, 'commit', failing_fourth)
+    bag = tmp_path / 'late'
+    writer = BagWriter(bag)
+    record(writer, 3, ('/a/odom',), finish=False)
+    writer.add_topic('/late/odom', 'nav_msgs/msg/Odometry', QOS)
+    writer.add_topic('/late/text', 'std_msgs/msg/String', [QOS, QOS])
+    writer.write('/a/odom', odometry(103 * 10**9, 3.0))
+    writer.write('/late/odom', odometry(103 * 10**9, 3.0))
+    assert writer.counts == {'/a/odom': 4, '/late/odom': 1, '/late/text': 0}
+    assert not writer.end_step()
+    assert writer.steps == 3 and 'cannot write (Input/output error)' in writer.disk_full
+    assert check_bag_directory(bag) == []
+    assert counts(bag) == {'/a/odom': 3, '/late/odom': 0, '/late/text': 0}
+    with (bag / 'late.mcap').open('rb') as handle:
+        summary = make_reader(handle).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert summary.statistics.message_count == 3 and summary.statistics.chunk_count == 3
+    assert summary.statistics.message_end_time == 102 * 10**9
+    assert sorted(c.topic for c in summary.channels.values()) == ['/a/odom', '/late/odom',
+                                                                   '/late/text']
+    assert sorted(p.name for p in bag.iterdir()) == ['late.mcap', 'metadata.yaml']
+
+
+def test_the_rebuilt_writer_must_end_where_the_complete_steps_end(tmp_path: Path) -> None:
+    """The writer rebuilt from a file (after a failed step) writes the same bytes as the one
+    that wrote it, checked: it refuses a file cut inside a step, a size that is not the
+    file's, or a header naming another writer."""
+    bag = tmp_path / 'cut'
+    record(BagWriter(bag), 3, finish=False)
+    mcap = bag / 'cut.mcap'
+    size = mcap.stat().st_size
+    rebuilt = mcap_steps.replay(mcap, size, mcap_steps.RECORDER_LIBRARY)
+    assert (rebuilt.stream.position, rebuilt.schemas, rebuilt.channels) == (size, 1, 2)
+    with pytest.raises(ValueError, match=f'ends at byte {size}, not {size + 1}'):
+        mcap_steps.replay(mcap, size + 1, mcap_steps.RECORDER_LIBRARY)
+    with pytest.raises(ValueError, match='its header names'):
+        mcap_steps.replay(mcap, size, 'another.writer')
+    with mcap.open('ab') as handle:                     # a record longer than the file
+        handle.write(b'\x05' + b'\xff' * 8)
+    with pytest.raises(ValueError, match=f'cannot be read to byte {size + 9}'):
+        mcap_steps.replay(mcap, size + 9, mcap_steps.RECORDER_LIBRARY)
+    with mcap.open('r+b') as handle:
+        handle.truncate(size - 100)                     # in the last step's message indexes
+    with pytest.raises(ValueError, match=rf'replay to \d+ bytes, not {size - 100}'):
+        mcap_steps.replay(mcap, size - 100, mcap_steps.RECORDER_LIBRARY)
+
+
+PUBLIC_ONLY = ('bag_writer', 'bag_metadata', 'mcap_steps')
+"""The bag writer's modules: public library API only."""
+
+
+def _internal(module: str) -> str:
+    """Why ``module`` is not public API of its library ('' if it is): a part starting with
+    ``_``, or a package whose ``__all__`` does not name the next part."""
+    parts = module.split('.')
+    for number, part in enumerate(parts):
+        if part.startswith('_'):
+            return f'{module}: {part} is private'
+        if number:
+            package = importlib.import_module('.'.join(parts[:number]))
+            names = getattr(package, '__all__', None)
+            if names is not None and part not in names:
+                return f'{module}: {package.__name__}.__all__ does not name {part}'
+    return ''
+
+
+@pytest.mark.parametrize('name', PUBLIC_ONLY)
+def test_the_bag_writer_uses_public_library_api_only(name: str) -> None:
+    """No attribute starting with ``_`` of anything but the writer's own objects, no
+    internal module, no name a module's ``__all__`` leaves out (rosbags, mcap, yaml)."""
+    source = Path(bag_writer.__file__).with_name(f'{name}.py')
+    problems = []
+    for node in ast.walk(ast.parse(source.read_text())):
+        if isinstance(node, ast.Attribute) and node.attr.startswith('_') \
+                and not node.attr.startswith('__') \
+                and not (isinstance(node.value, ast.Name) and node.value.id == 'self'):
+            problems.append(f'line {node.lineno}: .{node.attr}')
+        elif isinstance(node, ast.ImportFrom) and node.module \
+                and node.module.split('.')[0] in ('rosbags', 'mcap', 'yaml'):
+            why = _internal(node.module)
+            names = getattr(importlib.import_module(node.module), '__all__', None)
+            for alias in node.names:
+                if alias.name.startswith('_') or (names is not None
+                                                  and alias.name not in names):
+                    why = why or f'{node.module}.{alias.name} is not in its __all__'
+            if why:
+                problems.append(f'line {node.lineno}: {why}')
+    assert problems == []
+    assert _internal('rosbags.rosbag2.storage_mcap')     # what it used before is caught
+    assert _internal('mcap._chunk_builder')
 
 
 def test_outputs_are_checked_before_a_run(tmp_path: Path) -> None:

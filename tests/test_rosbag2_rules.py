@@ -243,9 +243,9 @@ def test_counts_and_times_must_match_the_mcap(good_bag: Path, tmp_path: Path) ->
 
 
 def test_the_project_s_recorder_writes_what_rosbag2_reads(tmp_path: Path) -> None:
-    """The recorder's writer (trust_av_planner.graph.bag_writer.BagWriter: rosbags' Writer
-    with one chunk per step) passes every rule; the same file without its metadata.yaml, as a
-    lone .mcap, does not."""
+    """The recorder's writer (trust_av_planner.graph.bag_writer.BagWriter: the mcap
+    library's public Writer, one chunk per step) passes every rule; the same file without
+    its metadata.yaml, as a lone .mcap, does not."""
     from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
 
     path = tmp_path / 'run'

@@ -1,9 +1,16 @@
 """Crash-safe rosbag2 bag directories: the graph's recordings.
 
-A recording is a rosbag2 bag directory (``metadata.yaml`` + one MCAP file) written by
-rosbags' ``Writer`` (version 9, MCAP storage, typestore ``ROS2_JAZZY``): the metadata, the
-MCAP's own ``rosbag2`` record, the channels' ``offered_qos_profiles`` and the type hashes
-are rosbags' (the format owner's reader rules are checked by ``tests/rosbag2_rules.py``).
+A recording is a rosbag2 bag directory (``metadata.yaml`` + one MCAP file), written through
+public library API only: the MCAP file by the ``mcap`` library's ``mcap.writer.Writer``
+(:mod:`~trust_av_planner.graph.mcap_steps`), ``metadata.yaml`` and the MCAP's ``rosbag2``
+metadata record by :mod:`~trust_av_planner.graph.bag_metadata` (PyYAML), the types'
+definitions and RIHS01 hashes by the public ``Typestore.generate_msgdef`` and
+``Typestore.hash_rihs01`` of rosbags' ``ROS2_JAZZY`` typestore, QoS profiles as
+``rosbags.interfaces.Qos``. No private attribute and no internal module of a library is
+used. What rosbag2 Jazzy writes is kept: version-9 metadata; schemas ``ros2msg``; every
+channel's metadata holds ``offered_qos_profiles`` (one profile per publisher) and
+``topic_type_hash`` (``rosbag2_storage_mcap`` ``mcap_storage.cpp`` ``create_topic``, jazzy
+L933-938); the format owner's reader rules are checked by ``tests/rosbag2_rules.py``.
 On top of it, :class:`BagWriter` adds what a recording that must survive any end needs:
 
 - **a chunk per step**: :meth:`BagWriter.end_step` closes the MCAP chunk and writes it
@@ -13,7 +20,9 @@ On top of it, :class:`BagWriter` adds what a recording that must survive any end
 - **a full disk**: a reserve file inside the bag directory holds, at all times, room for
   the MCAP summary and ``metadata.yaml``; when a write fails with ``ENOSPC`` the partial
   step is cut off, the reserve is released, the bag is finished with every complete step,
-  and :class:`DiskFullError` says so. The reserve never outlives the writer.
+  and :class:`DiskFullError` says so. The reserve never outlives the writer. As the MCAP
+  writer cannot take back a step, the writer that finishes the bag is rebuilt from the
+  complete steps in the file (:func:`~trust_av_planner.graph.mcap_steps.replay`).
 
 Messages are raw CDR as they came over DDS; log time = publish time = the header stamp
 (sim time in lock-step, wall time in wall mode).
@@ -28,10 +37,9 @@ import shutil
 import signal
 import struct
 import threading
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
+from mcap.writer import Writer as McapWriter
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -40,11 +48,11 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
-from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph.mcap_steps import StepStorage, StepWriter
+from trust_av_planner.graph.bag_metadata import BagInfo, TopicInfo, qos_text
+from trust_av_planner.graph.mcap_steps import RECORDER_LIBRARY, WholeWrites, new_writer, replay
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 RESERVE_BASE_BYTES = 48 * 1024
@@ -56,6 +64,9 @@ RESERVE_PER_CHUNK_BYTES = 256
 RESERVE_STEP_CHUNKS = 64
 """The reserve grows by this many chunks' worth at a time (one fallocate per 64 steps)."""
 RESERVE_NAME = '.reserve'
+MESSAGE_RECORD_BYTES = 31
+"""An MCAP Message record's bytes besides its data (opcode, length, channel, sequence,
+log and publish time)."""
 CHUNK_OVERHEAD_BYTES = 4096
 """Room a step's chunk record may need beyond twice its messages' bytes (record headers,
 message indexes), for the file-size limit check."""
@@ -111,13 +122,6 @@ def _file_size_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else int(soft)
 
 
-@dataclass
-class _Topic:
-    connection: Any
-    count: int = 0
-    step_count: int = 0
-
-
 class BagWriter:
     """A rosbag2 bag directory being recorded, one MCAP chunk per step (context manager).
 
@@ -130,6 +134,7 @@ class BagWriter:
 
     Raises:
         BagWriteError: the directory exists or cannot be created.
+        DiskFullError: there is no room to start a recording (nothing is left).
     """
 
     def __init__(self, path: Path, *, copy_of: str | None = None) -> None:
@@ -137,31 +142,37 @@ class BagWriter:
         if threading.current_thread() is threading.main_thread():
             # past a file-size limit a write fails with EFBIG instead of killing the process
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        existed = os.path.lexists(self.path)
-        storage: type[StepStorage] = StepStorage
-        if copy_of is not None:
-            storage = type('_CopyStorage', (StepStorage,),
-                           {'library': f'trust_av.bag_repair of {copy_of or "unknown"}'})
+        self._library = (RECORDER_LIBRARY if copy_of is None
+                         else f'trust_av.bag_repair of {copy_of or "unknown"}')
+        self._mcap_path = self.path / f'{self.path.name}.mcap'
+        self._info = BagInfo(self._mcap_path.name)
+        if copy_of is None:
+            self._info.custom_data['trust_av.recorder'] = 'one MCAP chunk per step'
+        else:
+            self._info.custom_data['trust_av.repaired_copy_of'] = copy_of or 'unknown'
+        if os.path.lexists(self.path):
+            raise BagWriteError(f'{self.path}: cannot create the bag directory ({self.path} '
+                                'exists already, not overwriting)')
         try:
-            writer: type[StepWriter] = StepWriter
-            if storage is not StepStorage:
-                writer = type('_CopyWriter', (StepWriter,), {'STORAGE_PLUGINS': {
-                    **Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: storage}})
-            self._writer = writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-            if copy_of is None:
-                self._writer.set_custom_data('trust_av.recorder', 'one MCAP chunk per step')
-            else:
-                self._writer.set_custom_data('trust_av.repaired_copy_of', copy_of or 'unknown')
-            self._writer.open()
-        except (WriterError, OSError) as err:
-            if not existed:                 # what this call created: an empty .mcap at most
-                shutil.rmtree(self.path, ignore_errors=True)
-            if isinstance(err, OSError) and err.errno in (errno.ENOSPC, errno.EDQUOT):
-                raise DiskFullError(f'{self.path}: no room to start a recording '
-                                    f'({os.strerror(err.errno)})') from err
-            raise BagWriteError(f'{self.path}: cannot create the bag directory ({err})') from err
-        self._topics: dict[str, _Topic] = {}
-        self._storage_write = self._storage.write
+            self.path.mkdir(mode=0o755, parents=True)
+        except OSError as err:
+            raise self._start_error(err, created=False) from err
+        try:
+            self._stream = WholeWrites(self._mcap_path)
+        except OSError as err:
+            raise self._start_error(err, created=True) from err
+        try:
+            self._mcap = new_writer(self._stream, self._library)
+        except OSError as err:
+            self._stream.close()
+            raise self._start_error(err, created=True) from err
+        self._topics: dict[str, TopicInfo] = {}
+        self._channels: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
+        self._schema_records: list[tuple[str, str, bytes]] = []
+        self._channel_records: list[tuple[str, str, int, dict[str, str]]] = []
+        self._pending: dict[str, int] = {}
+        self._step_bytes = 0
         self._offsets: dict[str, int] = {}
         self._reserve = self.path / RESERVE_NAME
         self._reserved = 0
@@ -174,32 +185,58 @@ class BagWriter:
         try:
             self._grow_reserve()
         except OSError as err:
-            self._writer.abort()
+            self._stream.close()
             shutil.rmtree(self.path, ignore_errors=True)
             raise DiskFullError(f'{self.path}: no room to start a recording '
                                 f'({os.strerror(err.errno or errno.ENOSPC)})') from err
 
+    def _start_error(self, err: OSError, *, created: bool) -> BagWriteError:
+        """The error of a start that failed; what it created (an empty .mcap at most) is
+        removed."""
+        if created:
+            shutil.rmtree(self.path, ignore_errors=True)
+        if err.errno in (errno.ENOSPC, errno.EDQUOT):
+            return DiskFullError(f'{self.path}: no room to start a recording '
+                                 f'({os.strerror(err.errno)})')
+        return BagWriteError(f'{self.path}: cannot create the bag directory ({err})')
+
     @property
     def counts(self) -> dict[str, int]:
         """Messages per topic written so far (complete steps and the pending one)."""
-        return {name: t.count + t.step_count for name, t in self._topics.items()}
+        return {name: t.count + self._pending[name] for name, t in self._topics.items()}
 
     def count(self, topic: str) -> int:
         """Messages of ``topic`` written so far (complete steps and the pending one)."""
-        entry = self._topics[topic]
-        return entry.count + entry.step_count
+        return self._topics[topic].count + self._pending[topic]
 
     def set_custom_data(self, key: str, value: str) -> None:
         """Set one ``custom_data`` entry of ``metadata.yaml`` (written when finished)."""
-        self._writer.set_custom_data(key, value)
+        self._info.custom_data[key] = value
 
     def add_topic(self, topic: str, msgtype: str, qos: Qos | list[Qos]) -> None:
         """Register a topic with its type and the QoS its publishers offer: one profile per
-        publisher, as ``ros2 bag record`` writes them (a profile alone: one publisher)."""
-        profiles = qos if isinstance(qos, list) else [qos]
-        connection = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
-                                                 offered_qos_profiles=profiles)
-        self._topics[topic] = _Topic(connection)
+        publisher, as ``ros2 bag record`` writes them (a profile alone: one publisher).
+
+        Raises:
+            BagWriteError: the topic was added already.
+        """
+        if topic in self._topics:
+            raise BagWriteError(f'{self.path}: topic {topic!r} added twice')
+        profiles = list(qos) if isinstance(qos, list) else [qos]
+        type_hash = TYPESTORE.hash_rihs01(msgtype)
+        if msgtype not in self._schemas:
+            msgdef, _ = TYPESTORE.generate_msgdef(msgtype, ros_version=2)
+            encoding = 'ros2idl' if msgdef.startswith('=' * 80 + '\nIDL: ') else 'ros2msg'
+            self._schema_records.append((msgtype, encoding, msgdef.encode()))
+            self._schemas[msgtype] = self._mcap.register_schema(msgtype, encoding,
+                                                                msgdef.encode())
+        metadata = {'offered_qos_profiles': qos_text(profiles), 'topic_type_hash': type_hash}
+        self._channel_records.append((topic, 'cdr', self._schemas[msgtype], metadata))
+        self._channels[topic] = self._mcap.register_channel(topic, 'cdr', self._schemas[msgtype],
+                                                            metadata)
+        self._topics[topic] = TopicInfo(topic, msgtype, profiles, type_hash)
+        self._info.topics.append(self._topics[topic])
+        self._pending[topic] = 0
         self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
 
     def write(self, topic: str, data: bytes | memoryview, log_time_ns: int | None = None) -> int:
@@ -217,11 +254,12 @@ class BagWriter:
         if self.finished:
             raise BagWriteError(f'{self.path}: written to after the bag was finished'
                                 + (f' ({self.disk_full})' if self.disk_full else ''))
-        entry = self._topics[topic]
         stamp = (header_stamp_ns(data, self._offsets[topic]) if log_time_ns is None
                  else log_time_ns)
-        self._storage_write(entry.connection, stamp, data)
-        entry.step_count += 1
+        self._mcap.add_message(self._channels[topic], stamp,
+                               data if isinstance(data, bytes) else bytes(data), stamp)
+        self._pending[topic] += 1
+        self._step_bytes += len(data) + MESSAGE_RECORD_BYTES
         if stamp < self._step_first:
             self._step_first = stamp
         if stamp > self._step_last:
@@ -240,54 +278,50 @@ class BagWriter:
         if self.finished:
             return False
         limit = _file_size_limit()
-        if limit is not None and (self._storage.bio.tell() + 2 * self._storage.chunk.bio.tell()
-                                  + CHUNK_OVERHEAD_BYTES + self._needed_reserve() > limit):
+        start = self._stream.tell()
+        if limit is not None and (start + 2 * self._step_bytes + CHUNK_OVERHEAD_BYTES
+                                  + self._needed_reserve() > limit):
             # the step and the summary would not fit under the limit: end before it does
-            self._drop_pending_step()
-            self._finish_after_write_error(OSError(errno.EFBIG, os.strerror(errno.EFBIG)),
+            self._finish_after_write_error(start, OSError(errno.EFBIG, os.strerror(errno.EFBIG)),
                                            f'file-size limit of {limit} bytes (RLIMIT_FSIZE)')
             return False
-        try:
-            self._storage.close_step_chunk()
-        except OSError as err:
-            self._drop_pending_step()
-            self._finish_after_write_error(err)
-            return False
-        self._chunks += 1
-        for entry in self._topics.values():
-            entry.count += entry.step_count
-            entry.step_count = 0
+        if self._step_bytes:
+            try:
+                self._stream.gather()
+                self._mcap.flush()  # type: ignore[no-untyped-call]  # the step's chunk
+                self._stream.commit()
+            except OSError as err:
+                self._finish_after_write_error(start, err)
+                return False
+            self._chunks += 1
+        for name, entry in self._topics.items():
+            entry.count += self._pending[name]
+            self._pending[name] = 0
+        self._step_bytes = 0
         if self._step_last >= 0:
             self._times = (min(self._times[0], self._step_first),
                            max(self._times[1], self._step_last))
         self._step_first, self._step_last = 2**63 - 1, -1
         self.steps += 1
-        if self._reserved < self._needed_reserve():
-            try:
+        if self._reserved < RESERVE_BASE_BYTES + RESERVE_PER_CHUNK_BYTES * self._chunks:
+            try:   # the reserve no longer pays for the summary: room for 64 more chunks
                 self._grow_reserve()
             except OSError as err:
-                self._finish_after_write_error(err)
+                self._finish_after_write_error(self._stream.tell(), err)
                 return False
         return True
 
-    def _drop_pending_step(self) -> None:
-        for entry in self._topics.values():
-            entry.step_count = 0
-        self._step_first, self._step_last = 2**63 - 1, -1
-        self._storage.discard_chunk()
-
     def finish(self) -> None:
-        """Write the pending step, the MCAP summary and metadata.yaml; remove the reserve."""
+        """Write the pending step, the MCAP summary and metadata.yaml; remove the reserve.
+
+        Raises:
+            BagWriteError: the summary or metadata.yaml cannot be written (the bag is left
+                for ``trust-av repair-bag``).
+        """
         if self.finished:
             return
-        if any(entry.step_count for entry in self._topics.values()) and not self.end_step():
+        if self._step_bytes and not self.end_step():
             return  # the disk filled up: end_step finished the bag
-        try:
-            self._storage.close_step_chunk()   # topics added after the last message
-        except OSError as err:
-            if err.errno not in (errno.ENOSPC, errno.EDQUOT):
-                raise
-            self._storage.discard_chunk()
         self._close()
 
     def __enter__(self) -> BagWriter:
@@ -296,13 +330,9 @@ class BagWriter:
     def __exit__(self, *exc: object) -> None:
         self.finish()
 
-    @property
-    def _storage(self) -> StepStorage:
-        storage = self._writer.storage
-        assert isinstance(storage, StepStorage)
-        return storage
-
     def _needed_reserve(self) -> int:
+        """The reserve's size when grown: the summary of the chunks so far and of
+        :data:`RESERVE_STEP_CHUNKS` more, and metadata.yaml (bytes)."""
         return RESERVE_BASE_BYTES + RESERVE_PER_CHUNK_BYTES * (self._chunks + RESERVE_STEP_CHUNKS)
 
     def _grow_reserve(self) -> None:
@@ -315,32 +345,71 @@ class BagWriter:
             os.close(fd)
         self._reserved = size
 
-    def _finish_after_write_error(self, err: OSError, what: str = '') -> None:
-        """Finish on the reserve with the complete steps; say why in :attr:`disk_full`
-        (``disk full`` for ENOSPC and EDQUOT, else the error or ``what``)."""
+    def _finish_after_write_error(self, end: int, err: OSError, what: str = '') -> None:
+        """Cut the file back to ``end`` (the end of the complete steps), finish on the
+        reserve with the complete steps; say why in :attr:`disk_full` (``disk full`` for
+        ENOSPC and EDQUOT, else the error or ``what``).
+
+        Raises:
+            BagWriteError: the complete steps cannot be finished as a bag (it is left for
+                ``trust-av repair-bag``).
+        """
         reason = os.strerror(err.errno) if err.errno else str(err)
         if err.errno in (errno.ENOSPC, errno.EDQUOT):
             what = f'disk full ({reason})'
         self.disk_full = (f'{self.path}: {what or f"cannot write ({reason})"} after '
                           f'{self.steps} complete steps; the bag holds them and is finished')
+        self.finished = True
+        for name in self._topics:
+            self._pending[name] = 0
+        self._step_bytes = 0
+        try:
+            self._stream.truncate(end)
+            self._mcap = self._rebuilt_writer(end)
+        except (OSError, ValueError) as error:
+            self._reserve.unlink(missing_ok=True)
+            self._stream.close()
+            raise BagWriteError(f'{self.path}: cannot finish the bag after {what or reason} '
+                                f'({error}); trust-av repair-bag keeps its complete '
+                                'steps') from error
         self._close()
 
+    def _rebuilt_writer(self, end: int) -> McapWriter:
+        """An MCAP writer holding the complete steps only (the failed step's messages are
+        in the old one): rebuilt from the file, given the schemas and channels that are
+        not in the file (registered since its last chunk), writing on from ``end``.
+
+        Raises:
+            ValueError: the file does not rebuild to ``end`` bytes.
+            OSError: the file cannot be read.
+        """
+        rebuilt = replay(self._mcap_path, end, self._library)
+        for schema in self._schema_records[rebuilt.schemas:]:
+            rebuilt.writer.register_schema(*schema)
+        for channel in self._channel_records[rebuilt.channels:]:
+            rebuilt.writer.register_channel(*channel)
+        rebuilt.stream.sink = self._stream
+        return rebuilt.writer
+
     def _close(self) -> None:
-        """Finish the MCAP and write metadata.yaml with the complete steps' counts."""
+        """Finish the MCAP (the ``rosbag2`` metadata record, summary, footer), fsync it and
+        write metadata.yaml with the complete steps' counts.
+
+        Raises:
+            BagWriteError: it cannot be written.
+        """
         self.finished = True
         self._reserve.unlink(missing_ok=True)
-        writer = self._writer
-        storage = self._storage
-        for entry in self._topics.values():
-            writer.counts[entry.connection.id] = entry.count
-            storage.channel_stats[entry.connection.id] = entry.count
-        if self.steps:
-            writer.min_timestamp, writer.max_timestamp = self._times
-            storage.message_start_time, storage.message_end_time = self._times
-        else:
-            writer.min_timestamp = writer.max_timestamp = 0
-            storage.message_start_time = storage.message_end_time = 0
+        if self._times[1] >= self._times[0]:
+            self._info.start_ns, self._info.end_ns = self._times
         try:
-            writer.close()
+            try:
+                self._mcap.add_metadata('rosbag2',
+                                        {'serialized_metadata': self._info.serialized()})
+                self._mcap.finish()  # type: ignore[no-untyped-call]
+                self._stream.sync()
+            finally:
+                self._stream.close()
+            self._info.write(self.path)
         except OSError as err:
             raise BagWriteError(f'{self.path}: cannot finish the bag ({err.strerror})') from err

@@ -1,41 +1,58 @@
-"""The MCAP storage under :class:`~trust_av_planner.graph.bag_writer.BagWriter`: rosbags'
-MCAP writer writing through an unbuffered file, one chunk per step, with the channel metadata
-rosbag2 Jazzy writes and a header naming this project's writer."""
+"""The MCAP file under :class:`~trust_av_planner.graph.bag_writer.BagWriter`, through the
+public API of the ``mcap`` library: ``mcap.writer.Writer`` (``start``, ``register_schema``,
+``register_channel``, ``add_message``, ``flush``, ``add_metadata``, ``finish``) writing to
+an unbuffered file, and ``mcap.stream_reader.StreamReader`` to rebuild a writer's state
+from the file after a step failed to be written.
+
+A step is one chunk: the writer's automatic chunking is off (a chunk size it never
+reaches) and ``Writer.flush`` closes the chunk at the end of each step (it writes no chunk
+without messages, so the first chunk always has a message index, as rosbag2's time-ordered
+read needs: ``tests/rosbag2_rules.py`` ``time_ordered_read``). Chunks are uncompressed."""
 
 from __future__ import annotations
 
 import os
-from collections import defaultdict
-from importlib.metadata import version
-from io import BytesIO
+import struct
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import IO, cast
 
-from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.rosbag2.storage_mcap import (
-    Channel,
-    McapWriter,
-    PendingChunk,
-    write_channel,
-    write_record,
-    write_string,
-)
+from mcap.exceptions import EndOfFile, McapError
+from mcap.records import Channel, Header, Message, MessageIndex, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 RECORDER_LIBRARY = 'trust_av.bag_writer'
 """What the MCAP header's ``library`` field of a bag this project wrote starts with (followed
-by `` (rosbags-VERSION)``): how :mod:`~trust_av_planner.graph.bag_repair` tells its own
+by `` (mcap-python/VERSION)``): how :mod:`~trust_av_planner.graph.bag_repair` tells its own
 recordings, whose log time is the header stamp, from another tool's."""
+PROFILE = 'ros2'
+"""The MCAP header's ``profile`` (rosbag2's MCAP plugin writes and expects ``ros2``)."""
+NO_AUTOMATIC_CHUNKS = 2**62
+"""The writer's ``chunk_size``: never reached, so a chunk ends only at ``flush`` (a step)."""
+
+
+def library_name(library: str) -> str:
+    """The MCAP header's ``library``: ``library`` and the mcap writer's own identifier."""
+    return f'{library} ({LIBRARY_IDENTIFIER})'
+
 
 class WholeWrites:
     """An unbuffered file whose ``write`` writes everything or raises ``OSError`` (no silent
-    short writes: rosbags' writer ignores ``write``'s return value). Between
-    :meth:`gather` and :meth:`commit` writes are collected and go to the file in one
-    ``os.write`` loop (a chunk and its ~45 small index records: one system call, not 45)."""
+    short writes). Between :meth:`gather` and :meth:`commit` writes are collected and go to
+    the file in one ``os.write`` loop (a chunk and its small index records: one system
+    call, not one per record).
 
-    def __init__(self, path: Path, offset: int) -> None:
-        self.fd = os.open(path, os.O_WRONLY | os.O_CLOEXEC)
-        os.lseek(self.fd, offset, os.SEEK_SET)
-        self.position = offset
+    Args:
+        path: the MCAP file to create (it must not exist).
+
+    Raises:
+        OSError: it cannot be created.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
+        self.position = 0
         self.gathered: list[bytes] | None = None
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
@@ -63,6 +80,9 @@ class WholeWrites:
     def tell(self) -> int:
         return self.position
 
+    def flush(self) -> None:
+        """Nothing is buffered (``mcap.writer.Writer.flush`` calls it)."""
+
     def truncate(self, size: int) -> None:
         """Cut the file at ``size`` and continue writing there (collected writes are
         dropped)."""
@@ -71,80 +91,106 @@ class WholeWrites:
         os.lseek(self.fd, size, os.SEEK_SET)
         self.position = size
 
+    def sync(self) -> None:
+        """fsync the file."""
+        os.fsync(self.fd)
+
     def close(self) -> None:
         os.close(self.fd)
 
 
-class StepStorage(McapWriter):
-    """rosbags' MCAP storage, writing through an unbuffered file (so a closed chunk is on
-    disk) and able to cut off a chunk that failed half-written."""
+class Redirect:
+    """A stream that counts and drops what is written until :attr:`sink` is set, then
+    writes through to it: the writer rebuilt by :func:`replay` goes over the bytes that are
+    in the file already, then writes the rest of the file."""
 
-    library = RECORDER_LIBRARY
-    """The MCAP header's ``library`` (followed by `` (rosbags-VERSION)``)."""
+    def __init__(self) -> None:
+        self.position = 0
+        self.sink: WholeWrites | None = None
 
-    def __init__(self, path: Path, compression: Any) -> None:
-        super().__init__(path, compression)
-        self.bio.seek(0)                    # the same magic and header, naming this writer
-        self.bio.truncate(0)
-        self.bio.write(b'\x89MCAP\x30\r\n')
-        header = BytesIO()
-        write_string(header, 'ros2')
-        write_string(header, f'{self.library} (rosbags-{version("rosbags")})')
-        write_record(self.bio, 0x01, header)
-        self.bio.flush()
-        offset = self.bio.tell()
-        self.bio.close()
-        self.bio = WholeWrites(self.path, offset)
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        if self.sink is not None:
+            return self.sink.write(data)
+        self.position += len(data)
+        return len(data)
 
-    def add_connection(self, connection: Any, offered_qos_profiles: str) -> None:
-        """A channel with the metadata rosbag2 Jazzy's MCAP plugin writes: the offered QoS
-        profiles and the type hash (``topic_type_hash``: the RIHS01 hash of the type, as
-        in metadata.yaml's ``type_description_hash``; ``rosbag2_storage_mcap``
-        ``mcap_storage.cpp`` ``create_topic``, jazzy L933-938). rosbags writes the first
-        only."""
-        metadata = BytesIO()
-        for key, value in (('offered_qos_profiles', offered_qos_profiles),
-                           ('topic_type_hash', connection.digest)):
-            write_string(metadata, key)
-            write_string(metadata, value)
-        self.channels.append(Channel(connection.id, connection.msgtype, connection.topic,
-                                     connection.ext.serialization_format,
-                                     metadata.getvalue()))
-        self.channel_stats[connection.id] = 0
-        write_channel(self.chunk.bio, self.channels[-1], self.schemas)
+    def tell(self) -> int:
+        return self.sink.tell() if self.sink is not None else self.position
 
-    def discard_chunk(self) -> None:
-        """Start a new, empty pending chunk (what was pending is dropped)."""
-        self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+    def flush(self) -> None:
+        """Nothing is buffered."""
 
-    def close_step_chunk(self) -> None:
-        """Write the pending chunk to the file; on an error cut the file back to where the
-        chunk began, drop the chunk and re-raise.
 
-        A pending chunk without messages (only the schema and channel records of topics
-        added since the last chunk) is written as those records, outside any chunk: the
-        mcap C++ reader that rosbag2 Jazzy uses refuses a time-ordered read of a file whose
-        first chunk has no message index (``reader.inl`` of ``foxglove/mcap``
-        ``releases/cpp/v1.3.0``, ``IndexedMessageReader``), and rosbag2 reads in time order.
-        """
-        if not self.chunk.bio.tell():
-            return
-        start, indexed = self.bio.tell(), len(self.chunks)
-        self.bio.gather()
+def new_writer(stream: WholeWrites | Redirect, library: str) -> Writer:
+    """An MCAP writer on ``stream`` that has written its magic and header (profile
+    ``ros2``, ``library`` as :func:`library_name`), one chunk per ``flush``, uncompressed."""
+    writer = Writer(cast('IO[bytes]', stream), chunk_size=NO_AUTOMATIC_CHUNKS,
+                    compression=CompressionType.NONE)
+    writer.start(profile=PROFILE, library=library_name(library))
+    return writer
+
+
+@dataclass
+class Replayed:
+    """A writer rebuilt from a file's complete chunks, and what it found."""
+
+    writer: Writer
+    stream: Redirect
+    schemas: int
+    channels: int
+
+
+def replay(path: Path, end: int, library: str) -> Replayed:
+    """A new writer in the state the writer of ``path`` had when its first ``end`` bytes
+    were written: every schema, channel and message of the file read with
+    ``StreamReader`` and given to it in file order, a ``flush`` after each chunk (its
+    message indexes follow it), the bytes it writes counted, not written.
+
+    The MCAP writer is deterministic, so the rebuilt writer writes the same bytes; it is
+    checked: its count must be ``end``. Set ``stream.sink`` to go on writing the file.
+
+    Raises:
+        ValueError: the file does not replay to ``end`` bytes (the bag is then left as it
+            is, for ``trust-av repair-bag``).
+        OSError: the file cannot be read.
+    """
+    stream = Redirect()
+    writer = new_writer(stream, library)
+    schemas = channels = 0
+    with path.open('rb') as handle:
         try:
-            if self.chunk.msgs:
-                self.close_chunk()
-            else:
-                self.bio.write(self.chunk.bio.getbuffer())
-                self.discard_chunk()
-            self.bio.commit()
-        except OSError:
-            self.bio.truncate(start)
-            del self.chunks[indexed:]   # close_chunk indexed the chunk the file lacks
-            raise
+            for record in StreamReader(handle, skip_magic=False,
+                                       record_size_limit=max(end, 1)).records:
+                schemas, channels = _give(writer, library, record, schemas, channels)
+        except EndOfFile:          # the end of the complete steps: the file ends there
+            if handle.tell() != end:
+                raise ValueError(f'it ends at byte {handle.tell()}, not {end}') from None
+        except (McapError, struct.error) as err:   # a record cut off or damaged
+            raise ValueError(f'it cannot be read to byte {end} ({err})') from err
+    if stream.position != end:
+        raise ValueError(f'its complete steps replay to {stream.position} bytes, not {end}')
+    return Replayed(writer, stream, schemas, channels)
 
 
-class StepWriter(Writer):
-    """rosbags' Writer with :class:`StepStorage` as its MCAP storage plugin."""
-
-    STORAGE_PLUGINS = {**Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: StepStorage}  # noqa: RUF012
+def _give(writer: Writer, library: str, record: object, schemas: int,
+          channels: int) -> tuple[int, int]:
+    """Give one record read from the file to the rebuilt writer; the schemas and channels
+    seen so far."""
+    if isinstance(record, Header):
+        if record.library != library_name(library) or record.profile != PROFILE:
+            raise ValueError(f'its header names {record.library!r}')
+    elif isinstance(record, Schema):
+        schemas += 1
+        if writer.register_schema(record.name, record.encoding, record.data) != record.id:
+            raise ValueError(f'schema {record.id} is out of order')
+    elif isinstance(record, Channel):
+        channels += 1
+        if writer.register_channel(record.topic, record.message_encoding, record.schema_id,
+                                   record.metadata) != record.id:
+            raise ValueError(f'channel {record.id} is out of order')
+    elif isinstance(record, Message):
+        writer.add_message(record.channel_id, record.log_time, record.data,
+                           record.publish_time, record.sequence)
+    elif isinstance(record, MessageIndex):
+        writer.flush()  # type: ignore[no-untyped-call]
+    return schemas, channels
