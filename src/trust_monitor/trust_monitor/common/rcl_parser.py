@@ -23,8 +23,8 @@ Struct layouts (ROS 2 Jazzy, ``rcl_yaml_param_parser`` 9.2.x, ``rcutils`` 6.7.x)
 
 The libraries are found as rclpy's extension finds them: by the dynamic loader's search
 (``LD_LIBRARY_PATH``, set by a ROS ``setup.bash`` or by the PyPI wheels' bootstrapper), else
-in ``<prefix>/lib`` of ``sys.prefix`` and of every ``AMENT_PREFIX_PATH`` entry, with the
-wheels' vendored libraries (``site-packages/ros_*.libs``) loaded first.
+in ``<prefix>/lib`` of ``sys.prefix`` and of every ``AMENT_PREFIX_PATH`` entry, with its
+dependencies loaded first from the same folder (and the PyPI wheel's vendored libyaml).
 """
 
 from __future__ import annotations
@@ -122,12 +122,14 @@ def _library_dirs() -> list[Path]:
 
 
 def _vendored_libs() -> list[Path]:
-    """The PyPI wheels' vendored libraries (auditwheel's ``ros_*.libs``), e.g. libyaml."""
+    """The parser wheel's vendored libyaml (auditwheel renames it ``libyaml-0-<hash>.so.*``
+    and keeps it in ``site-packages/ros_rcl_yaml_param_parser.libs``). Only this one: other
+    wheels' vendored copies (e.g. LTTng's) abort the process when loaded twice."""
     found: list[Path] = []
     for entry in sys.path:
-        if entry and Path(entry).is_dir():
-            for folder in sorted(Path(entry).glob('ros_*.libs')):
-                found.extend(sorted(folder.glob('lib*.so*')))
+        folder = Path(entry or '.') / 'ros_rcl_yaml_param_parser.libs'
+        if entry and folder.is_dir():
+            found.extend(sorted(folder.glob('libyaml-0-*.so*')))
     return found
 
 
@@ -155,11 +157,8 @@ def load_library(dirs: Sequence[Path] | None = None) -> ctypes.CDLL:
             if not candidate.is_file():
                 continue
             try:
-                for vendored in _vendored_libs():   # libyaml-0-<hash>.so, ...: best effort
-                    try:
-                        ctypes.CDLL(str(vendored), mode=ctypes.RTLD_GLOBAL)
-                    except OSError:
-                        continue
+                for vendored in _vendored_libs()[:1]:
+                    ctypes.CDLL(str(vendored), mode=ctypes.RTLD_GLOBAL)
                 for name in _DEPENDENCIES:
                     if (folder / name).is_file():
                         ctypes.CDLL(str(folder / name), mode=ctypes.RTLD_GLOBAL)
