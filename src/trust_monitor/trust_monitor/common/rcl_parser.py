@@ -167,9 +167,10 @@ def load_library(dirs: Sequence[Path] | None = None) -> ctypes.CDLL:
             except OSError as err2:
                 reasons.append(str(err2))
     if library is None:
-        raise ParamsError(f"cannot load rcl's params-file parser {PARSER_LIBRARY} (package "
-                          'ros-jazzy-rcl-yaml-param-parser, not found by the loader nor in '
-                          f'<prefix>/lib of sys.prefix or AMENT_PREFIX_PATH): '
+        raise ParamsError(f"cannot load rcl's params-file parser {PARSER_LIBRARY} (pip "
+                          'ros-rcl-yaml-param-parser, apt ros-jazzy-rcl-yaml-param-parser; not '
+                          'found by the loader nor in <prefix>/lib of sys.prefix or '
+                          'AMENT_PREFIX_PATH): '
                           f'{reasons[-1].splitlines()[0] if reasons else "not found"}')
     library.rcl_yaml_node_struct_init.argtypes = [_Allocator]
     library.rcl_yaml_node_struct_init.restype = ctypes.POINTER(_Params)
@@ -199,7 +200,9 @@ def _as_file(data: bytes) -> Iterator[str]:
     if hasattr(os, 'memfd_create') and Path('/proc/self/fd').is_dir():
         fd = os.memfd_create('trust-av-params', os.MFD_CLOEXEC)
         try:
-            os.write(fd, data)
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view):]
             yield f'/proc/self/fd/{fd}'
         finally:
             os.close(fd)
