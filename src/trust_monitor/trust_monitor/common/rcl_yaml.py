@@ -35,32 +35,27 @@ from trust_monitor.common.rcl_parser import RclParseError, parse_files
 from trust_monitor.common.rcl_values import PARAMS_KEY, ParsedParams, _name
 
 
-def _events(text: str) -> list[tuple[int, yaml.Event]]:
-    """libyaml's events for ``text`` with their 1-based lines, up to the first error."""
+def _events(text: str) -> tuple[list[tuple[int, yaml.Event]], yaml.YAMLError | None]:
+    """libyaml's events for ``text`` with their 1-based lines, up to the first syntax error,
+    and that error (None: ``text`` is YAML). Only for messages: rcl has refused the file."""
     loader = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
     events: list[tuple[int, yaml.Event]] = []
     try:
         for event in yaml.parse(text, Loader=loader):
             line = event.start_mark.line + 1 if event.start_mark is not None else 0
             events.append((line, event))
-    except yaml.YAMLError:
-        pass
-    return events
-
-
-def _yaml_problem(text: str) -> str | None:
-    """libyaml's reason ``text`` is not YAML, without any of its content (None: it is)."""
-    loader = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
-    try:
-        for _ in yaml.parse(text, Loader=loader):
-            pass
     except yaml.YAMLError as err:
-        problem = str(getattr(err, 'problem', None) or 'syntax error')
-        # Keep quoted punctuation (',' or ']'), drop anything that could be file content.
-        return re.sub(r"'[^']*'|\"[^\"]*\"",
-                      lambda m: '(...)' if re.search(r'[A-Za-z0-9\\]', m.group()) else m.group(),
-                      problem).replace('\n', ' ')
-    return None
+        return events, err
+    return events, None
+
+
+def _yaml_problem(err: yaml.YAMLError) -> str:
+    """libyaml's reason a text is not YAML, without any of its content."""
+    problem = str(getattr(err, 'problem', None) or 'syntax error')
+    # Keep quoted punctuation (',' or ']'), drop anything that could be file content.
+    return re.sub(r"'[^']*'|\"[^\"]*\"",
+                  lambda m: '(...)' if re.search(r'[A-Za-z0-9\\]', m.group()) else m.group(),
+                  problem).replace('\n', ' ')
 
 
 def _key_paths(text: str) -> list[tuple[int, list[str]]]:
@@ -68,7 +63,7 @@ def _key_paths(text: str) -> list[tuple[int, list[str]]]:
     'ros__parameters', 'alpha']``), in file order."""
     paths: list[tuple[int, list[str]]] = []
     stack: list[list[Any]] = []  # per open collection: [is_mapping, expecting_key, key]
-    for line, event in _events(text):
+    for line, event in _events(text)[0]:
         top = stack[-1] if stack else None
         if isinstance(event, (yaml.ScalarEvent, yaml.AliasEvent,
                               yaml.MappingStartEvent, yaml.SequenceStartEvent)):
@@ -136,9 +131,9 @@ def _refusal(err: RclParseError, text: str) -> ParamsError:
     if err.line is not None:
         above = [keys for line, keys in _key_paths(text) if line <= err.line]
         context = _describe(above[-1]) if above else ''
-        problem = _yaml_problem(text)
-        if problem is not None:
-            reason += f' (not valid YAML: {problem})'
+        syntax_error = _events(text)[1]
+        if syntax_error is not None:
+            reason += f' (not valid YAML: {_yaml_problem(syntax_error)})'
         return ParamsError(f'{err.where}: line {err.line}: {context}rcl: {reason}')
     # No line (a section's node name rmw refuses): the first section rcl did not store.
     context = next((f'section {_name(name)}: ' for name in _sections(text)
