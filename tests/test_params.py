@@ -198,14 +198,17 @@ def test_values_written_for_the_nodes_read_back_unchanged(value: object) -> None
 
 
 @pytest.mark.parametrize(('text', 'message'), [
-    ('planner: [\n', 'line 1: a sequence where rcl needs a key'),
-    ('planner:\n  alpha: 0.5\n', r"a value under 'planner/alpha' above ros__parameters"),
+    ('planner: [\n', "line 1: key 'planner': rcl: Sequences can only be values"),
+    ('planner:\n  alpha: 0.5\n', r"line 2: key 'planner/alpha': rcl: Cannot have a value "
+                                  'before ros__parameters'),
     ('planner:\n  ros__parameters:\n    a: &a 0.5\n    alpha: *a\n', 'YAML alias'),
-    ('planner:\n  ros__parameters:\n    alpha: [1, 2.0]\n', 'sequence must have one type'),
+    ('planner:\n  ros__parameters:\n    alpha: [1, 2.0]\n', r"line 3: parameter 'alpha' .*"
+                                                            'items of one list must have one '
+                                                            'type'),
     ('planner:\n  ros__parameters:\n    alpha: []\n', 'has no value'),
     ('planner:\n  ros__parameters:\n    alpha: on\n', 'parameter alpha: expected a number, '
                                                       'got True'),
-    ('plan-ner:\n  ros__parameters:\n    alpha: 0.5\n', 'node name'),
+    ('plan-ner:\n  ros__parameters:\n    alpha: 0.5\n', "section 'plan-ner': rcl: node name"),
     ('planer:\n  ros__parameters:\n    alpha: 0.5\n', "unknown node section 'planer'"),
     ('planner:\n  ros__parameters:\n    alpha: "0.5\n', 'not valid YAML'),
 ])

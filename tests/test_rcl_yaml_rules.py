@@ -1,13 +1,15 @@
-"""trust_monitor.common.rcl_yaml against the real rcl params-file parser (the oracle).
+"""trust_monitor.common.rcl_yaml (rcl's parser through ctypes, rclpy's section matching in
+Python) against a node started with the same files (the oracle: rcl through rclpy).
 
 For each case of the corpus below, one subprocess (for the whole corpus) runs what a node
 started with ``--ros-args --params-file F [--params-file G]`` runs: ``rclpy.init`` with those
 arguments (rcl ``arguments.c: _rcl_parse_param_file`` -> ``rcl_yaml_param_parser``
 ``parser.c: rcl_parse_yaml_file``), then a node ``planner`` in ``/`` and one in ``/car1``
 with ``automatically_declare_parameters_from_overrides=True`` (rclpy ``node.py``), and reads
-each declared parameter's type and value, or records the error. The pure module must agree
+each declared parameter's type and value, or records the error. The binding must agree
 on accept/refuse (same line where rcl names one), on which node refuses, and on every typed
-value, bit for bit.
+value, bit for bit: the guard that the ctypes struct layouts, the reading of
+``rcl_variant_t`` in rclpy's slot order and the section matching are rclpy's.
 """
 
 from __future__ import annotations
@@ -537,7 +539,7 @@ def test_corpus_is_big_enough() -> None:
 
 
 @pytest.mark.parametrize('case', sorted(CORPUS))
-def test_pure_module_agrees_with_rcl(case: str, oracle: dict[str, Any]) -> None:
+def test_binding_agrees_with_rclpy(case: str, oracle: dict[str, Any]) -> None:
     expected = oracle[case]
     paths = oracle['__paths__'][case]
     builtins = set(oracle['__baseline__']['nodes']['/planner']['params'])
@@ -547,13 +549,14 @@ def test_pure_module_agrees_with_rcl(case: str, oracle: dict[str, Any]) -> None:
             parsed.append(parse_params_text(text, path))
     except ParamsError as err:
         message = str(err)
-        assert 'error' in expected, f'rcl accepts {case}, the pure module refuses: {message}'
+        assert 'error' in expected, f'rclpy accepts {case}, the binding refuses: {message}'
         assert '\n' not in message and message.startswith(path)
         rcl_line = re.search(r'at line(?:_num)? (\d+)', expected['error'])
         if rcl_line:
             assert f'line {rcl_line.group(1)}:' in message, (message, expected['error'])
         return
-    assert 'error' not in expected, f'rcl refuses {case} ({expected["error"]}); pure accepts'
+    assert 'error' not in expected, (f'rclpy refuses {case} ({expected["error"]}); the '
+                                     'binding accepts')
     for fqn in NODES:
         got = expected['nodes'][fqn]
         if 'node_error' in got:

@@ -4,10 +4,11 @@
 A run's configuration is an ordered list of ROS 2 params files: the shipped
 ``config/trust_av.yaml`` first, then every ``--params-file`` in command-line order. The nodes
 get exactly that list (``--ros-args --params-file F1 --params-file F2 ...``), so the values
-are what rcl and rclpy make of it (:mod:`trust_monitor.common.rcl_yaml`: all files parsed
-into one structure, sections matched against the node's fully qualified name and applied in
-order of first appearance). Two of rcl's rules would silently drop a value the user wrote in
-a later file; :func:`layered_params` refuses both instead, naming the file and parameter:
+are what rcl and rclpy make of it (:mod:`trust_monitor.common.rcl_yaml`: all files parsed by
+rcl's own parser into one structure, sections matched against the node's fully qualified
+name and applied in order of first appearance). Two of rcl's rules would silently drop a
+value the user wrote in a later file; :func:`layered_params` refuses both instead, naming
+the file and parameter:
 
 - a section that first appeared in an earlier file is applied at its first appearance, so
   ``/**: alpha: 0.3`` in a later file loses against an earlier ``planner: alpha: 0.5``;
@@ -102,7 +103,7 @@ def layer_files(files: str | Path | Iterable[str | Path] = (),
 
 
 def read_layer(path: str | Path) -> ParsedParams:
-    """Read one params file by rcl's rules (:func:`rcl_yaml.parse_params_text`).
+    """Read one params file with rcl's parser (:func:`rcl_yaml.parse_params_text`).
 
     Raises:
         ParamsError: the file cannot be read, is not a regular file, is larger than
