@@ -35,7 +35,7 @@ from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.graph import stop_signals
 from trust_av_planner.graph.bag_writer import BagWriter, DiskFullError
 from trust_av_planner.graph.domains import lease_domain
-from trust_av_planner.graph.lifecycle_client import change_states
+from trust_av_planner.graph.lifecycle_client import set_states
 from trust_av_planner.graph.orchestrator import node_specs
 from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
 from trust_av_planner.graph.publication_ledger import (
@@ -190,7 +190,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                     stats.done(time.monotonic_ns() - now)
                     next_tick += period_ns
                     graph.check_alive(set())
-                _stop_and_drain(graph, node, executor, SHADOW_NODES)
+                _stop_and_drain(graph, executor, SHADOW_NODES, node=node)
                 if recording.disk_full:
                     raise DiskFullError(recording.disk_full)
                 counts = dict(recording.counts)
@@ -333,7 +333,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                         next_chunk += 1.0
                         if every_second is not None:
                             every_second(pids, time.monotonic() - started)
-                _stop_and_drain(graph, node, executor, WALL_GRAPH_NODES)
+                _stop_and_drain(graph, executor, WALL_GRAPH_NODES, node=node)
                 if recording.disk_full:
                     raise DiskFullError(recording.disk_full)
                 counts = dict(recording.counts)
@@ -364,10 +364,10 @@ def _published(loops: dict[str, Any], recorded: Collection[str]) -> dict[Publish
             for topic, count in loop.get('published', {}).items() if topic in recorded}
 
 
-def _stop_and_drain(graph: Graph, node: Any, executor: Any, names: tuple[str, ...],
-                    drain_s: float = 0.5) -> None:
-    """Deactivate the managed nodes (the planner hands over), stop the nodes (they write
-    their loop statistics) while taking what they publish, then for ``drain_s`` the last.
+def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
+                    drain_s: float = 0.5, node: Any = None) -> None:
+    """Deactivate the managed nodes through ``node`` if given (the planner hands over), stop
+    the nodes (they write their loop statistics) while taking what they publish, then the last.
 
     The stop runs in a thread so that the executor keeps spinning: the command topics keep
     only the last message (keep-last 1), so a node that ticks twice while being stopped
@@ -376,7 +376,7 @@ def _stop_and_drain(graph: Graph, node: Any, executor: Any, names: tuple[str, ..
     """
     import threading
 
-    change_states(graph, node, executor, SHADOW_NODES, ('deactivate',))
+    set_states(node, executor, SHADOW_NODES if node is not None else (), 'inactive', graph=graph)
     errors: list[BaseException] = []
 
     def stop() -> None:
@@ -432,9 +432,9 @@ def _wait_nodes(graph: Graph, node: Any, executor: Any, topics: PlannerTopics,
 
 def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[int, int]],
                  timeout_s: float, pending: Callable[[], list[str]] | None = None) -> None:
-    """Configure and activate the managed nodes (``autostart: false``), then wait until every
-    topic has its (publishers, subscribers) and ``pending`` (if given) names nothing more."""
-    change_states(graph, node, executor, SHADOW_NODES, ('configure', 'activate'), timeout_s)
+    """Bring the managed nodes to active (configure, activate), then wait until every topic
+    has its (publishers, subscribers) and ``pending`` (if given) names nothing more."""
+    set_states(node, executor, SHADOW_NODES, 'active', timeout_s, graph)
     deadline = time.monotonic() + timeout_s
     missing: list[str] = []
     while time.monotonic() < deadline:
