@@ -245,7 +245,8 @@ def test_wall_mode_planner_waits_inactive_then_hands_over(tmp_path: Path) -> Non
     """``clock_mode: wall``, shipped ``autostart: true``: the planner configures itself
     (and warms its solver) but publishes nothing until activated, although it ticks on the
     wall clock and its inputs are missing (before, it braked from start-up); active: the
-    stale-input command every tick; deactivate: the hand-over command, then silence."""
+    stale-input command every tick; deactivate: the hand-over command, then silence; a
+    SIGINT while active hands over too."""
     from geometry_msgs.msg import AccelStamped
 
     from trust_monitor.common.wall_clock import WallClockConfig
@@ -270,12 +271,14 @@ def test_wall_mode_planner_waits_inactive_then_hands_over(tmp_path: Path) -> Non
             seen = len(commands)
             manager.spin_for(1.5)
             assert len(commands) == seen
+            assert manager.transition(ACTIVATE)   # then stopped by SIGINT while active
         finally:
             manager.close()
             out = stop(proc)
     assert 'solver warmed: 3 solves' in out
     assert 'inactive: waiting for activate (clock_mode wall)' in out
-    assert 'deactivate: handed over with' in out
+    # a stop request deactivates an active wall-mode planner first: it hands over again
+    assert out.count('deactivate: handed over with') == 2, out
 
 
 def test_monitor_publishes_trust_only_while_active(tmp_path: Path) -> None:
