@@ -33,6 +33,7 @@ from typing import Any
 import yaml
 
 from trust_av_planner.graph.domains import lease_domain
+from trust_av_planner.graph.lifecycle_client import lifecycle_manager, set_states
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 
 REMAPS = {'/preceding_vehicle/odom': '/perception/lead_vehicle/odom',
@@ -104,6 +105,10 @@ def run_vehicle_loop(out_dir: Path, *, duration_s: float = 60.0, rate_hz: float 
                         node_command(module, name, files, remaps), stdout=log,
                         stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                         start_new_session=True)
+            # managed nodes in wall mode wait inactive: activated as a vehicle's manager would
+            with lifecycle_manager(domain) as (node, executor):
+                set_states(node, executor, ('planner', 'trust_monitor'), 'active',
+                           startup_timeout_s)
             deadline = time.monotonic() + startup_timeout_s + duration_s + 30.0
             standin = processes['vehicle_standin']
             while standin.poll() is None and time.monotonic() < deadline:

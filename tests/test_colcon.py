@@ -131,14 +131,17 @@ def test_installed_node_names_what_it_misses(install: Path, tmp_path: Path) -> N
     assert proc.returncode == 2
     errors = [line for line in proc.stderr.splitlines() if line.startswith('error:')]
     assert errors == ['error: parameters initial_position_m, start_time_s are missing '
-                      '(PlantConfig): pass --ros-args -p initial_position_m:=VALUE -p '
-                      'start_time_s:=VALUE'], proc.stderr
+                      '(PlantConfig): no params file sets them, each run supplies them '
+                      '(trust-av does; by hand: pass --ros-args -p initial_position_m:=VALUE '
+                      '-p start_time_s:=VALUE)'], proc.stderr
     for package, executable, line in (
             ('human_driver_sim', 'driver', 'parameters initial_position_m, initial_speed_mps, '
-             'start_time_s are missing (FollowerState): pass --ros-args -p '
-             'initial_position_m:=VALUE -p initial_speed_mps:=VALUE -p start_time_s:=VALUE'),
+             'start_time_s are missing (FollowerState): no params file sets them, each run '
+             'supplies them (trust-av does; by hand: pass --ros-args -p '
+             'initial_position_m:=VALUE -p initial_speed_mps:=VALUE -p start_time_s:=VALUE)'),
             ('trust_av_planner', 'recorder', 'parameter bag_path is missing (RecorderConfig): '
-             'pass --ros-args -p bag_path:=VALUE')):
+             'no params file sets it, each run supplies it (trust-av does; by hand: pass '
+             '--ros-args -p bag_path:=VALUE)')):
         exe = install / package / 'lib' / package / executable
         proc = in_install(install, str(exe), tmp_path)
         assert proc.returncode == 2

@@ -181,6 +181,7 @@ def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None
     from rclpy.qos import QoSProfile
 
     from trust_av_planner.graph.domains import lease_domain
+    from trust_av_planner.graph.lifecycle_client import set_states
     from trust_monitor.ros.messages import diagnostic_values, odometry
     from trust_monitor.ros.qos import topic_qos
 
@@ -203,6 +204,8 @@ def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None
         node = rclpy.create_node('autoware_like', context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
+        # a managed node in wall mode waits inactive until it is activated
+        set_states(node, executor, ['planner'], 'active', 60.0)
         statuses: list[dict[str, str]] = []
         node.create_subscription(DiagnosticArray, '/ego/planner_status',
                                  lambda m: statuses.append(diagnostic_values(m)),
@@ -272,6 +275,7 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
     from rclpy.parameter import Parameter
 
     from trust_av_planner.graph.domains import lease_domain
+    from trust_av_planner.graph.lifecycle_client import set_states
     from trust_monitor.ros.messages import diagnostic_values, odometry
     from trust_monitor.ros.qos import topic_qos
 
@@ -298,6 +302,8 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
         node = rclpy.create_node('tester', context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
+        # a managed node in wall mode waits inactive until it is activated
+        set_states(node, executor, ['planner'], 'active', 60.0)
         statuses: list[tuple[int, dict[str, str]]] = []
         commands: list[float] = []
         node.create_subscription(DiagnosticArray, '/ego/planner_status',

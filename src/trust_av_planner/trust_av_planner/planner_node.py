@@ -41,7 +41,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import AccelStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
@@ -53,8 +52,10 @@ from trust_monitor.common import registry
 from trust_monitor.common.frames import FrameConfig, body_frame, position_frame_problem
 from trust_monitor.common.grids import interp_at
 from trust_monitor.common.kinematics import VehicleState
+from trust_monitor.common.lifecycle import LifecycleConfig
 from trust_monitor.common.lockstep import StepBuffer
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+from trust_monitor.ros.lifecycle import ManagedNode
 from trust_monitor.ros.messages import (
     TrajectoryBytes,
     VehicleMarkers,
@@ -72,6 +73,11 @@ from trust_monitor.ros.tuning import Tunable, enable_tuning
 from trust_monitor.trust_interface import build_trust_model
 from trust_monitor.trust_model import TrustConfig
 
+WARM_UP = True
+"""Wall mode: ``configure`` warms the outputs and the NMPC (:meth:`PlannerNode.warm_up`);
+False only for the cold case of benchmarks/bench_lifecycle.py."""
+WARM_UP_SOLVES = 3
+"""Solves of the NMPC at ``configure`` in wall mode."""
 STEP_INPUTS = ('traffic', 'preview', 'ego', 'human')
 TABLE_TOPIC = {'traffic': 'preceding_vehicle/odom', 'preview': 'preceding_vehicle/speed_preview',
                'ego': 'ego/odom', 'human': 'human/odom', 'trust': 'trust_monitor/trust'}
@@ -83,14 +89,26 @@ def vehicle(msg: Odometry) -> VehicleState:
     return VehicleState(float(msg.pose.pose.position.x), float(msg.twist.twist.linear.x))
 
 
-class PlannerNode(Node):
-    """Thin adapter over :class:`~trust_av_planner.planner.AvPlanner`."""
+class PlannerNode(ManagedNode):
+    """Thin adapter over :class:`~trust_av_planner.planner.AvPlanner`, a managed node
+    (:mod:`trust_monitor.ros.lifecycle`): ``configure`` builds and warms it, ``activate``
+    starts the outputs, ``deactivate`` hands over (:meth:`handover`)."""
+
+    user_errors = (ValueError, TrustAvPlannerError)
 
     def __init__(self) -> None:
         super().__init__('planner')
-        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
-        self.stopping = False  # set by spin_node on a stop request
-        self.exit_code = 0
+        self.lifecycle = declare_config(self, LifecycleConfig)
+        self.tuning = False
+
+    def build(self) -> None:
+        """``configure``: parameters, core (warmed in wall mode), publishers, subscriptions.
+
+        Raises:
+            ParamsError: a refused parameter value.
+            TrustAvPlannerError: a trust model wall mode cannot mirror.
+            ValueError: an empty ``human_odom_topic`` where the follower is needed.
+        """
         self.config = declare_config(self, PlannerConfig)
         trust = declare_config(self, TrustConfig)
         shared = declare_config(self, SharedConfig)
@@ -102,7 +120,7 @@ class PlannerNode(Node):
         params = {c.name: declare_config(self, c.config_type)
                   for c in registry.components(registry.PREDICTORS)
                   if c.config_type is not None}
-        wall = self.clock.wall
+        wall = self.wall = self.clock.wall
         if wall:
             check_control_rate(self.config, self.clock.control_rate_hz)
         self.trust_model = build_trust_model(
@@ -145,15 +163,15 @@ class PlannerNode(Node):
         self.frame = ''
         self.set_frame(self.frames.base_frame_id)
         self.markers = VehicleMarkers(shared.vehicle_length_m)
-        self.pub_plan = self.create_publisher(JointTrajectory, 'ego/plan',
+        self.pub_plan = self.create_lifecycle_publisher(JointTrajectory, 'ego/plan',
                                               topic_qos('ego/plan', self.clock))
-        self.pub_expected = self.create_publisher(JointTrajectory, 'ego/expected_plan',
+        self.pub_expected = self.create_lifecycle_publisher(JointTrajectory, 'ego/expected_plan',
                                                   topic_qos('ego/expected_plan', self.clock))
-        self.pub_accel = self.create_publisher(AccelStamped, 'ego/accel_cmd',
+        self.pub_accel = self.create_lifecycle_publisher(AccelStamped, 'ego/accel_cmd',
                                                topic_qos('ego/accel_cmd', self.clock))
-        self.pub_status = self.create_publisher(DiagnosticArray, 'ego/planner_status',
+        self.pub_status = self.create_lifecycle_publisher(DiagnosticArray, 'ego/planner_status',
                                                 topic_qos('ego/planner_status', self.clock))
-        self.pub_markers = self.create_publisher(MarkerArray, 'vehicle_markers',
+        self.pub_markers = self.create_lifecycle_publisher(MarkerArray, 'vehicle_markers',
                                                  topic_qos('vehicle_markers', self.clock))
         inputs = (('traffic', Odometry, topics.lead_odom_topic),
                   ('preview', JointTrajectory,
@@ -169,13 +187,57 @@ class PlannerNode(Node):
                     topic_qos(TABLE_TOPIC[name], self.clock),
                     event_callbacks=self.event_callbacks(name) if wall else None)
         self.loop = WallLoop(self, self.clock, self.wall_step) if wall else None
-        enable_tuning(self, [Tunable(PlannerConfig, lambda: self.config, self.retune)], wall)
+        if not self.tuning:   # once: the values it guards stay declared across cleanup
+            enable_tuning(self, [Tunable(PlannerConfig, lambda: self.config, self.retune)], wall)
+            self.tuning = True
+        warm = self.warm_up() if wall and WARM_UP else ''
+
         mode = f'wall clock at {self.clock.control_rate_hz:g} Hz' if wall else 'lock-step'
         step_s, steps = self.planner.grid
         self.get_logger().info(f'ready ({mode}): predictor {self.config.predictor}, alpha '
                                f'{self.config.alpha:g}, prediction grid {steps} x {step_s:g} s, '
                                f'lead preview {self.config.lead_preview}, inputs '
-                               f'{", ".join(t for _, _, t in inputs if t)}')
+                               f'{", ".join(t for _, _, t in inputs if t)}{warm}')
+
+    def warm_up(self) -> str:
+        """Take the first-use costs off the first active tick: the output templates of the
+        body frame (made by :meth:`set_frame`; a plan's template deserialises the message
+        once per byte to find its exact length, about 170 ms for 30 points, which was most
+        of the 150-220 ms first tick; benchmarks/bench_lifecycle.py) and the NMPC's first
+        solves, on a steady car-following state, after which its warm start is forgotten.
+        Only the NMPC is stepped: the plan estimator sees nothing. Lock-step runs are not
+        warmed (no deadline; their numbers stay those of the in-process loop).
+
+        Returns:
+            The log's note: solves and the first and last solve times.
+        """
+        nmpc, c = self.planner.nmpc, self.config
+        speed = 0.5 * (c.speed_min_mps + c.speed_max_mps)
+        gap = c.standstill_gap_m + c.time_headway_s * speed
+        state = self.trust_model.initial_state()
+        if isinstance(state, float):   # above T_min, or the NMPC falls back without a solve
+            state = max(state, c.trust_min + 1.0)
+        times = []
+        for _ in range(WARM_UP_SOLVES):
+            start = time.perf_counter()
+            nmpc.step(gap, speed, np.full(nmpc.steps, speed), np.zeros(nmpc.steps), state)
+            times.append(time.perf_counter() - start)
+        nmpc.reset()
+        return (f'; solver warmed: {len(times)} solves, {1e3 * times[0]:.1f} ms then '
+                f'{1e3 * times[-1]:.1f} ms')
+
+    def handover(self) -> None:
+        """``deactivate``: one last command, ``stale_decel_mps2`` (the stale-input
+        deceleration, :class:`~trust_av_planner.nmpc.PlannerConfig`), stamped now in the
+        AV's frame; then the outputs stop until ``activate``."""
+        accel = self.config.stale_decel_mps2
+        self.pub_accel.publish(self.command_bytes.render(now_ns(self), accel))
+        self.get_logger().info(f'deactivate: handed over with {accel:g} m/s^2')
+
+    def release(self) -> None:
+        """``cleanup``/``shutdown``: drop the core and the step buffers."""
+        for name in ('planner', 'buffer', 'latest', 'markers'):
+            self.__dict__.pop(name, None)
 
     def set_frame(self, frame: str) -> None:
         """The frame_id of the plans and the command from now on (the AV's body frame)."""
@@ -183,10 +245,15 @@ class PlannerNode(Node):
             self.frame = frame
             self.plan_bytes = TrajectoryBytes('accelerations', frame)
             self.command_bytes = accel_command_bytes(frame)
+            if self.wall and WARM_UP:   # the templates are made now, not on the next tick
+                step_s, steps = self.planner.grid
+                self.plan_bytes.render(0, step_s, [0.0] * steps)
 
     def retune(self, config: PlannerConfig) -> None:
-        """A validated run-time parameter change: effective at the next tick."""
-        self.planner.retune(config)
+        """A validated run-time parameter change: effective at the next tick (kept for the
+        next ``configure`` while unconfigured)."""
+        if 'planner' in self.__dict__:
+            self.planner.retune(config)
         self.config = config
 
     def event_callbacks(self, name: str) -> SubscriptionEventCallbacks:
@@ -209,7 +276,8 @@ class PlannerNode(Node):
         return SubscriptionEventCallbacks(deadline=on_deadline, incompatible_qos=on_incompatible)
 
     def on_latest(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
-        """Wall mode: keep the latest message of each input with its receive time."""
+        """Wall mode: keep the latest message of each input with its receive time (also
+        while inactive: the first active tick has fresh inputs)."""
         self.latest.put(name, time.monotonic_ns(), msg)
         self.missed.pop(name, None)
         if name == 'ego':
@@ -233,7 +301,9 @@ class PlannerNode(Node):
 
     def wall_step(self) -> None:
         """Wall mode: one planning step from the latest inputs, stamped now; the stale-input
-        deceleration while a required input is missing or stale."""
+        deceleration while a required input is missing or stale. Only while active."""
+        if not self.active:
+            return
         ns, mono = now_ns(self), time.monotonic_ns()
         t_s = mono / NS_PER_S
         why = self.problems(mono)
@@ -272,17 +342,20 @@ class PlannerNode(Node):
                      extra={'reason': why, 'fallback': 'True', 'success': 'False'},
                      error=True)
 
-    def close(self) -> None:
-        """At shutdown: the wall loop's jitter statistics."""
-        if self.loop is not None:
-            self.loop.close()
-
     def on_input(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
-        """Store an input; plan every step whose inputs are complete, in order."""
+        """Store an input; plan every step whose inputs are complete, in order (only while
+        active: while inactive the lock-step chain waits, its inputs kept for
+        :meth:`resume`)."""
         self.buffer.put(name, msg_ns(msg.header.stamp), msg)
         if name == 'ego':
             self.set_frame(body_frame(msg.child_frame_id, self.frames))  # type: ignore[union-attr]
-        self.try_plan()
+        if self.active:
+            self.try_plan()
+
+    def resume(self) -> None:
+        """``activate`` in lock-step: plan the steps whose inputs came while inactive."""
+        if not self.wall:
+            self.try_plan()
 
     def try_plan(self) -> None:
         """Plan the next step if its inputs (and the previous step's trust) are in."""

@@ -22,14 +22,15 @@ import time
 
 import numpy as np
 from geometry_msgs.msg import Vector3Stamped
-from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory
 
 from trust_monitor.common.grids import hold_at
+from trust_monitor.common.lifecycle import LifecycleConfig
 from trust_monitor.common.lockstep import StepBuffer
 from trust_monitor.common.registry import TRUST_MODELS
 from trust_monitor.common.topics import NO_FRAME
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+from trust_monitor.ros.lifecycle import ManagedNode
 from trust_monitor.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
 from trust_monitor.ros.parameters import declare_component_params, declare_config
 from trust_monitor.ros.qos import topic_qos
@@ -39,23 +40,31 @@ from trust_monitor.trust_interface import build_trust_model
 from trust_monitor.trust_model import MonitorConfig, TrustConfig, TrustEstimator
 
 
-class MonitorNode(Node):
-    """Thin adapter over :class:`trust_monitor.trust_model.TrustEstimator`."""
+class MonitorNode(ManagedNode):
+    """Thin adapter over :class:`trust_monitor.trust_model.TrustEstimator`, a managed node
+    (:mod:`trust_monitor.ros.lifecycle`): ``configure`` builds the estimator, trust is
+    published only while active."""
 
     def __init__(self) -> None:
         super().__init__('trust_monitor')
-        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
-        self.stopping = False  # set by spin_node on a stop request
-        self.exit_code = 0
+        self.lifecycle = declare_config(self, LifecycleConfig)
+
+    def build(self) -> None:
+        """``configure``: parameters, the trust estimator, the publisher, the subscriptions.
+
+        Raises:
+            ParamsError: a refused parameter value.
+        """
         trust = declare_config(self, TrustConfig)
         self.estimator = TrustEstimator(trust, build_trust_model(
             trust, declare_component_params(self, TRUST_MODELS, trust.trust_model)))
         self.step_s = declare_config(self, MonitorConfig).dt_s
         self.clock = declare_config(self, WallClockConfig)
+        self.wall = self.clock.wall
         self.buffer = StepBuffer(['plan', 'expected'])
         self.latest = LatestInputs(['plan', 'expected'])
         self.scored_ns: int | None = None
-        self.pub = self.create_publisher(Vector3Stamped, 'trust_monitor/trust',
+        self.pub = self.create_lifecycle_publisher(Vector3Stamped, 'trust_monitor/trust',
                                          topic_qos('trust_monitor/trust', self.clock))
         self.trust_bytes = vector3_bytes(NO_FRAME)
         callback = self.on_latest if self.clock.wall else self.on_input
@@ -74,7 +83,9 @@ class MonitorNode(Node):
         self.wall_step()
 
     def wall_step(self) -> None:
-        """Wall mode: score the latest plan pair once, stamped now."""
+        """Wall mode: score the latest plan pair once, stamped now (only while active)."""
+        if not self.active:
+            return
         plan, expected = self.latest.get('plan'), self.latest.get('expected')
         if plan is None or expected is None:
             return
@@ -88,19 +99,29 @@ class MonitorNode(Node):
         self.scored_ns = ns
         self.publish(now_ns(self), plan, expected, dt_s)
 
-    def close(self) -> None:
-        """At shutdown: the wall loop's jitter statistics."""
-        if self.loop is not None:
-            self.loop.close()
+    def release(self) -> None:
+        """``cleanup``/``shutdown``: drop the estimator and the step buffers."""
+        for name in ('estimator', 'buffer', 'latest'):
+            self.__dict__.pop(name, None)
 
     def on_input(self, name: str, msg: JointTrajectory) -> None:
-        """Store a plan; when both plans of a step are there, score them."""
+        """Store a plan; when both plans of a step are there, score them (only while
+        active: while inactive they wait for :meth:`resume`)."""
         ns = msg_ns(msg.header.stamp)
         self.buffer.put(name, ns, msg)
-        if not self.buffer.ready(ns):
-            return
+        if self.active and self.buffer.ready(ns):
+            self.score(ns)
+
+    def score(self, ns: int) -> None:
+        """Lock-step: score the plan pair of step ``ns`` and publish the trust."""
         items = self.buffer.pop(ns)
         self.publish(ns, items['plan'], items['expected'], self.step_s)  # type: ignore[arg-type]
+
+    def resume(self) -> None:
+        """``activate`` in lock-step: score the plan pairs that came while inactive."""
+        if not self.wall:
+            for ns in list(self.buffer.ready_stamps(['plan', 'expected'])):
+                self.score(ns)
 
     def publish(self, ns: int, plan: JointTrajectory, expected: JointTrajectory,
                 dt_s: float) -> None:

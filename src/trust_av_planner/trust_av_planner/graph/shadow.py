@@ -35,6 +35,7 @@ from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.graph import stop_signals
 from trust_av_planner.graph.bag_writer import BagWriter, DiskFullError
 from trust_av_planner.graph.domains import lease_domain
+from trust_av_planner.graph.lifecycle_client import set_states
 from trust_av_planner.graph.orchestrator import node_specs
 from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
 from trust_av_planner.graph.publication_ledger import (
@@ -78,7 +79,7 @@ def shadow_specs(config: RunConfig, trace: SpeedTrace, rate_hz: float,
                  log_dir: Path) -> list[NodeSpec]:
     """The two node processes of a shadow run, in wall mode."""
     cfg = config.for_trace(trace)
-    wall = {'clock_mode': 'wall', 'control_rate_hz': rate_hz}
+    wall = {'clock_mode': 'wall', 'control_rate_hz': rate_hz, 'autostart': False}
     return [
         NodeSpec('trust_monitor', 'trust_monitor.monitor_node',
                  {**wall, 'jitter_report_path': str(log_dir / 'trust_monitor.jitter.json')}),
@@ -189,7 +190,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                     stats.done(time.monotonic_ns() - now)
                     next_tick += period_ns
                     graph.check_alive(set())
-                _stop_and_drain(graph, executor, SHADOW_NODES)
+                _stop_and_drain(graph, executor, SHADOW_NODES, node=node)
                 if recording.disk_full:
                     raise DiskFullError(recording.disk_full)
                 counts = dict(recording.counts)
@@ -208,6 +209,7 @@ def wall_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, rate_hz: fl
                        log_dir / 'unused.mcap', 0)
     return [NodeSpec(spec.name, spec.module,
                      {**spec.params, 'clock_mode': 'wall', 'control_rate_hz': rate_hz,
+                      **({'autostart': False} if spec.name in SHADOW_NODES else {}),
                       'jitter_report_path': str(log_dir / f'{spec.name}.jitter.json')})
             for spec in specs if spec.name in WALL_GRAPH_NODES]
 
@@ -331,7 +333,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                         next_chunk += 1.0
                         if every_second is not None:
                             every_second(pids, time.monotonic() - started)
-                _stop_and_drain(graph, executor, WALL_GRAPH_NODES)
+                _stop_and_drain(graph, executor, WALL_GRAPH_NODES, node=node)
                 if recording.disk_full:
                     raise DiskFullError(recording.disk_full)
                 counts = dict(recording.counts)
@@ -363,9 +365,9 @@ def _published(loops: dict[str, Any], recorded: Collection[str]) -> dict[Publish
 
 
 def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
-                    drain_s: float = 0.5) -> None:
-    """Stop the nodes (they write their loop statistics on exit) while this process goes on
-    taking what they publish, then take in for ``drain_s`` what they published last.
+                    drain_s: float = 0.5, node: Any = None) -> None:
+    """Deactivate the managed nodes through ``node`` if given (the planner hands over), stop
+    the nodes (they write their loop statistics) while taking what they publish, then the last.
 
     The stop runs in a thread so that the executor keeps spinning: the command topics keep
     only the last message (keep-last 1), so a node that ticks twice while being stopped
@@ -374,6 +376,7 @@ def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
     """
     import threading
 
+    set_states(node, executor, SHADOW_NODES if node is not None else (), 'inactive', graph=graph)
     errors: list[BaseException] = []
 
     def stop() -> None:
@@ -429,8 +432,9 @@ def _wait_nodes(graph: Graph, node: Any, executor: Any, topics: PlannerTopics,
 
 def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[int, int]],
                  timeout_s: float, pending: Callable[[], list[str]] | None = None) -> None:
-    """Wait until every topic has its (publishers, subscribers) and ``pending`` (if given)
-    names nothing more; name what is missing."""
+    """Bring the managed nodes to active (configure, activate), then wait until every topic
+    has its (publishers, subscribers) and ``pending`` (if given) names nothing more."""
+    set_states(node, executor, SHADOW_NODES, 'active', timeout_s, graph)
     deadline = time.monotonic() + timeout_s
     missing: list[str] = []
     while time.monotonic() < deadline:

@@ -24,6 +24,7 @@ from preceding_traffic.traces import SpeedTrace, TraceConfig
 from trust_av_planner.nmpc import PlannerConfig, prediction_grid
 from trust_monitor.common import registry
 from trust_monitor.common.frames import FrameConfig
+from trust_monitor.common.lifecycle import LifecycleConfig
 from trust_monitor.common.param_layers import (
     Layered,
     layer_files,
@@ -111,9 +112,9 @@ TRUST_MODEL_CONFIGS = trust_model_config_types()
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
     'preceding_traffic': (TraceConfig, SharedConfig, WallClockConfig),
     'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
-                FrameConfig),
+                FrameConfig, LifecycleConfig),
     'human_driver': (DriverConfig, FollowerConfig, SharedConfig, WallClockConfig),
-    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig),
+    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig, LifecycleConfig),
 }
 
 COMPONENT_GROUPS: dict[str, tuple[str, ...]] = {

@@ -147,9 +147,11 @@ def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None
         elif field.default is dataclasses.MISSING:
             missing.append(name)
     if missing:   # every value a run must supply, in one line
-        hint = ('pass --ros-args ' + ' '.join(f'-p {name}:=VALUE' for name in missing)
-                if shipped_path else 'the shipped params file was not found: pass --ros-args '
-                '--params-file config/trust_av.yaml of the trust-av sources')
+        them = 'them' if len(missing) > 1 else 'it'
+        hint = (f'no params file sets {them}, each run supplies {them} (trust-av does; by '
+                'hand: pass --ros-args ' + ' '.join(f'-p {name}:=VALUE' for name in missing)
+                + ')' if shipped_path else 'the shipped params file was not found: pass '
+                '--ros-args --params-file config/trust_av.yaml of the trust-av sources')
         plural = 's' if len(missing) > 1 else ''
         raise ParamsError(f'parameter{plural} {", ".join(missing)} '
                           f'{"are" if plural else "is"} missing ({cls.__name__}): {hint}')

@@ -131,7 +131,9 @@ def init_rclpy(args: list[str]) -> None:
 def start_node(factory: Callable[[], Node], args: list[str] | None = None) -> Node:
     """Build a node and refuse it if it got an unknown parameter from its own section or
     ``-p`` (:func:`trust_monitor.ros.parameters.check_overrides`); needs ``rclpy.init``
-    first.
+    first. A managed node (:class:`trust_monitor.ros.lifecycle.ManagedNode`, which has a
+    ``start`` method) runs the start-up transitions its ``autostart`` asks for instead; its
+    ``configure`` makes the check.
 
     Args:
         factory: builds the node.
@@ -141,9 +143,14 @@ def start_node(factory: Callable[[], Node], args: list[str] | None = None) -> No
         ParamsError: a bad or unknown parameter (the node is closed and destroyed).
     """
     node = factory()
+    command_line = list(sys.argv if args is None else args)
     try:
-        check_overrides(node, sys.argv if args is None else args)
-    except ParamsError:
+        start = getattr(node, 'start', None)
+        if callable(start):   # a managed node: its configure checks the overrides
+            start(command_line)
+        else:
+            check_overrides(node, command_line)
+    except BaseException:
         node.close()  # type: ignore[attr-defined]
         node.destroy_node()
         raise
@@ -226,6 +233,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
                 stop['requested'] = True
         if not graph_node.finished and rclpy.ok():
             graph_node.stopping = True
+            _hand_over(node)
             _drain(executor, node)
     except ExternalShutdownException:
         pass  # the context was shut down from outside: clean exit below
@@ -238,6 +246,15 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
             node.destroy_node()
         rclpy.try_shutdown()
     return 0 if node is None else int(node.exit_code)  # type: ignore[attr-defined]
+
+
+def _hand_over(node: Node) -> None:
+    """On a stop request, an active managed node in wall mode is deactivated first, so that
+    a vehicle gets its hand-over command (:meth:`trust_monitor.ros.lifecycle.ManagedNode.handover`)
+    and the recorder still takes it while the node drains. In lock-step nothing is added:
+    a stopped run records exactly the steps it made."""
+    if getattr(node, 'active', False) and getattr(node, 'wall', False):
+        node.trigger_deactivate()  # type: ignore[attr-defined]
 
 
 def _say(line: str) -> None:

@@ -1,0 +1,394 @@
+"""The planner and the trust monitor are managed (lifecycle) nodes, driven as
+``ros2 lifecycle set`` drives them: ``lifecycle_msgs/srv/ChangeState`` on
+``/<node>/change_state``, ``GetState`` on ``/<node>/get_state``.
+
+The rules checked are rclpy's and rcl_lifecycle's, from their sources:
+
+- ``rclpy/lifecycle/node.py`` (rclpy 7.1, ``LifecycleNodeMixin.__on_change_state``): the
+  answer's ``success`` is True only when the transition callback returned SUCCESS; an
+  exception raised by a callback is turned into ERROR there (``__execute_callback``), so our
+  callbacks catch and report it themselves.
+- ``rcl_lifecycle/src/default_state_machine.c``: configure goes unconfigured -> inactive,
+  activate inactive -> active, deactivate active -> inactive; a configure that FAILs returns
+  to unconfigured. A transition not valid from the current state fails in
+  ``rcl_lifecycle/src/rcl_lifecycle.c`` ("Transition is not registered"), which rclpy 7.1
+  raises out of the service callback (ending the process); our nodes answer ``success``
+  False and stay in their state (``trust_monitor/ros/lifecycle.py``).
+- ``lifecycle_msgs/msg/State``: ids 1 unconfigured, 2 inactive, 3 active;
+  ``lifecycle_msgs/msg/Transition``: configure 1, activate 3, deactivate 4.
+- ``rclpy/lifecycle/publisher.py``: a ``LifecyclePublisher`` publishes nothing unless
+  activated.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from trust_av_planner.graph.domains import lease_domain
+
+UNCONFIGURED, INACTIVE, ACTIVE = 1, 2, 3
+CONFIGURE, ACTIVATE, DEACTIVATE = 1, 3, 4
+STEP_NS = 100_000_000   # dt_s of the shipped file, 0.1 s
+
+
+def start(tmp_path: Path, domain: int, module: str, *args: str) -> subprocess.Popen[str]:
+    """A node started by hand, as a user does (``python -m``), on its own domain."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_LOG_DIR=str(tmp_path / 'ros_log'), PYTHONUNBUFFERED='1')
+    return subprocess.Popen([sys.executable, '-m', module, '--ros-args', *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env, start_new_session=True)
+
+
+def stop(proc: subprocess.Popen[str]) -> str:
+    """SIGINT the node; its whole output (it must exit 0)."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGINT)
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 0, out
+    assert 'Traceback' not in out, out
+    return out
+
+
+class Manager:
+    """This test's side: lifecycle service clients of one node, input publishers, and what
+    the node published, on a private rclpy context."""
+
+    def __init__(self, domain: int, name: str) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node('lifecycle_manager', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        from lifecycle_msgs.srv import ChangeState, GetState
+
+        self.change = self.node.create_client(ChangeState, f'/{name}/change_state')
+        self.get = self.node.create_client(GetState, f'/{name}/get_state')
+        self.received: dict[str, list[Any]] = {}
+
+    def close(self) -> None:
+        import rclpy
+
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+    def spin_until(self, done: Callable[[], bool], timeout_s: float = 60.0) -> bool:
+        end = time.monotonic() + timeout_s
+        while not done() and time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.05)
+        return done()
+
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def call(self, client: Any, request: Any) -> Any:
+        assert self.spin_until(client.service_is_ready), client.srv_name
+        future = client.call_async(request)
+        assert self.spin_until(future.done), client.srv_name
+        return future.result()
+
+    def state(self) -> int:
+        from lifecycle_msgs.srv import GetState
+
+        return int(self.call(self.get, GetState.Request()).current_state.id)
+
+    def transition(self, transition_id: int) -> bool:
+        from lifecycle_msgs.msg import Transition
+        from lifecycle_msgs.srv import ChangeState
+
+        request = ChangeState.Request(transition=Transition(id=transition_id))
+        return bool(self.call(self.change, request).success)
+
+    def record(self, msgtype: Any, topic: str, qos: Any) -> None:
+        self.received[topic] = []
+        self.node.create_subscription(msgtype, topic, self.received[topic].append, qos)
+
+
+def lockstep_qos(topic: str) -> Any:
+    from trust_monitor.common.wall_clock import WallClockConfig
+    from trust_monitor.ros.qos import topic_qos
+
+    return topic_qos(topic, WallClockConfig())
+
+
+@contextlib.contextmanager
+def planner_inputs(manager: Manager) -> Iterator[Callable[[int], None]]:
+    """A function publishing one lock-step step's inputs (and the trust of the step before)
+    to the planner, stamped ``ns``."""
+    from geometry_msgs.msg import Vector3Stamped
+    from nav_msgs.msg import Odometry
+    from trajectory_msgs.msg import JointTrajectory
+
+    from trust_monitor.ros.messages import header, odometry, trajectory
+
+    node = manager.node
+    pubs = {name: node.create_publisher(msgtype, name, lockstep_qos(name))
+            for name, msgtype in (('preceding_vehicle/odom', Odometry),
+                                  ('preceding_vehicle/speed_preview', JointTrajectory),
+                                  ('ego/odom', Odometry), ('human/odom', Odometry),
+                                  ('trust_monitor/trust', Vector3Stamped))}
+    assert manager.spin_until(lambda: all(p.get_subscription_count() for p in pubs.values()))
+
+    def publish(ns: int) -> None:
+        t_s = ns / 1e9
+        pubs['preceding_vehicle/odom'].publish(
+            odometry(ns, 60.0 + 15.0 * t_s, 15.0, 'preceding_vehicle'))
+        pubs['preceding_vehicle/speed_preview'].publish(
+            trajectory(ns, 0.1, frame_id='preceding_vehicle', velocities=[15.0] * 30))
+        pubs['ego/odom'].publish(odometry(ns, 30.0 + 15.0 * t_s, 15.0, 'ego'))
+        pubs['human/odom'].publish(odometry(ns, 15.0 * t_s, 15.0, 'human'))
+        if ns > STEP_NS:   # the monitor's trust after the previous step
+            pubs['trust_monitor/trust'].publish(Vector3Stamped(header=header(ns - STEP_NS, '')))
+
+    yield publish
+
+
+def test_hand_started_planner_is_driven_through_its_lifecycle(tmp_path: Path) -> None:
+    """Started by hand with ``autostart: false``: unconfigured; a transition not valid there
+    (activate) is refused and changes nothing; configure -> inactive: a complete step's
+    inputs are kept but not planned, nothing is published; activate -> active: that step is
+    planned, then one command per step; deactivate -> one hand-over command of
+    ``stale_decel_mps2``, then none although the next step is complete; activate again ->
+    that step's command (what held it was the state: the lock-step chain paused)."""
+    from geometry_msgs.msg import AccelStamped
+
+    from trust_av_planner.system.config import load_run_config
+    from trust_monitor.ros.messages import msg_ns
+
+    with lease_domain() as domain:
+        proc = start(tmp_path, domain, 'trust_av_planner.planner_node', '-p', 'autostart:=false')
+        manager = Manager(domain, 'planner')
+        try:
+            manager.record(AccelStamped, 'ego/accel_cmd', lockstep_qos('ego/accel_cmd'))
+            commands = manager.received['ego/accel_cmd']
+            assert manager.state() == UNCONFIGURED
+            assert not manager.transition(ACTIVATE)          # not valid from unconfigured
+            assert manager.state() == UNCONFIGURED
+            assert manager.transition(CONFIGURE)
+            assert manager.state() == INACTIVE
+            with planner_inputs(manager) as publish:
+                publish(1 * STEP_NS)                          # complete, but inactive
+                manager.spin_for(2.0)
+                assert commands == []
+                assert manager.transition(ACTIVATE)
+                assert manager.state() == ACTIVE
+                assert manager.spin_until(lambda: len(commands) >= 1)
+                publish(2 * STEP_NS)
+                publish(3 * STEP_NS)
+                assert manager.spin_until(lambda: len(commands) >= 3)
+                assert [msg_ns(c.header.stamp) for c in commands] == [
+                    1 * STEP_NS, 2 * STEP_NS, 3 * STEP_NS]
+                assert manager.transition(DEACTIVATE)
+                assert manager.state() == INACTIVE
+                assert manager.spin_until(lambda: len(commands) >= 4)
+                assert commands[3].accel.linear.x == load_run_config().planner.stale_decel_mps2
+                publish(4 * STEP_NS)                          # complete, trust of step 3 in
+                manager.spin_for(2.0)
+                assert len(commands) == 4
+                assert manager.transition(ACTIVATE)
+                assert manager.spin_until(lambda: len(commands) >= 5)
+                assert msg_ns(commands[4].header.stamp) == 4 * STEP_NS
+        finally:
+            manager.close()
+            out = stop(proc)
+    assert 'unconfigured: waiting for configure (autostart false)' in out
+    assert 'deactivate: handed over with' in out
+
+
+def test_a_bad_parameter_fails_configure_with_one_line_and_the_node_lives(
+        tmp_path: Path) -> None:
+    """``autostart: false`` and an out-of-range value: configure fails (rclpy answers
+    success False, the state returns to unconfigured), the log holds one line naming the
+    parameter and no traceback, the process keeps serving; with ``autostart: true`` the same
+    value ends the process with one ``error:`` line and exit 2, as before."""
+    with lease_domain() as domain:
+        proc = start(tmp_path, domain, 'trust_av_planner.planner_node', '-p', 'autostart:=false',
+                     '-p', 'alpha:=1.5')
+        manager = Manager(domain, 'planner')
+        try:
+            assert not manager.transition(CONFIGURE)
+            assert manager.state() == UNCONFIGURED
+            assert not manager.transition(CONFIGURE)          # the same answer again
+            assert proc.poll() is None
+        finally:
+            manager.close()
+            out = stop(proc)
+    failures = [line for line in out.splitlines() if 'configure failed' in line]
+    assert len(failures) == 2, out
+    assert 'alpha' in failures[0] and '1.5' in failures[0], failures[0]
+    with lease_domain() as domain:
+        auto = start(tmp_path, domain, 'trust_av_planner.planner_node', '-p', 'alpha:=1.5')
+        out, _ = auto.communicate(timeout=120)
+    assert auto.returncode == 2, out
+    errors = [line for line in out.splitlines() if line.startswith('error:')]
+    assert len(errors) == 1 and 'alpha' in errors[0], out
+    assert 'Traceback' not in out
+
+
+def test_wall_mode_planner_waits_inactive_then_hands_over(tmp_path: Path) -> None:
+    """``clock_mode: wall``, shipped ``autostart: true``: the planner configures itself
+    (and warms its solver) but publishes nothing until activated, although it ticks on the
+    wall clock and its inputs are missing (before, it braked from start-up); active: the
+    stale-input command every tick; deactivate: the hand-over command, then silence; a
+    SIGINT while active hands over too."""
+    from geometry_msgs.msg import AccelStamped
+
+    from trust_monitor.common.wall_clock import WallClockConfig
+    from trust_monitor.ros.qos import topic_qos
+
+    with lease_domain() as domain:
+        proc = start(tmp_path, domain, 'trust_av_planner.planner_node', '-p', 'clock_mode:=wall',
+                     '-p', "human_odom_topic:=''", '-p', 'predictor:=ca')
+        manager = Manager(domain, 'planner')
+        try:
+            qos = topic_qos('ego/accel_cmd', WallClockConfig(clock_mode='wall'))
+            manager.record(AccelStamped, 'ego/accel_cmd', qos)
+            commands = manager.received['ego/accel_cmd']
+            assert manager.state() == INACTIVE
+            assert manager.spin_until(lambda: manager.change.service_is_ready())
+            manager.spin_for(1.5)                              # 15 periods of 0.1 s
+            assert commands == []
+            assert manager.transition(ACTIVATE)
+            assert manager.spin_until(lambda: len(commands) >= 3)
+            assert manager.transition(DEACTIVATE)
+            manager.spin_for(0.5)                              # the last ones in flight
+            seen = len(commands)
+            manager.spin_for(1.5)
+            assert len(commands) == seen
+            assert manager.transition(ACTIVATE)   # then stopped by SIGINT while active
+        finally:
+            manager.close()
+            out = stop(proc)
+    assert 'solver warmed: 3 solves' in out
+    assert 'inactive: waiting for activate (clock_mode wall)' in out
+    # a stop request deactivates an active wall-mode planner first: it hands over again
+    assert out.count('deactivate: handed over with') == 2, out
+
+
+def test_monitor_publishes_trust_only_while_active(tmp_path: Path) -> None:
+    """The trust monitor, ``autostart: false``: a plan pair scored only while active."""
+    from geometry_msgs.msg import Vector3Stamped
+    from trajectory_msgs.msg import JointTrajectory
+
+    from trust_monitor.ros.messages import trajectory
+
+    with lease_domain() as domain:
+        proc = start(tmp_path, domain, 'trust_monitor.monitor_node', '-p', 'autostart:=false')
+        manager = Manager(domain, 'trust_monitor')
+        try:
+            manager.record(Vector3Stamped, 'trust_monitor/trust',
+                           lockstep_qos('trust_monitor/trust'))
+            trust = manager.received['trust_monitor/trust']
+            assert manager.transition(CONFIGURE)
+            pubs = [manager.node.create_publisher(JointTrajectory, name, lockstep_qos(name))
+                    for name in ('ego/plan', 'ego/expected_plan')]
+            assert manager.spin_until(lambda: all(p.get_subscription_count() for p in pubs))
+
+            def plans(ns: int) -> None:
+                for pub in pubs:
+                    pub.publish(trajectory(ns, 0.1, frame_id='ego', accelerations=[0.0] * 30))
+
+            plans(STEP_NS)
+            manager.spin_for(1.5)
+            assert trust == []
+            assert manager.transition(ACTIVATE)
+            plans(2 * STEP_NS)
+            assert manager.spin_until(lambda: len(trust) >= 1)
+            assert len(trust) == 1
+        finally:
+            manager.close()
+            stop(proc)
+
+
+@pytest.mark.parametrize('module', ['trust_av_planner.planner_node',
+                                    'trust_monitor.monitor_node'])
+def test_a_cleaned_up_node_configures_again(tmp_path: Path, module: str) -> None:
+    """configure -> cleanup -> configure: the parameters stay declared (read-only), the
+    core and the outputs are made again; shutdown from inactive finalizes the node."""
+    from lifecycle_msgs.msg import Transition
+
+    name = 'planner' if 'planner' in module else 'trust_monitor'
+    with lease_domain() as domain:
+        proc = start(tmp_path, domain, module, '-p', 'autostart:=false')
+        manager = Manager(domain, name)
+        try:
+            assert manager.transition(CONFIGURE)
+            assert manager.transition(Transition.TRANSITION_CLEANUP)
+            assert manager.state() == UNCONFIGURED
+            assert manager.transition(CONFIGURE)
+            assert manager.state() == INACTIVE
+            assert manager.transition(Transition.TRANSITION_INACTIVE_SHUTDOWN)
+            assert manager.state() == 4   # lifecycle_msgs/msg/State PRIMARY_STATE_FINALIZED
+        finally:
+            manager.close()
+            out = stop(proc)
+    assert 'configure failed' not in out
+
+
+SIX = {'preceding_traffic.traffic_node': 'waiting for /sim/start',
+       'trust_av_planner.planner_node': 'active',
+       'trust_monitor.monitor_node': 'active',
+       'trust_av_planner.ego_plant_node': ('parameters initial_position_m, initial_speed_mps, '
+                                           'start_time_s are missing (PlantConfig): no params '
+                                           'file sets them, each run supplies them (trust-av '
+                                           'does; by hand: pass --ros-args -p '
+                                           'initial_position_m:=VALUE -p initial_speed_mps:=VALUE'
+                                           ' -p start_time_s:=VALUE)'),
+       'human_driver_sim.driver_node': ('parameters initial_position_m, initial_speed_mps, '
+                                        'start_time_s are missing (FollowerState): no params '
+                                        'file sets them, each run supplies them (trust-av does; '
+                                        'by hand: pass --ros-args -p initial_position_m:=VALUE '
+                                        '-p initial_speed_mps:=VALUE -p start_time_s:=VALUE)'),
+       'trust_av_planner.graph.recorder_node': ('parameter bag_path is missing (RecorderConfig): '
+                                                'no params file sets it, each run supplies it '
+                                                '(trust-av does; by hand: pass --ros-args -p '
+                                                'bag_path:=VALUE)')}
+"""The graph's six executables started from the shipped params file alone: the line that
+says it is up, or the one error line naming what a run must supply."""
+
+
+def test_the_six_executables_from_the_shipped_params_file_alone(tmp_path: Path) -> None:
+    """Three come up (the managed ones active, lock-step autostart); the three with per-run
+    values end with one ``error:`` line naming each value and who supplies it, exit 2."""
+    from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+
+    with lease_domain() as domain:
+        procs = {module: start(tmp_path, domain, module, '--params-file',
+                               str(DEFAULT_PARAMS_FILE)) for module in SIX}
+        outputs: dict[str, str] = {}
+        for module, proc in procs.items():
+            assert proc.stdout is not None
+            if SIX[module].startswith('parameter'):
+                outputs[module] = proc.communicate(timeout=120)[0]
+                assert proc.returncode == 2, outputs[module]
+                continue
+            seen = []
+            for line in proc.stdout:   # until it is up (or it ends: then the asserts fail)
+                seen.append(line)
+                if line.rstrip().endswith(SIX[module]):
+                    break
+            outputs[module] = ''.join(seen) + stop(proc)
+    for module, expected in SIX.items():
+        assert 'Traceback' not in outputs[module], outputs[module]
+        if expected.startswith('parameter'):
+            errors = [line for line in outputs[module].splitlines() if line.startswith('error:')]
+            assert errors == [f'error: {expected}'], outputs[module]
+        else:
+            assert any(line.rstrip().endswith(expected)
+                       for line in outputs[module].splitlines()), outputs[module]
