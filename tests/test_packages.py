@@ -42,7 +42,8 @@ ROSDEP_KEYS = {
 """Python module -> rosdep key (rosdistro rosdep/python.yaml; see the module docstring)."""
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python',
                 'std_msgs', 'nav_msgs', 'geometry_msgs', 'trajectory_msgs', 'diagnostic_msgs',
-                'rosgraph_msgs', 'tf2_msgs', 'visualization_msgs', 'sensor_msgs', *PACKAGES}
+                'rosgraph_msgs', 'tf2_msgs', 'visualization_msgs', 'sensor_msgs', 'lifecycle_msgs',
+                *PACKAGES}
 """Modules that are ROS 2 packages: the key is the package name."""
 OPTIONAL = {'ray': 'pip install ray==2.60.0 (trust-av reproduce --executor ray)'}
 """Modules with no rosdep key, installed by a documented pip step, imported lazily."""

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from trust_monitor.common.input_files import not_regular
+from trust_monitor.common.lifecycle import LifecycleConfig
 from trust_monitor.common.output_files import cannot_write, odd_path, replacing
 from trust_monitor.common.param_layers import layer_files, layered_params, read_layers
 from trust_monitor.common.params import build_config, check_known
@@ -237,7 +238,7 @@ def trust_setup(params_files: Sequence[Path], trust_model: str | None = None,
     for layer in layers:
         for section, section_values in layer.items():
             if section.rstrip('/').rsplit('/', 1)[-1] == 'trust_monitor':
-                check_known(section_values, TrustConfig, WallClockConfig,
+                check_known(section_values, TrustConfig, WallClockConfig, LifecycleConfig,
                             *trust_model_config_types(),
                             where=f'{layer.where}: section {section}')
     values: dict[str, Any] = dict(layered_params(layers, '/trust_monitor'))
