@@ -100,15 +100,17 @@ def run_vehicle_loop(out_dir: Path, *, duration_s: float = 60.0, rate_hz: float 
                    RMW_IMPLEMENTATION='rmw_fastrtps_cpp', ROS_LOG_DIR=str(out_dir / 'ros'))
         try:
             for module, name, files, remaps in specs:
+                if name == 'vehicle_standin':
+                    # the managed nodes in wall mode wait inactive: activated, as a vehicle's
+                    # manager would, before the vehicle (its run's clock) starts
+                    with lifecycle_manager(domain) as (node, executor):
+                        set_states(node, executor, ('planner', 'trust_monitor'), 'active',
+                                   startup_timeout_s)
                 with (out_dir / f'{name}.log').open('wb') as log:
                     processes[name] = subprocess.Popen(
                         node_command(module, name, files, remaps), stdout=log,
                         stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                         start_new_session=True)
-            # managed nodes in wall mode wait inactive: activated as a vehicle's manager would
-            with lifecycle_manager(domain) as (node, executor):
-                set_states(node, executor, ('planner', 'trust_monitor'), 'active',
-                           startup_timeout_s)
             deadline = time.monotonic() + startup_timeout_s + duration_s + 30.0
             standin = processes['vehicle_standin']
             while standin.poll() is None and time.monotonic() < deadline:
