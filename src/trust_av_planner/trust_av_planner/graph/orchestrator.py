@@ -38,6 +38,7 @@ from trust_av_planner.graph.bag_records import records_from_bag
 from trust_av_planner.graph.bag_repair import repair_bag
 from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, DiskFullError
 from trust_av_planner.graph.domains import check_domain_id, check_namespace, lease_domain
+from trust_av_planner.graph.lifecycle_client import set_states
 from trust_av_planner.graph.processes import RECORDER, Graph, GraphError, NodeSpec
 from trust_av_planner.graph.session import (
     clashing_participants,
@@ -59,7 +60,7 @@ def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: In
     return [
         NodeSpec('recorder', 'trust_av_planner.graph.recorder_node',
                  {'bag_path': str(bag), 'expected_steps': trace.steps}),
-        NodeSpec('trust_monitor', 'trust_monitor.monitor_node', {}),
+        NodeSpec('trust_monitor', 'trust_monitor.monitor_node', {'autostart': False}),
         NodeSpec('ego_plant', 'trust_av_planner.ego_plant_node',
                  {'initial_position_m': initial.av.position_m,
                   'initial_speed_mps': initial.av.speed_mps, 'start_time_s': start}),
@@ -69,7 +70,7 @@ def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: In
                   'driver_model': cfg.follower.driver_model}),
         NodeSpec('planner', 'trust_av_planner.planner_node',
                  {**shared, 'alpha': cfg.planner.alpha, 'predictor': cfg.planner.predictor,
-                  'lead_preview': cfg.planner.lead_preview}),
+                  'lead_preview': cfg.planner.lead_preview, 'autostart': False}),
         NodeSpec('preceding_traffic', 'preceding_traffic.traffic_node',
                  {'trace': trace_arg, 'initial_position_m': initial.traffic.position_m,
                   'max_steps': max_steps, 'recorder_window_steps': window_steps(),
@@ -156,6 +157,10 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                         QOS['CLOCK'])
                 start_pub = node.create_publisher(Empty, session.topic('sim/start'),
                                                   QOS['LATCHED'])
+                # the managed nodes wait unconfigured: configured and activated here, as a
+                # lifecycle manager does, before the graph is checked and started
+                set_states(node, session.executor, [_managed(namespace, name) for name in MANAGED],
+                           'active', startup_timeout_s, graph)
                 session.wait_connected(startup_timeout_s)
                 startup = time.monotonic() - started
                 start_pub.publish(Empty())
@@ -183,6 +188,15 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
         _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
                     wall_s=time.monotonic() - started, startup_s=startup)
+
+
+MANAGED = ('trust_monitor', 'planner')
+"""The graph's managed (lifecycle) nodes, started with ``autostart: false``."""
+
+
+def _managed(namespace: str, name: str) -> str:
+    """A managed node's name in the run's namespace, as :func:`set_states` takes it."""
+    return f'{namespace.strip("/")}/{name}'.lstrip('/')
 
 
 @contextlib.contextmanager
