@@ -372,18 +372,24 @@ def test_the_six_executables_from_the_shipped_params_file_alone(tmp_path: Path) 
         procs = {module: start(tmp_path, domain, module, '--params-file',
                                str(DEFAULT_PARAMS_FILE)) for module in SIX}
         outputs: dict[str, str] = {}
-        for module, proc in procs.items():
-            assert proc.stdout is not None
-            if SIX[module].startswith('parameter'):
-                outputs[module] = proc.communicate(timeout=120)[0]
-                assert proc.returncode == 2, outputs[module]
-                continue
-            seen = []
-            for line in proc.stdout:   # until it is up (or it ends: then the asserts fail)
-                seen.append(line)
-                if line.rstrip().endswith(SIX[module]):
-                    break
-            outputs[module] = ''.join(seen) + stop(proc)
+        try:
+            for module, proc in procs.items():
+                assert proc.stdout is not None
+                if SIX[module].startswith('parameter'):
+                    outputs[module] = proc.communicate(timeout=120)[0]
+                    assert proc.returncode == 2, outputs[module]
+                    continue
+                seen = []
+                for line in proc.stdout:   # until it is up (or it ends: the asserts fail)
+                    seen.append(line)
+                    if line.rstrip().endswith(SIX[module]):
+                        break
+                outputs[module] = ''.join(seen) + stop(proc)
+        finally:                           # none is left on the domain for the next lease
+            for proc in procs.values():
+                if proc.poll() is None:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                    proc.wait()
     for module, expected in SIX.items():
         assert 'Traceback' not in outputs[module], outputs[module]
         if expected.startswith('parameter'):

@@ -204,8 +204,6 @@ def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None
         node = rclpy.create_node('autoware_like', context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        # a managed node in wall mode waits inactive until it is activated
-        set_states(node, executor, ['planner'], 'active', 60.0)
         statuses: list[dict[str, str]] = []
         node.create_subscription(DiagnosticArray, '/ego/planner_status',
                                  lambda m: statuses.append(diagnostic_values(m)),
@@ -230,6 +228,8 @@ def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None
                 executor.spin_once(timeout_sec=1 / 30)
 
         try:
+            # a managed node in wall mode waits inactive until it is activated
+            set_states(node, executor, ['planner'], 'active', 60.0)
             deadline = time.monotonic() + 60.0
             while not statuses and time.monotonic() < deadline:
                 spin(0.2, publish=False)
@@ -302,8 +302,6 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
         node = rclpy.create_node('tester', context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        # a managed node in wall mode waits inactive until it is activated
-        set_states(node, executor, ['planner'], 'active', 60.0)
         statuses: list[tuple[int, dict[str, str]]] = []
         commands: list[float] = []
         node.create_subscription(DiagnosticArray, '/ego/planner_status',
@@ -337,6 +335,8 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
             return future.result()
 
         try:
+            # a managed node in wall mode waits inactive until it is activated
+            set_states(node, executor, ['planner'], 'active', 60.0)
             deadline = time.monotonic() + 30.0
             while not statuses and time.monotonic() < deadline:
                 spin(0.2)

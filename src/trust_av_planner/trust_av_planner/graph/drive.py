@@ -51,7 +51,7 @@ from trust_av_planner.graph.drive_link import (
 )
 from trust_av_planner.graph.orchestrator import node_specs
 from trust_av_planner.graph.processes import Graph, NodeSpec
-from trust_av_planner.graph.session import graph_session
+from trust_av_planner.graph.session import foreign_participants, graph_session
 from trust_av_planner.graph.shadow import _node_loops, _stop_and_drain, _wait_topics
 from trust_av_planner.system.closed_loop import equilibrium_start
 from trust_av_planner.system.config import RunConfig
@@ -115,7 +115,7 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
     log_dir = bag.with_name(bag.name + '.logs')
     outcome = DriveOutcome(bag=bag, status='abandoned', driven_s=0.0, counts={})
     state: dict[str, Any] = {'ack': None}
-    with lease_domain() as domain:
+    with lease_domain(foreign_participants) as domain:  # skips a domain with leftovers
         graph = Graph(drive_specs(config, trace_arg, trace, follower, rate_hz, log_dir),
                       config.params_files, domain, log_dir)
         with graph_session(graph, 'drive') as session:

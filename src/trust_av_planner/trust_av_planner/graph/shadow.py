@@ -44,7 +44,7 @@ from trust_av_planner.graph.publication_ledger import (
     Publisher,
     check_lossless,
 )
-from trust_av_planner.graph.session import graph_session
+from trust_av_planner.graph.session import foreign_participants, graph_session
 from trust_av_planner.system.closed_loop import equilibrium_start
 from trust_av_planner.system.config import PlannerTopics, RunConfig
 from trust_monitor.common.kinematics import VehicleState, advance
@@ -116,7 +116,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
     lead = LeadReplay(trace, initial.traffic.position_m)
     log_dir = bag.with_name(bag.name + '.logs')
     period_ns = round(NS_PER_S / rate_hz)
-    with lease_domain() as domain:
+    with lease_domain(foreign_participants) as domain:  # skips a domain with leftovers
         graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), config.params_files, domain,
                       log_dir)
         with graph_session(graph, 'shadow_player') as session:
@@ -256,7 +256,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
              for t in recorded}
     needs['/sim/start'] = (1, 3)
     log_dir = bag.with_name(bag.name + '.logs')
-    with lease_domain() as domain:
+    with lease_domain(foreign_participants) as domain:  # skips a domain with leftovers
         graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), config.params_files,
                       domain, log_dir)
         with graph_session(graph, 'wall_recorder') as session:
