@@ -398,3 +398,74 @@ def test_the_six_executables_from_the_shipped_params_file_alone(tmp_path: Path) 
         else:
             assert any(line.rstrip().endswith(expected)
                        for line in outputs[module].splitlines()), outputs[module]
+
+
+class _Future:
+    def __init__(self, result: Any = None, done: bool = True) -> None:
+        self._result, self._done = result, done
+
+    def done(self) -> bool:
+        return self._done
+
+    def result(self) -> Any:
+        return self._result
+
+
+class _LossyNode:
+    """A managed node's lifecycle services as a client sees them, losing what ``lose`` says:
+    ('answer', transition) applies the transition and loses its answer once; ('request',
+    transition) loses the request once."""
+
+    def __init__(self, lose: list[tuple[str, int]]) -> None:
+        self.state, self.lose, self.applied = 1, list(lose), []
+
+    def create_client(self, srv: Any, name: str) -> Any:
+        from lifecycle_msgs.srv import ChangeState, GetState
+        lossy = self
+
+        class Client:
+            def service_is_ready(self) -> bool:
+                return True
+
+            def call_async(self, request: Any) -> _Future:
+                if srv is GetState:
+                    answer = GetState.Response()
+                    answer.current_state.id = lossy.state
+                    return _Future(answer)
+                transition = request.transition.id
+                if ('request', transition) in lossy.lose:
+                    lossy.lose.remove(('request', transition))
+                    return _Future(done=False)
+                lossy.state = {1: 2, 3: 3, 4: 2}[transition]
+                lossy.applied.append(transition)
+                if ('answer', transition) in lossy.lose:
+                    lossy.lose.remove(('answer', transition))
+                    return _Future(done=False)
+                return _Future(ChangeState.Response(success=True))
+
+        assert srv in (GetState, ChangeState) and name.startswith('/planner/')
+        return Client()
+
+    def destroy_client(self, client: Any) -> None:
+        pass
+
+
+class _Idle:
+    def spin_once(self, timeout_sec: float) -> None:
+        time.sleep(min(timeout_sec, 0.001))
+
+
+@pytest.mark.parametrize('lose', [[], [('answer', 1)], [('request', 1)],
+                                  [('answer', 3), ('request', 3)]],
+                         ids=['nothing', 'configure_answer', 'configure_request',
+                              'activate_answer_and_request'])
+def test_a_lost_answer_or_request_is_asked_again_and_nothing_is_sent_twice(
+        lose: list[tuple[str, int]], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A service answer lost on its way back (a client made just before the server had
+    matched it: ``no answer after 30 s`` in a loaded suite run) or a lost request: the state
+    is asked again and the next transition chosen from it, so each is applied once."""
+    from trust_av_planner.graph import lifecycle_client
+    monkeypatch.setattr(lifecycle_client, 'ANSWER_S', 0.05)
+    node = _LossyNode(lose)
+    lifecycle_client.set_states(node, _Idle(), ['planner'], 'active', 5.0)
+    assert node.state == 3 and node.applied == [1, 3]

@@ -33,22 +33,38 @@ LABELS = {CONFIGURE: 'configure', ACTIVATE: 'activate', DEACTIVATE: 'deactivate'
 GOALS = {'inactive': INACTIVE, 'active': ACTIVE}
 
 
+ANSWER_S = 2.0
+"""How long an answer is waited for before the state is asked again (a lost answer)."""
+ATTEMPTS = 3
+"""Times one transition is sent from one state before it counts as failed."""
+TRANSITIONING = range(10, 16)
+"""``lifecycle_msgs/msg/State`` ids of the transition states (configuring ... errorprocessing)."""
+
+
 def set_states(node: Any, executor: Any, names: Sequence[str], goal: str,
                timeout_s: float = 30.0, graph: Graph | None = None) -> None:
     """Bring each node of ``names`` to ``goal`` (``inactive`` or ``active``) from whatever
     state it is in (one that configured itself is not configured again), spinning
     ``executor`` (which holds ``node``) meanwhile.
 
+    A service client is "ready" once the server takes its requests, which is not proof that
+    the answer finds its way back: a client made just before (the server's answer writer not
+    yet matched with the client's reader, under load) waited forever for an answer that was
+    sent and lost (seen in a full test run: ``no answer after 30 s``). So an answer is
+    waited for :data:`ANSWER_S`, then the state is asked again (``GetState`` is asked until
+    it answers), and the next transition is chosen from the state the node reports: a
+    transition whose answer was lost is not sent twice, one whose request was lost is.
+
     Args:
         node: this process's node, the services' client.
         executor: the executor spinning ``node``.
-        names: the managed nodes' names (root namespace).
+        names: the managed nodes' names, namespace included, without the leading slash.
         goal: ``inactive`` or ``active``.
-        timeout_s: longest wait for a node's services and for each answer, s.
+        timeout_s: longest time for each node to reach ``goal``, s.
         graph: the running graph, if any: a node of it that dies meanwhile is named.
 
     Raises:
-        GraphError: a node's service did not appear or answer in time, a transition
+        GraphError: a node's services did not appear or answer in time, a transition
             failed (the node's log says why) or the node is in a state with no path to
             ``goal`` (finalized).
     """
@@ -59,29 +75,59 @@ def set_states(node: Any, executor: Any, names: Sequence[str], goal: str,
         if graph is not None:
             graph.check_alive(set())
 
-    def call(client: Any, request: Any, what: str) -> Any:
-        _wait(executor, timeout_s, client.service_is_ready, f'{what}: no service', alive)
-        future = client.call_async(request)
-        _wait(executor, timeout_s, future.done, f'{what}: no answer', alive)
-        return future.result()
-
     for name in names:
         get = node.create_client(GetState, f'/{name}/get_state')
         change = node.create_client(ChangeState, f'/{name}/change_state')
+        deadline = time.monotonic() + timeout_s
+        sent: dict[tuple[int, int], int] = {}
         try:
-            state = int(call(get, GetState.Request(), f'node {name}').current_state.id)
-            if state == GOALS[goal]:
-                continue
-            if (state, GOALS[goal]) not in PATHS:
-                raise GraphError(f'node {name}: lifecycle state {state} has no path to {goal}')
-            for transition in PATHS[state, GOALS[goal]]:
-                request = ChangeState.Request(transition=Transition(id=transition))
+            for client in (get, change):
+                _wait(executor, deadline, client.service_is_ready,
+                      f'node {name}: no lifecycle services after {timeout_s:g} s', alive)
+            while True:
+                state = _ask(executor, get, GetState.Request(), deadline, f'node {name}',
+                             alive).current_state.id
+                if state == GOALS[goal]:
+                    break
+                if state in TRANSITIONING:
+                    continue                # its executor was busy with it: ask again
+                if (state, GOALS[goal]) not in PATHS:
+                    raise GraphError(f'node {name}: lifecycle state {state} has no path to '
+                                     f'{goal}')
+                transition = PATHS[state, GOALS[goal]][0]
                 label = LABELS[transition]
-                if not call(change, request, f'node {name}: {label}').success:
+                sent[state, transition] = sent.get((state, transition), 0) + 1
+                if sent[state, transition] > ATTEMPTS:
+                    raise GraphError(f'node {name}: transition {label} failed (see its log)')
+                future = change.call_async(
+                    ChangeState.Request(transition=Transition(id=transition)))
+                if _answered(executor, future, min(deadline, time.monotonic() + ANSWER_S),
+                             alive) and not future.result().success:
                     raise GraphError(f'node {name}: transition {label} failed (see its log)')
         finally:
             node.destroy_client(get)
             node.destroy_client(change)
+
+
+def _ask(executor: Any, client: Any, request: Any, deadline: float, what: str,
+         alive: Callable[[], None]) -> Any:
+    """``request``'s answer, asked again every :data:`ANSWER_S` until ``deadline``."""
+    while True:
+        future = client.call_async(request)
+        if _answered(executor, future, min(deadline, time.monotonic() + ANSWER_S), alive):
+            return future.result()
+        if time.monotonic() >= deadline:
+            raise GraphError(f'{what}: no answer in time')
+
+
+def _answered(executor: Any, future: Any, until: float, alive: Callable[[], None]) -> bool:
+    """Spin until ``future`` is done (True) or ``until`` (monotonic s) passes (False)."""
+    while not future.done():
+        if time.monotonic() >= until:
+            return False
+        stop_signals.spin_once(executor, 0.02)
+        alive()
+    return True
 
 
 @contextlib.contextmanager
@@ -104,11 +150,10 @@ def lifecycle_manager(domain: int) -> Iterator[tuple[Any, Any]]:
         rclpy.try_shutdown(context=context)
 
 
-def _wait(executor: Any, timeout_s: float, done: Callable[[], bool], what: str,
+def _wait(executor: Any, deadline: float, done: Callable[[], bool], what: str,
           alive: Callable[[], None]) -> None:
-    deadline = time.monotonic() + timeout_s
     while not done():
         if time.monotonic() > deadline:
-            raise GraphError(f'{what} after {timeout_s:g} s')
+            raise GraphError(what)
         stop_signals.spin_once(executor, 0.02)
         alive()
