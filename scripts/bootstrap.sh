@@ -22,6 +22,12 @@ if [ ! -x "$venv/bin/python" ]; then
   "$python_bin" -m venv "$venv"
 fi
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  # the pins need CPython 3.11.5 or a later 3.11 (pymdown-extensions 13.1.2, for one); Debian
+  # 12's python3 is 3.11.2: say so in one line instead of pip's page of versions
+  if ! "$venv/bin/python" -c 'import sys; sys.exit(not (3, 11, 5) <= sys.version_info[:3] < (3, 12))'; then
+    echo "[bootstrap] error: $venv has $("$venv/bin/python" --version 2>&1); the pinned dependencies need Python 3.11.5 or a later 3.11: remove $venv and run again with PYTHON=/path/to/that/python" >&2
+    exit 2
+  fi
   echo "[bootstrap] installing pinned dependencies (first run takes about a minute)" >&2
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$root/requirements.txt" 2> >(grep -v "^WARNING: Location" >&2)
   args=()
