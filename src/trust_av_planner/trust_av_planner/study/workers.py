@@ -34,6 +34,7 @@ from multiprocessing import resource_tracker
 from types import FrameType
 from typing import Any, TypeVar
 
+from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph import stop_signals
 from trust_monitor.common.held_stops import STOP_SIGNALS, held
 
@@ -149,11 +150,11 @@ class WorkerPool(ProcessPoolExecutor):
                 continue
             for process in processes:
                 if process.exitcode is not None:
-                    raise RuntimeError(f'worker process {process.pid} ended while it was '
-                                       f'starting (exit code {process.exitcode})')
+                    raise TrustAvPlannerError(f'worker process {process.pid} ended while it '
+                                              f'was starting (exit code {process.exitcode})')
             if time.monotonic() > deadline:
-                raise RuntimeError(f'{workers - up} of {workers} worker processes did not '
-                                   f'start within {WORKER_START_TIMEOUT_S:.0f} s')
+                raise TrustAvPlannerError(f'{workers - up} of {workers} worker processes did '
+                                          f'not start within {WORKER_START_TIMEOUT_S:.0f} s')
 
     def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
         return super().submit(functools.partial(_call, fn), *args, **kwargs)
