@@ -199,3 +199,19 @@ def children_of(pid: int) -> list[int]:
             if int(fields[1]) == pid and fields[0] != 'Z':
                 found.append(int(entry.name))
     return found
+
+
+def wait_ready(process: subprocess.Popen[str]) -> None:
+    """Read ``process``'s stdout up to its ``ready`` line; Fast DDS may log a transport
+    error there first (seen: ``RTPS_TRANSPORT_SHM Error ... open_and_lock_file failed``).
+    If it ends without one, it is killed and the lines are the assertion's message (a
+    helper that raised with its process alive left an intruder on the domain for the next
+    tests)."""
+    assert process.stdout is not None
+    lines = [process.stdout.readline()]
+    while lines[-1] not in ('ready\n', ''):
+        lines.append(process.stdout.readline())
+    if lines[-1] != 'ready\n':
+        process.kill()
+        process.wait()
+        raise AssertionError(f'no ready line: {lines}')

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import INTERRUPTED_RUN_STEPS, long_trace, wait_for_steps
+from conftest import INTERRUPTED_RUN_STEPS, long_trace, wait_for_steps, wait_ready
 from rosbags.highlevel import AnyReader
 from test_graph import assert_records_equal  # the graph == in-process comparison
 
@@ -241,7 +241,7 @@ def intruder(domain: int, topic: str, *, on_go: bool = False) -> subprocess.Pope
     process = subprocess.Popen([sys.executable, '-c', code], env=env, text=True,
                                stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                stderr=subprocess.DEVNULL)
-    assert process.stdout is not None and process.stdout.readline() == 'ready\n'
+    wait_ready(process)
     return process
 
 

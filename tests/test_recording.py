@@ -24,6 +24,7 @@ from conftest import (
     assert_every_topic_complete,
     long_trace,
     wait_for_steps,
+    wait_ready,
 )
 from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
@@ -511,7 +512,7 @@ def intruder(domain: int) -> subprocess.Popen[str]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     process = subprocess.Popen([sys.executable, '-c', code], env=env, text=True,
                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-    assert process.stdout is not None and process.stdout.readline() == 'ready\n'
+    wait_ready(process)
     return process
 
 
