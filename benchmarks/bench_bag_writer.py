@@ -25,45 +25,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
 
+from preceding_traffic.bags import ODOMETRY, TYPESTORE, odometry_messages
 from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
-
-TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-
-
-def odometry(stamp_ns: int, speed: float) -> bytes:
-    """One serialized Odometry stamped ``stamp_ns`` (CDR, little endian)."""
-    types = TYPESTORE.types
-    msg = types['nav_msgs/msg/Odometry'](
-        header=types['std_msgs/msg/Header'](
-            stamp=types['builtin_interfaces/msg/Time'](sec=stamp_ns // 10**9,
-                                                      nanosec=stamp_ns % 10**9),
-            frame_id='odom'),
-        child_frame_id='ego',
-        pose=types['geometry_msgs/msg/PoseWithCovariance'](
-            pose=types['geometry_msgs/msg/Pose'](
-                position=types['geometry_msgs/msg/Point'](x=speed, y=0.0, z=0.0),
-                orientation=types['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0,
-                                                                  w=1.0)),
-            covariance=np.zeros(36)),
-        twist=types['geometry_msgs/msg/TwistWithCovariance'](
-            twist=types['geometry_msgs/msg/Twist'](
-                linear=types['geometry_msgs/msg/Vector3'](x=speed, y=0.0, z=0.0),
-                angular=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0)),
-            covariance=np.zeros(36)))
-    return bytes(TYPESTORE.serialize_cdr(msg, 'nav_msgs/msg/Odometry'))
 
 
 def run_once(directory: Path, steps: int, topics: int) -> dict[str, float]:
     """Record one bag; CPU µs per step, ms to finish, MiB written."""
     names = [f'/t{number}/odom' for number in range(topics)]
-    messages = [odometry((100 + step) * 10**8, float(step)) for step in range(steps)]
+    times_s = 10.0 + 0.1 * np.arange(steps)
+    messages = [bytes(TYPESTORE.serialize_cdr(msg, ODOMETRY)) for _ns, msg in
+                odometry_messages(times_s, times_s - 10.0, 'odom', 'ego')]
     bag = directory / 'bag'
     writer = BagWriter(bag)
     qos = qos_profile(reliable=True, transient_local=False, depth=10)
     for name in names:
-        writer.add_topic(name, 'nav_msgs/msg/Odometry', qos)
+        writer.add_topic(name, ODOMETRY, qos)
     start = time.process_time()
     for step in range(steps):
         for name in names:
