@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import errno
 import importlib
 import io
 import math
@@ -25,11 +24,10 @@ from pathlib import Path
 import pytest
 from rosbag2_rules import check_bag_directory
 from rosbags.rosbag2 import Reader
-from test_recording import record
+from test_recording import fail_commit, record
 
 from trust_av_planner.cli.main import main
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph import mcap_steps
 from trust_av_planner.graph.bag_writer import BagWriter
 from trust_av_planner.study.sweep import check_ray_address
 from trust_monitor.common.kinematics import VehicleState, advance, integrate
@@ -207,7 +205,7 @@ FILE_LIMIT_CHILD = """
 import sys
 from pathlib import Path
 sys.path.insert(0, sys.argv[2])
-from test_recording import record
+from test_recording import fail_commit, record
 from trust_av_planner.graph.bag_writer import BagWriter
 writer = BagWriter(Path(sys.argv[1]))
 record(writer, 100_000, finish=False)
@@ -248,16 +246,7 @@ def test_any_other_write_error_ends_the_recording_like_a_full_disk(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """EIO (a failing disk) writing step 31's chunk: one line naming it, the 30 complete
     steps kept and the bag finished."""
-    commit = mcap_steps.WholeWrites.commit
-    commits = []
-
-    def failing_once(handle: mcap_steps.WholeWrites) -> None:
-        commits.append(1)
-        if len(commits) == 31:
-            raise OSError(errno.EIO, os.strerror(errno.EIO))
-        commit(handle)
-
-    monkeypatch.setattr(mcap_steps.WholeWrites, 'commit', failing_once)
+    fail_commit(monkeypatch, 31)
     bag = tmp_path / 'eio'
     writer = BagWriter(bag)
     record(writer, 200, finish=False)

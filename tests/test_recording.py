@@ -67,6 +67,20 @@ def odometry(stamp_ns: int, speed: float) -> bytes:
     return bytes(TYPESTORE.serialize_cdr(msg, 'nav_msgs/msg/Odometry'))
 
 
+def fail_commit(monkeypatch: pytest.MonkeyPatch, number: int) -> None:
+    """The ``number``-th chunk write (a step's commit) fails with EIO, as a failing disk."""
+    commit = mcap_steps.WholeWrites.commit
+    commits = []
+
+    def failing(handle: mcap_steps.WholeWrites) -> None:
+        commits.append(1)
+        if len(commits) == number:
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        commit(handle)
+
+    monkeypatch.setattr(mcap_steps.WholeWrites, 'commit', failing)
+
+
 def record(writer: BagWriter, steps: int, topics: tuple[str, ...] = ('/a/odom', '/b/odom'),
            *, finish: bool = True) -> None:
     for topic in topics:
@@ -234,16 +248,7 @@ def test_a_failed_step_with_a_new_topic_keeps_every_complete_step(
     with it: the writer that finishes the bag is rebuilt from the file's complete steps
     (the failed step's messages never reach the summary), and both late topics are in it
     with no messages."""
-    commit = mcap_steps.WholeWrites.commit
-    commits = []
-
-    def failing_fourth(handle: mcap_steps.WholeWrites) -> None:
-        commits.append(1)
-        if len(commits) == 4:
-            raise OSError(errno.EIO, os.strerror(errno.EIO))
-        commit(handle)
-
-    monkeypatch.setattr(mcap_steps.WholeWrites, 'commit', failing_fourth)
+    fail_commit(monkeypatch, 4)
     bag = tmp_path / 'late'
     writer = BagWriter(bag)
     record(writer, 3, ('/a/odom',), finish=False)
