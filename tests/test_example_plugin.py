@@ -108,14 +108,21 @@ def test_study_cache_keys_on_the_plugins_code(plugin_env: dict[str, str],
     assert with_plugin[1] != without[1]
 
 
-def test_plugin_passes_the_component_contract(plugin_env: dict[str, str],
-                                              tmp_path: Path) -> None:
-    proc = subprocess.run([sys.executable, '-m', 'pytest', '-n', '0', '-q', '-p',
-                           'no:cacheprovider', '-k', 'predictors-ses or (needs and ses)',
-                           str(REPO / 'tests' / 'test_component_contract.py')],
+def contract(plugin_env: dict[str, str], tmp_path: Path, module: str, selection: str,
+             verbosity: str) -> subprocess.CompletedProcess[str]:
+    """The selected tests of ``tests/<module>`` run with the plug-in installed; they pass."""
+    proc = subprocess.run([sys.executable, '-m', 'pytest', '-n', '0', verbosity, '-p',
+                           'no:cacheprovider', '-k', selection, str(REPO / 'tests' / module)],
                           env=plugin_env, cwd=tmp_path, capture_output=True, text=True,
                           timeout=600, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    return proc
+
+
+def test_plugin_passes_the_component_contract(plugin_env: dict[str, str],
+                                              tmp_path: Path) -> None:
+    proc = contract(plugin_env, tmp_path, 'test_component_contract.py',
+                    'predictors-ses or (needs and ses)', '-q')
     assert '6 passed' in proc.stdout, proc.stdout
 
 
@@ -123,12 +130,7 @@ def test_plugin_trust_model_passes_the_trust_model_contract(plugin_env: dict[str
                                                             tmp_path: Path) -> None:
     """``leaky``, registered by the installed package only, is held to every rule of
     tests/test_trust_model_contract.py, the node graph == in-process run included."""
-    proc = subprocess.run([sys.executable, '-m', 'pytest', '-n', '0', '-v', '-p',
-                           'no:cacheprovider', '-k', 'leaky',
-                           str(REPO / 'tests' / 'test_trust_model_contract.py')],
-                          env=plugin_env, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=600, stdin=subprocess.DEVNULL)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    proc = contract(plugin_env, tmp_path, 'test_trust_model_contract.py', 'leaky', '-v')
     assert 'test_graph_equals_in_process[leaky] PASSED' in proc.stdout, proc.stdout
     assert 'test_numeric_bound_keeps_trust_above_the_minimum[3-1.0-leaky] PASSED' in \
         proc.stdout, proc.stdout
