@@ -26,7 +26,7 @@ only after the recording is ready (``from_first``): there the first message is n
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 from trust_av_planner.errors import TrustAvPlannerError
@@ -54,9 +54,9 @@ class Lost:
 class RecordingLossError(TrustAvPlannerError):
     """A wall-mode recording lost messages; the bag holds the rest (the line says which)."""
 
-    def __init__(self, message: str, losses: list[Lost]) -> None:
+    def __init__(self, message: str, losses: Sequence[Lost]) -> None:
         super().__init__(message)
-        self.losses = losses
+        self.losses = list(losses)
 
 
 class PublicationLedger:
@@ -100,16 +100,16 @@ class PublicationLedger:
         return losses
 
 
-def check_lossless(ledger: PublicationLedger, published: Mapping[Publisher, int],
-                   from_first: Collection[Publisher] = (),
-                   stop_edge: Collection[Publisher] = ()) -> None:
-    """Raise :class:`RecordingLossError` naming every publisher that lost messages
-    (:meth:`PublicationLedger.lost`).
+def check_lossless(ledger: PublicationLedger, losses: Sequence[Lost]) -> None:
+    """Raise :class:`RecordingLossError` naming every publisher that lost messages.
+
+    Args:
+        ledger: what the recording received.
+        losses: what it lost (:meth:`PublicationLedger.lost`).
 
     Raises:
         RecordingLossError: one line: how many of how many messages, per publisher which.
     """
-    losses = ledger.lost(published, from_first, stop_edge)
     if losses:
         count = sum(loss.count for loss in losses)
         raise RecordingLossError(

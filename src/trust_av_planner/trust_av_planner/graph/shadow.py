@@ -196,7 +196,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
                 counts = dict(recording.counts)
     loops = {'shadow_player': {'node': 'shadow_player', **stats.summary()},
              **_node_loops(graph, log_dir, SHADOW_NODES)}
-    check_lossless(ledger, _published(loops, recorded))
+    check_lossless(ledger, ledger.lost(_published(loops, recorded)))
     return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops)
 
 
@@ -352,10 +352,10 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
             published[key] = published.get(key, 0) + topic.initial // len(vehicles)
     sensors = {(qualified(t.name), n) for t in recorded if t.wall_qos == 'SENSOR'
                for n in t.publishers}
+    losses = tuple(ledger.lost(published, from_first, stop_edge=sensors))
     if lossless:
-        check_lossless(ledger, published, from_first, stop_edge=sensors)
-    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops,
-                     losses=tuple(ledger.lost(published, from_first, stop_edge=sensors)))
+        check_lossless(ledger, losses)
+    return ShadowRun(bag=bag, duration_s=duration_s, counts=counts, loops=loops, losses=losses)
 
 
 def _published(loops: dict[str, Any], recorded: Collection[str]) -> dict[Publisher, int]:
