@@ -33,7 +33,11 @@ from typing import Any
 import yaml
 
 from trust_av_planner.graph.domains import lease_domain
-from trust_av_planner.graph.lifecycle_client import lifecycle_manager, set_states
+from trust_av_planner.graph.lifecycle_client import (
+    MANAGED_NODES,
+    lifecycle_manager,
+    set_states,
+)
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 
 REMAPS = {'/preceding_vehicle/odom': '/perception/lead_vehicle/odom',
@@ -104,7 +108,7 @@ def run_vehicle_loop(out_dir: Path, *, duration_s: float = 60.0, rate_hz: float 
                     # the managed nodes in wall mode wait inactive: activated, as a vehicle's
                     # manager would, before the vehicle (its run's clock) starts
                     with lifecycle_manager(domain) as (node, executor):
-                        set_states(node, executor, ('planner', 'trust_monitor'), 'active',
+                        set_states(node, executor, MANAGED_NODES, 'active',
                                    startup_timeout_s)
                 with (out_dir / f'{name}.log').open('wb') as log:
                     processes[name] = subprocess.Popen(

@@ -24,6 +24,8 @@ from typing import Any
 from trust_av_planner.graph import stop_signals
 from trust_av_planner.graph.processes import Graph, GraphError
 
+MANAGED_NODES = ('planner', 'trust_monitor')
+"""The project's managed (lifecycle) nodes: what an orchestrator configures and activates."""
 UNCONFIGURED, INACTIVE, ACTIVE = 1, 2, 3
 CONFIGURE, ACTIVATE, DEACTIVATE = 1, 3, 4
 PATHS = {(UNCONFIGURED, INACTIVE): (CONFIGURE,), (UNCONFIGURED, ACTIVE): (CONFIGURE, ACTIVATE),

@@ -38,7 +38,7 @@ from trust_av_planner.graph.bag_records import records_from_bag
 from trust_av_planner.graph.bag_repair import repair_bag
 from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, DiskFullError
 from trust_av_planner.graph.domains import check_domain_id, check_namespace, lease_domain
-from trust_av_planner.graph.lifecycle_client import set_states
+from trust_av_planner.graph.lifecycle_client import MANAGED_NODES, set_states
 from trust_av_planner.graph.processes import RECORDER, Graph, GraphError, NodeSpec
 from trust_av_planner.graph.session import (
     clashing_participants,
@@ -159,8 +159,9 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                                                   QOS['LATCHED'])
                 # the managed nodes wait unconfigured: configured and activated here, as a
                 # lifecycle manager does, before the graph is checked and started
-                set_states(node, session.executor, [_managed(namespace, name) for name in MANAGED],
-                           'active', startup_timeout_s, graph)
+                set_states(node, session.executor,
+                           [_managed(namespace, name) for name in MANAGED_NODES], 'active',
+                           startup_timeout_s, graph)
                 session.wait_connected(startup_timeout_s)
                 startup = time.monotonic() - started
                 start_pub.publish(Empty())
@@ -188,10 +189,6 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
         _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
                     wall_s=time.monotonic() - started, startup_s=startup)
-
-
-MANAGED = ('trust_monitor', 'planner')
-"""The graph's managed (lifecycle) nodes, started with ``autostart: false``."""
 
 
 def _managed(namespace: str, name: str) -> str:

@@ -35,7 +35,7 @@ from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.graph import stop_signals
 from trust_av_planner.graph.bag_writer import BagWriter, DiskFullError
 from trust_av_planner.graph.domains import lease_domain
-from trust_av_planner.graph.lifecycle_client import set_states
+from trust_av_planner.graph.lifecycle_client import MANAGED_NODES, set_states
 from trust_av_planner.graph.orchestrator import node_specs
 from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
 from trust_av_planner.graph.publication_ledger import (
@@ -209,7 +209,7 @@ def wall_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, rate_hz: fl
                        log_dir / 'unused.mcap', 0)
     return [NodeSpec(spec.name, spec.module,
                      {**spec.params, 'clock_mode': 'wall', 'control_rate_hz': rate_hz,
-                      **({'autostart': False} if spec.name in SHADOW_NODES else {}),
+                      **({'autostart': False} if spec.name in MANAGED_NODES else {}),
                       'jitter_report_path': str(log_dir / f'{spec.name}.jitter.json')})
             for spec in specs if spec.name in WALL_GRAPH_NODES]
 
@@ -376,7 +376,7 @@ def _stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
     """
     import threading
 
-    set_states(node, executor, SHADOW_NODES if node is not None else (), 'inactive', graph=graph)
+    set_states(node, executor, MANAGED_NODES if node is not None else (), 'inactive', graph=graph)
     errors: list[BaseException] = []
 
     def stop() -> None:
@@ -434,7 +434,7 @@ def _wait_topics(graph: Graph, node: Any, executor: Any, needs: dict[str, tuple[
                  timeout_s: float, pending: Callable[[], list[str]] | None = None) -> None:
     """Bring the managed nodes to active (configure, activate), then wait until every topic
     has its (publishers, subscribers) and ``pending`` (if given) names nothing more."""
-    set_states(node, executor, SHADOW_NODES, 'active', timeout_s, graph)
+    set_states(node, executor, MANAGED_NODES, 'active', timeout_s, graph)
     deadline = time.monotonic() + timeout_s
     missing: list[str] = []
     while time.monotonic() < deadline:
