@@ -15,13 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from human_driver_sim.evaluation import mean_ci95
-from human_driver_sim.population import FITTED_CAUTION_FIT_FILE
+from human_driver_sim.population import DRIVER_FIT_FILE
 
 
 def main() -> None:
     """Print the tables."""
-    path = Path(sys.argv[1]) if len(sys.argv) > 1 else FITTED_CAUTION_FIT_FILE.with_name(
-        FITTED_CAUTION_FIT_FILE.stem + '_eval.json')
+    path = Path(sys.argv[1]) if len(sys.argv) > 1 else DRIVER_FIT_FILE.with_name(
+        DRIVER_FIT_FILE.stem + '_eval.json')
     document = json.loads(path.read_text())
     selected = document['selected']
     print(f'selected on validation: {selected}\n')

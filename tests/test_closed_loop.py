@@ -17,6 +17,10 @@ from trust_monitor.common import kinematics
 GOLDEN = Path(__file__).parent / 'golden' / 'us06_ca_alpha0.5_metrics.json'
 TRACES = ('us06', 'nycc')
 MAX_FALLBACK_STEPS = 2  # measured: 0 in every run; more means the NMPC regressed
+# The shipped human plans its gap bound against the braking it expects; when the AV brakes
+# harder its bound is infeasible and it brakes as hard as it can (a driver fallback). Measured
+# behind TAC-CA: at most 73 of 600 steps (NYCC, alpha = 0), 0-7 elsewhere.
+MAX_DRIVER_FALLBACK_STEPS = 90
 
 
 @pytest.mark.parametrize('trace', TRACES)
@@ -50,13 +54,12 @@ def test_no_collision_and_physical_speeds(trace: str, alpha: float, run_config) 
     result = closed_loop(trace, alpha)
     d_s = run_config.planner.standstill_gap_m
     assert result.metrics.min_av_gap_m >= d_s - 0.5  # the NMPC's gap bound (Table I d_s)
-    # The human keeps eq. (13)'s d_s as a hard bound with a margin for the AV braking harder
-    # than it expects (docs/MODEL.md, "The human's safety gap"): at every alpha it stays at
-    # or above the safety line d_s - safety_gap_margin_m, and rarely needs its braking
-    # fallback to do so.
+    # The human plans eq. (13)'s d_s bound against the AV braking it expects (docs/MODEL.md,
+    # "The human's safety gap"): behind TAC-CA it stays at or above the safety line
+    # d_s - safety_gap_margin_m (measured: smallest 4.956 m, NYCC alpha = 0).
     assert result.metrics.min_human_gap_m >= run_config.min_safe_gap_m
     assert result.metrics.unsafe_steps == 0
-    assert result.metrics.driver_fallback_steps <= MAX_FALLBACK_STEPS
+    assert result.metrics.driver_fallback_steps <= MAX_DRIVER_FALLBACK_STEPS
     for r in result.records:
         assert r.av_speed_mps >= -BOUND_TOLERANCE and r.human_speed_mps >= -BOUND_TOLERANCE
     # Odometry is consistent with the gaps the controllers saw.
@@ -66,28 +69,49 @@ def test_no_collision_and_physical_speeds(trace: str, alpha: float, run_config) 
 
 
 @pytest.mark.parametrize('alpha', ALPHAS)
-def test_human_keeps_the_safety_line_behind_tac_gru(alpha: float, run_config) -> None:
-    """TAC-GRU on US06 brought the human closest before its gap bound was hard (3.55 m at
-    alpha = 0): every alpha now keeps it at or above d_s - safety_gap_margin_m."""
+def test_behind_tac_gru_the_human_comes_closer_and_the_av_keeps_d_s(alpha: float,
+                                                                    run_config) -> None:
+    """TAC-GRU on US06 departs furthest from the plan the human expects: the shipped human
+    (docs/DRIVER_IRL.md, "Closed-loop safety") then comes below the safety line on a few steps
+    (measured: smallest 4.289 m, 1-9 steps below 4.5 m per alpha), never near a collision, while
+    the AV's own gap never goes below d_s."""
     metrics = closed_loop('us06', alpha, 'gru').metrics
-    assert metrics.min_human_gap_m >= run_config.min_safe_gap_m
+    d_s = run_config.planner.standstill_gap_m
+    assert metrics.min_av_gap_m >= d_s - BOUND_TOLERANCE
+    assert 4.0 <= metrics.min_human_gap_m < d_s - 0.5
+    assert 0 < metrics.unsafe_steps <= 20
+    assert metrics.fallback_steps == 0
+    assert metrics.driver_fallback_steps <= MAX_DRIVER_FALLBACK_STEPS
+
+
+@pytest.mark.parametrize('alpha', (0.0, 1.0))
+def test_the_cautious_human_keeps_d_s_behind_tac_gru(alpha: float, run_config) -> None:
+    """The profile config/human_cautious.yaml plans the bound against the AV braking at
+    u_R,min whatever it expects: behind the same TAC-GRU on US06 it never comes below d_s."""
+    from trust_av_planner.system.closed_loop import simulate
+    from trust_av_planner.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
+    config = load_run_config(HUMAN_CAUTIOUS_PARAMS_FILE,
+                             {'planner': {'alpha': alpha, 'predictor': 'gru'}})
+    assert config.driver.cautious
+    metrics = simulate(config, shipped_trace('us06')).metrics
+    assert metrics.min_human_gap_m >= run_config.planner.standstill_gap_m - 1e-9
     assert metrics.unsafe_steps == 0
-    assert metrics.driver_fallback_steps <= MAX_FALLBACK_STEPS
 
 
 def test_a_driver_stopped_behind_the_av_does_not_creep_below_d_s(run_config) -> None:
     """NYCC's long stops behind TAC-CA (alpha = 0.75) with a driver who hardly wants speed
     (driver 9 of ``--drivers 20``, seed 1, at 9af173a's fit): the QP met its gap bound only to
     its tolerance, so the stopped human crept ~5e-8 m per step below d_s and then fell back
-    (65 steps). The plan is now corrected to meet the bound exactly."""
+    (65 steps). The plan is now corrected to meet the bound exactly. The driver of the time was
+    cautious (config/human_cautious.yaml), which promises d_s."""
     from trust_av_planner.system.closed_loop import simulate
-    from trust_av_planner.system.config import load_run_config
+    from trust_av_planner.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
     driver = {'weight_acceleration': 1.0, 'weight_desired_speed': 3.992764167065127e-09,
               'weight_relative_speed': 0.033816528119931986,
               'weight_relative_distance': 0.0007407111453434325,
               'time_headway_s': 0.9751187838091812}
-    config = load_run_config(overrides={'planner': {'alpha': 0.75, 'predictor': 'ca'},
-                                        'human_driver': driver})
+    config = load_run_config(HUMAN_CAUTIOUS_PARAMS_FILE,
+                             {'planner': {'alpha': 0.75, 'predictor': 'ca'}, 'human_driver': driver})
     metrics = simulate(config, shipped_trace('nycc')).metrics
     assert metrics.min_human_gap_m >= run_config.planner.standstill_gap_m - 1e-9
     assert metrics.driver_fallback_steps == 0
@@ -124,20 +148,22 @@ def test_golden_metrics() -> None:
         assert metrics[key] == pytest.approx(value, rel=1e-7, abs=1e-9), key
 
 
-def test_fitted_caution_profile_follows_closer_and_the_av_keeps_d_s(run_config) -> None:
-    """The profile config/human_fitted.yaml (docs/DRIVER_IRL.md, "Closed-loop safety") on
-    NYCC, TAC-CA, alpha = 0 (where the AV departs most from the plan the human expects): the
-    human, planning its bound against the expected braking only, comes below d_s (measured
-    4.956 m; the cautious shipped driver keeps 5.000 m) and falls back to hard braking more
-    often (measured 72 steps), while the AV's own gap never goes below d_s."""
+def test_the_shipped_human_follows_closer_than_the_cautious_one(run_config) -> None:
+    """NYCC, TAC-CA, alpha = 0 (where the AV departs most from the plan the human expects): the
+    shipped human, planning its bound against the expected braking only, comes below d_s
+    (measured 4.956 m; the cautious profile keeps 5.000 m) and falls back to hard braking more
+    often (measured 73 steps), while the AV's own gap never goes below d_s."""
     from trust_av_planner.system.closed_loop import simulate
-    from trust_av_planner.system.config import HUMAN_FITTED_PARAMS_FILE, load_run_config
-    config = load_run_config(HUMAN_FITTED_PARAMS_FILE,
-                             {'planner': {'alpha': 0.0, 'predictor': 'ca'}})
-    assert not config.driver.cautious
-    metrics = simulate(config, shipped_trace('nycc')).metrics
+    from trust_av_planner.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
     d_s = run_config.planner.standstill_gap_m
-    assert metrics.min_av_gap_m >= d_s - BOUND_TOLERANCE
-    assert run_config.min_safe_gap_m <= metrics.min_human_gap_m < d_s - 0.01
-    assert metrics.driver_fallback_steps > MAX_FALLBACK_STEPS
-    assert metrics.unsafe_steps == 0
+    shipped = closed_loop('nycc', 0.0).metrics
+    assert not run_config.driver.cautious
+    assert shipped.min_av_gap_m >= d_s - BOUND_TOLERANCE
+    assert run_config.min_safe_gap_m <= shipped.min_human_gap_m < d_s - 0.01
+    assert shipped.driver_fallback_steps > MAX_FALLBACK_STEPS
+    assert shipped.unsafe_steps == 0
+    cautious = simulate(load_run_config(HUMAN_CAUTIOUS_PARAMS_FILE,
+                                        {'planner': {'alpha': 0.0, 'predictor': 'ca'}}),
+                        shipped_trace('nycc')).metrics
+    assert cautious.min_human_gap_m >= d_s - 1e-9
+    assert cautious.min_av_gap_m >= d_s - BOUND_TOLERANCE

@@ -12,7 +12,7 @@ from synthetic_car_following import write_ngsim_chain, write_openacc
 from human_driver_sim.fitting import MPC_BOUNDS
 from trust_av_planner.cli.main import main
 
-MODELS = ('driver MPC (params file)', 'driver MPC, fitted caution (human_fitted.yaml)',
+MODELS = ('driver MPC (params file)', 'driver MPC, cautious (human_cautious.yaml)',
           'IDM, bounded fit', 'IDM, textbook motorway',
           'constant speed', 'recorded speed (noise floor)')
 
@@ -85,7 +85,7 @@ def test_fit_driver_writes_fit_and_evaluation(tmp_path: Path,
     assert fit['pooled']['weight_acceleration'] == 1.0
     assert 0.0 <= fit['pooled']['av_extra_decel_mps2'] <= 3.0
     # Selected on validation: the candidate with the lowest validation loss.
-    candidates = ('MPC params file (cautious)', 'MPC fitted caution',
+    candidates = ('MPC cautious (human_cautious.yaml)', 'MPC fitted caution',
                   'MPC fitted caution, a_extra = 0')
     assert fit['selected'] == min(candidates, key=lambda m: fit['validation_loss'][m]['mean'])
     assert fit['pooled']['cautious'] == (fit['selected'] == candidates[0])

@@ -52,32 +52,20 @@ def test_shipped_driver_fit_has_per_pair_weights(tmp_path: Path) -> None:
         per_pair_weights(tmp_path / 'missing.yaml')
 
 
-def test_params_file_driver_is_the_pooled_fit() -> None:
-    """The default config's human driver is the shipped fit (W, tau_H and d_s)."""
-    import yaml
-
-    from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
-    from trust_av_planner.system.config import load_run_config
-    pooled = yaml.safe_load(DRIVER_FIT_FILE.read_text())['pooled']
-    driver = load_run_config().driver
-    for name in (*WEIGHT_NAMES, 'time_headway_s', 'desired_standstill_gap_m'):
-        assert getattr(driver, name) == pooled[name], name
-
-
 def test_fitted_caution_file_picked_on_validation_and_its_test_target() -> None:
-    """driver_fit_caution.yaml (the profile's source): the model with the lowest validation
+    """driver_fit_caution.yaml (the shipped driver's source): the model with the lowest validation
     loss is the one picked, and its evaluation's test target (docs/DRIVER_IRL.md, Summary)
     is what the docs report: at most 0.9 x the best IDM on both test sets, no collision."""
     import json
 
     import yaml
 
-    from human_driver_sim.population import FITTED_CAUTION_FIT_FILE
-    fit = yaml.safe_load(FITTED_CAUTION_FIT_FILE.read_text())
+    from human_driver_sim.population import DRIVER_FIT_FILE
+    fit = yaml.safe_load(DRIVER_FIT_FILE.read_text())
     losses = {m: v['mean'] for m, v in fit['validation_loss'].items() if m.startswith('MPC')}
     assert fit['selected'] == min(losses, key=losses.__getitem__)
-    evaluation = json.loads(FITTED_CAUTION_FIT_FILE.with_name(
-        FITTED_CAUTION_FIT_FILE.stem + '_eval.json').read_text())
+    evaluation = json.loads(DRIVER_FIT_FILE.with_name(
+        DRIVER_FIT_FILE.stem + '_eval.json').read_text())
     assert set(evaluation['target']) == {'openacc test', 'ngsim test'}
     for by_protocol in evaluation['target'].values():
         for target in by_protocol.values():

@@ -44,26 +44,32 @@ def test_paper_fitted_is_as_reported_with_the_fitted_threshold_only() -> None:
     assert config.trust.trust_model == 'paper'
 
 
-def test_human_fitted_profile_is_the_selected_fit_and_changes_only_the_driver() -> None:
-    """config/human_fitted.yaml = `pooled` of models/driver_fit_caution.yaml (the model picked
-    on the validation split); every other parameter is the shipped one."""
+def test_the_shipped_driver_is_the_selected_fit_and_the_cautious_profile_changes_only_it() -> None:
+    """config/trust_av.yaml's driver = `pooled` of models/driver_fit_caution.yaml (the model
+    picked on the validation split); config/human_cautious.yaml = `pooled` of
+    models/driver_fit.yaml with the worst-case bound, and every other parameter is the shipped
+    one."""
     import dataclasses
 
     import yaml
 
-    from human_driver_sim.population import FITTED_CAUTION_FIT_FILE, WEIGHT_NAMES
-    from trust_av_planner.system.config import HUMAN_FITTED_PARAMS_FILE
+    from human_driver_sim.population import CAUTIOUS_FIT_FILE, DRIVER_FIT_FILE, WEIGHT_NAMES
+    from trust_av_planner.system.config import HUMAN_CAUTIOUS_PARAMS_FILE
 
-    pooled = yaml.safe_load(FITTED_CAUTION_FIT_FILE.read_text())['pooled']
-    layer = read_layer(HUMAN_FITTED_PARAMS_FILE)
-    assert list(layer) == ['/**/human_driver']
+    names = (*WEIGHT_NAMES, 'time_headway_s', 'desired_standstill_gap_m')
     default = load_run_config()
-    fitted = load_run_config(HUMAN_FITTED_PARAMS_FILE, {})
-    names = (*WEIGHT_NAMES, 'time_headway_s', 'desired_standstill_gap_m', 'cautious',
-             'av_extra_decel_mps2')
+    pooled = yaml.safe_load(DRIVER_FIT_FILE.read_text())['pooled']
+    for name in (*names, 'cautious', 'av_extra_decel_mps2'):
+        assert getattr(default.driver, name) == pooled[name], name
+    assert not default.driver.cautious
+
+    layer = read_layer(HUMAN_CAUTIOUS_PARAMS_FILE)
+    assert list(layer) == ['/**/human_driver']
+    cautious = load_run_config(HUMAN_CAUTIOUS_PARAMS_FILE, {})
+    before = yaml.safe_load(CAUTIOUS_FIT_FILE.read_text())['pooled']
     for name in names:
-        assert getattr(fitted.driver, name) == pooled[name], name
-    assert not fitted.driver.cautious
-    assert dataclasses.replace(fitted.driver, **{n: getattr(default.driver, n)
-                                                 for n in names}) == default.driver
-    assert (fitted.planner, fitted.trust) == (default.planner, default.trust)
+        assert getattr(cautious.driver, name) == before[name], name
+    assert cautious.driver.cautious
+    assert dataclasses.replace(cautious.driver, cautious=False,
+                               **{n: getattr(default.driver, n) for n in names}) == default.driver
+    assert (cautious.planner, cautious.trust) == (default.planner, default.trust)

@@ -188,18 +188,21 @@ def test_run_settings_are_checked() -> None:
 
 
 def test_population_cases_are_seeded_and_named() -> None:
+    """From a fit without per-driver fits (the cautious driver's driver_fit.yaml): W drawn
+    from its per-pair weights, tau_H its pooled one."""
+    from human_driver_sim.population import CAUTIOUS_FIT_FILE, fitted_time_headway_s
     cases = sweep.sweep_cases(['us06'], ['gru'], [0.0, 1.0])
-    first = population.population_cases(cases, 3, seed=4)
-    again = population.population_cases(cases, 3, seed=4)
-    other = population.population_cases(cases, 3, seed=5)
+    first = population.population_cases(cases, 3, seed=4, driver_fit=CAUTIOUS_FIT_FILE)
+    again = population.population_cases(cases, 3, seed=4, driver_fit=CAUTIOUS_FIT_FILE)
+    other = population.population_cases(cases, 3, seed=5, driver_fit=CAUTIOUS_FIT_FILE)
     assert first == again and first != other
     assert len(first) == 6 and [c.driver for c in first] == [1, 2, 3, 1, 2, 3]
     # The same driver k for every alpha, so improvements over alpha = 0 are per driver.
     assert first[0].driver_params == first[3].driver_params
     params = dict(first[0].driver_params)
     assert params['weight_acceleration'] == 1.0 and len(params) == 5
-    from human_driver_sim.population import fitted_time_headway_s
-    assert params['time_headway_s'] == fitted_time_headway_s() == pytest.approx(1.2715, abs=1e-3)
+    assert params['time_headway_s'] == fitted_time_headway_s(CAUTIOUS_FIT_FILE) == pytest.approx(
+        1.2715, abs=1e-3)
     assert first[1].label == 'us06/TAC-GRU/alpha=0/driver=2'
     assert first[4].base == Case('us06', 'gru', 1.0)
     from trust_av_planner.errors import TrustAvPlannerError
@@ -249,26 +252,38 @@ def test_reproduce_with_a_driver_population(tmp_path: Path) -> None:
     assert bad.returncode == 2 and '--drivers must be >= 0, got -1' in bad.stderr
 
 
-def test_human_fitted_profile_population_draws_from_its_per_driver_fits(tmp_path: Path) -> None:
-    """``--profile human_fitted --drivers K``: the fitted-caution driver, and K drivers drawn
-    from the per-driver fits of driver_fit_caution.yaml (d_s and a_extra per driver too)."""
+def test_the_population_draws_from_the_shipped_per_driver_fits(tmp_path: Path) -> None:
+    """``--drivers K``: K drivers drawn from the per-driver fits of driver_fit_caution.yaml (the
+    shipped driver's fit: d_s and a_extra per driver too); ``--profile human_cautious`` draws
+    from driver_fit.yaml's per-pair weights and keeps the worst-case bound."""
     import yaml
 
-    from human_driver_sim.population import FITTED_CAUTION_FIT_FILE, sample_driver_params
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
-                           '--profile', 'human_fitted', '--traces', 'nycc', '--predictors',
-                           'ca', '--drivers', '2', '--max-steps', '15', '--results-dir',
-                           str(tmp_path), '--no-progress', '--workers', '2'],
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    rows = [r.split(',') for r in (tmp_path / 'all_runs.csv').read_text().splitlines()]
-    header = rows[0]
-    per_driver = list(yaml.safe_load(FITTED_CAUTION_FIT_FILE.read_text())['per_driver'].values())
+    from human_driver_sim.population import CAUTIOUS_FIT_FILE, DRIVER_FIT_FILE, sample_driver_params
+
+    def runs(out: Path, *args: str) -> list[dict[str, str]]:
+        proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+                               *args, '--traces', 'nycc', '--predictors', 'ca', '--drivers', '2',
+                               '--alphas', '0,1', '--max-steps', '15', '--results-dir', str(out),
+                               '--no-progress', '--workers', '2'],
+                              capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        rows = [r.split(',') for r in (out / 'all_runs.csv').read_text().splitlines()]
+        return [dict(zip(rows[0], row, strict=True)) for row in rows[1:]]
+
+    per_driver = list(yaml.safe_load(DRIVER_FIT_FILE.read_text())['per_driver'].values())
     drawn = sample_driver_params(per_driver, 2, seed=1)
-    for row in rows[1:]:
-        driver = drawn[int(row[header.index('driver')]) - 1]
+    shipped = runs(tmp_path / 'shipped')
+    assert len(shipped) == 4
+    for row in shipped:
+        driver = drawn[int(row['driver']) - 1]
         for name in ('desired_standstill_gap_m', 'av_extra_decel_mps2', 'time_headway_s'):
-            assert float(row[header.index(name)]) == pytest.approx(driver[name]), name
+            assert float(row[name]) == pytest.approx(driver[name]), name
+        assert row['cautious'] == 'False'
+    cautious = runs(tmp_path / 'cautious', '--profile', 'human_cautious')
+    pooled_tau = yaml.safe_load(CAUTIOUS_FIT_FILE.read_text())['pooled']['time_headway_s']
+    for row in cautious:
+        assert float(row['time_headway_s']) == pytest.approx(pooled_tau)
+        assert row['cautious'] == 'True'
 
 
 def reproduce(*args: str) -> subprocess.CompletedProcess[str]:

@@ -35,11 +35,13 @@ def sample_population(per_pair_weights: np.ndarray, count: int, *, seed: int) ->
     return np.column_stack([np.ones(count), draws])
 
 
-DRIVER_FIT_FILE = Path(__file__).parent / 'models' / 'driver_fit.yaml'
-"""The shipped fit of ``trust-av fit-driver`` (weights with provenance, docs/DRIVER_IRL.md)."""
-FITTED_CAUTION_FIT_FILE = Path(__file__).parent / 'models' / 'driver_fit_caution.yaml'
-"""The fit of the driver with a fitted caution (``trust-av fit-driver``; the profile
-config/human_fitted.yaml; docs/DRIVER_IRL.md)."""
+DRIVER_FIT_FILE = Path(__file__).parent / 'models' / 'driver_fit_caution.yaml'
+"""The fit of the shipped human driver (``trust-av fit-driver``: fitted on the training split,
+picked on the validation split, with its fitted caution; docs/DRIVER_IRL.md): its ``pooled``
+is config/trust_av.yaml's driver, its per-driver fits the population's source."""
+CAUTIOUS_FIT_FILE = Path(__file__).parent / 'models' / 'driver_fit.yaml'
+"""The fit of the cautious driver (the profile config/human_cautious.yaml), made before the
+train / validation / test split: its ``pooled`` and per-pair weights."""
 WEIGHT_NAMES = ('weight_acceleration', 'weight_desired_speed', 'weight_relative_speed',
                 'weight_relative_distance')
 """Driver-MPC parameter names of W, in the order of the weight vectors."""

@@ -25,13 +25,13 @@ from trust_av_planner.cli.options import output_file
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import (
     DEFAULT_PARAMS_FILE,
-    HUMAN_FITTED_PARAMS_FILE,
+    HUMAN_CAUTIOUS_PARAMS_FILE,
     load_run_config,
 )
 from trust_monitor.common import output_files
 
 SHIPPED = 'driver MPC (params file)'
-FITTED = 'driver MPC, fitted caution (human_fitted.yaml)'
+CAUTIOUS = 'driver MPC, cautious (human_cautious.yaml)'
 BOUNDED_IDM = 'IDM, bounded fit'
 TEXTBOOK_IDM = 'IDM, textbook motorway'
 CONSTANT_SPEED = 'constant speed'
@@ -42,8 +42,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser = subparsers.add_parser(
         'eval-driver', help='score the shipped human driver on recorded car following',
         description=(
-            "Score the params file's driver MPC, the same with the fitted-caution profile "
-            '(config/human_fitted.yaml) layered over it, the bounded IDM of the driver fit, the '
+            "Score the params file's driver MPC, the same with the cautious profile "
+            '(config/human_cautious.yaml) layered over it, the bounded IDM of the driver fit, the '
             'textbook IDM and constant speed on a directory of OpenACC or NGSIM-chain CSVs '
             '(read only): gap and speed NRMSE with 95 % CIs over pairs, collisions, gaps below '
             "2 m, beside the data's noise floor, for full runs and re-initialised windows."))
@@ -55,7 +55,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
                         help='ROS 2 params file whose human_driver section is scored')
     parser.add_argument('--driver-fit', type=Path, default=DRIVER_FIT_FILE,
-                        help='driver-fit file holding the bounded IDM (default: the shipped)')
+                        help="driver-fit file holding the bounded IDM (default: the shipped driver's, "
+                             'fitted on the training split)')
     parser.add_argument('--window-s', type=float, default=WINDOW_S,
                         help='re-initialised window length, s (default: %(default)s)')
     parser.add_argument('--vehicle-length-m', type=float, default=NGSIM_VEHICLE_LENGTH_M,
@@ -64,20 +65,20 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 
 def models(params_file: Path, driver_fit: Path) -> dict[str, Follower]:
-    """The five scored models: the params file's driver, the same with the fitted-caution
-    profile layered over it, the bounded IDM of the driver fit, the textbook IDM and
+    """The five scored models: the params file's driver, the same with the cautious profile
+    layered over it, the bounded IDM of the driver fit, the textbook IDM and
     constant speed.
 
     Raises:
         TrustAvPlannerError: Bad driver-fit file (ParamsError propagates for a bad params file).
     """
     config = load_run_config(params_file).driver
-    fitted = load_run_config([params_file, HUMAN_FITTED_PARAMS_FILE]).driver
+    cautious = load_run_config([params_file, HUMAN_CAUTIOUS_PARAMS_FILE]).driver
     try:
         idm = IdmParams(**fitted_idm_params(driver_fit))
     except (DriverFitError, ValueError) as err:
         raise TrustAvPlannerError(str(err)) from err
-    return {SHIPPED: MpcFollower(config), FITTED: MpcFollower(fitted),
+    return {SHIPPED: MpcFollower(config), CAUTIOUS: MpcFollower(cautious),
             BOUNDED_IDM: IdmFollower(idm),
             TEXTBOOK_IDM: IdmFollower(TEXTBOOK_MOTORWAY), CONSTANT_SPEED: ConstantSpeed()}
 

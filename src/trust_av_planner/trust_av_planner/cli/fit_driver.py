@@ -31,11 +31,15 @@ from human_driver_sim.evaluation import (
 )
 from human_driver_sim.fitting import MPC_BOUNDS, FitResult, configured, fit_idm, fit_mpc
 from human_driver_sim.idm import PARAM_NAMES, TEXTBOOK_MOTORWAY, IdmParams
-from human_driver_sim.population import FITTED_CAUTION_FIT_FILE, WEIGHT_NAMES
+from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from human_driver_sim.splits import Split, split_ngsim, split_openacc
 from trust_av_planner.cli.options import MAX_ITERATIONS, Progress, bounded_int, output_file
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_planner.system.config import (
+    DEFAULT_PARAMS_FILE,
+    HUMAN_CAUTIOUS_PARAMS_FILE,
+    load_run_config,
+)
 from trust_monitor.common.output_files import replacing
 
 TARGET_RATIO = 0.9
@@ -45,13 +49,14 @@ CANDIDATES: dict[str, dict[str, Any]] = {
     'MPC fitted caution': {'cautious': False},
 }
 """Driver-MPC candidates fitted on the training split; the validation split picks one of
-them, :data:`ABLATION` and the params file's (cautious) driver, :data:`PARAMS_FILE_MPC`.
-The cautious driver is not refitted (its fit binds the gap bound on many NGSIM steps and
-takes most of the time): the params file's was fitted on part2 and the even NGSIM IDs,
-training and validation together, so its validation score is if anything optimistic."""
+them, :data:`ABLATION` and the cautious driver, :data:`CAUTIOUS_MPC` (the params file's
+driver with the profile config/human_cautious.yaml layered over it). The cautious driver is not
+refitted (its fit binds the gap bound on many NGSIM steps and takes most of the time): it was
+fitted on part2 and the even NGSIM IDs, training and validation together, so its validation
+score is if anything optimistic."""
 ABLATION = 'MPC fitted caution, a_extra = 0'
 """The fitted-caution driver with its caution removed (the bound against min(u_R^H, 0))."""
-PARAMS_FILE_MPC = 'MPC params file (cautious)'
+CAUTIOUS_MPC = 'MPC cautious (human_cautious.yaml)'
 IDM_POOLED = 'IDM pooled (bounded)'
 IDM_TEXTBOOK = 'IDM textbook'
 
@@ -78,15 +83,15 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='a trust-av drive study directory: its complete drives (a person '
                              'following the AV) are demonstrations too, split by participant '
                              'into train, validation and test like NGSIM (optional)')
-    parser.add_argument('--out', type=Path, default=FITTED_CAUTION_FIT_FILE,
+    parser.add_argument('--out', type=Path, default=DRIVER_FIT_FILE,
                         help='fit file with provenance (default: '
-                             'human_driver_sim/models/driver_fit_caution.yaml, the profile '
-                             'config/human_fitted.yaml); its evaluation is written beside it '
-                             'as <stem>_eval.json')
+                             'human_driver_sim/models/driver_fit_caution.yaml, whose pooled fit is '
+                             "config/trust_av.yaml's driver); its evaluation is written "
+                             'beside it as <stem>_eval.json')
     parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
                         help="ROS 2 params file whose human_driver section gives what is "
-                             "not fitted (dt_s, horizon, bounds) and the model scored as "
-                             "'MPC before' (default: the shipped)")
+                             'not fitted (dt_s, horizon, bounds); with config/human_cautious.yaml '
+                             'layered over it, the cautious candidate (default: the shipped)')
     parser.add_argument('--iterations', type=bounded_int('--iterations', 1, MAX_ITERATIONS),
                         default=80,
                         help='Nelder-Mead iterations per start (default: %(default)s)')
@@ -194,7 +199,9 @@ def run(args: argparse.Namespace) -> int:
     if args.iterations < 1:
         raise TrustAvPlannerError(f'--iterations must be >= 1, got {args.iterations}')
     output_file(args.out)             # before the fit: minutes of work with nowhere to go
-    base = load_run_config(args.params_file).driver
+    # the cautious driver: the candidate that is not refitted, and the inverse-KKT start's tau_H
+    # and d_s (so the fit does not move with the params file's fitted driver)
+    base = load_run_config([args.params_file, HUMAN_CAUTIOUS_PARAMS_FILE]).driver
     splits, cleaning = _load(args, base.dt_s)
     n = base.horizon_steps
     train = {name: make_runs(split.train, 'window') for name, split in splits.items()}
@@ -218,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
                                    fits[name].params) for name in CANDIDATES}
     candidates[ABLATION] = dataclasses.replace(candidates['MPC fitted caution'],
                                                av_extra_decel_mps2=0.0)
-    candidates[PARAMS_FILE_MPC] = base
+    candidates[CAUTIOUS_MPC] = base
     validation = {name: _validation_loss(MpcFollower(cfg), splits)
                   for name, cfg in candidates.items()}
     for name, follower in ((IDM_POOLED, IdmFollower(IdmParams(**idm.params))),

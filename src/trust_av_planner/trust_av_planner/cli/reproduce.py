@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from human_driver_sim.population import DRIVER_FIT_FILE, FITTED_CAUTION_FIT_FILE
+from human_driver_sim.population import CAUTIOUS_FIT_FILE, DRIVER_FIT_FILE
 from preceding_traffic.sources import load_trace
 from trust_av_planner.cli.options import (
     MAX_DRIVERS,
@@ -40,7 +40,7 @@ from trust_av_planner.study.plots import speed_profiles, trust_over_time
 from trust_av_planner.study.sweep import Case
 from trust_av_planner.system.config import (
     DEFAULT_PARAMS_FILE,
-    HUMAN_FITTED_PARAMS_FILE,
+    HUMAN_CAUTIOUS_PARAMS_FILE,
     load_run_config,
 )
 from trust_monitor.common import output_files, registry
@@ -49,15 +49,15 @@ from trust_monitor.trust_interface import paper_bound_holds
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
             'as_reported': DEFAULT_PARAMS_FILE.with_name('paper_as_reported.yaml'),
             'paper_fitted': DEFAULT_PARAMS_FILE.with_name('paper_fitted_threshold.yaml'),
-            'human_fitted': HUMAN_FITTED_PARAMS_FILE}
+            'human_cautious': HUMAN_CAUTIOUS_PARAMS_FILE}
 """Parameter profiles: the paper's Table I, the reading its printed mean E imply, that
 reading with P_thre fitted to its final trusts (a hypothesis: docs/concepts/trust-models.md),
-and Table I with the human follower of the fitted caution (docs/DRIVER_IRL.md)."""
+and Table I with the cautious human follower, who never breaks d_s (docs/DRIVER_IRL.md)."""
 DEFAULT_RESULTS = {'table_i': Path('results/paper'),
                    'as_reported': Path('results/paper_as_reported'),
                    'paper_fitted': Path('results/paper_fitted'),
-                   'human_fitted': Path('results/human_fitted')}
-DRIVER_FITS = {'human_fitted': FITTED_CAUTION_FIT_FILE}
+                   'human_cautious': Path('results/human_cautious')}
+DRIVER_FITS = {'human_cautious': CAUTIOUS_FIT_FILE}
 """The driver-fit file a profile's population (``--drivers K``) draws from; the shipped fit
 for the others."""
 
@@ -287,8 +287,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                              "(default: whole traces; tables then differ from the paper's)")
     parser.add_argument('--drivers', type=bounded_int('--drivers', 0, MAX_DRIVERS),
                         default=0, metavar='K',
-                        help='run every case for K human drivers sampled from the fitted '
-                             "per-pair weights (seeded) instead of the params file's driver; "
+                        help='run every case for K human drivers sampled (seeded) from the '
+                             "driver fit's per-driver fits instead of the params file's driver; "
                              'tables then give mean ± 95 %% confidence interval per cell '
                              f"(default: 0, the params file's driver; at most {MAX_DRIVERS})")
     parser.add_argument('--drivers-seed', type=bounded_int('--drivers-seed', 0, MAX_SEED),
@@ -297,21 +297,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--driver-fit', type=Path, default=None,
                         help='driver-fit file: its per-driver fits, or else its per-pair '
                              'weights, are the population source (default: '
-                             'human_driver_sim/models/driver_fit_caution.yaml for the '
-                             'human_fitted profile, the shipped driver_fit.yaml otherwise)')
+                             'human_driver_sim/models/driver_fit.yaml for the '
+                             'human_cautious profile, the shipped driver_fit_caution.yaml '
+                             'otherwise)')
     parser.add_argument('--profile', choices=tuple(PROFILES), default='table_i',
                         help="which parameters: table_i = the paper's Table I (epsilon 6, "
                              "config/trust_av.yaml), as_reported = what the paper's printed "
                              'mean E imply (epsilon 3, config/paper_as_reported.yaml; '
                              'docs/RESULTS.md), paper_fitted = as_reported with P_thre 0.97 '
                              "FITTED to the paper's final trusts (a hypothesis; "
-                             'config/paper_fitted_threshold.yaml), human_fitted = Table I with '
-                             'the human driver of the fitted caution (config/human_fitted.yaml; '
+                             'config/paper_fitted_threshold.yaml), human_cautious = Table I with '
+                             'the cautious human driver, who never breaks d_s '
+                             '(config/human_cautious.yaml; '
                              'docs/DRIVER_IRL.md); default: %(default)s')
     parser.add_argument('--results-dir', type=Path, default=None,
                         help='where tables, figures and the cache go (default: results/paper '
                              'for table_i, results/paper_<profile> for as_reported and '
-                             'paper_fitted, results/human_fitted for human_fitted)')
+                             'paper_fitted, results/human_cautious for human_cautious)')
     add_params_file_option(parser)  # repeatable, layered as in run and simulate
     add_lead_preview_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')

@@ -53,10 +53,9 @@ from trust_monitor.trust_model import MonitorConfig, TrustConfig
 DEFAULT_PARAMS_FILE = shipped_params_file()
 """The shipped params file (``config/trust_av.yaml``; ``share/trust_monitor/config/`` when
 installed by colcon): the bottom layer of every run."""
-HUMAN_FITTED_PARAMS_FILE = DEFAULT_PARAMS_FILE.with_name('human_fitted.yaml')
-"""Profile layer with the human driver of the fitted caution (docs/DRIVER_IRL.md): the
-follower plans its gap bound against the expected AV plan's braking plus a fitted margin
-instead of the AV's worst case."""
+HUMAN_CAUTIOUS_PARAMS_FILE = DEFAULT_PARAMS_FILE.with_name('human_cautious.yaml')
+"""Profile layer with the cautious human driver (docs/DRIVER_IRL.md): the follower plans its gap
+bound against the AV braking at u_R,min whatever it expects, and never comes closer than d_s."""
 
 
 @dataclass(frozen=True)
