@@ -111,7 +111,8 @@ def test_a_driver_stopped_behind_the_av_does_not_creep_below_d_s(run_config) -> 
               'weight_relative_distance': 0.0007407111453434325,
               'time_headway_s': 0.9751187838091812}
     config = load_run_config(HUMAN_CAUTIOUS_PARAMS_FILE,
-                             {'planner': {'alpha': 0.75, 'predictor': 'ca'}, 'human_driver': driver})
+                             {'planner': {'alpha': 0.75, 'predictor': 'ca'},
+                              'human_driver': driver})
     metrics = simulate(config, shipped_trace('nycc')).metrics
     assert metrics.min_human_gap_m >= run_config.planner.standstill_gap_m - 1e-9
     assert metrics.driver_fallback_steps == 0

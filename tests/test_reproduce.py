@@ -258,7 +258,11 @@ def test_the_population_draws_from_the_shipped_per_driver_fits(tmp_path: Path) -
     from driver_fit.yaml's per-pair weights and keeps the worst-case bound."""
     import yaml
 
-    from human_driver_sim.population import CAUTIOUS_FIT_FILE, DRIVER_FIT_FILE, sample_driver_params
+    from human_driver_sim.population import (
+        CAUTIOUS_FIT_FILE,
+        DRIVER_FIT_FILE,
+        sample_driver_params,
+    )
 
     def runs(out: Path, *args: str) -> list[dict[str, str]]:
         proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',

@@ -55,8 +55,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
                         help='ROS 2 params file whose human_driver section is scored')
     parser.add_argument('--driver-fit', type=Path, default=DRIVER_FIT_FILE,
-                        help="driver-fit file holding the bounded IDM (default: the shipped driver's, "
-                             'fitted on the training split)')
+                        help='driver-fit file holding the bounded IDM (default: the shipped '
+                             "driver's fit, whose IDM is fitted on the training split)")
     parser.add_argument('--window-s', type=float, default=WINDOW_S,
                         help='re-initialised window length, s (default: %(default)s)')
     parser.add_argument('--vehicle-length-m', type=float, default=NGSIM_VEHICLE_LENGTH_M,

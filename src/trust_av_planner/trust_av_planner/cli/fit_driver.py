@@ -85,11 +85,11 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                              'into train, validation and test like NGSIM (optional)')
     parser.add_argument('--out', type=Path, default=DRIVER_FIT_FILE,
                         help='fit file with provenance (default: '
-                             'human_driver_sim/models/driver_fit_caution.yaml, whose pooled fit is '
-                             "config/trust_av.yaml's driver); its evaluation is written "
+                             'human_driver_sim/models/driver_fit_caution.yaml, whose pooled fit '
+                             "is config/trust_av.yaml's driver); its evaluation is written "
                              'beside it as <stem>_eval.json')
     parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
-                        help="ROS 2 params file whose human_driver section gives what is "
+                        help='ROS 2 params file whose human_driver section gives what is '
                              'not fitted (dt_s, horizon, bounds); with config/human_cautious.yaml '
                              'layered over it, the cautious candidate (default: the shipped)')
     parser.add_argument('--iterations', type=bounded_int('--iterations', 1, MAX_ITERATIONS),
