@@ -80,9 +80,10 @@ ASSUMED_MPS2 = -3.0
 
 
 def safety_config(run_config, **changes: float) -> DriverConfig:
-    """The shipped driver with v_max 30 m/s, the AV assumed to brake at up to -3 m/s^2 and
-    ``changes``."""
-    values = {'speed_max_mps': 30.0, 'assumed_av_accel_min_mps2': ASSUMED_MPS2, **changes}
+    """The shipped driver with v_max 30 m/s, cautious (the AV assumed to brake at up to
+    -3 m/s^2) unless ``changes`` say otherwise."""
+    values = {'speed_max_mps': 30.0, 'assumed_av_accel_min_mps2': ASSUMED_MPS2,
+              'cautious': True, **changes}
     return dataclasses.replace(run_config.driver, **values)
 
 
@@ -112,8 +113,8 @@ def test_fitted_caution_av_speeds_by_hand(run_config) -> None:
     plain = DriverMpc(safety_config(run_config, cautious=False, av_extra_decel_mps2=0.0))
     assert plain.cautious_av_speeds(10.0, np.array([1.0, -1.0, 0.5])) == pytest.approx(
         [10, 10, 9])
-    # The shipped driver is the cautious one, and cautious ignores a_extra.
-    assert run_config.driver.cautious
+    # The shipped driver plans against the expected braking; cautious ignores a_extra.
+    assert not run_config.driver.cautious
     worst = DriverMpc(safety_config(run_config, av_extra_decel_mps2=2.0))
     assert worst.cautious_av_speeds(10.0, np.array([1.0, -4.0, 0.5])) == pytest.approx(
         [10, 7, 3])
@@ -171,6 +172,22 @@ def test_first_gap_is_not_constrained(run_config) -> None:
     gaps, _ = kinematics.rollout(5.2, 21.0, list(cautious), list(result.plan_mps2), cfg.dt_s)
     assert gaps[0] == pytest.approx(4.2)
     assert min(gaps[1:]) >= cfg.standstill_gap_m - 1e-6
+
+
+@pytest.mark.parametrize('gap_m', (5.2, 5.5, 6.0))
+def test_the_shipped_driver_solves_where_the_bound_binds(run_config, gap_m: float) -> None:
+    # The shipped (not cautious) driver 1 m/s faster than an AV expected to hold 20 m/s:
+    # d^2 = gap - 2 - u^0 >= 5 needs u^0 <= gap - 7, and the cost wants u^0 near 0, so the
+    # bound binds. qrqp stopped here with Search_Direction_Becomes_Too_Small at d^2 = 4.64 m
+    # (gap 5.2 m) and the human fell back to its hold-gap plan (-6 m/s^2).
+    cfg = dataclasses.replace(run_config.driver, speed_max_mps=30.0)
+    assert not cfg.cautious
+    mpc = DriverMpc(cfg)
+    result = mpc.step(gap_m, 21.0, 20.0, np.zeros(3))
+    assert result.success, result.status
+    assert result.plan_mps2[0] == pytest.approx(gap_m - 7.0, abs=1e-6)
+    gaps, _ = kinematics.rollout(gap_m, 21.0, [20.0] * 3, list(result.plan_mps2), cfg.dt_s)
+    assert min(gaps[1:]) >= cfg.standstill_gap_m - 1e-9
 
 
 def test_infeasible_gap_bound_brakes_hardest_and_is_a_fallback(run_config) -> None:

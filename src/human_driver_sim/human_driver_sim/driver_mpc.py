@@ -40,7 +40,7 @@ import numpy as np
 from trust_monitor.common import kinematics
 from trust_monitor.common.params import check_fields, control_step_param, param, require
 from trust_monitor.common.registry import Component
-from trust_monitor.common.solver import solve, sqp_options
+from trust_monitor.common.solver import driver_solver_options, solve
 
 LOG = logging.getLogger(__name__)
 
@@ -201,7 +201,7 @@ class DriverMpc:
                                  {'x': u, 'f': cost, 'g': g,
                                   'p': ca.vertcat(gap0, speed0, av_speed0, expected, weights,
                                                   cautious)},
-                                 sqp_options(config.solver_max_iter))
+                                 driver_solver_options(config.solver_max_iter))
         self._previous: np.ndarray | None = None
 
     def reset(self) -> None:

@@ -37,11 +37,27 @@ QRQP_MAX_STEPS = 10
 corner ``qrqp`` stalled on at N = 30 (docs/MODEL.md, "QP solver on fine grids")."""
 
 
+def _with_daqp(options: dict[str, Any]) -> dict[str, Any]:
+    options['qpsol'] = 'daqp'
+    options['qpsol_options'] = {'error_on_fail': False}
+    return options
+
+
 def nmpc_solver_options(max_iter: int, steps: int) -> dict[str, Any]:
     """SQP options of the NMPC: the shared ``qrqp`` settings up to :data:`QRQP_MAX_STEPS`
     steps (the paper's grid), DAQP for finer grids."""
     options = sqp_options(max_iter)
-    if steps > QRQP_MAX_STEPS:
-        options['qpsol'] = 'daqp'
-        options['qpsol_options'] = {'error_on_fail': False}
-    return options
+    return _with_daqp(options) if steps > QRQP_MAX_STEPS else options
+
+
+def driver_solver_options(max_iter: int) -> dict[str, Any]:
+    """SQP options of the driver MPC: the shared settings with DAQP as the QP solver.
+
+    The driver's problem is a convex QP (docs/MODEL.md, "The human's safety gap"), so SQP
+    takes one QP step. ``qrqp`` stopped on some feasible ones with
+    ``Search_Direction_Becomes_Too_Small`` at a plan that broke the active gap bound (the human
+    5.2 m behind, 1 m/s faster than an AV expected to hold its speed: d^2 = 4.64 m < d_s; 7 of
+    24,000 steps of the paper sweep), and the human then fell back to its hold-gap plan; DAQP
+    solves them (u^0 = -1.8 m/s^2, d^2 = d_s).
+    """
+    return _with_daqp(sqp_options(max_iter))
