@@ -64,15 +64,34 @@ def interrupted_run(bag: Path) -> tuple[subprocess.Popen[str], str]:
     return proc, trace
 
 
+RECORD_TOLERANCE = 1e-7
+"""How far a graph value may be from the in-process one. The two paths agree to ~1e-16 per
+step (the graph's numbers differ in the last bits; the source is not found), and each
+iterative solve returns a point within its termination tolerance, so such a difference can
+come out of the NMPC's SQP as ~1e-8 (measured: 1.7e-8 in the AV's plan at t = 39 s of the
+60 s TAC-GRU test, from inputs 1e-14 apart). 1e-7 is ten times that and far below any
+physical difference."""
+SOLVER_DETAILS = {'solver_status': 'solver_success', 'solver_iterations': 'solver_success',
+                  'driver_status': 'driver_success'}
+"""How a successful solve got there: the graph's numbers differ from the in-process ones in
+the last bits (measured up to ~1e-13), and at a degenerate point (the AV standing at d_s with
+a zero plan) that decides whether qrqp reports Solve_Succeeded in 1 iteration or
+Search_Direction_Becomes_Too_Small in 2, for the same plan. Success itself and every number
+of the plans are compared."""
+
+
 def assert_records_equal(graph: list[StepRecord], ref: list[StepRecord]) -> None:
     assert len(graph) == len(ref)
     for g, r in zip(graph, ref, strict=True):
         for field in dataclasses.fields(StepRecord):
             if 'solve_time' in field.name:
                 continue
+            success = SOLVER_DETAILS.get(field.name)
+            if success is not None and getattr(g, success) and getattr(r, success):
+                continue
             a, b = getattr(g, field.name), getattr(r, field.name)
             if isinstance(b, (tuple, float)):
-                assert a == pytest.approx(b, abs=1e-9), (r.t_s, field.name)
+                assert a == pytest.approx(b, abs=RECORD_TOLERANCE), (r.t_s, field.name)
             else:
                 assert a == b, (r.t_s, field.name)
 

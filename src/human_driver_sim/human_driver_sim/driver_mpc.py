@@ -40,7 +40,7 @@ import numpy as np
 from trust_monitor.common import kinematics
 from trust_monitor.common.params import check_fields, control_step_param, param, require
 from trust_monitor.common.registry import Component
-from trust_monitor.common.solver import driver_solver_options, solve
+from trust_monitor.common.solver import qp_options, solve
 
 LOG = logging.getLogger(__name__)
 
@@ -85,8 +85,8 @@ class DriverConfig:
                                   high=0.0, high_inclusive=False)
     accel_max_mps2: float = param("human's upper acceleration bound", unit='m/s^2', low=0.0,
                                   low_inclusive=False, high=100.0)
-    solver_max_iter: int = param('SQP iterations before the step falls back', low=1,
-                                 high=10_000)
+    solver_max_iter: int = param('QP (DAQP active-set) iterations before the step falls back',
+                                 low=1, high=10_000)
     fallback_gap_gain_per_s2: float = param('gap gain of the fallback controller',
                                             unit='1/s^2', low=0.0, high=1000.0)
     fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
@@ -159,6 +159,10 @@ def bound_av_accels(config: DriverConfig, expected_mps2: np.ndarray) -> np.ndarr
     return np.asarray(np.minimum(expected, 0.0) - config.av_extra_decel_mps2, dtype=float)
 
 
+SOLVED = 'Solve_Succeeded'
+"""The status of a solved step (the word of CasADi's SQP, which the AV planner reports)."""
+
+
 @dataclass(frozen=True)
 class DriverResult:
     """Outcome of one driver MPC step (the same fields as the AV's ``PlanResult``)."""
@@ -197,11 +201,11 @@ class DriverMpc:
         self._ubg = np.concatenate([np.full(n - 1, np.inf), np.full(n, config.speed_max_mps)])
         self._lbx = np.full(n, config.accel_min_mps2)
         self._ubx = np.full(n, config.accel_max_mps2)
-        self._solver = ca.nlpsol('driver_mpc', 'sqpmethod',
-                                 {'x': u, 'f': cost, 'g': g,
-                                  'p': ca.vertcat(gap0, speed0, av_speed0, expected, weights,
-                                                  cautious)},
-                                 driver_solver_options(config.solver_max_iter))
+        self._solver = ca.qpsol('driver_mpc', 'daqp',
+                                {'x': u, 'f': cost, 'g': g,
+                                 'p': ca.vertcat(gap0, speed0, av_speed0, expected, weights,
+                                                 cautious)},
+                                qp_options(config.solver_max_iter))
         self._previous: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -284,22 +288,22 @@ class DriverMpc:
                     ubg=self._ubg)
         elapsed = time.perf_counter() - start
         stats = self._solver.stats()
-        iterations = int(stats.get('iter_count', 0))
+        iterations = 1                      # one QP solve (DAQP does not report its count)
         if stats['success']:
             plan = self._meet_bound(np.asarray(sol['x']).ravel(), gap_m, speed_mps, cautious,
                                     lbg[:n - 1])
             self._previous = plan
-            return DriverResult(plan, str(stats['return_status']), True, iterations, elapsed)
+            return DriverResult(plan, SOLVED, True, iterations, elapsed)
         plan = np.asarray(kinematics.hold_gap_plan(
             gap_m, speed_mps, list(cautious), dt_s=c.dt_s, standstill_gap_m=c.standstill_gap_m,
             time_headway_s=c.time_headway_s, gap_gain_per_s2=c.fallback_gap_gain_per_s2,
             speed_gain_per_s=c.fallback_speed_gain_per_s, accel_min_mps2=c.accel_min_mps2,
             accel_max_mps2=c.accel_max_mps2, speed_min_mps=c.speed_min_mps,
             speed_max_mps=c.speed_max_mps))
-        LOG.debug('driver MPC fallback (%s)', stats['return_status'])
+        status = f'{stats["unified_return_status"]} (DAQP exit flag {stats["return_status"]})'
+        LOG.debug('driver MPC fallback (%s)', status)
         self._previous = None
-        return DriverResult(plan, f'fallback: {stats["return_status"]}', False, iterations,
-                            elapsed)
+        return DriverResult(plan, f'fallback: {status}', False, iterations, elapsed)
 
 
 def build(config: DriverConfig, params: None) -> DriverMpc:

@@ -50,14 +50,15 @@ def nmpc_solver_options(max_iter: int, steps: int) -> dict[str, Any]:
     return _with_daqp(options) if steps > QRQP_MAX_STEPS else options
 
 
-def driver_solver_options(max_iter: int) -> dict[str, Any]:
-    """SQP options of the driver MPC: the shared settings with DAQP as the QP solver.
+def qp_options(max_iter: int) -> dict[str, Any]:
+    """Options of a convex QP solved directly with DAQP (``casadi.qpsol``): the driver MPC.
 
-    The driver's problem is a convex QP (docs/MODEL.md, "The human's safety gap"), so SQP
-    takes one QP step. ``qrqp`` stopped on some feasible ones with
+    Its problem is a convex QP (docs/MODEL.md, "The human's safety gap"), so it needs no SQP
+    around it. ``sqpmethod`` with ``qrqp`` stopped on some feasible ones with
     ``Search_Direction_Becomes_Too_Small`` at a plan that broke the active gap bound (the human
     5.2 m behind, 1 m/s faster than an AV expected to hold its speed: d^2 = 4.64 m < d_s; 7 of
-    24,000 steps of the paper sweep), and the human then fell back to its hold-gap plan; DAQP
-    solves them (u^0 = -1.8 m/s^2, d^2 = d_s).
+    24,000 steps of the paper sweep), and with DAQP inside it at standstill; one DAQP solve
+    answers all of them. ``max_iter`` bounds DAQP's active-set iterations. Failures are
+    reported through ``stats()``, never raised.
     """
-    return _with_daqp(sqp_options(max_iter))
+    return {'error_on_fail': False, 'daqp': {'iter_limit': max_iter}}
