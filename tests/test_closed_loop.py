@@ -19,8 +19,9 @@ TRACES = ('us06', 'nycc')
 MAX_FALLBACK_STEPS = 2  # measured: 0 in every run; more means the NMPC regressed
 # The shipped human plans its gap bound against the braking it expects; when the AV brakes
 # harder its bound is infeasible and it brakes as hard as it can (a driver fallback). Measured
-# behind TAC-CA: at most 73 of 600 steps (NYCC, alpha = 0), 0-7 elsewhere.
-MAX_DRIVER_FALLBACK_STEPS = 90
+# on US06 and NYCC: at most 25 of 600 steps behind TAC-CA (NYCC, alpha = 0), 24 behind TAC-GRU
+# on US06 (alpha = 0).
+MAX_DRIVER_FALLBACK_STEPS = 40
 
 
 @pytest.mark.parametrize('trace', TRACES)
@@ -56,7 +57,7 @@ def test_no_collision_and_physical_speeds(trace: str, alpha: float, run_config) 
     assert result.metrics.min_av_gap_m >= d_s - 0.5  # the NMPC's gap bound (Table I d_s)
     # The human plans eq. (13)'s d_s bound against the AV braking it expects (docs/MODEL.md,
     # "The human's safety gap"): behind TAC-CA it stays at or above the safety line
-    # d_s - safety_gap_margin_m (measured: smallest 4.956 m, NYCC alpha = 0).
+    # d_s - safety_gap_margin_m (measured: smallest 4.898 m, NYCC alpha = 0.25).
     assert result.metrics.min_human_gap_m >= run_config.min_safe_gap_m
     assert result.metrics.unsafe_steps == 0
     assert result.metrics.driver_fallback_steps <= MAX_DRIVER_FALLBACK_STEPS
@@ -73,7 +74,7 @@ def test_behind_tac_gru_the_human_comes_closer_and_the_av_keeps_d_s(alpha: float
                                                                     run_config) -> None:
     """TAC-GRU on US06 departs furthest from the plan the human expects: the shipped human
     (docs/DRIVER_IRL.md, "Closed-loop safety") then comes below the safety line on a few steps
-    (measured: smallest 4.289 m, 1-9 steps below 4.5 m per alpha), never near a collision, while
+    (measured: smallest 4.167 m, 8-11 steps below 4.5 m per alpha), never near a collision, while
     the AV's own gap never goes below d_s."""
     metrics = closed_loop('us06', alpha, 'gru').metrics
     d_s = run_config.planner.standstill_gap_m
@@ -152,8 +153,8 @@ def test_golden_metrics() -> None:
 def test_the_shipped_human_follows_closer_than_the_cautious_one(run_config) -> None:
     """NYCC, TAC-CA, alpha = 0 (where the AV departs most from the plan the human expects): the
     shipped human, planning its bound against the expected braking only, comes below d_s
-    (measured 4.956 m; the cautious profile keeps 5.000 m) and falls back to hard braking more
-    often (measured 73 steps), while the AV's own gap never goes below d_s."""
+    (measured 4.963 m; the cautious profile keeps 5.000 m) and falls back to hard braking more
+    often (measured 25 steps), while the AV's own gap never goes below d_s."""
     from trust_av_planner.system.closed_loop import simulate
     from trust_av_planner.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
     d_s = run_config.planner.standstill_gap_m

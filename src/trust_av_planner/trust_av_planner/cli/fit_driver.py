@@ -93,8 +93,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                              'not fitted (dt_s, horizon, bounds); with config/human_cautious.yaml '
                              'layered over it, the cautious candidate (default: the shipped)')
     parser.add_argument('--iterations', type=bounded_int('--iterations', 1, MAX_ITERATIONS),
-                        default=80,
-                        help='Nelder-Mead iterations per start (default: %(default)s)')
+                        default=70,
+                        help='Nelder-Mead iterations per start (default: %(default)s, the '
+                             'shipped fit)')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(func=run)
 
