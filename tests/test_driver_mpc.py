@@ -219,3 +219,22 @@ def test_stopped_a_hair_below_d_s_is_solved_not_a_fallback(run_config) -> None:
     assert mpc.step(cfg.standstill_gap_m - 1e-3, 0.0, 0.0, np.zeros(3)).status == (
         'fallback: gap_bound_infeasible')
 
+
+
+def test_a_qp_failure_is_a_named_fallback_to_the_hold_gap_plan(run_config) -> None:
+    # One DAQP iteration cannot solve the bound-active problem of the test above: the step
+    # falls back to the hold-gap controller against the bound's AV speeds, named by DAQP's
+    # exit flag.
+    cfg = dataclasses.replace(run_config.driver, speed_max_mps=30.0, solver_max_iter=1)
+    mpc = DriverMpc(cfg)
+    result = mpc.step(5.2, 21.0, 20.0, np.zeros(3))
+    assert not result.success
+    assert result.status == 'fallback: DAQP iteration limit (exit flag -4)'
+    expected = kinematics.hold_gap_plan(
+        5.2, 21.0, list(mpc.cautious_av_speeds(20.0, np.zeros(3))), dt_s=cfg.dt_s,
+        standstill_gap_m=cfg.standstill_gap_m, time_headway_s=cfg.time_headway_s,
+        gap_gain_per_s2=cfg.fallback_gap_gain_per_s2,
+        speed_gain_per_s=cfg.fallback_speed_gain_per_s, accel_min_mps2=cfg.accel_min_mps2,
+        accel_max_mps2=cfg.accel_max_mps2, speed_min_mps=cfg.speed_min_mps,
+        speed_max_mps=cfg.speed_max_mps)
+    assert result.plan_mps2 == pytest.approx(expected)

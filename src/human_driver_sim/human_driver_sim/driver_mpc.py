@@ -161,6 +161,9 @@ def bound_av_accels(config: DriverConfig, expected_mps2: np.ndarray) -> np.ndarr
 
 SOLVED = 'Solve_Succeeded'
 """The status of a solved step (the word of CasADi's SQP, which the AV planner reports)."""
+DAQP_EXIT_FLAGS = {-1: 'infeasible', -2: 'cycling', -3: 'unbounded', -4: 'iteration limit'}
+"""DAQP's failure exit flags (``include/constants.h`` of darnstrom/daqp: EXIT_INFEASIBLE,
+EXIT_CYCLE, EXIT_UNBOUNDED, EXIT_ITERLIMIT); 1 and 2 are (soft) optimal."""
 
 
 @dataclass(frozen=True)
@@ -300,7 +303,8 @@ class DriverMpc:
             speed_gain_per_s=c.fallback_speed_gain_per_s, accel_min_mps2=c.accel_min_mps2,
             accel_max_mps2=c.accel_max_mps2, speed_min_mps=c.speed_min_mps,
             speed_max_mps=c.speed_max_mps))
-        status = f'{stats["unified_return_status"]} (DAQP exit flag {stats["return_status"]})'
+        flag = stats['return_status']
+        status = f'DAQP {DAQP_EXIT_FLAGS.get(flag, "failed")} (exit flag {flag})'
         LOG.debug('driver MPC fallback (%s)', status)
         self._previous = None
         return DriverResult(plan, f'fallback: {status}', False, iterations, elapsed)

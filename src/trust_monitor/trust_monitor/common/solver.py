@@ -37,17 +37,14 @@ QRQP_MAX_STEPS = 10
 corner ``qrqp`` stalled on at N = 30 (docs/MODEL.md, "QP solver on fine grids")."""
 
 
-def _with_daqp(options: dict[str, Any]) -> dict[str, Any]:
-    options['qpsol'] = 'daqp'
-    options['qpsol_options'] = {'error_on_fail': False}
-    return options
-
-
 def nmpc_solver_options(max_iter: int, steps: int) -> dict[str, Any]:
     """SQP options of the NMPC: the shared ``qrqp`` settings up to :data:`QRQP_MAX_STEPS`
     steps (the paper's grid), DAQP for finer grids."""
     options = sqp_options(max_iter)
-    return _with_daqp(options) if steps > QRQP_MAX_STEPS else options
+    if steps > QRQP_MAX_STEPS:
+        options['qpsol'] = 'daqp'
+        options['qpsol_options'] = {'error_on_fail': False}
+    return options
 
 
 def qp_options(max_iter: int) -> dict[str, Any]:
