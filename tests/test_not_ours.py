@@ -6,6 +6,7 @@ foreign bag."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -92,3 +93,150 @@ def test_dev_stdout_is_still_an_output(tmp_path: Path) -> None:
             text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert out.read_text() == '{}'
+
+
+# --- withdrawal ------------------------------------------------------------------------
+
+def _conditions() -> list:
+    from trust_av_planner.drive.sessions import Condition
+    return [Condition('a', 0.0, 'ca', 'us06'), Condition('b', 1.0, 'ca', 'us06')]
+
+
+def _withdraw(study: Path, participant: str, *extra: str) -> int:
+    return main(['drive', '--study', str(study), '--participant', participant, '--withdraw',
+                 *extra])
+
+
+def _refused(capsys: pytest.CaptureFixture[str], *words: str) -> None:
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('trust-av drive: error: '), err
+    assert 'Traceback' not in err and all(word in err for word in words), err
+
+
+def _foreign_folders(root: Path) -> dict[str, Path]:
+    """Folders trust-av never made, each where a participant folder could be."""
+    made: dict[str, Path] = {}
+    documents = root / 'Documents'                    # a user's folder with their files
+    (documents / 'taxes').mkdir(parents=True)
+    (documents / 'taxes' / '2025.pdf').write_bytes(b'%PDF')
+    made['a user folder'] = documents
+    (root / 'Empty').mkdir()
+    made['an empty folder'] = root / 'Empty'
+    looks = root / 'Looks'                            # a session.json that is not a session
+    looks.mkdir()
+    (looks / 'session.json').write_text('{"participant": "Looks"}\n')
+    made['a folder with a foreign session.json'] = looks
+    other = root / 'Other'                            # another participant's session copied
+    other.mkdir()
+    (other / 'session.json').write_text(json.dumps(
+        {'participant': 'P99', 'row': 0, 'order': ['a', 'b'], 'practice_done': False,
+         'drives': []}))
+    made["another participant's session"] = other
+    forged = root / 'Forged'                          # a marker naming someone else
+    forged.mkdir()
+    (forged / '.trust_av_participant').write_text(json.dumps(
+        {'trust_av': 'participant folder', 'study': 'x', 'participant': 'P01'}))
+    made['a marker naming another participant'] = forged
+    (root / 'AFile').write_text('not a folder')
+    made['a file'] = root / 'AFile'
+    return made
+
+
+@pytest.mark.parametrize('with_study', [False, True])
+def test_withdrawal_never_deletes_a_foreign_folder(tmp_path: Path, with_study: bool,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """`--study home --participant Documents` once deleted home/Documents: a folder that
+    does not carry the study's marker (or, from before markers, its session) is refused in
+    one line, exit 2, with --yes, and nothing anywhere is changed."""
+    from trust_av_planner.drive.sessions import enrol
+
+    if with_study:
+        enrol(tmp_path, 'P01', _conditions())
+    for name, folder in _foreign_folders(tmp_path).items():
+        before = _tree(tmp_path)
+        assert _withdraw(tmp_path, folder.name, '--yes') == 2, name
+        _refused(capsys, str(folder), 'nothing is deleted')
+        assert _tree(tmp_path) == before, name
+
+
+def test_a_foreign_folder_is_never_enrolled(tmp_path: Path) -> None:
+    """Enrolment never adopts a folder it did not make (it would then carry the marker)."""
+    from trust_av_planner.drive.sessions import SessionError, enrol
+
+    for folder in _foreign_folders(tmp_path).values():
+        before = _tree(tmp_path)
+        with pytest.raises(SessionError):
+            enrol(tmp_path, folder.name, _conditions())
+        assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize('where', ['participant folder', 'study directory', 'inside'])
+def test_withdrawal_refuses_a_symbolic_link(tmp_path: Path, where: str,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    from trust_av_planner.drive.sessions import enrol
+
+    real = tmp_path / 'real'
+    enrol(real, 'P01', _conditions())
+    keep = tmp_path / 'keep'                 # what a link might point at
+    keep.mkdir()
+    (keep / 'precious').write_text('not ours')
+    study, participant = real, 'P01'
+    if where == 'participant folder':
+        (real / 'P02').symlink_to(real / 'P01')          # a link to a real participant's
+        participant = 'P02'
+    elif where == 'study directory':
+        study = tmp_path / 'linked'
+        study.symlink_to(real)
+    else:
+        (real / 'P01' / 'shortcut').symlink_to(keep)
+    before = _tree(tmp_path)
+    assert _withdraw(study, participant, '--yes') == 2
+    _refused(capsys, 'symbolic link', 'nothing is deleted')
+    assert _tree(tmp_path) == before
+
+
+def test_withdrawal_deletes_our_folder_after_confirmation(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import io
+
+    from trust_av_planner.drive.sessions import MARKER, enrol
+
+    enrol(tmp_path, 'P01', _conditions())
+    marker = json.loads((tmp_path / 'P01' / MARKER).read_text())
+    study = json.loads((tmp_path / 'study.json').read_text())
+    assert marker['participant'] == 'P01' and marker['study'] == study['study']
+    before = _tree(tmp_path)
+    assert _withdraw(tmp_path, 'P01') == 2          # no terminal (pytest's stdin), no --yes
+    _refused(capsys, '--yes', 'no terminal')
+    assert _tree(tmp_path) == before
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    for answer, deleted in (('n\n', False), ('', False), ('y\n', True)):
+        monkeypatch.setattr(sys, 'stdin', Terminal(answer))
+        assert _withdraw(tmp_path, 'P01') == 0
+        out = capsys.readouterr().out
+        assert (tmp_path / 'P01').exists() != deleted
+        assert ('every file deleted' if deleted else 'nothing deleted') in out
+    assert _withdraw(tmp_path, 'P01', '--yes') == 0
+    assert 'no data in this study' in capsys.readouterr().out
+
+
+def test_a_folder_from_before_markers_is_recognised_by_its_session(tmp_path: Path) -> None:
+    """A study made by an earlier version: its participant folders have a session.json of
+    the participant and the study a study.json, but no marker. Resuming adds the marker;
+    withdrawal deletes such a folder."""
+    from trust_av_planner.drive.sessions import MARKER, enrol, withdraw
+
+    for participant in ('P01', 'P02'):
+        enrol(tmp_path, participant, _conditions())
+        (tmp_path / participant / MARKER).unlink()
+    (tmp_path / 'study.json').write_text('{"enrolled": 2}\n')   # the old counter
+    enrol(tmp_path, 'P01', _conditions())                       # resumed
+    assert (tmp_path / 'P01' / MARKER).is_file()
+    assert 'study' in json.loads((tmp_path / 'study.json').read_text())
+    assert withdraw(tmp_path, 'P01') and withdraw(tmp_path, 'P02')
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['study.json']
