@@ -240,3 +240,117 @@ def test_a_folder_from_before_markers_is_recognised_by_its_session(tmp_path: Pat
     assert 'study' in json.loads((tmp_path / 'study.json').read_text())
     assert withdraw(tmp_path, 'P01') and withdraw(tmp_path, 'P02')
     assert sorted(p.name for p in tmp_path.iterdir()) == ['study.json']
+
+
+# --- repair-bag ------------------------------------------------------------------------
+
+ATTACHMENT = ('calibration.yaml', 'application/yaml', b'wheelbase_m: 2.7\n')
+METADATA = ('recording', {'operator': 'site B', 'weather': 'dry'})
+QUIET = '/lead/status'
+
+
+def foreign_mcap(path: Path, *, finished: bool, messages: int = 40) -> None:
+    """An MCAP another tool wrote (profile ros2, CDR, ros2msg schemas, as ``ros2 bag
+    record``): an attachment, a metadata record, a channel without messages and a schema
+    no channel uses besides /lead/odom's messages; finished, or cut off by a kill (chunks on
+    disk, no summary, no footer)."""
+    from mcap.writer import CompressionType
+    from mcap.writer import Writer as McapWriter
+    from test_recording import odometry
+
+    with path.open('wb') as handle:
+        writer = McapWriter(handle, compression=CompressionType.ZSTD, chunk_size=512)
+        writer.start(profile='ros2', library='mcap-cpp; rosbag2 jazzy')
+        writer.add_attachment(11, 12, *ATTACHMENT)
+        writer.add_metadata(*METADATA)
+        writer.register_schema('my_pkg/msg/Note', 'ros2msg', b'string text')
+        odom = writer.register_channel(
+            '/lead/odom', 'cdr', writer.register_schema('nav_msgs/msg/Odometry', 'ros2msg', b''),
+            {})
+        writer.register_channel(QUIET, 'cdr',
+                                writer.register_schema('std_msgs/msg/String', 'ros2msg', b''), {})
+        for i in range(messages):
+            log_time = 5_000_000_000 + 17 * i
+            writer.add_message(odom, log_time=log_time, publish_time=log_time,
+                               data=odometry(i * 10**9, float(i)))
+        if finished:
+            writer.finish()
+        handle.flush()
+
+
+@pytest.mark.parametrize('layout', ['lone .mcap', 'directory without metadata.yaml'])
+def test_a_complete_foreign_recording_is_never_rewritten(
+        tmp_path: Path, layout: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """It was rewritten, its attachment and metadata record dropped, the original deleted."""
+    if layout == 'lone .mcap':
+        path = tmp_path / 'drive.mcap'
+        foreign_mcap(path, finished=True)
+    else:
+        path = tmp_path / 'drive'
+        path.mkdir()
+        foreign_mcap(path / 'drive_0.mcap', finished=True)
+    before = _tree(tmp_path)
+    assert main(['repair-bag', str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'a complete bag written by mcap-cpp' in err, err
+    assert 'never rewrites a complete recording' in err
+    assert ('ros2 bag reindex' in err) == (layout != 'lone .mcap')
+    assert _tree(tmp_path) == before
+
+
+def test_a_repair_keeps_attachments_metadata_and_quiet_channels(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from mcap.reader import make_reader
+    from rosbag2_rules import check_bag_directory
+    from rosbags.rosbag2 import Reader
+
+    from trust_av_planner.graph.bag_repair import complete_mcap
+
+    lone = tmp_path / 'drive.mcap'
+    foreign_mcap(lone, finished=False)
+    assert not complete_mcap(lone)
+    assert main(['repair-bag', str(lone)]) == 0
+    out = capsys.readouterr().out
+    bag = tmp_path / 'drive'
+    (mcap,) = bag.glob('*.mcap')
+    assert complete_mcap(mcap) and check_bag_directory(bag) == []
+    with mcap.open('rb') as handle:
+        reader = make_reader(handle)
+        attachments = [(a.name, a.media_type, a.data) for a in reader.iter_attachments()]
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+        summary = reader.get_summary()
+        assert summary is not None
+        topics = {c.topic for c in summary.channels.values()}
+        schemas = {s.name for s in summary.schemas.values()}
+        kept = sum(1 for _ in reader.iter_messages())
+    assert attachments == [ATTACHMENT] and metadata[METADATA[0]] == METADATA[1]
+    assert 'rosbag2' in metadata                   # the repaired bag's own description
+    assert topics == {'/lead/odom', QUIET} and 'my_pkg/msg/Note' in schemas
+    with Reader(bag) as rosbag:
+        assert {c.topic: c.msgcount for c in rosbag.connections} == {'/lead/odom': kept,
+                                                                    QUIET: 0}
+    assert out == (f'{bag}: repaired, {kept} messages kept on 1 topic, 1 topic without '
+                   'messages, 1 schema no channel uses, 1 attachment, 1 metadata record; '
+                   'the unfinished recording was replaced once the repaired bag read back '
+                   'whole (mcap reader and rosbags)\n')
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['drive']
+
+
+def test_repair_bag_refuses_a_symbolic_link(tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """A link named as the recording (or the MCAP file in a bag directory): the repair would
+    move the link, not the recording; refused in one line, nothing changed."""
+    elsewhere = tmp_path / 'elsewhere'
+    elsewhere.mkdir()
+    foreign_mcap(elsewhere / 'real.mcap', finished=False)
+    (tmp_path / 'link.mcap').symlink_to(elsewhere / 'real.mcap')
+    (tmp_path / 'linked_bag').symlink_to(elsewhere)
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    (bag / 'bag_0.mcap').symlink_to(elsewhere / 'real.mcap')
+    before = _tree(tmp_path)
+    for path in ('link.mcap', 'linked_bag', 'bag'):
+        assert main(['repair-bag', str(tmp_path / path)]) == 2, path
+        err = capsys.readouterr().err
+        assert err.count('\n') == 1 and 'a symbolic link' in err, err
+        assert _tree(tmp_path) == before
