@@ -81,6 +81,23 @@ def test_no_output_is_written_through_a_link(tmp_path: Path, capsys: pytest.Capt
     assert _tree(tmp_path) == before
 
 
+@pytest.mark.parametrize('name', ['all_runs.csv', 'table_IV_max_improvements.md',
+                                  'figure_3_trust_us06.png'])
+def test_reproduce_refuses_a_link_among_its_results_before_the_sweep(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str) -> None:
+    results = tmp_path / 'results'
+    results.mkdir()
+    victim = tmp_path / 'notes.txt'
+    victim.write_text('not ours')
+    (results / name).symlink_to(victim)
+    before = _tree(tmp_path)
+    assert main(['reproduce', '--traces', 'us06', '--predictors', 'ca', '--alphas', '0',
+                 '--results-dir', str(results), '--no-progress']) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and f'{name} is a symbolic link' in err, err
+    assert _tree(tmp_path) == before
+
+
 def test_dev_stdout_is_still_an_output(tmp_path: Path) -> None:
     """``/dev/stdout`` is a link (to ``/proc/self/fd/1``): the system's names for open
     files are followed, also when stdout is a regular file."""
