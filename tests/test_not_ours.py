@@ -154,6 +154,11 @@ def _foreign_folders(root: Path) -> dict[str, Path]:
     (forged / '.trust_av_participant').write_text(json.dumps(
         {'trust_av': 'participant folder', 'study': 'x', 'participant': 'P01'}))
     made['a marker naming another participant'] = forged
+    copied = root / 'Copied'                          # ours, but of another study
+    copied.mkdir()
+    (copied / '.trust_av_participant').write_text(json.dumps(
+        {'trust_av': 'participant folder', 'study': 'another-study', 'participant': 'Copied'}))
+    made['a folder of another study'] = copied
     (root / 'AFile').write_text('not a folder')
     made['a file'] = root / 'AFile'
     return made

@@ -250,6 +250,17 @@ def _study_record(study: Path) -> tuple[int, str]:
     return enrolled, study_id
 
 
+def _existing_study_id(study: Path) -> str | None:
+    """The study's id in its ``study.json``, or None (no file, no id, not ours); nothing
+    is written."""
+    try:
+        data = json.loads((study / STUDY_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    study_id = data.get('study') if isinstance(data, dict) else None
+    return study_id if isinstance(study_id, str) else None
+
+
 def _marker_text(study_id: str, participant: str) -> str:
     return json.dumps({'trust_av': 'participant folder', 'study': study_id,
                        'participant': participant,
@@ -288,6 +299,10 @@ def _participant_folder(study: Path, participant: str) -> Path:
         elif marker is None or marker.get('participant') != participant:
             raise SessionError(f'{directory}: exists and was not made by trust-av for '
                                f'participant {participant} (no {MARKER}); choose another '
+                               'participant id or move it away')
+        elif marker.get('study') != _existing_study_id(study):
+            raise SessionError(f'{directory}: made by trust-av for another study (its '
+                               f'{MARKER} names study {marker.get("study")!r}); choose another '
                                'participant id or move it away')
         return directory
     study_id = _study_record(study)[1]
@@ -331,15 +346,13 @@ def withdrawal_folder(study: Path, participant: str) -> Path | None:
                                    'nothing is deleted')
     marker = _marker(directory)
     if marker is not None:
-        try:
-            study_id = json.loads((study / STUDY_FILE).read_text()).get('study')
-        except (OSError, ValueError, AttributeError):
-            study_id = None
-        if marker.get('participant') != participant or marker.get('study') != study_id:
+        if (marker.get('participant') != participant
+                or marker.get('study') != _existing_study_id(study)):
             raise SessionError(f'{directory / MARKER}: names participant '
                                f'{marker.get("participant")!r} of study '
                                f'{marker.get("study")!r}, not {participant!r} of the study in '
-                               f'{study}; nothing is deleted')
+                               f'{study} (copied from another study? withdraw it there); '
+                               'nothing is deleted')
         return directory
     try:
         session = load_session(study, participant)
