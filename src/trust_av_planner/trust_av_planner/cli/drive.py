@@ -43,7 +43,7 @@ def _withdraw(args: argparse.Namespace) -> int:
         return 0
     files = sum(len(names) for _, _, names in os.walk(directory))
     if not args.yes:
-        if not sys.stdin.isatty():
+        if sys.stdin is None or not sys.stdin.isatty():
             raise TrustAvPlannerError(f'--withdraw would delete {directory} ({files} files); '
                                       'no terminal to confirm on, pass --yes')
         try:
