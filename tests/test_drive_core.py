@@ -183,7 +183,8 @@ def test_sessions_are_counterbalanced_resumed_and_withdrawn(tmp_path: Path) -> N
     assert withdraw(tmp_path, 'P01') and not (tmp_path / 'P01').exists()
     assert not withdraw(tmp_path, 'P01')
     assert enrol(tmp_path, 'P03', CONDITIONS).row == 2   # the counter holds no ids
-    assert json.loads((tmp_path / 'study.json').read_text()) == {'enrolled': 3}
+    counter = json.loads((tmp_path / 'study.json').read_text())
+    assert counter['enrolled'] == 3 and sorted(counter) == ['enrolled', 'study']
     assert 'P01' not in (tmp_path / 'study.json').read_text()
 
 
@@ -303,5 +304,6 @@ def test_withdrawal_from_the_command_line(tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
     from trust_av_planner.cli.main import main
     enrol(tmp_path, 'P07', CONDITIONS)
-    assert main(['drive', '--study', str(tmp_path), '--participant', 'P07', '--withdraw']) == 0
+    assert main(['drive', '--study', str(tmp_path), '--participant', 'P07', '--withdraw',
+                 '--yes']) == 0
     assert not (tmp_path / 'P07').exists() and 'every file deleted' in capsys.readouterr().out

@@ -125,9 +125,10 @@ def test_a_bag_on_a_full_disk_is_one_line_and_leaves_nothing(small_disk: Path) -
     assert list(small_disk.iterdir()) == []
 
 
-def test_a_link_is_followed_and_a_special_file_written_in_place(tmp_path: Path) -> None:
-    """Renaming over ``/dev/stdout`` or a FIFO would replace the device, not write to it;
-    a link keeps pointing where it did."""
+def test_a_link_is_refused_and_a_special_file_written_in_place(tmp_path: Path) -> None:
+    """A link would redirect the write to what it names (a link planted in a shared
+    directory): refused, nothing written; renaming over ``/dev/stdout`` or a FIFO would
+    replace the device, not write to it."""
     import threading
 
     real = tmp_path / 'results' / 'table.csv'
@@ -135,8 +136,17 @@ def test_a_link_is_followed_and_a_special_file_written_in_place(tmp_path: Path) 
     real.write_text('old')
     link = tmp_path / 'latest.csv'
     link.symlink_to(real)
-    write_text(link, 'new')
-    assert link.is_symlink() and real.read_text() == 'new'
+    dangling = tmp_path / 'dangling.csv'
+    dangling.symlink_to(tmp_path / 'results' / 'new.csv')
+    for path in (link, dangling):
+        with pytest.raises(OutputFileError) as error:
+            write_text(path, 'new')
+        assert str(error.value).startswith(f'{path}: a symbolic link (to {tmp_path}')
+        assert 'refusing to write through it' in str(error.value)
+    with pytest.raises(OutputFileError, match='symbolic link'), replacing(tmp_path / 'a', link):
+        pytest.fail('the block runs only when no path is a link')
+    assert link.is_symlink() and real.read_text() == 'old'
+    assert sorted(p.name for p in real.parent.iterdir()) == ['table.csv']
     fifo = tmp_path / 'pipe'
     os.mkfifo(fifo)
     received: list[str] = []
@@ -145,7 +155,8 @@ def test_a_link_is_followed_and_a_special_file_written_in_place(tmp_path: Path) 
     write_text(fifo, 'through the pipe')
     reader.join(timeout=30)
     assert received == ['through the pipe'] and stat.S_ISFIFO(os.stat(fifo).st_mode)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ['latest.csv', 'pipe', 'results']
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['dangling.csv', 'latest.csv', 'pipe',
+                                                         'results']
 
 
 def test_json_to_stdout_through_a_pipe(tmp_path: Path) -> None:

@@ -179,9 +179,11 @@ def write_trace_bag(times_s: np.ndarray, speeds_mps: np.ndarray, path: Path, top
         The number of messages written.
 
     Raises:
-        BagError: the bag directory exists already or cannot be written (then nothing of
-            it is left).
+        BagError: the bag directory exists already, is a symbolic link or cannot be
+            written (then nothing of it is left).
     """
+    if path.is_symlink():           # a dangling link would be written through
+        raise BagError(f'{path}: a symbolic link; give a real path for the bag directory')
     if path.exists():
         raise BagError(f'{path}: exists already; remove it or choose another name')
     count = 0

@@ -36,6 +36,7 @@ from preceding_traffic.replay import LeadReplay
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig
 from trust_monitor.common.kinematics import advance
+from trust_monitor.common.output_files import write_text
 from trust_monitor.common.params import (
     MAX_STAMP_S,
     MAX_VEHICLE_LENGTH_M,
@@ -196,10 +197,9 @@ class StandinNode(Node):
     def finish(self) -> None:
         """Write the report and end the node."""
         if self.config.report_path:
-            path = Path(self.config.report_path)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(json.dumps({'config': self.config.__dict__,
-                                        'command_deadline_s': self.deadline_s, **self.log}))
+            write_text(Path(self.config.report_path), json.dumps(
+                {'config': self.config.__dict__, 'command_deadline_s': self.deadline_s,
+                 **self.log}))
         self.finished = True
 
     def close(self) -> None:

@@ -31,7 +31,7 @@ from typing import Any, TextIO
 
 from trust_monitor.common.input_files import not_regular
 from trust_monitor.common.lifecycle import LifecycleConfig
-from trust_monitor.common.output_files import cannot_write, odd_path, replacing
+from trust_monitor.common.output_files import cannot_write, link_refused, odd_path, replacing
 from trust_monitor.common.param_layers import layer_files, layered_params, read_layers
 from trust_monitor.common.params import build_config, check_known
 from trust_monitor.common.rcl_values import ParsedParams
@@ -152,12 +152,15 @@ def check_output(out_path: Path) -> None:
     """Refuse an output path that cannot be written, before any work.
 
     Raises:
-        EstimateError: an odd path (a NUL or newline in it, ``.``), a directory, or a
-            parent that is missing or not a directory.
+        EstimateError: an odd path (a NUL or newline in it, ``.``), a symbolic link, a
+            directory, or a parent that is missing or not a directory.
     """
     odd = odd_path(out_path)
     if odd is not None:
         raise EstimateError(f'-o {str(out_path)!r}: {odd}')
+    refused = link_refused(out_path)
+    if refused is not None:
+        raise EstimateError(f'-o {out_path}: {refused}')
     if out_path.is_dir():
         raise EstimateError(f'{out_path}: is a directory; -o needs a file name')
     parent = out_path.parent

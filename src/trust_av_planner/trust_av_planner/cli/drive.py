@@ -4,6 +4,8 @@ a study session of drives in counterbalanced order, recorded one bag per drive."
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from pathlib import Path
 
 from trust_av_planner.cli.options import add_params_file_option, positive_seconds
@@ -15,22 +17,45 @@ DEFAULT_DRIVE_FILE = DEFAULT_PARAMS_FILE.with_name('drive.yaml')
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av drive``."""
-    from trust_av_planner.drive.sessions import SessionError, check_participant, withdraw
+    from trust_av_planner.drive.sessions import SessionError, check_participant
 
     try:
         check_participant(args.participant)
+        if args.withdraw:
+            return _withdraw(args)
     except SessionError as err:
         raise TrustAvPlannerError(str(err)) from err
-    if args.withdraw:
-        gone = withdraw(args.study, args.participant)
-        print(f'participant {args.participant}: ' + ('every file deleted' if gone else
-                                                     'no data in this study'))
-        return 0
     from trust_av_planner.study.drive_session import run_session
     try:
         return run_session(args)
     except SessionError as err:
         raise TrustAvPlannerError(str(err)) from err
+
+
+def _withdraw(args: argparse.Namespace) -> int:
+    """Delete the participant's folder, only if it is proven this study's, after a
+    confirmation on the terminal (or ``--yes``)."""
+    from trust_av_planner.drive.sessions import withdraw, withdrawal_folder
+
+    directory = withdrawal_folder(args.study, args.participant)
+    if directory is None:
+        print(f'participant {args.participant}: no data in this study')
+        return 0
+    files = sum(len(names) for _, _, names in os.walk(directory))
+    if not args.yes:
+        if sys.stdin is None or not sys.stdin.isatty():
+            raise TrustAvPlannerError(f'--withdraw would delete {directory} ({files} files); '
+                                      'no terminal to confirm on, pass --yes')
+        try:
+            answer = input(f'delete {directory} and its {files} files for good? [y/N] ')
+        except EOFError:
+            answer = ''
+        if answer.strip().lower() not in ('y', 'yes'):
+            print(f'participant {args.participant}: nothing deleted')
+            return 0
+    withdraw(args.study, args.participant)      # checked again just before deleting
+    print(f'participant {args.participant}: every file deleted ({directory}, {files} files)')
+    return 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -45,8 +70,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'Jian et al. (2000) questionnaire after each drive, one rosbag2 bag per '
                     'drive under STUDY/PARTICIPANT/, a summary table and the comparison of the '
                     "person's ratings with every trust model. Run again to resume. Exit codes: "
-                    '0 done (or stopped by an abandoned drive: run again to resume), 2 bad '
-                    'input or a node failed, 130 interrupted.')
+                    '0 done (or stopped by an abandoned drive: run again to resume; a withdrawal '
+                    'done or declined), 2 bad input, a node failed or a withdrawal refused, '
+                    '130 interrupted.')
     parser.add_argument('--study', type=Path, required=True,
                         help='study directory (created; one sub-directory per participant)')
     parser.add_argument('--participant', required=True,
@@ -61,7 +87,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--port', type=int, default=None,
                         help="TCP port of the page (0: any free; default: the drive file's)")
     parser.add_argument('--withdraw', action='store_true',
-                        help='delete every file of the participant in this study and exit')
+                        help='delete every file of the participant in this study and exit: '
+                             'only a folder trust-av made for them (its '
+                             '.trust_av_participant marker, or a session.json of theirs '
+                             'from before markers), never through a symbolic link; asks '
+                             'for confirmation on the terminal')
+    parser.add_argument('--yes', action='store_true',
+                        help='--withdraw without asking (needed when stdin is not a terminal)')
     parser.add_argument('--startup-timeout-s', type=positive_seconds, default=60.0,
                         help='how long to wait for the nodes to connect (default: %(default)s)')
     add_params_file_option(parser)

@@ -200,6 +200,7 @@ def run(args: argparse.Namespace) -> int:
     if args.iterations < 1:
         raise TrustAvPlannerError(f'--iterations must be >= 1, got {args.iterations}')
     output_file(args.out)             # before the fit: minutes of work with nowhere to go
+    output_file(args.out.with_name(args.out.stem + '_eval.json'), '--out (its evaluation)')
     # the cautious driver: the candidate that is not refitted, and the inverse-KKT start's tau_H
     # and d_s (so the fit does not move with the params file's fitted driver)
     base = load_run_config([args.params_file, HUMAN_CAUTIOUS_PARAMS_FILE]).driver

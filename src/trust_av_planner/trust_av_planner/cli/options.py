@@ -20,7 +20,7 @@ from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 from trust_av_planner.system.metrics import Metrics
 from trust_monitor.common import registry
-from trust_monitor.common.output_files import cannot_write, odd_path
+from trust_monitor.common.output_files import cannot_write, link_refused, odd_path
 from trust_monitor.common.params import field_spec
 from trust_monitor.common.wall_clock import WallClockConfig
 
@@ -108,12 +108,16 @@ def output_file(path: Path, option: str = '--out') -> Path:
     """Check, before any work, that ``path`` can be written as a file.
 
     Raises:
-        TrustAvPlannerError: ``path`` is odd (a NUL or newline in it, ``.``), a directory,
-            or its nearest existing ancestor is not a writable directory.
+        TrustAvPlannerError: ``path`` is odd (a NUL or newline in it, ``.``), a symbolic
+            link (:func:`~trust_monitor.common.output_files.link_refused`), a directory, or
+            its nearest existing ancestor is not a writable directory.
     """
     odd = odd_path(path)
     if odd is not None:
         raise TrustAvPlannerError(f'{option} {str(path)!r}: {odd}')
+    refused = link_refused(path)
+    if refused is not None:
+        raise TrustAvPlannerError(f'{option} {path}: {refused}')
     if path.is_dir():
         raise TrustAvPlannerError(f'{path}: is a directory; {option} needs a file name')
     ancestor = path.parent

@@ -11,7 +11,7 @@ from trust_av_planner.errors import TrustAvPlannerError
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av repair-bag``."""
-    from trust_av_planner.graph.bag_repair import repair_bag  # rosbags: only when repairing
+    from trust_av_planner.graph.bag_repair import repair  # rosbags: only when repairing
 
     raw: str = args.path
     if raw == '' or '\x00' in raw:
@@ -25,9 +25,10 @@ def run(args: argparse.Namespace) -> int:
         raise TrustAvPlannerError(f'{path}: no such bag directory or .mcap file')
     if not (path.is_dir() or path.is_file()):       # a FIFO or a device: reading would block
         raise TrustAvPlannerError(f'{path}: not a bag directory or a regular .mcap file')
-    kept = repair_bag(path)
+    kept = repair(path)
     target = path if path.is_dir() else path.with_suffix('')
-    print(f'{target}: repaired, {kept} messages kept')
+    print(f'{target}: repaired, {kept}; the unfinished recording was replaced once the '
+          'repaired bag read back whole (mcap reader and rosbags)')
     return 0
 
 
@@ -43,9 +44,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     "recording this project wrote is cut into one chunk per step again (log "
                     "time = header stamp); another tool's keeps its log times (publish time "
                     'becomes the log time); a topic that cannot be written again (no schema, '
-                    'not CDR, not a ROS 2 Jazzy type) is refused, not dropped. The recording '
-                    'is replaced only once the repaired bag is complete and reads back whole. '
-                    "Exit codes: 0 repaired, 2 nothing readable, no complete message, another "
-                    "tool's complete bag, or the copy failed (nothing is changed then).")
+                    'not CDR, not a ROS 2 Jazzy type) is refused, not dropped. Attachments, '
+                    'metadata records, channels without messages and unused schemas are '
+                    'kept. A complete MCAP file (footer, summary and closing magic read, '
+                    "every CRC valid: MCAP's own rule) is never rewritten, whoever wrote it. "
+                    'The recording is replaced only once the repaired bag reads back whole '
+                    'with the mcap reader and rosbags (the same messages); what was kept is '
+                    "printed. Exit codes: 0 repaired, 2 nothing readable, no complete "
+                    "message, a complete recording, or the copy failed (nothing is changed "
+                    "then).")
     parser.add_argument('path', metavar='PATH', help='bag directory or .mcap file')
     parser.set_defaults(func=run)

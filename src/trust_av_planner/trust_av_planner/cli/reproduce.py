@@ -57,6 +57,11 @@ DEFAULT_RESULTS = {'table_i': Path('results/paper'),
                    'as_reported': Path('results/paper_as_reported'),
                    'paper_fitted': Path('results/paper_fitted'),
                    'human_cautious': Path('results/human_cautious')}
+RESULT_FILES = ('all_runs.csv', 'table_II_tac_gru_us06.csv', 'table_II_tac_gru_us06.md',
+                'table_III_tac_ca_us06.csv', 'table_III_tac_ca_us06.md',
+                'table_IV_max_improvements.csv', 'table_IV_max_improvements.md',
+                'figure_2_speed_profiles.png', 'figure_3_trust_us06.png')
+"""The files ``reproduce`` writes in the results directory (none may be a link)."""
 DRIVER_FITS = {'human_cautious': CAUTIOUS_FIT_FILE}
 """The driver-fit file a profile's population (``--drivers K``) draws from; the shipped fit
 for the others."""
@@ -163,6 +168,10 @@ def run(args: argparse.Namespace) -> int:
     except OSError as err:
         raise TrustAvPlannerError(f'--results-dir {out}: cannot create it '
                                   f'({err.strerror})') from err
+    for name in (*RESULT_FILES, f'params_lead_preview_{args.lead_preview}.yaml'):
+        refused = output_files.link_refused(out / name)   # before the sweep, not after it
+        if refused is not None:
+            raise TrustAvPlannerError(f'--results-dir {out}: {name} is {refused}')
     if args.lead_preview is not None:
         files.append(lead_preview_layer(args.lead_preview, out))
     executor: sweep.Executor

@@ -78,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
     config = load_run_config(args.params_files)
     settings = settings_from_args(args)
     output_file(args.out)             # before the training: minutes of work with nowhere to go
+    for card in ('.json', '.png'):    # the model card and loss curve beside it
+        output_file(args.out.with_suffix(card), '--out (its model card)')
     if not in_pinned_child():
         reason = unsupported_reason()
         if reason is not None:

@@ -3,7 +3,8 @@ the conditions, the session's progress on disk (resume after a crash) and withdr
 
 Layout of a study directory::
 
-    <study>/study.json                 enrolment counter (no participant ids)
+    <study>/study.json                 enrolment counter and the study's id (no participant ids)
+    <study>/<participant>/.trust_av_participant  marker: the study's id and the participant
     <study>/<participant>/session.json the session: order, drives done, their outcome
     <study>/<participant>/drive_<k>_<condition>/   one rosbag2 bag per drive
     <study>/<participant>/summary.csv  one row per drive
@@ -14,6 +15,15 @@ the conditions (Williams design: with n conditions every condition appears once 
 position in n rows, and each ordered pair of neighbours once; for odd n, 2n rows, the
 second n reversed). Withdrawal deletes the participant's directory; the enrolment counter
 keeps counting, so the next participant still gets the next row.
+
+Only a folder trust-av made is ever deleted. A participant folder is created whole with its
+marker (:data:`MARKER`, made in a hidden folder beside it and renamed into place), and a
+participant id whose folder exists without one is refused at enrolment. Withdrawal deletes a
+folder only when it carries the marker naming this study and this participant, or, for a
+folder made before markers existed, when its ``session.json`` is a session of this
+participant and the study has its ``study.json`` (such a folder gets its marker when the
+session is next resumed). A symbolic link (the study directory, the participant folder or
+anything in it) is refused: trust-av never makes one.
 """
 
 from __future__ import annotations
@@ -23,6 +33,8 @@ import os
 import re
 import shutil
 import tempfile
+import time
+import uuid
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +44,11 @@ PARTICIPANT_ID = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,31}')
 PRACTICE = 'practice'
 """The name of the practice drive (never in the comparison or the order)."""
 DONE, ABANDONED = 'done', 'abandoned'
+MARKER = '.trust_av_participant'
+"""The file trust-av writes into each participant folder it creates (JSON naming the
+study's id and the participant); withdrawal deletes only a folder that carries it."""
+STUDY_FILE = 'study.json'
+"""The study's enrolment counter and id."""
 
 
 class SessionError(ValueError):
@@ -136,8 +153,16 @@ def _write_json(path: Path, text: str) -> None:
 
 
 def session_path(study: Path, participant: str) -> Path:
-    """The participant's session file."""
-    return study / check_participant(participant) / 'session.json'
+    """The participant's session file.
+
+    Raises:
+        SessionError: a bad id, or the participant folder is a symbolic link.
+    """
+    directory = study / check_participant(participant)
+    if directory.is_symlink():
+        raise SessionError(f'{directory}: the participant folder is a symbolic link; trust-av '
+                           "never makes one, so it is not this study's")
+    return directory / 'session.json'
 
 
 def load_session(study: Path, participant: str) -> Session | None:
@@ -188,27 +213,171 @@ def enrol(study: Path, participant: str, conditions: list[Condition], *,
         if sorted(existing.order) != sorted(names):
             raise SessionError(f'participant {participant}: their session has conditions '
                                f'{existing.order}, the study now has {names}')
+        if existing.participant != participant:
+            raise SessionError(f'{session_path(study, participant)}: the session of '
+                               f'{existing.participant!r}, not of {participant!r}')
+        _participant_folder(study, participant)  # a folder made before markers gets one
         return existing
     study.mkdir(parents=True, exist_ok=True)
-    counter = study / 'study.json'
-    enrolled = json.loads(counter.read_text())['enrolled'] if counter.exists() else 0
-    row = int(enrolled)
+    _participant_folder(study, participant)
+    row, study_id = _study_record(study)
     session = Session(participant, row,
                       [names[i] for i in balanced_latin_square_row(len(names), row)],
                       practice_done=not practice)
     save_session(study, session)
-    _write_json(counter, json.dumps({'enrolled': row + 1}) + '\n')
+    _write_json(study / STUDY_FILE, json.dumps({'enrolled': row + 1, 'study': study_id}) + '\n')
     return session
 
 
+def _study_record(study: Path) -> tuple[int, str]:
+    """(participants enrolled so far, the study's id) from ``study.json``; a study without
+    one (new, or made before studies had ids) gets its id written now.
+
+    Raises:
+        SessionError: ``study.json`` is not one trust-av wrote.
+    """
+    path = study / STUDY_FILE
+    try:
+        data = json.loads(path.read_text()) if path.exists() else {'enrolled': 0}
+        enrolled, study_id = int(data['enrolled']), data.get('study')
+        if enrolled < 0 or not (study_id is None or isinstance(study_id, str)):
+            raise ValueError('not a counter and an id')
+    except (OSError, ValueError, TypeError, KeyError) as err:
+        raise SessionError(f'{path}: not a study file of trust-av ({err})') from err
+    if study_id is None:
+        study_id = uuid.uuid4().hex
+        _write_json(path, json.dumps({'enrolled': enrolled, 'study': study_id}) + '\n')
+    return enrolled, study_id
+
+
+def _existing_study_id(study: Path) -> str | None:
+    """The study's id in its ``study.json``, or None (no file, no id, not ours); nothing
+    is written."""
+    try:
+        data = json.loads((study / STUDY_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    study_id = data.get('study') if isinstance(data, dict) else None
+    return study_id if isinstance(study_id, str) else None
+
+
+def _marker_text(study_id: str, participant: str) -> str:
+    return json.dumps({'trust_av': 'participant folder', 'study': study_id,
+                       'participant': participant,
+                       'created': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())},
+                      indent=1) + '\n'
+
+
+def _marker(directory: Path) -> dict[str, Any] | None:
+    """The marker in ``directory``, or None (none, not a regular file, not ours)."""
+    path = directory / MARKER
+    try:
+        if not os.path.isfile(path) or os.path.islink(path):
+            return None
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if not (isinstance(data, dict) and data.get('trust_av') == 'participant folder'):
+        return None
+    return data
+
+
+def _participant_folder(study: Path, participant: str) -> Path:
+    """The participant's folder, created with its marker if missing (made in a hidden
+    folder and renamed into place: it never exists without its marker). A folder of a
+    resumed session made before markers existed gets its marker.
+
+    Raises:
+        SessionError: the folder exists and trust-av did not make it for this study.
+    """
+    directory = session_path(study, participant).parent
+    if os.path.lexists(directory):
+        marker = _marker(directory)
+        session = load_session(study, participant) if marker is None else None
+        if session is not None and session.participant == participant:
+            _write_json(directory / MARKER, _marker_text(_study_record(study)[1], participant))
+        elif marker is None or marker.get('participant') != participant:
+            raise SessionError(f'{directory}: exists and was not made by trust-av for '
+                               f'participant {participant} (no {MARKER}); choose another '
+                               'participant id or move it away')
+        elif marker.get('study') != _existing_study_id(study):
+            raise SessionError(f'{directory}: made by trust-av for another study (its '
+                               f'{MARKER} names study {marker.get("study")!r}); choose another '
+                               'participant id or move it away')
+        return directory
+    study_id = _study_record(study)[1]
+    staging = Path(tempfile.mkdtemp(dir=study, prefix=f'.{participant}.', suffix='.new'))
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        staging.chmod(0o777 & ~umask)
+        _write_json(staging / MARKER, _marker_text(study_id, participant))
+        os.rename(staging, directory)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return directory
+
+
+def withdrawal_folder(study: Path, participant: str) -> Path | None:
+    """The participant folder withdrawal would delete, proven this study's (see the module
+    notes), or None if the participant has no folder in the study.
+
+    Raises:
+        SessionError: a bad id; the study directory, the participant folder or anything in
+            it is a symbolic link; the folder is not one trust-av made for this participant
+            of this study. Nothing is deleted then.
+    """
+    directory = study / check_participant(participant)
+    for path in (study, directory):
+        if path.is_symlink():
+            raise SessionError(f'{path}: a symbolic link; trust-av never makes one, so '
+                               'nothing is deleted (remove the link yourself)')
+    if not os.path.lexists(directory):
+        return None
+    if not directory.is_dir():
+        raise SessionError(f'{directory}: not a folder; trust-av made no such participant '
+                           'folder, so nothing is deleted')
+    for root, dirs, files in os.walk(directory):
+        for name in dirs + files:
+            if os.path.islink(os.path.join(root, name)):
+                raise SessionError(f'{os.path.join(root, name)}: a symbolic link in the '
+                                   'participant folder; trust-av never makes one, so '
+                                   'nothing is deleted')
+    marker = _marker(directory)
+    if marker is not None:
+        if (marker.get('participant') != participant
+                or marker.get('study') != _existing_study_id(study)):
+            raise SessionError(f'{directory / MARKER}: names participant '
+                               f'{marker.get("participant")!r} of study '
+                               f'{marker.get("study")!r}, not {participant!r} of the study in '
+                               f'{study} (copied from another study? withdraw it there); '
+                               'nothing is deleted')
+        return directory
+    try:
+        session = load_session(study, participant)
+    except SessionError:
+        session = None
+    if session is None or session.participant != participant or not (
+            study / STUDY_FILE).is_file():
+        raise SessionError(f'{directory}: not a participant folder of this study (no {MARKER} '
+                           f'written by trust-av, no session.json of {participant}); nothing '
+                           'is deleted')
+    return directory            # made before markers existed: its session proves it
+
+
 def withdraw(study: Path, participant: str) -> bool:
-    """Delete every file of the participant (bags, session, summaries).
+    """Delete every file of the participant (bags, session, summaries), only if the folder
+    is proven this study's (:func:`withdrawal_folder`).
 
     Returns:
         Whether there was anything to delete.
+
+    Raises:
+        SessionError: as :func:`withdrawal_folder` (nothing is deleted).
     """
-    directory = study / check_participant(participant)
-    if not directory.exists():
+    directory = withdrawal_folder(study, participant)
+    if directory is None:
         return False
     shutil.rmtree(directory)
     return True

@@ -239,6 +239,21 @@ class BagWriter:
         self._pending[topic] = 0
         self._offsets[topic] = 8 if msgtype in STAMP_IN_FIRST_ELEMENT else 4
 
+    def add_attachment(self, name: str, media_type: str, data: bytes, *, log_time_ns: int,
+                       create_time_ns: int) -> None:
+        """Write an MCAP attachment record (a file kept with the recording, indexed in the
+        summary), e.g. one kept from a repaired recording; before the first message."""
+        self._mcap.add_attachment(create_time_ns, log_time_ns, name, media_type, data)
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """Write an MCAP metadata record (indexed in the summary); before the first message."""
+        self._mcap.add_metadata(name, data)
+
+    def add_schema(self, name: str, encoding: str, data: bytes) -> None:
+        """Register a schema no topic of the bag uses (kept from a repaired recording: it is
+        in the summary)."""
+        self._mcap.register_schema(name, encoding, data)
+
     def write(self, topic: str, data: bytes | memoryview, log_time_ns: int | None = None) -> int:
         """Append one raw CDR message to the current step; returns its log time (ns).
 

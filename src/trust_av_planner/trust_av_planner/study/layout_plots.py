@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_monitor.common.output_files import OutputFileError, link_refused
 
 LAYOUT_FILE = Path(__file__).resolve().parents[1] / 'config' / 'foxglove_layout.json'
 """The shipped layout (the repository's ``config/``; ``share/trust_av_planner/config/`` holds
@@ -271,9 +272,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--layout', type=Path, default=LAYOUT_FILE, help='Foxglove layout')
     parser.add_argument('--dpi', type=int, default=110, help='resolution of the PNG')
     args = parser.parse_args(argv)
+    refused = link_refused(args.png)      # before reading the recording
+    if refused is not None:
+        print(f'error: {args.png}: {refused}', file=sys.stderr)
+        return 2
     try:
         render_plots(args.bag, args.png, load_layout(args.layout), args.dpi)
-    except TrustAvPlannerError as err:
+    except (TrustAvPlannerError, OutputFileError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
     return 0

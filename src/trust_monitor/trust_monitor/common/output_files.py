@@ -7,6 +7,12 @@ replace the shipped model files by default. :func:`replacing` lets the caller wr
 temporary files beside the targets and renames them over the targets only when every one
 is complete and on disk (``os.replace`` is atomic within a file system, POSIX
 ``rename(2)``).
+
+A symbolic link is never written through (:func:`link_refused`): a link planted in a shared
+directory would redirect the write to whatever it names, so it is refused in one line, as
+bag, log and plot paths are. Only the system's names for open files and devices
+(``/dev/stdout``, ``/dev/fd/1``, ``/proc/self/fd/1``: links under ``/dev`` and ``/proc``)
+are followed.
 """
 
 from __future__ import annotations
@@ -53,8 +59,27 @@ def stop_signals_held() -> Iterator[None]:
         yield
 
 
+def _system_name(path: Path) -> bool:
+    """A name under ``/dev`` or ``/proc``: the system's names for devices and open files
+    (``/dev/stdout`` is a link to ``/proc/self/fd/1``)."""
+    parts = Path(os.path.abspath(path)).parts
+    return len(parts) > 1 and parts[1] in ('dev', 'proc')
+
+
+def link_refused(path: Path) -> str | None:
+    """Why ``path`` is refused as an output because it is a symbolic link, or ``None``:
+    a link (dangling or not) outside ``/dev`` and ``/proc`` would redirect the write to
+    what it names. Only the last component counts, as for bag directories (a linked parent
+    directory is the user's own choice of where to write)."""
+    if not os.path.islink(path) or _system_name(path):
+        return None
+    return (f'a symbolic link (to {os.readlink(path)}); refusing to write through it, '
+            'give the real path')
+
+
 def _target(path: Path) -> Path:
-    """Where writing ``path`` lands: a symbolic link's target (the link stays a link)."""
+    """Where writing ``path`` lands: the path itself, or a system name's target
+    (``/dev/stdout`` redirected to a regular file is that file)."""
     return Path(os.path.realpath(path)) if path.is_symlink() else path
 
 
@@ -75,14 +100,19 @@ def replacing(*paths: Path) -> Iterator[tuple[Path, ...]]:
     its path, with the stop signals (:data:`HELD_SIGNALS`) held back from the first rename
     to the last (a stop then acts right after the whole set is in place). When the block
     raises, or writing fails, the temporary files are removed and every path keeps what it
-    had. A symbolic link is followed (its target is replaced, the link kept); a path that
-    exists and is not a regular file (``/dev/stdout``, a FIFO) is handed to the block
-    itself.
+    had. A symbolic link is refused (:func:`link_refused`; only ``/dev/stdout`` and the
+    like are followed); a path that exists and is not a regular file (``/dev/stdout``, a
+    FIFO) is handed to the block itself.
 
     Raises:
-        OutputFileError: a file could not be created, written or renamed (a full disk, no
-            permission, a missing directory that cannot be made); one line naming it.
+        OutputFileError: a path is a symbolic link (nothing is written), or a file could not
+            be created, written or renamed (a full disk, no permission, a missing directory
+            that cannot be made); one line naming it.
     """
+    for path in paths:
+        refused = link_refused(Path(path))
+        if refused is not None:
+            raise OutputFileError(f'{path}: {refused}')
     # a special file is written through the name given (/dev/stdout -> a pipe has no path)
     targets = [Path(path) if _is_special(Path(path)) else _target(Path(path)) for path in paths]
     temporaries: dict[Path, Path] = {}      # target -> its temporary file
@@ -139,7 +169,11 @@ def odd_path(path: str | Path) -> str | None:
 def cannot_write(path: Path, directory: Path) -> str | None:
     """Why the output file ``path`` cannot be written, or ``None`` if it can. ``directory`` is
     where it goes (its nearest existing ancestor): a regular file (new or replaced) is
-    created there (:func:`replacing`), while a device or FIFO is written in place."""
+    created there (:func:`replacing`), while a device or FIFO is written in place; a
+    symbolic link is refused (:func:`link_refused`)."""
+    refused = link_refused(path)
+    if refused is not None:
+        return refused
     if path.exists() and not path.is_file():
         return None if os.access(path, os.W_OK) else 'not writable'
     reason = cannot_create_in(directory)

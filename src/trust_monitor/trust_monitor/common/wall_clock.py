@@ -149,9 +149,11 @@ class LoopStats:
                 'published': dict(sorted(self.published.items()))}
 
     def write(self, path: str | Path, node: str) -> None:
-        """Write :meth:`summary` (with the node name) as JSON."""
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        Path(path).write_text(json.dumps({'node': node, **self.summary()}, indent=1) + '\n')
+        """Write :meth:`summary` (with the node name) as JSON, whole or not at all; a
+        symbolic link is refused (:mod:`~trust_monitor.common.output_files`)."""
+        from trust_monitor.common.output_files import write_text
+
+        write_text(Path(path), json.dumps({'node': node, **self.summary()}, indent=1) + '\n')
 
 
 def _percentiles(values_ns: np.ndarray) -> dict[str, float | None]:
