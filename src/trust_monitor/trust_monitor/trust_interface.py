@@ -39,8 +39,8 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
-from trust_monitor.common.params import ParamsError, build_config
-from trust_monitor.common.registry import TRUST_MODELS, Component, config_types, get
+from trust_monitor.common.params import build_config
+from trust_monitor.common.registry import TRUST_MODELS, Component, build, config_types, get
 
 BOUND_TOLERANCE = 1e-12
 """Bisection stops when the bracket of E_max is this narrow (E is dimensionless, < 1)."""
@@ -205,12 +205,9 @@ def build_trust_model(trust: Any, params: Any) -> TrustModel:
     declares them: :func:`trust_monitor.ros.parameters.declare_component_params`).
 
     Raises:
-        RegistryError: the model is not registered.
-        ParamsError: its factory returned no :class:`TrustModel`.
+        RegistryError: the model is not registered, its factory failed or returned no
+            :class:`TrustModel`.
     """
     component = trust_model_component(trust.trust_model)
-    model = component.factory(trust, params)
-    if not isinstance(model, TrustModel):
-        raise ParamsError(f'trust model {component.name!r}: its factory returned a '
-                          f'{type(model).__name__}, not a TrustModel')
+    model: TrustModel = build(TRUST_MODELS, component, trust, params)
     return model

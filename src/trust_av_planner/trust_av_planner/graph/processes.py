@@ -181,6 +181,9 @@ class Graph:
                 continue
             if process.spec.name in allowed_done and code == 0:
                 continue
+            line = process.error_line() if code == 2 else ''
+            if line:   # a node's own one-line refusal (spin_node): it is the message
+                raise GraphError(f'node {process.spec.name}: {line}')
             raise GraphError(f'node {process.spec.name} exited with code {code}'
                              f'{" (killed by signal " + str(-code) + ")" if code < 0 else ""}; '
                              f'{process.tail()}')
