@@ -106,8 +106,8 @@ def check_plan(value: Any, *, group: str, name: str, step: int, steps: int, low:
         raise _fail(group, name, step, f'{what} {_short(value)} is not an array of numbers '
                                        f'({one_line(err)})') from err
     if array.dtype.kind not in 'iuf':
-        raise _fail(group, name, step, f'{what} {_short(value)} is a {type(value).__name__} '
-                                       f'of {array.dtype}, not of real numbers')
+        raise _fail(group, name, step, f'{what} {_short(value)} ({type(value).__name__} of '
+                                       f'{array.dtype}) is not an array of real numbers')
     if array.shape != (steps,):
         raise _fail(group, name, step, f'{what} has shape {array.shape}, expected ({steps},) '
                                        f'(one value per horizon step): {_short(value)}')
@@ -133,7 +133,7 @@ def check_number(value: Any, *, group: str, name: str, step: int, what: str,
         ComponentError: not a real number, not finite, or out of bounds.
     """
     if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
-        raise _fail(group, name, step, f'{what} {_short(value)} is a {type(value).__name__}, '
+        raise _fail(group, name, step, f'{what} {_short(value)} ({type(value).__name__}) is '
                                        'not a real number')
     number = float(value)
     if not math.isfinite(number):
@@ -155,6 +155,6 @@ def check_type(value: Any, kind: type | tuple[type, ...], *, group: str, name: s
     if not isinstance(value, kind):
         wanted = kind.__name__ if isinstance(kind, type) else \
             ' or '.join(k.__name__ for k in kind)
-        raise _fail(group, name, step, f'{what} {_short(value)} is a {type(value).__name__}, '
+        raise _fail(group, name, step, f'{what} {_short(value)} ({type(value).__name__}) is '
                                        f'not a {wanted}')
     return value

@@ -172,6 +172,11 @@ def _signature(factory: Callable[..., Any]) -> str:
         return ''
 
 
+def _short(value: Any) -> str:
+    text = ' '.join(repr(value).split())
+    return text if len(text) <= 60 else text[:57] + '...'
+
+
 def build(group: str, component: Component, shared: Any, params: Any) -> Any:
     """``component.factory(shared, params)``, checked: whatever the factory raises (any
     exception or ``SystemExit``; ``KeyboardInterrupt`` passes) and an object without the
@@ -196,8 +201,9 @@ def build(group: str, component: Component, shared: Any, params: Any) -> Any:
                             f'{one_line(err)}') from err
     missing = [a for a in INTERFACES[group] if not hasattr(built, a)]
     if missing:
-        raise RegistryError(f'{where}: its factory returned a {type(built).__name__} without '
-                            f'{", ".join(missing)} (not a {_group_name(group)})')
+        raise RegistryError(f'{where}: its factory returned {_short(built)} '
+                            f'({type(built).__name__}), not a {_group_name(group)}: it lacks '
+                            f'{", ".join(missing)}')
     return built
 
 
