@@ -34,7 +34,6 @@ import casadi as ca
 import numpy as np
 
 from trust_monitor.common import kinematics, registry
-from trust_monitor.common.component_checks import call, check_number
 from trust_monitor.common.params import (
     PARAM_METADATA_KEY,
     check_fields,
@@ -43,8 +42,7 @@ from trust_monitor.common.params import (
     require,
 )
 from trust_monitor.common.solver import nmpc_solver_options, solve
-from trust_monitor.trust_interface import TrustModel, make_trust_model
-from trust_monitor.trust_interface import explicability_bound as trust_bound
+from trust_monitor.trust_interface import CheckedBound, TrustModel, make_trust_model
 from trust_monitor.trust_model import TrustConfig, explicability
 
 LOG = logging.getLogger(__name__)
@@ -251,7 +249,7 @@ class TrustAwareNmpc:
         self.config = config
         self.trust = trust
         self.trust_model = make_trust_model(trust) if trust_model is None else trust_model
-        self.bounds_done = 0  # the trust model's step count in a bad bound's message
+        self.e_max_of = CheckedBound(self.trust_model, trust.trust_model)
         self.cpu_budget = cpu_budget
         self.grid_step_s, self.steps = prediction_grid(config, period_s)
         n, dt = self.steps, self.grid_step_s
@@ -310,24 +308,6 @@ class TrustAwareNmpc:
         upper[-1] = explicability_max
         return self._lower, upper
 
-    def _trust_bound(self, trust: Any, trust_min: float, steps: int,
-                     dt_s: float) -> float | None:
-        """The trust model's E_max (:func:`trust_monitor.trust_interface.explicability_bound`),
-        checked where it enters (:mod:`trust_monitor.common.component_checks`): None, inf,
-        or a number >= 0; anything the model raises on the way names it.
-
-        Raises:
-            ComponentError: the model raised, or the bound is none of those.
-        """
-        name, k = self.trust.trust_model, self.bounds_done
-        e_max = call(registry.TRUST_MODELS, name, k, 'the explicability bound', trust_bound,
-                     self.trust_model, trust, trust_min, steps, dt_s)
-        if e_max is not None and e_max != math.inf:
-            check_number(e_max, group=registry.TRUST_MODELS, name=name, step=k, what='E_max',
-                         low=0.0)
-        self.bounds_done += 1
-        return e_max
-
     def step(self, gap_m: float, speed_mps: float, lead_speeds_mps: np.ndarray,
              expected_mps2: np.ndarray, trust: Any) -> PlanResult:
         """Plan the next N accelerations.
@@ -345,7 +325,7 @@ class TrustAwareNmpc:
             The plan and the solver's report; never raises for an infeasible problem.
         """
         c, n, dt = self.config, self.steps, self.grid_step_s
-        e_max = self._trust_bound(trust, c.trust_min, n, dt)
+        e_max = self.e_max_of(trust, c.trust_min, n, dt)
         params = np.concatenate([[gap_m, speed_mps], lead_speeds_mps, expected_mps2, [c.alpha]])
         if e_max is None:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps, 'trust below T_min',

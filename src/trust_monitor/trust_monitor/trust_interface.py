@@ -39,6 +39,7 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
+from trust_monitor.common.component_checks import call, check_number
 from trust_monitor.common.params import build_config
 from trust_monitor.common.registry import TRUST_MODELS, Component, build, config_types, get
 
@@ -155,6 +156,37 @@ def explicability_bound(model: TrustModel, state: Any, trust_min: float, steps: 
     if model.closed_form_bound is not None:
         return model.closed_form_bound(state, trust_min, steps, dt_s)
     return numeric_bound(model, state, trust_min, steps, dt_s)
+
+
+class CheckedBound:
+    """:func:`explicability_bound` as the NMPC takes it, checked where it enters
+    (:mod:`trust_monitor.common.component_checks`): None, inf, or a number >= 0; anything
+    the model raises on the way names it.
+
+    Args:
+        model: the trust model.
+        name: its registered name (for the message, with the count of bounds taken).
+    """
+
+    def __init__(self, model: TrustModel, name: str) -> None:
+        self.model = model
+        self.name = name
+        self.steps_done = 0
+
+    def __call__(self, state: Any, trust_min: float, steps: int, dt_s: float) -> float | None:
+        """:func:`explicability_bound` of the model (same arguments and result).
+
+        Raises:
+            ComponentError: the model raised, or the bound is none of those.
+        """
+        k = self.steps_done
+        e_max = call(TRUST_MODELS, self.name, k, 'the explicability bound',
+                     explicability_bound, self.model, state, trust_min, steps, dt_s)
+        if e_max is not None and e_max != math.inf:
+            check_number(e_max, group=TRUST_MODELS, name=self.name, step=k, what='E_max',
+                         low=0.0)
+        self.steps_done += 1
+        return e_max
 
 
 def paper_bound_holds(model: TrustModel) -> bool:
