@@ -117,9 +117,9 @@ def check_plan(value: Any, *, group: str, name: str, step: int, steps: int, low:
         finite = np.isfinite(plan)
         if not finite.all():
             k = int(np.argmin(finite))
-            raise _fail(group, name, step, f'{what}[{k}] = {plan[k]} is not finite')
+            raise _fail(group, name, step, f'{what}[{k}] = {float(plan[k])} is not finite')
         k = int(np.argmin(plan)) if lowest < low - BOUND_TOLERANCE else int(np.argmax(plan))
-        raise _fail(group, name, step, f'{what}[{k}] = {plan[k]!r} is outside its bounds '
+        raise _fail(group, name, step, f'{what}[{k}] = {float(plan[k])!r} is outside its bounds '
                                        f'[{low:g}, {high:g}] m/s^2')
     return plan
 
