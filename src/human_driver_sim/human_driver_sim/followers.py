@@ -107,9 +107,9 @@ class CheckedFollower:
                           steps=self.driver.horizon_steps, low=self.driver.accel_min_mps2,
                           high=self.driver.accel_max_mps2, what='plan_mps2')
         check_type(result.status, str, group=group, name=name, step=k, what='status')
-        check_type(result.success, bool | np.bool_, group=group, name=name, step=k,
+        check_type(result.success, (bool, np.bool_), group=group, name=name, step=k,
                    what='success')
-        check_type(result.iterations, int | np.integer, group=group, name=name, step=k,
+        check_type(result.iterations, (int, np.integer), group=group, name=name, step=k,
                    what='iterations')
         check_number(result.solve_time_s, group=group, name=name, step=k, what='solve_time_s',
                      low=0.0)
