@@ -39,7 +39,7 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
-from trust_monitor.common.component_checks import call, check_number
+from trust_monitor.common.component_checks import ComponentError, call, check_number
 from trust_monitor.common.params import build_config
 from trust_monitor.common.registry import TRUST_MODELS, Component, build, config_types, get
 
@@ -160,8 +160,9 @@ def explicability_bound(model: TrustModel, state: Any, trust_min: float, steps: 
 
 class CheckedBound:
     """:func:`explicability_bound` as the NMPC takes it, checked where it enters
-    (:mod:`trust_monitor.common.component_checks`): None, inf, or a number >= 0; anything
-    the model raises on the way names it.
+    (:mod:`trust_monitor.common.component_checks`): the trust of the state it starts from a
+    finite number, the bound None, inf, or a number >= 0; anything the model raises on the
+    way names it.
 
     Args:
         model: the trust model.
@@ -180,13 +181,40 @@ class CheckedBound:
             ComponentError: the model raised, or the bound is none of those.
         """
         k = self.steps_done
-        e_max = call(TRUST_MODELS, self.name, k, 'the explicability bound',
-                     explicability_bound, self.model, state, trust_min, steps, dt_s)
-        if e_max is not None and e_max != math.inf:
+        check_number(call(TRUST_MODELS, self.name, k, 'trust()', self.model.trust, state),
+                     group=TRUST_MODELS, name=self.name, step=k, what='trust')
+        try:
+            e_max = call(TRUST_MODELS, self.name, k, 'the explicability bound',
+                         explicability_bound, self.model, state, trust_min, steps, dt_s)
+        except ComponentError:
+            self._propagated(state, steps, dt_s)   # names the bad reading, if one
+            raise
+        if e_max is None:          # no E keeps T >= T_min: or a reading that is no number?
+            self._propagated(state, steps, dt_s)
+        elif e_max != math.inf:
             check_number(e_max, group=TRUST_MODELS, name=self.name, step=k, what='E_max',
                          low=0.0)
         self.steps_done += 1
         return e_max
+
+    def _propagated(self, state: Any, steps: int, dt_s: float) -> None:
+        """Check the trust the model propagates from ``state`` at E = 0 and E = 1 (where
+        the bound failed or found no admissible E: what a bad reading inside it looks
+        like).
+
+        Raises:
+            ComponentError: a propagated trust is not a finite number, or a step raised.
+        """
+        k = self.steps_done
+        for score in (0.0, 1.0):
+            after = state
+            for _ in range(steps):
+                after = call(TRUST_MODELS, self.name, k, 'step()', self.model.step, after,
+                             score, dt_s)
+                check_number(call(TRUST_MODELS, self.name, k, 'trust()', self.model.trust,
+                                  after),
+                             group=TRUST_MODELS, name=self.name, step=k,
+                             what=f'propagated trust (E = {score:g})')
 
 
 def paper_bound_holds(model: TrustModel) -> bool:
