@@ -174,6 +174,7 @@ GRAPH_CASES = [(registry.PREDICTORS, 'broken_nan', 'planner', 'plan[0] = nan is 
 one (the driver); the trust monitor is managed like the planner."""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(('group', 'name', 'node', 'shown'), GRAPH_CASES,
                          ids=[c[1] for c in GRAPH_CASES])
 def test_a_broken_plugin_stops_the_graph_in_one_line(group: str, name: str, node: str,

@@ -17,7 +17,14 @@ import numpy as np
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverResult
 from trust_monitor.common import registry
-from trust_monitor.common.component_checks import call, check_number, check_plan, check_type
+from trust_monitor.common.component_checks import (
+    PASSING,
+    call,
+    check_number,
+    check_plan,
+    check_type,
+    raised,
+)
 from trust_monitor.common.params import check_fields, param, require
 
 
@@ -100,17 +107,23 @@ class CheckedFollower:
             ComponentError: it raised, or its result breaks the interface.
         """
         group, name, k = registry.DRIVERS, self.name, self.steps_done
-        result = call(group, name, k, 'step()', self.model.step, gap_m, speed_mps,
-                      av_speed_mps, expected_mps2)
-        check_type(result, DriverResult, group=group, name=name, step=k, what='result')
+        try:
+            result = self.model.step(gap_m, speed_mps, av_speed_mps, expected_mps2)
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(group, name, k, 'step()', err) from err
+        if not (type(result) is DriverResult and type(result.status) is str
+                and type(result.success) is bool and type(result.iterations) is int):
+            check_type(result, DriverResult, group=group, name=name, step=k, what='result')
+            check_type(result.status, str, group=group, name=name, step=k, what='status')
+            check_type(result.success, (bool, np.bool_), group=group, name=name, step=k,
+                       what='success')
+            check_type(result.iterations, (int, np.integer), group=group, name=name, step=k,
+                       what='iterations')
         plan = check_plan(result.plan_mps2, group=group, name=name, step=k,
                           steps=self.driver.horizon_steps, low=self.driver.accel_min_mps2,
                           high=self.driver.accel_max_mps2, what='plan_mps2')
-        check_type(result.status, str, group=group, name=name, step=k, what='status')
-        check_type(result.success, (bool, np.bool_), group=group, name=name, step=k,
-                   what='success')
-        check_type(result.iterations, (int, np.integer), group=group, name=name, step=k,
-                   what='iterations')
         check_number(result.solve_time_s, group=group, name=name, step=k, what='solve_time_s',
                      low=0.0)
         self.steps_done += 1

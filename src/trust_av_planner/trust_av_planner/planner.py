@@ -21,7 +21,7 @@ from trust_av_planner.predictors import Observation, Predictor
 from trust_av_planner.predictors.sampling import ModelGridPredictor
 from trust_av_planner.preview import LeadPreview, hold_on_grid
 from trust_monitor.common import registry
-from trust_monitor.common.component_checks import call, check_plan
+from trust_monitor.common.component_checks import PASSING, call, check_plan, raised
 from trust_monitor.common.kinematics import VehicleState, gap_m
 from trust_monitor.trust_interface import TrustModel
 from trust_monitor.trust_model import TrustConfig
@@ -70,8 +70,13 @@ class CheckedPredictor:
 
     def observe(self, observation: Observation) -> None:
         """Record the step just executed."""
-        call(registry.PREDICTORS, self.config.predictor, self.steps_done, 'observe()',
-             self.inner.observe, observation)
+        try:
+            self.inner.observe(observation)
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(registry.PREDICTORS, self.config.predictor, self.steps_done,
+                         'observe()', err) from err
 
     def predict(self) -> np.ndarray:
         """The estimator's prediction, checked (a float array).
@@ -80,9 +85,13 @@ class CheckedPredictor:
             ComponentError: it raised, or the prediction breaks the interface.
         """
         c, k = self.config, self.steps_done
-        plan = check_plan(call(registry.PREDICTORS, c.predictor, k, 'predict()',
-                               self.inner.predict),
-                          group=registry.PREDICTORS, name=c.predictor, step=k,
+        try:
+            value = self.inner.predict()
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(registry.PREDICTORS, c.predictor, k, 'predict()', err) from err
+        plan = check_plan(value, group=registry.PREDICTORS, name=c.predictor, step=k,
                           steps=c.horizon_steps, low=c.accel_min_mps2, high=c.accel_max_mps2)
         self.steps_done += 1
         return plan

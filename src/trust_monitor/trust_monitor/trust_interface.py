@@ -39,7 +39,7 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
-from trust_monitor.common.component_checks import ComponentError, call, check_number
+from trust_monitor.common.component_checks import PASSING, call, check_number, raised
 from trust_monitor.common.params import build_config
 from trust_monitor.common.registry import TRUST_MODELS, Component, build, config_types, get
 
@@ -160,9 +160,9 @@ def explicability_bound(model: TrustModel, state: Any, trust_min: float, steps: 
 
 class CheckedBound:
     """:func:`explicability_bound` as the NMPC takes it, checked where it enters
-    (:mod:`trust_monitor.common.component_checks`): the trust of the state it starts from a
-    finite number, the bound None, inf, or a number >= 0; anything the model raises on the
-    way names it.
+    (:mod:`trust_monitor.common.component_checks`): None, inf, or a number >= 0; anything
+    the model raises on the way names it, and so does a propagated trust that is no finite
+    number where the bound fails or admits no E (NaN compares false).
 
     Args:
         model: the trust model.
@@ -180,15 +180,14 @@ class CheckedBound:
         Raises:
             ComponentError: the model raised, or the bound is none of those.
         """
-        k = self.steps_done
-        check_number(call(TRUST_MODELS, self.name, k, 'trust()', self.model.trust, state),
-                     group=TRUST_MODELS, name=self.name, step=k, what='trust')
+        k = self.steps_done   # the trust of `state`: checked by the TrustEstimator that made it
         try:
-            e_max = call(TRUST_MODELS, self.name, k, 'the explicability bound',
-                         explicability_bound, self.model, state, trust_min, steps, dt_s)
-        except ComponentError:
-            self._propagated(state, steps, dt_s)   # names the bad reading, if one
+            e_max = explicability_bound(self.model, state, trust_min, steps, dt_s)
+        except PASSING:
             raise
+        except BaseException as err:
+            self._propagated(state, steps, dt_s)   # names the bad reading, if one
+            raise raised(TRUST_MODELS, self.name, k, 'the explicability bound', err) from err
         if e_max is None:          # no E keeps T >= T_min: or a reading that is no number?
             self._propagated(state, steps, dt_s)
         elif e_max != math.inf:

@@ -24,7 +24,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from trust_monitor.common.component_checks import call, check_number
+from trust_monitor.common.component_checks import PASSING, call, check_number, raised
 from trust_monitor.common.params import ParamsError, check_fields, param
 from trust_monitor.common.registry import TRUST_MODELS
 
@@ -222,7 +222,8 @@ class TrustEstimator:
         self.config = config
         self.model = make_trust_model(config) if model is None else model
         self.steps_done = 0
-        self.state = self._call('initial_state()', self.model.initial_state)
+        self.state = call(TRUST_MODELS, config.trust_model, 0, 'initial_state()',
+                          self.model.initial_state)
         self._reading(self.state)   # the initial trust: a number too
 
     @property
@@ -247,14 +248,16 @@ class TrustEstimator:
             raise ValueError(f'dt_s must be finite and >= 0, got {dt_s}')
         score = float(explicability(list(plan), list(expected), self.config.epsilon_mps2))
         perf = performance(score)
-        self.state = self._call('step()', self.model.step, self.state, score, dt_s)
+        try:
+            self.state = self.model.step(self.state, score, dt_s)
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(TRUST_MODELS, self.config.trust_model, self.steps_done, 'step()',
+                         err) from err
         trust, variance = self._reading(self.state)
         self.steps_done += 1
         return TrustEstimate(score, perf, trust, variance)
-
-    def _call(self, what: str, function: Any, *args: Any) -> Any:
-        return call(TRUST_MODELS, self.config.trust_model, self.steps_done, what, function,
-                    *args)
 
     def _reading(self, state: Any) -> tuple[float, float | None]:
         """The model's trust and variance of ``state``, checked where they enter the loop
@@ -265,9 +268,13 @@ class TrustEstimator:
             ComponentError: the model raised, or a reading is none of those.
         """
         name, k = self.config.trust_model, self.steps_done
-        trust = check_number(self._call('trust()', self.model.trust, state),
-                             group=TRUST_MODELS, name=name, step=k, what='trust')
-        variance = self._call('variance()', self.model.variance, state)
+        try:
+            trust, variance = self.model.trust(state), self.model.variance(state)
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(TRUST_MODELS, name, k, 'its trust() or variance()', err) from err
+        trust = check_number(trust, group=TRUST_MODELS, name=name, step=k, what='trust')
         if variance is not None:
             variance = check_number(variance, group=TRUST_MODELS, name=name, step=k,
                                     what='variance', low=0.0)
