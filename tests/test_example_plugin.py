@@ -165,7 +165,8 @@ def test_tutorial_includes_the_example_files() -> None:
     included = re.findall(r'^--8<-- "([^"]+)"$', text, flags=re.MULTILINE)
     assert set(included) == {
         'examples/trust_av_example_plugin/pyproject.toml',
-        'examples/trust_av_example_plugin/trust_av_example_plugin/smoothing.py'}
+        'examples/trust_av_example_plugin/trust_av_example_plugin/smoothing.py',
+        'examples/trust_av_example_plugin/tests/test_contract.py'}
     for path in included:
         assert (REPO / path).is_file(), path
 
