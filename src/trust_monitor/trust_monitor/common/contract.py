@@ -7,36 +7,21 @@
         check_component('trust_av.predictors', 'ses')               # in-process rules
         check_component('trust_av.predictors', 'ses', graph=True)   # and graph == in-process
 
-:func:`check_component` raises :class:`ContractError` naming every rule the component
-breaks (one per ``'; '``-separated part), and returns a :class:`ContractReport` of the rules
-it kept. The rules, for every group (:data:`~trust_monitor.common.registry.GROUPS`):
+:func:`check_component` raises :class:`ContractError` naming every rule broken and returns
+a :class:`ContractReport` of the rules kept: it **loads** (a ``Component`` whose factory
+takes ``(shared, params)``); its **declaration** (a description; parameters a frozen
+dataclass of ``param()`` fields with valid defaults and names no other component or its
+node uses; a trust model's start with its name); it **builds** from the shipped
+configuration; its **outputs** over seeded inputs pass the loop's own per-step checks
+(:mod:`trust_monitor.common.component_checks`); it is **deterministic**; a **bad
+parameter** is refused in one line naming it; a trust model's **time consistency**, **pure
+step**, **monotone** update, **bound** and **closed form**; with ``graph=True``, **graph ==
+in-process** over 30 steps (it starts processes: 10-30 s). docs/reference/components.md
+says each in full.
 
-- **loads**: its entry point loads to a :class:`~trust_monitor.common.registry.Component` of
-  its name whose factory takes ``(shared, params)``;
-- **declaration**: a description; its parameters (if any) a frozen dataclass whose every
-  field is declared with ``param()`` and has a valid default, and whose names no other
-  component and no parameter of its node use (a trust model's start with its name);
-- **builds**: the factory builds it from the shipped configuration and returns an object
-  with the group's interface;
-- **outputs**: over seeded, plausible inputs every output passes the checks the loop makes
-  every step (:mod:`trust_monitor.common.component_checks`: shape, finite, bounds);
-- **deterministic**: two instances fed the same inputs give the same outputs;
-- **bad parameters**: a value out of a parameter's declared range or choices is refused in
-  one line naming the parameter;
-- trust models also: **time consistency** (ten steps of 0.1 s equal one of 1 s),
-  **pure step** (a step leaves its input state as it was), **monotone** (trust after a
-  step does not rise with E: what the NMPC's bound assumes), **bound** (the numeric E_max
-  keeps the propagated trust >= T_min and is the largest that does) and **closed form**
-  (equal to the numeric bound, when the model gives one);
-- with ``graph=True``: **graph == in-process**: a 30-step ``trust-av run`` (the node graph,
-  one process per node, lock-step) with the component chosen records what the in-process
-  loop computes (a trust model with T_min above its initial trust, so that the NMPC's
-  trust constraint binds). It starts processes and takes 10-30 s.
-
-The contract checks a component inside the system it plugs into, so it drives the packages
-above this floor (the configuration, the planner, the loop, the CLI). It imports them when
-called, by name, as the registry loads a component: importing this module loads none of
-them.
+It checks a component inside the system it plugs into, so it drives the packages above
+this floor (the configuration, the planner, the loop, the CLI): it imports them when
+called, by name, as the registry loads a component; importing it loads none of them.
 """
 
 from __future__ import annotations
@@ -87,14 +72,8 @@ class ContractError(TrustMonitorError):
 
 @dataclass(frozen=True)
 class ContractReport:
-    """The rules a component kept.
-
-    Attributes:
-        group: its entry-point group.
-        name: its registered name.
-        passed: the rules it kept, in order.
-        skipped: rules that do not apply to it, with why (``'closed form: none given'``).
-    """
+    """The rules component ``name`` of ``group`` kept (``passed``, in order) and those that
+    do not apply to it, each with why (``skipped``: ``'closed form: none given'``)."""
 
     group: str
     name: str
@@ -130,10 +109,7 @@ def check_component(group: str, name: str, *, graph: bool = False, steps: int = 
         ContractError: it breaks one or more rules (each named, with why).
         RegistryError: ``group`` is not a group, or ``name`` is not registered in it.
     """
-    if group not in registry.GROUPS:
-        raise registry.RegistryError(f'unknown component group {group!r} '
-                                     f'(known: {list(registry.GROUPS)})')
-    if name not in registry.names(group):
+    if name not in registry.names(group):   # (names() refuses an unknown group)
         registry.get(group, name)   # raises: unknown, listing the registered names
     rules: list[tuple[str, Callable[[], None]]] = [
         ('loads', lambda: _loads(group, name)),
@@ -151,9 +127,7 @@ def check_component(group: str, name: str, *, graph: bool = False, steps: int = 
                   ('closed form', lambda: _closed_form(name))]
     if graph:
         rules.append(('graph == in-process', lambda: _graph_equals_in_process(group, name)))
-    passed: list[str] = []
-    skipped: list[str] = []
-    broken: list[str] = []
+    passed, skipped, broken = [], [], []
     for rule, check in rules:
         needed = [r for r in NEEDS.get(rule, ()) if r not in passed]
         if needed:
@@ -177,8 +151,8 @@ def check_component(group: str, name: str, *, graph: bool = False, steps: int = 
     return ContractReport(group, name, tuple(passed), tuple(skipped))
 
 
-def _ignore(_value: Any) -> None:
-    """A rule that only needs its call to succeed."""
+def _ignore(_value: Any) -> None:   # a rule that only needs its call to succeed
+    pass
 
 
 def _require(condition: bool, message: str) -> None:
@@ -217,24 +191,20 @@ def _declaration(group: str, name: str) -> None:
                         'node')
 
 
-def _run_config(group: str, name: str, files: tuple[Path, ...] = ()) -> Any:
-    """The shipped run configuration with ``name`` chosen (over ``files``)."""
-    config = _module('trust_av_planner.system.config')
-    if group == registry.TRUST_MODELS:
-        return config.load_run_config(files, {'/**': {'trust_model': name}})
-    chooser = 'predictor' if group == registry.PREDICTORS else 'driver_model'
-    return config.load_run_config(files, {NODE_OF[group]: {chooser: name}})
+def _run_config(group: str, name: str) -> Any:
+    """The shipped run configuration with ``name`` chosen."""
+    chooser = {registry.PREDICTORS: ('planner', 'predictor'),
+               registry.DRIVERS: ('human_driver', 'driver_model')}.get(
+                   group, ('/**', 'trust_model'))
+    return _module('trust_av_planner.system.config').load_run_config(
+        (), {chooser[0]: {chooser[1]: name}})
 
 
 def _outputs(group: str, name: str, steps: int, seed: int) -> list[Any]:
     """A fresh instance's outputs over ``steps`` seeded inputs, each through the loop's own
     checks (a bad one raises :class:`~trust_monitor.common.component_checks.ComponentError`)."""
-    rng = np.random.default_rng(seed)
-    if group == registry.PREDICTORS:
-        return _predictions(name, steps, rng)
-    if group == registry.DRIVERS:
-        return _follower_plans(name, steps, rng)
-    return _trust_readings(name, steps, rng)
+    feed = {registry.PREDICTORS: _predictions, registry.DRIVERS: _follower_plans}
+    return feed.get(group, _trust_readings)(name, steps, np.random.default_rng(seed))
 
 
 def _predictions(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
@@ -267,9 +237,8 @@ def _follower_plans(name: str, steps: int, rng: np.random.Generator) -> list[Any
     return out
 
 
-def _trust_config(name: str, **values: Any) -> Any:
-    trust_model = _module('trust_monitor.trust_model')
-    return trust_model.TrustConfig(**{**TRUST_BASE, **values, 'trust_model': name})
+def _trust_config(name: str) -> Any:
+    return _module('trust_monitor.trust_model').TrustConfig(**TRUST_BASE, trust_model=name)
 
 
 def _model(name: str) -> Any:
@@ -440,8 +409,7 @@ def _compare_graph(group: str, name: str, folder: Path) -> None:
         f'{t},{12.0 + 6.0 * math.sin(t / 5.0):.3f}\n' for t in range(GRAPH_STEPS + 1)))
     params = folder / 'component.yaml'
     if group == registry.TRUST_MODELS:   # T_min above its initial trust: the bound binds
-        shipped = _run_config(group, name)
-        model = shipped.trust_model()
+        model = _run_config(group, name).trust_model()
         trust_min = model.trust(model.initial_state()) + 0.1
         params.write_text(f'/**:\n  ros__parameters:\n    trust_model: {name}\n'
                           f'/**/planner:\n  ros__parameters:\n    trust_min: {trust_min!r}\n')
