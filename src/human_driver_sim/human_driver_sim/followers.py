@@ -95,9 +95,8 @@ class CheckedFollower:
         self.steps_done = 0
 
     def reset(self) -> None:
-        """Reset the model (its state and this step count)."""
+        """Reset the model's state (the step count goes on)."""
         call(registry.DRIVERS, self.name, self.steps_done, 'reset()', self.model.reset)
-        self.steps_done = 0
 
     def step(self, gap_m: float, speed_mps: float, av_speed_mps: float,
              expected_mps2: np.ndarray) -> DriverResult:

@@ -63,10 +63,10 @@ class CheckedPredictor:
         self.history_steps = int(getattr(inner, 'history_steps', 1))
 
     def reset(self) -> None:
-        """Forget the history (and the step count)."""
+        """Forget the history (the step count goes on: at a control period shorter than
+        ``dt_s`` the sampler resets the estimator before every prediction)."""
         call(registry.PREDICTORS, self.config.predictor, self.steps_done, 'reset()',
              self.inner.reset)
-        self.steps_done = 0
 
     def observe(self, observation: Observation) -> None:
         """Record the step just executed."""
