@@ -133,8 +133,8 @@ def get(group: str, name: str) -> Component:
         raise RegistryError(f'{_group_name(group)} {name!r} is registered twice: '
                             f'{", ".join(sorted(ep.value for ep in found))}')
     loaded = _load(group, found[0])
-    if isinstance(loaded, RegistryError):
-        raise loaded
+    if isinstance(loaded, RegistryError):   # a fresh one each time, with the original cause
+        raise RegistryError(str(loaded)) from loaded.__cause__
     return loaded
 
 
