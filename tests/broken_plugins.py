@@ -1,22 +1,36 @@
 """Install the deliberately broken plug-ins of ``tests/plugins/`` with real entry points: a
 ``*.dist-info`` directory (what pip writes) beside the modules, in a directory put first on
-``sys.path`` (this process) or PYTHONPATH (a command and the node processes it starts), so
-the project's environment stays as it was."""
+the import path (this process, through pytest's ``monkeypatch``) or PYTHONPATH (a command
+and the node processes it starts), so the project's environment stays as it was."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from types import ModuleType
+
+import pytest
 
 PLUGINS = Path(__file__).resolve().parent / 'plugins'
-sys.path.insert(0, str(PLUGINS))
-import trust_av_broken_plugins as broken  # noqa: E402  (the table of what is registered)
 
-sys.path.remove(str(PLUGINS))
+
+def _table() -> ModuleType:
+    """The plug-ins' module read from its file (what it registers), under another name than
+    the installed one's."""
+    spec = importlib.util.spec_from_file_location('broken_plugins_table',
+                                                  PLUGINS / 'trust_av_broken_plugins.py')
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+broken = _table()
 AT_IMPORT = 'broken_at_import'
 """The predictor whose module exits at import."""
 
@@ -50,18 +64,19 @@ def environment(site: Path) -> dict[str, str]:
 
 
 @contextmanager
-def installed_here(site: Path) -> Iterator[None]:
-    """The plug-ins in ``site`` registered in this process too (the registry's scans are
-    redone on entry and on exit)."""
+def installed_here(site: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """The plug-ins in ``site`` registered in this process too, while the context lasts
+    (``site`` on the import path through ``monkeypatch``; the registry's scans are redone
+    on entry and on exit)."""
     from trust_monitor.common import registry
 
-    sys.path.insert(0, str(site))
+    monkeypatch.syspath_prepend(str(site))
     registry._entry_points.cache_clear()
     registry._load.cache_clear()
     try:
         yield
     finally:
-        sys.path.remove(str(site))
+        monkeypatch.undo()
         registry._entry_points.cache_clear()
         registry._load.cache_clear()
         for module in ('trust_av_broken_plugins', 'trust_av_broken_at_import'):

@@ -70,9 +70,9 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture
-def registered(site: Path) -> Iterator[None]:
+def registered(site: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     """The broken plug-ins registered in this process for one test."""
-    with installed_here(site):
+    with installed_here(site, monkeypatch):
         yield
 
 
@@ -218,3 +218,25 @@ def test_the_checks_take_what_the_interface_allows() -> None:
             check_number(value, what='trust', **args)
     with pytest.raises(ComponentError, match=r'variance = -0.1 is outside its bounds \[0, inf\]'):
         check_number(-0.1, what='variance', low=0.0, **args)
+
+
+def test_a_refused_configure_is_named_by_the_orchestrator(tmp_path: Path) -> None:
+    """A managed node whose component fails to build logs one ``configure failed:`` line
+    (trust_monitor.ros.lifecycle); the orchestrator's message is that line, not 'see its
+    log' (seen end to end by hand: ``node planner: transition configure failed: predictor
+    'broken_factory_raises' (trust_av.predictors): its factory raised ValueError: ...``)."""
+    from types import SimpleNamespace
+
+    from trust_av_planner.graph.lifecycle_client import _why
+
+    log = tmp_path / 'planner.log'
+    log.write_text('[INFO] [1.0] [planner]: unconfigured\n[ERROR] [2.0] [planner]: configure '
+                   "failed: predictor 'x' (trust_av.predictors): its factory raised "
+                   'ValueError: no\n')
+    graph = SimpleNamespace(by_name=lambda name: SimpleNamespace(log_path=log))
+    assert _why(graph, 'ns/planner') == (": predictor 'x' (trust_av.predictors): its factory "
+                                         'raised ValueError: no')
+    log.write_text('[ERROR] [2.0] [planner]: configure failed: Traceback (most recent call '
+                   'last):\n  File "x.py"\n')
+    assert _why(graph, 'planner') == ' (see its log)'
+    assert _why(None, 'planner') == ' (see its log)'
