@@ -242,3 +242,16 @@ def test_soak_wall_two_minutes(tmp_path: Path) -> None:
         assert row['recorded'] >= 0.5 * 120 * figures['rate_hz'], row
         assert row['max_gap_s'] <= 1.0, row
     assert all(figures['loops'][node]['ticks'] > 0 for node in NODES)
+
+
+def test_component_checks_benchmark_smoke(tmp_path: Path) -> None:
+    """bench_component_checks.py on 5 steps writes the per-step cost of the output checks
+    beside the cost of a step (no timing threshold)."""
+    from bench_component_checks import main
+
+    out = tmp_path / 'checks.json'
+    assert main(['--steps', '5', '--repeats', '2', '--out', str(out)]) == 0
+    figures = json.loads(out.read_text())
+    assert figures['steps'] == 5 and figures['step_ms_median'] > 0
+    assert figures['component_calls_checked_us_per_step'] > 0
+    assert 'checks_percent_of_step' in figures

@@ -1,20 +1,13 @@
 """The contract every registered plan estimator and follower model is held to, shipped or
 installed (a plug-in is tested by installing it into the environment and running this file).
 
-Parametrised from the registry at collection time; only the declared interface is used:
-the :class:`~trust_monitor.common.registry.Component` (factory, config_type, needs), the
-group's factory arguments (:mod:`trust_av_planner.predictors`,
-:mod:`human_driver_sim.followers`), the params file and the command line. Per component:
-
-- declaration: its parameters are a frozen dataclass whose every field is declared with
-  ``param()`` and has a default, and no field shares a name with its node's parameters or
-  another component's;
-- shape: ``horizon_steps`` finite values within the bounds of the AV (estimator) or the
-  human (follower);
-- determinism: two instances fed the same inputs give the same outputs;
-- refusal: a bad value of one of its parameters in a params file (or, when it has none, a
-  parameter it does not have) is one line on stderr, exit 2 and nothing written;
-- graph == in-process: 30 steps through the node graph equal the in-process loop.
+Parametrised from the registry at collection time. The rules themselves are the shipped
+contract, :func:`trust_monitor.common.contract.check_component` (declaration, build, output
+shape and bounds, determinism, bad parameters, and with ``graph=True`` graph == in-process:
+30 steps through the node graph equal the in-process loop), which a plug-in's own CI runs
+the same way. Here also, through the command line: a bad value of one of its parameters in
+a params file (or, when it has none, a parameter it does not have) is one line on stderr,
+exit 2 and nothing written; and the declared needs decide what runs without the follower.
 """
 
 from __future__ import annotations
@@ -27,20 +20,12 @@ import typing
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
-from test_graph import assert_records_equal
 
-from human_driver_sim.followers import FollowerConfig, make_follower
-from preceding_traffic.sources import load_trace
-from preceding_traffic.traces import truncate
-from trust_av_planner.planner import make_predictor
-from trust_av_planner.predictors import Observation
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import NODE_COMPONENTS, load_run_config
-from trust_av_planner.system.metrics import StepRecord
+from trust_av_planner.system.config import load_run_config
 from trust_monitor.common import registry
-from trust_monitor.common.params import PARAM_METADATA_KEY, ParamSpec
+from trust_monitor.common.contract import check_component
+from trust_monitor.common.params import PARAM_METADATA_KEY
 
 GRAPH_STEPS = 30
 SECTIONS = {registry.PREDICTORS: ('planner', 'predictor', '--predictor'),
@@ -65,91 +50,11 @@ def trace_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def observations(seed: int, count: int = 15) -> list[Observation]:
-    """Seeded, physically plausible observations of the AV by the human."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(count):
-        gap, speed = rng.uniform(8.0, 40.0), rng.uniform(2.0, 25.0)
-        out.append(Observation(gap_m=gap, relative_speed_mps=rng.uniform(-3.0, 3.0),
-                               time_headway_s=min(gap / speed, 10.0),
-                               av_accel_mps2=rng.uniform(-3.0, 3.0)))
-    return out
-
-
-def predictions(name: str) -> list[np.ndarray]:
-    """A fresh estimator ``name`` (shipped planner parameters): its prediction before and
-    after each of :func:`observations`."""
-    config = load_run_config(overrides={'planner': {'predictor': name}})
-    predictor = make_predictor(config.planner, config.predictor_params)
-    out = [np.array(predictor.predict(), dtype=float)]
-    for observation in observations(seed=7):
-        predictor.observe(observation)
-        out.append(np.array(predictor.predict(), dtype=float))
-    return out
-
-
-def follower_plans(name: str) -> list[np.ndarray]:
-    """A fresh follower ``name`` (shipped human_driver parameters): its plans over seeded
-    inputs (gap, speeds, the expected AV plan)."""
-    config = load_run_config(overrides={'human_driver': {'driver_model': name}})
-    follower = make_follower(config.driver, FollowerConfig(name), config.driver_params)
-    rng = np.random.default_rng(11)
-    plans = []
-    for _ in range(10):
-        expected = rng.uniform(-3.0, 3.0, config.driver.horizon_steps)
-        result = follower.step(float(rng.uniform(8.0, 40.0)), float(rng.uniform(2.0, 25.0)),
-                               float(rng.uniform(2.0, 25.0)), expected)
-        plans.append(np.array(result.plan_mps2, dtype=float))
-    return plans
-
-
-def outputs(group: str, name: str) -> list[np.ndarray]:
-    return predictions(name) if group == registry.PREDICTORS else follower_plans(name)
-
-
 @pytest.mark.parametrize(('group', 'name'), CASES, ids=IDS)
-def test_declaration(group: str, name: str) -> None:
-    component = registry.get(group, name)
-    assert component.name == name and component.description
-    assert set(component.needs) <= registry.KNOWN_NEEDS
-    if component.config_type is None:
-        return
-    cls = component.config_type
-    assert dataclasses.is_dataclass(cls) and cls.__dataclass_params__.frozen  # type: ignore[attr-defined]
-    for field in dataclasses.fields(cls):
-        assert isinstance(field.metadata.get(PARAM_METADATA_KEY), ParamSpec), field.name
-        assert field.default is not dataclasses.MISSING, f'{field.name} has no default'
-    cls()  # the defaults are valid
-    node = SECTIONS[group][0]
-    others = [c.config_type for g in SECTIONS for c in registry.components(g)
-              if c.config_type is not None and c.name != name]
-    taken = {f.name for c in (*NODE_COMPONENTS[node], *others) for f in dataclasses.fields(c)}
-    clash = {f.name for f in dataclasses.fields(cls)} & taken
-    assert not clash, f'{name}: parameter(s) {sorted(clash)} already belong to another component'
-
-
-@pytest.mark.parametrize(('group', 'name'), CASES, ids=IDS)
-def test_output_shape_and_bounds(group: str, name: str) -> None:
-    config = load_run_config()
-    if group == registry.PREDICTORS:
-        steps, low, high = (config.planner.horizon_steps, config.planner.accel_min_mps2,
-                            config.planner.accel_max_mps2)
-    else:
-        steps, low, high = (config.driver.horizon_steps, config.driver.accel_min_mps2,
-                            config.driver.accel_max_mps2)
-    for out in outputs(group, name):
-        assert out.shape == (steps,)
-        assert np.all(np.isfinite(out))
-        assert np.all(out >= low - 1e-9) and np.all(out <= high + 1e-9), out
-
-
-@pytest.mark.parametrize(('group', 'name'), CASES, ids=IDS)
-def test_deterministic(group: str, name: str) -> None:
-    first, second = outputs(group, name), outputs(group, name)
-    assert len(first) == len(second)
-    for a, b in zip(first, second, strict=True):
-        np.testing.assert_array_equal(a, b)
+def test_contract(group: str, name: str) -> None:
+    report = check_component(group, name)
+    assert {'loads', 'declaration', 'builds', 'outputs', 'deterministic'} <= \
+        set(report.passed), report
 
 
 def bad_value(field: dataclasses.Field[Any], hint: Any) -> Any:
@@ -213,22 +118,7 @@ def test_the_declared_needs_decide_what_runs_without_the_follower(name: str,
     assert ('has no human follower state' in proc.stderr) == needs, proc.stderr
 
 
-def assert_same_records(graph: list[StepRecord], ref: list[StepRecord]) -> None:
-    assert len(ref) == GRAPH_STEPS
-    assert_records_equal(graph, ref)
-
-
 @pytest.mark.parametrize(('group', 'name'), CASES, ids=IDS)
-def test_graph_equals_in_process(group: str, name: str, tmp_path: Path,
-                                 trace_csv: Path) -> None:
-    from trust_av_planner.graph.bag_records import records_from_bag
-
-    node, chooser, option = SECTIONS[group]
-    bag = tmp_path / 'run'
-    proc = cli('run', '--trace', str(trace_csv), option, name, '--max-steps', str(GRAPH_STEPS),
-               '--bag', str(bag), '--no-plot', '--no-progress', cwd=tmp_path)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    config = load_run_config(overrides={node: {chooser: name}})
-    trace = truncate(load_trace(str(trace_csv), config.planner.dt_s, config.trace),
-                     GRAPH_STEPS)
-    assert_same_records(records_from_bag(bag), simulate(config, trace).records)
+def test_graph_equals_in_process(group: str, name: str) -> None:
+    report = check_component(group, name, graph=True)
+    assert 'graph == in-process' in report.passed, report

@@ -13,6 +13,7 @@ import pytest
 from example_plugin import install_example_plugin
 
 REPO = Path(__file__).resolve().parents[1]
+PLUGIN_TESTS = REPO / 'examples' / 'trust_av_example_plugin' / 'tests'
 STEPS = 12
 
 
@@ -123,7 +124,20 @@ def test_plugin_passes_the_component_contract(plugin_env: dict[str, str],
                                               tmp_path: Path) -> None:
     proc = contract(plugin_env, tmp_path, 'test_component_contract.py',
                     'predictors-ses or (needs and ses)', '-q')
-    assert '6 passed' in proc.stdout, proc.stdout
+    assert '4 passed' in proc.stdout, proc.stdout
+
+
+def test_plugin_runs_the_shipped_contract_in_its_own_test(plugin_env: dict[str, str],
+                                                           tmp_path: Path) -> None:
+    """The plug-in's own CI (examples/trust_av_example_plugin/tests/test_contract.py) imports
+    the contract from the installed trust-av, as any package outside the repository does
+    (its graph half is the same rule the repository's contract tests above run)."""
+    proc = subprocess.run([sys.executable, '-m', 'pytest', '-n', '0', '-q', '-p',
+                           'no:cacheprovider', '-k', 'not graph',
+                           str(PLUGIN_TESTS / 'test_contract.py')],
+                          env=plugin_env, cwd=tmp_path, capture_output=True, text=True,
+                          timeout=600, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 0 and '2 passed' in proc.stdout, proc.stdout + proc.stderr
 
 
 def test_plugin_trust_model_passes_the_trust_model_contract(plugin_env: dict[str, str],
@@ -132,8 +146,7 @@ def test_plugin_trust_model_passes_the_trust_model_contract(plugin_env: dict[str
     tests/test_trust_model_contract.py, the node graph == in-process run included."""
     proc = contract(plugin_env, tmp_path, 'test_trust_model_contract.py', 'leaky', '-v')
     assert 'test_graph_equals_in_process[leaky] PASSED' in proc.stdout, proc.stdout
-    assert 'test_numeric_bound_keeps_trust_above_the_minimum[3-1.0-leaky] PASSED' in \
-        proc.stdout, proc.stdout
+    assert 'test_contract[leaky] PASSED' in proc.stdout, proc.stdout
 
 
 def test_no_file_under_src_names_the_plugin() -> None:
@@ -152,7 +165,8 @@ def test_tutorial_includes_the_example_files() -> None:
     included = re.findall(r'^--8<-- "([^"]+)"$', text, flags=re.MULTILINE)
     assert set(included) == {
         'examples/trust_av_example_plugin/pyproject.toml',
-        'examples/trust_av_example_plugin/trust_av_example_plugin/smoothing.py'}
+        'examples/trust_av_example_plugin/trust_av_example_plugin/smoothing.py',
+        'examples/trust_av_example_plugin/tests/test_contract.py'}
     for path in included:
         assert (REPO / path).is_file(), path
 

@@ -45,8 +45,9 @@ def test_idm_plan_follows_the_expected_av_plan(driver) -> None:  # type: ignore[
 
 
 def test_followers_are_chosen_by_name(driver) -> None:  # type: ignore[no-untyped-def]
-    assert isinstance(make_follower(driver), DriverMpc)        # the default, mpc
-    idm = make_follower(driver, FollowerConfig('idm'), IdmConfig(idm_time_headway_s=2.0))
+    # the model the registry built, inside the checks of its every step (CheckedFollower)
+    assert isinstance(make_follower(driver).model, DriverMpc)  # the default, mpc
+    idm = make_follower(driver, FollowerConfig('idm'), IdmConfig(idm_time_headway_s=2.0)).model
     assert isinstance(idm, IdmFollower) and idm.params.time_headway_s == 2.0
     with pytest.raises(ParamsError, match=r"driver_model must be one of \[.*'idm'.*\], got 'x'"):
         FollowerConfig('x')

@@ -41,6 +41,7 @@ from trust_av_planner.study.pinned_numerics import (
 )
 from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
+from trust_monitor.common.registry import RegistryError
 
 SHIPPED = MODELS_DIR / 'gru_plan_estimator.npz'
 
@@ -102,11 +103,15 @@ def test_missing_and_mismatched_weights_are_named(tmp_path: Path) -> None:
         load_weights(save(random_weights(), tmp_path / 'dt.npz'), 3, dt_s=0.5)
     shipped_step = load_run_config(overrides={'/**': {'dt_s': 0.5},
                                               'planner': {'predictor': 'gru'}})
-    with pytest.raises(ModelError, match=r'gru_plan_estimator\.npz: trained at dt_s = 1 s'):
-        make_predictor(shipped_step.planner)   # what the simulator and the planner node call
+    # what the simulator and the planner node call: the factory's error, naming the plug-in
+    with pytest.raises(RegistryError, match=r"predictor 'gru' \(trust_av.predictors\): its "
+                       r'factory raised ModelError: .*gru_plan_estimator\.npz: trained at '
+                       r'dt_s = 1 s') as err:
+        make_predictor(shipped_step.planner)
+    assert isinstance(err.value.__cause__, ModelError)
     config = load_run_config(overrides={'planner': {'predictor': 'gru',
                                                     'gru_model': str(tmp_path / 'x.npz')}})
-    with pytest.raises(ModelError, match=r'x\.npz: GRU weights file not found'):
+    with pytest.raises(RegistryError, match=r'ModelError: .*x\.npz: GRU weights file not found'):
         simulate(config, truncate(shipped_trace('us06'), 60))
 
 

@@ -17,6 +17,14 @@ import numpy as np
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverResult
 from trust_monitor.common import registry
+from trust_monitor.common.component_checks import (
+    PASSING,
+    call,
+    check_number,
+    check_plan,
+    check_type,
+    raised,
+)
 from trust_monitor.common.params import check_fields, param, require
 
 
@@ -61,5 +69,62 @@ def make_follower(driver: DriverConfig, follower: FollowerConfig | None = None,
         RegistryError: the name is not registered, or ``params`` does not fit it.
     """
     component = registry.get(registry.DRIVERS, (follower or FollowerConfig()).driver_model)
-    model: Follower = component.factory(driver, registry.config_of(component, params))
-    return model
+    model: Follower = registry.build(registry.DRIVERS, component, driver,
+                                     registry.config_of(component, params))
+    return CheckedFollower(model, component.name, driver)
+
+
+class CheckedFollower:
+    """A follower whose every step is checked where it enters the loop
+    (:mod:`trust_monitor.common.component_checks`): the result must have a plan of
+    ``horizon_steps`` finite accelerations within the driver's bounds, a ``str`` status, a
+    ``bool`` success, an ``int`` iteration count and a finite solve time >= 0; anything the
+    model raises names it. The in-process loop and the ``driver`` node both get one from
+    :func:`make_follower`.
+
+    Args:
+        model: the follower the registry built.
+        name: its registered name.
+        driver: the ``human_driver`` section (horizon and acceleration bounds).
+    """
+
+    def __init__(self, model: Follower, name: str, driver: DriverConfig) -> None:
+        self.model = model
+        self.name = name
+        self.driver = driver
+        self.steps_done = 0
+
+    def reset(self) -> None:
+        """Reset the model's state (the step count goes on)."""
+        call(registry.DRIVERS, self.name, self.steps_done, 'reset()', self.model.reset)
+
+    def step(self, gap_m: float, speed_mps: float, av_speed_mps: float,
+             expected_mps2: np.ndarray) -> DriverResult:
+        """:meth:`Follower.step` of the model, checked.
+
+        Raises:
+            ComponentError: it raised, or its result breaks the interface.
+        """
+        group, name, k = registry.DRIVERS, self.name, self.steps_done
+        try:
+            result = self.model.step(gap_m, speed_mps, av_speed_mps, expected_mps2)
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(group, name, k, 'step()', err) from err
+        if not (type(result) is DriverResult and type(result.status) is str
+                and type(result.success) is bool and type(result.iterations) is int):
+            check_type(result, DriverResult, group=group, name=name, step=k, what='result')
+            check_type(result.status, str, group=group, name=name, step=k, what='status')
+            check_type(result.success, (bool, np.bool_), group=group, name=name, step=k,
+                       what='success')
+            check_type(result.iterations, (int, np.integer), group=group, name=name, step=k,
+                       what='iterations')
+        plan = check_plan(result.plan_mps2, group=group, name=name, step=k,
+                          steps=self.driver.horizon_steps, low=self.driver.accel_min_mps2,
+                          high=self.driver.accel_max_mps2, what='plan_mps2')
+        check_number(result.solve_time_s, group=group, name=name, step=k, what='solve_time_s',
+                     low=0.0)
+        self.steps_done += 1
+        return result if plan is result.plan_mps2 else DriverResult(
+            plan, result.status, result.success, result.iterations, result.solve_time_s)

@@ -42,8 +42,7 @@ from trust_monitor.common.params import (
     require,
 )
 from trust_monitor.common.solver import nmpc_solver_options, solve
-from trust_monitor.trust_interface import TrustModel, make_trust_model
-from trust_monitor.trust_interface import explicability_bound as trust_bound
+from trust_monitor.trust_interface import CheckedBound, TrustModel, make_trust_model
 from trust_monitor.trust_model import TrustConfig, explicability
 
 LOG = logging.getLogger(__name__)
@@ -250,6 +249,7 @@ class TrustAwareNmpc:
         self.config = config
         self.trust = trust
         self.trust_model = make_trust_model(trust) if trust_model is None else trust_model
+        self.e_max_of = CheckedBound(self.trust_model, trust.trust_model)
         self.cpu_budget = cpu_budget
         self.grid_step_s, self.steps = prediction_grid(config, period_s)
         n, dt = self.steps, self.grid_step_s
@@ -325,7 +325,7 @@ class TrustAwareNmpc:
             The plan and the solver's report; never raises for an infeasible problem.
         """
         c, n, dt = self.config, self.steps, self.grid_step_s
-        e_max = trust_bound(self.trust_model, trust, c.trust_min, n, dt)
+        e_max = self.e_max_of(trust, c.trust_min, n, dt)
         params = np.concatenate([[gap_m, speed_mps], lead_speeds_mps, expected_mps2, [c.alpha]])
         if e_max is None:
             return self._fallback(gap_m, speed_mps, lead_speeds_mps, 'trust below T_min',

@@ -21,6 +21,7 @@ from trust_av_planner.predictors import Observation, Predictor
 from trust_av_planner.predictors.sampling import ModelGridPredictor
 from trust_av_planner.preview import LeadPreview, hold_on_grid
 from trust_monitor.common import registry
+from trust_monitor.common.component_checks import PASSING, call, check_plan, raised
 from trust_monitor.common.kinematics import VehicleState, gap_m
 from trust_monitor.trust_interface import TrustModel
 from trust_monitor.trust_model import TrustConfig
@@ -34,11 +35,66 @@ def make_predictor(config: PlannerConfig, params: Any = None) -> Predictor:
         params: the estimator's own parameters (its ``config_type``; None: its defaults).
 
     Raises:
-        RegistryError: the name is not registered or its entry point is broken.
+        RegistryError: the name is not registered, its entry point is broken, or its
+            factory fails or returns no predictor.
     """
     component = registry.get(registry.PREDICTORS, config.predictor)
-    predictor: Predictor = component.factory(config, registry.config_of(component, params))
+    predictor: Predictor = registry.build(registry.PREDICTORS, component, config,
+                                          registry.config_of(component, params))
     return predictor
+
+
+class CheckedPredictor:
+    """A plan estimator whose every call is checked where it enters the loop
+    (:mod:`trust_monitor.common.component_checks`): a prediction must be ``horizon_steps``
+    finite accelerations within the planner's bounds; anything the estimator raises names
+    it. :class:`AvPlanner` (the in-process loop's and the ``planner`` node's) wraps its
+    estimator in one.
+
+    Args:
+        inner: the estimator.
+        config: the planner's parameters (its ``predictor`` names the estimator).
+    """
+
+    def __init__(self, inner: Predictor, config: PlannerConfig) -> None:
+        self.inner = inner
+        self.config = config
+        self.steps_done = 0
+        self.history_steps = int(getattr(inner, 'history_steps', 1))
+
+    def reset(self) -> None:
+        """Forget the history (the step count goes on: at a control period shorter than
+        ``dt_s`` the sampler resets the estimator before every prediction)."""
+        call(registry.PREDICTORS, self.config.predictor, self.steps_done, 'reset()',
+             self.inner.reset)
+
+    def observe(self, observation: Observation) -> None:
+        """Record the step just executed."""
+        try:
+            self.inner.observe(observation)
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(registry.PREDICTORS, self.config.predictor, self.steps_done,
+                         'observe()', err) from err
+
+    def predict(self) -> np.ndarray:
+        """The estimator's prediction, checked (a float array).
+
+        Raises:
+            ComponentError: it raised, or the prediction breaks the interface.
+        """
+        c, k = self.config, self.steps_done
+        try:
+            value = self.inner.predict()
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(registry.PREDICTORS, c.predictor, k, 'predict()', err) from err
+        plan = check_plan(value, group=registry.PREDICTORS, name=c.predictor, step=k,
+                          steps=c.horizon_steps, low=c.accel_min_mps2, high=c.accel_max_mps2)
+        self.steps_done += 1
+        return plan
 
 
 def needs_follower_state(config: PlannerConfig) -> bool:
@@ -101,11 +157,11 @@ class AvPlanner:
         self.period_s = config.dt_s if period_s is None else period_s
         self.nmpc = TrustAwareNmpc(config, trust, self.period_s, cpu_budget=cpu_budget,
                                    trust_model=trust_model)
-        self.predictor = (predictor if predictor is not None
-                          else make_predictor(config, predictor_params))
+        self.predictor = CheckedPredictor(predictor if predictor is not None
+                                          else make_predictor(config, predictor_params), config)
         self.needs_follower = needs_follower_state(config)
         self.same_grid = abs(self.period_s - config.dt_s) <= 1e-12 * config.dt_s
-        history = int(getattr(self.predictor, 'history_steps', 1))
+        history = self.predictor.history_steps
         self.sampler = None if self.same_grid else ModelGridPredictor(
             self.predictor, config.dt_s, history)
         self.lead = (None if config.lead_preview == 'recorded'
@@ -123,7 +179,7 @@ class AvPlanner:
         """New values of the run-time parameters from the next step on (see
         :meth:`TrustAwareNmpc.retune`)."""
         self.nmpc.retune(config)
-        self.config = config
+        self.config = self.predictor.config = config
 
     def step(self, traffic: VehicleState, preview_mps: np.ndarray | None, av: VehicleState,
              human: VehicleState | None, trust: Any, t_s: float | None = None) -> PlannerOutput:

@@ -39,8 +39,9 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
-from trust_monitor.common.params import ParamsError, build_config
-from trust_monitor.common.registry import TRUST_MODELS, Component, config_types, get
+from trust_monitor.common.component_checks import PASSING, call, check_number, raised
+from trust_monitor.common.params import build_config
+from trust_monitor.common.registry import TRUST_MODELS, Component, build, config_types, get
 
 BOUND_TOLERANCE = 1e-12
 """Bisection stops when the bracket of E_max is this narrow (E is dimensionless, < 1)."""
@@ -157,6 +158,64 @@ def explicability_bound(model: TrustModel, state: Any, trust_min: float, steps: 
     return numeric_bound(model, state, trust_min, steps, dt_s)
 
 
+class CheckedBound:
+    """:func:`explicability_bound` as the NMPC takes it, checked where it enters
+    (:mod:`trust_monitor.common.component_checks`): None, inf, or a number >= 0; anything
+    the model raises on the way names it, and so does a propagated trust that is no finite
+    number where the bound fails or admits no E (NaN compares false).
+
+    Args:
+        model: the trust model.
+        name: its registered name (for the message, with the count of bounds taken).
+    """
+
+    def __init__(self, model: TrustModel, name: str) -> None:
+        self.model = model
+        self.name = name
+        self.steps_done = 0
+
+    def __call__(self, state: Any, trust_min: float, steps: int, dt_s: float) -> float | None:
+        """:func:`explicability_bound` of the model (same arguments and result).
+
+        Raises:
+            ComponentError: the model raised, or the bound is none of those.
+        """
+        k = self.steps_done   # the trust of `state`: checked by the TrustEstimator that made it
+        try:
+            e_max = explicability_bound(self.model, state, trust_min, steps, dt_s)
+        except PASSING:
+            raise
+        except BaseException as err:
+            self._propagated(state, steps, dt_s)   # names the bad reading, if one
+            raise raised(TRUST_MODELS, self.name, k, 'the explicability bound', err) from err
+        if e_max is None:          # no E keeps T >= T_min: or a reading that is no number?
+            self._propagated(state, steps, dt_s)
+        elif e_max != math.inf:
+            check_number(e_max, group=TRUST_MODELS, name=self.name, step=k, what='E_max',
+                         low=0.0)
+        self.steps_done += 1
+        return e_max
+
+    def _propagated(self, state: Any, steps: int, dt_s: float) -> None:
+        """Check the trust the model propagates from ``state`` at E = 0 and E = 1 (where
+        the bound failed or found no admissible E: what a bad reading inside it looks
+        like).
+
+        Raises:
+            ComponentError: a propagated trust is not a finite number, or a step raised.
+        """
+        k = self.steps_done
+        for score in (0.0, 1.0):
+            after = state
+            for _ in range(steps):
+                after = call(TRUST_MODELS, self.name, k, 'step()', self.model.step, after,
+                             score, dt_s)
+                check_number(call(TRUST_MODELS, self.name, k, 'trust()', self.model.trust,
+                                  after),
+                             group=TRUST_MODELS, name=self.name, step=k,
+                             what=f'propagated trust (E = {score:g})')
+
+
 def paper_bound_holds(model: TrustModel) -> bool:
     """Whether ``model`` declares that it runs eqs. (9)-(11) with the shared
     :class:`~trust_monitor.trust_model.TrustConfig` (class attribute
@@ -205,12 +264,9 @@ def build_trust_model(trust: Any, params: Any) -> TrustModel:
     declares them: :func:`trust_monitor.ros.parameters.declare_component_params`).
 
     Raises:
-        RegistryError: the model is not registered.
-        ParamsError: its factory returned no :class:`TrustModel`.
+        RegistryError: the model is not registered, its factory failed or returned no
+            :class:`TrustModel`.
     """
     component = trust_model_component(trust.trust_model)
-    model = component.factory(trust, params)
-    if not isinstance(model, TrustModel):
-        raise ParamsError(f'trust model {component.name!r}: its factory returned a '
-                          f'{type(model).__name__}, not a TrustModel')
+    model: TrustModel = build(TRUST_MODELS, component, trust, params)
     return model

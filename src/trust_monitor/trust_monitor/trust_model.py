@@ -24,7 +24,9 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from trust_monitor.common.component_checks import PASSING, call, check_number, raised
 from trust_monitor.common.params import ParamsError, check_fields, param
+from trust_monitor.common.registry import TRUST_MODELS
 
 SAME_MODEL = 'the planner and the monitor must run the same trust model'
 
@@ -219,7 +221,10 @@ class TrustEstimator:
         from trust_monitor.trust_interface import make_trust_model
         self.config = config
         self.model = make_trust_model(config) if model is None else model
-        self.state = self.model.initial_state()
+        self.steps_done = 0
+        self.state = call(TRUST_MODELS, config.trust_model, 0, 'initial_state()',
+                          self.model.initial_state)
+        self._reading(self.state)   # the initial trust: a number too
 
     @property
     def trust(self) -> float:
@@ -237,10 +242,40 @@ class TrustEstimator:
 
         Raises:
             ValueError: ``dt_s`` is negative or not finite.
+            ComponentError: the trust model raised or gave a bad reading.
         """
         if not (math.isfinite(dt_s) and dt_s >= 0.0):
             raise ValueError(f'dt_s must be finite and >= 0, got {dt_s}')
         score = float(explicability(list(plan), list(expected), self.config.epsilon_mps2))
         perf = performance(score)
-        self.state = self.model.step(self.state, score, dt_s)
-        return TrustEstimate(score, perf, self.trust, self.model.variance(self.state))
+        try:
+            self.state = self.model.step(self.state, score, dt_s)
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(TRUST_MODELS, self.config.trust_model, self.steps_done, 'step()',
+                         err) from err
+        trust, variance = self._reading(self.state)
+        self.steps_done += 1
+        return TrustEstimate(score, perf, trust, variance)
+
+    def _reading(self, state: Any) -> tuple[float, float | None]:
+        """The model's trust and variance of ``state``, checked where they enter the loop
+        (:mod:`trust_monitor.common.component_checks`): trust a finite number, the variance
+        None or a finite number >= 0.
+
+        Raises:
+            ComponentError: the model raised, or a reading is none of those.
+        """
+        name, k = self.config.trust_model, self.steps_done
+        try:
+            trust, variance = self.model.trust(state), self.model.variance(state)
+        except PASSING:
+            raise
+        except BaseException as err:
+            raise raised(TRUST_MODELS, name, k, 'its trust() or variance()', err) from err
+        trust = check_number(trust, group=TRUST_MODELS, name=name, step=k, what='trust')
+        if variance is not None:
+            variance = check_number(variance, group=TRUST_MODELS, name=name, step=k,
+                                    what='variance', low=0.0)
+        return trust, variance

@@ -18,6 +18,7 @@ from trust_av_planner.cli.options import (
 )
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import check_control_rate, load_run_config
+from trust_monitor.common.component_checks import ComponentError
 from trust_monitor.common.output_files import replacing
 from trust_monitor.common.output_lock import hold_output_lock
 
@@ -35,7 +36,16 @@ def run(args: argparse.Namespace) -> int:
         if args.out is not None:   # a second command on --out is refused before it writes
             stack.enter_context(hold_output_lock(args.out))
         bar = Progress(f'simulate {trace.name}', trace.steps, shown=not args.no_progress)
-        result = simulate(config, trace, on_step=bar.update)
+        try:
+            result = simulate(config, trace, on_step=bar.update)
+        except ComponentError as err:   # the steps before it are kept in --out
+            bar.close()
+            if args.out is None or err.partial is None:
+                raise
+            write_table(err.partial, args.out)
+            kept = len(err.partial.records)
+            raise ComponentError(f'{err}; the {kept} step{"" if kept == 1 else "s"} before it '
+                                 f'{"is" if kept == 1 else "are"} in {args.out}') from err
         bar.close()
         if args.out is not None:
             write_table(result, args.out)

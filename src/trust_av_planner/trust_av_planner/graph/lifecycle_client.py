@@ -100,15 +100,29 @@ def set_states(node: Any, executor: Any, names: Sequence[str], goal: str,
                 label = LABELS[transition]
                 sent[state, transition] = sent.get((state, transition), 0) + 1
                 if sent[state, transition] > ATTEMPTS:
-                    raise GraphError(f'node {name}: transition {label} failed (see its log)')
+                    raise GraphError(f'node {name}: transition {label} failed{_why(graph, name)}')
                 future = change.call_async(
                     ChangeState.Request(transition=Transition(id=transition)))
                 if _answered(executor, future, min(deadline, time.monotonic() + ANSWER_S),
                              alive) and not future.result().success:
-                    raise GraphError(f'node {name}: transition {label} failed (see its log)')
+                    raise GraphError(f'node {name}: transition {label} failed{_why(graph, name)}')
         finally:
             node.destroy_client(get)
             node.destroy_client(change)
+
+
+def _why(graph: Any, name: str) -> str:
+    """``': WHY'`` from the node's log (the one line a managed node logs for a refused
+    ``configure``: ``configure failed: WHY``), else ``' (see its log)'``."""
+    marker = 'configure failed: '
+    try:
+        log = graph.by_name(name.rsplit('/', 1)[-1]).log_path.read_text(errors='replace')
+    except (AttributeError, StopIteration, OSError):
+        return ' (see its log)'
+    lines = [line for line in log.splitlines() if marker in line]
+    last = lines[-1].split(marker, 1)[1].strip() if lines else ''
+    return f': {last}' if last and last != 'Traceback (most recent call last):' \
+        else ' (see its log)'
 
 
 def _ask(executor: Any, client: Any, request: Any, deadline: float, what: str,

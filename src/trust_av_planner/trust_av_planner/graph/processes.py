@@ -97,6 +97,17 @@ class Process:
         fields = stat.rsplit(')', 1)[-1].split()
         return fields[0] if fields else ''
 
+    def exit_message(self, code: int) -> str:
+        """Why the node exited with ``code``: its own one-line refusal (``spin_node``: exit 2
+        and an ``error:`` line, e.g. a plug-in that broke its interface), else the code and
+        its last output."""
+        line = self.error_line() if code == 2 else ''
+        if line:
+            return f'node {self.spec.name}: {line}'
+        return (f'node {self.spec.name} exited with code {code}'
+                f'{" (killed by signal " + str(-code) + ")" if code < 0 else ""}; '
+                f'{self.tail()}')
+
     def error_line(self) -> str:
         """The node's last ``error: ...`` line ('' if none)."""
         if not self.log.closed:
@@ -181,9 +192,7 @@ class Graph:
                 continue
             if process.spec.name in allowed_done and code == 0:
                 continue
-            raise GraphError(f'node {process.spec.name} exited with code {code}'
-                             f'{" (killed by signal " + str(-code) + ")" if code < 0 else ""}; '
-                             f'{process.tail()}')
+            raise GraphError(process.exit_message(code))
 
     def stop(self, names: list[str] | None = None) -> None:
         """Stop nodes: while the recorder still runs, first the step authority (no new step

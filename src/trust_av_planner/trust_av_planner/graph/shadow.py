@@ -401,8 +401,7 @@ def _node_loops(graph: Graph, log_dir: Path, names: tuple[str, ...]) -> dict[str
     """After a wall run: every node exited cleanly and wrote its loop statistics."""
     for process in graph.processes:
         if process.popen.returncode not in (0, None):
-            raise GraphError(f'node {process.spec.name} exited with code '
-                             f'{process.popen.returncode}; {process.tail()}')
+            raise GraphError(process.exit_message(process.popen.returncode))
     loops = {}
     for name in names:
         path = log_dir / f'{name}.jitter.json'

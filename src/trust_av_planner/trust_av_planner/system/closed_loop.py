@@ -37,6 +37,7 @@ from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.planner import AvPlanner
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import Metrics, StepRecord, compute_metrics
+from trust_monitor.common.component_checks import ComponentError
 from trust_monitor.common.grids import grid_times, hold_at
 from trust_monitor.common.kinematics import VehicleState, gap_m, integrate
 from trust_monitor.trust_model import TrustEstimator
@@ -209,6 +210,10 @@ def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | No
         trace: preceding-traffic speeds on the control grid.
         initial: initial odometry; default :func:`equilibrium_start`.
         on_step: called with (steps done, total steps) after each step (progress).
+
+    Raises:
+        ComponentError: a component broke its interface; its ``partial`` holds the steps
+            before (a :class:`SimResult`).
     """
     loop = ClosedLoop(config, trace, initial)
     step_s = loop.planner.grid[0]
@@ -216,7 +221,7 @@ def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | No
                        predictor=config.planner.predictor,
                        min_safe_gap_m=config.min_safe_gap_m,
                        plan_step_s=None if step_s == loop.period_s else step_s)
-    for record in loop.steps():
+    for record in _keeping(loop.steps(), result):
         result.records.append(record)
         if min(record.av_gap_m, record.human_gap_m) < config.min_safe_gap_m:
             LOG.warning('t = %.1f s: gap below the safety minimum %.2f m (AV %.3f m, human '
@@ -225,3 +230,13 @@ def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | No
         if on_step is not None:
             on_step(len(result.records), trace.steps)
     return result
+
+
+def _keeping(records: Iterator[StepRecord], result: SimResult) -> Iterator[StepRecord]:
+    """``records``; a component's failure on the way carries ``result`` (the steps before
+    it, the run's record) as its ``partial``."""
+    try:
+        yield from records
+    except ComponentError as err:
+        err.partial = result
+        raise

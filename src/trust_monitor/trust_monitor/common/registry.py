@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
+import logging
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -31,6 +33,18 @@ TRUST_MODELS = 'trust_av.trust_models'
 DRIVERS = 'trust_av.drivers'
 """Entry-point group of the human follower (driver) models."""
 GROUPS = (PREDICTORS, TRUST_MODELS, DRIVERS)
+
+FACTORY_ARGUMENTS = {PREDICTORS: ('planner', 'params'), TRUST_MODELS: ('trust', 'params'),
+                     DRIVERS: ('driver', 'params')}
+"""How each group's ``factory`` is called: two positional arguments, the group's shared
+configuration and the component's own parameters (see the group's interface module)."""
+INTERFACES = {PREDICTORS: ('reset', 'predict', 'observe'),
+              TRUST_MODELS: ('name', 'closed_form_bound', 'initial_state', 'step', 'trust',
+                             'variance'),
+              DRIVERS: ('reset', 'step')}
+"""What the object a group's factory returns must have (its interface's attributes)."""
+
+LOG = logging.getLogger(__name__)
 
 FOLLOWER_STATE = 'follower_state'
 """A need: the component uses the human follower's odometry (not only the AV's)."""
@@ -80,6 +94,11 @@ def _group_name(group: str) -> str:
     return group.rsplit('.', 1)[-1].rstrip('s').replace('_', ' ')
 
 
+def describe(group: str, name: str) -> str:
+    """How a message names a component: ``predictor 'ses' (trust_av.predictors)``."""
+    return f'{_group_name(group)} {name!r} ({group})'
+
+
 @functools.cache
 def _entry_points(group: str) -> tuple[EntryPoint, ...]:
     """The entry points of ``group``, scanned once per process (a scan of every installed
@@ -99,8 +118,10 @@ def get(group: str, name: str) -> Component:
 
     Raises:
         RegistryError: ``name`` is not registered (the message lists the registered names),
-            two distributions register it, or its entry point fails to load or is not a
-            :class:`Component` of that name.
+            two distributions register it, or its entry point fails to load (any exception
+            or ``SystemExit`` while importing it; ``KeyboardInterrupt`` passes), is not a
+            :class:`Component` of that name, or its factory cannot be called as the group
+            calls it (:data:`FACTORY_ARGUMENTS`).
     """
     if group not in GROUPS:
         raise RegistryError(f'unknown component group {group!r} (known: {list(GROUPS)})')
@@ -111,23 +132,93 @@ def get(group: str, name: str) -> Component:
     if len({ep.value for ep in found}) > 1:
         raise RegistryError(f'{_group_name(group)} {name!r} is registered twice: '
                             f'{", ".join(sorted(ep.value for ep in found))}')
+    loaded = _load(group, found[0])
+    if isinstance(loaded, RegistryError):   # a fresh one each time, with the original cause
+        raise RegistryError(str(loaded)) from loaded.__cause__
+    return loaded
+
+
+@functools.cache
+def _load(group: str, entry: EntryPoint) -> Component | RegistryError:
+    """The checked component of ``entry``, or the error that says why it is none (kept, so
+    that a module failing at import is imported once per process)."""
+    where = f'{_group_name(group)} {entry.name!r} ({entry.value})'
     try:
-        obj = found[0].load()
-    except Exception as err:
-        raise RegistryError(f'{_group_name(group)} {name!r} ({found[0].value}) failed to '
-                            f'load: {one_line(err)}') from err
+        obj = entry.load()
+    except KeyboardInterrupt:
+        raise
+    except BaseException as err:   # SystemExit at import too: a plug-in never ends a command
+        failed = RegistryError(f'{where} failed to load: {type(err).__name__}: '
+                               f'{one_line(err)}')
+        failed.__cause__ = err
+        return failed
     if not isinstance(obj, Component):
-        raise RegistryError(f'{_group_name(group)} {name!r} ({found[0].value}) is a '
-                            f'{type(obj).__name__}, not a Component')
-    if obj.name != name:
-        raise RegistryError(f'{_group_name(group)} {name!r} ({found[0].value}) is named '
-                            f'{obj.name!r} inside')
+        return RegistryError(f'{where} is a {type(obj).__name__}, not a Component')
+    if obj.name != entry.name:
+        return RegistryError(f'{where} is named {obj.name!r} inside')
+    wanted = FACTORY_ARGUMENTS[group]
+    try:
+        inspect.signature(obj.factory).bind(*wanted)
+    except TypeError as err:
+        return RegistryError(f'{where}: its factory{_signature(obj.factory)} cannot be called '
+                             f'as factory({", ".join(wanted)}) ({one_line(err)})')
     return obj
 
 
+def _signature(factory: Callable[..., Any]) -> str:
+    try:
+        return str(inspect.signature(factory))
+    except (TypeError, ValueError):
+        return ''
+
+
+def _short(value: Any) -> str:
+    text = ' '.join(repr(value).split())
+    return text if len(text) <= 60 else text[:57] + '...'
+
+
+def build(group: str, component: Component, shared: Any, params: Any) -> Any:
+    """``component.factory(shared, params)``, checked: whatever the factory raises (any
+    exception or ``SystemExit``; ``KeyboardInterrupt`` passes) and an object without the
+    group's interface (:data:`INTERFACES`) are one line naming the component.
+
+    Args:
+        group: the component's group.
+        component: the component (:func:`get`).
+        shared: the group's shared configuration (the factory's first argument).
+        params: the component's own parameters (:func:`config_of`).
+
+    Raises:
+        RegistryError: the factory failed or returned something else.
+    """
+    where = describe(group, component.name)
+    try:
+        built = component.factory(shared, params)
+    except (KeyboardInterrupt, RegistryError):
+        raise
+    except BaseException as err:
+        raise RegistryError(f'{where}: its factory raised {type(err).__name__}: '
+                            f'{one_line(err)}') from err
+    missing = [a for a in INTERFACES[group] if not hasattr(built, a)]
+    if missing:
+        raise RegistryError(f'{where}: its factory returned {_short(built)} '
+                            f'({type(built).__name__}), not a {_group_name(group)}: it lacks '
+                            f'{", ".join(missing)}')
+    return built
+
+
 def components(group: str) -> tuple[Component, ...]:
-    """Every registered component of ``group``, in name order."""
-    return tuple(get(group, n) for n in names(group))
+    """Every registered component of ``group`` that loads, in name order.
+
+    One that fails to load is left out (logged at debug level: ``trust-av -v``), so that a
+    broken plug-in stops only a command that chooses it (:func:`get` then raises)."""
+    found = []
+    for n in names(group):
+        try:
+            found.append(get(group, n))
+        except RegistryError as err:
+            LOG.debug('left out: %s', err)
+    return tuple(found)
 
 
 def config_types(group: str) -> tuple[type, ...]:

@@ -53,6 +53,7 @@ from rclpy.lifecycle import (
 )
 
 from trust_monitor.common.params import ParamsError
+from trust_monitor.common.registry import RegistryError
 from trust_monitor.errors import one_line
 from trust_monitor.ros.parameters import check_overrides
 from trust_monitor.ros.spin import WallLoop
@@ -168,7 +169,7 @@ class ManagedNode(LifecycleNode):
         try:
             self.build()
             check_overrides(self, self.command_line)
-        except (*self.user_errors, ParamsError, InvalidParameterValueException,
+        except (*self.user_errors, ParamsError, RegistryError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
             return self._failed(err, FAILURE, one_line(err))
         except Exception as err:   # logged with its traceback, re-raised by start()

@@ -21,7 +21,9 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.signals import SignalHandlerOptions
 
+from trust_monitor.common.component_checks import ComponentError
 from trust_monitor.common.params import ParamsError
+from trust_monitor.common.registry import RegistryError
 from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
 from trust_monitor.errors import one_line
 from trust_monitor.ros.parameters import check_overrides
@@ -171,10 +173,13 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     ``factory`` builds a node that is also a :class:`GraphNode`. Start-up errors of the kinds
     in ``user_errors`` (bad parameters, an unreadable trace), and a parameter override that
     neither the node nor any node of the graph has (:func:`check_overrides`), are printed as
-    one line and give exit code 2; anything else propagates with its traceback, so the
-    orchestrator can name the node that died. SIGINT, SIGTERM and SIGHUP (unless ignored, as
-    under ``nohup``) end the node cleanly (its
-    ``exit_code``), as does the death of the process named by :data:`PARENT_ENV`: the node
+    one line and give exit code 2, and so do a component that fails to load or build
+    (:class:`~trust_monitor.common.registry.RegistryError`) and, at any step, one that
+    breaks its interface (:class:`~trust_monitor.common.component_checks.ComponentError`:
+    the node then stops as on SIGTERM, its messages acknowledged); anything else propagates
+    with its traceback, so the orchestrator can name the node that died. SIGINT, SIGTERM and
+    SIGHUP (unless ignored, as under ``nohup``) end the node cleanly (its ``exit_code``), as
+    does the death of the process named by :data:`PARENT_ENV`: the node
     first takes what is queued for :data:`DRAIN_S` and waits until its messages are
     acknowledged, so a recorder stopped after it holds them. While it drains, its
     ``stopping`` is set: the step authority starts no new step (it would otherwise keep the
@@ -220,17 +225,21 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     try:
         try:
             node = start_node(factory, args)
-        except (*user_errors, ParamsError, InvalidParameterValueException,
+        except (*user_errors, ParamsError, RegistryError, InvalidParameterValueException,
                 ParameterUninitializedException) as err:
             _say(f'error: {one_line(err)}')
             return int(getattr(err, 'exit_code', 2))  # e.g. the recorder's disk-full code
         executor.add_node(node)
         graph_node: GraphNode = node  # type: ignore[assignment]
         parent = int(os.environ.get(PARENT_ENV, '0') or 0)
-        while not stop['requested'] and rclpy.ok() and not graph_node.finished:
-            executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
-            if parent and os.getppid() != parent:
-                stop['requested'] = True
+        try:
+            while not stop['requested'] and rclpy.ok() and not graph_node.finished:
+                executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+                if parent and os.getppid() != parent:
+                    stop['requested'] = True
+        except ComponentError as err:   # a plug-in broke its interface: stop cleanly, exit 2
+            _say(f'error: {one_line(err)}')
+            graph_node.exit_code = 2
         if not graph_node.finished and rclpy.ok():
             graph_node.stopping = True
             _hand_over(node)
