@@ -119,6 +119,19 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     items.sort(key=rank)
 
 
+@pytest.hookimpl(optionalhook=True)
+def pytest_handlecrashitem(crashitem: str, report: pytest.TestReport, sched: object) -> None:
+    """A test whose worker died (pytest-timeout's thread method ends a hung test's worker)
+    has failed once: it is not run again. pytest-xdist's group scheduler puts the dead
+    worker's whole unit back in its queue, the test that killed it included, so a hung test
+    ran again on each replacement worker until the restarts ran out. The rest of its unit
+    still runs."""
+    del report
+    for unit in getattr(sched, 'workqueue', {}).values():
+        if crashitem in unit:
+            unit[crashitem] = True
+
+
 def recorded_chunks(mcap: Path) -> int:
     """Chunks written so far to a growing MCAP (the recorder writes one chunk per step), read
     with mcap's stream reader up to the first incomplete record."""
