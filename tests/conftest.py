@@ -8,6 +8,7 @@ import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -117,6 +118,47 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         return 1 if item.get_closest_marker('slow') is not None else 2
 
     items.sort(key=rank)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
+    """``--dist loadgroup`` with two mends for a worker that dies (pytest-timeout's thread
+    method ends a hung test's worker, and xdist starts a new one), so that such a test fails
+    once and alone and the run goes on:
+
+    * the dead worker's unfinished unit goes back to the queue without the test that killed
+      it (xdist 3.8 requeued that test too: it hung again on every new worker until the
+      restarts ran out);
+    * a new worker gets work only once its collection is in (xdist 3.8 could hand it work
+      before, and the run ended in an INTERNALERROR, ``KeyError: <WorkerController>``).
+    """
+    if config.getvalue('dist') != 'loadgroup':
+        return None
+    from xdist.scheduler import LoadGroupScheduling
+
+    class Scheduling(LoadGroupScheduling):  # type: ignore[misc]
+        def remove_node(self, node: Any) -> str | None:
+            # xdist 3.8's LoadScopeScheduling.remove_node, but the test that was running
+            # when the worker died is marked done before its unit goes back to the queue
+            workload = self.assigned_work.pop(node)
+            crashed = next((nodeid for unit in workload.values()
+                            for nodeid, done in unit.items() if not done), None)
+            if crashed is None:
+                return None
+            for scope, unit in workload.items():
+                if crashed in unit:
+                    unit[crashed] = True    # it failed: it is not sent again
+                if not all(unit.values()):
+                    self.workqueue[scope] = unit
+            for other in self.assigned_work:
+                self._reschedule(other)
+            return crashed
+
+        def _reschedule(self, node: Any) -> None:
+            if node in self.registered_collections:
+                super()._reschedule(node)
+
+    return Scheduling(config, log)
 
 
 def recorded_chunks(mcap: Path) -> int:

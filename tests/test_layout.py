@@ -2,40 +2,39 @@
 packages by walking their imports (module level and inside functions), and the pure core's
 promise that importing it never loads rclpy or a message package (HOUSE_STYLE rule 1).
 
-The rule:
+The layers are declared once, in ``scripts/code_map.py`` (``LAYERS``), which also writes the
+code map. The rule:
+- every module is in a folder its package's layers declare: an unlisted folder fails;
 - packages: ``trust_monitor`` imports none of the other three; ``preceding_traffic`` and
   ``human_driver_sim`` import only ``trust_monitor`` (and not each other); nothing imports
-  ``trust_av_planner``.
-- inside ``trust_av_planner``, one direction: core (``errors``, ``nmpc``, ``planner``,
-  ``predictors``) <- ``system`` <- ``graph`` <- ``study`` <- ``cli``; the node modules
-  (``*_node.py``, adapters at the level of the graph) are started by name and imported by
-  nobody.
-- inside ``trust_monitor``: ``common`` imports only ``common`` and ``errors``; ``ros`` only
-  ``common``, ``ros`` and ``errors``.
-- pure modules (everything except ``ros/``, ``graph/``, ``study/``, ``cli/``, ``*_node.py``
-  and ``__main__``) never import rclpy, a message package, or a non-pure project module.
+  ``trust_av_planner``;
+- inside a package, a module imports only folders of the same or a lower rank; node modules
+  (``*_node.py``) are started by name and imported by nobody;
+- pure folders' modules (except node modules and ``__main__``) never import rclpy, a message
+  package, or a module that is not pure;
 - no import cycles between project modules.
 """
 
 from __future__ import annotations
 
 import ast
+import importlib.util
 import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 SRC = Path(__file__).resolve().parents[1] / 'src'
-PACKAGES = ('trust_monitor', 'preceding_traffic', 'human_driver_sim', 'trust_av_planner')
-ALLOWED_PACKAGES = {
-    'trust_monitor': {'trust_monitor'},
-    'preceding_traffic': {'trust_monitor', 'preceding_traffic'},
-    'human_driver_sim': {'trust_monitor', 'human_driver_sim'},
-    'trust_av_planner': set(PACKAGES),
-}
-PLANNER_LAYERS = {'core': 0, 'system': 1, 'graph': 2, 'study': 3, 'cli': 4}
+_spec = importlib.util.spec_from_file_location(
+    'code_map', Path(__file__).resolve().parents[1] / 'scripts' / 'code_map.py')
+assert _spec is not None and _spec.loader is not None
+code_map = importlib.util.module_from_spec(_spec)
+sys.modules['code_map'] = code_map      # dataclass-like NamedTuples need their module
+_spec.loader.exec_module(code_map)
+PACKAGES: tuple[str, ...] = code_map.PACKAGES
+ALLOWED_PACKAGES: dict[str, set[str]] = code_map.ALLOWED_PACKAGES
+LAYERS = code_map.LAYERS
 ROS_ROOTS = ('rclpy', 'rcl_interfaces', 'builtin_interfaces', 'rosgraph_msgs', 'rosidl_runtime_py')
-NOT_PURE_FOLDERS = ('ros', 'graph', 'study', 'cli')
 
 
 @dataclass(frozen=True)
@@ -79,19 +78,23 @@ def is_node(name: str) -> bool:
     return name.rsplit('.', 1)[-1].endswith('_node')
 
 
-def is_pure(name: str) -> bool:
-    parts = name.split('.')
-    return not (is_node(name) or parts[-1] == '__main__'
-                or any(p in NOT_PURE_FOLDERS for p in parts[1:-1]))
+def layer_of(module: Module) -> object | None:
+    """The declared layer of a module's folder (None: the folder is not declared)."""
+    return code_map.layer(module.name, module.path)
 
 
-def planner_layer(name: str) -> int:
-    """Rank in core <- system <- graph <- study <- cli; a node module (an adapter started by
-    name) ranks with the graph."""
-    parts = name.split('.')
-    if is_node(name):
-        return PLANNER_LAYERS['graph']
-    return PLANNER_LAYERS.get(parts[1], 0) if len(parts) > 1 else 0
+def is_pure(module: Module) -> bool:
+    layer = layer_of(module)
+    return not (layer is None or not layer.pure or is_node(module.name)
+                or module.name.endswith('__main__'))
+
+
+def rank(module: Module) -> int:
+    """Rank inside its package; a node module (an adapter started by name) ranks above
+    everything of its package that it may use."""
+    layer = layer_of(module)
+    assert layer is not None
+    return 99 if is_node(module.name) else int(layer.rank)
 
 
 def is_ros(imported: str) -> bool:
@@ -104,10 +107,15 @@ def violations(modules: dict[str, Module]) -> list[str]:
     problems = []
     for module in modules.values():
         package = module.name.split('.')[0]
+        if layer_of(module) is None:
+            folder = code_map.folder_of(module.name, module.path)
+            problems.append(f'{module.name}: folder {package}/{folder}/ is in no declared '
+                            'layer (scripts/code_map.py LAYERS)')
+            continue
         for imported in module.imports:
             target = imported.split('.')[0]
             where = f'{module.name} imports {imported}'
-            if is_pure(module.name) and is_ros(imported):
+            if is_pure(module) and is_ros(imported):
                 problems.append(f'{where}: a pure module imports ROS')
             if target not in PACKAGES:
                 continue
@@ -115,21 +123,16 @@ def violations(modules: dict[str, Module]) -> list[str]:
                 continue  # a name inside a module; the module itself is listed too
             if target not in ALLOWED_PACKAGES[package]:
                 problems.append(f'{where}: package {package} may not import {target}')
+            other = modules.get(imported)
+            if other is None or layer_of(other) is None:
+                continue
             if is_node(imported):
                 problems.append(f'{where}: node modules are started by name, never imported')
-            if is_pure(module.name) and imported in modules and not is_pure(imported):
+            if is_pure(module) and not is_pure(other):
                 problems.append(f'{where}: a pure module imports a non-pure one')
-            if package == target == 'trust_av_planner' and \
-                    planner_layer(imported) > planner_layer(module.name):
-                problems.append(f'{where}: against the direction core <- system <- graph <- '
-                                'study <- cli')
-            if package == target == 'trust_monitor':
-                folder = module.name.split('.')[1] if module.name.count('.') > 1 else ''
-                allowed = {'common': {'common', 'errors'},
-                           'ros': {'common', 'ros', 'errors'}}.get(folder)
-                if allowed is not None and imported.split('.')[1] not in allowed:
-                    problems.append(f'{where}: trust_monitor.{folder} may only import '
-                                    f'{sorted(allowed)}')
+            if package == target and rank(other) > rank(module):
+                problems.append(f'{where}: layer {rank(module)} may not import layer '
+                                f'{rank(other)}')
     problems += [f'import cycle: {" -> ".join(c)}' for c in cycles(modules)]
     return problems
 
@@ -173,6 +176,7 @@ def plant(tmp_path: Path, files: dict[str, str]) -> dict[str, Module]:
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_text(path.read_text())
     for relative, text in files.items():
+        (tmp_path / relative).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / relative).write_text(text)
     return scan(tmp_path)
 
@@ -190,15 +194,19 @@ def test_planted_violations_are_found(tmp_path: Path) -> None:
         'trust_av_planner/trust_av_planner/bad_msgs.py': 'from nav_msgs.msg import Odometry\n',
         'preceding_traffic/preceding_traffic/cycle_a.py': 'import preceding_traffic.cycle_b\n',
         'preceding_traffic/preceding_traffic/cycle_b.py': 'import preceding_traffic.cycle_a\n',
+        'trust_av_planner/trust_av_planner/webapp/server.py': 'import asyncio\n',
         'trust_av_planner/trust_av_planner/study/bad_node.py':
             'from trust_av_planner.planner_node import PlannerNode\n',
     }
     found = '\n'.join(violations(plant(tmp_path, planted)))
     assert 'common.bad_ros imports rclpy: a pure module imports ROS' in found
-    assert ('common.bad_up imports trust_monitor.trust_model: trust_monitor.common may only'
-            in found)
+    assert ('common.bad_up imports trust_monitor.trust_model: layer 0 may not import '
+            'layer 2') in found
     assert 'bad_planner imports trust_av_planner.nmpc: package human_driver_sim may not' in found
-    assert 'system.bad_graph imports trust_av_planner.graph.orchestrator' in found
+    assert ('system.bad_graph imports trust_av_planner.graph.orchestrator: layer 1 may not '
+            'import layer 2') in found
+    assert ('trust_av_planner.webapp.server: folder trust_av_planner/webapp/ is in no declared '
+            'layer') in found
     assert 'bad_msgs imports nav_msgs.msg: a pure module imports ROS' in found
     assert 'import cycle: preceding_traffic.cycle_a -> preceding_traffic.cycle_b' in found
     assert 'bad_node imports trust_av_planner.planner_node: node modules' in found
@@ -207,7 +215,7 @@ def test_planted_violations_are_found(tmp_path: Path) -> None:
 def test_importing_the_pure_core_loads_no_ros() -> None:
     """At run time too (third-party imports included): every pure module, imported in a
     fresh interpreter, leaves rclpy and every message package unloaded."""
-    pure = sorted(name for name in scan(SRC) if is_pure(name))
+    pure = sorted(name for name, module in scan(SRC).items() if is_pure(module))
     assert 'trust_av_planner.system.closed_loop' in pure and 'trust_monitor.ros.qos' not in pure
     code = ('import sys\n'
             f'for m in {pure!r}: __import__(m)\n'

@@ -1,4 +1,4 @@
-"""Mean and 95 % confidence interval for driver populations, against textbook t quantiles."""
+"""The one mean and 95 % confidence interval of every table, against textbook t quantiles."""
 
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ import math
 
 import pytest
 
-from trust_av_planner.study.stats import mean_ci95, t_quantile_975
+from trust_av_planner.study.tables import _cell
+from trust_monitor.common.stats import mean_ci95, t_quantile_975
 
 
 @pytest.mark.parametrize(('dof', 'quantile'), [(1, 12.706), (2, 4.303), (4, 2.776),
@@ -20,7 +21,13 @@ def test_mean_ci95_by_hand() -> None:
     mean, half = mean_ci95([1.0, 2.0, 3.0, 4.0])
     assert mean == 2.5
     assert half == pytest.approx(3.1824 * math.sqrt(5 / 3) / 2, rel=1e-4)
-    assert mean_ci95([7.0]) == (7.0, 0.0)
+
+
+def test_one_value_has_no_interval_and_tables_say_so() -> None:
+    mean, half = mean_ci95([7.0])
+    assert mean == 7.0 and math.isnan(half)
+    assert _cell([7.0], 2) == '7.00 (n = 1)'
+    assert _cell([1.0, 3.0], 1) == f'2.0 ± {t_quantile_975(1) * 1.0:.1f}'
 
 
 def test_mean_ci95_rejects_bad_input() -> None:

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
+ROOT = Path(__file__).resolve().parents[1]
 CONFTEST = Path(__file__).with_name('conftest.py')
 
 
@@ -85,3 +87,62 @@ def test_groups_stay_on_one_worker(tmp_path: Path) -> None:
     assert sum(kind == 'fixture built' for kind, _ in rows) == 1, rows
     assert len(workers['module fixture']) == 1, rows
     assert len(workers['wall clock']) == 1, rows
+
+
+def test_a_test_that_times_out_fails_alone_and_the_run_goes_on(tmp_path: Path) -> None:
+    """Under the suite's own settings (pyproject.toml: pytest-timeout's thread method; the
+    scheduler of tests/conftest.py) and ``-n 2 --dist loadgroup``, a hung test is reported
+    failed once, and every other test still runs and passes, those of its own group too: no
+    INTERNALERROR ends the run, and the hung test does not run again on each new worker."""
+    (tmp_path / 'conftest.py').write_text(textwrap.dedent(f"""
+        import importlib.util
+
+        spec = importlib.util.spec_from_file_location('project_conftest', {str(CONFTEST)!r})
+        project = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(project)
+        pytest_collection_modifyitems = project.pytest_collection_modifyitems
+        pytest_xdist_make_scheduler = project.pytest_xdist_make_scheduler
+        """))
+    (tmp_path / 'test_probe.py').write_text(textwrap.dedent("""
+        import time
+
+        import pytest
+
+
+        @pytest.fixture(scope='module')
+        def shared():
+            return 1
+
+
+        @pytest.mark.timeout(2)
+        def test_hangs_beside_its_group(shared):
+            time.sleep(120)
+
+
+        @pytest.mark.parametrize('i', range(3))
+        def test_in_the_group(shared, i):
+            time.sleep(0.2)
+
+
+        @pytest.mark.timeout(2)
+        def test_hangs():
+            time.sleep(120)
+
+
+        @pytest.mark.parametrize('i', range(6))
+        def test_fine(i):
+            time.sleep(0.2)
+        """))
+    proc = subprocess.run(
+        [sys.executable, '-m', 'pytest', '-n', '2', '--dist', 'loadgroup', '-q',
+         '-p', 'no:cacheprovider', '-c', str(ROOT / 'pyproject.toml'), '--rootdir',
+         str(tmp_path), str(tmp_path / 'test_probe.py')],
+        cwd=tmp_path, capture_output=True, text=True, timeout=600)  # a hang guard only
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 1, out
+    assert 'INTERNALERROR' not in out, out
+    # each hung test once, and every other test of its group (module fixture) still ran
+    assert re.search(r'\b2 failed, 9 passed\b', out), out
+    assert out.count("crashed while running 'test_probe.py::test_hangs'") == 1, out
+    # (its id carries its xdist group: test_probe.py::test_hangs_beside_its_group@...)
+    assert out.count("crashed while running 'test_probe.py::test_hangs_beside_its_group") == 1

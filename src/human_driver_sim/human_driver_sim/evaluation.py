@@ -13,13 +13,13 @@ v_max = max(v_PT) for the trace followed (Table I; the simulator's ``speed_max_f
 Per pair (all segments and windows of one leader->follower pair together), the gap NRMSE
 is RMSE(gap) / mean recorded gap and the speed NRMSE RMSE(speed) / mean recorded speed,
 over every simulated sample (the re-initialised first samples excluded). Pooled: the mean
-over pairs with a 95 % Student-t confidence interval. Every table carries the data's own
-noise floor: the follower's *recorded* speed replayed through the same gap computation.
+over pairs with a 95 % Student-t confidence interval (``trust_monitor.common.stats``).
+Every table carries the data's own noise floor: the follower's *recorded* speed replayed
+through the same gap computation.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -31,6 +31,7 @@ from human_driver_sim.driver_mpc import DriverConfig
 from human_driver_sim.driver_qp import BatchDriver
 from human_driver_sim.idm import IdmParams, idm_accel_array
 from trust_monitor.common import kinematics
+from trust_monitor.common.stats import mean_ci95
 
 WINDOW_S = 30.0
 """Length of a re-initialised window, s."""
@@ -40,57 +41,6 @@ CLOSE_GAP_M = 2.0
 """Simulated gaps below this are counted ("gaps below 2 m"), m."""
 PROTOCOLS = ('full', 'window')
 NOISE_FLOOR = 'recorded speed (noise floor)'
-
-
-def t_quantile_975(dof: int) -> float:
-    """Two-sided 95 % quantile of Student's t with ``dof`` degrees of freedom.
-
-    Exact finite series of P(|T| <= t) for integer dof (Abramowitz & Stegun 26.7.3-4),
-    inverted by bisection: 12.706 (1), 4.303 (2), 2.093 (19), 1.960 as dof grows.
-
-    Raises:
-        ValueError: dof < 1.
-    """
-    if dof < 1:
-        raise ValueError(f'degrees of freedom must be >= 1, got {dof}')
-
-    def central(t: float) -> float:
-        theta = math.atan(t / math.sqrt(dof))
-        c2 = math.cos(theta) ** 2
-        if dof % 2 == 1:
-            term, total = 1.0, 1.0 if dof > 1 else 0.0
-            for j in range(1, (dof - 1) // 2):
-                term *= c2 * (2 * j) / (2 * j + 1)
-                total += term
-            return 2.0 / math.pi * (theta + math.sin(theta) * math.cos(theta) * total)
-        term, total = 1.0, 1.0
-        for j in range(1, dof // 2):
-            term *= c2 * (2 * j - 1) / (2 * j)
-            total += term
-        return math.sin(theta) * total
-
-    low, high = 0.0, 100.0
-    for _ in range(100):
-        mid = 0.5 * (low + high)
-        low, high = (mid, high) if central(mid) < 0.95 else (low, mid)
-    return 0.5 * (low + high)
-
-
-def mean_ci95(values: Sequence[float]) -> tuple[float, float]:
-    """Mean and half-width of its 95 % confidence interval (Student t, n - 1 dof).
-
-    One value gives a half-width of nan (no spread can be estimated).
-
-    Raises:
-        ValueError: No values or a value that is not finite.
-    """
-    data = np.asarray(values, dtype=float)
-    if data.size == 0 or not np.all(np.isfinite(data)):
-        raise ValueError(f'mean_ci95 needs finite values, got {data.tolist()}')
-    if data.size == 1:
-        return float(data[0]), float('nan')
-    half = t_quantile_975(data.size - 1) * float(np.std(data, ddof=1)) / math.sqrt(data.size)
-    return float(np.mean(data)), half
 
 
 class Follower(Protocol):

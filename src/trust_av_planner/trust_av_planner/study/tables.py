@@ -17,9 +17,9 @@ import numpy as np
 
 from trust_av_planner.study.paper_results import MAX_IMPROVEMENT_PERCENT
 from trust_av_planner.study.population import by_driver
-from trust_av_planner.study.stats import mean_ci95
 from trust_av_planner.study.sweep import METRICS, Case
 from trust_monitor.common.output_files import replacing
+from trust_monitor.common.stats import mean_ci95
 from trust_monitor.trust_bound import row_bound
 from trust_monitor.trust_model import TrustConfig
 
@@ -172,6 +172,8 @@ def _cell(values: Sequence[float], digits: int, suffix: str = '') -> str:
     if not values:
         return NO_VALUE
     mean, half = mean_ci95(values)
+    if math.isnan(half):
+        return f'{mean:.{digits}f}{suffix} (n = 1)'
     return f'{mean:.{digits}f} ± {half:.{digits}f}{suffix}'
 
 
