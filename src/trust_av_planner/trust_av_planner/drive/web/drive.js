@@ -18,7 +18,7 @@ const drive = {
   phase: 'connecting', controlRateHz: 10, accelMax: 2.5, accelMin: -6.0, onCollision: 'continue',
   frames: [], displayed: null, pedal: 0, seq: 0, durationS: 0, keys: new Set(),
   pointerPedal: null, prompt: null, ws: null, inputTimer: null, source: 'none',
-  controlling: false, final: false, lastSentMs: -1e9, lastSentPedal: null, acks: 0,
+  controlling: false, final: false, lastSentMs: -1e9, lastSentPedal: null, acks: 0, frameTimes: [],
   token: document.querySelector('meta[name="drive-token"]').content,
 };
 window.drive = drive;
@@ -62,6 +62,8 @@ function onMessage(msg) {
   } else if (msg.type === 'state') {
     if (msg.ack !== undefined && drive.controlling) { send({type: 'ack', seq: msg.ack}); drive.acks++; }
     msg.received_ms = performance.now();
+    drive.frameTimes.push(msg.received_ms);      // when frames came (tests, benchmark)
+    if (drive.frameTimes.length > 3000) drive.frameTimes.shift();
     drive.frames.push(msg);
     if (drive.frames.length > 50) drive.frames.shift();
     showCrash(msg);
