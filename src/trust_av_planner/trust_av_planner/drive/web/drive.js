@@ -312,7 +312,7 @@ function drawTopDown(ctx, W, H, s) {
 // The driver's seat: a pinhole camera EYE_HEIGHT_M above the road, EYE_BEHIND_BUMPER_M
 // behind your front bumper, looking down the road; f in px.
 function drawDriverView(ctx, W, H, s) {
-  const horizon = H * 0.40, f = W * 0.9, cx = W / 2;
+  const horizon = H * 0.40, f = W * 1.1, cx = W / 2;
   const sky = ctx.createLinearGradient(0, 0, 0, horizon);
   sky.addColorStop(0, '#5b86b5'); sky.addColorStop(1, '#b9cfe3');
   ctx.fillStyle = sky; ctx.fillRect(0, 0, W, horizon);
@@ -374,8 +374,8 @@ function drawRear(ctx, z, colour, brake, label, xAt, yAt, f) {
   ctx.fillStyle = '#3a3a3a'; ctx.fillRect(left, ground - 0.45 * px, width, 0.18 * px);
   // rear lights: dim red; bright, with a glow, while the AV is commanded to brake
   const lit = brake > 0;
-  ctx.fillStyle = lit ? `rgba(255, 30, 40, ${brake})` : '#6b1a1a';
-  if (lit) { ctx.shadowColor = '#ff2020'; ctx.shadowBlur = 12 + 30 * brake; }
+  ctx.fillStyle = lit ? '#ff1f1f' : '#5e1b1b';
+  if (lit) { ctx.shadowColor = '#ff2020'; ctx.shadowBlur = 10 + 30 * brake; }
   const lampW = 0.22 * width, lampH = 0.12 * height, lampY = top + 0.58 * height;
   ctx.fillRect(left + 0.02 * width, lampY, lampW, lampH);
   ctx.fillRect(left + width - 0.02 * width - lampW, lampY, lampW, lampH);
