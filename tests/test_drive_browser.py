@@ -418,7 +418,8 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
             ws.send(JSON.stringify({type: 'ack', seq: 123456}));
             ws.send('not json');
         }""")
-        # a flood of 10,000 messages from the driving tab; the other tab's frames go on
+        # a flood of 10,000 messages from the driving tab: refused, the connection closed
+        # after 200 of them (the tab reconnects by itself); the other tab's frames go on
         flood_start = second.evaluate('performance.now()')
         first.evaluate("""() => {
             const ws = window.drive.ws;
@@ -494,7 +495,7 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
                    'ack of no sent frame', 'not a page message',
                    'a message from a tab that is not driving'):
         assert refused.get(reason, 0) >= 1, (reason, refused)
-    assert refused['input over the control rate'] > 4000
+    assert refused['more than 200 messages in a second: the connection closed'] == 1
     assert sum(v for k, v in refused.items() if 'WebSocket' in k) >= 2     # the foreign page
     # nothing refused reached the graph: every command within the pedal's range, at most
     # about the control rate, and the recorded answers are the participant's

@@ -14,12 +14,12 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from websockets.exceptions import InvalidStatus
+from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
 from trust_av_planner.drive.follower import COLLISION_CLEAR_M, contact
 from trust_av_planner.drive.gate import DRIVING, INPUT_BURST, QUESTIONNAIRE, READY, WAIT, Gate
-from trust_av_planner.drive.server import DriveServer
+from trust_av_planner.drive.server import FLOOD_MESSAGES_PER_S, DriveServer
 from trust_av_planner.planner import observe
 from trust_monitor.common.kinematics import VehicleState
 
@@ -187,7 +187,36 @@ def test_one_tab_drives_a_second_is_told_and_may_take_over(
         second.send(json.dumps({'type': 'take_over'}))
         assert _received(second, 'control')['controlling'] is True
         assert _received(first, 'control') == {'type': 'control', 'controlling': False,
-                                               'other': True}
+                                               'other': True, 'taken_over': True}
         assert ('event', 'take_over') in _drain(inbox)
+        with _open(server) as third:        # a reconnection before the old one is gone
+            assert _received(third, 'control')['other'] is True
+            second.close()                  # the driving tab closes: the control is free
+            assert _received(third, 'control') == {'type': 'control', 'controlling': False,
+                                                   'other': False}
+            third.send(json.dumps({'type': 'take_over'}))   # what the page that drove does
+            assert _received(third, 'control')['controlling'] is True
+            events = [e for kind, e in _drain(inbox) if kind == 'event']
+            assert events == ['page_lost', 'page_connected']
     events = [e for kind, e in _drain(inbox) if kind == 'event']
-    assert events == ['page_lost']          # the controlling tab closed: an interruption
+    assert events == ['page_lost']          # the driving tab closed: an interruption
+
+
+def test_a_flooding_connection_is_closed_and_the_others_go_on(
+        served: tuple[DriveServer, queue.Queue[Any]]) -> None:
+    server, inbox = served
+    with _open(server) as flooder, _open(server) as other:
+        _received(other, 'control')
+        with pytest.raises(ConnectionClosed) as closed:
+            for k in range(10_000):
+                flooder.send(json.dumps({'type': 'input', 'seq': k, 'accel_mps2': 1.0}))
+            flooder.recv(timeout=10)
+        assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
+        server.send({'type': 'state'})
+        assert _received(other, 'state') == {'type': 'state'}
+    seen = _drain(inbox)
+    # at least one second's worth passed (more only if the host is too slow to take 200
+    # messages within a second), then nothing more
+    assert FLOOD_MESSAGES_PER_S <= len([m for kind, m in seen if kind == 'message']) < 10_000
+    assert ('refused', f'more than {FLOOD_MESSAGES_PER_S} messages in a second: the '
+            'connection closed') in seen

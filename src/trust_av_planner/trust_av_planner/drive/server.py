@@ -8,7 +8,11 @@ per-server token written into the served page (``?token=``); anything else is re
 (403) and counted. One connection controls the car at a time: the first one; a later tab is
 told another tab is driving (``control``, ``controlling: false``) and its messages are
 refused and counted, until it sends ``take_over`` (recorded as an event); a controlling tab
-that closes frees the control for the next tab that connects or takes over.
+that closes frees the control: the next tab that connects drives, and the tabs still open
+are told (the page that drove before takes it back by itself: a reconnection that came
+before the old connection was gone). A connection
+that floods (more than ``FLOOD_MESSAGES_PER_S`` messages in a second) is closed; messages
+are handled one at a time, every other connection's traffic going first between two.
 
 Messages are JSON objects with a ``type`` (the page's protocol, not ROS: the drive turns
 each into standard ROS messages). In: ``ready``, ``input`` (``seq``, ``accel_mps2``),
@@ -48,6 +52,9 @@ MAX_MESSAGE_BYTES = 4096
 TOKEN_MARK = b'__DRIVE_TOKEN__'
 """Replaced in the served ``index.html`` by the server's token."""
 LOOPBACK = ('127.0.0.1', 'localhost')
+FLOOD_MESSAGES_PER_S = 200
+"""A connection that sends more messages than this within one second is closed (1008; the
+page reconnects by itself): a page sends about 2 x ``control_rate_hz`` a second."""
 
 
 class ServerError(TrustAvPlannerError):
@@ -189,9 +196,20 @@ class DriveServer:
             self.on_event('page_connected', time.time_ns())
         await self._send_one(connection, json.dumps(self.on_connect()))
         await self._send_control(connection)
+        window_ns, in_window = 0, 0
         try:
             async for text in connection:
                 arrived = time.time_ns()
+                if arrived - window_ns > 1_000_000_000:
+                    window_ns, in_window = arrived, 0
+                in_window += 1
+                if in_window > FLOOD_MESSAGES_PER_S:
+                    self.on_refused(f'more than {FLOOD_MESSAGES_PER_S} messages in a second: '
+                                    'the connection closed')
+                    self.clients.discard(connection)
+                    await self._release(connection)
+                    await connection.close(1008, 'too many messages')
+                    break
                 try:
                     message = parse_message(text)
                 except ValueError as err:
@@ -210,16 +228,23 @@ class DriveServer:
         finally:
             self.clients.discard(connection)
             self.disconnects += 1
-            if connection is self.controller:
-                self.controller = None
-                self.on_event('page_lost', time.time_ns())
-                for other in list(self.clients):
+            await self._release(connection)
+
+    async def _release(self, connection: ServerConnection) -> None:
+        """``connection`` no longer drives (closed, or closing): the control is free; every
+        other tab is told (the page that drove before takes it back by itself)."""
+        if connection is self.controller:
+            self.controller = None
+            self.on_event('page_lost', time.time_ns())
+            for other in list(self.clients):
+                if other is not connection:
                     await self._send_control(other)
 
-    async def _send_control(self, connection: ServerConnection) -> None:
+    async def _send_control(self, connection: ServerConnection, **extra: bool) -> None:
         await self._send_one(connection, json.dumps({
             'type': 'control', 'controlling': connection is self.controller,
-            'other': self.controller is not None and connection is not self.controller}))
+            'other': self.controller is not None and connection is not self.controller,
+            **extra}))
 
     async def _take_over(self, connection: ServerConnection, now_ns: int) -> None:
         if connection is self.controller:
@@ -227,7 +252,10 @@ class DriveServer:
         previous, self.controller = self.controller, connection
         self.on_event('take_over' if previous is not None else 'page_connected', now_ns)
         for client in list(self.clients):
-            await self._send_control(client)
+            if client is previous:
+                await self._send_control(client, taken_over=True)
+            else:
+                await self._send_control(client)
 
     def send(self, message: dict[str, Any]) -> None:
         """Send ``message`` to every connected page (from any thread)."""
@@ -265,6 +293,7 @@ class DriveServer:
         async def shut() -> None:
             server.close()
             await server.wait_closed()
-        asyncio.run_coroutine_threadsafe(shut(), loop).result(timeout=10)
+        # a client that never answers the closing handshake is dropped after close_timeout
+        asyncio.run_coroutine_threadsafe(shut(), loop).result(timeout=30)
         loop.call_soon_threadsafe(loop.stop)
         self._thread.join(timeout=10)

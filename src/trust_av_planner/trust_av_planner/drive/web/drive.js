@@ -18,7 +18,7 @@ const drive = {
   phase: 'connecting', controlRateHz: 10, accelMax: 2.5, accelMin: -6.0, onCollision: 'continue',
   frames: [], displayed: null, pedal: 0, seq: 0, durationS: 0, keys: new Set(),
   pointerPedal: null, prompt: null, ws: null, inputTimer: null, source: 'none',
-  controlling: false, final: false, lastSentMs: -1e9, lastSentPedal: null, acks: 0, frameTimes: [],
+  controlling: false, final: false, lastSentMs: -1e9, lastSentPedal: null, acks: 0, frameTimes: [], drove: false,
   token: document.querySelector('meta[name="drive-token"]').content,
 };
 window.drive = drive;
@@ -71,7 +71,13 @@ function onMessage(msg) {
 }
 
 function setControl(msg) {
+  if (!msg.controlling && !msg.other && drive.drove) {
+    send({type: 'take_over'});               // this tab drove: it takes the free control back
+    return;
+  }
   drive.controlling = msg.controlling;
+  if (msg.controlling) drive.drove = true;
+  else if (msg.taken_over) drive.drove = false;   // another tab took over: not taken back
   $('control').hidden = msg.controlling;
   $('control-text').textContent = msg.other
     ? 'Another tab is driving this session. Only one tab can drive.'
