@@ -36,6 +36,7 @@ from trust_av_planner.drive.bag_data import (
     drive_bag_pairs,
     read_drive,
 )
+from trust_av_planner.drive.gate import reason_key
 from trust_av_planner.drive.sessions import balanced_latin_square_row
 from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
 from trust_av_planner.drive.trust_rating import questionnaire_score
@@ -136,6 +137,10 @@ def _counts(bag: Path) -> dict[str, int]:
     meta = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     return {t['topic_metadata']['name']: t['message_count']
             for t in meta['topics_with_message_count']}
+
+
+def _stamp_ns(msg: Any) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
 def _phases(bag: Path) -> list[str]:
@@ -489,14 +494,17 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
     assert check_bag_directory(bag) == []
     meta = custom_data(bag)
     assert int(meta['trust_av.drive.collisions']) >= 1
-    refused = json.loads(meta['trust_av.drive.refused'])
+    refused = {k.removeprefix('trust_av.drive.refused.'): int(v) for k, v in meta.items()
+               if k.startswith('trust_av.drive.refused.')}
+    assert sum(refused.values()) == int(meta['trust_av.drive.refused'])
     for reason in ('questionnaire during driving', 'rating outside a prompt',
                    'ready during driving', 'input over the control rate',
                    'ack of no sent frame', 'not a page message',
                    'a message from a tab that is not driving'):
-        assert refused.get(reason, 0) >= 1, (reason, refused)
-    assert refused['more than 200 messages in a second: the connection closed'] == 1
-    assert sum(v for k, v in refused.items() if 'WebSocket' in k) >= 2     # the foreign page
+        assert refused.get(reason_key(reason), 0) >= 1, (reason, refused)
+    assert refused[reason_key('more than 200 messages in a second: the connection '
+                              'closed')] == 1
+    assert sum(v for k, v in refused.items() if 'websocket' in k) >= 2     # the foreign page
     # nothing refused reached the graph: every command within the pedal's range, at most
     # about the control rate, and the recorded answers are the participant's
     commands = [m.accel.linear.x for m in _messages(bag, '/human/accel_cmd')]
@@ -515,6 +523,12 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         assert kind in events
     lost = events.index('page_lost')
     assert 'page_connected' in events[lost:]          # the interruption and the return
+    # the rating schedule went on through the interruptions: every prompt on the 4 s grid
+    start_ns = int(meta['trust_av.drive.start_ns'])
+    prompts = [(_stamp_ns(m) - start_ns) / 1e9 for m in _messages(bag, '/driver/events')
+               if m.status[0].message == 'rating_prompt']
+    assert len(prompts) >= 3
+    assert all(abs(t / 4.0 - round(t / 4.0)) * 4.0 < 1.0 for t in prompts), prompts
     # every registered trust model's trust, live during the drive
     trust = _messages(bag, '/driver/model_trust')
     assert len(trust) > 100 and list(trust[0].name) == list(names(TRUST_MODELS))

@@ -10,6 +10,7 @@ drive's loop changes the phase and opens prompts. Times are passed in (ns); no r
 from __future__ import annotations
 
 import math
+import re
 import threading
 from collections import Counter
 from dataclasses import dataclass
@@ -28,6 +29,12 @@ ACK_KEEP_NS = 5_000_000_000
 INPUT_BURST = 4
 """Pedal samples the page may send at once above the control rate (key press and release
 between two periodic samples)."""
+
+
+def reason_key(reason: str) -> str:
+    """A refusal reason as a metadata key: lower-case words joined by ``_``
+    (``'input over the control rate'`` -> ``input_over_the_control_rate``)."""
+    return re.sub(r'[^a-z0-9]+', '_', reason.lower()).strip('_')
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,8 @@ bag, on the same clock:
 
 Only the page's admitted messages reach the drive (:mod:`trust_av_planner.drive.gate`: the
 phase, the rate, the pedal's range, open prompts); the refused ones are counted, never
-stored (``custom_data`` ``trust_av.drive.refused``).
+stored (``custom_data`` ``trust_av.drive.refused``: the total, and
+``trust_av.drive.refused.<reason>`` per reason, :func:`~trust_av_planner.drive.gate.reason_key`).
 
 The bag's ``custom_data`` (rosbag2 ``metadata.yaml``) holds the study metadata:
 participant, condition, alpha, predictor, trace, code version, seed, status, what ended
@@ -38,7 +39,6 @@ the drive, the collisions, the refused messages and the latency percentiles.
 
 from __future__ import annotations
 
-import json
 import logging
 import queue
 import time
@@ -47,7 +47,7 @@ from typing import Any
 
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.drive.follower import APPLIED_TOPIC, COMMAND_TOPIC, FollowerConfig
-from trust_av_planner.drive.gate import DRIVING, IDLE, QUESTIONNAIRE, READY, WAIT
+from trust_av_planner.drive.gate import DRIVING, IDLE, QUESTIONNAIRE, READY, WAIT, reason_key
 from trust_av_planner.drive.server import DriveServer
 from trust_av_planner.drive.trust_rating import JIAN_ITEMS, RatingError
 from trust_av_planner.graph import stop_signals
@@ -382,8 +382,11 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                 recording.set_custom_data('trust_av.drive.ended_by', outcome.ended_by)
                 recording.set_custom_data('trust_av.drive.collisions', str(outcome.collisions))
                 recording.set_custom_data('trust_av.drive.on_collision', on_collision)
-                recording.set_custom_data('trust_av.drive.refused', json.dumps(
-                    outcome.refused, sort_keys=True))
+                recording.set_custom_data('trust_av.drive.refused',
+                                          str(sum(outcome.refused.values())))
+                for reason, count in sorted(outcome.refused.items()):
+                    recording.set_custom_data(f'trust_av.drive.refused.{reason_key(reason)}',
+                                              str(count))
                 for key, number in latency.items():
                     recording.set_custom_data(f'trust_av.drive.latency.{key}', f'{number:g}')
                 recording.finish()
