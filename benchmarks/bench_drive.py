@@ -263,7 +263,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--duration-s', type=float, default=40.0,
                         help='wall time of each drive, s (default: %(default)s)')
-    parser.add_argument('--busy', type=int, nargs='+', default=[0, 2],
+    parser.add_argument('--busy', type=int, nargs='*', default=[0, 2],
                         help='busy processes beside the drive, one run each '
                              '(default: %(default)s)')
     parser.add_argument('--flood', action='store_true',

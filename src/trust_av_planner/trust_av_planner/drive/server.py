@@ -53,8 +53,9 @@ TOKEN_MARK = b'__DRIVE_TOKEN__'
 """Replaced in the served ``index.html`` by the server's token."""
 LOOPBACK = ('127.0.0.1', 'localhost')
 FLOOD_MESSAGES_PER_S = 200
-"""A connection that sends more messages than this within one second is closed (1008; the
-page reconnects by itself): a page sends about 2 x ``control_rate_hz`` a second."""
+"""A connection that sends more messages than this within one second is dropped (its TCP
+connection aborted; the page reconnects by itself): a page sends about 2 x
+``control_rate_hz`` a second."""
 
 
 class ServerError(TrustAvPlannerError):
@@ -208,7 +209,9 @@ class DriveServer:
                                     'the connection closed')
                     self.clients.discard(connection)
                     await self._release(connection)
-                    await connection.close(1008, 'too many messages')
+                    # dropped at once: a closing handshake would first read (and parse)
+                    # everything the flood has queued
+                    connection.transport.abort()
                     break
                 try:
                     message = parse_message(text)
