@@ -118,7 +118,7 @@ function setPhase(msg) {
     $('message').textContent = {
       finished: 'Thank you: the session is complete. You can close this tab.',
       wait: 'Drive complete. Please wait a moment.',
-    }[msg.phase] || 'The session is paused. The experimenter will resume it.';
+    }[msg.phase] || 'The session is paused. When the experimenter resumes it, reload this page.';
     setStatus(msg.phase);
     if (msg.phase === 'finished' || msg.phase === 'paused') {
       drive.final = true;                   // nothing more comes: the end screen is final
