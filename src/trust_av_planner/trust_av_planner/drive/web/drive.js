@@ -117,7 +117,9 @@ function setPhase(msg) {
     $('message').hidden = false;
     $('message').textContent = {
       finished: 'Thank you: the session is complete. You can close this tab.',
-      wait: 'Drive complete. Please wait a moment.',
+      wait: msg.ended_by === 'collision'
+        ? 'The drive ended: your car hit the AV. Please wait a moment.'
+        : 'Drive complete. Please wait a moment.',
     }[msg.phase] || 'The session is paused. When the experimenter resumes it, reload this page.';
     setStatus(msg.phase);
     if (msg.phase === 'finished' || msg.phase === 'paused') {
@@ -127,10 +129,11 @@ function setPhase(msg) {
     }
   }
   if (!['driving', 'wait'].includes(msg.phase)) hideRating();
+  if (msg.phase !== 'driving') $('crash').hidden = true;
 }
 
 function showCrash(frame) {
-  $('crash').hidden = !frame.crash;
+  $('crash').hidden = !frame.crash || drive.phase !== 'driving';
   if (frame.crash) {
     $('crash-text').textContent = drive.onCollision === 'end'
       ? 'Your car hit the AV and stopped. This drive ends here.'
