@@ -36,6 +36,7 @@ from trust_av_planner.drive.bag_data import (
     drive_bag_pairs,
     read_drive,
 )
+from trust_av_planner.drive.gate import reason_key
 from trust_av_planner.drive.sessions import balanced_latin_square_row
 from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
 from trust_av_planner.drive.trust_rating import questionnaire_score
@@ -136,6 +137,10 @@ def _counts(bag: Path) -> dict[str, int]:
     meta = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     return {t['topic_metadata']['name']: t['message_count']
             for t in meta['topics_with_message_count']}
+
+
+def _stamp_ns(msg: Any) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
 def _phases(bag: Path) -> list[str]:
@@ -319,3 +324,212 @@ def test_a_session_resumes_after_the_command_is_killed(tmp_path: Path, browser: 
     finally:
         again.kill()
     assert again.process.returncode == 128 + signal.SIGTERM
+
+
+FOREIGN_PAGE = """<!doctype html><script>
+window.result = [];
+for (const query of ['?token=' + location.hash.slice(1), '']) {
+  const ws = new WebSocket('ws://127.0.0.1:PORT/ws' + query);
+  ws.onopen = () => window.result.push('open');
+  ws.onclose = () => window.result.push('closed');
+}
+</script>"""
+"""Another web page on this machine that knows the drive's port and even its token."""
+ROBUST = """/**/drive:
+  ros__parameters:
+    drive_duration_s: 30.0
+    practice: false
+    rating_period_s: 4.0
+    abandon_after_s: 8.0
+    start_timeout_s: 120.0
+    questionnaire_timeout_s: 60.0
+    port: 0
+    on_collision: continue
+    condition_names: [low_alpha]
+    condition_alphas: [0.0]
+    condition_predictors: [ca]
+    condition_traces: [us06]
+"""
+
+
+def _foreign_server(port: int) -> Any:
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    body = FOREIGN_PAGE.replace('PORT', str(port)).encode()
+
+    class Page(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            self.send_response(200)
+            self.send_header('Content-Type', 'text/html')
+            self.send_header('Content-Length', str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *_args: Any) -> None:
+            pass
+
+    server = ThreadingHTTPServer(('127.0.0.1', 0), Page)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return server
+
+
+def _shown(page: Any, selector: str) -> bool:
+    return bool(page.locator(selector).is_visible())
+
+
+def test_no_participant_second_tab_or_other_page_breaks_a_drive(
+        tmp_path: Path, browser: Any) -> None:
+    """One drive, every misuse in turn: a foreign page, a second tab, the gas held at the
+    start (a collision), stray messages, a flood, a take-over, a closed and reopened tab."""
+    settings = tmp_path / 'drive.yaml'
+    settings.write_text(ROBUST)
+    study = tmp_path / 'study'
+    drive = Drive(study, 'P04', settings)
+    port = int(drive.url.rsplit(':', 1)[1].strip('/'))
+    context = browser.new_context(viewport={'width': 1000, 'height': 760})
+    foreign = _foreign_server(port)
+    try:
+        first = context.new_page()
+        first.goto(drive.url)
+        first.wait_for_selector('#start', state='visible', timeout=120_000)
+        assert first.text_content('#title') == 'Drive 1 of 1'
+        assert 'automated vehicle' in first.text_content('#intro')
+        # another web page, even one that knows the token, cannot open the WebSocket
+        token = first.evaluate('window.drive.token')
+        evil = context.new_page()
+        evil.goto(f'http://127.0.0.1:{foreign.server_address[1]}/#{token}')
+        evil.wait_for_function('window.result.length === 2', timeout=10_000)
+        assert evil.evaluate('window.result') == ['closed', 'closed']
+        evil.close()
+        # a second tab is told another tab drives
+        second = context.new_page()
+        second.goto(drive.url)
+        second.wait_for_selector('#control', state='visible', timeout=10_000)
+        assert 'Another tab is driving' in second.text_content('#control')
+        # the gas held at the start: the car hits the AV, stops behind it, the page says so
+        first.bring_to_front()
+        first.keyboard.down('ArrowUp')
+        first.click('#start')
+        first.wait_for_selector('#crash', state='visible', timeout=30_000)
+        assert 'hit the AV' in first.text_content('#crash')
+        first.keyboard.up('ArrowUp')
+        assert float(first.locator('#gap').get_attribute('data-m')) > -0.1
+        # stray messages: a questionnaire and a rating nobody asked for, a start, junk
+        first.evaluate("""() => {
+            const ws = window.drive.ws;
+            ws.send(JSON.stringify({type: 'questionnaire', answers: Array(12).fill(7)}));
+            ws.send(JSON.stringify({type: 'rating', id: 999, value: 100}));
+            ws.send(JSON.stringify({type: 'ready'}));
+            ws.send(JSON.stringify({type: 'ack', seq: 123456}));
+            ws.send('not json');
+        }""")
+        # a flood of 10,000 messages from the driving tab: refused, the connection closed
+        # after 200 of them (the tab reconnects by itself); the other tab's frames go on
+        flood_start = second.evaluate('performance.now()')
+        first.evaluate("""() => {
+            const ws = window.drive.ws;
+            for (let k = 0; k < 10000; k++) {
+                ws.send(JSON.stringify(k % 2 ? {type: 'input', seq: k, accel_mps2: 1e308}
+                                            : {type: 'ack', seq: k}));
+            }
+        }""")
+        first.wait_for_timeout(3000)
+        frames = second.evaluate(f'window.drive.frameTimes.filter(t => t > {flood_start})')
+        assert len(frames) > 20
+        print(f'flood: the other tab got {len(frames)} frames in 3 s, largest gap '
+              f'{max(np.diff(frames)):.0f} ms')
+        # a rating prompt is answered in the driving tab
+        first.wait_for_selector('#rating', state='visible', timeout=15_000)
+        first.locator('#rating-slider').fill('60')
+        first.click('#rating-submit')
+        # the second tab takes over explicitly; the first is told
+        second.bring_to_front()
+        second.click('#take-over')
+        first.wait_for_selector('#control', state='visible', timeout=10_000)
+        second.wait_for_selector('#control', state='hidden', timeout=10_000)
+        first.evaluate("window.drive.ws.send(JSON.stringify({type: 'input', seq: 1, "
+                       "accel_mps2: 2}))")
+        first.close()
+        # the driving tab is closed and reopened: the true time left, the same schedule
+        second.wait_for_function("document.getElementById('time-left').dataset.s",
+                                 timeout=10_000)
+        left_before = float(second.locator('#time-left').get_attribute('data-s'))
+        prompt_before = second.evaluate('window.drive.prompt')
+        second.close()
+        reopened = context.new_page()
+        reopened.goto(drive.url)
+        reopened.wait_for_function("window.drive.controlling && document.getElementById("
+                                   "'time-left').dataset.s", timeout=10_000)
+        left_after = float(reopened.locator('#time-left').get_attribute('data-s'))
+        assert 0 < left_before - left_after < 5.0, (left_before, left_after)
+        reopened.wait_for_selector('#rating', state='visible', timeout=15_000)
+        assert prompt_before is None or reopened.evaluate('window.drive.prompt') >= prompt_before
+        reopened.locator('#rating-slider').fill('40')
+        reopened.click('#rating-submit')
+        box = reopened.locator('#pedal').bounding_box()
+        reopened.mouse.move(box['x'] + box['width'] / 2, box['y'] + box['height'] / 2 + 10)
+        reopened.mouse.down()                    # a light brake: the participant is there
+        reopened.wait_for_function("window.drive.phase === 'questionnaire'", timeout=60_000)
+        reopened.mouse.up()
+        assert reopened.evaluate('window.innerHeight') >= reopened.locator(
+            '#questionnaire-submit').bounding_box()['y']      # it fits the window
+        assert reopened.locator('#questionnaire input:checked').count() == 0   # no default
+        for i, value in enumerate(ANSWERS):
+            reopened.check(f'input[name="item{i + 1}"][value="{value}"]')
+        reopened.click('#questionnaire-submit')
+        reopened.wait_for_function("window.drive.phase === 'finished'", timeout=60_000)
+        output = drive.finish()
+        reopened.wait_for_timeout(1500)
+        assert 'connection lost' not in reopened.text_content('#status')   # final
+        assert 'session is complete' in reopened.text_content('#message')
+    finally:
+        foreign.shutdown()
+        context.close()
+        drive.kill()
+    assert '1 collisions' in output
+    session = json.loads((study / 'P04' / 'session.json').read_text())
+    (record,) = session['drives']
+    assert record['status'] == 'done' and record['summary']['collisions'] >= 1
+    bag = study / record['bag']
+    assert check_bag_directory(bag) == []
+    meta = custom_data(bag)
+    assert int(meta['trust_av.drive.collisions']) >= 1
+    refused = {k.removeprefix('trust_av.drive.refused.'): int(v) for k, v in meta.items()
+               if k.startswith('trust_av.drive.refused.')}
+    assert sum(refused.values()) == int(meta['trust_av.drive.refused'])
+    for reason in ('questionnaire during driving', 'rating outside a prompt',
+                   'ready during driving', 'input over the control rate',
+                   'ack of no sent frame', 'not a page message',
+                   'a message from a tab that is not driving'):
+        assert refused.get(reason_key(reason), 0) >= 1, (reason, refused)
+    assert refused[reason_key('more than 200 messages in a second: the connection '
+                              'closed')] == 1
+    assert sum(v for k, v in refused.items() if 'websocket' in k) >= 2     # the foreign page
+    # nothing refused reached the graph: every command within the pedal's range, at most
+    # about the control rate, and the recorded answers are the participant's
+    commands = [m.accel.linear.x for m in _messages(bag, '/human/accel_cmd')]
+    assert all(-6.0 <= a <= 2.5 for a in commands)
+    assert len(commands) < 30.0 * 10 * 1.5
+    data = read_drive(bag)
+    assert data.questionnaire[:12] == ANSWERS
+    np.testing.assert_allclose(sorted(data.ratings), [0.40, 0.60])
+    # the car never went through the AV
+    you, av = data.odometry['/human/odom'], data.odometry['/ego/odom']
+    gaps = np.interp(you[:, 0], av[:, 0], av[:, 1]) - 4.5 - you[:, 1]
+    assert gaps.min() > -0.2
+    events = [m.status[0].message for m in _messages(bag, '/driver/events')]
+    assert events.index('start') < events.index('collision')
+    for kind in ('take_over', 'page_lost', 'rating_prompt', 'end'):
+        assert kind in events
+    lost = events.index('page_lost')
+    assert 'page_connected' in events[lost:]          # the interruption and the return
+    # the rating schedule went on through the interruptions: every prompt on the 4 s grid
+    start_ns = int(meta['trust_av.drive.start_ns'])
+    prompts = [(_stamp_ns(m) - start_ns) / 1e9 for m in _messages(bag, '/driver/events')
+               if m.status[0].message == 'rating_prompt']
+    assert len(prompts) >= 3
+    assert all(abs(t / 4.0 - round(t / 4.0)) * 4.0 < 1.0 for t in prompts), prompts
+    # every registered trust model's trust, live during the drive
+    trust = _messages(bag, '/driver/model_trust')
+    assert len(trust) > 100 and list(trust[0].name) == list(names(TRUST_MODELS))
+    assert all(np.isfinite(m.position).all() for m in trust)

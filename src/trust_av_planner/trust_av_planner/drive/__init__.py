@@ -4,7 +4,8 @@ from a browser page.
 :mod:`.follower` (the participant's car and its reaction to a lost participant),
 :mod:`.trust_rating` (questionnaire scoring, ratings vs trust models), :mod:`.sessions`
 (participants, counterbalancing, resume, withdrawal), :mod:`.study` (settings, summaries),
-:mod:`.bag_data` (a drive's bag read back), :mod:`.server` (the page and its WebSocket),
+:mod:`.bag_data` (a drive's bag read back), :mod:`.server` (the page and its WebSocket:
+who may connect and drive), :mod:`.gate` (what the driving page may send, when),
 :mod:`.synthetic` (a synthetic participant for tests and benchmarks); the page itself is in
 ``web/``. The follower plant node is :mod:`.follower_node`; one drive through the graph is
 :mod:`trust_av_planner.graph.drive`; a session, :mod:`trust_av_planner.study.drive_session`.

@@ -10,7 +10,12 @@ frozen) the car reacts in two documented phases, as a driver-assistance fallback
 3. **brake**: then it brakes at ``fallback_brake_mps2`` until it stands still.
 
 A new command ends the reaction at once. The AV is not affected: the follower drives
-behind it and the planner only observes the follower. No rclpy here; times are passed in.
+behind it and the planner only observes the follower.
+
+A gap at or below zero is a collision (:func:`contact`): the car is put at the AV's rear
+bumper and stops there; it never drives through the AV (while the pedal pushes it on, it
+stays at the rear bumper, no faster than the AV). A new collision is counted only after the
+gap opened to ``COLLISION_CLEAR_M`` again. No rclpy here; times are passed in.
 """
 
 from __future__ import annotations
@@ -58,6 +63,45 @@ class FollowerConfig:
 def clip_accel(config: FollowerConfig, accel_mps2: float) -> float:
     """The command limited to the pedal's range, m/s^2."""
     return min(config.accel_max_mps2, max(config.accel_min_mps2, accel_mps2))
+
+
+COLLISION_CLEAR_M = 0.5
+"""A contact after the gap opened to this much again is a new collision, m."""
+
+
+@dataclass(frozen=True)
+class Contact:
+    """The follower after the collision check: its position and speed, whether it touches
+    the AV now and whether that is a new collision."""
+
+    position_m: float
+    speed_mps: float
+    touching: bool
+    new_collision: bool
+
+
+def contact(position_m: float, speed_mps: float, av_rear_m: float, av_speed_mps: float,
+            was_touching: bool) -> Contact:
+    """The collision check of the participant's car behind the AV.
+
+    Args:
+        position_m: the follower's front bumper, m.
+        speed_mps: its speed, m/s.
+        av_rear_m: the AV's rear bumper (its position minus the vehicle length), m.
+        av_speed_mps: the AV's speed, m/s.
+        was_touching: whether the last check found contact (or a gap below
+            ``COLLISION_CLEAR_M`` since).
+
+    Returns:
+        At a gap <= 0: the car at the rear bumper, stopped on a new collision, else at most as
+        fast as the AV; otherwise the car unchanged.
+    """
+    gap = av_rear_m - position_m
+    if gap > 0.0:
+        return Contact(position_m, speed_mps, was_touching and gap < COLLISION_CLEAR_M, False)
+    new = not was_touching
+    speed = 0.0 if new else min(speed_mps, max(0.0, av_speed_mps))
+    return Contact(av_rear_m, speed, True, new)
 
 
 def applied_accel(config: FollowerConfig, command_mps2: float | None,

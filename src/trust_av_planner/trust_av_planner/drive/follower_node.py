@@ -16,7 +16,12 @@ see the person exactly as they see the simulated driver:
   command led to;
 - ``human/driver_status`` (``diagnostic_msgs/msg/DiagnosticArray``) on each tick: the
   phase of :func:`trust_av_planner.drive.follower.applied_accel` (``hold``, ``coast``,
-  ``brake``, ``waiting``); WARN while the participant is gone.
+  ``brake``, ``waiting``), the collisions so far (``collisions``) and whether the car
+  touches the AV (``touching``); WARN while the participant is gone or the car touches.
+
+It subscribes ``ego/odom`` for the collision check
+(:func:`trust_av_planner.drive.follower.contact`, the AV's position extrapolated to now at
+its speed): the car never drives through the AV.
 
 Until ``sim/start`` the car holds its initial state. Parameters: :class:`FollowerConfig`,
 the initial state and the wall-clock settings.
@@ -42,6 +47,7 @@ from trust_av_planner.drive.follower import (
     WAITING,
     FollowerConfig,
     applied_accel,
+    contact,
 )
 from trust_monitor.common.kinematics import VehicleState, advance
 from trust_monitor.common.params import check_fields, param
@@ -61,6 +67,8 @@ class FollowerStart:
                                       default=0.0, low=-1e7, high=1e7)
     initial_speed_mps: float = param("the participant's car's initial speed", unit='m/s',
                                      low=0.0, default=0.0, high=100.0)
+    vehicle_length_m: float = param('length of the AV (its rear bumper is its position minus '
+                                    'this)', unit='m', low=0.0, default=4.5, high=50.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -80,6 +88,10 @@ class FollowerPlantNode(Node):
         if not self.clock.wall:
             raise ValueError('follower_plant runs in wall mode only (clock_mode: wall)')
         self.state = VehicleState(start.initial_position_m, start.initial_speed_mps)
+        self.length_m = start.vehicle_length_m
+        self.av: tuple[float, float, int] | None = None   # position, speed, at (monotonic ns)
+        self.touching = False
+        self.collisions = 0
         self.vehicle = VehicleOdometry(VEHICLE_FRAMES['human_driver'])
         self.pub = self.create_publisher(Odometry, 'human/odom',
                                          topic_qos('human/odom', self.clock, publisher=True))
@@ -99,6 +111,8 @@ class FollowerPlantNode(Node):
         self.create_subscription(AccelStamped, COMMAND_TOPIC, self.on_command,
                                  wall_qos('STATE', self.clock))
         self.create_subscription(Empty, 'sim/start', self.on_start, QOS['LATCHED'])
+        self.create_subscription(Odometry, 'ego/odom', self.on_av,
+                                 topic_qos('ego/odom', self.clock))
         self.publish()
         self.loop = WallLoop(self, self.clock, self.tick)
         self.get_logger().info(f'ready: initial state {self.state}, {self.config}')
@@ -108,12 +122,26 @@ class FollowerPlantNode(Node):
         self.started = True
         self.last_ns = time.monotonic_ns()
 
+    def on_av(self, msg: Odometry) -> None:
+        """The AV's newest state (for the collision check)."""
+        self.av = (float(msg.pose.pose.position.x), float(msg.twist.twist.linear.x),
+                   time.monotonic_ns())
+
     def advance_to(self, mono_ns: int) -> None:
-        """Integrate the applied acceleration up to ``mono_ns`` (monotonic), then choose the
-        acceleration from there on."""
+        """Integrate the applied acceleration up to ``mono_ns`` (monotonic), stop behind the
+        AV on contact, then choose the acceleration from there on."""
         if self.started:
             position, speed = advance(self.state.position_m, self.state.speed_mps, self.accel,
                                       (mono_ns - self.last_ns) / NS_PER_S)
+            if self.av is not None:
+                av_at, av_speed, av_ns = self.av
+                rear = av_at + av_speed * max(0, mono_ns - av_ns) / NS_PER_S - self.length_m
+                hit = contact(position, speed, rear, av_speed, self.touching)
+                position, speed, self.touching = hit.position_m, hit.speed_mps, hit.touching
+                if hit.new_collision:
+                    self.collisions += 1
+                    self.get_logger().warning(f'collision {self.collisions}: the car stopped '
+                                              "at the AV's rear bumper")
             self.state = VehicleState(position, speed)
         self.last_ns = mono_ns
         since = (mono_ns - self.command_at_ns) / NS_PER_S
@@ -142,8 +170,10 @@ class FollowerPlantNode(Node):
         self.advance_to(time.monotonic_ns())
         self.publish()
         self.pub_status.publish(diagnostics(
-            now_ns(self), 'follower_plant', self.phase in (HOLD, WAITING),
-            self.phase, {'phase': self.phase, 'accel_mps2': repr(self.accel)}))
+            now_ns(self), 'follower_plant', self.phase in (HOLD, WAITING) and not self.touching,
+            self.phase, {'phase': self.phase, 'accel_mps2': repr(self.accel),
+                         'collisions': str(self.collisions),
+                         'touching': str(self.touching).lower()}))
 
     def close(self) -> None:
         """At shutdown: the wall loop's jitter statistics."""

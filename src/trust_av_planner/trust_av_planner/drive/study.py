@@ -71,6 +71,9 @@ class DriveConfig:
                       low=0, default=0, high=4294967295)
     max_lag_s: float = param('largest lag tried when comparing ratings with a model',
                              unit='s', low=0.0, default=10.0, high=600.0)
+    on_collision: str = param("the protocol at a collision (the participant's car stops at "
+                              "the AV's rear bumper): continue the drive, or end it",
+                              choices=('continue', 'end'), default='continue')
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -119,7 +122,8 @@ def load_drive_settings(path: Path) -> tuple[DriveConfig, FollowerConfig, list[C
 
 SUMMARY_FIELDS = ('drive', 'condition', 'alpha', 'predictor', 'trace', 'status', 'driven_s',
                   'ratings', 'mean_rating', 'final_monitor_trust', 'questionnaire_score',
-                  'min_gap_m', 'latency_p50_ms', 'latency_p99_ms', 'latency_samples', 'bag')
+                  'min_gap_m', 'collisions', 'ended_by', 'refused_messages', 'latency_p50_ms',
+                  'latency_p99_ms', 'latency_samples', 'bag')
 
 
 def summary_row(record: DriveRecord) -> dict[str, Any]:
@@ -163,6 +167,8 @@ def drive_summary(bag: Path, condition: Condition | None, outcome: Any,
         if len(monitor) and math.isfinite(monitor[-1]) else '',
         'questionnaire_score': round(drive.questionnaire[-1], 4) if drive.questionnaire else '',
         'min_gap_m': round(float(gaps.min()), 3) if len(gaps) else '',
+        'collisions': outcome.collisions, 'ended_by': outcome.ended_by,
+        'refused_messages': sum(outcome.refused.values()), 'refused': dict(outcome.refused),
         'latency_p50_ms': round(latency['round_trip_p50_ms'], 2),
         'latency_p99_ms': round(latency['round_trip_p99_ms'], 2),
         'latency_samples': latency['samples']}

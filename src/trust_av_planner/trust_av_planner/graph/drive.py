@@ -14,13 +14,27 @@ bag, on the same clock:
 - ``driver/questionnaire`` (``sensor_msgs/msg/JointState``): ``name`` the 12 items
   ``jian_01`` .. ``jian_12`` and ``trust_score``; ``position`` the answers (1-7) and the score
   in [0, 1];
-- ``driver/latency`` (``Vector3Stamped``): per acknowledged pedal sample, x the round trip
-  page -> graph -> page (s, the page's clock), y arrival here -> applied by the follower
-  plant (s), z applied -> state sent to the page (s).
+- ``driver/latency`` (``Vector3Stamped``): per acknowledged pedal sample, measured here on
+  this process's clock (the page reports no time): x the round trip (sample received ->
+  the page's echo of the state frame acknowledging it received, s), y received -> applied
+  by the follower plant (s), z applied -> echo received (s). Only sequence numbers this
+  process issued and sent are accepted, each once;
+- ``driver/model_trust`` (``sensor_msgs/msg/JointState``): every registered trust model's
+  trust in [0, 1] (``name`` the models), live at each plan pair
+  (:class:`~trust_av_planner.graph.drive_link.ModelTrust`);
+- ``driver/events`` (``diagnostic_msgs/msg/DiagnosticArray``): the drive's events as the
+  status message: ``waiting``, ``start``, ``end`` (``ended_by``), ``page_connected``,
+  ``page_lost`` (with the time left: an interruption), ``take_over`` (another tab took the
+  control), ``collision`` (the count and the protocol), ``rating_prompt`` (its id).
+
+Only the page's admitted messages reach the drive (:mod:`trust_av_planner.drive.gate`: the
+phase, the rate, the pedal's range, open prompts); the refused ones are counted, never
+stored (``custom_data`` ``trust_av.drive.refused``: the total, and
+``trust_av.drive.refused.<reason>`` per reason, :func:`~trust_av_planner.drive.gate.reason_key`).
 
 The bag's ``custom_data`` (rosbag2 ``metadata.yaml``) holds the study metadata:
-participant, condition, alpha, predictor, trace, code version, seed, status and the
-latency percentiles.
+participant, condition, alpha, predictor, trace, code version, seed, status, what ended
+the drive, the collisions, the refused messages and the latency percentiles.
 """
 
 from __future__ import annotations
@@ -33,18 +47,17 @@ from typing import Any
 
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.drive.follower import APPLIED_TOPIC, COMMAND_TOPIC, FollowerConfig
+from trust_av_planner.drive.gate import DRIVING, IDLE, QUESTIONNAIRE, READY, WAIT, reason_key
 from trust_av_planner.drive.server import DriveServer
-from trust_av_planner.drive.trust_rating import (
-    JIAN_ITEMS,
-    RatingError,
-    rating_value,
-)
+from trust_av_planner.drive.trust_rating import JIAN_ITEMS, RatingError
 from trust_av_planner.graph import stop_signals
 from trust_av_planner.graph.bag_writer import BagWriter, DiskFullError
 from trust_av_planner.graph.domains import lease_domain
 from trust_av_planner.graph.drive_link import (
     DriveLink,
     DriveOutcome,
+    ModelTrust,
+    event_msg,
     joint_state_cdr,
     questionnaire_msg,
     vector_msg,
@@ -64,7 +77,9 @@ DRIVER_TOPICS = {'/human/accel_cmd': 'geometry_msgs/msg/AccelStamped',
                  '/human/accel_applied': 'geometry_msgs/msg/AccelStamped',
                  '/driver/rating': 'geometry_msgs/msg/Vector3Stamped',
                  '/driver/questionnaire': 'sensor_msgs/msg/JointState',
-                 '/driver/latency': 'geometry_msgs/msg/Vector3Stamped'}
+                 '/driver/latency': 'geometry_msgs/msg/Vector3Stamped',
+                 '/driver/model_trust': 'sensor_msgs/msg/JointState',
+                 '/driver/events': 'diagnostic_msgs/msg/DiagnosticArray'}
 """The drive's own topics, recorded beside the graph's."""
 NOT_PUBLISHED = ('clock', 'sim/start', 'human/plan')
 """Topics of the table that no node of a drive publishes (no lock-step clock; the person
@@ -86,6 +101,7 @@ def drive_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, follower: 
         **wall, 'jitter_report_path': str(log_dir / 'follower_plant.jitter.json'),
         'initial_position_m': initial.human.position_m,
         'initial_speed_mps': initial.human.speed_mps,
+        'vehicle_length_m': config.shared.vehicle_length_m,
         **{name: getattr(follower, name) for name in follower.__dataclass_fields__}}))
     return specs
 
@@ -95,10 +111,14 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
               server: DriveServer, link: DriveLink, follower: FollowerConfig,
               metadata: dict[str, str], duration_s: float, rate_hz: float,
               abandon_after_s: float, start_timeout_s: float, questionnaire: bool,
-              questionnaire_timeout_s: float, startup_timeout_s: float = 60.0) -> DriveOutcome:
+              questionnaire_timeout_s: float, rating_period_s: float = 15.0,
+              on_collision: str = 'continue', page_info: dict[str, Any] | None = None,
+              startup_timeout_s: float = 60.0) -> DriveOutcome:
     """Run one drive: start the graph, wait for the page's start, drive ``duration_s`` of
-    wall time (or until the person has sent nothing for ``abandon_after_s``), stop the
-    nodes, ask the questionnaire (if ``questionnaire`` and not abandoned), finish the bag.
+    wall time (or until the person has sent nothing for ``abandon_after_s``, or until a
+    collision if ``on_collision`` is ``end``), asking a rating every ``rating_period_s``,
+    stop the nodes, ask the questionnaire (if ``questionnaire`` and not abandoned), finish
+    the bag. ``page_info`` is shown on the start screen (drive ``number`` ``of``).
 
     Raises:
         GraphError: the nodes did not connect in time or one died.
@@ -108,13 +128,15 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
     from std_msgs.msg import Empty
 
     from trust_av_planner.graph.bag_qos import offered_qos
-    from trust_monitor.ros.messages import message_class, msg_ns
+    from trust_monitor.ros.messages import diagnostic_values, message_class, msg_ns
     from trust_monitor.ros.qos import QOS, record_qos, wall_qos
 
     recorded = [t for t in TOPICS if t.name not in NOT_PUBLISHED]
     log_dir = bag.with_name(bag.name + '.logs')
     outcome = DriveOutcome(bag=bag, status='abandoned', driven_s=0.0, counts={})
-    state: dict[str, Any] = {'ack': None}
+    gate = link.gate
+    state: dict[str, Any] = {'ack': None, 'collisions': 0, 'crash_ns': 0}
+    models = ModelTrust(config.trust, dict(config.trust_model_params))
     with lease_domain(foreign_participants) as domain:  # skips a domain with leftovers
         graph = Graph(drive_specs(config, trace_arg, trace, follower, rate_hz, log_dir),
                       config.params_files, domain, log_dir)
@@ -132,9 +154,26 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                 for key, value in metadata.items():
                     recording.set_custom_data(key, value)
                 started: list[int] = []
+                begin: list[float] = []
 
                 def t_s(ns: int) -> float:
                     return (ns - started[0]) / NS_PER_S if started else 0.0
+
+                def left_s() -> float:
+                    return max(0.0, duration_s - (time.monotonic() - begin[0])) if begin \
+                        else duration_s
+
+                def write_own(topic: str, msg: Any, data: bytes | None = None) -> None:
+                    if topic in own_pubs:
+                        own_pubs[topic].publish(msg)
+                    if not recording.finished:
+                        recording.write(topic, data if data is not None
+                                        else serialize_message(msg))
+
+                def event(kind: str, ns: int, **values: Any) -> None:
+                    write_own('/driver/events', event_msg(ns, kind, {
+                        k: str(v) for k, v in values.items()}))
+                    outcome.events.append((t_s(ns), kind))
 
                 def on_graph(topic: str, data: bytes) -> None:
                     if recording.finished:
@@ -157,24 +196,46 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                                         float(odom.twist.twist.linear.x))
                         if topic == '/human/odom':
                             send_state()
-                    elif topic == '/trust_monitor/trust':
-                        trust = deserialize_message(data, message_class(
-                            'geometry_msgs/msg/Vector3Stamped'))
-                        state['trust'] = float(trust.vector.z)
+                    elif topic == '/ego/accel_cmd':
+                        state['av_accel'] = float(deserialize_message(data, message_class(
+                            'geometry_msgs/msg/AccelStamped')).accel.linear.x)
+                    elif topic in ('/ego/plan', '/ego/expected_plan'):
+                        plan = deserialize_message(data, message_class(
+                            'trajectory_msgs/msg/JointTrajectory'))
+                        stamp = msg_ns(plan.header.stamp)
+                        trust = models.add('plan' if topic == '/ego/plan' else 'expected',
+                                           stamp, [float(p.accelerations[0])
+                                                   for p in plan.points])
+                        if trust is not None:
+                            msg = models.message(stamp, trust)
+                            write_own('/driver/model_trust', msg, joint_state_cdr(msg))
+                    elif topic == '/human/driver_status' and started:
+                        values = diagnostic_values(deserialize_message(data, message_class(
+                            'diagnostic_msgs/msg/DiagnosticArray')))
+                        count = int(values.get('collisions', '0'))
+                        if count > state['collisions']:
+                            state['collisions'] = outcome.collisions = count
+                            now = time.time_ns()
+                            state['crash_ns'] = now
+                            event('collision', now, count=count, protocol=on_collision)
+                            send_state()
 
                 def send_state() -> None:
                     now = time.time_ns()
                     frame: dict[str, Any] = {
-                        'type': 'state', 't_s': t_s(now),
+                        'type': 'state', 't_s': t_s(now), 'left_s': round(left_s(), 2),
                         'vehicles': {name: state.get(topic) for name, topic in
                                      (('lead', '/preceding_vehicle/odom'),
                                       ('av', '/ego/odom'), ('you', '/human/odom'))},
-                        'trust': state.get('trust')}
+                        'av_accel_mps2': state.get('av_accel'),
+                        'collisions': state['collisions'],
+                        'crash': state['crash_ns'] > 0
+                        and now - state['crash_ns'] < CRASH_SHOWN_NS}
                     ack = state['ack']
                     if ack is not None:
                         seq, arrived, applied = ack
-                        frame['ack'] = {'seq': seq, 'graph_ms': (applied - arrived) / 1e6,
-                                        'back_ms': (now - applied) / 1e6}
+                        frame['ack'] = seq
+                        gate.sent_ack(seq, arrived, applied, now)
                         state['ack'] = None
                     server.send(frame)
 
@@ -192,13 +253,6 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                                          lambda d: on_graph(APPLIED_TOPIC_ABS, d),
                                          record_qos('STATE'), raw=True)
 
-                def write_own(topic: str, msg: Any, data: bytes | None = None) -> None:
-                    if topic in own_pubs:
-                        own_pubs[topic].publish(msg)
-                    if not recording.finished:
-                        recording.write(topic, data if data is not None
-                                        else serialize_message(msg))
-
                 needs = {qualified(t.name): (len([p for p in t.publishers
                                                   if p != 'human_driver']) or 1, 0)
                          for t in recorded}
@@ -211,27 +265,32 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                     kind = message['type']
                     if kind == 'command':
                         write_own('/human/accel_cmd', message['msg'])
-                    elif kind == 'rating' and started:
+                    elif kind == 'event':
+                        event(message['event'], arrived, left_s=f'{left_s():.2f}')
+                    elif kind == 'ready':
+                        state['ready'] = True
+                    elif kind == 'rating':
+                        rated = gate.rating(message, arrived)
+                        if rated is not None:
+                            _prompt, value, response_s = rated
+                            write_own('/driver/rating', vector_msg(
+                                arrived, value / 100.0, response_s, value))
+                            outcome.ratings.append((t_s(arrived), value / 100.0))
+                    elif kind == 'ack':
+                        latency = gate.echo(message, arrived)
+                        if latency is not None:
+                            write_own('/driver/latency', vector_msg(arrived, *latency))
+                            outcome.latency_s.append(latency)
+                    elif kind == 'questionnaire':
+                        answers = message.get('answers')
                         try:
-                            value = rating_value(message.get('value'))
-                            response_s = max(0.0, (float(message['answered_ms'])
-                                                   - float(message['shown_ms'])) / 1e3)
-                        except (RatingError, KeyError, TypeError, ValueError) as err:
-                            LOG.warning('a bad rating from the page dropped: %s', err)
-                            return            # the page sends only valid ratings
-                        write_own('/driver/rating', vector_msg(arrived, value, response_s,
-                                                                value * 100.0))
-                        outcome.ratings.append((t_s(arrived), value))
-                    elif kind == 'latency' and started:
-                        try:
-                            trip = float(message['round_trip_ms']) / 1e3
-                            graph_s = float(message['graph_ms']) / 1e3
-                            back = float(message['back_ms']) / 1e3
-                        except (KeyError, TypeError, ValueError) as err:
-                            LOG.warning('a bad latency report dropped: %s', err)
+                            msg = questionnaire_msg(arrived, answers)  # type: ignore[arg-type]
+                        except (RatingError, TypeError) as err:
+                            gate.refuse('questionnaire with bad answers')
+                            LOG.warning('a questionnaire refused: %s', err)
                             return
-                        write_own('/driver/latency', vector_msg(arrived, trip, graph_s, back))
-                        outcome.latency_s.append((trip, graph_s, back))
+                        if gate.take_questionnaire():
+                            state['answers'] = msg
 
                 def drain() -> None:
                     while True:
@@ -240,16 +299,15 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                         except queue.Empty:
                             return
                         handle(message, arrived)
-                        if message['type'] == 'ready' and not started:
-                            state['ready'] = True
-                        if message['type'] == 'questionnaire':
-                            state['answers'] = message.get('answers')
+
+                def set_phase(phase: str, **extra: Any) -> None:
+                    gate.set_phase(phase)
+                    link.greet = {'type': 'phase', 'phase': phase, **extra}
+                    server.send(link.greet)
 
                 # wait for the participant's start
-                link.greet = {'type': 'phase', 'phase': 'ready', **{
-                    k: metadata.get(f'trust_av.{k}', '') for k in
-                    ('drive', 'condition', 'participant')}, 'duration_s': duration_s}
-                server.send(link.greet)
+                set_phase(READY, duration_s=duration_s, **(page_info or {}))
+                event('waiting', time.time_ns())
                 deadline = time.monotonic() + start_timeout_s
                 while not state.get('ready'):
                     if time.monotonic() > deadline:
@@ -264,56 +322,71 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                     start_pub.publish(Empty())
                     started.append(time.time_ns())
                     recording.set_custom_data('trust_av.drive.start_ns', str(started[0]))
-                    link.greet = {'type': 'phase', 'phase': 'driving',
-                                  'duration_s': duration_s}
-                    server.send(link.greet)
-                    begin = time.monotonic()
-                    next_chunk = begin + 1.0
+                    begin.append(time.monotonic())
+                    set_phase(DRIVING, duration_s=duration_s)
+                    event('start', started[0])
+                    next_chunk = begin[0] + 1.0
+                    next_prompt = begin[0] + rating_period_s
                     outcome.status = 'done'
-                    while time.monotonic() - begin < duration_s:
+                    while time.monotonic() - begin[0] < duration_s:
                         stop_signals.spin_once(executor, 0.005)
                         drain()
                         graph.check_alive(set())
-                        if time.monotonic() >= next_chunk:
+                        now = time.monotonic()
+                        if now >= next_chunk:
                             next_chunk += 1.0
                             if not recording.end_step():
                                 break
+                        if now >= next_prompt:
+                            next_prompt += rating_period_s
+                            if not gate.open_prompts():     # one still open stays open
+                                prompt = gate.open_prompt(time.time_ns())
+                                server.send({'type': 'rate', 'id': prompt})
+                                event('rating_prompt', time.time_ns(), id=prompt)
+                        if on_collision == 'end' and state['collisions']:
+                            outcome.ended_by = 'collision'
+                            break
                         with link.lock:
                             gone_s = (time.time_ns() - link.last_input_ns) / NS_PER_S
                         if gone_s > abandon_after_s:
                             outcome.status = 'abandoned'
                             break
-                    outcome.driven_s = time.monotonic() - begin
+                    outcome.driven_s = time.monotonic() - begin[0]
+                    outcome.ended_by = outcome.ended_by or (
+                        'time' if outcome.status == 'done' else 'no input')
+                    event('end', time.time_ns(), ended_by=outcome.ended_by)
                 with link.lock:
                     link.publisher = None
-                link.greet = {'type': 'phase', 'phase': 'wait'}
-                server.send(link.greet)
+                set_phase(WAIT, ended_by=outcome.ended_by)
                 _stop_and_drain(graph, executor, DRIVE_NODES)
                 drain()
                 if questionnaire and outcome.status == 'done' and not recording.finished:
-                    link.greet = {'type': 'phase', 'phase': 'questionnaire',
-                                  'items': list(JIAN_ITEMS)}
-                    server.send(link.greet)
+                    set_phase(QUESTIONNAIRE, items=list(JIAN_ITEMS))
                     deadline = time.monotonic() + questionnaire_timeout_s
                     while 'answers' not in state and time.monotonic() < deadline:
                         time.sleep(0.02)
                         drain()
-                    answers = state.get('answers')
-                    msg = None
-                    if not isinstance(answers, list):
+                    msg = state.get('answers')
+                    if msg is None:
                         LOG.warning('no questionnaire answered within %g s',
                                     questionnaire_timeout_s)
                     else:
-                        try:
-                            msg = questionnaire_msg(time.time_ns(), answers)
-                        except RatingError as err:
-                            LOG.warning('no questionnaire recorded: %s', err)
-                    if msg is not None:
                         write_own('/driver/questionnaire', msg, joint_state_cdr(msg))
-                        outcome.questionnaire = [int(a) for a in answers]
+                        outcome.questionnaire = [int(a) for a in msg.position[:-1]]
+                drain()
+                gate.set_phase(IDLE)
+                outcome.refused = gate.refused_counts()
                 latency = outcome.latency_ms()
                 recording.set_custom_data('trust_av.drive.status', outcome.status)
                 recording.set_custom_data('trust_av.drive.driven_s', f'{outcome.driven_s:.3f}')
+                recording.set_custom_data('trust_av.drive.ended_by', outcome.ended_by)
+                recording.set_custom_data('trust_av.drive.collisions', str(outcome.collisions))
+                recording.set_custom_data('trust_av.drive.on_collision', on_collision)
+                recording.set_custom_data('trust_av.drive.refused',
+                                          str(sum(outcome.refused.values())))
+                for reason, count in sorted(outcome.refused.items()):
+                    recording.set_custom_data(f'trust_av.drive.refused.{reason_key(reason)}',
+                                              str(count))
                 for key, number in latency.items():
                     recording.set_custom_data(f'trust_av.drive.latency.{key}', f'{number:g}')
                 recording.finish()
@@ -324,5 +397,7 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
     return outcome
 
 
+CRASH_SHOWN_NS = 3_000_000_000
+"""The page shows a collision this long."""
 VEHICLE_TOPICS = ('/preceding_vehicle/odom', '/ego/odom', '/human/odom')
 APPLIED_TOPIC_ABS = qualified(APPLIED_TOPIC)

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from trust_av_planner.drive.gate import Gate
 from trust_av_planner.drive.trust_rating import ITEM_NAMES, SCORE_NAME, questionnaire_score
 
 LOG = logging.getLogger(__name__)
@@ -31,9 +32,15 @@ class DriveOutcome:
     ratings: list[tuple[float, float]] = field(default_factory=list)
     questionnaire: list[int] | None = None
     loops: dict[str, Any] = field(default_factory=dict)
+    collisions: int = 0
+    ended_by: str = ''
+    refused: dict[str, int] = field(default_factory=dict)
+    events: list[tuple[float, str]] = field(default_factory=list)
 
     def latency_ms(self) -> dict[str, float]:
-        """p50/p99/max of the round trip, and of its graph part, ms (NaN without samples)."""
+        """p50/p99/max of the round trip (pedal sample received here -> the page's echo of
+        its acknowledgement received here), and of its graph part, ms (NaN without
+        samples)."""
         if not self.latency_s:
             return {'round_trip_p50_ms': float('nan'), 'round_trip_p99_ms': float('nan'),
                     'round_trip_max_ms': float('nan'), 'graph_p99_ms': float('nan'),
@@ -59,10 +66,12 @@ def code_version() -> str:
 
 
 class DriveLink:
-    """What the server's thread and the drive's loop share: the page's messages, the pedal
-    publisher and the samples waiting to be acknowledged. Thread-safe."""
+    """What the server's thread and the drive's loop share: the page's admitted messages,
+    the pedal publisher, the samples waiting to be acknowledged and the message policy
+    (:class:`~trust_av_planner.drive.gate.Gate`). Thread-safe."""
 
-    def __init__(self) -> None:
+    def __init__(self, gate: Gate) -> None:
+        self.gate = gate
         self.events: queue.SimpleQueue[tuple[dict[str, Any], int]] = queue.SimpleQueue()
         self.lock = threading.Lock()
         self.publisher: Any = None           # human/accel_cmd while a drive runs
@@ -71,29 +80,33 @@ class DriveLink:
         self.greet: dict[str, Any] = {}
 
     def on_message(self, message: dict[str, Any], arrived_ns: int) -> None:
-        """Server thread: a pedal sample is published at once; everything goes to the loop."""
-        if message['type'] == 'input':
-            with self.lock:
-                publisher = self.publisher
-                self.last_input_ns = arrived_ns
-            if publisher is not None:
-                try:
-                    accel = float(message['accel_mps2'])
-                    seq = int(message['seq'])
-                except (KeyError, TypeError, ValueError) as err:
-                    LOG.warning('a pedal sample without a number dropped: %r (%s)', message,
-                                err)
-                    return                    # a malformed sample is not a command
-                if not np.isfinite(accel):
-                    LOG.warning('a non-finite pedal sample dropped: %r', message)
-                    return
-                msg = _accel_msg(arrived_ns, accel)
-                with self.lock:
-                    self.pending[arrived_ns] = (seq, arrived_ns)
-                publisher.publish(msg)
-                self.events.put(({'type': 'command', 'msg': msg}, arrived_ns))
+        """Server thread: a message of the controlling page. One that does not fit the
+        phase is refused and counted; an admitted pedal sample is rate-limited, clipped to
+        the pedal's range and published at once; everything else goes to the loop."""
+        if not self.gate.admit(message):
             return
-        self.events.put((message, arrived_ns))
+        if message['type'] != 'input':
+            self.events.put((message, arrived_ns))
+            return
+        with self.lock:
+            publisher = self.publisher
+        if publisher is None:
+            self.gate.refuse('input before the drive started')
+            return
+        sample = self.gate.sample(message, arrived_ns)
+        if sample is None:
+            return
+        msg = _accel_msg(arrived_ns, sample.accel_mps2)
+        with self.lock:
+            self.last_input_ns = arrived_ns
+            self.pending[arrived_ns] = (sample.seq, arrived_ns)
+        publisher.publish(msg)
+        self.events.put(({'type': 'command', 'msg': msg, 'clipped': sample.clipped},
+                         arrived_ns))
+
+    def on_event(self, kind: str, now_ns: int) -> None:
+        """Server thread: the controlling page connected, was lost or was taken over."""
+        self.events.put(({'type': 'event', 'event': kind}, now_ns))
 
 
 def _accel_msg(stamp_ns: int, accel_mps2: float) -> Any:
@@ -144,3 +157,67 @@ def joint_state_cdr(msg: Any) -> bytes:
         velocity=np.array(msg.velocity, dtype=np.float64),
         effort=np.array(msg.effort, dtype=np.float64))
     return bytes(TYPESTORE.serialize_cdr(plain, kind))
+
+
+class ModelTrust:
+    """Every registered trust model run live on the AV's plans as the drive records them
+    (each model by the monitor's own :class:`~trust_monitor.trust_model.TrustEstimator`,
+    each update scaled by the time since the previous plan pair), so a drive's bag holds
+    every model's trust beside the monitor's.
+
+    Args:
+        config: the run's shared trust parameters.
+        values: the params files' values of the models' own parameters.
+    """
+
+    def __init__(self, config: Any, values: dict[str, Any]) -> None:
+        import dataclasses
+
+        from trust_monitor.common.registry import TRUST_MODELS, names
+        from trust_monitor.trust_interface import make_trust_model
+        from trust_monitor.trust_model import TrustEstimator
+
+        self.names = list(names(TRUST_MODELS))
+        self.estimators = []
+        for name in self.names:
+            each = dataclasses.replace(config, trust_model=name)
+            self.estimators.append(TrustEstimator(each, make_trust_model(each, values)))
+        self.plans: dict[str, dict[int, list[float]]] = {'plan': {}, 'expected': {}}
+        self.last_ns: int | None = None
+        self.period_s = 0.1
+
+    def add(self, kind: str, stamp_ns: int, plan: list[float]) -> list[float] | None:
+        """A plan (``kind`` ``plan`` or ``expected``) of step ``stamp_ns``; every model's
+        trust once both plans of the step are in, else None."""
+        self.plans[kind][stamp_ns] = plan
+        other = self.plans['expected' if kind == 'plan' else 'plan']
+        if stamp_ns not in other:
+            return None
+        plan_r, expected = self.plans['plan'].pop(stamp_ns), self.plans['expected'].pop(
+            stamp_ns)
+        for table in self.plans.values():
+            for old in [s for s in table if s < stamp_ns]:
+                del table[old]
+        if self.last_ns is not None and stamp_ns > self.last_ns:
+            self.period_s = (stamp_ns - self.last_ns) / 1e9
+        self.last_ns = stamp_ns
+        return [float(e.step(plan_r, expected, self.period_s).trust) for e in self.estimators]
+
+    def message(self, stamp_ns: int, trust: list[float]) -> Any:
+        """Every model's trust as a ``sensor_msgs/msg/JointState`` (``name`` the models,
+        ``position`` their trust in [0, 1])."""
+        from sensor_msgs.msg import JointState
+
+        from trust_monitor.common.topics import NO_FRAME
+        from trust_monitor.ros.messages import header
+        return JointState(header=header(stamp_ns, NO_FRAME), name=list(self.names),
+                          position=list(trust))
+
+
+def event_msg(stamp_ns: int, event: str, values: dict[str, str]) -> Any:
+    """A drive event (start, end, page connected or lost, take-over, collision, rating
+    prompt) as a ``diagnostic_msgs/msg/DiagnosticArray``: status ``drive``, message the
+    event, values its details."""
+    from trust_monitor.ros.messages import diagnostics
+    return diagnostics(stamp_ns, 'drive', event not in ('page_lost', 'collision'), event,
+                       values)

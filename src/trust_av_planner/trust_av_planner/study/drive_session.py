@@ -9,8 +9,9 @@ import sys
 from typing import Any
 
 from preceding_traffic.sources import load_trace
+from trust_av_planner.drive.gate import Gate
 from trust_av_planner.drive.server import DriveServer
-from trust_av_planner.drive.sessions import DriveRecord
+from trust_av_planner.drive.sessions import PRACTICE, DriveRecord
 from trust_av_planner.drive.study import (
     comparison_csv,
     comparison_text,
@@ -50,16 +51,21 @@ def run_session(args: argparse.Namespace) -> int:
         load_trace(listed.trace, base.planner.dt_s, base.trace)
         check_control_rate(configs[listed.name].planner, rate_hz)
     by_name = {c.name: c for c in conditions}
-    link = DriveLink()
+    link = DriveLink(Gate(rate_hz, follower.accel_min_mps2, follower.accel_max_mps2))
     # The page's server thread and the recording loop share the GIL: a 1 ms switch interval
     # (Python's default is 5 ms) lets a pedal sample or a state frame through sooner.
     sys.setswitchinterval(0.001)
-    server = DriveServer(link.on_message, lambda: server.send(
-        {'type': 'hello', 'rating_period_s': drive.rating_period_s,
-         'control_rate_hz': rate_hz, 'participant': args.participant,
-         'accel_max_mps2': follower.accel_max_mps2, 'accel_min_mps2': follower.accel_min_mps2,
-         **{k: v for k, v in link.greet.items() if k != 'type'}}),
-        host=drive.host, port=drive.port)
+
+    def hello() -> dict[str, Any]:
+        """What a page is told when it connects: the settings and where the session is (a
+        reopened tab shows the phase, the open rating prompt; frames give the time left)."""
+        return {'type': 'hello', 'control_rate_hz': rate_hz, 'participant': args.participant,
+                'accel_max_mps2': follower.accel_max_mps2,
+                'accel_min_mps2': follower.accel_min_mps2,
+                'on_collision': drive.on_collision, 'prompts': link.gate.open_prompts(),
+                **{k: v for k, v in link.greet.items() if k != 'type'}}
+    server = DriveServer(link.on_message, hello, on_event=link.on_event,
+                         on_refused=link.gate.refuse, host=drive.host, port=drive.port)
     url = server.start()         # before any file is written: a taken port writes nothing
     try:
         session = plan_session(args.study, args.participant, conditions,
@@ -88,6 +94,9 @@ def run_session(args: argparse.Namespace) -> int:
                         'trust_av.predictor': config.planner.predictor,
                         'trust_av.trace': trace_name, 'trust_av.code_version': version,
                         'trust_av.seed': str(seed)}
+            done = sum(1 for d in session.drives if d.status == 'done' and d.condition != PRACTICE)
+            page_info = {'practice': condition is None, 'number': done + 1,
+                         'of': len(session.order)}
             print(f'drive {index} ({name}): waiting for the participant to start', flush=True)
             outcome = run_drive(config, trace_name, trace, bag, server=server, link=link,
                                 follower=follower, metadata=metadata, duration_s=duration,
@@ -95,6 +104,8 @@ def run_session(args: argparse.Namespace) -> int:
                                 start_timeout_s=drive.start_timeout_s,
                                 questionnaire=condition is not None,
                                 questionnaire_timeout_s=drive.questionnaire_timeout_s,
+                                rating_period_s=drive.rating_period_s,
+                                on_collision=drive.on_collision, page_info=page_info,
                                 startup_timeout_s=args.startup_timeout_s)
             if outcome.driven_s > 0:
                 summary, rows = drive_summary(bag, condition, outcome,
@@ -107,7 +118,8 @@ def run_session(args: argparse.Namespace) -> int:
                 index, name, str(bag.relative_to(args.study)), outcome.status, seed, summary),
                 output_files.write_text)
             print(f'drive {index} ({name}): {outcome.status} after {outcome.driven_s:.1f} s, '
-                  f'{len(outcome.ratings)} ratings, latency p99 '
+                  f'{outcome.collisions} collisions, {len(outcome.ratings)} ratings, '
+                  f'{sum(outcome.refused.values())} messages refused, latency p99 '
                   f'{summary.get("latency_p99_ms", "-")} ms; {bag}', flush=True)
             if outcome.status != 'done':
                 status = 'abandoned'

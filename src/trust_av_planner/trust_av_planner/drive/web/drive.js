@@ -1,31 +1,40 @@
-// trust-av drive: the participant's page. Plain JS, no build step.
-// State frames arrive over the WebSocket (a few per control period); the road is drawn at the
-// display's frame rate, interpolating the frames RENDER_DELAY_MS behind the newest one.
-// Pedal samples are stamped (performance.now()) and sent at the control rate.
+// trust-av drive: the participant's page. Plain JS and Canvas 2D, no build step, nothing
+// fetched from elsewhere. State frames arrive over the WebSocket (a few per control period);
+// the view is drawn at the display's frame rate, interpolating the frames RENDER_DELAY_MS
+// behind the newest one. A pedal sample is sent at once on a key or pointer press or release,
+// on any other change of the pedal at most once per control period, and at the control rate
+// while nothing changes. The server acknowledges samples in its frames; the page echoes each
+// acknowledgement at once (the server measures the latency, the page reports no time).
 'use strict';
 
 const RENDER_DELAY_MS = 100;
 const VEHICLE_LENGTH_M = 4.5;
-const KEY_GAS_PER_S = 1.5, KEY_BRAKE_PER_S = 2.5, KEY_RELEASE_PER_S = 4.0;
+const KEY_GAS_PER_S = 1.5, KEY_BRAKE_PER_S = 2.5, KEY_RELEASE_PER_S = 4.0, KEY_STEP = 0.15;
+const BRAKE_LIGHT_MPS2 = -0.3;          // the AV's commanded acceleration that lights them
+const EYE_BEHIND_BUMPER_M = 2.0, EYE_HEIGHT_M = 1.2, CAR_WIDTH_M = 1.8, CAR_HEIGHT_M = 1.5;
+const KEYS = ['ArrowUp', 'ArrowDown', 'KeyW', 'KeyS'];
 
 const drive = {
-  phase: 'connecting', controlRateHz: 10, ratingPeriodS: 15, accelMax: 2.5, accelMin: -6.0,
-  frames: [], displayed: null, pedal: 0, seq: 0, sent: new Map(), durationS: 0,
-  drivingSinceMs: null, keys: new Set(), pointerPedal: null, nextRatingMs: null,
-  ratingShownMs: null, ws: null, inputTimer: null, source: 'none',
+  phase: 'connecting', controlRateHz: 10, accelMax: 2.5, accelMin: -6.0, onCollision: 'continue',
+  frames: [], displayed: null, pedal: 0, seq: 0, durationS: 0, keys: new Set(),
+  pointerPedal: null, prompt: null, ws: null, inputTimer: null, source: 'none',
+  controlling: false, final: false, lastSentMs: -1e9, lastSentPedal: null, acks: 0, frameTimes: [], drove: false,
+  token: document.querySelector('meta[name="drive-token"]').content,
 };
 window.drive = drive;
 
 const $ = (id) => document.getElementById(id);
 
 function connect() {
-  const ws = new WebSocket(`ws://${location.host}/ws`);
+  if (drive.final) return;
+  const ws = new WebSocket(`ws://${location.host}/ws?token=${encodeURIComponent(drive.token)}`);
   drive.ws = ws;
   ws.onopen = () => setStatus('connected');
   ws.onmessage = (event) => onMessage(JSON.parse(event.data));
   ws.onclose = () => {
-    setStatus('connection lost: reconnecting…');
     stopInput();
+    if (drive.final) return;                // the end screen stays as it is
+    setStatus('connection lost: reconnecting…');
     setTimeout(connect, 1000);
   };
 }
@@ -39,43 +48,65 @@ function setStatus(text) { $('status').textContent = text; }
 function onMessage(msg) {
   if (msg.type === 'hello') {
     drive.controlRateHz = msg.control_rate_hz;
-    drive.ratingPeriodS = msg.rating_period_s;
     drive.accelMax = msg.accel_max_mps2;
     drive.accelMin = msg.accel_min_mps2;
+    drive.onCollision = msg.on_collision || 'continue';
     if (msg.phase) setPhase(msg);
+    if (msg.prompts && msg.prompts.length && drive.phase === 'driving') showRating(msg.prompts[msg.prompts.length - 1]);
+  } else if (msg.type === 'control') {
+    setControl(msg);
   } else if (msg.type === 'phase') {
     setPhase(msg);
+  } else if (msg.type === 'rate') {
+    if (drive.controlling && ['driving', 'wait'].includes(drive.phase)) showRating(msg.id);
   } else if (msg.type === 'state') {
+    if (msg.ack !== undefined && drive.controlling) { send({type: 'ack', seq: msg.ack}); drive.acks++; }
     msg.received_ms = performance.now();
+    drive.frameTimes.push(msg.received_ms);      // when frames came (tests, benchmark)
+    if (drive.frameTimes.length > 3000) drive.frameTimes.shift();
     drive.frames.push(msg);
     if (drive.frames.length > 50) drive.frames.shift();
-    if (msg.ack) {
-      const sentMs = drive.sent.get(msg.ack.seq);
-      if (sentMs !== undefined) {
-        send({type: 'latency', seq: msg.ack.seq, round_trip_ms: msg.received_ms - sentMs,
-              graph_ms: msg.ack.graph_ms, back_ms: msg.ack.back_ms});
-        drive.sent.delete(msg.ack.seq);
-      }
-    }
+    showCrash(msg);
   }
 }
 
+function setControl(msg) {
+  if (!msg.controlling && !msg.other && drive.drove) {
+    send({type: 'take_over'});               // this tab drove: it takes the free control back
+    return;
+  }
+  drive.controlling = msg.controlling;
+  if (msg.controlling) drive.drove = true;
+  else if (msg.taken_over) drive.drove = false;   // another tab took over: not taken back
+  $('control').hidden = msg.controlling;
+  $('control-text').textContent = msg.other
+    ? 'Another tab is driving this session. Only one tab can drive.'
+    : 'No tab is driving this session.';
+  if (!msg.controlling) { stopInput(); hideRating(); }
+  else if (drive.phase === 'driving') startInput();
+}
+$('take-over').addEventListener('click', () => send({type: 'take_over'}));
+
 function setPhase(msg) {
   drive.phase = msg.phase;
-  $('start').hidden = true;
+  $('intro').hidden = true;
   $('questionnaire').hidden = true;
   $('message').hidden = true;
   if (msg.phase === 'ready') {
-    $('title').textContent = msg.condition === 'practice' ? 'Practice drive' : `Drive ${msg.drive}`;
+    const title = msg.practice ? 'Practice drive'
+      : (msg.number ? `Drive ${msg.number} of ${msg.of}` : 'Drive');
+    $('title').textContent = title;
+    $('intro-title').textContent = title;
     drive.durationS = msg.duration_s;
-    $('start').textContent = msg.condition === 'practice' ? 'Start the practice drive' : 'Start the drive';
-    $('start').hidden = false;
+    $('intro-length').textContent = `This ${msg.practice ? 'practice drive' : 'drive'} takes about ${Math.round(msg.duration_s)} s.`
+      + (msg.practice ? ' It is for getting used to the car: nothing you do here counts.' : '');
+    $('start').textContent = msg.practice ? 'Start the practice drive' : 'Start the drive';
+    $('intro').hidden = false;
+    drive.frames = [];
     setStatus('ready');
   } else if (msg.phase === 'driving') {
     drive.durationS = msg.duration_s;
-    if (drive.drivingSinceMs === null) drive.drivingSinceMs = performance.now();
-    drive.nextRatingMs = performance.now() + drive.ratingPeriodS * 1000;
-    startInput();
+    if (drive.controlling) startInput();
     setStatus('driving');
   } else if (msg.phase === 'questionnaire') {
     stopInput();
@@ -85,12 +116,29 @@ function setPhase(msg) {
     stopInput();
     $('message').hidden = false;
     $('message').textContent = {
-      finished: 'Thank you: the session is complete.',
-      wait: 'Drive complete. Please wait a moment.',
-    }[msg.phase] || 'The session is paused. The experimenter will resume it.';
+      finished: 'Thank you: the session is complete. You can close this tab.',
+      wait: msg.ended_by === 'collision'
+        ? 'The drive ended: your car hit the AV. Please wait a moment.'
+        : 'Drive complete. Please wait a moment.',
+    }[msg.phase] || 'The session is paused. When the experimenter resumes it, reload this page.';
     setStatus(msg.phase);
+    if (msg.phase === 'finished' || msg.phase === 'paused') {
+      drive.final = true;                   // nothing more comes: the end screen is final
+      $('hud').hidden = true; $('controls').hidden = true; $('stage').hidden = true;
+      if (drive.ws) drive.ws.close();
+    }
   }
-  if (msg.phase !== 'driving') { drive.drivingSinceMs = null; hideRating(); }
+  if (!['driving', 'wait'].includes(msg.phase)) hideRating();
+  if (msg.phase !== 'driving') $('crash').hidden = true;
+}
+
+function showCrash(frame) {
+  $('crash').hidden = !frame.crash || drive.phase !== 'driving';
+  if (frame.crash) {
+    $('crash-text').textContent = drive.onCollision === 'end'
+      ? 'Your car hit the AV and stopped. This drive ends here.'
+      : 'Your car hit the AV and stopped behind it. Drive on when the AV moves away.';
+  }
 }
 
 // ---- input -------------------------------------------------------------------------------
@@ -101,13 +149,12 @@ function gamepadPedal() {
   const gas = pad.buttons[7] ? pad.buttons[7].value : 0;
   const brake = pad.buttons[6] ? pad.buttons[6].value : 0;
   const axis = pad.axes.length > 1 ? -pad.axes[1] : 0;   // stick or wheel pedal axis
-  const value = Math.abs(gas - brake) > 0.02 ? gas - brake : (Math.abs(axis) > 0.05 ? axis : 0);
-  return value;
+  return Math.abs(gas - brake) > 0.02 ? gas - brake : (Math.abs(axis) > 0.05 ? axis : 0);
 }
 
 let lastKeyMs = performance.now();
 function updatePedal(nowMs) {
-  const dt = Math.min(0.1, (nowMs - lastKeyMs) / 1000);
+  const dt = Math.max(0, Math.min(0.1, (nowMs - lastKeyMs) / 1000));
   lastKeyMs = nowMs;
   if (drive.pointerPedal !== null) { drive.pedal = drive.pointerPedal; drive.source = 'pointer'; return; }
   const pad = gamepadPedal();
@@ -115,8 +162,8 @@ function updatePedal(nowMs) {
   const gas = drive.keys.has('ArrowUp') || drive.keys.has('KeyW');
   const brake = drive.keys.has('ArrowDown') || drive.keys.has('KeyS');
   let p = drive.pedal;
-  if (gas && !brake) p = Math.min(1, Math.max(0, p) + KEY_GAS_PER_S * dt);
-  else if (brake && !gas) p = Math.max(-1, Math.min(0, p) - KEY_BRAKE_PER_S * dt);
+  if (gas && !brake) p = Math.min(1, Math.max(KEY_STEP, p + KEY_GAS_PER_S * dt));
+  else if (brake && !gas) p = Math.max(-1, Math.min(-KEY_STEP, p - KEY_BRAKE_PER_S * dt));
   else p = p > 0 ? Math.max(0, p - KEY_RELEASE_PER_S * dt) : Math.min(0, p + KEY_RELEASE_PER_S * dt);
   drive.pedal = p;
   drive.source = 'keyboard';
@@ -124,10 +171,25 @@ function updatePedal(nowMs) {
 
 function pedalAccel(p) { return p >= 0 ? p * drive.accelMax : -p * drive.accelMin; }
 
+function sendSample(nowMs) {
+  if (drive.inputTimer === null) return;
+  updatePedal(nowMs);
+  drive.lastSentMs = nowMs;
+  drive.lastSentPedal = drive.pedal;
+  send({type: 'input', seq: ++drive.seq, accel_mps2: pedalAccel(drive.pedal)});
+}
+const periodMs = () => 1000 / drive.controlRateHz;
+
 window.addEventListener('keydown', (e) => {
-  if (['ArrowUp', 'ArrowDown', 'KeyW', 'KeyS'].includes(e.code)) { drive.keys.add(e.code); e.preventDefault(); }
+  if (!KEYS.includes(e.code)) return;
+  e.preventDefault();
+  if (drive.keys.has(e.code)) return;        // auto-repeat: the ramp goes on by itself
+  drive.keys.add(e.code);
+  sendSample(performance.now());             // a press is sent at once
 });
-window.addEventListener('keyup', (e) => drive.keys.delete(e.code));
+window.addEventListener('keyup', (e) => {
+  if (drive.keys.delete(e.code)) sendSample(performance.now());
+});
 window.addEventListener('blur', () => drive.keys.clear());
 
 const pedalEl = $('pedal');
@@ -137,22 +199,19 @@ function pointerValue(e) {
 }
 pedalEl.addEventListener('pointerdown', (e) => {
   pedalEl.setPointerCapture(e.pointerId); drive.pointerPedal = pointerValue(e); e.preventDefault();
+  sendSample(performance.now());
 });
 pedalEl.addEventListener('pointermove', (e) => { if (drive.pointerPedal !== null) drive.pointerPedal = pointerValue(e); });
-const releasePointer = () => { drive.pointerPedal = null; drive.pedal = 0; };
+const releasePointer = () => { drive.pointerPedal = null; drive.pedal = 0; sendSample(performance.now()); };
 pedalEl.addEventListener('pointerup', releasePointer);
 pedalEl.addEventListener('pointercancel', releasePointer);
 
 function startInput() {
   if (drive.inputTimer !== null) return;
-  drive.inputTimer = setInterval(() => {
-    updatePedal(performance.now());
-    const seq = ++drive.seq;
-    const pageMs = performance.now();
-    drive.sent.set(seq, pageMs);
-    if (drive.sent.size > 200) drive.sent.delete(drive.sent.keys().next().value);
-    send({type: 'input', seq, accel_mps2: pedalAccel(drive.pedal), page_ms: pageMs});
-  }, 1000 / drive.controlRateHz);
+  drive.inputTimer = setInterval(() => {     // the control rate while nothing else is sent
+    const now = performance.now();
+    if (now - drive.lastSentMs >= 0.8 * periodMs()) sendSample(now);
+  }, periodMs() / 2);
 }
 
 function stopInput() {
@@ -160,37 +219,47 @@ function stopInput() {
   drive.inputTimer = null;
 }
 
-$('start').addEventListener('click', () => { $('start').hidden = true; send({type: 'ready'}); });
+$('start').addEventListener('click', () => { $('intro').hidden = true; send({type: 'ready'}); });
 
-// ---- trust rating (non-blocking) -----------------------------------------------------------
-function showRating(nowMs) {
-  $('rating-slider').value = 50; $('rating-value').textContent = '50';
+// ---- trust rating (non-blocking, asked by the server) ----------------------------------------
+function showRating(id) {
+  if (drive.prompt === id) return;
+  drive.prompt = id;
+  $('rating-slider').value = 50;
+  $('rating-slider').classList.add('unset');
+  $('rating-value').textContent = 'move the slider';
+  $('rating-submit').disabled = true;
   $('rating').hidden = false;
-  drive.ratingShownMs = nowMs;
 }
-function hideRating() { $('rating').hidden = true; drive.ratingShownMs = null; }
-$('rating-slider').addEventListener('input', () => { $('rating-value').textContent = $('rating-slider').value; });
+function hideRating() { $('rating').hidden = true; drive.prompt = null; }
+$('rating-slider').addEventListener('input', () => {
+  $('rating-slider').classList.remove('unset');
+  $('rating-value').textContent = $('rating-slider').value;
+  $('rating-submit').disabled = false;
+});
 $('rating-submit').addEventListener('click', () => {
-  if (drive.ratingShownMs === null) return;
-  send({type: 'rating', value: Number($('rating-slider').value), shown_ms: drive.ratingShownMs,
-        answered_ms: performance.now()});
+  if (drive.prompt === null || $('rating-slider').classList.contains('unset')) return;
+  send({type: 'rating', id: drive.prompt, value: Number($('rating-slider').value)});
   hideRating();
 });
 
 // ---- questionnaire -------------------------------------------------------------------------
 function showQuestionnaire(items) {
-  const list = $('items');
-  list.innerHTML = '';
+  const body = $('items');
+  body.innerHTML = '';
   items.forEach((text, i) => {
-    const li = document.createElement('li');
-    li.innerHTML = `<div>${text.replace(/</g, '&lt;')}</div><div class="answers"></div>`;
+    const row = document.createElement('tr');
+    const cell = document.createElement('td');
+    cell.textContent = `${i + 1}. ${text}`;
+    row.appendChild(cell);
     for (let v = 1; v <= 7; v++) {
-      const label = document.createElement('label');
-      label.innerHTML = `<input type="radio" name="item${i + 1}" value="${v}" required> ${v}`;
-      li.querySelector('.answers').appendChild(label);
+      const td = document.createElement('td');
+      td.innerHTML = `<input type="radio" name="item${i + 1}" value="${v}" required aria-label="${v}">`;
+      row.appendChild(td);
     }
-    list.appendChild(li);
+    body.appendChild(row);
   });
+  $('questionnaire-missing').textContent = '';
   $('questionnaire').hidden = false;
 }
 $('questionnaire').addEventListener('submit', (e) => {
@@ -198,7 +267,7 @@ $('questionnaire').addEventListener('submit', (e) => {
   const answers = [];
   for (let i = 1; i <= 12; i++) {
     const checked = document.querySelector(`input[name="item${i}"]:checked`);
-    if (!checked) return;
+    if (!checked) { $('questionnaire-missing').textContent = `Please answer statement ${i}.`; return; }
     answers.push(Number(checked.value));
   }
   send({type: 'questionnaire', answers});
@@ -217,7 +286,7 @@ function interpolated(nowMs) {
   }
   const span = b.received_ms - a.received_ms;
   const w = span > 0 ? Math.max(0, Math.min(1, (t - a.received_ms) / span)) : 1;
-  const out = {};
+  const out = {avAccel: b.av_accel_mps2, leftS: b.left_s, frameMs: b.received_ms};
   for (const name of ['lead', 'av', 'you']) {
     const va = a.vehicles[name], vb = b.vehicles[name];
     if (!va || !vb) { out[name] = vb || va || null; continue; }
@@ -226,33 +295,149 @@ function interpolated(nowMs) {
   return out;
 }
 
+function drawTopDown(ctx, W, H, s) {
+  ctx.fillStyle = '#3a3f47'; ctx.fillRect(0, 0, W, H);
+  ctx.fillStyle = '#555b64'; ctx.fillRect(0, H / 2 - 50, W, 100);
+  const scale = 8, origin = W * 0.2;
+  const toX = (x) => origin + (x - s.you[0]) * scale;
+  ctx.strokeStyle = '#ddd'; ctx.lineWidth = 3; ctx.setLineDash([30, 30]);
+  ctx.lineDashOffset = (s.you[0] * scale) % 60;
+  for (const y of [H / 2 + 50, H / 2 - 50]) { ctx.beginPath(); ctx.moveTo(0, y); ctx.lineTo(W, y); ctx.stroke(); }
+  ctx.setLineDash([]);
+  for (const [name, colour, label] of [['lead', '#9e9e9e', 'lead'], ['av', '#1e88e5', 'AV'], ['you', '#fb8c00', 'you']]) {
+    const v = s[name];
+    if (!v) continue;
+    const x = toX(v[0]);
+    ctx.fillStyle = colour;
+    ctx.fillRect(x - VEHICLE_LENGTH_M * scale, H / 2 - 9, VEHICLE_LENGTH_M * scale, 18);
+    if (name === 'av' && s.avAccel !== null && s.avAccel < BRAKE_LIGHT_MPS2) {
+      ctx.fillStyle = '#ff1744'; ctx.fillRect(x - VEHICLE_LENGTH_M * scale, H / 2 - 9, 4, 18);
+    }
+    ctx.fillStyle = '#fff'; ctx.font = '14px sans-serif';
+    ctx.fillText(label, x - VEHICLE_LENGTH_M * scale, H / 2 - 16);
+  }
+}
+
+// The driver's seat: a pinhole camera EYE_HEIGHT_M above the road, EYE_BEHIND_BUMPER_M
+// behind your front bumper, looking down the road; f in px.
+function drawDriverView(ctx, W, H, s) {
+  const horizon = H * 0.40, f = W * 1.1, cx = W / 2;
+  const sky = ctx.createLinearGradient(0, 0, 0, horizon);
+  sky.addColorStop(0, '#5b86b5'); sky.addColorStop(1, '#b9cfe3');
+  ctx.fillStyle = sky; ctx.fillRect(0, 0, W, horizon);
+  ctx.fillStyle = '#5d7d46'; ctx.fillRect(0, horizon, W, H - horizon);
+  const yAt = (z) => horizon + EYE_HEIGHT_M * f / z;            // road at distance z
+  const xAt = (x, z) => cx + x * f / z;                          // lateral x (m) at z
+  const near = 1.0, far = 600;
+  // road and its edges
+  ctx.fillStyle = '#4a4d52';
+  ctx.beginPath();
+  ctx.moveTo(xAt(-5.5, near), yAt(near)); ctx.lineTo(xAt(-5.5, far), yAt(far));
+  ctx.lineTo(xAt(5.5, far), yAt(far)); ctx.lineTo(xAt(5.5, near), yAt(near)); ctx.fill();
+  ctx.strokeStyle = '#e8e8e8'; ctx.lineWidth = 2;
+  for (const x of [-5.4, 5.4]) {
+    ctx.beginPath(); ctx.moveTo(xAt(x, near), yAt(near)); ctx.lineTo(xAt(x, far), yAt(far)); ctx.stroke();
+  }
+  // lane dashes, fixed to the road (they move past as you drive): 3 m every 12 m
+  const you = s.you[0];
+  ctx.fillStyle = '#f0f0f0';
+  for (let k = Math.floor((you - 2) / 12); k * 12 < you + 200; k++) {
+    for (const x of [-1.85, 1.85]) {
+      const z0 = k * 12 - you + EYE_BEHIND_BUMPER_M, z1 = z0 + 3;
+      if (z1 <= near) continue;
+      const a = Math.max(z0, near);
+      ctx.beginPath();
+      ctx.moveTo(xAt(x - 0.08, a), yAt(a)); ctx.lineTo(xAt(x - 0.08, z1), yAt(z1));
+      ctx.lineTo(xAt(x + 0.08, z1), yAt(z1)); ctx.lineTo(xAt(x + 0.08, a), yAt(a)); ctx.fill();
+    }
+  }
+  // the lead vehicle, then the AV in front of it
+  const braking = s.avAccel !== null && s.avAccel !== undefined && s.avAccel < BRAKE_LIGHT_MPS2;
+  const strength = braking ? Math.min(1, 0.5 + (-s.avAccel) / 4) : 0;
+  if (s.lead) drawRear(ctx, s.lead[0] - VEHICLE_LENGTH_M - you + EYE_BEHIND_BUMPER_M, '#8d939b', 0, '', xAt, yAt, f);
+  if (s.av) drawRear(ctx, s.av[0] - VEHICLE_LENGTH_M - you + EYE_BEHIND_BUMPER_M, '#dfe3e8', strength, 'AV', xAt, yAt, f);
+  // your bonnet
+  ctx.fillStyle = '#1f2a36';
+  ctx.beginPath(); ctx.moveTo(0, H); ctx.lineTo(W * 0.12, H * 0.86); ctx.quadraticCurveTo(cx, H * 0.80, W * 0.88, H * 0.86);
+  ctx.lineTo(W, H); ctx.fill();
+  drawDashboard(ctx, W, H, s);
+}
+
+function drawRear(ctx, z, colour, brake, label, xAt, yAt, f) {
+  if (z < 0.6) z = 0.6;                       // at (or in) your bumper: drawn at the windscreen
+  const half = CAR_WIDTH_M / 2, ground = yAt(z), px = f / z;
+  const left = xAt(-half, z), width = CAR_WIDTH_M * px, height = CAR_HEIGHT_M * px;
+  const top = ground - height;
+  ctx.fillStyle = '#00000055';                 // shadow
+  ctx.fillRect(left - 0.1 * px, ground - 0.05 * px, width + 0.2 * px, 0.12 * px);
+  ctx.fillStyle = colour;                      // body
+  ctx.beginPath();
+  ctx.moveTo(left, ground - 0.25 * px); ctx.lineTo(left, top + 0.55 * height);
+  ctx.lineTo(left + 0.15 * width, top); ctx.lineTo(left + 0.85 * width, top);
+  ctx.lineTo(left + width, top + 0.55 * height); ctx.lineTo(left + width, ground - 0.25 * px); ctx.fill();
+  ctx.fillStyle = '#2b3440';                   // rear window
+  ctx.fillRect(left + 0.2 * width, top + 0.08 * height, 0.6 * width, 0.32 * height);
+  ctx.fillStyle = '#222';                      // tyres and bumper
+  ctx.fillRect(left + 0.05 * width, ground - 0.3 * px, 0.18 * width, 0.3 * px);
+  ctx.fillRect(left + 0.77 * width, ground - 0.3 * px, 0.18 * width, 0.3 * px);
+  ctx.fillStyle = '#3a3a3a'; ctx.fillRect(left, ground - 0.45 * px, width, 0.18 * px);
+  // rear lights: dim red; bright, with a glow, while the AV is commanded to brake
+  const lit = brake > 0;
+  ctx.fillStyle = lit ? '#ff1f1f' : '#5e1b1b';
+  if (lit) { ctx.shadowColor = '#ff2020'; ctx.shadowBlur = 10 + 30 * brake; }
+  const lampW = 0.22 * width, lampH = 0.12 * height, lampY = top + 0.58 * height;
+  ctx.fillRect(left + 0.02 * width, lampY, lampW, lampH);
+  ctx.fillRect(left + width - 0.02 * width - lampW, lampY, lampW, lampH);
+  ctx.fillRect(left + 0.42 * width, top + 0.02 * height, 0.16 * width, 0.04 * height);  // third light
+  ctx.shadowBlur = 0;
+  if (label) {                                 // the plate
+    ctx.fillStyle = '#f4f4f4'; ctx.fillRect(left + 0.38 * width, lampY + 0.02 * height, 0.24 * width, 0.1 * height);
+    ctx.fillStyle = '#0d47a1'; ctx.font = `bold ${Math.max(8, 0.08 * height)}px sans-serif`;
+    ctx.textAlign = 'center'; ctx.fillText(label, left + width / 2, lampY + 0.1 * height); ctx.textAlign = 'start';
+  }
+}
+
+function drawDashboard(ctx, W, H, s) {
+  const cx = W * 0.2, cy = H - 12, r = 70;
+  ctx.fillStyle = '#0e1319ee';
+  ctx.beginPath(); ctx.arc(cx, cy, r + 12, Math.PI, 2 * Math.PI); ctx.fill();
+  ctx.strokeStyle = '#9fb3c8'; ctx.lineWidth = 2;
+  for (let v = 0; v <= 160; v += 20) {          // km/h ticks
+    const a = Math.PI + (v / 160) * Math.PI;
+    ctx.beginPath(); ctx.moveTo(cx + Math.cos(a) * (r - 8), cy + Math.sin(a) * (r - 8));
+    ctx.lineTo(cx + Math.cos(a) * r, cy + Math.sin(a) * r); ctx.stroke();
+  }
+  const kmh = s.you[1] * 3.6, a = Math.PI + Math.min(1, Math.max(0, kmh / 160)) * Math.PI;
+  ctx.strokeStyle = '#ff7043'; ctx.lineWidth = 4;
+  ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(cx + Math.cos(a) * (r - 6), cy + Math.sin(a) * (r - 6)); ctx.stroke();
+  ctx.fillStyle = '#fff'; ctx.textAlign = 'center';
+  ctx.font = 'bold 24px sans-serif'; ctx.fillText(kmh.toFixed(0), cx, cy - 22);
+  ctx.font = '12px sans-serif'; ctx.fillText('km/h', cx, cy - 6);
+  const gx = W * 0.8;
+  ctx.fillStyle = '#0e1319ee';
+  ctx.beginPath(); ctx.arc(gx, cy, r + 12, Math.PI, 2 * Math.PI); ctx.fill();
+  ctx.fillStyle = '#fff';
+  if (s.av) {
+    const gap = s.av[0] - VEHICLE_LENGTH_M - s.you[0];
+    ctx.fillStyle = gap < 10 ? '#ffab40' : '#fff';
+    ctx.font = 'bold 24px sans-serif'; ctx.fillText(`${Math.max(0, gap).toFixed(1)} m`, gx, cy - 22);
+    ctx.fillStyle = '#fff'; ctx.font = '12px sans-serif'; ctx.fillText('gap to the AV', gx, cy - 6);
+  }
+  ctx.textAlign = 'start';
+}
+
 function draw(nowMs) {
-  if (drive.phase === 'driving') updatePedal(nowMs);
+  if (drive.phase === 'driving' && drive.inputTimer !== null) {
+    updatePedal(nowMs);
+    const changed = drive.lastSentPedal === null || Math.abs(drive.pedal - drive.lastSentPedal) > 1e-3;
+    if (changed && nowMs - drive.lastSentMs >= periodMs()) sendSample(nowMs);
+  }
   const s = interpolated(nowMs);
   drive.displayed = s;
   const canvas = $('road'), ctx = canvas.getContext('2d');
   const W = canvas.width, H = canvas.height;
-  ctx.fillStyle = '#3a3f47'; ctx.fillRect(0, 0, W, H);
-  ctx.fillStyle = '#555b64'; ctx.fillRect(0, H / 2 - 50, W, 100);
   if (s && s.you) {
-    const scale = 8;                               // px per m
-    const origin = W * 0.2;                        // your front bumper
-    const toX = (x) => origin + (x - s.you[0]) * scale;
-    ctx.strokeStyle = '#ddd'; ctx.lineWidth = 3; ctx.setLineDash([30, 30]);
-    ctx.lineDashOffset = (s.you[0] * scale) % 60;
-    ctx.beginPath(); ctx.moveTo(0, H / 2 + 50); ctx.lineTo(W, H / 2 + 50); ctx.stroke();
-    ctx.beginPath(); ctx.moveTo(0, H / 2 - 50); ctx.lineTo(W, H / 2 - 50); ctx.stroke();
-    ctx.setLineDash([]);
-    const cars = [['lead', '#9e9e9e', 'lead'], ['av', '#1e88e5', 'AV'], ['you', '#fb8c00', 'you']];
-    for (const [name, colour, label] of cars) {
-      const v = s[name];
-      if (!v) continue;
-      const x = toX(v[0]);
-      ctx.fillStyle = colour;
-      ctx.fillRect(x - VEHICLE_LENGTH_M * scale, H / 2 - 9, VEHICLE_LENGTH_M * scale, 18);
-      ctx.fillStyle = '#fff'; ctx.font = '14px sans-serif';
-      ctx.fillText(label, x - VEHICLE_LENGTH_M * scale, H / 2 - 16);
-    }
+    if ($('top-down').checked) drawTopDown(ctx, W, H, s); else drawDriverView(ctx, W, H, s);
     $('speed').textContent = `${(s.you[1] * 3.6).toFixed(1)} km/h`;
     $('speed').dataset.mps = s.you[1].toFixed(3);
     if (s.av) {
@@ -262,17 +447,16 @@ function draw(nowMs) {
       $('av-speed').textContent = `${(s.av[1] * 3.6).toFixed(1)} km/h`;
       $('av-speed').dataset.mps = s.av[1].toFixed(3);
     }
+    if (drive.phase === 'driving' && typeof s.leftS === 'number') {
+      const left = Math.max(0, s.leftS - (nowMs - s.frameMs) / 1000);
+      $('time-left').textContent = `${left.toFixed(0)} s`;
+      $('time-left').dataset.s = left.toFixed(2);
+    }
+  } else {
+    ctx.fillStyle = '#2a2f36'; ctx.fillRect(0, 0, W, H);
   }
   $('pedal-value').textContent = drive.pedal.toFixed(2);
   $('pedal-mark').style.top = `${(1 - drive.pedal) / 2 * 196}px`;
-  if (drive.phase === 'driving' && drive.drivingSinceMs !== null) {
-    const left = Math.max(0, drive.durationS - (nowMs - drive.drivingSinceMs) / 1000);
-    $('time-left').textContent = `${left.toFixed(0)} s`;
-    if (drive.nextRatingMs !== null && nowMs >= drive.nextRatingMs) {
-      if ($('rating').hidden) showRating(nowMs);   // one still open stays as it is
-      drive.nextRatingMs = nowMs + drive.ratingPeriodS * 1000;
-    }
-  }
   requestAnimationFrame(draw);
 }
 

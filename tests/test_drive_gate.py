@@ -1,0 +1,222 @@
+"""Who may drive and what a page may send, without a graph or a browser: the message gate
+(phase, rate, pedal range, prompts, acknowledgements), the server's origin, token and
+one-controlling-tab rules (a plain WebSocket client plays the pages), the follower's
+collision check and the planner's observation at a gap at or below zero."""
+
+from __future__ import annotations
+
+import json
+import math
+import queue
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+from websockets.sync.client import connect
+
+from trust_av_planner.drive.follower import COLLISION_CLEAR_M, contact
+from trust_av_planner.drive.gate import DRIVING, INPUT_BURST, QUESTIONNAIRE, READY, WAIT, Gate
+from trust_av_planner.drive.server import FLOOD_MESSAGES_PER_S, DriveServer
+from trust_av_planner.planner import observe
+from trust_monitor.common.kinematics import VehicleState
+
+MS = 1_000_000
+
+
+def _gate(phase: str = DRIVING) -> Gate:
+    gate = Gate(10.0, -6.0, 2.5)
+    gate.set_phase(READY)
+    gate.set_phase(phase)
+    return gate
+
+
+def test_messages_that_do_not_fit_the_phase_are_refused_and_counted() -> None:
+    gate = _gate(DRIVING)
+    assert gate.admit({'type': 'input'}) and gate.admit({'type': 'rating'})
+    assert not gate.admit({'type': 'questionnaire', 'answers': [1] * 12})
+    assert not gate.admit({'type': 'ready'})
+    gate.set_phase(QUESTIONNAIRE)
+    assert gate.admit({'type': 'questionnaire'}) and not gate.admit({'type': 'input'})
+    assert gate.take_questionnaire() and not gate.take_questionnaire()   # one per drive
+    assert gate.refused_counts() == {'questionnaire during driving': 1,
+                                     'ready during driving': 1,
+                                     'input during questionnaire': 1,
+                                     'a second questionnaire': 1}
+
+
+def test_pedal_samples_are_clipped_and_rate_limited() -> None:
+    gate = _gate()
+    high = gate.sample({'accel_mps2': 1e308}, 0)
+    low = gate.sample({'accel_mps2': -1e308}, 0)
+    assert high is not None and (high.accel_mps2, high.clipped) == (2.5, True)
+    assert low is not None and (low.accel_mps2, low.clipped) == (-6.0, True)
+    for bad in (math.nan, math.inf, '1', True, None):
+        assert gate.sample({'accel_mps2': bad}, 0) is None
+    # a burst above the control rate passes INPUT_BURST samples, then one per period
+    flood = [gate.sample({'accel_mps2': 1.0}, 1000 * MS + k) for k in range(10_000)]
+    assert sum(s is not None for s in flood) == INPUT_BURST
+    later = [gate.sample({'accel_mps2': 1.0}, (1000 + 101 * k) * MS) for k in range(1, 11)]
+    assert all(s is not None for s in later)
+    seqs = [s.seq for s in [high, low, *flood, *later] if s is not None]
+    assert seqs == list(range(1, len(seqs) + 1))
+    assert gate.refused_counts()['input over the control rate'] == 10_000 - INPUT_BURST
+
+
+def test_ratings_only_answer_open_prompts() -> None:
+    gate = _gate()
+    assert gate.rating({'type': 'rating', 'id': 1, 'value': 50}, 0) is None   # none open
+    prompt = gate.open_prompt(1000 * MS)
+    assert gate.open_prompts() == [prompt]
+    assert gate.rating({'id': prompt, 'value': 101}, 0) is None
+    assert gate.rating({'id': prompt, 'value': 40}, 3500 * MS) == (prompt, 40.0, 2.5)
+    assert gate.rating({'id': prompt, 'value': 40}, 3600 * MS) is None       # answered
+    assert gate.open_prompts() == []
+    gate.set_phase(WAIT)                  # a prompt open as the drive ends may be answered
+    late = gate.open_prompt(0)
+    assert gate.rating({'id': late, 'value': 10}, MS) is not None
+    assert gate.refused_counts() == {'rating outside a prompt': 2, 'rating not in [0, 100]': 1}
+
+
+def test_latency_comes_only_from_acknowledgements_the_server_sent() -> None:
+    gate = _gate()
+    gate.sent_ack(7, arrived_ns=0, applied_ns=5 * MS, sent_ns=6 * MS)
+    assert gate.echo({'seq': 8}, 10 * MS) is None                     # never sent: forged
+    assert gate.echo({'seq': 7}, 20 * MS) == pytest.approx((0.020, 0.005, 0.015))
+    assert gate.echo({'seq': 7}, 21 * MS) is None                     # echoed twice
+    assert gate.refused_counts() == {'ack of no sent frame': 2}
+
+
+def test_the_follower_stops_behind_the_av_and_never_drives_through() -> None:
+    free = contact(10.0, 5.0, 12.0, 3.0, False)
+    assert (free.position_m, free.speed_mps, free.touching, free.new_collision) == \
+        (10.0, 5.0, False, False)
+    hit = contact(13.0, 5.0, 12.0, 3.0, False)               # overlapping: a collision
+    assert (hit.position_m, hit.speed_mps, hit.touching, hit.new_collision) == \
+        (12.0, 0.0, True, True)
+    pushed = contact(12.4, 4.0, 12.2, 3.0, True)              # pedal on: at the bumper
+    assert (pushed.position_m, pushed.speed_mps, pushed.new_collision) == (12.2, 3.0, False)
+    near = contact(12.0, 1.0, 12.2, 3.0, True)                # not yet clear: same contact
+    assert near.touching and contact(12.3, 1.0, 12.2, 3.0, near.touching).new_collision is False
+    clear = contact(10.0, 1.0, 10.0 + COLLISION_CLEAR_M + 0.1, 3.0, True)
+    assert not clear.touching
+    assert contact(11.0, 1.0, 10.6, 3.0, clear.touching).new_collision
+
+
+@pytest.mark.parametrize(('gap', 'speed'), [(-51.0, 0.0), (0.0, 0.0), (-1.0, 3.0)])
+def test_planner_observes_a_crash_without_dividing(gap: float, speed: float) -> None:
+    seen = observe(VehicleState(100.0, 0.0), VehicleState(100.0 - 4.5 - gap, speed), 0.0, 4.5,
+                   10.0)
+    assert seen.gap_m == pytest.approx(gap) and seen.time_headway_s == 0.0
+
+
+# ---- the server ----------------------------------------------------------------------------
+@pytest.fixture
+def served() -> Iterator[tuple[DriveServer, queue.Queue[Any]]]:
+    inbox: queue.Queue[Any] = queue.Queue()
+    server = DriveServer(lambda m, _ns: inbox.put(('message', m)), lambda: {'type': 'hello'},
+                         on_event=lambda kind, _ns: inbox.put(('event', kind)),
+                         on_refused=lambda reason: inbox.put(('refused', reason)), port=0)
+    server.start()
+    try:
+        yield server, inbox
+    finally:
+        server.stop()
+
+
+def _open(server: DriveServer, *, origin: str | None = None, token: str | None = None,
+          host: str | None = None) -> Any:
+    origin = origin if origin is not None else f'http://127.0.0.1:{server.port}'
+    token = token if token is not None else server.token
+    headers = {'Origin': origin, **({'Host': host} if host else {})}
+    return connect(f'ws://127.0.0.1:{server.port}/ws?token={token}',
+                   additional_headers=headers, open_timeout=10)
+
+
+def _received(ws: Any, kind: str) -> dict[str, Any]:
+    while True:
+        message = json.loads(ws.recv(timeout=10))
+        if message['type'] == kind:
+            return message
+
+
+def _drain(inbox: queue.Queue[Any], wait_s: float = 0.5) -> list[Any]:
+    out = []
+    try:
+        while True:
+            out.append(inbox.get(timeout=wait_s))
+    except queue.Empty:
+        return out
+
+
+def test_only_the_served_page_may_open_the_websocket(
+        served: tuple[DriveServer, queue.Queue[Any]]) -> None:
+    server, inbox = served
+    for kwargs in ({'origin': 'http://evil.example'}, {'origin': 'null'},
+                   {'origin': f'http://127.0.0.1:{server.port + 1}'},
+                   {'token': 'guess'}, {'token': ''}):
+        with pytest.raises(InvalidStatus, match='403'):
+            _open(server, **kwargs)
+    refused = [r for kind, r in _drain(inbox) if kind == 'refused']
+    assert len(refused) == 5 and "origin 'http://evil.example'" in refused[0]
+    # the token is in the served page, and only there; a page for another host name (DNS
+    # rebinding) is not served
+    page = urllib.request.urlopen(server.url, timeout=10).read().decode()
+    assert server.token in page
+    request = urllib.request.Request(server.url, headers={'Host': f'evil.example:{server.port}'})
+    with pytest.raises(urllib.error.HTTPError, match='403'):
+        urllib.request.urlopen(request, timeout=10)
+    with _open(server, origin=f'http://localhost:{server.port}') as ws:   # the page's origin
+        assert _received(ws, 'control')['controlling'] is True
+
+
+def test_one_tab_drives_a_second_is_told_and_may_take_over(
+        served: tuple[DriveServer, queue.Queue[Any]]) -> None:
+    server, inbox = served
+    with _open(server) as first, _open(server) as second:
+        assert _received(first, 'hello') and _received(first, 'control')['controlling']
+        told = _received(second, 'control')
+        assert (told['controlling'], told['other']) == (False, True)
+        second.send(json.dumps({'type': 'input', 'seq': 1, 'accel_mps2': 1.0}))
+        first.send(json.dumps({'type': 'input', 'seq': 1, 'accel_mps2': -1.0}))
+        seen = _drain(inbox)
+        assert ('refused', 'a message from a tab that is not driving') in seen
+        assert [m['accel_mps2'] for kind, m in seen if kind == 'message'] == [-1.0]
+        second.send(json.dumps({'type': 'take_over'}))
+        assert _received(second, 'control')['controlling'] is True
+        assert _received(first, 'control') == {'type': 'control', 'controlling': False,
+                                               'other': True, 'taken_over': True}
+        assert ('event', 'take_over') in _drain(inbox)
+        with _open(server) as third:        # a reconnection before the old one is gone
+            assert _received(third, 'control')['other'] is True
+            second.close()                  # the driving tab closes: the control is free
+            assert _received(third, 'control') == {'type': 'control', 'controlling': False,
+                                                   'other': False}
+            third.send(json.dumps({'type': 'take_over'}))   # what the page that drove does
+            assert _received(third, 'control')['controlling'] is True
+            events = [e for kind, e in _drain(inbox) if kind == 'event']
+            assert events == ['page_lost', 'page_connected']
+    events = [e for kind, e in _drain(inbox) if kind == 'event']
+    assert events == ['page_lost']          # the driving tab closed: an interruption
+
+
+def test_a_flooding_connection_is_closed_and_the_others_go_on(
+        served: tuple[DriveServer, queue.Queue[Any]]) -> None:
+    server, inbox = served
+    with _open(server) as flooder, _open(server) as other:
+        _received(other, 'control')
+        with pytest.raises(ConnectionClosed) as closed:
+            for k in range(10_000):
+                flooder.send(json.dumps({'type': 'input', 'seq': k, 'accel_mps2': 1.0}))
+            flooder.recv(timeout=10)
+        assert closed.value.rcvd is None           # dropped, no closing handshake
+        server.send({'type': 'state'})
+        assert _received(other, 'state') == {'type': 'state'}
+    seen = _drain(inbox)
+    # at least one second's worth passed (more only if the host is too slow to take 200
+    # messages within a second), then nothing more
+    assert FLOOD_MESSAGES_PER_S <= len([m for kind, m in seen if kind == 'message']) < 10_000
+    assert ('refused', f'more than {FLOOD_MESSAGES_PER_S} messages in a second: the '
+            'connection closed') in seen
