@@ -65,7 +65,12 @@ from trust_monitor.ros.messages import (
     trajectory_times,
     trajectory_values,
 )
-from trust_monitor.ros.parameters import declare_component_params, declare_config
+from trust_monitor.ros.parameters import (
+    declare_component_params,
+    declare_config,
+    predeclare,
+    predeclare_component,
+)
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -100,6 +105,12 @@ class PlannerNode(ManagedNode):
         super().__init__('planner')
         self.lifecycle = declare_config(self, LifecycleConfig)
         self.tuning = False
+        # declared now, read and checked at configure: `ros2 param` sees them unconfigured
+        for cls in (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
+                    FrameConfig, *(c.config_type for c in registry.components(
+                        registry.PREDICTORS) if c.config_type is not None)):
+            predeclare(self, cls)
+        predeclare_component(self, registry.TRUST_MODELS, 'trust_model')
 
     def build(self) -> None:
         """``configure``: parameters, core (warmed in wall mode), publishers, subscriptions.
@@ -277,7 +288,9 @@ class PlannerNode(ManagedNode):
 
     def on_latest(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Wall mode: keep the latest message of each input with its receive time (also
-        while inactive: the first active tick has fresh inputs)."""
+        while inactive: the first active tick has fresh inputs; none once released)."""
+        if not self.configured:
+            return
         self.latest.put(name, time.monotonic_ns(), msg)
         self.missed.pop(name, None)
         if name == 'ego':
@@ -345,7 +358,9 @@ class PlannerNode(ManagedNode):
     def on_input(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Store an input; plan every step whose inputs are complete, in order (only while
         active: while inactive the lock-step chain waits, its inputs kept for
-        :meth:`resume`)."""
+        :meth:`resume`; none once released)."""
+        if not self.configured:
+            return
         self.buffer.put(name, msg_ns(msg.header.stamp), msg)
         if name == 'ego':
             self.set_frame(body_frame(msg.child_frame_id, self.frames))  # type: ignore[union-attr]

@@ -32,7 +32,12 @@ from trust_monitor.common.topics import NO_FRAME
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.ros.lifecycle import ManagedNode
 from trust_monitor.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
-from trust_monitor.ros.parameters import declare_component_params, declare_config
+from trust_monitor.ros.parameters import (
+    declare_component_params,
+    declare_config,
+    predeclare,
+    predeclare_component,
+)
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -48,6 +53,10 @@ class MonitorNode(ManagedNode):
     def __init__(self) -> None:
         super().__init__('trust_monitor')
         self.lifecycle = declare_config(self, LifecycleConfig)
+        # declared now, read and checked at configure: `ros2 param` sees them unconfigured
+        for cls in (TrustConfig, MonitorConfig, WallClockConfig):
+            predeclare(self, cls)
+        predeclare_component(self, TRUST_MODELS, 'trust_model')
 
     def build(self) -> None:
         """``configure``: parameters, the trust estimator, the publisher, the subscriptions.
@@ -78,7 +87,9 @@ class MonitorNode(ManagedNode):
     def on_latest(self, name: str, msg: JointTrajectory) -> None:
         """Wall mode: keep the latest plan of each kind and score a new pair as soon as it
         is complete (on the tick alone, a tick that fell just before the planner's publish
-        found nothing new, and under load whole seconds went unscored)."""
+        found nothing new, and under load whole seconds went unscored). None once released."""
+        if not self.configured:
+            return
         self.latest.put(name, time.monotonic_ns(), msg)
         self.wall_step()
 
@@ -106,7 +117,9 @@ class MonitorNode(ManagedNode):
 
     def on_input(self, name: str, msg: JointTrajectory) -> None:
         """Store a plan; when both plans of a step are there, score them (only while
-        active: while inactive they wait for :meth:`resume`)."""
+        active: while inactive they wait for :meth:`resume`; none once released)."""
+        if not self.configured:
+            return
         ns = msg_ns(msg.header.stamp)
         self.buffer.put(name, ns, msg)
         if self.active and self.buffer.ready(ns):

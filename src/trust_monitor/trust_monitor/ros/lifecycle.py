@@ -72,6 +72,11 @@ class ManagedNode(LifecycleNode):
 
     Attributes:
         active: the node is in the ``active`` state (its steps run and publish).
+        configured: :meth:`build` succeeded and :meth:`release` has not run since: the
+            core exists. An input callback tests it first and drops the message if not: the
+            executor still delivers a message it took before ``cleanup`` or ``shutdown``
+            destroyed the subscription (seen under a lifecycle manager with inputs at
+            100 Hz: an ``AttributeError`` out of the callback ended the node).
         wall: ``clock_mode`` is ``wall`` (set by :meth:`build`).
         configure_error: why the last ``configure`` failed (None if it did not).
     """
@@ -85,6 +90,7 @@ class ManagedNode(LifecycleNode):
         self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.active = False
+        self.configured = False
         self.wall = False
         self.loop: WallLoop | None = None
         self.configure_error: BaseException | None = None
@@ -175,6 +181,7 @@ class ManagedNode(LifecycleNode):
             return self._failed(err, ERROR, traceback.format_exc())
         if self.loop is not None:
             self.loop.timer.cancel()
+        self.configured = True
         return super().on_configure(state)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -227,6 +234,7 @@ class ManagedNode(LifecycleNode):
 
     def _release(self) -> None:
         """Destroy what ``configure`` made (timers, subscriptions, publishers) and the core."""
+        self.configured = False
         self.close()
         publishers, subscriptions, timers = self._base
         for timer in [t for t in self.timers if t not in timers]:
