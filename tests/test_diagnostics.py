@@ -151,8 +151,9 @@ def test_diagnostics_once_a_second_with_solve_times_input_ages_and_frames(
             # counted on /diagnostics, the node goes on
             raw = manager.node.create_publisher(Odometry, 'ego/odom', topic_qos(
                 'ego/odom', WallClockConfig(clock_mode='wall')))
-            for data in (b'\x00\x01\x00\x00\xff\xff', b'\x00\x01\x00\x00' + b'\x07' * 40):
-                raw.publish(data)
+            assert manager.spin_until(lambda: raw.get_subscription_count() > 0)
+            malformed = (b'\x00\x01\x00\x00\xff\xff', b'\x00\x01\x00\x00' + b'\x07' * 40)
+            manager.node.create_timer(0.1, lambda: [raw.publish(data) for data in malformed])
             assert manager.spin_until(lambda: any(
                 int(values(s).get('dropped_messages', 0)) >= 2
                 for s in statuses(manager, 'planner')))

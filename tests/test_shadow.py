@@ -23,7 +23,7 @@ from preceding_traffic.bags import TYPESTORE
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.graph.bag_records import message_stamp
-from trust_av_planner.graph.bag_writer import header_stamp_ns
+from trust_av_planner.graph.bag_writer import STAMP_IN_FIRST_ELEMENT, header_stamp_ns
 from trust_monitor.common.kinematics import advance
 from trust_monitor.common.topics import TOPICS, qualified
 
@@ -190,8 +190,8 @@ def test_whole_graph_in_wall_mode_drives_at_real_time(tmp_path: Path) -> None:
             stamped.setdefault(connection.topic, []).append((stamp_ns, msg))
     from mcap.reader import make_reader
     with next(out.glob('*.mcap')).open('rb') as stream:
-        for _, channel, message in make_reader(stream).iter_messages():   # tf: first element's
-            offset = 8 if channel.topic == '/tf' else 4
+        for schema, channel, message in make_reader(stream).iter_messages():
+            offset = 8 if schema.name in STAMP_IN_FIRST_ELEMENT else 4   # tf, markers
             assert message.publish_time == header_stamp_ns(message.data, offset), channel.topic
     recorded = {qualified(t.name) for t in TOPICS} - {'/clock', '/sim/start'}
     assert recorded <= set(stamped), recorded - set(stamped)
