@@ -21,6 +21,9 @@ if [ ! -x "$venv/bin/python" ]; then
   echo "[bootstrap] creating virtual environment $venv ($("$python_bin" --version))" >&2
   "$python_bin" -m venv "$venv"
 fi
+# colcon never crawls the environment (its share/ holds the message wheels' package.xml files):
+# a clone in a colcon workspace (docs/operations/colcon.md) builds only the four packages
+[ -f "$venv/COLCON_IGNORE" ] || touch "$venv/COLCON_IGNORE"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   # the pins need CPython 3.11.5 or a later 3.11 (pymdown-extensions 13.1.2, for one); Debian
   # 12's python3 is 3.11.2: say so in one line instead of pip's page of versions

@@ -186,3 +186,49 @@ def test_frame_ids_are_rep105_parameters_and_positions_must_share_one() -> None:
     for bad in ('', '/odom', ' odom'):
         with pytest.raises((ValueError, ParamsError), match='odom_frame_id must be a tf2'):
             FrameConfig(odom_frame_id=bad)
+
+
+def test_centreline_projection_gives_distance_along_and_signed_offset() -> None:
+    """An L-shaped lane in ``map``: 100 m east, then 50 m north. A point beside the first leg
+    reads its easting as distance along, left (north) positive; beside the second leg the
+    distance continues past the corner; before the start and past the end it is clamped;
+    the velocity along the lane is the component along the leg."""
+    import math
+
+    from trust_monitor.common.lane import Centreline, LaneError
+
+    lane = Centreline([(1000.0, 2000.0), (1100.0, 2000.0), (1100.0, 2050.0)])
+    assert lane.length_m == 150.0
+    first = lane.project(1030.0, 2001.5)
+    assert (first.s_m, first.lateral_m, first.heading_rad) == (30.0, 1.5, 0.0)
+    assert lane.project(1030.0, 1998.0).lateral_m == -2.0
+    second = lane.project(1101.0, 2020.0)
+    assert (second.s_m, second.lateral_m) == (120.0, -1.0)
+    assert second.heading_rad == math.pi / 2
+    assert lane.project(900.0, 2000.0).s_m == 0.0
+    assert lane.project(1100.0, 2100.0).s_m == 150.0
+    assert lane.along(first, 10.0, 3.0) == 10.0
+    assert abs(lane.along(second, 10.0, 3.0) - 3.0) < 1e-12
+    for bad, words in (([(0.0, 0.0)], 'at least 2 points'),
+                       ([(0.0, 0.0), (0.0, 0.0)], 'points 0 and 1 are equal'),
+                       ([(0.0, 0.0), (math.nan, 1.0)], 'not finite')):
+        with pytest.raises(LaneError, match=words):
+            Centreline(bad)
+    with pytest.raises(LaneError, match='not finite'):
+        lane.project(math.inf, 0.0)
+
+
+def test_lead_is_the_nearest_object_ahead_on_the_lane() -> None:
+    """Behind the AV, beside the lane (more than half a lane width off) or farther ahead:
+    not the lead; none qualifying: None."""
+    from trust_monitor.common.lane import LaneError, OnLane, lead_on_lane
+
+    objects = [OnLane(40.0, 0.2, 0.0),    # behind the AV at 50 m
+               OnLane(70.0, 3.5, 0.0),    # next lane
+               OnLane(90.0, -1.0, 0.0),   # ahead, on the lane
+               OnLane(80.0, 1.7, 0.0)]    # ahead, on the lane, nearer
+    assert lead_on_lane(50.0, objects, 3.5) == 3
+    assert lead_on_lane(50.0, objects[:3], 3.5) == 2
+    assert lead_on_lane(95.0, objects, 3.5) is None
+    with pytest.raises(LaneError, match='lane_width_m'):
+        lead_on_lane(0.0, objects, 0.0)

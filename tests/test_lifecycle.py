@@ -23,6 +23,7 @@ The rules checked are rclpy's and rcl_lifecycle's, from their sources:
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import signal
 import subprocess
@@ -469,3 +470,163 @@ def test_a_lost_answer_or_request_is_asked_again_and_nothing_is_sent_twice(
     node = _LossyNode(lose)
     lifecycle_client.set_states(node, _Idle(), ['planner'], 'active', 5.0)
     assert node.state == 3 and node.applied == [1, 3]
+
+
+CLEANUP, SHUTDOWN_UNCONFIGURED, SHUTDOWN_INACTIVE, SHUTDOWN_ACTIVE = 2, 5, 6, 7
+FINALIZED = 4   # lifecycle_msgs/msg/State PRIMARY_STATE_FINALIZED
+NAV2 = {'startup': (CONFIGURE, ACTIVATE), 'pause': (DEACTIVATE,), 'resume': (ACTIVATE,),
+        'reset': (DEACTIVATE, CLEANUP),
+        'shutdown': (DEACTIVATE, CLEANUP, SHUTDOWN_UNCONFIGURED)}
+"""The transition sequences of nav2's lifecycle manager (nav2_lifecycle_manager
+``lifecycle_manager.cpp``: startup, pause, resume, reset, shutdown), as transition ids
+(``lifecycle_msgs/msg/Transition``)."""
+SEQUENCES = {
+    'nav2': ('startup', 'pause', 'resume', 'reset', 'startup', 'shutdown'),
+    'from_active': ('startup', SHUTDOWN_ACTIVE),
+    'from_inactive': (CONFIGURE, SHUTDOWN_INACTIVE),
+    'from_unconfigured': (SHUTDOWN_UNCONFIGURED,),
+}
+"""Every nav2 sequence in one node's life, then shutdown from each primary state."""
+INPUT_PERIOD_S = 0.01   # inputs at 100 Hz throughout
+
+
+def wall_inputs(manager: Manager, node: str) -> Callable[[], None]:
+    """Start publishing the wall-mode inputs of ``node`` at 100 Hz from the manager's
+    executor, stamped now (steady car following 30 m behind a lead at 15 m/s, in ``odom``;
+    for the monitor a zero plan pair); returns what stops them."""
+    from nav_msgs.msg import Odometry
+    from trajectory_msgs.msg import JointTrajectory
+
+    from trust_monitor.common.wall_clock import WallClockConfig
+    from trust_monitor.ros.messages import odometry, trajectory
+    from trust_monitor.ros.qos import topic_qos
+
+    wall = WallClockConfig(clock_mode='wall')
+    if node == 'planner':
+        topics = {'preceding_vehicle/odom': Odometry, 'ego/odom': Odometry}
+    else:
+        topics = {'ego/plan': JointTrajectory, 'ego/expected_plan': JointTrajectory}
+    pubs = {t: manager.node.create_publisher(m, t, topic_qos(t, wall)) for t, m in topics.items()}
+
+    def publish() -> None:
+        ns = time.time_ns()
+        t_s = time.monotonic()
+        if node == 'planner':
+            pubs['preceding_vehicle/odom'].publish(
+                odometry(ns, 60.0 + 15.0 * t_s, 15.0, 'preceding_vehicle'))
+            pubs['ego/odom'].publish(odometry(ns, 30.0 + 15.0 * t_s, 15.0, 'ego'))
+        else:
+            for pub in pubs.values():
+                pub.publish(trajectory(ns, 0.1, frame_id='ego', accelerations=[0.0] * 30))
+
+    timer = manager.node.create_timer(INPUT_PERIOD_S, publish)
+    return timer.cancel
+
+
+@pytest.mark.parametrize('sequence', sorted(SEQUENCES))
+@pytest.mark.parametrize('module', ['trust_av_planner.planner_node',
+                                    'trust_monitor.monitor_node'])
+def test_lifecycle_manager_sequences_with_inputs_flowing(tmp_path: Path, module: str,
+                                                         sequence: str) -> None:
+    """A wall-mode node driven through nav2's lifecycle-manager sequences by real service
+    calls while its inputs arrive at 100 Hz: every transition succeeds, the node ends
+    ``finalized`` with no traceback; the planner sends exactly one hand-over command
+    (``stale_decel_mps2``) per deactivation (also the one a shutdown from active makes) and
+    none while inactive; the monitor publishes no trust while inactive. Before, a cleanup
+    or shutdown with inputs flowing ended in ``AttributeError: ... no attribute 'latest'``
+    (a message taken before the subscription was destroyed reached the released node)."""
+    from geometry_msgs.msg import AccelStamped, Vector3Stamped
+
+    from trust_av_planner.system.config import load_run_config
+    from trust_monitor.common.wall_clock import WallClockConfig
+    from trust_monitor.ros.messages import msg_ns
+    from trust_monitor.ros.qos import topic_qos
+
+    name = 'planner' if 'planner' in module else 'trust_monitor'
+    topic, msgtype = (('ego/accel_cmd', AccelStamped) if name == 'planner'
+                      else ('trust_monitor/trust', Vector3Stamped))
+    steps = [t for item in SEQUENCES[sequence]
+             for t in (NAV2[item] if isinstance(item, str) else (item,))]
+    args = ['-p', 'autostart:=false', '-p', 'clock_mode:=wall']
+    if name == 'planner':
+        args += ['-p', "human_odom_topic:=''", '-p', 'predictor:=ca', '-p',
+                 'lead_preview:=constant_speed']   # plans from its inputs while active
+    handover = load_run_config().planner.stale_decel_mps2
+    with lease_domain() as domain:
+        proc = start(tmp_path, domain, module, *args)
+        manager = Manager(domain, name)
+        try:
+            manager.record(msgtype, topic, topic_qos(topic, WallClockConfig(clock_mode='wall')))
+            out = manager.received[topic]
+            stop_inputs = wall_inputs(manager, name)
+            assert manager.state() == UNCONFIGURED
+            # (deactivate asked, answered, next activate asked), ns
+            inactive: list[tuple[int, int, int]] = []
+            for transition in steps:
+                asked = time.time_ns()
+                if transition == ACTIVATE and inactive:
+                    inactive[-1] = (*inactive[-1][:2], asked)
+                assert manager.transition(transition), (sequence, transition)
+                if transition in (DEACTIVATE, SHUTDOWN_ACTIVE):
+                    inactive.append((asked, time.time_ns(), 2 ** 63))
+                if transition == ACTIVATE:   # it works while active
+                    seen = len(out)
+                    assert manager.spin_until(lambda s=seen: len(out) >= s + 3)
+                else:                        # inputs keep arriving in the new state
+                    manager.spin_for(0.3)
+            assert manager.state() == FINALIZED
+            manager.spin_for(0.5)                     # what was in flight
+            assert proc.poll() is None
+            stop_inputs()
+        finally:
+            manager.close()
+            log = stop(proc)
+    assert 'AttributeError' not in log and 'Traceback' not in log, log
+    deactivations = sum(t in (DEACTIVATE, SHUTDOWN_ACTIVE) for t in steps)
+    assert log.count('deactivate: handed over with') == (deactivations if name == 'planner'
+                                                         else 0), log
+    for asked, answered, end in inactive:   # outputs until the node took the request
+        after = [m for m in out if answered < msg_ns(m.header.stamp) < end]
+        assert after == [], (answered, after)
+        if name == 'planner':
+            during = [m.accel.linear.x for m in out if asked <= msg_ns(m.header.stamp) < end]
+            assert during.count(handover) == 1, (asked, during)
+
+
+@pytest.mark.parametrize('module', ['trust_av_planner.planner_node',
+                                    'trust_monitor.monitor_node'])
+def test_parameters_are_declared_while_unconfigured(tmp_path: Path, module: str) -> None:
+    """``ros2 param list``/``get`` (``rcl_interfaces`` services) on a node still
+    ``unconfigured``: every parameter its configure reads is there with the value configure
+    takes (the shipped file's, a ``-p`` override's); configure then keeps them."""
+    from rcl_interfaces.srv import GetParameters, ListParameters
+
+    from trust_av_planner.nmpc import PlannerConfig
+    from trust_av_planner.system.config import load_run_config
+    from trust_monitor.trust_model import TrustConfig
+
+    name = 'planner' if 'planner' in module else 'trust_monitor'
+    with lease_domain() as domain:
+        proc = start(tmp_path, domain, module, '-p', 'autostart:=false', '-p',
+                      'trust_initial:=5.0')
+        manager = Manager(domain, name)
+        try:
+            listing = manager.node.create_client(ListParameters, f'/{name}/list_parameters')
+            getting = manager.node.create_client(GetParameters, f'/{name}/get_parameters')
+            before = set(manager.call(listing, ListParameters.Request()).result.names)
+            assert manager.state() == UNCONFIGURED
+            asked = ['trust_initial', 'clock_mode'] + (['alpha'] if name == 'planner' else [])
+            values = manager.call(getting, GetParameters.Request(names=asked)).values
+            assert manager.transition(CONFIGURE)
+            after = set(manager.call(listing, ListParameters.Request()).result.names)
+        finally:
+            manager.close()
+            stop(proc)
+    fields = {f.name for f in dataclasses.fields(TrustConfig)}
+    if name == 'planner':
+        fields |= {f.name for f in dataclasses.fields(PlannerConfig)}
+    assert fields <= before, fields - before
+    assert after == before
+    assert values[0].double_value == 5.0 and values[1].string_value == 'lockstep'
+    if name == 'planner':
+        assert values[2].double_value == load_run_config().planner.alpha

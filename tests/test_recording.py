@@ -109,6 +109,29 @@ def test_bag_writer_writes_a_rosbag2_bag_directory(tmp_path: Path) -> None:
         BagWriter(bag)
 
 
+def test_wall_mode_log_time_is_the_receive_time_and_publish_time_the_stamp(
+        tmp_path: Path) -> None:
+    """``receive_time_ns`` (wall mode, as ``ros2 bag record``): log time = receive time,
+    publish time = the header stamp; without it both are the stamp (lock-step). The bag
+    still follows rosbag2's rules (its start and duration are the log times')."""
+    from mcap.reader import make_reader
+    bag = tmp_path / 'wall'
+    with BagWriter(bag) as writer:
+        writer.add_topic('/a/odom', 'nav_msgs/msg/Odometry', QOS)
+        for step in range(3):
+            stamp = (100 + step) * 10**9
+            assert writer.write('/a/odom', odometry(stamp, 0.0),
+                                receive_time_ns=stamp + 2_000_000) == stamp + 2_000_000
+            writer.end_step()
+        writer.write('/a/odom', odometry(200 * 10**9, 0.0))
+        writer.finish()
+    assert check_bag_directory(bag) == []
+    with (bag / 'wall.mcap').open('rb') as stream:
+        times = [(m.log_time, m.publish_time) for _, _, m in make_reader(stream).iter_messages()]
+    assert times == [((100 + k) * 10**9 + 2_000_000, (100 + k) * 10**9) for k in range(3)] + [
+        (200 * 10**9, 200 * 10**9)]
+
+
 def test_every_step_is_on_disk_before_the_bag_is_finished(tmp_path: Path) -> None:
     """A writer that never finishes (SIGKILL) leaves every closed step in the file; repair
     turns it into a complete bag, and a chunk cut in the middle is dropped whole."""

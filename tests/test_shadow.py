@@ -23,6 +23,7 @@ from preceding_traffic.bags import TYPESTORE
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.graph.bag_records import message_stamp
+from trust_av_planner.graph.bag_writer import STAMP_IN_FIRST_ELEMENT, header_stamp_ns
 from trust_monitor.common.kinematics import advance
 from trust_monitor.common.topics import TOPICS, qualified
 
@@ -166,7 +167,8 @@ def test_lead_replay_interpolates_and_integrates() -> None:
 def test_whole_graph_in_wall_mode_drives_at_real_time(tmp_path: Path) -> None:
     """Every node in wall mode (``--whole-graph``, GRU predictor): the lead of a constant
     10 m/s trace advances at 10 m/s of *wall* time, the simulated AV and human follow it
-    without collision, every topic is recorded with log time = header stamp = wall time."""
+    without collision, every topic is recorded as ``ros2 bag record`` records it: log time =
+    receive time (wall time, not before the stamp), publish time = header stamp."""
     trace = tmp_path / 'steady.csv'
     trace.write_text('time_s,speed_mps\n' + ''.join(f'{t},10.0\n' for t in range(61)))
     out, stats = tmp_path / 'wall', tmp_path / 'wall.json'
@@ -183,9 +185,14 @@ def test_whole_graph_in_wall_mode_drives_at_real_time(tmp_path: Path) -> None:
         for connection, log_ns, raw in reader.messages():
             msg = reader.deserialize(raw, connection.msgtype)
             stamp = message_stamp(msg)
-            assert log_ns == stamp.sec * 1_000_000_000 + stamp.nanosec, connection.topic
-            assert before_ns <= log_ns <= after_ns, connection.topic
-            stamped.setdefault(connection.topic, []).append((log_ns, msg))
+            stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+            assert before_ns <= stamp_ns <= log_ns <= after_ns, connection.topic
+            stamped.setdefault(connection.topic, []).append((stamp_ns, msg))
+    from mcap.reader import make_reader
+    with next(out.glob('*.mcap')).open('rb') as stream:
+        for schema, channel, message in make_reader(stream).iter_messages():
+            offset = 8 if schema.name in STAMP_IN_FIRST_ELEMENT else 4   # tf, markers
+            assert message.publish_time == header_stamp_ns(message.data, offset), channel.topic
     recorded = {qualified(t.name) for t in TOPICS} - {'/clock', '/sim/start'}
     assert recorded <= set(stamped), recorded - set(stamped)
     lead = stamped['/preceding_vehicle/odom']

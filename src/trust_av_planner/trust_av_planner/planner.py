@@ -11,6 +11,7 @@ solves the trust-aware NMPC. At any control period: the NMPC predicts on its gri
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -218,6 +219,32 @@ class AvPlanner:
         result = self.nmpc.step(gap, av.speed_mps, preview, expected, trust)
         self.commanded(float(result.plan_mps2[0]), t_s)
         return PlannerOutput(result, expected, expected_model, preview, gap)
+
+    def warm_up(self, solves: int, trust_state: object) -> list[float]:
+        """Solve the NMPC ``solves`` times on a steady car-following state (mid speed, at
+        the headway), then forget the warm start: the first-use costs leave the first
+        real step. Only the NMPC is stepped: the plan estimator sees nothing.
+
+        Args:
+            solves: solves to make.
+            trust_state: the trust model's initial state (a T below T_min is raised above
+                it: the NMPC would fall back without a solve).
+
+        Returns:
+            Each solve's wall time, s.
+        """
+        nmpc, c = self.nmpc, self.config
+        speed = 0.5 * (c.speed_min_mps + c.speed_max_mps)
+        gap = c.standstill_gap_m + c.time_headway_s * speed
+        if isinstance(trust_state, float):
+            trust_state = max(trust_state, c.trust_min + 1.0)
+        times = []
+        for _ in range(solves):
+            start = time.perf_counter()
+            nmpc.step(gap, speed, np.full(nmpc.steps, speed), np.zeros(nmpc.steps), trust_state)
+            times.append(time.perf_counter() - start)
+        nmpc.reset()
+        return times
 
     def hold(self, accel_mps2: float, av: VehicleState | None, human: VehicleState | None,
              t_s: float) -> tuple[np.ndarray, np.ndarray]:

@@ -10,23 +10,18 @@ status (``DiagnosticArray``) and the three vehicles' markers (``vehicle_markers`
 its vehicle's frame). Topic names are relative (the node's namespace). Parameters: the
 ``planner`` section of ``config/trust_av.yaml``.
 
-``clock_mode: wall`` (real-vehicle mode, docs/operations/real-vehicle.md): a wall-clock timer
-at ``control_rate_hz`` plans from the LATEST inputs (topics from the ``*_topic`` parameters or
-remapping), the NMPC predicting on the control period's grid; outputs are stamped with the
-current time. Inputs use the sensor-data QoS (best effort, volatile, keep last 1) without a
-deadline, so they match any vehicle stack's publishers; an input never received or received
-longer ago than ``input_timeout_s`` is stale. With ``input_deadline_qos`` they also request a
-deadline of ``input_timeout_s`` (only publishers offering one match): a missed deadline is
-reported by DDS (a QoS event) and marks the input stale at once. While the lead or ego
-odometry (or a recorded preview) is stale the planner commands ``stale_decel_mps2`` with
-status ERROR naming the input; it plans again as soon as they are fresh. The human odometry
-is used when fresh; without it the plan estimator observes only the AV's own acceleration
-(enough for an estimator that does not declare the ``follower_state`` need, such as CA or
-CV; an empty ``human_odom_topic`` requires such an estimator).
-Positions: the lead's and the AV's (and the follower's) ``pose.position.x`` are distances
-along the road only in one world-fixed frame: inputs whose ``header.frame_id`` is not
-``odom_frame_id`` or ``map_frame_id``, or differ, are unusable (the stale-input policy names
-them; a follower in another frame is ignored).
+``clock_mode: wall`` (real-vehicle mode, docs/operations/real-vehicle.md): a steady-clock
+timer at ``control_rate_hz`` plans from the LATEST inputs (sensor-data QoS; with
+``input_deadline_qos`` a QoS deadline of ``input_timeout_s``), the NMPC predicting on the
+control period's grid; outputs are stamped with the current time. While the lead or ego
+odometry (or a recorded preview) is missing, older than ``input_timeout_s``, past its
+deadline, or in frames it cannot relate (positions along the road need one world-fixed
+frame, ``odom_frame_id`` or ``map_frame_id``), it commands ``stale_decel_mps2`` with status
+ERROR naming why; it plans again as soon as they are usable. The human odometry is used
+when fresh (an empty ``human_odom_topic`` needs an estimator without the ``follower_state``
+need, such as CA or CV). With ``use_sim_time`` true it does not command at all and its
+status and ``/diagnostics`` say why (:meth:`ManagedNode.clock_problem
+<trust_monitor.ros.lifecycle.ManagedNode.clock_problem>`).
 Trust: the latest estimate, ``trust_initial`` before the first. ``alpha``, ``trust_min`` and
 ``solver_cpu_budget_s`` can be changed with ``ros2 param set`` (from the next tick).
 """
@@ -37,10 +32,9 @@ import sys
 import time
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
-from rclpy.event_handler import SubscriptionEventCallbacks
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
@@ -51,6 +45,7 @@ from trust_av_planner.system.config import PlannerTopics, SharedConfig, check_co
 from trust_monitor.common import registry
 from trust_monitor.common.frames import FrameConfig, body_frame, position_frame_problem
 from trust_monitor.common.grids import interp_at
+from trust_monitor.common.health import Report, SolveRecord, age
 from trust_monitor.common.kinematics import VehicleState
 from trust_monitor.common.lifecycle import LifecycleConfig
 from trust_monitor.common.lockstep import StepBuffer
@@ -65,8 +60,13 @@ from trust_monitor.ros.messages import (
     trajectory_times,
     trajectory_values,
 )
-from trust_monitor.ros.parameters import declare_component_params, declare_config
-from trust_monitor.ros.qos import topic_qos
+from trust_monitor.ros.parameters import (
+    declare_component_params,
+    declare_config,
+    predeclare,
+    predeclare_component,
+)
+from trust_monitor.ros.qos import input_events, topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
 from trust_monitor.ros.tuning import Tunable, enable_tuning
@@ -95,11 +95,19 @@ class PlannerNode(ManagedNode):
     starts the outputs, ``deactivate`` hands over (:meth:`handover`)."""
 
     user_errors = (ValueError, TrustAvPlannerError)
+    task = 'trust_aware_nmpc'
+    idle = 'inactive: not commanding (waiting for activate)'
 
     def __init__(self) -> None:
         super().__init__('planner')
         self.lifecycle = declare_config(self, LifecycleConfig)
         self.tuning = False
+        # declared now, read and checked at configure: `ros2 param` sees them unconfigured
+        for cls in (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
+                    FrameConfig, *(c.config_type for c in registry.components(
+                        registry.PREDICTORS) if c.config_type is not None)):
+            predeclare(self, cls)
+        predeclare_component(self, registry.TRUST_MODELS, 'trust_model')
 
     def build(self) -> None:
         """``configure``: parameters, core (warmed in wall mode), publishers, subscriptions.
@@ -159,6 +167,7 @@ class PlannerNode(ManagedNode):
             # human odometry it cannot predict, so the stale-input policy applies
             self.required.append('human')
         self.missed: dict[str, int] = {}  # input -> deadline events since its last message
+        self.record = SolveRecord(self.trust_initial)   # for /diagnostics
         self.stale_reason = ''
         self.frame = ''
         self.set_frame(self.frames.base_frame_id)
@@ -184,8 +193,9 @@ class PlannerNode(ManagedNode):
             if topic:
                 subscribe(
                     self, msgtype, topic, lambda m, n=name: callback(n, m),
-                    topic_qos(TABLE_TOPIC[name], self.clock),
-                    event_callbacks=self.event_callbacks(name) if wall else None)
+                    topic_qos(TABLE_TOPIC[name], self.clock), readers=not wall,
+                    event_callbacks=input_events(self, name, self.missed, self.clock) if wall
+                    else None)
         self.loop = WallLoop(self, self.clock, self.wall_step) if wall else None
         if not self.tuning:   # once: the values it guards stay declared across cleanup
             enable_tuning(self, [Tunable(PlannerConfig, lambda: self.config, self.retune)], wall)
@@ -211,18 +221,7 @@ class PlannerNode(ManagedNode):
         Returns:
             The log's note: solves and the first and last solve times.
         """
-        nmpc, c = self.planner.nmpc, self.config
-        speed = 0.5 * (c.speed_min_mps + c.speed_max_mps)
-        gap = c.standstill_gap_m + c.time_headway_s * speed
-        state = self.trust_model.initial_state()
-        if isinstance(state, float):   # above T_min, or the NMPC falls back without a solve
-            state = max(state, c.trust_min + 1.0)
-        times = []
-        for _ in range(WARM_UP_SOLVES):
-            start = time.perf_counter()
-            nmpc.step(gap, speed, np.full(nmpc.steps, speed), np.zeros(nmpc.steps), state)
-            times.append(time.perf_counter() - start)
-        nmpc.reset()
+        times = self.planner.warm_up(WARM_UP_SOLVES, self.trust_model.initial_state())
         return (f'; solver warmed: {len(times)} solves, {1e3 * times[0]:.1f} ms then '
                 f'{1e3 * times[-1]:.1f} ms')
 
@@ -256,28 +255,11 @@ class PlannerNode(ManagedNode):
             self.planner.retune(config)
         self.config = config
 
-    def event_callbacks(self, name: str) -> SubscriptionEventCallbacks:
-        """QoS events of an input: a missed deadline marks it stale; an incompatible
-        publisher (e.g. one without a deadline) is logged with the policy."""
-        def on_deadline(info: object, n: str = name) -> None:
-            self.missed[n] = self.missed.get(n, 0) + 1
-            self.get_logger().warning(f'input {n}: QoS deadline missed (no message for '
-                                      f'{self.clock.input_timeout_s:g} s)',
-                                      throttle_duration_sec=1.0)
-
-        def on_incompatible(info: object, n: str = name) -> None:
-            policy = getattr(info, 'last_policy_kind', '?')
-            need = ('a deadline <= input_timeout_s (or set input_deadline_qos false)'
-                    if self.clock.input_deadline_qos else 'a compatible profile')
-            self.get_logger().error(f'input {n}: a publisher with incompatible QoS ({policy}) '
-                                    f'is not connected; vehicle inputs need {need}',
-                                    throttle_duration_sec=5.0)
-
-        return SubscriptionEventCallbacks(deadline=on_deadline, incompatible_qos=on_incompatible)
-
     def on_latest(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Wall mode: keep the latest message of each input with its receive time (also
-        while inactive: the first active tick has fresh inputs)."""
+        while inactive: the first active tick has fresh inputs; none once released)."""
+        if not self.configured:
+            return
         self.latest.put(name, time.monotonic_ns(), msg)
         self.missed.pop(name, None)
         if name == 'ego':
@@ -304,6 +286,10 @@ class PlannerNode(ManagedNode):
         deceleration while a required input is missing or stale. Only while active."""
         if not self.active:
             return
+        if not self.check_clock():   # no command: its stamp would be wrong; the status says why
+            return self.pub_status.publish(diagnostics(
+                time.time_ns(), 'trust_aware_nmpc', False, 'not_running',
+                {'reason': self.blocked, 'commanding': 'False'}, error=True))
         ns, mono = now_ns(self), time.monotonic_ns()
         t_s = mono / NS_PER_S
         why = self.problems(mono)
@@ -319,6 +305,7 @@ class PlannerNode(ManagedNode):
         if self.stale_reason:
             self.get_logger().info('inputs fresh again: planning resumed')
             self.stale_reason = ''
+            self.diagnostics.changed()
         items: dict[str, object] = {name: self.latest.get(name) for name in self.required}
         items.setdefault('preview', None)
         items['human'] = human
@@ -334,18 +321,30 @@ class PlannerNode(ManagedNode):
         accel = self.config.stale_decel_mps2
         plan, expected = self.planner.hold(accel, None if ego is None else vehicle(ego),
                                            None if human is None else vehicle(human), t_s)
+        self.record.stale()
         if why != self.stale_reason:
             self.get_logger().error(f'stale inputs ({why}): commanding {accel:g} m/s^2 until '
                                     'they are fresh')
             self.stale_reason = why
+            self.diagnostics.changed()
         self.publish(ns, plan, expected, accel, trust, status='stale_inputs', ok=False,
                      extra={'reason': why, 'fallback': 'True', 'success': 'False'},
                      error=True)
 
+    def health(self) -> Report:
+        """``/diagnostics`` (:meth:`ManagedNode.diagnose`): :meth:`SolveRecord.report
+        <trust_monitor.common.health.SolveRecord.report>`, with the input ages in wall mode."""
+        mono = time.monotonic_ns()
+        ages = {name: age(mono, self.latest.received(name)) for name in self.latest.names
+                if self.wall and (name != 'human' or self.has_human)}
+        return self.record.report(self.stale_reason, self.config.stale_decel_mps2, ages)
+
     def on_input(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Store an input; plan every step whose inputs are complete, in order (only while
         active: while inactive the lock-step chain waits, its inputs kept for
-        :meth:`resume`)."""
+        :meth:`resume`; none once released)."""
+        if not self.configured:
+            return
         self.buffer.put(name, msg_ns(msg.header.stamp), msg)
         if name == 'ego':
             self.set_frame(body_frame(msg.child_frame_id, self.frames))  # type: ignore[union-attr]
@@ -410,6 +409,7 @@ class PlannerNode(ManagedNode):
                                 else vehicle(items['human']),  # type: ignore[arg-type]
                                 state, t_s)
         result = out.result
+        self.record.solved(result.solve_time_s, result.fallback, result.status)
         self.publish(ns, result.plan_mps2, out.expected_mps2, float(result.plan_mps2[0]), trust,
                      status=result.status,
                      ok=result.success and not result.gap_bounds_relaxed,
@@ -429,15 +429,13 @@ class PlannerNode(ManagedNode):
         """The four outputs of a step, stamped ``ns`` (plans on the prediction grid, in the
         AV's frame), then the vehicles' markers."""
         step_s = self.planner.grid[0]
+        self.record.published(trust, accel_mps2)
         self.pub_plan.publish(self.plan_bytes.render(ns, step_s, plan.tolist()))
         self.pub_expected.publish(self.plan_bytes.render(ns, step_s, expected.tolist()))
         self.pub_accel.publish(self.command_bytes.render(ns, accel_mps2))
-        report = diagnostics(ns, 'trust_aware_nmpc', ok, status,
-                             {'status': status, **extra, 'trust': repr(trust),
-                              'command_mps2': repr(accel_mps2)})
-        if error:
-            report.status[0].level = DiagnosticStatus.ERROR
-        self.pub_status.publish(report)
+        self.pub_status.publish(diagnostics(ns, 'trust_aware_nmpc', ok, status,
+                                            {'status': status, **extra, 'trust': repr(trust),
+                                             'command_mps2': repr(accel_mps2)}, error=error))
         self.pub_markers.publish(self.markers.update(ns))
 
 

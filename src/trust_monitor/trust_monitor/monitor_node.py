@@ -30,9 +30,15 @@ from trust_monitor.common.lockstep import StepBuffer
 from trust_monitor.common.registry import TRUST_MODELS
 from trust_monitor.common.topics import NO_FRAME
 from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+from trust_monitor.ros import diagnostics as diag
 from trust_monitor.ros.lifecycle import ManagedNode
 from trust_monitor.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
-from trust_monitor.ros.parameters import declare_component_params, declare_config
+from trust_monitor.ros.parameters import (
+    declare_component_params,
+    declare_config,
+    predeclare,
+    predeclare_component,
+)
 from trust_monitor.ros.qos import topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
 from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
@@ -45,9 +51,16 @@ class MonitorNode(ManagedNode):
     (:mod:`trust_monitor.ros.lifecycle`): ``configure`` builds the estimator, trust is
     published only while active."""
 
+    task = 'trust'
+    idle = 'inactive: not publishing trust (waiting for activate)'
+
     def __init__(self) -> None:
         super().__init__('trust_monitor')
         self.lifecycle = declare_config(self, LifecycleConfig)
+        # declared now, read and checked at configure: `ros2 param` sees them unconfigured
+        for cls in (TrustConfig, MonitorConfig, WallClockConfig):
+            predeclare(self, cls)
+        predeclare_component(self, TRUST_MODELS, 'trust_model')
 
     def build(self) -> None:
         """``configure``: parameters, the trust estimator, the publisher, the subscriptions.
@@ -64,27 +77,30 @@ class MonitorNode(ManagedNode):
         self.buffer = StepBuffer(['plan', 'expected'])
         self.latest = LatestInputs(['plan', 'expected'])
         self.scored_ns: int | None = None
+        self.scored = 0
+        self.estimate: tuple[float, float, float] | None = None   # E, P, trust of the last
         self.pub = self.create_lifecycle_publisher(Vector3Stamped, 'trust_monitor/trust',
                                          topic_qos('trust_monitor/trust', self.clock))
         self.trust_bytes = vector3_bytes(NO_FRAME)
         callback = self.on_latest if self.clock.wall else self.on_input
-        subscribe(self, JointTrajectory, 'ego/plan', lambda m: callback('plan', m),
-                  topic_qos('ego/plan', self.clock))
-        subscribe(self, JointTrajectory, 'ego/expected_plan', lambda m: callback('expected', m),
-                  topic_qos('ego/expected_plan', self.clock))
+        for name, topic in (('plan', 'ego/plan'), ('expected', 'ego/expected_plan')):
+            subscribe(self, JointTrajectory, topic, lambda m, n=name: callback(n, m),
+                      topic_qos(topic, self.clock), readers=not self.wall)
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
         self.get_logger().info(f'ready ({self.clock.clock_mode})')
 
     def on_latest(self, name: str, msg: JointTrajectory) -> None:
         """Wall mode: keep the latest plan of each kind and score a new pair as soon as it
         is complete (on the tick alone, a tick that fell just before the planner's publish
-        found nothing new, and under load whole seconds went unscored)."""
+        found nothing new, and under load whole seconds went unscored). None once released."""
+        if not self.configured:
+            return
         self.latest.put(name, time.monotonic_ns(), msg)
         self.wall_step()
 
     def wall_step(self) -> None:
         """Wall mode: score the latest plan pair once, stamped now (only while active)."""
-        if not self.active:
+        if not self.active or not self.check_clock():
             return
         plan, expected = self.latest.get('plan'), self.latest.get('expected')
         if plan is None or expected is None:
@@ -104,9 +120,24 @@ class MonitorNode(ManagedNode):
         for name in ('estimator', 'buffer', 'latest'):
             self.__dict__.pop(name, None)
 
+    def health(self) -> tuple[int, str, dict[str, str]]:
+        """``/diagnostics`` (:meth:`ManagedNode.diagnose`): plan pairs scored since configure,
+        the last E, P and trust, the plans' ages (wall mode)."""
+        values = {'scored': str(self.scored)}
+        if self.estimate is not None:
+            values.update(zip(('explicability', 'performance', 'trust'),
+                              map(repr, self.estimate), strict=True))
+        if self.wall:
+            mono = time.monotonic_ns()
+            for name in self.latest.names:
+                values[f'input_age_{name}_s'] = diag.age(mono, self.latest.received(name))
+        return diag.OK, 'publishing trust', values
+
     def on_input(self, name: str, msg: JointTrajectory) -> None:
         """Store a plan; when both plans of a step are there, score them (only while
-        active: while inactive they wait for :meth:`resume`)."""
+        active: while inactive they wait for :meth:`resume`; none once released)."""
+        if not self.configured:
+            return
         ns = msg_ns(msg.header.stamp)
         self.buffer.put(name, ns, msg)
         if self.active and self.buffer.ready(ns):
@@ -134,6 +165,8 @@ class MonitorNode(ManagedNode):
                        np.array(trajectory_values(expected, 'accelerations')), step_s,
                        len(values))
         estimate = self.estimator.step(values, held.tolist(), dt_s)
+        self.scored += 1
+        self.estimate = (estimate.explicability, estimate.performance, estimate.trust)
         self.pub.publish(self.trust_bytes.render(ns, estimate.explicability,
                                                  estimate.performance, estimate.trust))
 

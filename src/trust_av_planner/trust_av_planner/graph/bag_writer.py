@@ -24,8 +24,10 @@ On top of it, :class:`BagWriter` adds what a recording that must survive any end
   writer cannot take back a step, the writer that finishes the bag is rebuilt from the
   complete steps in the file (:func:`~trust_av_planner.graph.mcap_steps.replay`).
 
-Messages are raw CDR as they came over DDS; log time = publish time = the header stamp
-(sim time in lock-step, wall time in wall mode).
+Messages are raw CDR as they came over DDS; in lock-step log time = publish time = the
+header stamp (sim time); in wall mode, as ``ros2 bag record`` writes them, log time = the
+time the recorder received the message and publish time = its header stamp (the
+publisher's), both wall time (``receive_time_ns`` of :meth:`BagWriter.write`).
 """
 
 from __future__ import annotations
@@ -254,14 +256,17 @@ class BagWriter:
         in the summary)."""
         self._mcap.register_schema(name, encoding, data)
 
-    def write(self, topic: str, data: bytes | memoryview, log_time_ns: int | None = None) -> int:
+    def write(self, topic: str, data: bytes | memoryview, log_time_ns: int | None = None, *,
+              receive_time_ns: int | None = None) -> int:
         """Append one raw CDR message to the current step; returns its log time (ns).
 
         Args:
             topic: a topic added with :meth:`add_topic`.
             data: the message, CDR with its 4-byte encapsulation header.
-            log_time_ns: its log time, ns (default: the stamp of its header, which the
-                graph's messages carry first).
+            log_time_ns: its log time and publish time, ns (default: the stamp of its
+                header, which the graph's messages carry first).
+            receive_time_ns: wall mode, as ``ros2 bag record``: the log time is this
+                receive time, the publish time the header's stamp (the publisher's).
 
         Raises:
             BagWriteError: the bag is finished (after :meth:`finish`, or once
@@ -269,10 +274,11 @@ class BagWriter:
         if self.finished:
             raise BagWriteError(f'{self.path}: written to after the bag was finished'
                                 + (f' ({self.disk_full})' if self.disk_full else ''))
-        stamp = (header_stamp_ns(data, self._offsets[topic]) if log_time_ns is None
-                 else log_time_ns)
+        published = (header_stamp_ns(data, self._offsets[topic]) if log_time_ns is None
+                     else log_time_ns)
+        stamp = published if receive_time_ns is None else receive_time_ns
         self._mcap.add_message(self._channels[topic], stamp,
-                               data if isinstance(data, bytes) else bytes(data), stamp)
+                               data if isinstance(data, bytes) else bytes(data), published)
         self._pending[topic] += 1
         self._step_bytes += len(data) + MESSAGE_RECORD_BYTES
         if stamp < self._step_first:

@@ -139,7 +139,8 @@ class RecorderNode(Node):
         if topic == self.step_topic and not self.end_step():
             self.stop_disk_full()
             return
-        self.bag.write(topic, data)
+        # wall mode, as ros2 bag record: log time = receive time (publish time = the stamp)
+        self.bag.write(topic, data, receive_time_ns=time.time_ns() if self.clock.wall else None)
         row = self.ack_rows.get(topic)
         if row is not None and self.pub_ack is not None:
             self.acknowledge(topic, row)

@@ -9,11 +9,10 @@ stamps = now) and the ego odometry, which is *simulated*: the latest ``/ego/acce
 integrated over the real elapsed time (:func:`trust_monitor.common.kinematics.integrate`), because
 the commute bags hold only the lead vehicle. There is no human follower: the planner runs
 with ``human_odom_topic: ''`` (its plan estimator observes only the AV's acceleration, so a
-shadow run requires one that does not declare the ``follower_state`` need, e.g. ca or cv). Every
-message on the recorded topics is written with log time = its header stamp = the wall time
-it was published (not sim time). The player publishes on the planner's configured input
-topics (``lead_odom_topic``, ``lead_preview_topic``, ``ego_odom_topic``), so a params file
-that remaps them is exercised end to end.
+shadow run requires one that does not declare the ``follower_state`` need, e.g. ca or cv).
+Recorded as ``ros2 bag record`` does: log time = receive time, publish time = header stamp.
+The player publishes on the planner's input topics (``lead_odom_topic``, ...), so a params
+file that remaps them is exercised end to end.
 
 :func:`run_wall_graph` (``trust-av shadow --whole-graph``) runs every node in wall mode
 instead: ``preceding_traffic`` replays the bag at real time after ``/sim/start``,
@@ -140,7 +139,8 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
             with BagWriter(bag) as recording:
                 def on_message(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     if not recording.finished:   # finished early only by a full disk
-                        recording.write(topic, data)
+                        recording.write(topic, data,
+                                        receive_time_ns=int(info['received_timestamp']))
                         ledger.received(topic, publisher[topic],
                                         int(info['publication_sequence_number']))
 
@@ -273,7 +273,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
                 def record(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     if recording.finished:       # finished early only by a full disk
                         return
-                    recording.write(topic, data)
+                    recording.write(topic, data, receive_time_ns=int(info['received_timestamp']))
                     sequence = int(info['publication_sequence_number'])
                     if topic == tf_topic:        # three publishers: told apart by frame
                         frames = [t.child_frame_id for t in

@@ -155,6 +155,21 @@ TOPICS: tuple[Topic, ...] = (
 )
 TOPIC = {t.name: t for t in TOPICS}
 
+DIAGNOSTICS_TOPIC = Topic(
+    '/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', NODES, (), 'DIAGNOSTICS',
+    "once a second from a steady timer (diagnostic_updater's default period), and at once "
+    'when a status changes; in every lifecycle state',
+    "one status per message, named `<node's full name>: <task>`; level OK/WARN/ERROR; "
+    'message: what it does or why not (`not running: ...`); values: lifecycle_state, '
+    "dropped_messages and the planner's solves, fallbacks, stale_input_ticks, "
+    'solve_time_last_s, solve_time_max_recent_s, trust, command_mps2, input_age_<input>_s '
+    "(wall mode), the monitor's scored, explicability, performance, trust", _STATUS_FRAMES,
+    per_step=0, wall_qos='DIAGNOSTICS')
+"""The system's health topic (trust_monitor.ros.diagnostics): absolute, every node
+publishes it, no node of the graph subscribes (tools do: rqt_robot_monitor,
+diagnostic_aggregator, Foxglove); timed by the wall clock, so not part of a lock-step step
+and not recorded (not in :data:`TOPICS`)."""
+
 
 _TOPIC_NAME = re.compile(r'(~|~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*', re.ASCII)
 
@@ -180,7 +195,8 @@ JOINT_NAME = 'longitudinal'
 
 LOCKSTEP_QOS_TEXT = {'STEP': 'reliable, transient local, keep last 1000',
                      'CLOCK': 'reliable, transient local, keep last 1000',
-                     'LATCHED': 'reliable, transient local, keep last 1'}
+                     'LATCHED': 'reliable, transient local, keep last 1',
+                 'DIAGNOSTICS': "reliable, volatile, keep last 1 (diagnostic_updater's)"}
 """The lock-step profiles (``qos`` column): nothing lost, late joiners served (determinism)."""
 
 WALL_QOS_TEXT = {
@@ -192,6 +208,7 @@ WALL_QOS_TEXT = {
                'newest or none, never a backlog or an old one to a late joiner)',
     'STATE': 'reliable, volatile, keep last 10',
     'LATCHED': 'reliable, transient local, keep last 1',
+    'DIAGNOSTICS': "reliable, volatile, keep last 1 (diagnostic_updater's)",
 }
 """The wall-mode profiles (``wall_qos`` column) and why (``trust_monitor.ros.qos.wall_qos``)."""
 
@@ -201,7 +218,7 @@ def topic_table_markdown() -> str:
     lines = ['| topic | type | publishers | subscribers | QoS (lock-step) | QoS (wall mode) | '
              'rate | units | frames |',
              '|---|---|---|---|---|---|---|---|---|']
-    for t in TOPICS:
+    for t in (*TOPICS, DIAGNOSTICS_TOPIC):
         wall = 'not published' if t.name == 'clock' else WALL_QOS_TEXT[t.wall_qos]
         lines.append(f'| `{t.name}` | `{t.msgtype}` | {", ".join(t.publishers)} | '
                      f'{", ".join(t.subscribers)} | {LOCKSTEP_QOS_TEXT[t.qos]} | {wall} | '

@@ -93,6 +93,11 @@ class LatestInputs:
         item = self._latest.get(name)
         return None if item is None else item[1]
 
+    def received(self, name: str) -> int | None:
+        """When the latest ``name`` was received (wall ns), None if never."""
+        item = self._latest.get(name)
+        return None if item is None else item[0]
+
     def problems(self, now_ns: int, timeout_s: float, names: list[str] | None = None) -> str:
         """Why the inputs cannot be used now: '' when every one is present and fresh.
 

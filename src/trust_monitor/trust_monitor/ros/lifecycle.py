@@ -55,6 +55,8 @@ from rclpy.lifecycle import (
 from trust_monitor.common.params import ParamsError
 from trust_monitor.common.registry import RegistryError
 from trust_monitor.errors import one_line
+from trust_monitor.ros import diagnostics as diag
+from trust_monitor.ros.diagnostics import NodeDiagnostics, Report
 from trust_monitor.ros.parameters import check_overrides
 from trust_monitor.ros.spin import WallLoop
 
@@ -73,12 +75,21 @@ class ManagedNode(LifecycleNode):
 
     Attributes:
         active: the node is in the ``active`` state (its steps run and publish).
+        configured: :meth:`build` succeeded and :meth:`release` has not run since: the
+            core exists. An input callback tests it first and drops the message if not: the
+            executor still delivers a message it took before ``cleanup`` or ``shutdown``
+            destroyed the subscription (seen under a lifecycle manager with inputs at
+            100 Hz: an ``AttributeError`` out of the callback ended the node).
         wall: ``clock_mode`` is ``wall`` (set by :meth:`build`).
         configure_error: why the last ``configure`` failed (None if it did not).
     """
 
     user_errors: tuple[type[BaseException], ...] = (ValueError,)
     """Exceptions of :meth:`build` that mean bad input (one line, not a traceback)."""
+    task = 'node'
+    """What its ``/diagnostics`` status is about (after the node's name)."""
+    idle = 'inactive: waiting for activate'
+    """Its ``/diagnostics`` message while inactive."""
 
     def __init__(self, name: str) -> None:
         super().__init__(name)
@@ -86,11 +97,16 @@ class ManagedNode(LifecycleNode):
         self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.active = False
+        self.configured = False
         self.wall = False
         self.loop: WallLoop | None = None
         self.configure_error: BaseException | None = None
         self.command_line: list[str] = []
         self._quiet = False   # start(): the caller reports a failed configure itself
+        self.blocked = ''     # why it cannot run as configured (clock_problem), '' if it can
+        self.dropped = 0      # malformed input messages dropped (trust_monitor.ros.raw_inputs)
+        # in every state, from construction (a regular publisher: kept across cleanup)
+        self.diagnostics = NodeDiagnostics(self, self.task, self.diagnose)
         self._base = (set(self.publishers), set(self.subscriptions), set(self.timers))
         service = self._service_change_state
         service.callback = self._refusing_invalid(service.callback)
@@ -127,6 +143,57 @@ class ManagedNode(LifecycleNode):
     def resume(self) -> None:
         """Called at the end of ``activate`` (default: nothing; lock-step: the steps whose
         inputs came while inactive)."""
+
+    def health(self) -> Report:
+        """The configured node's own (level, message, values) for ``/diagnostics``."""
+        return diag.OK, 'configured', {}
+
+    def diagnose(self) -> Report:
+        """The ``/diagnostics`` status (:mod:`trust_monitor.ros.diagnostics`): the lifecycle
+        state, why it does not run if it cannot (:meth:`clock_problem`, a failed
+        ``configure``), else :meth:`health` while active."""
+        state = str(self._state_machine.current_state[1])
+        values = {'lifecycle_state': state, 'dropped_messages': str(self.dropped)}
+        if not self.configured:
+            error = self.configure_error
+            if error is not None:
+                return diag.ERROR, f'not running: configure failed: {one_line(error)}', values
+            waiting = f'{state}: waiting for configure' if state == 'unconfigured' else state
+            return diag.OK, waiting, values
+        problem = self.clock_problem()
+        level, message, more = self.health()
+        values.update(more)
+        if problem:
+            return diag.ERROR, f'not running: {problem}', values
+        if not self.active:
+            return diag.OK, self.idle, values
+        return level, message, values
+
+    def clock_problem(self) -> str:
+        """Why the node's clock does not fit ``clock_mode`` ('' if it does): wall mode
+        stamps its outputs with the node's clock and times its inputs on the system's, so it
+        needs ``use_sim_time`` false."""
+        if not self.wall or not self.get_parameter('use_sim_time').value:
+            return ''
+        if self.get_clock().now().nanoseconds == 0:
+            return ('use_sim_time is true and no clock is published on /clock: clock_mode wall '
+                    'runs on the system clock (set use_sim_time false)')
+        return ('use_sim_time is true and a simulated clock is published on /clock: '
+                'clock_mode wall runs on the system clock (set use_sim_time false, or '
+                'clock_mode lockstep to follow a simulation)')
+
+    def check_clock(self) -> bool:
+        """Wall mode, each tick: whether the node can run; a change is logged once (an
+        error naming the problem, or that it is gone) and put on ``/diagnostics`` at once."""
+        problem = self.clock_problem()
+        if problem != self.blocked:
+            if problem:
+                self.get_logger().error(f'not running: {problem}')
+            else:
+                self.get_logger().info('clock fits clock_mode wall again: running')
+            self.blocked = problem
+            self.diagnostics.changed()
+        return not problem
 
     def start(self, args: list[str]) -> None:
         """The start-up transitions ``autostart`` asks for (see the module docstring).
@@ -176,6 +243,7 @@ class ManagedNode(LifecycleNode):
             return self._failed(err, ERROR, traceback.format_exc())
         if self.loop is not None:
             self.loop.timer.cancel()
+        self.configured = True
         return super().on_configure(state)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -185,6 +253,7 @@ class ManagedNode(LifecycleNode):
             self.loop.timer.reset()
         self.get_logger().info('active')
         self.resume()
+        self.diagnostics.changed()
         return result
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -217,6 +286,7 @@ class ManagedNode(LifecycleNode):
             self.loop.timer.cancel()
         result = super().on_deactivate(state)
         self.get_logger().info('inactive')
+        self.diagnostics.changed()
         return result
 
     def _failed(self, err: BaseException, code: Any, text: str) -> TransitionCallbackReturn:
@@ -228,6 +298,7 @@ class ManagedNode(LifecycleNode):
 
     def _release(self) -> None:
         """Destroy what ``configure`` made (timers, subscriptions, publishers) and the core."""
+        self.configured = False
         self.close()
         publishers, subscriptions, timers = self._base
         for timer in [t for t in self.timers if t not in timers]:
@@ -240,3 +311,4 @@ class ManagedNode(LifecycleNode):
             else:
                 self.destroy_publisher(pub)
         self.release()
+        self.diagnostics.changed()

@@ -301,11 +301,13 @@ def trajectory_times(msg: JointTrajectory) -> list[float]:
 
 
 def diagnostics(ns: int, name: str, level_ok: bool, message: str,
-                values: dict[str, str]) -> DiagnosticArray:
-    """One DiagnosticStatus with key/values (floats as repr: exact round trip); no frame
-    (``frame_id`` empty: nothing spatial)."""
-    status = DiagnosticStatus(level=DiagnosticStatus.OK if level_ok else DiagnosticStatus.WARN,
-                              name=name, message=message, hardware_id='sim')
+                values: dict[str, str], error: bool = False) -> DiagnosticArray:
+    """One DiagnosticStatus with key/values (floats as repr: exact round trip), level OK,
+    WARN if not ``level_ok``, ERROR if ``error``; no frame (``frame_id`` empty: nothing
+    spatial)."""
+    level = (DiagnosticStatus.ERROR if error else DiagnosticStatus.OK if level_ok
+             else DiagnosticStatus.WARN)
+    status = DiagnosticStatus(level=level, name=name, message=message, hardware_id='sim')
     status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
     return DiagnosticArray(header=header(ns, NO_FRAME), status=[status])
 

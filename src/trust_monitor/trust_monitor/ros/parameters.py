@@ -35,6 +35,7 @@ from collections.abc import Sequence
 from typing import Any, TypeVar
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -164,6 +165,51 @@ def declare_config(node: Node, cls: type[T], extra: dict[str, Any] | None = None
         node.declare_parameter(name, value, descriptor(field, hints[name]),
                                ignore_override=True)
     return config
+
+
+def predeclare(node: Node, cls: type) -> None:
+    """Declare the fields of ``cls`` on ``node`` before any validation, so ``ros2 param``
+    shows a managed node's parameters while it is still ``unconfigured``: each with the value
+    :func:`declare_config` would take (override, shipped file, default) and its descriptor.
+    A field whose value is missing, of the wrong type or outside its descriptor's range is
+    left undeclared here: ``configure`` refuses it with the one line :func:`declare_config`
+    gives, and the process goes on. :func:`declare_config` at ``configure`` reads the
+    declared values, so both see one value.
+    """
+    hints = typing.get_type_hints(cls)
+    overrides = node_overrides(node)
+    shipped, _ = _shipped(node.get_fully_qualified_name())
+    for field in dataclasses.fields(cls):  # type: ignore[arg-type]
+        name = field.name
+        if node.has_parameter(name):
+            continue
+        try:
+            if name in overrides:
+                value = check_type(name, overrides[name], hints[name])
+            elif name in shipped:
+                value = check_type(name, shipped[name], hints[name])
+            elif field.default is not dataclasses.MISSING:
+                value = field.default
+            else:
+                continue
+            node.declare_parameter(name, value, descriptor(field, hints[name]),
+                                   ignore_override=True)
+        except (ParamsError, InvalidParameterValueException, InvalidParameterTypeException):
+            continue   # refused at configure, with its one line
+
+
+def predeclare_component(node: Node, group: str, chooser: str) -> None:
+    """:func:`predeclare` the parameters of the component of ``group`` that the (declared)
+    parameter ``chooser`` names; nothing if it is not declared or names no registered
+    component (``configure`` says which)."""
+    if not node.has_parameter(chooser):
+        return
+    try:
+        component = registry.get(group, str(node.get_parameter(chooser).value))
+    except registry.RegistryError:
+        return
+    if component.config_type is not None:
+        predeclare(node, component.config_type)
 
 
 def ros_args_sources(args: Sequence[str]) -> tuple[list[str], list[str]]:

@@ -13,6 +13,8 @@ documentation's topic table (:func:`trust_monitor.common.topics.topic_table_mark
 from __future__ import annotations
 
 from rclpy.duration import Duration
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from trust_monitor.common.record_window import HISTORY_DEPTH as RECORD_HISTORY_DEPTH
@@ -138,3 +140,25 @@ def topic_qos(topic: str, clock: WallClockConfig, publisher: bool = False) -> Qo
     (``qos`` column) or the wall-mode one (``wall_qos`` column, :func:`wall_qos`)."""
     row = TOPIC[topic]
     return wall_qos(row.wall_qos, clock, publisher) if clock.wall else QOS[row.qos]
+
+
+def input_events(node: Node, name: str, missed: dict[str, int],
+                 clock: WallClockConfig) -> SubscriptionEventCallbacks:
+    """QoS events of a wall-mode input ``name``: a missed deadline is counted in
+    ``missed[name]`` (the node treats the input as stale until its next message) and
+    logged; an incompatible publisher (e.g. one without a deadline) is logged with the
+    policy."""
+    def on_deadline(info: object) -> None:
+        missed[name] = missed.get(name, 0) + 1
+        node.get_logger().warning(f'input {name}: QoS deadline missed (no message for '
+                                  f'{clock.input_timeout_s:g} s)', throttle_duration_sec=1.0)
+
+    def on_incompatible(info: object) -> None:
+        policy = getattr(info, 'last_policy_kind', '?')
+        need = ('a deadline <= input_timeout_s (or set input_deadline_qos false)'
+                if clock.input_deadline_qos else 'a compatible profile')
+        node.get_logger().error(f'input {name}: a publisher with incompatible QoS ({policy}) '
+                                f'is not connected; vehicle inputs need {need}',
+                                throttle_duration_sec=5.0)
+
+    return SubscriptionEventCallbacks(deadline=on_deadline, incompatible_qos=on_incompatible)

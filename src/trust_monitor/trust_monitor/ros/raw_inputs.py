@@ -6,7 +6,9 @@ and one or two numbers. For the types the graph's nodes take on every step, a su
 made with :func:`subscribe` takes the bytes (``raw=True``) and :data:`READERS` reads them
 into light objects with the same attribute paths as the message (``msg.header.stamp.sec``,
 ``msg.pose.pose.position.x``, ``msg.points[k].accelerations``), so node code is unchanged.
-Other types are taken as rclpy messages.
+Other types, and every input of a wall-mode (vehicle) node, are decoded by rclpy's own
+``deserialize_message`` (:func:`subscribe`); a message that does not decode either way is
+dropped, counted and logged, never raised into the executor.
 
 The bytes are CDR as ROS 2 serialises them (rmw_fastrtps: XCDR1 with a 4-byte
 encapsulation header, little- or big-endian by its second byte; primitives aligned to their
@@ -18,7 +20,7 @@ from any publisher -- the graph's own serialised templates, another DDS vendor, 
 vehicle -- reads to the same values as rclpy's own deserialisation (tests/test_raw_inputs.py
 compares both on random messages, and reads a hand-built big-endian one). Bytes in another
 encoding (XCDR2, parameter lists) are left to rclpy; a truncated or malformed message
-raises :class:`RawInputError` naming the type and topic.
+raises :class:`RawInputError` in a reader, and :func:`subscribe` drops it.
 """
 
 from __future__ import annotations
@@ -231,28 +233,52 @@ def type_name(msg_class: Any) -> str:
     return f'{module}/msg/{msg_class.__name__}'
 
 
-def subscribe(node: Node, msg_class: Any, topic: str, callback: Callable[[Any], None],
-              qos: QoSProfile | int, **options: Any) -> Any:
-    """``node.create_subscription``, taking the bytes and reading them with
-    :data:`READERS` when the type has a reader (the callback gets the light object), else
-    as rclpy messages; bytes in another encoding than plain CDR are read by rclpy.
-    ``options`` go to ``create_subscription`` (e.g. event callbacks).
+DECODE_ERRORS = (RawInputError, struct.error, UnicodeDecodeError, RuntimeError, ValueError,
+                 TypeError, OverflowError, MemoryError)
+"""What a message's decoding raises for bytes that are not a serialisation of its type: the
+readers' own errors, and rclpy's ``deserialize_message``: ``RMWError`` (a ``RuntimeError``),
+"failed to deserialize ROS message: Fast CDR exception ..." from ``rmw_deserialize``, seen for
+every kind of bytes tests/test_raw_inputs.py's fuzz test sends; the others for the
+conversions of decoded fields to Python."""
 
-    A message that does not read raises :class:`RawInputError` naming the type and topic
-    (into the executor, as a broken message would in rclpy's own deserialisation).
+
+def subscribe(node: Node, msg_class: Any, topic: str, callback: Callable[[Any], None],
+              qos: QoSProfile | int, *, readers: bool = True, **options: Any) -> Any:
+    """``node.create_subscription`` taking the bytes, decoded before ``callback`` sees them:
+    with :data:`READERS` when ``readers`` is true and the type has one (the callback gets
+    the light object; bytes in another encoding than plain CDR go to rclpy), else with
+    rclpy's own ``deserialize_message`` (the callback gets the rclpy message: what the
+    vehicle path uses, ``readers=False``). ``options`` go to ``create_subscription`` (e.g.
+    event callbacks).
+
+    A message that does not decode (:data:`DECODE_ERRORS`) is dropped, counted in the node's
+    ``dropped`` attribute (reported on ``/diagnostics``) and logged as a warning naming the
+    type, the topic and the error (at most one line a second); it never reaches
+    ``callback`` and never raises into the executor. An exception of ``callback`` itself is
+    not caught here.
     """
     name = type_name(msg_class)
-    reader = READERS.get(name)
-    if reader is None or os.environ.get(INPUTS_ENV) == 'rclpy':
-        return node.create_subscription(msg_class, topic, callback, qos, **options)
+    reader = READERS.get(name) if readers and os.environ.get(INPUTS_ENV) != 'rclpy' else None
 
     def on_bytes(data: bytes) -> None:
         try:
-            msg = reader(data)
-        except OtherEncodingError:
-            msg = deserialize_message(data, msg_class)
-        except (RawInputError, struct.error, UnicodeDecodeError) as err:
-            raise RawInputError(f'{name} on {topic}: {err}') from err
+            if reader is None:
+                msg = deserialize_message(data, msg_class)
+            else:
+                try:
+                    msg = reader(data)
+                except OtherEncodingError:
+                    msg = deserialize_message(data, msg_class)
+        except DECODE_ERRORS as err:
+            dropped(node, f'{name} on {topic}: {type(err).__name__}: {err}')
+            return
         callback(msg)
 
     return node.create_subscription(msg_class, topic, on_bytes, qos, raw=True, **options)
+
+
+def dropped(node: Node, what: str) -> None:
+    """Count and log one dropped malformed message (``node.dropped``, made 0 if absent)."""
+    node.dropped = getattr(node, 'dropped', 0) + 1  # type: ignore[attr-defined]
+    node.get_logger().warning(f'dropped a malformed message ({node.dropped} so far): '  # type: ignore[attr-defined]
+                              f'{what}', throttle_duration_sec=1.0)

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
@@ -26,6 +27,7 @@ from trust_monitor.common.params import ParamsError
 from trust_monitor.common.registry import RegistryError
 from trust_monitor.common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
 from trust_monitor.errors import one_line
+from trust_monitor.ros.diagnostics import OK, NodeDiagnostics
 from trust_monitor.ros.parameters import check_overrides
 
 
@@ -44,7 +46,10 @@ class WallLoop:
         for publisher in node.publishers:
             self._count(publisher)
         self._next_log_ns = time.monotonic_ns() + round(config.jitter_log_period_s * NS_PER_S)
-        self.timer = node.create_timer(1.0 / config.control_rate_hz, self._tick)
+        # the steady clock: wall mode never waits on a ROS clock (use_sim_time without
+        # /clock stopped this timer, and the node fell silent)
+        self.timer = node.create_timer(1.0 / config.control_rate_hz, self._tick,
+                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _count(self, publisher: Publisher) -> None:
         publish, topic = publisher.publish, publisher.topic_name
@@ -135,7 +140,8 @@ def start_node(factory: Callable[[], Node], args: list[str] | None = None) -> No
     ``-p`` (:func:`trust_monitor.ros.parameters.check_overrides`); needs ``rclpy.init``
     first. A managed node (:class:`trust_monitor.ros.lifecycle.ManagedNode`, which has a
     ``start`` method) runs the start-up transitions its ``autostart`` asks for instead; its
-    ``configure`` makes the check.
+    ``configure`` makes the check. A node without its own ``/diagnostics`` status gets one
+    saying it runs (:mod:`trust_monitor.ros.diagnostics`).
 
     Args:
         factory: builds the node.
@@ -156,6 +162,9 @@ def start_node(factory: Callable[[], Node], args: list[str] | None = None) -> No
         node.close()  # type: ignore[attr-defined]
         node.destroy_node()
         raise
+    if getattr(node, 'diagnostics', None) is None:   # a managed node has its own
+        node.diagnostics = NodeDiagnostics(  # type: ignore[attr-defined]
+            node, 'node', lambda: (OK, 'running', {}))
     return node
 
 
