@@ -50,7 +50,11 @@ def observe(av: VehicleState, human: VehicleState, av_accel_mps2: float, length_
             headway_cap_s: float) -> Observation:
     """What the human sees of the AV, eq. (6): gap, relative speed, headway, AV acceleration."""
     gap = gap_m(av, human, length_m)
-    headway = gap / human.speed_mps if human.speed_mps * headway_cap_s > gap else headway_cap_s
+    if gap <= 0.0:                  # touching or overlapping (a collision): no headway left
+        headway = 0.0
+    else:
+        headway = gap / human.speed_mps if human.speed_mps * headway_cap_s > gap \
+            else headway_cap_s
     return Observation(gap_m=gap, relative_speed_mps=av.speed_mps - human.speed_mps,
                        time_headway_s=headway, av_accel_mps2=av_accel_mps2)
 

@@ -1,0 +1,153 @@
+"""The fault cases left open by the fault rounds: each is one line and exit 2, or the
+documented behaviour (docs/operations/failures.md)."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import struct
+from pathlib import Path
+
+import pytest
+from synthetic_car_following import write_ngsim_chain
+
+from trust_av_planner.cli.main import main
+from trust_av_planner.planner import observe
+from trust_monitor.common.kinematics import VehicleState
+
+
+def trust_av(*argv: str) -> tuple[int, str]:
+    """``main(argv)`` in-process: its exit code (argparse's too) and stderr."""
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = main(list(argv))
+        except SystemExit as exit_:
+            code = int(exit_.code or 0)
+    return code, err.getvalue()
+
+
+def one_line(err: str) -> str:
+    """The single line a failed command printed (fails on a traceback or more lines)."""
+    lines = [line for line in err.splitlines() if line.strip() and ': ' in line
+             and not line.startswith('simulate ')]
+    assert 'Traceback' not in err, err
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+def _trace_bag(directory: Path) -> Path:
+    """A 30-sample Odometry bag written by trust-av (trace-to-bag)."""
+    trace = directory / 'lead.csv'
+    trace.write_text('time_s,speed_mps\n' + ''.join(f'{t},{10 + 0.1 * t}\n' for t in range(30)))
+    bag = directory / 'lead_bag'
+    assert trust_av('trace-to-bag', str(trace), str(bag))[0] == 0
+    return bag
+
+
+def _corrupt_chunk_index(bag: Path) -> None:
+    """Make the compression name of the MCAP's chunk index (summary section) one byte that
+    is not UTF-8 (its length 0 -> 1, the byte 0xff): rosbags raised UnicodeDecodeError."""
+    mcap = next(bag.glob('*.mcap'))
+    data = bytearray(mcap.read_bytes())
+    footer = len(data) - 8 - 29                     # Footer record before the closing magic
+    assert data[footer] == 0x02
+    record = struct.unpack_from('<Q', data, footer + 9)[0]        # summary_start
+    while data[record] != 0x08:                     # the ChunkIndex record
+        record += 9 + struct.unpack_from('<Q', data, record + 1)[0]
+    body = record + 9
+    offsets = struct.unpack_from('<I', data, body + 32)[0]         # message_index_offsets
+    compression = body + 32 + 4 + offsets + 8                      # after message_index_length
+    assert struct.unpack_from('<I', data, compression)[0] == 0     # '' (not compressed)
+    struct.pack_into('<I', data, compression, 1)
+    data[compression + 4] = 0xff
+    mcap.write_bytes(bytes(data))
+
+
+def _foreign_odometry(directory: Path) -> Path:
+    """An MCAP whose ``nav_msgs/msg/Odometry`` schema is another tool's (two floats)."""
+    from mcap.writer import Writer
+
+    path = directory / 'foreign.mcap'
+    with path.open('wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='another tool')
+        schema = writer.register_schema('nav_msgs/msg/Odometry', 'ros2msg',
+                                        b'float64 speed\nfloat64 time')
+        channel = writer.register_channel('/preceding_vehicle/odom', 'cdr', schema)
+        for i in range(10):
+            writer.add_message(channel, log_time=i * 10**9, publish_time=i * 10**9,
+                               data=b'\x00\x01\x00\x00' + struct.pack('<dd', 10.0, float(i)))
+        writer.finish()
+    return path
+
+
+class TestOneLine:
+    """Each case: exit 2 and one line naming the bad thing, never a traceback."""
+
+    def test_a_corrupt_chunk_index(self, tmp_path: Path) -> None:
+        bag = _trace_bag(tmp_path)
+        _corrupt_chunk_index(bag)
+        code, err = trust_av('simulate', '--trace', str(bag), '--max-steps', '3',
+                             '--no-progress')
+        assert code == 2, err
+        line = one_line(err)
+        assert str(bag) in line and 'cannot read bag (damaged: UnicodeDecodeError' in line
+
+    def test_a_foreign_odometry_schema(self, tmp_path: Path) -> None:
+        mcap = _foreign_odometry(tmp_path)
+        code, err = trust_av('simulate', '--trace', str(mcap), '--max-steps', '3',
+                             '--no-progress')
+        assert code == 2, err
+        line = one_line(err)
+        assert str(mcap) in line and 'defines it differently from ROS 2 Jazzy' in line
+
+    @pytest.mark.parametrize(('option', 'value', 'words'), [
+        ('--window-s', '0.5', '--window-s 0.5: a window needs at least 5 steps'),
+        ('--window-s', 'inf', '--window-s must be > 0 and finite'),
+        ('--vehicle-length-m', 'nan', '--vehicle-length-m must be in [0, 30] m, got nan'),
+        ('--vehicle-length-m', '-1', '--vehicle-length-m must be in [0, 30] m'),
+    ])
+    def test_eval_driver_odd_numbers(self, tmp_path: Path, option: str, value: str,
+                                     words: str) -> None:
+        write_ngsim_chain(tmp_path / 'a.csv', [1, 2, 3])
+        code, err = trust_av('eval-driver', '--data', str(tmp_path), option, value)
+        assert code == 2, err
+        assert words in one_line(err)
+
+    @pytest.mark.parametrize('kind', ['csv', 'bag'])
+    def test_a_stationary_lead_names_the_trace(self, tmp_path: Path, kind: str) -> None:
+        trace = tmp_path / 'parked.csv'
+        trace.write_text('time_s,speed_mps\n' + ''.join(f'{t},0\n' for t in range(6)))
+        if kind == 'bag':
+            bag = tmp_path / 'parked_bag'
+            assert trust_av('trace-to-bag', str(trace), str(bag))[0] == 0
+            trace = bag
+        code, err = trust_av('simulate', '--trace', str(trace), '--no-progress')
+        assert code == 2, err
+        line = one_line(err)
+        assert str(trace) in line and 'the lead never moves' in line
+        assert 'speed_max_from_trace' in line
+
+
+def test_a_stationary_lead_runs_without_the_speed_limit_from_it(tmp_path: Path) -> None:
+    """What the line offers works: the speed limit from the params file instead."""
+    trace = tmp_path / 'parked.csv'
+    trace.write_text('time_s,speed_mps\n' + ''.join(f'{t},0\n' for t in range(6)))
+    params = tmp_path / 'limit.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    speed_max_from_trace: false\n')
+    code, err = trust_av('simulate', '--trace', str(trace), '--params-file', str(params),
+                         '--no-progress')
+    assert code == 0, err
+
+
+def test_headway_after_the_follower_reached_the_car_in_front() -> None:
+    """``dt_s: 0.01`` on US06: the human, whose 3-step horizon is 0.03 s there, drove into the
+    AV and stopped with the gap below zero; the headway divided by its speed of 0
+    (ZeroDivisionError). A gap at or below zero leaves no headway."""
+    av, human = VehicleState(100.0, 0.0), VehicleState(120.0, 0.0)     # 24.5 m overlap
+    seen = observe(av, human, 0.0, 4.5, 5.0)
+    assert seen.time_headway_s == 0.0 and math.isfinite(seen.gap_m) and seen.gap_m < 0
+    moving = observe(VehicleState(100.0, 5.0), VehicleState(90.0, 5.0), 0.0, 4.5, 5.0)
+    assert moving.time_headway_s == pytest.approx(5.5 / 5.0)
