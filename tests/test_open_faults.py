@@ -6,15 +6,24 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import os
+import signal
 import struct
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from conftest import children_of, wait_for_steps
+from rosbag2_rules import check_bag_directory
 from synthetic_car_following import write_ngsim_chain
+from test_recording import interrupted_run
 
 from trust_av_planner.cli.main import main
+from trust_av_planner.graph.stalls import steps_done, waiting_for
 from trust_av_planner.planner import observe
 from trust_monitor.common.kinematics import VehicleState
+from trust_monitor.common.topics import TOPICS, qualified
 
 
 def trust_av(*argv: str) -> tuple[int, str]:
@@ -151,3 +160,63 @@ def test_headway_after_the_follower_reached_the_car_in_front() -> None:
     assert seen.time_headway_s == 0.0 and math.isfinite(seen.gap_m) and seen.gap_m < 0
     moving = observe(VehicleState(100.0, 5.0), VehicleState(90.0, 5.0), 0.0, 4.5, 5.0)
     assert moving.time_headway_s == pytest.approx(5.5 / 5.0)
+
+
+def _state(pid: int) -> str:
+    """The kernel's one-letter state of ``pid`` ('' once it is gone or a zombie)."""
+    try:
+        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except (OSError, IndexError):
+        return ''
+    return '' if state == 'Z' else state
+
+
+def _until(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    """Wait for ``condition`` (polled every 0.1 s), failing with ``what`` after the time."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.1)
+
+
+@pytest.mark.wall_clock
+def test_a_killed_orchestrator_leaves_no_node_even_a_stopped_one(tmp_path: Path) -> None:
+    """The planner stopped with SIGSTOP, then ``trust-av run`` killed with SIGKILL: the
+    stopped planner stayed (its parent-death SIGTERM waited for a SIGCONT that never came),
+    with another node. Now every node is gone and the recorder finished the bag."""
+    bag = tmp_path / 'orphan'
+    proc = interrupted_run(bag)
+    wait_for_steps(bag, 8, proc=proc)
+    nodes = children_of(proc.pid)
+    assert len(nodes) == 6
+    planner = next(pid for pid in nodes if b'trust_av_planner.planner_node'
+                   in Path(f'/proc/{pid}/cmdline').read_bytes())
+    os.kill(planner, signal.SIGSTOP)
+    _until(lambda: _state(planner) in ('T', 't'), 30, 'the planner did not stop')
+    proc.kill()
+    proc.communicate(timeout=60)
+    _until(lambda: not any(_state(pid) for pid in nodes), 60,
+           f'nodes left: {[pid for pid in nodes if _state(pid)]}')
+    assert (bag / 'metadata.yaml').exists()               # finished by the recorder itself
+    assert check_bag_directory(bag) == []
+
+
+def test_the_node_a_stalled_chain_waits_for() -> None:
+    """From the messages recorded per topic: the first node, in the order they act within a
+    step, that has done fewer steps than the step source."""
+    def counts(steps: dict[str, int]) -> dict[str, int]:
+        out = {}
+        for row in TOPICS:
+            if len(row.publishers) == 1 and row.per_step:
+                out[qualified(row.name)] = row.initial + row.per_step * steps[row.publishers[0]]
+        return out
+
+    everyone = {'preceding_traffic': 11, 'planner': 11, 'ego_plant': 11, 'human_driver': 11,
+                'trust_monitor': 11}
+    assert waiting_for(counts(everyone)) == ''
+    assert steps_done(counts(everyone)) == everyone
+    assert waiting_for(counts({**everyone, 'planner': 10, 'ego_plant': 10,
+                               'human_driver': 10, 'trust_monitor': 10})) == 'planner'
+    assert waiting_for(counts({**everyone, 'trust_monitor': 10})) == 'trust_monitor'
+    assert waiting_for(counts({**everyone, 'human_driver': 10, 'trust_monitor': 10}),
+                       ) == 'human_driver'

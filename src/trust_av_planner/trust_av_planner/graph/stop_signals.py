@@ -165,3 +165,13 @@ def stop_with_parent() -> None:
     process that started it dies, even by SIGKILL (Linux ``PR_SET_PDEATHSIG``)."""
     libc = ctypes.CDLL('libc.so.6', use_errno=True)
     libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def continue_with_parent() -> None:
+    """In a node process, before it runs (``preexec_fn``): SIGCONT when the process that
+    started it dies, even by SIGKILL (Linux ``PR_SET_PDEATHSIG``). A node checks its parent
+    between spins and stops cleanly once it is gone (``trust_monitor.ros.spin.spin_node``);
+    SIGTERM here would stay pending in a node stopped by SIGSTOP or a debugger, which then
+    outlived the run. Continued, it makes the check within a spin (0.1 s)."""
+    libc = ctypes.CDLL('libc.so.6', use_errno=True)
+    libc.prctl(1, signal.SIGCONT)  # PR_SET_PDEATHSIG
