@@ -14,7 +14,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from conftest import children_of, wait_for_steps
+from conftest import (
+    INTERRUPTED_RUN_STEPS,
+    assert_every_topic_complete,
+    children_of,
+    wait_for_steps,
+)
 from rosbag2_rules import check_bag_directory
 from synthetic_car_following import write_ngsim_chain
 from test_recording import interrupted_run
@@ -220,3 +225,51 @@ def test_the_node_a_stalled_chain_waits_for() -> None:
     assert waiting_for(counts({**everyone, 'trust_monitor': 10})) == 'trust_monitor'
     assert waiting_for(counts({**everyone, 'human_driver': 10, 'trust_monitor': 10}),
                        ) == 'human_driver'
+
+
+def _node(pids: list[int], module: bytes) -> int:
+    """The pid among ``pids`` running the node module ``module``."""
+    return next(pid for pid in pids if module in Path(f'/proc/{pid}/cmdline').read_bytes())
+
+
+@pytest.mark.wall_clock
+def test_a_recorder_killed_with_its_orchestrator_leaves_a_bag_repair_restores(
+        tmp_path: Path) -> None:
+    """SIGKILL to the recorder, with ``trust-av run`` killed too (nobody repairs it): the
+    bag directory holds the MCAP of every complete step without a summary, and
+    ``trust-av repair-bag`` restores it."""
+    bag = tmp_path / 'killed'
+    proc = interrupted_run(bag)
+    wait_for_steps(bag, 8, proc=proc)
+    nodes = children_of(proc.pid)
+    recorder = _node(nodes, b'trust_av_planner.graph.recorder_node')
+    proc.send_signal(signal.SIGSTOP)         # so that it cannot repair the bag in between
+    os.kill(recorder, signal.SIGKILL)
+    proc.kill()
+    proc.communicate(timeout=60)
+    _until(lambda: not any(_state(pid) for pid in nodes), 60,
+           f'nodes left: {[pid for pid in nodes if _state(pid)]}')
+    assert not (bag / 'metadata.yaml').exists() and (bag / f'{bag.name}.mcap').is_file()
+    code, err = trust_av('repair-bag', str(bag))
+    assert code == 0, err
+    assert check_bag_directory(bag) == []
+    assert 8 <= assert_every_topic_complete(bag) < INTERRUPTED_RUN_STEPS
+
+
+@pytest.mark.wall_clock
+def test_a_run_stopped_before_its_first_step_leaves_no_bag(tmp_path: Path) -> None:
+    """SIGINT while the graph starts (the recorder has created the bag, the planner is held
+    stopped so that no step can begin): no bag is left (it held no step), the node logs
+    are, and the line is the stop's."""
+    bag = tmp_path / 'early'
+    proc = interrupted_run(bag)
+    _until(lambda: len(children_of(proc.pid)) == 6, 120, 'the nodes did not start')
+    planner = _node(children_of(proc.pid), b'trust_av_planner.planner_node')
+    os.kill(planner, signal.SIGSTOP)
+    _until(lambda: (bag / f'{bag.name}.mcap').exists(), 120, 'the recorder made no bag')
+    proc.send_signal(signal.SIGINT)
+    _out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert err.count('\n') == 1 and 'interrupted; everything it started was stopped' in err
+    assert not bag.exists()
+    assert (tmp_path / 'early.logs' / 'recorder.log').is_file()

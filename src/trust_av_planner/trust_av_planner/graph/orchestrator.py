@@ -49,7 +49,9 @@ from trust_av_planner.graph.stalls import BUSY_SHARE, cpu_s, waiting_for
 from trust_av_planner.system.closed_loop import InitialState, equilibrium_start
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
+from trust_monitor.common.output_files import stop_signals_held
 from trust_monitor.common.record_window import window_steps
+from trust_monitor.common.topics import qualified
 
 
 def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: InitialState,
@@ -182,12 +184,15 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                 raise GraphError(f'{err}; the bag lacks {lost} messages') from err
             if isinstance(err, StallError):
                 raise GraphError(f'{err}{_waited_for(bag, namespace)}') from err
+            if _drop_if_no_step(bag, namespace):
+                raise GraphError(f'{err}; no step was recorded, so no bag was kept') from err
             low_disk = '' if isinstance(err, DiskFullError) else _low_disk(bag)
             if low_disk:
                 raise GraphError(f'{err}{low_disk}') from err
             raise
         except BaseException:
             _finish_recording(graph, bag)   # a stop: finish the bag, then go on stopping
+            _drop_if_no_step(bag, namespace)
             raise
         _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
@@ -227,6 +232,27 @@ class IncompleteRecordingError(GraphError):
 class StallError(GraphError):
     """No step recorded for the stall timeout, and no node stopped or busy: the finished
     bag tells which node the chain waits for (:func:`_waited_for`)."""
+
+
+def _drop_if_no_step(bag: Path, namespace: str) -> bool:
+    """Remove the finished bag of a run that ended before its first step (its ``clock``
+    topic holds no message: only the initial states, if anything); True if removed. A run
+    stopped or failed during start-up leaves no bag rather than an empty one; its node logs
+    stay. A bag that does not read, or not finished, is left as it is."""
+    from rosbags.rosbag2 import Reader, ReaderError
+
+    if not (bag / 'metadata.yaml').is_file() or bag.is_symlink():
+        return False
+    try:
+        with Reader(bag) as reader:
+            counts = {c.topic: c.msgcount for c in reader.connections}
+    except (ReaderError, OSError):
+        return False
+    if counts.get(qualified('clock', namespace), 0):
+        return False
+    with stop_signals_held():
+        shutil.rmtree(bag)
+    return True
 
 
 def _waited_for(bag: Path, namespace: str) -> str:
