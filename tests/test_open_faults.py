@@ -273,3 +273,112 @@ def test_a_run_stopped_before_its_first_step_leaves_no_bag(tmp_path: Path) -> No
     assert err.count('\n') == 1 and 'interrupted; everything it started was stopped' in err
     assert not bag.exists()
     assert (tmp_path / 'early.logs' / 'recorder.log').is_file()
+
+
+# --- every stop signal is honoured by every long in-process command -------------------------
+
+def test_a_swallowed_stop_is_raised_again_where_the_command_works(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A stop raised into code that swallowed it (native code turning it into its own
+    error): the command went on, and every further signal only escalated a stop that was
+    not under way (fit-driver needed a third). The next progress update raises it again,
+    and so does a command that returns success after it."""
+    import trust_av_planner.cli.simulate
+    from trust_av_planner.cli.options import Progress
+    from trust_av_planner.graph import stop_signals
+
+    with stop_signals.installed():
+        with contextlib.suppress(stop_signals.Stopped):      # swallowed
+            stop_signals.handle(signal.SIGTERM, None)
+        stop_signals.handle(signal.SIGTERM, None)           # the second: no exception here
+        with pytest.raises(stop_signals.Stopped) as again:
+            Progress('work', 10, shown=False).update(1)
+        assert again.value.signum == signal.SIGTERM
+
+    def swallowing(_args: object) -> int:
+        with contextlib.suppress(stop_signals.Stopped):
+            stop_signals.handle(signal.SIGTERM, None)
+        return 0
+
+    monkeypatch.setattr(trust_av_planner.cli.simulate, 'run', swallowing)
+    code, err = trust_av('simulate')
+    assert code == 143 and 'stopped by SIGTERM' in err
+
+
+def _write_fit_data(directory: Path) -> list[str]:
+    from synthetic_car_following import write_openacc
+
+    directory.mkdir()
+    write_openacc(directory / 'JRC-VC_280219_part2.csv', duration_s=70.0)
+    write_openacc(directory / 'JRC-VC_280219_part3.csv', duration_s=70.0)
+    return ['fit-driver', '--data', str(directory), '--out', str(directory / 'fit.yaml'),
+            '--iterations', '1000', '--no-progress']
+
+
+def _write_eval_data(directory: Path) -> list[str]:
+    from synthetic_car_following import write_openacc
+
+    directory.mkdir()
+    write_openacc(directory / 'trip_part1.csv', duration_s=1500.0, cars=5)
+    params = directory / 'fine.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    dt_s: 0.1\n')
+    return ['eval-driver', '--data', str(directory), '--params-file', str(params)]
+
+
+def _write_long_trace(directory: Path) -> list[str]:
+    directory.mkdir()
+    trace = directory / 'long.csv'          # 20000 steps: about 10 CPU-s in process
+    trace.write_text('time_s,speed_mps\n' + ''.join(
+        f'{t},{10.0 + 5.0 * math.sin(t / 30.0):.3f}\n' for t in range(20001)))
+    return ['simulate', '--trace', str(trace), '--no-progress',
+            '--out', str(directory / 'out.csv')]
+
+
+STOP_GRACE_S = 10.0
+"""An in-process command ends this soon after a stop signal (docs/operations/failures.md)."""
+
+
+def _handles_sigterm(pid: int) -> bool:
+    """Whether ``pid`` has a handler for SIGTERM (``SigCgt`` in ``/proc/PID/status``): the
+    command has installed its stop handlers and started its work."""
+    try:
+        status = Path(f'/proc/{pid}/status').read_text()
+    except OSError:
+        return False
+    caught = next(line.split()[1] for line in status.splitlines() if line.startswith('SigCgt'))
+    return bool(int(caught, 16) >> (signal.SIGTERM - 1) & 1)
+
+
+@pytest.mark.wall_clock
+class TestStopSignalsEndLongCommands:
+    """SIGTERM, and a second one, to a long in-process command once it works: exit 143 and
+    one line within :data:`STOP_GRACE_S`, nothing written."""
+
+    @pytest.mark.parametrize('make', [_write_fit_data, _write_eval_data, _write_long_trace],
+                             ids=['fit-driver', 'eval-driver', 'simulate'])
+    def test_sigterm_and_another(self, tmp_path: Path, make: Callable[[Path], list[str]]
+                                 ) -> None:
+        import subprocess
+        import sys
+
+        from trust_av_planner.graph.stalls import cpu_s
+
+        argv = make(tmp_path / 'data')
+        proc = subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', *argv],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        _until(lambda: _handles_sigterm(proc.pid) or proc.poll() is not None, 120,
+               'no stop handler')
+        started = cpu_s(proc.pid)
+        _until(lambda: cpu_s(proc.pid) > started + 1.0 or proc.poll() is not None, 120,
+               'no work')
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGTERM)
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(signal.SIGTERM)
+        _out, err = proc.communicate(timeout=STOP_GRACE_S)
+        assert proc.returncode == 143, err
+        assert err.strip().splitlines() == [
+            f'trust-av {argv[0]}: stopped by SIGTERM; everything it started was stopped and '
+            'its recordings finished']
+        assert not (tmp_path / 'data' / 'fit.yaml').exists()
+        assert not (tmp_path / 'data' / 'out.csv').exists()
