@@ -382,3 +382,34 @@ class TestStopSignalsEndLongCommands:
             'its recordings finished']
         assert not (tmp_path / 'data' / 'fit.yaml').exists()
         assert not (tmp_path / 'data' / 'out.csv').exists()
+
+
+@pytest.mark.wall_clock
+def test_sigterm_and_another_end_shadow_with_a_finished_bag(tmp_path: Path) -> None:
+    """``trust-av shadow`` (wall-clock nodes, its own recording): SIGTERM and a second one
+    once it records end it with one line, 143, no node left and the bag finished."""
+    import subprocess
+    import sys
+
+    lead = tmp_path / 'lead.csv'
+    lead.write_text('time_s,speed_mps\n' + ''.join(f'{t},{10 + 0.1 * t}\n' for t in range(120)))
+    source = tmp_path / 'lead_bag'
+    assert trust_av('trace-to-bag', str(lead), str(source))[0] == 0
+    out = tmp_path / 'shadow'
+    proc = subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
+                             str(source), '--out', str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _until(lambda: (out / f'{out.name}.mcap').exists() or proc.poll() is not None, 120,
+           'no recording')
+    nodes = children_of(proc.pid)
+    assert proc.poll() is None and nodes, proc.communicate()
+    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(signal.SIGTERM)
+    _out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines() == [
+        'trust-av shadow: stopped by SIGTERM; everything it started was stopped and its '
+        'recordings finished']
+    assert not any(_state(pid) for pid in nodes)
+    assert (out / 'metadata.yaml').exists()
+    assert check_bag_directory(out) == []
