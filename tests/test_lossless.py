@@ -294,42 +294,42 @@ def test_a_run_suspended_for_longer_than_the_stall_timeout_succeeds(tmp_path: Pa
 
 
 @pytest.mark.wall_clock
-def test_a_recorder_suspended_for_longer_than_the_stall_timeout_is_waited_for(
-        tmp_path: Path) -> None:
-    """A node stopped by a signal is not a stalled graph: the run waits for it. In process,
-    with a 4 s stall timeout and the recorder stopped for 8 s (shorter than Fast DDS's
-    participant lease, 20 s: a participant suspended longer is dropped by its peers, see
-    docs/operations/recording.md)."""
-    import threading
-
+@pytest.mark.parametrize('node', ['planner', 'recorder'])
+def test_a_node_stopped_for_longer_than_the_stall_timeout_ends_the_run(
+        tmp_path: Path, node: str) -> None:
+    """A node stopped by a signal makes no progress: the run ends within the stall timeout
+    with one line naming it, and the bag is finished (the stop continues the node so it
+    takes its stop signal). In process, with a 4 s stall timeout; the node is stopped at
+    step 50 and never continued by the test."""
     from preceding_traffic.sources import load_trace
     from preceding_traffic.traces import truncate
     from trust_av_planner.graph.orchestrator import run_graph
+    from trust_av_planner.graph.processes import GraphError
     from trust_av_planner.system.config import load_run_config
 
     config = load_run_config()
     trace_path = long_trace(tmp_path)
     trace = truncate(load_trace(str(trace_path), config.planner.dt_s, config.trace), STEPS)
-    bag = tmp_path / 'waited'
+    bag = tmp_path / 'stopped'
     stopped: list[int] = []
-    timers: list[threading.Timer] = []
+    module = {'planner': b'trust_av_planner.planner_node',
+              'recorder': b'trust_av_planner.graph.recorder_node'}[node]
 
     def on_step(done: int, _total: int) -> None:
         if done >= 50 and not stopped:
-            pid = recorder_pid(os.getpid())
+            pid = next(pid for pid in children_of(os.getpid())
+                       if module in Path(f'/proc/{pid}/cmdline').read_bytes())
             os.kill(pid, signal.SIGSTOP)
-            stopped.append(done)
-            timers.append(threading.Timer(8.0, os.kill, (pid, signal.SIGCONT)))
-            timers[0].start()
+            stopped.append(pid)
 
-    try:
+    with pytest.raises(GraphError, match=rf'no progress after \d+ steps in 4 s: node {node} is '
+                                         r'stopped \(state T'):
         run_graph(config, str(trace_path), trace, bag, max_steps=STEPS, step_timeout_s=4.0,
                   on_step=on_step)
-    finally:
-        for timer in timers:
-            timer.join()
-    assert stopped
-    assert_lossless(bag)
+    assert stopped and not children_of(os.getpid())           # the stopped node too
+    assert (bag / 'metadata.yaml').exists()
+    assert check_bag_directory(bag) == []
+    assert 50 <= len(records_from_bag(bag)) < STEPS
 
 
 # --- a stop is complete whatever signals arrive --------------------------------------------------

@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import os
 import shutil
+import struct
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
-from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.rosbag2 import ReaderError, StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
 from preceding_traffic.traces import (
@@ -44,6 +45,12 @@ SPEED_TYPES = (ODOMETRY, TWIST_STAMPED)
 """Message types a speed can be read from."""
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+
+DAMAGED = (ReaderError, UnicodeDecodeError, struct.error, KeyError, IndexError, OverflowError,
+           ValueError, OSError, MemoryError)
+"""What rosbags' readers raise on a damaged file (a corrupt chunk index, record length,
+string or schema encoding) besides their own errors: read as "cannot read the bag". A damaged
+record length can make them ask for GiBs (``MemoryError``) before any byte is read."""
 
 
 class BagError(TraceError):
@@ -101,6 +108,7 @@ def read_bag_samples(path: Path, topic: str, msgtype: str,
             wrong = [c.msgtype for c in connections if c.msgtype != msgtype]
             if wrong:
                 raise BagError(f'{path}: topic {topic} has type {wrong[0]}, expected {msgtype}')
+            _check_definition(path, topic, msgtype, reader.typestore)
             stamps: list[int] = []
             log_times: list[int] = []
             for connection, log_time, raw in reader.messages(connections=connections):
@@ -108,14 +116,34 @@ def read_bag_samples(path: Path, topic: str, msgtype: str,
                 stamps.append(_stamp_ns(msg))
                 log_times.append(log_time)
                 speeds.append(_speed(msg, connection.msgtype))
+    except BagError:
+        raise
     except (AnyReaderError, WriterError) as err:
         raise BagError(f'{path}: cannot read bag ({err})') from err
+    except DAMAGED as err:
+        raise BagError(f'{path}: cannot read bag (damaged: {type(err).__name__}: '
+                       f'{str(err)[:200]})') from err
     if not speeds:
         raise BagError(f'{path}: topic {topic} has no messages')
     # Header stamps are the time base when the messages carry them (a simulation's stamps
     # start at 0); only a topic whose stamps are all zero is timed by its log times.
     times = [ns * 1e-9 for ns in (stamps if any(stamps) else log_times)]
     return _validated(path, topic, times, speeds, config)
+
+
+def _check_definition(path: Path, topic: str, msgtype: str, bag_types: object) -> None:
+    """The bag's definition of ``msgtype`` (its schema) must be ROS 2 Jazzy's: another
+    tool's message under the same name has other fields, and reading a speed from it
+    would be a guess."""
+    ours = TYPESTORE.generate_msgdef(msgtype)[1]
+    try:
+        theirs = bag_types.generate_msgdef(msgtype)[1]  # type: ignore[attr-defined]
+    except Exception as err:
+        theirs = f'unreadable ({type(err).__name__})'
+    if theirs != ours:
+        raise BagError(f'{path}: topic {topic} is named {msgtype}, but the bag defines it '
+                       "differently from ROS 2 Jazzy (another tool's message); no speed can be "
+                       'read from it')
 
 
 def _validated(path: Path, topic: str, times: list[float], speeds: list[float],
@@ -141,7 +169,7 @@ def load_bag_trace(path: str | Path, topic: str, msgtype: str, dt_s: float,
     except TraceError as err:
         raise BagError(str(err)) from err
     return SpeedTrace(name=path.stem, dt_s=dt_s, speeds_mps=grid,
-                      t0_s=float(times[0]))
+                      t0_s=float(times[0]), source=str(path))
 
 
 def odometry_messages(times_s: np.ndarray, speeds_mps: np.ndarray,

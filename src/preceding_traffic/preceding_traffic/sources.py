@@ -43,4 +43,4 @@ def load_trace(name_or_path: str, dt_s: float, config: TraceConfig) -> SpeedTrac
     shipped = name_or_path.lower() in SHIPPED_TRACES + TRAINING_TRACES
     name = name_or_path.lower() if shipped else path.stem
     return SpeedTrace(name=name, dt_s=dt_s, speeds_mps=resample(times, speeds, dt_s, str(path)),
-                      t0_s=float(times[0]))
+                      t0_s=float(times[0]), source=str(path))

@@ -87,6 +87,7 @@ class SpeedTrace:
         t0_s: time of the first sample, s.
         step_limit: run only this many steps (0: all); the preview past it is the
             recorded future, as in the whole run.
+        source: the file it was read from ('' if none), for messages.
     """
 
     name: str
@@ -94,6 +95,7 @@ class SpeedTrace:
     speeds_mps: np.ndarray
     t0_s: float = 0.0
     step_limit: int = 0
+    source: str = ''
 
     @property
     def steps(self) -> int:

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from human_driver_sim.car_following import CarFollowingDataError, LoadReport
 from human_driver_sim.datasets import FORMATS, load_directory
 from human_driver_sim.evaluation import (
+    MIN_WINDOW_STEPS,
     PROTOCOLS,
     WINDOW_S,
     ConstantSpeed,
@@ -35,6 +37,8 @@ CAUTIOUS = 'driver MPC, cautious (human_cautious.yaml)'
 BOUNDED_IDM = 'IDM, bounded fit'
 TEXTBOOK_IDM = 'IDM, textbook motorway'
 CONSTANT_SPEED = 'constant speed'
+MAX_VEHICLE_LENGTH_M = 30.0
+"""``--vehicle-length-m`` at most: longer than any road vehicle a chain could hold."""
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -85,15 +89,23 @@ def models(params_file: Path, driver_fit: Path) -> dict[str, Follower]:
 
 def run(args: argparse.Namespace) -> int:
     """Load, clean, score, print (and write JSON)."""
-    if not args.window_s > 0.0:
-        raise TrustAvPlannerError(f'--window-s must be > 0, got {args.window_s}')
+    if not (args.window_s > 0.0 and math.isfinite(args.window_s)):
+        raise TrustAvPlannerError(f'--window-s must be > 0 and finite, got {args.window_s}')
+    if not (math.isfinite(args.vehicle_length_m)
+            and 0.0 <= args.vehicle_length_m <= MAX_VEHICLE_LENGTH_M):
+        raise TrustAvPlannerError(f'--vehicle-length-m must be in [0, {MAX_VEHICLE_LENGTH_M:g}] '
+                                  f'm, got {args.vehicle_length_m}')
     if args.json is not None:
         output_file(args.json, '--json')
     scored = models(args.params_file, args.driver_fit)
+    dt_s = load_run_config(args.params_file).driver.dt_s
+    if args.window_s < MIN_WINDOW_STEPS * dt_s:
+        raise TrustAvPlannerError(f'--window-s {args.window_s:g}: a window needs at least '
+                                  f'{MIN_WINDOW_STEPS} steps of dt_s = {dt_s:g} s '
+                                  f'({MIN_WINDOW_STEPS * dt_s:g} s)')
     report = LoadReport()
     try:
-        pairs = load_directory(args.data, args.format, report=report,
-                               dt_s=load_run_config(args.params_file).driver.dt_s,
+        pairs = load_directory(args.data, args.format, report=report, dt_s=dt_s,
                                vehicle_length_m=args.vehicle_length_m)
     except CarFollowingDataError as err:
         raise TrustAvPlannerError(str(err)) from err

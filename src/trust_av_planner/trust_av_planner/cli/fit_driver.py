@@ -35,6 +35,7 @@ from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from human_driver_sim.splits import Split, split_ngsim, split_openacc
 from trust_av_planner.cli.options import MAX_ITERATIONS, Progress, bounded_int, output_file
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph import stop_signals
 from trust_av_planner.system.config import (
     DEFAULT_PARAMS_FILE,
     HUMAN_CAUTIOUS_PARAMS_FILE,
@@ -297,6 +298,7 @@ def run(args: argparse.Namespace) -> int:
         'idm_textbook': {k: float(getattr(TEXTBOOK_MOTORWAY, k)) for k in PARAM_NAMES},
         'target': targets}
     eval_path = args.out.with_name(args.out.stem + '_eval.json')
+    stop_signals.deliver_pending(working=True)    # a stop is never followed by a write
     with replacing(args.out, eval_path) as (fit_file, eval_file):  # both or neither
         fit_file.write_text(yaml.safe_dump(document, sort_keys=False))
         eval_file.write_text(json.dumps(compact({

@@ -69,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     with stop_signals.installed():
         try:
             code = int(args.func(args))
-            stop_signals.deliver_pending()  # one that arrived where it could not be raised
+            # one that was not raised, or (a success after a stop) one that was swallowed
+            stop_signals.deliver_pending(working=code == 0)
             return code
         except (TrustMonitorError, PrecedingTrafficError, HumanDriverSimError,
                 TrustAvPlannerError) as err:

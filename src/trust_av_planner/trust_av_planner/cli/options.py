@@ -273,7 +273,7 @@ class Progress:
 
     def update(self, done: int, total: int | None = None) -> None:
         """Report ``done`` of ``total`` items."""
-        stop_signals.deliver_pending()
+        stop_signals.deliver_pending(working=True)
         self.done = done
         if total is not None and total != self.total:
             self.total = max(total, 1)

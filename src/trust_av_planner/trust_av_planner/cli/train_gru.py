@@ -25,6 +25,7 @@ from trust_av_planner.cli.options import (
     positive_int,
 )
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph import stop_signals
 from trust_av_planner.predictors.gru import MODELS_DIR
 from trust_av_planner.study.gru_training import TrainingSettings, save_model, train_with_dagger
 from trust_av_planner.study.pinned_numerics import (
@@ -113,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
                                             jobs=args.jobs or default_jobs())
     if bar is not None:
         bar.close()
+    stop_signals.deliver_pending(working=True)    # a stop is never followed by a write
     save_model(weights, report, settings, args.out)
     print(f"samples: {report['samples_train']} train, {report['samples_validation']} "
           'validation (last 20 % of every trace)')

@@ -45,10 +45,13 @@ from trust_av_planner.graph.session import (
     foreign_participants,
     graph_session,
 )
+from trust_av_planner.graph.stalls import BUSY_SHARE, cpu_s, waiting_for
 from trust_av_planner.system.closed_loop import InitialState, equilibrium_start
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
+from trust_monitor.common.output_files import stop_signals_held
 from trust_monitor.common.record_window import window_steps
+from trust_monitor.common.topics import qualified
 
 
 def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: InitialState,
@@ -179,12 +182,17 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                 raise GraphError(f'{err}; {finishing}{_low_disk(bag)}') from err
             if lost:
                 raise GraphError(f'{err}; the bag lacks {lost} messages') from err
+            if isinstance(err, StallError):
+                raise GraphError(f'{err}{_waited_for(bag, namespace)}') from err
+            if _drop_if_no_step(bag, namespace):
+                raise GraphError(f'{err}; no step was recorded, so no bag was kept') from err
             low_disk = '' if isinstance(err, DiskFullError) else _low_disk(bag)
             if low_disk:
                 raise GraphError(f'{err}{low_disk}') from err
             raise
         except BaseException:
             _finish_recording(graph, bag)   # a stop: finish the bag, then go on stopping
+            _drop_if_no_step(bag, namespace)
             raise
         _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
@@ -217,13 +225,49 @@ process itself was suspended (Ctrl-Z then ``fg``, SIGSTOP) or not scheduled at a
 time was not the graph's and does not count towards a stall."""
 
 
-SUSPENSION_PROBE_S = 0.5
-"""How often the follow loop reads the nodes' states (``/proc``) for a suspended one: not
-every turn, which comes with every step where a benchmark follows the clock."""
-
-
 class IncompleteRecordingError(GraphError):
     """The graph finished every step but the recorder did not receive every message."""
+
+
+class StallError(GraphError):
+    """No step recorded for the stall timeout, and no node stopped or busy: the finished
+    bag tells which node the chain waits for (:func:`_waited_for`)."""
+
+
+def _drop_if_no_step(bag: Path, namespace: str) -> bool:
+    """Remove the finished bag of a run that ended before its first step (its ``clock``
+    topic holds no message: only the initial states, if anything); True if removed. A run
+    stopped or failed during start-up leaves no bag rather than an empty one; its node logs
+    stay. A bag that does not read, or not finished, is left as it is."""
+    from rosbags.rosbag2 import Reader, ReaderError
+
+    if not (bag / 'metadata.yaml').is_file() or bag.is_symlink():
+        return False
+    try:
+        with Reader(bag) as reader:
+            counts = {c.topic: c.msgcount for c in reader.connections}
+    except (ReaderError, OSError):
+        return False
+    if counts.get(qualified('clock', namespace), 0):
+        return False
+    with stop_signals_held():
+        shutil.rmtree(bag)
+    return True
+
+
+def _waited_for(bag: Path, namespace: str) -> str:
+    """``'; the chain waits for node NAME ...'`` from the finished bag's counts ('' if they
+    do not tell or the bag does not read)."""
+    from rosbags.rosbag2 import Reader, ReaderError
+
+    try:
+        with Reader(bag) as reader:
+            counts = {c.topic: c.msgcount for c in reader.connections}
+    except (ReaderError, OSError):
+        return ''
+    node = waiting_for(counts, namespace)
+    return (f'; the chain waits for node {node} (it has every input of its next step and '
+            'published nothing for it)' if node else '')
 
 
 def _follow(session: Any, steps: int, step_timeout_s: float,
@@ -231,15 +275,16 @@ def _follow(session: Any, steps: int, step_timeout_s: float,
     """Until the recorder has every step and exits: health, privacy, progress, stalls.
 
     A stall is ``step_timeout_s`` without a step recorded, not counting the time this
-    process was suspended itself (a loop turn longer than :data:`OWN_PAUSE_S`) nor the time
-    a node of the graph was (stopped by a signal: it goes on when it is continued; the
-    step authority waits for a suspended or slow recorder, see
-    :mod:`trust_monitor.common.record_window`).
+    process was suspended itself (a loop turn longer than :data:`OWN_PAUSE_S`: the nodes
+    went on without it). Time a node of the graph spends stopped (SIGSTOP, a debugger),
+    deadlocked or busy does count: it makes no progress, and the run ends naming it
+    (:mod:`trust_av_planner.graph.stalls`).
     """
     graph = session.graph
     recorder = graph.by_name(RECORDER)
     last, last_change = -1, time.monotonic()
-    turn = next_probe = last_change
+    turn = last_change
+    cpu_at_change = _cpu(graph)
     while recorder.popen.poll() is None:
         session.spin(0.05)
         now = time.monotonic()
@@ -247,29 +292,43 @@ def _follow(session: Any, steps: int, step_timeout_s: float,
             last_change += now - turn      # this process was suspended, not the graph
         turn = now
         session.check({RECORDER})
-        probe = now >= next_probe          # the nodes' states: twice a second
-        if probe:
-            next_probe = now + SUSPENSION_PROBE_S
         if session.recorder_steps != last:
             last, last_change = session.recorder_steps, now
+            cpu_at_change = _cpu(graph)
             if on_step is not None:
                 on_step(min(last, steps), steps)
-        elif probe and graph.suspended():
-            last_change = now              # a suspended node is not a stalled graph
         elif now - last_change > step_timeout_s:
             if last >= steps:
                 raise IncompleteRecordingError(
                     f'node recorder did not receive every message of the run in '
                     f'{step_timeout_s:g} s; node logs in {graph.log_dir}')
-            why = ('the recorder is blocked writing to its disk' if recorder.state() == 'D'
-                   else 'the graph stalled')
-            raise GraphError(f'no progress after {last} steps in {step_timeout_s:g} s '
-                             f'({why}); node logs in {graph.log_dir}')
+            head = f'no progress after {last} steps in {step_timeout_s:g} s'
+            tail = f'node logs in {graph.log_dir}'
+            stopped = graph.suspended()
+            if stopped:
+                raise GraphError(f'{head}: node {", ".join(stopped)} is stopped (state T: '
+                                 f'SIGSTOP, Ctrl-Z or a debugger); {tail}')
+            used = {name: cpu - cpu_at_change.get(name, 0.0)
+                    for name, cpu in _cpu(graph).items()}
+            busy = [f'{name} ({used[name]:.1f} s of CPU)' for name in sorted(used)
+                    if used[name] > BUSY_SHARE * (now - last_change)]
+            if busy:
+                raise GraphError(f'{head}: node {", ".join(busy)} is busy without making '
+                                 f'progress; {tail}')
+            if recorder.state() == 'D':
+                raise GraphError(f'{head} (the recorder is blocked writing to its disk); '
+                                 f'{tail}')
+            raise StallError(f'{head} (the graph stalled); {tail}')
     if recorder.popen.returncode == EXIT_DISK_FULL:
         return
     session.check({RECORDER})
     if on_step is not None:
         on_step(steps, steps)
+
+
+def _cpu(graph: Graph) -> dict[str, float]:
+    """CPU time each node process has used so far, s."""
+    return {p.spec.name: cpu_s(p.popen.pid) for p in graph.processes}
 
 
 def missing_messages(bag: Path, steps: int, namespace: str = '/') -> str:

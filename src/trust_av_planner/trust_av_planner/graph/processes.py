@@ -1,8 +1,10 @@
 """The node processes of one run: started as ``python -m <node module> --ros-args ...``
 (exactly what ``ros2 run`` would start), each in its own process group. When the
-orchestrator dies, even by SIGKILL, its nodes stop as on SIGTERM (``PR_SET_PDEATHSIG`` and
-the parent check of :func:`trust_monitor.ros.spin.spin_node`), so the recorder still
-finishes its bag and no process is left. They are stopped in the order that keeps the
+orchestrator dies, even by SIGKILL, its nodes stop as on SIGTERM (the parent check of
+:func:`trust_monitor.ros.spin.spin_node`; ``PR_SET_PDEATHSIG`` continues a node that was
+stopped by a signal, so that it makes that check too), so the recorder still finishes its bag
+and no process is left. A node stopped by a signal is continued with every stop signal it
+gets. They are stopped in the order that keeps the
 recording complete (the step authority first, the recorder last), each with SIGINT, then
 SIGTERM, then SIGKILL after grace periods."""
 
@@ -173,7 +175,7 @@ class Graph:
             popen = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
                                      stdin=subprocess.DEVNULL, env=self.env,
                                      start_new_session=True,
-                                     preexec_fn=stop_signals.stop_with_parent)
+                                     preexec_fn=stop_signals.continue_with_parent)
             self.processes.append(Process(spec, popen, log_path, log))
 
     def by_name(self, name: str) -> Process:
@@ -241,6 +243,7 @@ def _stop_group(group: list[Process], recorder: bool = False) -> None:
         for process in alive:
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(process.popen.pid, sig)
+                os.killpg(process.popen.pid, signal.SIGCONT)  # a stopped node takes it too
         seen = stop_signals.escalations()
         deadline = time.monotonic() + grace
         while (time.monotonic() < deadline and stop_signals.escalations() == seen

@@ -132,14 +132,23 @@ def ignored_on_purpose(signum: int, handler: Any) -> bool:
     return signum == signal.SIGHUP and handler == signal.SIG_IGN
 
 
-def deliver_pending() -> None:
+def deliver_pending(working: bool = False) -> None:
     """Raise the stop that arrived where it could not be raised, if any (not inside a
-    :func:`stopping` block: there it waits for the block's end)."""
+    :func:`stopping` block: there it waits for the block's end).
+
+    ``working``: the caller is at a point of the command's own work (a progress update,
+    the end of the command or of a worker's call), never on the way out of a stop. A stop
+    that was raised and is still not carried out there was swallowed (native code that
+    turned the exception into its own error, a library that caught it): it is raised
+    again, so that no stop is lost and the further signals, which only escalate a stop
+    under way, are not ignored with it."""
     if _state['quiet']:
         return
     signum, _state['pending'] = _state['pending'], 0
     if signum:
         _raise(signum)
+    if working and _state['raised']:
+        _raise(_state['raised'])
 
 
 @contextlib.contextmanager
@@ -165,3 +174,13 @@ def stop_with_parent() -> None:
     process that started it dies, even by SIGKILL (Linux ``PR_SET_PDEATHSIG``)."""
     libc = ctypes.CDLL('libc.so.6', use_errno=True)
     libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def continue_with_parent() -> None:
+    """In a node process, before it runs (``preexec_fn``): SIGCONT when the process that
+    started it dies, even by SIGKILL (Linux ``PR_SET_PDEATHSIG``). A node checks its parent
+    between spins and stops cleanly once it is gone (``trust_monitor.ros.spin.spin_node``);
+    SIGTERM here would stay pending in a node stopped by SIGSTOP or a debugger, which then
+    outlived the run. Continued, it makes the check within a spin (0.1 s)."""
+    libc = ctypes.CDLL('libc.so.6', use_errno=True)
+    libc.prctl(1, signal.SIGCONT)  # PR_SET_PDEATHSIG

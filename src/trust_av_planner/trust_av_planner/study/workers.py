@@ -77,7 +77,7 @@ def _call(fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
     _in_call['now'] = True
     try:
         result = fn(*args, **kwargs)
-        stop_signals.deliver_pending()  # one that arrived where it could not be raised
+        stop_signals.deliver_pending(working=True)  # one not raised, or swallowed
         return result
     except stop_signals.Stopped as stop:
         sys.stdout.flush()

@@ -216,6 +216,13 @@ class RunConfig:
         if not self.shared.speed_max_from_trace:
             return self
         vmax = trace.max_speed_mps
+        if not vmax > self.planner.speed_min_mps:
+            raise ParamsError(
+                f'{trace.source or trace.name}: the lead never moves faster than '
+                f'speed_min_mps = {self.planner.speed_min_mps:g} m/s (its highest speed is '
+                f"{vmax:g} m/s), and speed_max_from_trace takes both vehicles' speed limit "
+                'from it; use a trace in which the lead moves, or speed_max_from_trace: false '
+                'with speed_max_mps')
         return dataclasses.replace(
             self, planner=dataclasses.replace(self.planner, speed_max_mps=vmax),
             driver=dataclasses.replace(self.driver, speed_max_mps=vmax))
