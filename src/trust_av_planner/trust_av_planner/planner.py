@@ -48,9 +48,17 @@ def needs_follower_state(config: PlannerConfig) -> bool:
 
 def observe(av: VehicleState, human: VehicleState, av_accel_mps2: float, length_m: float,
             headway_cap_s: float) -> Observation:
-    """What the human sees of the AV, eq. (6): gap, relative speed, headway, AV acceleration."""
+    """What the human sees of the AV, eq. (6): gap, relative speed, headway, AV acceleration.
+
+    The time headway d_H / v_H is capped at ``headway_cap_s`` (a stopped or slow human); a
+    stopped human at a gap at or below 0 m (a collision) has headway 0 s, never a division
+    by a zero speed.
+    """
     gap = gap_m(av, human, length_m)
-    headway = gap / human.speed_mps if human.speed_mps * headway_cap_s > gap else headway_cap_s
+    if human.speed_mps > 0.0 and human.speed_mps * headway_cap_s > gap:
+        headway = gap / human.speed_mps
+    else:
+        headway = headway_cap_s if gap > 0.0 else 0.0
     return Observation(gap_m=gap, relative_speed_mps=av.speed_mps - human.speed_mps,
                        time_headway_s=headway, av_accel_mps2=av_accel_mps2)
 

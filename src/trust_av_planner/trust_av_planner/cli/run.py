@@ -11,6 +11,7 @@ from preceding_traffic.traces import truncate
 from trust_av_planner.cli.options import (
     Progress,
     add_run_options,
+    collision_exit,
     format_metrics,
     positive_seconds,
     run_overrides,
@@ -52,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.no_plot:
             from trust_av_planner.study.plots import run_overview  # matplotlib: ~1 CPU-s
 
-            run_overview(records, title, outputs.plot,
+            run_overview(records[:metrics.steps], title, outputs.plot,
                          performance_threshold=config.trust.performance_threshold,
                          trust_growth_rate=config.trust.trust_growth_rate,
                          trust_initial=config.trust.trust_initial)
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plot:
         print(f'plot: {outputs.plot}')
     print(f'node logs: {outputs.logs}')
-    return 0
+    return collision_exit(metrics, 'run')
 
 
 def domain_id_value(text: str) -> int:
@@ -91,9 +92,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'topic to a rosbag2 bag directory (metadata.yaml + MCAP), then print the '
                     'metrics and write a plot (BAG.png) and the node logs (BAG.logs/) beside '
                     'it. However the run ends the bag is finished and readable. Exit codes: 0 '
-                    'done, 2 bad input, a node failed (named) or the disk is full, 130 '
-                    'interrupted (SIGINT), 143 terminated (SIGTERM), 129 its terminal closed '
-                    '(SIGHUP; not under nohup).')
+                    'done, 3 a collision (a gap at or below 0 m: the summary ends at that step '
+                    'and says so; the bag is complete), 2 bad input, a node failed (named) or '
+                    'the disk is full, 130 interrupted (SIGINT), 143 terminated (SIGTERM), '
+                    '129 its terminal closed (SIGHUP; not under nohup).')
     add_run_options(parser)
     parser.add_argument('--bag', type=Path, default=None,
                         help='bag directory to write (default: bags/run_<trace>_<predictor>_'
