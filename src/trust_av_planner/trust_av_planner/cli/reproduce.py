@@ -137,6 +137,8 @@ def trend_checks(results: dict[Case, dict[str, Any]], traces: list[str],
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av reproduce``."""
+    for option in ('--traces', '--predictors', '--alphas', '--driver-models', '--trust-models'):
+        sweep.check_axis(option, getattr(args, option[2:].replace('-', '_')))
     check_axes(args.predictors, args.driver_models, args.trust_models, args.alphas)
     if args.profile != 'table_i' and args.params_files:
         raise TrustAvPlannerError('--profile and --params-file both choose the parameters: give '
@@ -256,7 +258,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     "the cases with the params file's follower and trust model also Tables "
                     "II-IV (Markdown and CSV, ours beside the paper's where it printed the "
                     'case) and Figures 2-3 (PNG). Finished cases are cached by a hash of case, '
-                    'params files and code, so a rerun only runs what changed.')
+                    'params files and code, so a rerun only runs what changed. Every axis '
+                    'needs a value and holds each value once (an empty axis or a duplicate is '
+                    'refused, exit 2): one row per distinct case.')
     parser.add_argument('--traces', type=csv_list, default=list(sweep.TRACES),
                         help='comma-separated traces: shipped names, CSV files or rosbag2 bags '
                              '(default: %(default)s)')

@@ -363,13 +363,47 @@ class RayExecutor:
                 ray.shutdown()
 
 
+def check_axis(name: str, values: Sequence[str] | Sequence[float]) -> None:
+    """Refuse an axis of a study that asks for nothing, or for a case twice (a second row of
+    the same case would weigh twice in every mean).
+
+    Args:
+        name: the axis as the user named it, e.g. ``--alphas``.
+        values: its values (names compared as the trace reader does, case-blind for the
+            shipped traces; numbers by value, so ``0.5`` and ``.50`` are one).
+
+    Raises:
+        TrustAvPlannerError: no value, or a value given twice (one line naming it).
+    """
+    if not values:
+        raise TrustAvPlannerError(f'{name}: no value given (a study of no cases); give at '
+                                  'least one, comma-separated')
+    seen: dict[object, object] = {}
+    for value in values:
+        key = value.lower() if isinstance(value, str) and value.lower() in TRACES else value
+        if key in seen:
+            shown = f'{value!r}' if value == seen[key] else f'{seen[key]!r} and {value!r}'
+            raise TrustAvPlannerError(f'{name}: {shown} given twice (each case runs once; a '
+                                      'duplicate row would weigh twice in every mean)')
+        seen[key] = value
+
+
 def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PAPER_PREDICTORS,
                 alphas: Iterable[float] = ALPHAS, driver_models: Iterable[str] = ('',),
                 trust_models: Iterable[str] = ('',)) -> list[Case]:
-    """Every combination, in table order ('' in a model axis: the params file's)."""
-    alphas, driver_models, trust_models = list(alphas), list(driver_models), list(trust_models)
-    return [Case(t, p, a, driver_model=d, trust_model=m) for t in traces for p in predictors
-            for m in trust_models for d in driver_models for a in alphas]
+    """Every combination, in table order ('' in a model axis: the params file's); one case
+    each.
+
+    Raises:
+        TrustAvPlannerError: an axis is empty or holds a value twice (:func:`check_axis`).
+    """
+    axes = {'traces': list(traces), 'predictors': list(predictors), 'alphas': list(alphas),
+            'driver models': list(driver_models), 'trust models': list(trust_models)}
+    for name, values in axes.items():
+        check_axis(name, values)
+    return [Case(t, p, a, driver_model=d, trust_model=m) for t in axes['traces']
+            for p in axes['predictors'] for m in axes['trust models']
+            for d in axes['driver models'] for a in axes['alphas']]
 
 
 def run_sweep(cases: Sequence[Case], params_file: ParamsFiles, results_dir: Path,
