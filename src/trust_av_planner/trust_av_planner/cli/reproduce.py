@@ -44,7 +44,7 @@ from trust_av_planner.system.config import (
     load_run_config,
 )
 from trust_monitor.common import output_files, registry
-from trust_monitor.trust_interface import paper_bound_holds
+from trust_monitor.trust_interface import paper_bound_holds, trust_ceiling
 
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
             'as_reported': DEFAULT_PARAMS_FILE.with_name('paper_as_reported.yaml'),
@@ -219,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
                                        for a in args.alphas}
                   for p in args.predictors}
         trust_over_time(series, 'us06', out / 'figure_3_trust_us06.png',
-                        config.trust.trust_growth_rate)
+                        trust_ceiling(config.trust_model()))
         written.append('figure_3_trust_us06.png')
 
     for path in written:

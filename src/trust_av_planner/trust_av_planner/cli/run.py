@@ -21,6 +21,7 @@ from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import compute_metrics
 from trust_av_planner.system.outputs import replacing_outputs
+from trust_monitor.trust_interface import trust_ceiling
 
 
 def run(args: argparse.Namespace) -> int:
@@ -55,8 +56,7 @@ def run(args: argparse.Namespace) -> int:
 
             run_overview(records[:metrics.steps], title, outputs.plot,
                          performance_threshold=config.trust.performance_threshold,
-                         trust_growth_rate=config.trust.trust_growth_rate,
-                         trust_initial=config.trust.trust_initial)
+                         ceiling=trust_ceiling(config.trust_model()))
     print(format_metrics(metrics, title))
     print(f'wall time {result.wall_s:.1f} s (start-up {result.startup_s:.1f} s), '
           f'{trace.steps * trace.dt_s / max(result.wall_s - result.startup_s, 1e-9):.0f}x '
