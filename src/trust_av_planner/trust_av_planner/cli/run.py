@@ -18,6 +18,7 @@ from trust_av_planner.cli.options import (
     steps_value,
 )
 from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
+from trust_av_planner.system import run_record
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import compute_metrics
 from trust_av_planner.system.outputs import replacing_outputs
@@ -38,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     bag: Path = args.bag or Path('bags') / (
         f'run_{trace.name}_{config.planner.predictor}_alpha{config.planner.alpha:g}')
     with replacing_outputs(bag, overwrite=args.overwrite, command='run') as outputs:
+        print(run_record.header(config), flush=True)
         bar = Progress(f'graph {trace.name}', trace.steps, shown=not args.no_progress)
         try:
             result, records = run_graph_records(
@@ -65,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plot:
         print(f'plot: {outputs.plot}')
     print(f'node logs: {outputs.logs}')
+    print(f'effective parameters of every node: {outputs.logs / run_record.PARAMS_FILE_NAME} '
+          f"(and the bag's custom_data {run_record.PARAMS_KEY})")
     return collision_exit(metrics, 'run')
 
 

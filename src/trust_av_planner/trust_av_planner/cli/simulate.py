@@ -17,6 +17,7 @@ from trust_av_planner.cli.options import (
     run_overrides,
     steps_value,
 )
+from trust_av_planner.system import run_record
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import check_control_rate, load_run_config
 from trust_monitor.common.output_files import replacing
@@ -32,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
         check_control_rate(config.planner, args.control_rate_hz)
     # --max-steps shortens the run only: the speed limit and the preview are the whole trace's
     trace = truncate(control_trace(config, args.control_rate_hz), args.max_steps)
+    print(run_record.header(config), flush=True)
     with contextlib.ExitStack() as stack:
         if args.out is not None:   # a second command on --out is refused before it writes
             stack.enter_context(hold_output_lock(args.out))

@@ -397,13 +397,15 @@ def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PAPE
     Raises:
         TrustAvPlannerError: an axis is empty or holds a value twice (:func:`check_axis`).
     """
-    axes = {'traces': list(traces), 'predictors': list(predictors), 'alphas': list(alphas),
-            'driver models': list(driver_models), 'trust models': list(trust_models)}
-    for name, values in axes.items():
-        check_axis(name, values)
-    return [Case(t, p, a, driver_model=d, trust_model=m) for t in axes['traces']
-            for p in axes['predictors'] for m in axes['trust models']
-            for d in axes['driver models'] for a in axes['alphas']]
+    names = {'traces': list(traces), 'predictors': list(predictors),
+             'driver models': list(driver_models), 'trust models': list(trust_models)}
+    values = list(alphas)
+    for name, axis in names.items():
+        check_axis(name, axis)
+    check_axis('alphas', values)
+    return [Case(t, p, a, driver_model=d, trust_model=m) for t in names['traces']
+            for p in names['predictors'] for m in names['trust models']
+            for d in names['driver models'] for a in values]
 
 
 def run_sweep(cases: Sequence[Case], params_file: ParamsFiles, results_dir: Path,
