@@ -147,9 +147,9 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
     specs = node_specs(config, trace_arg, trace, initial, bag, max_steps)
     started = time.monotonic()
     logs = log_dir if log_dir is not None else bag.with_name(bag.name + '.logs')
-    write_record(config.for_trace(trace), specs, logs)
     with _domain(domain_id, namespace) as domain:
         graph = Graph(specs, config.params_files, domain, logs, namespace)
+        write_record(config, trace, graph)
         try:
             with graph_session(graph, 'orchestrator') as session:
                 node = session.node
@@ -195,11 +195,12 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                     wall_s=time.monotonic() - started, startup_s=startup)
 
 
-def write_record(config: RunConfig, specs: list[NodeSpec], logs: Path) -> dict[str, str]:
-    """Write the run's record into ``logs`` (:mod:`trust_av_planner.system.run_record`): the
-    effective parameters of every node (``effective_params.yaml``) and the bag's
-    ``custom_data`` entries (``run_record.yaml``), which a recorder node among ``specs``
-    (its ``record_file``, set here) writes into the bag's metadata.
+def write_record(config: RunConfig, trace: SpeedTrace, graph: Graph) -> dict[str, str]:
+    """Write the record of ``graph``'s run of ``config`` on ``trace`` into its logs
+    directory, before it starts (:mod:`trust_av_planner.system.run_record`): the effective
+    parameters of every node (``effective_params.yaml``) and the bag's ``custom_data``
+    entries (``run_record.yaml``), which its recorder node, if it has one (its
+    ``record_file``, set here), writes into the bag's metadata.
 
     Returns:
         The ``custom_data`` entries (for a bag written in this process).
@@ -207,12 +208,13 @@ def write_record(config: RunConfig, specs: list[NodeSpec], logs: Path) -> dict[s
     Raises:
         GraphError: the files cannot be written (one line naming the directory).
     """
+    logs = graph.log_dir
     record = logs / run_record.RECORD_FILE_NAME
-    for spec in specs:
+    for spec in graph.specs:
         if spec.name == RECORDER:
             spec.params['record_file'] = str(record)
-    per_run = {spec.name: spec.params for spec in specs}
-    entries = run_record.custom_data(config, per_run)
+    per_run = {spec.name: spec.params for spec in graph.specs}
+    entries = run_record.custom_data(config.for_trace(trace), per_run)
     try:
         logs.mkdir(parents=True, exist_ok=True)
         (logs / run_record.PARAMS_FILE_NAME).write_text(

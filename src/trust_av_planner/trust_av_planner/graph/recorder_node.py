@@ -98,9 +98,8 @@ class RecorderNode(Node):
         self.exit_code = 0
         self.config = declare_config(self, RecorderConfig)
         self.clock = declare_config(self, WallClockConfig)
-        self.bag = BagWriter(Path(self.config.bag_path))
-        for key, value in read_record(self.config.record_file).items():
-            self.bag.set_custom_data(key, value)
+        self.bag = BagWriter(Path(self.config.bag_path),
+                             custom_data=read_record(self.config.record_file))
         self.write_delay_s = float(os.environ.get(WRITE_DELAY_ENV, '0') or 0)
         self.needed: dict[str, int] = {}
         self.publishers_needed: dict[str, int] = {}

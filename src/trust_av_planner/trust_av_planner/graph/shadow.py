@@ -117,9 +117,8 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
     log_dir = bag.with_name(bag.name + '.logs')
     period_ns = round(NS_PER_S / rate_hz)
     with lease_domain(foreign_participants) as domain:  # skips a domain with leftovers
-        specs = shadow_specs(config, trace, rate_hz, log_dir)
-        entries = write_record(cfg, specs, log_dir)
-        graph = Graph(specs, config.params_files, domain, log_dir)
+        graph = Graph(shadow_specs(config, trace, rate_hz, log_dir), config.params_files, domain,
+                      log_dir)
         with graph_session(graph, 'shadow_player') as session:
             node, executor = session.node, session.executor
             wall = WallClockConfig(clock_mode='wall', control_rate_hz=rate_hz)
@@ -138,10 +137,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
             # the node that publishes each recorded topic (the inputs: this player)
             publisher = {name: 'shadow_player' if name not in OUTPUTS else topic.publishers[0]
                          for name, topic in recorded.items()}
-            with BagWriter(bag) as recording:
-                for key, value in entries.items():
-                    recording.set_custom_data(key, value)
-
+            with BagWriter(bag, custom_data=write_record(config, trace, graph)) as recording:
                 def on_message(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     if not recording.finished:   # finished early only by a full disk
                         recording.write(topic, data)
@@ -261,9 +257,8 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
     needs['/sim/start'] = (1, 3)
     log_dir = bag.with_name(bag.name + '.logs')
     with lease_domain(foreign_participants) as domain:  # skips a domain with leftovers
-        specs = wall_specs(config, trace_arg, trace, rate_hz, log_dir)
-        entries = write_record(config.for_trace(trace), specs, log_dir)
-        graph = Graph(specs, config.params_files, domain, log_dir)
+        graph = Graph(wall_specs(config, trace_arg, trace, rate_hz, log_dir), config.params_files,
+                      domain, log_dir)
         with graph_session(graph, 'wall_recorder') as session:
             node, executor = session.node, session.executor
             start_pub = node.create_publisher(Empty, '/sim/start', QOS['LATCHED'])
@@ -274,10 +269,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
             started_at: list[float] = []
             ledger = PublicationLedger()
             vehicle_node = {frame: name for name, frame in VEHICLE_FRAMES.items()}
-            with BagWriter(bag) as recording:
-                for key, value in entries.items():
-                    recording.set_custom_data(key, value)
-
+            with BagWriter(bag, custom_data=write_record(config, trace, graph)) as recording:
                 def record(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     if recording.finished:       # finished early only by a full disk
                         return
