@@ -7,6 +7,7 @@ parameters (bag metadata, logs, printed header). Study axes are each case once."
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import math
 import subprocess
@@ -180,6 +181,21 @@ def test_study_axes_hold_each_case_once(tmp_path: Path, option: str, value: str,
     line, = proc.stderr.strip().splitlines()
     assert line.startswith(f'trust-av reproduce: error: {message} ')
     assert not out.exists()
+
+
+def test_a_study_case_that_collides_says_so_in_its_row(tmp_path: Path) -> None:
+    trace = hard_stop(tmp_path / 'stop.csv')
+    out = tmp_path / 'results'
+    proc = cli('reproduce', '--traces', f'{trace},nycc', '--predictors', 'ca', '--alphas',
+               '0.5', '--max-steps', '12', '--results-dir', str(out), '--workers', '1',
+               '--no-progress')
+    assert proc.returncode == 0, proc.stderr
+    assert f'1 of 2 cases collided: {trace}/TAC-CA/alpha=0.5: collision at step ' \
+        f'{COLLISION_STEP} ' in proc.stdout
+    rows = list(csv.DictReader((out / 'all_runs.csv').open()))
+    assert [(r['steps'], r['collision'].split(':')[0]) for r in rows] == [
+        (str(COLLISION_STEP + 1), f'collision at step {COLLISION_STEP} (t = {COLLISION_STEP} s)'),
+        ('12', 'none')]
 
 
 def test_sweep_cases_refuses_an_empty_or_repeated_axis() -> None:

@@ -180,6 +180,10 @@ def run(args: argparse.Namespace) -> int:
     bar.close()
     elapsed = time.monotonic() - start
     write_tidy_csv(out / 'all_runs.csv', tidy_rows(cases, every))
+    crashed = [f'{case.label}: {every[case]["collision"]}' for case in cases
+               if every[case].get('collision')]
+    if crashed:     # their metrics end at the collision (all_runs.csv, column collision)
+        print(f'{len(crashed)} of {len(cases)} cases collided: ' + '; '.join(crashed))
     trust_model = sweep.parameter_value(config, TRUST_MODEL_PARAMETER)
     results = paper_cases(every, cases, (config.follower.driver_model, trust_model or ''))
     written = ['all_runs.csv']
