@@ -224,6 +224,8 @@ def check_accelerations(where: str, times_s: np.ndarray, speeds_mps: np.ndarray,
     if not window > 0.0:
         return
     ends = times_s[times_s >= times_s[0] + window]
+    if ends.size == 0:       # a span of one window whose end rounds below it
+        ends = times_s[-1:]
     accels = (np.interp(ends, times_s, speeds_mps)
               - np.interp(ends - window, times_s, speeds_mps)) / window
     for index, limit, name, verb in (
