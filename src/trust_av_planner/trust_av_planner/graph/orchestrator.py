@@ -149,8 +149,8 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
     logs = log_dir if log_dir is not None else bag.with_name(bag.name + '.logs')
     with _domain(domain_id, namespace) as domain:
         graph = Graph(specs, config.params_files, domain, logs, namespace)
-        write_record(config, trace, graph)
         try:
+            write_record(config, trace, graph)   # a full disk: said as for the node logs
             with graph_session(graph, 'orchestrator') as session:
                 node = session.node
                 if on_clock is not None:
@@ -223,8 +223,8 @@ def write_record(config: RunConfig, trace: SpeedTrace, graph: Graph) -> dict[str
             + entries[run_record.PARAMS_KEY])
         record.write_text(yaml.safe_dump(entries, default_flow_style=False, sort_keys=True))
     except OSError as err:
-        raise GraphError(f"{logs}: cannot write the run's record there ({err.strerror})") \
-            from err
+        raise GraphError(f'{logs}: cannot write the node logs and per-run parameters there '
+                         f'({err.strerror})') from err
     return entries
 
 
