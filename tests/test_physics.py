@@ -172,13 +172,15 @@ def test_a_noisy_10_hz_trace_is_judged_over_1_s(tmp_path: Path) -> None:
     ('--traces', 'us06,US06', "--traces: 'us06' and 'US06' given twice"),
     ('--driver-models', 'mpc,idm,mpc', "--driver-models: 'mpc' given twice"),
 ])
-def test_study_axes_hold_each_case_once(tmp_path: Path, option: str, value: str,
-                                        message: str) -> None:
+def test_study_axes_hold_each_case_once(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                        option: str, value: str, message: str) -> None:
+    from trust_av_planner.cli.main import main
+
     out = tmp_path / 'results'
-    proc = cli('reproduce', option, value, '--max-steps', '2', '--results-dir', str(out),
-               '--no-progress')
-    assert proc.returncode == 2
-    line, = proc.stderr.strip().splitlines()
+    code = main(['reproduce', option, value, '--max-steps', '2', '--results-dir', str(out),
+                 '--no-progress'])
+    assert code == 2
+    line, = capsys.readouterr().err.strip().splitlines()
     assert line.startswith(f'trust-av reproduce: error: {message} ')
     assert not out.exists()
 
