@@ -133,7 +133,7 @@ def no_long_work(monkeypatch: pytest.MonkeyPatch) -> None:
 @settings(max_examples=40, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(data=st.data())
-def test_any_command_line_exits_0_or_2_in_one_piece(command: str, data: st.DataObject) -> None:
+def test_any_command_line_exits_0_2_or_3_in_one_piece(command: str, data: st.DataObject) -> None:
     argv, params = data.draw(command_lines(command))
     with fresh_directory() as here:
         Path('trace.csv').write_text(TINY_TRACE)
@@ -158,8 +158,11 @@ def test_any_command_line_exits_0_or_2_in_one_piece(command: str, data: st.DataO
                 code = 0
         text = err.getvalue()
         event(f'{argv[0]} exit {code}')     # --hypothesis-show-statistics
-        assert code in (0, 2), (argv, params, code, text)
+        # 3: the run collided (a gap at or below 0 m), a documented outcome of odd values
+        assert code in (0, 2, 3), (argv, params, code, text)
         assert 'Traceback' not in text, (argv, params, text)
+        if code == 3:
+            assert ': collision at step ' in text.strip().splitlines()[-1], (argv, params, text)
         if code == 2:
             assert text.strip(), (argv, params)
             assert listing(here) == inputs, (argv, params, text)

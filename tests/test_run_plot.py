@@ -21,7 +21,7 @@ EPOCH_S = 1_700_000_000.0
 
 
 def drawn_figure(records: list[Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                 **trust: float) -> Any:
+                 **trust: Any) -> Any:
     """Draw the run plot and keep the figure (the PNG is written too)."""
     kept: list[Any] = []
     save = plots.save_figure
@@ -47,7 +47,7 @@ def us06_records() -> list[Any]:
 def test_p_threshold_and_trust_ceiling_are_drawn(us06_records: list[Any], tmp_path: Path,
                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     fig = drawn_figure(us06_records, tmp_path, monkeypatch, performance_threshold=0.8,
-                       trust_growth_rate=0.1, trust_initial=0.5)
+                       ceiling=(0.5, 0.1))
     p_axis, trust_axis = fig.axes[4], fig.axes[5]
     p_lines = {line.get_label(): line for line in p_axis.get_lines()}
     assert list(p_lines['P'].get_ydata()) == [r.performance for r in us06_records]
@@ -65,10 +65,28 @@ def test_bag_timed_records_get_time_from_the_start(us06_records: list[Any], tmp_
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
     stamped = [dataclasses.replace(r, t_s=EPOCH_S + r.t_s) for r in us06_records]
     fig = drawn_figure(stamped, tmp_path, monkeypatch, performance_threshold=0.8,
-                       trust_growth_rate=0.1, trust_initial=0.0)
+                       ceiling=(0.0, 0.1))
     fig.canvas.draw()
     for axis in fig.axes:
         for line in axis.get_lines()[:1]:
             assert list(line.get_xdata()) == [float(k) for k in range(STEPS)]
         assert axis.xaxis.get_offset_text().get_text() == ''      # no "+1.7e9"
     assert fig.axes[-1].get_xlabel() == 'time since the start of the drive (s)'
+
+
+def test_a_ceiling_is_drawn_only_for_a_model_that_declares_one(
+        us06_records: list[Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The ceiling is the trust model's declared property (``ceiling``), not a guess from
+    its name: the paper's and asymmetric models declare T(0) + delta t, beta_bernoulli and
+    optimo none, and their plots have no ceiling line."""
+    from trust_monitor.trust_interface import make_trust_model, trust_ceiling
+
+    config = load_run_config()
+    declared = {name: trust_ceiling(make_trust_model(
+        dataclasses.replace(config.trust, trust_model=name), dict(config.trust_model_params)))
+        for name in ('paper', 'asymmetric', 'beta_bernoulli', 'optimo')}
+    assert declared == {'paper': (0.0, 0.1), 'asymmetric': (0.0, 0.1),
+                        'beta_bernoulli': None, 'optimo': None}
+    fig = drawn_figure(us06_records, tmp_path, monkeypatch, performance_threshold=0.8,
+                       ceiling=None)
+    assert [line.get_label() for line in fig.axes[5].get_lines()] == ['trust T']

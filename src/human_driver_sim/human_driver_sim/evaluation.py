@@ -11,7 +11,8 @@ The driver MPC's v_max is the leader's highest speed over the pair, the paper's 
 v_max = max(v_PT) for the trace followed (Table I; the simulator's ``speed_max_from_trace``).
 
 Per pair (all segments and windows of one leader->follower pair together), the gap NRMSE
-is RMSE(gap) / mean recorded gap and the speed NRMSE RMSE(speed) / mean recorded speed,
+is RMSE(gap) / mean recorded gap and the speed NRMSE RMSE(speed) / mean recorded speed
+(each mean floored at 0.1, m or m/s: a pair standing still or touching divides by no zero),
 over every simulated sample (the re-initialised first samples excluded). Pooled: the mean
 over pairs with a 95 % Student-t confidence interval (``trust_monitor.common.stats``).
 Every table carries the data's own noise floor: the follower's *recorded* speed replayed
@@ -211,7 +212,7 @@ def score(runs: Sequence[Run], simulated: Sequence[tuple[np.ndarray, np.ndarray]
         mean_speed = float(np.mean(np.concatenate([r.speed_mps[1:] for r, _, _ in items])))
         gap_rmse = float(np.sqrt(np.mean(gap_err ** 2)))
         speed_rmse = float(np.sqrt(np.mean(speed_err ** 2)))
-        out[key] = PairScore(gap_rmse, speed_rmse, gap_rmse / mean_gap,
+        out[key] = PairScore(gap_rmse, speed_rmse, gap_rmse / max(mean_gap, 0.1),
                              speed_rmse / max(mean_speed, 0.1), float(gaps.min()),
                              bool(gaps.min() <= 0.0), int(np.sum(gaps < CLOSE_GAP_M)),
                              len(gaps))

@@ -34,6 +34,7 @@ from preceding_traffic.traces import (
     SpeedTrace,
     TraceConfig,
     TraceError,
+    check_accelerations,
     check_sample,
     resample,
 )
@@ -165,6 +166,7 @@ def load_bag_trace(path: str | Path, topic: str, msgtype: str, dt_s: float,
     path = Path(path)
     times, speeds = read_bag_samples(path, topic, msgtype, config)
     try:
+        check_accelerations(f'{path}: {topic}', times, speeds, config)
         grid = resample(times, speeds, dt_s, f'{path}: {topic}')
     except TraceError as err:
         raise BagError(str(err)) from err

@@ -14,6 +14,7 @@ from preceding_traffic.traces import (
     TRAINING_TRACES,
     SpeedTrace,
     TraceConfig,
+    check_accelerations,
     read_samples,
     resample,
     trace_path,
@@ -34,12 +35,18 @@ def load_trace(name_or_path: str, dt_s: float, config: TraceConfig) -> SpeedTrac
             rosbag2 bag (read with ``config.bag_topic`` and ``config.bag_message_type``).
         dt_s: control step, s.
         config: validation settings.
+
+    Raises:
+        PrecedingTrafficError: the trace or bag breaks a rule of
+            :func:`~preceding_traffic.traces.check_sample`, or speeds up or brakes harder
+            than a road vehicle (:func:`~preceding_traffic.traces.check_accelerations`).
     """
     path = trace_path(name_or_path)
     if is_bag(path):
         from preceding_traffic.bags import load_bag_trace  # rosbags only for a bag
         return load_bag_trace(path, config.bag_topic, config.bag_message_type, dt_s, config)
     times, speeds = read_samples(path, config)
+    check_accelerations(str(path), times, speeds, config)
     shipped = name_or_path.lower() in SHIPPED_TRACES + TRAINING_TRACES
     name = name_or_path.lower() if shipped else path.stem
     return SpeedTrace(name=name, dt_s=dt_s, speeds_mps=resample(times, speeds, dt_s, str(path)),

@@ -37,6 +37,20 @@ keeps one record per step (2.9 kB measured on US06), so this bounds it to about 
 MAX_LINE_CHARS = 4096
 """Longest line of a trace CSV (a binary file has no line ends)."""
 
+TRACE_ACCEL_MAX_MPS2 = 5.0
+"""Default ``trace_accel_max_mps2``: the fastest speed-up of a trace, m/s^2. Above every
+standard drive cycle (EPA US06, the aggressive-driving cycle, peaks at 3.76 m/s^2 in
+``data/us06.csv``; the other shipped and training traces at 1.4-2.7 m/s^2) and a brisk
+passenger car at full throttle (0-100 km/h in 6 s is 4.6 m/s^2 on average). A trace in
+km/h read as m/s speeds up 3.6 times as fast: every shipped trace so read is above it."""
+TRACE_BRAKE_MAX_MPS2 = 9.81
+"""Default ``trace_brake_max_mps2``: the hardest braking of a trace, m/s^2: a tyre on dry
+asphalt transmits at most about 1 g (friction coefficient up to about 1.0; emergency stops
+of passenger cars reach 8-10 m/s^2)."""
+ACCEL_WINDOW_S = 1.0
+"""Accelerations of a trace are checked as speed changes over this window (a noisy 10 Hz
+odometry is not a hard acceleration), s."""
+
 SHIPPED_TRACES = ('us06', 'nycc', 'commute_am', 'commute_pm')
 """Evaluation traces shipped in ``data/`` (sources and licences in ``data/SOURCES.md``)."""
 TRAINING_TRACES = ('udds', 'hwfet', 'wltc_3b')
@@ -68,6 +82,14 @@ class TraceConfig:
     bag_message_type: str = param('its type: nav_msgs/msg/Odometry or '
                                   'geometry_msgs/msg/TwistStamped',
                                   default='nav_msgs/msg/Odometry')
+    trace_accel_max_mps2: float = param(
+        'fastest speed-up a trace may hold (over any 1 s); more is a unit mistake (km/h)',
+        unit='m/s^2', low=0.0, low_inclusive=False, high=100.0,
+        default=TRACE_ACCEL_MAX_MPS2)
+    trace_brake_max_mps2: float = param(
+        'hardest braking a trace may hold (over any 1 s, a magnitude); more is a unit '
+        'mistake (km/h)', unit='m/s^2', low=0.0, low_inclusive=False, high=100.0,
+        default=TRACE_BRAKE_MAX_MPS2)
 
     def __post_init__(self) -> None:
         try:
@@ -180,6 +202,46 @@ def check_sample(where: str, t: float, v: float, previous_t: float | None,
     if previous_t is not None and t - previous_t > config.max_sample_gap_s:
         raise TraceError(f'{where}: gap of {t - previous_t:g} s before t = {t:g} s exceeds '
                          f'max_sample_gap_s = {config.max_sample_gap_s:g} s')
+
+
+def check_accelerations(where: str, times_s: np.ndarray, speeds_mps: np.ndarray,
+                        config: TraceConfig) -> None:
+    """Refuse a trace that speeds up or brakes harder than a road vehicle does: the speed
+    change over every :data:`ACCEL_WINDOW_S` (over the whole trace when it is shorter),
+    against ``trace_accel_max_mps2`` and ``trace_brake_max_mps2``. The usual cause is a
+    trace in km/h read as m/s (3.6 times the accelerations).
+
+    Args:
+        where: the trace's name for messages (its file, or bag and topic).
+        times_s: sample times, increasing, s.
+        speeds_mps: speeds at those times, m/s.
+        config: the two limits.
+
+    Raises:
+        TraceError: an acceleration beyond a limit (one line naming the trace, the time, the
+            likely cause and the parameter that raises the limit).
+    """
+    span = float(times_s[-1] - times_s[0])
+    window = min(ACCEL_WINDOW_S, span)
+    if not window > 0.0:
+        return
+    ends = times_s[times_s >= times_s[0] + window]
+    if ends.size == 0:       # a span of one window whose end rounds below it
+        ends = times_s[-1:]
+    accels = (np.interp(ends, times_s, speeds_mps)
+              - np.interp(ends - window, times_s, speeds_mps)) / window
+    for index, limit, name, verb in (
+            (int(np.argmax(accels)), config.trace_accel_max_mps2, 'trace_accel_max_mps2',
+             'speeds up'),
+            (int(np.argmin(accels)), config.trace_brake_max_mps2, 'trace_brake_max_mps2',
+             'brakes')):
+        value = abs(float(accels[index]))
+        if (verb == 'brakes') == (accels[index] < 0.0) and value > limit:
+            raise TraceError(
+                f'{where}: {verb} at {value:.3g} m/s^2 before t = {ends[index]:g} s, harder '
+                f'than a road vehicle ({name} = {limit:g} m/s^2); are its speeds in km/h '
+                '(divide by 3.6 for m/s) or in another unit? If the trace is right, raise '
+                f'preceding_traffic.{name} in a --params-file')
 
 
 def read_samples(path: Path, config: TraceConfig) -> tuple[np.ndarray, np.ndarray]:

@@ -105,7 +105,12 @@ def needs_follower_state(config: PlannerConfig) -> bool:
 
 def observe(av: VehicleState, human: VehicleState, av_accel_mps2: float, length_m: float,
             headway_cap_s: float) -> Observation:
-    """What the human sees of the AV, eq. (6): gap, relative speed, headway, AV acceleration."""
+    """What the human sees of the AV, eq. (6): gap, relative speed, headway, AV acceleration.
+
+    The time headway d_H / v_H is capped at ``headway_cap_s`` (a stopped or slow human); a
+    stopped human at a gap at or below 0 m (a collision) has headway 0 s, never a division
+    by a zero speed.
+    """
     gap = gap_m(av, human, length_m)
     if gap <= 0.0:
         headway = 0.0            # touching or overlapping the AV: no headway (no division)

@@ -60,7 +60,10 @@ class TrustModel(Protocol):
             admissible; ``>= 1``: no restriction).
 
     Optional: a class attribute ``paper_bound_holds = True`` declares that the model runs
-    eqs. (9)-(11) with the shared parameters (:func:`paper_bound_holds`).
+    eqs. (9)-(11) with the shared parameters (:func:`paper_bound_holds`); an attribute
+    ``ceiling = (T0, rate_per_s)`` declares that its trust never exceeds ``T0 + rate_per_s *
+    t`` (t in s since the start: what a perfectly explicable AV earns), which plots draw
+    (:func:`trust_ceiling`). A model without one gets no such line.
     """
 
     name: str
@@ -222,6 +225,18 @@ def paper_bound_holds(model: TrustModel) -> bool:
     ``paper_bound_holds = True``): the final-trust bound of :mod:`trust_monitor.trust_bound`
     and the tables' column built on it hold only then."""
     return getattr(model, 'paper_bound_holds', False) is True
+
+
+def trust_ceiling(model: TrustModel) -> tuple[float, float] | None:
+    """The ceiling ``(T0, rate_per_s)`` that ``model`` declares (its ``ceiling`` attribute:
+    trust never exceeds ``T0 + rate_per_s * t``), or None when it declares none or not two
+    finite numbers."""
+    ceiling = getattr(model, 'ceiling', None)
+    if not (isinstance(ceiling, tuple) and len(ceiling) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                    and math.isfinite(v) for v in ceiling)):
+        return None
+    return float(ceiling[0]), float(ceiling[1])
 
 
 def trust_model_component(name: str) -> Component:

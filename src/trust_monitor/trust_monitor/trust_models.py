@@ -49,6 +49,8 @@ class PaperModel:
     def __init__(self, config: TrustConfig, params: None = None) -> None:
         self.config = config
         self.closed_form_bound: ClosedForm | None = self._closed_form
+        # u_T <= P <= 1 (eqs. 9, 11): trust gains at most delta per second
+        self.ceiling = (config.trust_initial, config.trust_growth_rate)
 
     def _closed_form(self, state: float, trust_min: float, steps: int,
                      dt_s: float) -> float | None:
@@ -100,6 +102,8 @@ class AsymmetricModel:
     def __init__(self, config: TrustConfig, params: AsymmetricConfig) -> None:
         self.config = config
         self.params = params
+        # it gains as the paper's model does (u_T <= 1): at most delta per second
+        self.ceiling = (config.trust_initial, config.trust_growth_rate)
 
     def initial_state(self) -> float:
         """T(0) = ``trust_initial``."""

@@ -5,6 +5,7 @@ table, and the progress bar (tqdm)."""
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -231,21 +232,43 @@ def run_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
     return {'planner': planner, 'preceding_traffic': traffic, 'human_driver': driver}
 
 
+EXIT_COLLISION = 3
+"""Exit status of a run that ended in a collision (a gap at or below 0 m): the run itself
+worked and its outputs are complete, but what it simulated is no car following."""
+
+
+def _figure(value: float, spec: str) -> str:
+    """A summary figure, or ``none`` for a value that does not exist (NaN, inf)."""
+    return format(value, spec) if math.isfinite(value) else 'none (not finite)'
+
+
 def format_metrics(metrics: Metrics, title: str) -> str:
-    """The metrics table printed at the end of a run."""
+    """The metrics table printed at the end of a run; a figure computed from no finite value
+    reads ``none``, and the last row says ``collision`` and where, or ``none``."""
+    crash = metrics.collision
     rows = [('steps', f'{metrics.steps}'),
-            ('final trust', f'{metrics.final_trust:.3f}'),
-            ('mean explicability E', f'{metrics.mean_explicability:.5f}'),
-            ('prediction RMSE (m/s^2)', f'{metrics.rmse_mps2:.4f}'),
-            ('min AV gap (m)', f'{metrics.min_av_gap_m:.3f}'),
-            ('min human gap (m)', f'{metrics.min_human_gap_m:.3f}'),
+            ('final trust', _figure(metrics.final_trust, '.3f')),
+            ('mean explicability E', _figure(metrics.mean_explicability, '.5f')),
+            ('prediction RMSE (m/s^2)', _figure(metrics.rmse_mps2, '.4f')),
+            ('min AV gap (m)', _figure(metrics.min_av_gap_m, '.3f')),
+            ('min human gap (m)', _figure(metrics.min_human_gap_m, '.3f')),
             ('NMPC fallback steps', f'{metrics.fallback_steps}'),
             ('driver fallback steps', f'{metrics.driver_fallback_steps}'),
-            ('unsafe steps (gap < d_s - margin)', f'{metrics.unsafe_steps}')]
+            ('unsafe steps (gap < d_s - margin)', f'{metrics.unsafe_steps}'),
+            ('collision', 'none' if crash is None else crash.short())]
     width = max(len(k) for k, _ in rows)
     lines = [title, '-' * (width + 14)]
     lines += [f'{k:<{width}}  {v:>12}' for k, v in rows]
     return '\n'.join(lines)
+
+
+def collision_exit(metrics: Metrics, command: str) -> int:
+    """After the summary: 0, or for a run that collided its one line on stderr and
+    :data:`EXIT_COLLISION`."""
+    if metrics.collision is None:
+        return 0
+    print(f'trust-av {command}: {metrics.collision.line()}', file=sys.stderr)
+    return EXIT_COLLISION
 
 
 class Progress:

@@ -44,7 +44,7 @@ from trust_av_planner.system.config import (
     load_run_config,
 )
 from trust_monitor.common import output_files, registry
-from trust_monitor.trust_interface import paper_bound_holds
+from trust_monitor.trust_interface import paper_bound_holds, trust_ceiling
 
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
             'as_reported': DEFAULT_PARAMS_FILE.with_name('paper_as_reported.yaml'),
@@ -142,6 +142,8 @@ def trend_checks(results: dict[Case, dict[str, Any]], traces: list[str],
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av reproduce``."""
+    for option in ('--traces', '--predictors', '--alphas', '--driver-models', '--trust-models'):
+        sweep.check_axis(option, getattr(args, option[2:].replace('-', '_')))
     check_axes(args.predictors, args.driver_models, args.trust_models, args.alphas)
     if args.profile != 'table_i' and args.params_files:
         raise TrustAvPlannerError('--profile and --params-file both choose the parameters: give '
@@ -187,6 +189,10 @@ def run(args: argparse.Namespace) -> int:
     bar.close()
     elapsed = time.monotonic() - start
     write_tidy_csv(out / 'all_runs.csv', tidy_rows(cases, every))
+    crashed = [f'{case.label}: {every[case]["collision"]}' for case in cases
+               if every[case].get('collision')]
+    if crashed:     # their metrics end at the collision (all_runs.csv, column collision)
+        print(f'{len(crashed)} of {len(cases)} cases collided: ' + '; '.join(crashed))
     trust_model = sweep.parameter_value(config, TRUST_MODEL_PARAMETER)
     results = paper_cases(every, cases, (config.follower.driver_model, trust_model or ''))
     written = ['all_runs.csv']
@@ -226,7 +232,7 @@ def run(args: argparse.Namespace) -> int:
                                        for a in args.alphas}
                   for p in args.predictors}
         trust_over_time(series, 'us06', out / 'figure_3_trust_us06.png',
-                        config.trust.trust_growth_rate)
+                        trust_ceiling(config.trust_model()))
         written.append('figure_3_trust_us06.png')
 
     for path in written:
@@ -265,7 +271,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     "the cases with the params file's follower and trust model also Tables "
                     "II-IV (Markdown and CSV, ours beside the paper's where it printed the "
                     'case) and Figures 2-3 (PNG). Finished cases are cached by a hash of case, '
-                    'params files and code, so a rerun only runs what changed.')
+                    'params files and code, so a rerun only runs what changed. Every axis '
+                    'needs a value and holds each value once (an empty axis or a duplicate is '
+                    'refused, exit 2): one row per distinct case.')
     parser.add_argument('--traces', type=csv_list, default=list(sweep.TRACES),
                         help='comma-separated traces: shipped names, CSV files or rosbag2 bags '
                              '(default: %(default)s)')

@@ -11,15 +11,18 @@ from preceding_traffic.traces import truncate
 from trust_av_planner.cli.options import (
     Progress,
     add_run_options,
+    collision_exit,
     format_metrics,
     positive_seconds,
     run_overrides,
     steps_value,
 )
 from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
+from trust_av_planner.system import run_record
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import compute_metrics
 from trust_av_planner.system.outputs import replacing_outputs
+from trust_monitor.trust_interface import trust_ceiling
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     bag: Path = args.bag or Path('bags') / (
         f'run_{trace.name}_{config.planner.predictor}_alpha{config.planner.alpha:g}')
     with replacing_outputs(bag, overwrite=args.overwrite, command='run') as outputs:
+        print(run_record.header(config), flush=True)
         bar = Progress(f'graph {trace.name}', trace.steps, shown=not args.no_progress)
         try:
             result, records = run_graph_records(
@@ -52,10 +56,9 @@ def run(args: argparse.Namespace) -> int:
         if not args.no_plot:
             from trust_av_planner.study.plots import run_overview  # matplotlib: ~1 CPU-s
 
-            run_overview(records, title, outputs.plot,
+            run_overview(records[:metrics.steps], title, outputs.plot,
                          performance_threshold=config.trust.performance_threshold,
-                         trust_growth_rate=config.trust.trust_growth_rate,
-                         trust_initial=config.trust.trust_initial)
+                         ceiling=trust_ceiling(config.trust_model()))
     print(format_metrics(metrics, title))
     print(f'wall time {result.wall_s:.1f} s (start-up {result.startup_s:.1f} s), '
           f'{trace.steps * trace.dt_s / max(result.wall_s - result.startup_s, 1e-9):.0f}x '
@@ -64,7 +67,9 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plot:
         print(f'plot: {outputs.plot}')
     print(f'node logs: {outputs.logs}')
-    return 0
+    print(f'effective parameters of every node: {outputs.logs / run_record.PARAMS_FILE_NAME} '
+          f"(and the bag's custom_data {run_record.PARAMS_KEY})")
+    return collision_exit(metrics, 'run')
 
 
 def domain_id_value(text: str) -> int:
@@ -91,9 +96,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'topic to a rosbag2 bag directory (metadata.yaml + MCAP), then print the '
                     'metrics and write a plot (BAG.png) and the node logs (BAG.logs/) beside '
                     'it. However the run ends the bag is finished and readable. Exit codes: 0 '
-                    'done, 2 bad input, a node failed (named) or the disk is full, 130 '
-                    'interrupted (SIGINT), 143 terminated (SIGTERM), 129 its terminal closed '
-                    '(SIGHUP; not under nohup).')
+                    'done, 3 a collision (a gap at or below 0 m: the summary ends at that step '
+                    'and says so; the bag is complete), 2 bad input, a node failed (named) or '
+                    'the disk is full, 130 interrupted (SIGINT), 143 terminated (SIGTERM), '
+                    '129 its terminal closed (SIGHUP; not under nohup).')
     add_run_options(parser)
     parser.add_argument('--bag', type=Path, default=None,
                         help='bag directory to write (default: bags/run_<trace>_<predictor>_'

@@ -19,6 +19,7 @@ from trust_av_planner.cli.options import (
 )
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.planner import needs_follower_state
+from trust_av_planner.system import run_record
 from trust_av_planner.system.config import (
     PlannerTopics,
     check_control_rate,
@@ -79,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
                            option='--out') as outputs:
         print(f'shadow: {args.bag} ({whole_s:g} s), replaying {duration_s:g} s at real time, '
               f'{nodes} at {rate_hz:g} Hz', flush=True)
+        print(run_record.header(config), flush=True)
         if args.whole_graph:
             result = run_wall_graph(config, str(args.bag), trace, outputs.bag,
                                     duration_s=duration_s, rate_hz=rate_hz,

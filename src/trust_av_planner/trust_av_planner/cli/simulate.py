@@ -10,12 +10,14 @@ from preceding_traffic.traces import truncate
 from trust_av_planner.cli.options import (
     Progress,
     add_run_options,
+    collision_exit,
     format_metrics,
     output_file,
     positive_hz,
     run_overrides,
     steps_value,
 )
+from trust_av_planner.system import run_record
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import check_control_rate, load_run_config
 from trust_monitor.common.component_checks import ComponentError
@@ -32,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
         check_control_rate(config.planner, args.control_rate_hz)
     # --max-steps shortens the run only: the speed limit and the preview are the whole trace's
     trace = truncate(control_trace(config, args.control_rate_hz), args.max_steps)
+    print(run_record.header(config), flush=True)
     with contextlib.ExitStack() as stack:
         if args.out is not None:   # a second command on --out is refused before it writes
             stack.enter_context(hold_output_lock(args.out))
@@ -51,10 +54,11 @@ def run(args: argparse.Namespace) -> int:
             write_table(result, args.out)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
              f'alpha = {config.planner.alpha:g} (in-process, {1.0 / trace.dt_s:g} Hz)')
-    print(format_metrics(result.metrics, title))
+    metrics = result.metrics
+    print(format_metrics(metrics, title))
     if args.out is not None:
         print(f'per-step table: {args.out}')
-    return 0
+    return collision_exit(metrics, 'simulate')
 
 
 def write_table(result: SimResult, out: Path) -> None:
@@ -73,7 +77,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         'simulate', help='in-process closed loop on one trace',
         description='Run the closed loop (traffic -> predictor -> AV NMPC -> trust -> human -> '
                     'integrate) in one process and print final trust, mean explicability, '
-                    'prediction RMSE, minimum gaps and fallback counts.')
+                    'prediction RMSE, minimum gaps and fallback counts. A gap at or below 0 m '
+                    'is a collision: the run ends at that step, the summary says so and the '
+                    'exit status is 3 (0 done, 2 bad input).')
     add_run_options(parser)
     parser.add_argument('--control-rate-hz', type=positive_hz, default=None,
                         help='control rate: the trace is interpolated to it, the NMPC predicts '

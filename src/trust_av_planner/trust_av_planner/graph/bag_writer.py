@@ -39,6 +39,7 @@ import shutil
 import signal
 import struct
 import threading
+from collections.abc import Mapping
 from pathlib import Path
 
 from mcap.writer import Writer as McapWriter
@@ -139,7 +140,8 @@ class BagWriter:
         DiskFullError: there is no room to start a recording (nothing is left).
     """
 
-    def __init__(self, path: Path, *, copy_of: str | None = None) -> None:
+    def __init__(self, path: Path, *, copy_of: str | None = None,
+                 custom_data: Mapping[str, str] | None = None) -> None:
         self.path = Path(path)
         if threading.current_thread() is threading.main_thread():
             # past a file-size limit a write fails with EFBIG instead of killing the process
@@ -152,6 +154,7 @@ class BagWriter:
             self._info.custom_data['trust_av.recorder'] = 'one MCAP chunk per step'
         else:
             self._info.custom_data['trust_av.repaired_copy_of'] = copy_of or 'unknown'
+        self._info.custom_data.update(custom_data or {})   # the run's record (run_record)
         if os.path.lexists(self.path):
             raise BagWriteError(f'{self.path}: cannot create the bag directory ({self.path} '
                                 'exists already, not overwriting)')

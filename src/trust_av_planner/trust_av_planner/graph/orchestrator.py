@@ -32,6 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from preceding_traffic.traces import SpeedTrace
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.bag_records import records_from_bag
@@ -46,6 +48,7 @@ from trust_av_planner.graph.session import (
     graph_session,
 )
 from trust_av_planner.graph.stalls import BUSY_SHARE, cpu_s, waiting_for
+from trust_av_planner.system import run_record
 from trust_av_planner.system.closed_loop import InitialState, equilibrium_start
 from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import StepRecord
@@ -150,6 +153,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
     with _domain(domain_id, namespace) as domain:
         graph = Graph(specs, config.params_files, domain, logs, namespace)
         try:
+            write_record(config, trace, graph)   # a full disk: said as for the node logs
             with graph_session(graph, 'orchestrator') as session:
                 node = session.node
                 if on_clock is not None:
@@ -197,6 +201,39 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
         _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
                     wall_s=time.monotonic() - started, startup_s=startup)
+
+
+def write_record(config: RunConfig, trace: SpeedTrace, graph: Graph) -> dict[str, str]:
+    """Write the record of ``graph``'s run of ``config`` on ``trace`` into its logs
+    directory, before it starts (:mod:`trust_av_planner.system.run_record`): the effective
+    parameters of every node (``effective_params.yaml``) and the bag's ``custom_data``
+    entries (``run_record.yaml``), which its recorder node, if it has one (its
+    ``record_file``, set here), writes into the bag's metadata.
+
+    Returns:
+        The ``custom_data`` entries (for a bag written in this process).
+
+    Raises:
+        GraphError: the files cannot be written (one line naming the directory).
+    """
+    logs = graph.log_dir
+    record = logs / run_record.RECORD_FILE_NAME
+    for spec in graph.specs:
+        if spec.name == RECORDER:
+            spec.params['record_file'] = str(record)
+    per_run = {spec.name: spec.params for spec in graph.specs}
+    entries = run_record.custom_data(config.for_trace(trace), per_run)
+    try:
+        logs.mkdir(parents=True, exist_ok=True)
+        (logs / run_record.PARAMS_FILE_NAME).write_text(
+            '# The effective parameters of every node of this run: the params files, the '
+            "command line's options and the per-run values merged.\n"
+            + entries[run_record.PARAMS_KEY])
+        record.write_text(yaml.safe_dump(entries, default_flow_style=False, sort_keys=True))
+    except OSError as err:
+        raise GraphError(f'{logs}: cannot write the node logs and per-run parameters there '
+                         f'({err.strerror})') from err
+    return entries
 
 
 def _managed(namespace: str, name: str) -> str:

@@ -29,10 +29,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from std_msgs.msg import UInt64
 
+from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph.bag_qos import offered_profiles
 from trust_av_planner.graph.bag_writer import EXIT_DISK_FULL, BagWriter
 from trust_monitor.common.params import check_fields, param
@@ -60,9 +62,30 @@ class RecorderConfig:
                                 'stopped)', low=0, default=0, high=10_000_000)
     flush_period_s: float = param('wall mode: a chunk is written at least this often',
                                   unit='s', low=0.0, low_inclusive=False, default=1.0, high=3600.0)
+    record_file: str = param("YAML mapping of the run's record (what ran, the effective "
+                             "parameters) for the bag's custom_data ('' = none)", default='')
 
     def __post_init__(self) -> None:
         check_fields(self)
+
+
+def read_record(path: str) -> dict[str, str]:
+    """The run's record the orchestrator wrote (:mod:`trust_av_planner.system.run_record`):
+    ``custom_data`` entries, strings to strings ({} for no file).
+
+    Raises:
+        TrustAvPlannerError: the file cannot be read or is not such a mapping.
+    """
+    if not path:
+        return {}
+    try:
+        document = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise TrustAvPlannerError(f'record_file {path}: cannot read it ({err})') from err
+    if not (isinstance(document, dict)
+            and all(isinstance(k, str) and isinstance(v, str) for k, v in document.items())):
+        raise TrustAvPlannerError(f'record_file {path}: not a mapping of text to text')
+    return document
 
 
 class RecorderNode(Node):
@@ -75,7 +98,8 @@ class RecorderNode(Node):
         self.exit_code = 0
         self.config = declare_config(self, RecorderConfig)
         self.clock = declare_config(self, WallClockConfig)
-        self.bag = BagWriter(Path(self.config.bag_path))
+        self.bag = BagWriter(Path(self.config.bag_path),
+                             custom_data=read_record(self.config.record_file))
         self.write_delay_s = float(os.environ.get(WRITE_DELAY_ENV, '0') or 0)
         self.needed: dict[str, int] = {}
         self.publishers_needed: dict[str, int] = {}

@@ -35,7 +35,7 @@ from trust_av_planner.graph import stop_signals
 from trust_av_planner.graph.bag_writer import BagWriter, DiskFullError
 from trust_av_planner.graph.domains import lease_domain
 from trust_av_planner.graph.lifecycle_client import MANAGED_NODES, set_states
-from trust_av_planner.graph.orchestrator import node_specs
+from trust_av_planner.graph.orchestrator import node_specs, write_record
 from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
 from trust_av_planner.graph.publication_ledger import (
     Lost,
@@ -136,7 +136,7 @@ def run_shadow(config: RunConfig, trace: SpeedTrace, bag: Path, *,
             # the node that publishes each recorded topic (the inputs: this player)
             publisher = {name: 'shadow_player' if name not in OUTPUTS else topic.publishers[0]
                          for name, topic in recorded.items()}
-            with BagWriter(bag) as recording:
+            with BagWriter(bag, custom_data=write_record(config, trace, graph)) as recording:
                 def on_message(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     if not recording.finished:   # finished early only by a full disk
                         recording.write(topic, data,
@@ -269,7 +269,7 @@ def run_wall_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Pa
             started_at: list[float] = []
             ledger = PublicationLedger()
             vehicle_node = {frame: name for name, frame in VEHICLE_FRAMES.items()}
-            with BagWriter(bag) as recording:
+            with BagWriter(bag, custom_data=write_record(config, trace, graph)) as recording:
                 def record(topic: str, data: bytes, info: dict[str, Any]) -> None:
                     if recording.finished:       # finished early only by a full disk
                         return

@@ -60,8 +60,11 @@ def check_axes(predictors: Iterable[str], driver_models: Iterable[str],
 
 def tidy_rows(cases: Sequence[Case], results: dict[Case, dict[str, Any]]
               ) -> list[dict[str, Any]]:
-    """One row per case, in case order: its settings as it ran, then its metrics."""
-    return [{**results[case]['settings'], **results[case]['metrics']} for case in cases]
+    """One row per case, in case order: its settings as it ran, then its metrics, then
+    ``collision``: ``none``, or the line naming the step and the vehicles (the metrics then
+    end with that step)."""
+    return [{**results[case]['settings'], **results[case]['metrics'],
+             'collision': results[case].get('collision') or 'none'} for case in cases]
 
 
 def write_tidy_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:

@@ -50,37 +50,45 @@ def speed_profiles(traces: Sequence[SpeedTrace], path: Path) -> None:
 
 def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
                                                                 Sequence[float]]]],
-                    trace: str, path: Path, growth_per_step: float) -> None:
+                    trace: str, path: Path, ceiling: tuple[float, float] | None) -> None:
     """Figure 3: trust over time for every alpha, one column per predictor.
 
-    The top row is the trust level itself (the paper's figure). The bottom row shows the
-    trust lost against the ceiling ``growth_per_step * step`` (what a perfectly explicable AV
+    The top row is the trust level itself (the paper's figure). When the trust model
+    declares a ceiling (:func:`~trust_monitor.trust_interface.trust_ceiling`), a bottom row
+    shows the trust lost against it, ``T(0) + delta * t`` (what a perfectly explicable AV
     would earn, P = 1 every step), which makes small differences between alphas visible.
 
     Args:
         series: predictor label -> alpha -> (time_s, trust after each step).
         trace: trace name for the title.
         path: PNG to write.
-        growth_per_step: delta of eq. (10).
+        ceiling: the trust model's (T(0), delta per second), or None (no bottom row).
     """
     plt = pyplot()
-    fig, axes = plt.subplots(2, len(series), figsize=(6 * len(series), 7), squeeze=False,
-                             sharex=True, sharey='row', height_ratios=[2, 1])
+    rows = 1 if ceiling is None else 2
+    fig, axes = plt.subplots(rows, len(series), figsize=(6 * len(series), 7 if rows == 2 else 5),
+                             squeeze=False, sharex=True, sharey='row',
+                             height_ratios=[2, 1][:rows])
     colors = plt.get_cmap('viridis')
     for col, (label, by_alpha) in enumerate(series.items()):
-        top, bottom = axes[0, col], axes[1, col]
+        top = axes[0, col]
         for i, (alpha, (time_s, trust)) in enumerate(sorted(by_alpha.items())):
             color = colors(i / max(len(by_alpha) - 1, 1))
-            ceiling = growth_per_step * np.arange(1, len(trust) + 1)
             top.plot(time_s, trust, color=color, label=f'alpha = {alpha:g}', linewidth=1.2)
-            bottom.plot(time_s, ceiling - np.asarray(trust), color=color, linewidth=1.2)
+            if ceiling is not None:
+                # trust is recorded after each step: after k steps, at most T(0) + delta*k*step
+                step_s = time_s[1] - time_s[0] if len(time_s) > 1 else 1.0
+                level = ceiling[0] + ceiling[1] * (np.asarray(time_s) - time_s[0] + step_s)
+                axes[1, col].plot(time_s, level - np.asarray(trust), color=color,
+                                  linewidth=1.2)
         top.set_title(f'{label} on {TRACE_LABELS.get(trace, trace)}')
         top.legend(loc='upper left', fontsize=8)
-        bottom.set_xlabel('time (s)')
-        for ax in (top, bottom):
+        axes[-1, col].set_xlabel('time (s)')
+        for ax in axes[:, col]:
             ax.grid(alpha=0.3)
     axes[0, 0].set_ylabel('trust level T')
-    axes[1, 0].set_ylabel('trust lost vs. ceiling δ·t')
+    if ceiling is not None:
+        axes[1, 0].set_ylabel('trust lost vs. ceiling T(0) + δ·t')
     fig.suptitle('Figure 3: trust level of the human driver during the trip')
     fig.tight_layout()
     save_figure(fig, path, dpi=120)
@@ -88,14 +96,16 @@ def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
 
 
 def run_overview(records: Sequence[Any], title: str, path: Path, *,
-                 performance_threshold: float, trust_growth_rate: float,
-                 trust_initial: float) -> None:
+                 performance_threshold: float,
+                 ceiling: tuple[float, float] | None) -> None:
     """One run: speeds, gaps, accelerations, E and P, and trust against time.
 
     Time runs from the start of the drive (the first record's stamp is 0 s), so a run timed
     by a bag's epoch stamps reads like a simulated one. The P panel draws the threshold
     P_thre (trust grows where P is above it), the trust panel the ceiling
-    ``T(0) + delta * t`` that a perfectly explicable AV (P = 1 every step) would reach.
+    ``T(0) + delta * t`` that a perfectly explicable AV (P = 1 every step) would reach, when
+    the trust model declares one
+    (:func:`~trust_monitor.trust_interface.trust_ceiling`).
 
     Args:
         records: :class:`trust_av_planner.system.metrics.StepRecord` (or objects with the
@@ -103,8 +113,8 @@ def run_overview(records: Sequence[Any], title: str, path: Path, *,
         title: the figure's title.
         path: PNG to write (whole or not at all).
         performance_threshold: P_thre of eq. (11), dimensionless.
-        trust_growth_rate: delta of eq. (10), trust units per second.
-        trust_initial: T(0), trust units.
+        ceiling: the trust model's ceiling (T(0), trust units; delta, trust units per
+            second), or None: it has none, and none is drawn.
     """
     plt = pyplot()
     t = drive_time_s(records)
@@ -129,9 +139,11 @@ def run_overview(records: Sequence[Any], title: str, path: Path, *,
                     label=f'threshold P_thre = {performance_threshold:g}')
     axes[4].set_ylabel('performance P')
     # Trust is recorded after each step: after k steps of step_s, at most T(0) + delta*k*step_s.
-    ceiling = trust_initial + trust_growth_rate * (np.asarray(t) + step_s)
-    axes[5].plot(t, ceiling, color='grey', linewidth=3.0, alpha=0.45,
-                 label=f'ceiling T(0) + δ·t (δ = {trust_growth_rate:g}/s)')
+    if ceiling is not None:
+        trust_initial, growth_per_s = ceiling
+        axes[5].plot(t, trust_initial + growth_per_s * (np.asarray(t) + step_s), color='grey',
+                     linewidth=3.0, alpha=0.45,
+                     label=f'ceiling T(0) + δ·t (δ = {growth_per_s:g}/s)')
     axes[5].plot(t, [r.trust for r in records], color='tab:green', label='trust T')
     axes[5].set_ylabel('trust T')
     axes[5].set_xlabel('time since the start of the drive (s)')

@@ -246,7 +246,9 @@ def run_case(case: Case, params_file: ParamsFiles,
         'case': dataclasses.asdict(case),
         'settings': case_settings(case, config, settings),
         'runner': settings.runner,
-        'metrics': dataclasses.asdict(metrics),
+        # every metric is a number (means over drivers, tables); a collision is its own entry
+        'metrics': {k: v for k, v in dataclasses.asdict(metrics).items() if k != 'collision'},
+        'collision': None if metrics.collision is None else metrics.collision.line(),
         'time_s': [r.t_s for r in records],
         'trust': [r.trust for r in records],
         'explicability': [r.explicability for r in records],
@@ -361,13 +363,49 @@ class RayExecutor:
                 ray.shutdown()
 
 
+def check_axis(name: str, values: Sequence[str] | Sequence[float]) -> None:
+    """Refuse an axis of a study that asks for nothing, or for a case twice (a second row of
+    the same case would weigh twice in every mean).
+
+    Args:
+        name: the axis as the user named it, e.g. ``--alphas``.
+        values: its values (names compared as the trace reader does, case-blind for the
+            shipped traces; numbers by value, so ``0.5`` and ``.50`` are one).
+
+    Raises:
+        TrustAvPlannerError: no value, or a value given twice (one line naming it).
+    """
+    if not values:
+        raise TrustAvPlannerError(f'{name}: no value given (a study of no cases); give at '
+                                  'least one, comma-separated')
+    seen: dict[object, object] = {}
+    for value in values:
+        key = value.lower() if isinstance(value, str) and value.lower() in TRACES else value
+        if key in seen:
+            shown = f'{value!r}' if value == seen[key] else f'{seen[key]!r} and {value!r}'
+            raise TrustAvPlannerError(f'{name}: {shown} given twice (each case runs once; a '
+                                      'duplicate row would weigh twice in every mean)')
+        seen[key] = value
+
+
 def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PAPER_PREDICTORS,
                 alphas: Iterable[float] = ALPHAS, driver_models: Iterable[str] = ('',),
                 trust_models: Iterable[str] = ('',)) -> list[Case]:
-    """Every combination, in table order ('' in a model axis: the params file's)."""
-    alphas, driver_models, trust_models = list(alphas), list(driver_models), list(trust_models)
-    return [Case(t, p, a, driver_model=d, trust_model=m) for t in traces for p in predictors
-            for m in trust_models for d in driver_models for a in alphas]
+    """Every combination, in table order ('' in a model axis: the params file's); one case
+    each.
+
+    Raises:
+        TrustAvPlannerError: an axis is empty or holds a value twice (:func:`check_axis`).
+    """
+    names = {'traces': list(traces), 'predictors': list(predictors),
+             'driver models': list(driver_models), 'trust models': list(trust_models)}
+    values = list(alphas)
+    for name, axis in names.items():
+        check_axis(name, axis)
+    check_axis('alphas', values)
+    return [Case(t, p, a, driver_model=d, trust_model=m) for t in names['traces']
+            for p in names['predictors'] for m in names['trust models']
+            for d in names['driver models'] for a in values]
 
 
 def run_sweep(cases: Sequence[Case], params_file: ParamsFiles, results_dir: Path,

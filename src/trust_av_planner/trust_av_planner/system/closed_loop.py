@@ -39,7 +39,7 @@ from trust_av_planner.system.config import RunConfig
 from trust_av_planner.system.metrics import Metrics, StepRecord, compute_metrics
 from trust_monitor.common.component_checks import ComponentError
 from trust_monitor.common.grids import grid_times, hold_at
-from trust_monitor.common.kinematics import VehicleState, gap_m, integrate
+from trust_monitor.common.kinematics import VehicleState, collision, gap_m, integrate
 from trust_monitor.trust_model import TrustEstimator
 
 LOG = logging.getLogger(__name__)
@@ -211,6 +211,10 @@ def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | No
         initial: initial odometry; default :func:`equilibrium_start`.
         on_step: called with (steps done, total steps) after each step (progress).
 
+    A gap at or below 0 m is a collision (:func:`~trust_monitor.common.kinematics.collision`):
+    the run ends with that step (its record is the last one) and ``result.metrics.collision``
+    names it.
+
     Raises:
         ComponentError: a component broke its interface; its ``partial`` holds the steps
             before (a :class:`SimResult`).
@@ -223,6 +227,13 @@ def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | No
                        plan_step_s=None if step_s == loop.period_s else step_s)
     for record in _keeping(loop.steps(), result):
         result.records.append(record)
+        crash = collision(len(result.records) - 1, record.t_s, record.av_gap_m,
+                          record.human_gap_m)
+        if crash is not None:      # the run ends: what follows is no car following
+            LOG.info('%s', crash.line())   # the command prints it, once
+            if on_step is not None:
+                on_step(len(result.records), trace.steps)
+            break
         if min(record.av_gap_m, record.human_gap_m) < config.min_safe_gap_m:
             LOG.warning('t = %.1f s: gap below the safety minimum %.2f m (AV %.3f m, human '
                         '%.3f m)', record.t_s, config.min_safe_gap_m, record.av_gap_m,

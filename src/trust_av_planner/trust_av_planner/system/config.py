@@ -191,6 +191,10 @@ class RunConfig:
     follower: FollowerConfig = field(default_factory=FollowerConfig)
     predictor_configs: tuple[tuple[str, Any], ...] = ()
     driver_configs: tuple[tuple[str, Any], ...] = ()
+    node_params: Mapping[str, Mapping[str, Any]] = field(default_factory=dict, compare=False)
+    """Node name -> every parameter it declares and its effective value (all params-file
+    layers and the command line's overrides merged, defaults filled in): what a run's
+    record keeps (:mod:`trust_av_planner.system.run_record`)."""
 
     def trust_model(self) -> TrustModel:
         """A fresh instance of the trust model ``trust.trust_model`` with its parameters."""
@@ -223,9 +227,12 @@ class RunConfig:
                 f"{vmax:g} m/s), and speed_max_from_trace takes both vehicles' speed limit "
                 'from it; use a trace in which the lead moves, or speed_max_from_trace: false '
                 'with speed_max_mps')
+        node_params = {node: ({**values, 'speed_max_mps': vmax} if 'speed_max_mps' in values
+                              else values) for node, values in self.node_params.items()}
         return dataclasses.replace(
             self, planner=dataclasses.replace(self.planner, speed_max_mps=vmax),
-            driver=dataclasses.replace(self.driver, speed_max_mps=vmax))
+            driver=dataclasses.replace(self.driver, speed_max_mps=vmax),
+            node_params=node_params)
 
 
 OVERRIDES_WHERE = 'command-line options'
@@ -355,6 +362,10 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         predictor_configs=configs[registry.PREDICTORS],
         driver_configs=configs[registry.DRIVERS],
         ignored=tuple(ignored),
+        node_params={node: {f.name: getattr(config, f.name)
+                            for (owner, _), config in built.items() if owner == node
+                            for f in dataclasses.fields(config)}
+                     for node in NODE_COMPONENTS},
     )
 
 

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trust_monitor.common.kinematics import Collision, collision
+
 
 @dataclass(frozen=True)
 class StepRecord:
@@ -54,6 +56,18 @@ class Metrics:
     fallback_steps: int
     driver_fallback_steps: int
     unsafe_steps: int = 0
+    collision: Collision | None = None
+    """The first step whose gaps show a collision; the figures above end with it."""
+
+
+def first_collision(records: list[StepRecord]) -> Collision | None:
+    """The first collision the records show (a gap at or below 0 m,
+    :func:`~trust_monitor.common.kinematics.collision`), or None."""
+    for index, record in enumerate(records):
+        found = collision(index, record.t_s, record.av_gap_m, record.human_gap_m)
+        if found is not None:
+            return found
+    return None
 
 
 def compute_metrics(records: list[StepRecord], min_safe_gap_m: float,
@@ -66,9 +80,18 @@ def compute_metrics(records: list[StepRecord], min_safe_gap_m: float,
     margin, ``standstill_gap_m - safety_gap_margin_m``); every shipped run must have none.
     ``plan_step_s``: the step of the plans' grid when it is not the control period
     (``prediction_grid: model_step`` at a faster rate); None = the control period.
+    A run that collided (:func:`first_collision`) is summarised up to and including the
+    collision step (a graph run records the steps after it; they are not a car-following
+    run any more), and ``collision`` names it.
+
+    Raises:
+        ValueError: no records (there is nothing to summarise).
     """
     if not records:
         raise ValueError('no steps to summarise')
+    crash = first_collision(records)
+    if crash is not None:
+        records = records[:crash.step + 1]
     errors = expectation_errors(records, plan_step_s)
     return Metrics(
         steps=len(records),
@@ -80,6 +103,7 @@ def compute_metrics(records: list[StepRecord], min_safe_gap_m: float,
         fallback_steps=sum(not r.solver_success for r in records),
         driver_fallback_steps=sum(not r.driver_success for r in records),
         unsafe_steps=sum(min(r.av_gap_m, r.human_gap_m) < min_safe_gap_m for r in records),
+        collision=crash,
     )
 
 

@@ -43,6 +43,55 @@ def gap_m(lead: VehicleState, follower: VehicleState, vehicle_length_m: float) -
     return lead.position_m - follower.position_m - vehicle_length_m
 
 
+@dataclass(frozen=True)
+class Collision:
+    """Two vehicles touched: a bumper-to-bumper gap at or below zero.
+
+    Attributes:
+        step: the control step whose start state holds the gap (0-based).
+        t_s: its time, s.
+        front: the vehicle ahead (``preceding traffic`` or ``AV``).
+        rear: the vehicle that reached it (``AV`` or ``human``).
+        gap_m: the gap, m (<= 0).
+    """
+
+    step: int
+    t_s: float
+    front: str
+    rear: str
+    gap_m: float
+
+    def line(self) -> str:
+        """One line naming the step and the vehicles, e.g. ``collision at step 41 (t = 41.0
+        s): the AV reached the preceding traffic (gap -0.73 m)``."""
+        return (f'collision at step {self.step} (t = {self.t_s:g} s): the {self.rear} reached '
+                f'the {self.front} (gap {self.gap_m:.2f} m)')
+
+    def short(self) -> str:
+        """For a summary table: ``step 41, AV into preceding traffic``."""
+        return f'step {self.step}, {self.rear} into {self.front}'
+
+
+def collision(step: int, t_s: float, av_gap_m: float,
+              human_gap_m: float | None = None) -> Collision | None:
+    """The collision a step's gaps show, or None: the AV's gap to the preceding traffic at
+    or below 0 m (named first when both are), else the human's gap to the AV at or below
+    0 m. A NaN gap is not a collision (the loop's output checks refuse it).
+
+    Args:
+        step: the control step (0-based).
+        t_s: its time, s.
+        av_gap_m: the AV's gap to the preceding traffic, m.
+        human_gap_m: the human's gap to the AV, m (None: no follower, e.g. a drive whose
+            follower state is not known).
+    """
+    if av_gap_m <= 0.0:
+        return Collision(step, t_s, 'preceding traffic', 'AV', float(av_gap_m))
+    if human_gap_m is not None and human_gap_m <= 0.0:
+        return Collision(step, t_s, 'AV', 'human', float(human_gap_m))
+    return None
+
+
 def advance(position_m: float, speed_mps: float, accel_mps2: float,
             dt_s: float) -> tuple[float, float]:
     """A simulated vehicle over ``dt_s`` of wall time (wall mode of ``ego_plant`` and
