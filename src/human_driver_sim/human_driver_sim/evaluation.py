@@ -21,11 +21,13 @@ through the same gap computation.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
+from scipy import stats
 
 from human_driver_sim.car_following import FollowingPair
 from human_driver_sim.driver_mpc import DriverConfig
@@ -277,8 +279,62 @@ def paired_difference(result: Evaluation, protocol: str, model: str,
     theirs = result.per_pair[protocol][other]
     diffs = [mine[k].gap_nrmse - theirs[k].gap_nrmse for k in sorted(mine)]
     mean, half = mean_ci95(diffs)
+    low, high = cluster_ci95(dict(zip(sorted(mine), diffs, strict=True)))
     return {'mean': mean, 'ci95': half, 'pairs': len(diffs),
-            'better': int(sum(d < 0.0 for d in diffs))}
+            'better': int(sum(d < 0.0 for d in diffs)),
+            'platoons': len(set(platoons(sorted(mine)).values())),
+            'cluster_ci95': [low, high]}
+
+
+def platoons(pairs: Sequence[str]) -> dict[str, int]:
+    """The platoon of each pair (named ``SOURCE:LEADER->FOLLOWER``): pairs that share a
+    vehicle, directly or through other pairs, are one platoon; numbered from 0 in the order
+    of their first pair."""
+    parent: dict[str, str] = {}
+
+    def root(vehicle: str) -> str:
+        while parent.setdefault(vehicle, vehicle) != vehicle:
+            parent[vehicle] = parent[parent[vehicle]]
+            vehicle = parent[vehicle]
+        return vehicle
+
+    ends = {}
+    for pair in pairs:
+        source, _, link = pair.rpartition(':')
+        leader, arrow, follower = link.partition('->')
+        if not arrow:
+            raise ValueError(f'{pair!r} is not a pair name SOURCE:LEADER->FOLLOWER')
+        ends[pair] = (f'{source}:{leader}', f'{source}:{follower}')
+        parent[root(ends[pair][0])] = root(ends[pair][1])
+    numbers: dict[str, int] = {}
+    return {pair: numbers.setdefault(root(a), len(numbers)) for pair, (a, _) in ends.items()}
+
+
+CLUSTER_RESAMPLES = 9999
+"""Resamples of :func:`cluster_ci95`."""
+
+
+def cluster_ci95(values: Mapping[str, float], *, seed: int = 0) -> tuple[float, float]:
+    """95 % interval of the mean over pairs from a cluster bootstrap: whole platoons
+    (:func:`platoons`) are resampled, because pairs of one platoon share vehicles and are
+    not independent (a Student t over pairs is then too narrow). scipy's percentile
+    bootstrap of the ratio sum / count over platoons, seeded. One platoon gives no interval
+    (nan, nan)."""
+    cluster = platoons(list(values))
+    count = max(cluster.values()) + 1
+    sums = np.zeros(count)
+    sizes = np.zeros(count)
+    for pair, value in values.items():
+        sums[cluster[pair]] += value
+        sizes[cluster[pair]] += 1
+    if count < 2:
+        return math.nan, math.nan
+    result = stats.bootstrap(
+        (sums, sizes), lambda s, n, axis=-1: s.sum(axis=axis) / n.sum(axis=axis),
+        paired=True, vectorized=True, n_resamples=CLUSTER_RESAMPLES, method='percentile',
+        rng=np.random.default_rng(seed))
+    interval = result.confidence_interval
+    return float(interval.low), float(interval.high)
 
 
 def format_table(result: Evaluation, protocol: str) -> str:

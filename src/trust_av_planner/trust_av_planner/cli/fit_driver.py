@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import datetime
 import json
+import math
 import subprocess
 import time
 from collections.abc import Mapping, Sequence
@@ -321,7 +322,16 @@ def run(args: argparse.Namespace) -> int:
                   f'{t["best_idm"]} {t["idm_gap_nrmse"]:.3f} = {t["ratio"]:.3f} '
                   f'({"met" if t["met"] else "not met"}, <= {TARGET_RATIO}); paired '
                   f'difference {d["mean"]:+.3f} ± {d["ci95"]:.3f} (MPC better on '
-                  f'{d["better"]} of {d["pairs"]})')
+                  f'{d["better"]} of {d["pairs"]}); {platoon_interval(d)}')
     print(f'selected: {document["pooled"]}; fit time {fit_time_s:.1f} s; wrote {args.out} '
           f'and {eval_path}')
     return 0
+
+
+def platoon_interval(difference: dict[str, Any]) -> str:
+    """The cluster-bootstrap interval of a paired difference, in words."""
+    low, high = difference['cluster_ci95']
+    if math.isnan(low):
+        return f'{difference["platoons"]} platoon: no cluster interval'
+    return (f'cluster bootstrap over {difference["platoons"]} platoons '
+            f'[{low:+.3f}, {high:+.3f}]')
