@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
-from trust_monitor.errors import TrustMonitorError, one_line
+from trust_monitor.errors import TrustMonitorError, did_you_mean, one_line
 
 PREDICTORS = 'trust_av.predictors'
 """Entry-point group of the plan estimators (the plan the human expects, u_R^H)."""
@@ -107,7 +107,8 @@ def get(group: str, name: str) -> Component:
     found = [ep for ep in _entry_points(group) if ep.name == name]
     if not found:
         raise RegistryError(f'unknown {_group_name(group)} {name!r} (registered: '
-                            f'{", ".join(names(group)) or "none"})')
+                            f'{", ".join(names(group)) or "none"})'
+                            f'{did_you_mean(name, names(group))}')
     if len({ep.value for ep in found}) > 1:
         raise RegistryError(f'{_group_name(group)} {name!r} is registered twice: '
                             f'{", ".join(sorted(ep.value for ep in found))}')
