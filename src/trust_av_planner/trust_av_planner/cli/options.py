@@ -13,11 +13,11 @@ from types import TracebackType
 
 from tqdm import tqdm
 
-from preceding_traffic.traces import SHIPPED_TRACES
+from preceding_traffic.traces import SHIPPED_TRACES, SpeedTrace
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph import stop_signals
 from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, RunConfig
 from trust_av_planner.system.metrics import Metrics
 from trust_monitor.common import registry
 from trust_monitor.common.output_files import cannot_write, odd_path
@@ -227,10 +227,15 @@ def run_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
     return {'planner': planner, 'preceding_traffic': traffic, 'human_driver': driver}
 
 
-def format_metrics(metrics: Metrics, title: str) -> str:
-    """The metrics table printed at the end of a run."""
+def format_metrics(metrics: Metrics, title: str, *,
+                   trust_ceiling: float | None = None) -> str:
+    """The metrics table printed at the end of a run; ``trust_ceiling`` (the paper's
+    T(0) + delta * t over the run) is shown under the final trust when given."""
+    ceiling = [] if trust_ceiling is None else [
+        ('trust ceiling T(0) + delta*t', f'{trust_ceiling:.3f}')]
     rows = [('steps', f'{metrics.steps}'),
             ('final trust', f'{metrics.final_trust:.3f}'),
+            *ceiling,
             ('mean explicability E', f'{metrics.mean_explicability:.5f}'),
             ('prediction RMSE (m/s^2)', f'{metrics.rmse_mps2:.4f}'),
             ('min AV gap (m)', f'{metrics.min_av_gap_m:.3f}'),
@@ -244,6 +249,14 @@ def format_metrics(metrics: Metrics, title: str) -> str:
     return '\n'.join(lines)
 
 
+def trust_ceiling(config: RunConfig, trace: SpeedTrace) -> float | None:
+    """The most trust the paper's model can reach on ``trace``: T(0) + delta * t (None for
+    another trust model)."""
+    if config.trust.trust_model != 'paper':
+        return None
+    return config.trust.trust_initial + config.trust.trust_growth_rate * trace.steps * trace.dt_s
+
+
 class Progress:
     """A progress bar on stderr (tqdm) fed with absolute counts (``update(done, total)``, the
     ``on_step`` callback of the runners). On a terminal it is redrawn at most every 0.1 s;
@@ -255,11 +268,15 @@ class Progress:
         label: what is counted, e.g. ``simulate us06``.
         total: the expected count.
         shown: False writes nothing (``--no-progress``).
+        timed: the final line gives the elapsed time (False: the command prints its own
+            timings, which this one would not agree with).
     """
 
-    def __init__(self, label: str, total: int, *, shown: bool = True) -> None:
+    def __init__(self, label: str, total: int, *, shown: bool = True,
+                 timed: bool = True) -> None:
         self.label = label
         self.shown = shown
+        self.timed = timed
         self.interactive = shown and sys.stderr.isatty()
         self._start = time.monotonic()
         self._bar = tqdm(total=max(total, 1), desc=label, unit='step', mininterval=0.1,
@@ -281,7 +298,8 @@ class Progress:
         self._bar.close()
         if self.shown and not self.interactive:
             elapsed = time.monotonic() - self._start
-            print(f'{self.label}: {self.done}/{self.total} in {elapsed:.1f} s', file=sys.stderr)
+            timing = f' in {elapsed:.1f} s' if self.timed else ' steps'
+            print(f'{self.label}: {self.done}/{self.total}{timing}', file=sys.stderr)
 
     def __enter__(self) -> Progress:
         return self

@@ -15,6 +15,7 @@ from trust_av_planner.cli.options import (
     positive_hz,
     run_overrides,
     steps_value,
+    trust_ceiling,
 )
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import check_control_rate, load_run_config
@@ -41,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
             write_table(result, args.out)
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
              f'alpha = {config.planner.alpha:g} (in-process, {1.0 / trace.dt_s:g} Hz)')
-    print(format_metrics(result.metrics, title))
+    print(format_metrics(result.metrics, title, trust_ceiling=trust_ceiling(config, trace)))
     if args.out is not None:
         print(f'per-step table: {args.out}')
     return 0

@@ -50,7 +50,7 @@ def speed_profiles(traces: Sequence[SpeedTrace], path: Path) -> None:
 
 def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
                                                                 Sequence[float]]]],
-                    trace: str, path: Path, growth_per_step: float) -> None:
+                    trace: str, path: Path, growth_per_step: float, note: str = '') -> None:
     """Figure 3: trust over time for every alpha, one column per predictor.
 
     The top row is the trust level itself (the paper's figure). The bottom row shows the
@@ -62,6 +62,7 @@ def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
         trace: trace name for the title.
         path: PNG to write.
         growth_per_step: delta of eq. (10).
+        note: a line under the title (a truncated run says so).
     """
     plt = pyplot()
     fig, axes = plt.subplots(2, len(series), figsize=(6 * len(series), 7), squeeze=False,
@@ -81,7 +82,8 @@ def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
             ax.grid(alpha=0.3)
     axes[0, 0].set_ylabel('trust level T')
     axes[1, 0].set_ylabel('trust lost vs. ceiling δ·t')
-    fig.suptitle('Figure 3: trust level of the human driver during the trip')
+    fig.suptitle('Figure 3: trust level of the human driver during the trip'
+                 + (f'\n{note}' if note else ''))
     fig.tight_layout()
     save_figure(fig, path, dpi=120)
     plt.close(fig)
@@ -89,13 +91,17 @@ def trust_over_time(series: Mapping[str, Mapping[float, tuple[Sequence[float],
 
 def run_overview(records: Sequence[Any], title: str, path: Path, *,
                  performance_threshold: float, trust_growth_rate: float,
-                 trust_initial: float) -> None:
-    """One run: speeds, gaps, accelerations, E and P, and trust against time.
+                 trust_initial: float, baseline: Sequence[Any] | None = None,
+                 trust_ceiling: bool = True) -> None:
+    """One run: speeds, gaps, accelerations, E and P, trust, and the trust lost against the
+    ceiling, against time; beside it (thin dashed lines) the trust-unaware AV (alpha = 0) on
+    the same drive when ``baseline`` is given.
 
     Time runs from the start of the drive (the first record's stamp is 0 s), so a run timed
     by a bag's epoch stamps reads like a simulated one. The P panel draws the threshold
-    P_thre (trust grows where P is above it), the trust panel the ceiling
-    ``T(0) + delta * t`` that a perfectly explicable AV (P = 1 every step) would reach.
+    P_thre (trust grows where P is above it), the trust panels the ceiling
+    ``T(0) + delta * t`` that a perfectly explicable AV (P = 1 every step) would reach and
+    how far below it each AV's trust is (what alpha changes when trust stays near it).
 
     Args:
         records: :class:`trust_av_planner.system.metrics.StepRecord` (or objects with the
@@ -105,38 +111,61 @@ def run_overview(records: Sequence[Any], title: str, path: Path, *,
         performance_threshold: P_thre of eq. (11), dimensionless.
         trust_growth_rate: delta of eq. (10), trust units per second.
         trust_initial: T(0), trust units.
+        baseline: the same drive's records with alpha = 0 (the trust-unaware AV), or None.
+        trust_ceiling: draw the ceiling (the paper's trust model; another model has none).
     """
     plt = pyplot()
     t = drive_time_s(records)
     step_s = t[1] - t[0] if len(t) > 1 else 1.0
-    fig, axes = plt.subplots(6, 1, figsize=(9, 12.5), sharex=True)
+    fig, axes = plt.subplots(7, 1, figsize=(9, 14.5), sharex=True)
+    aware = 'trust-aware AV' if baseline is not None else 'AV'
+    suffix = '' if baseline is None else f', {aware}'
+    unaware = 'trust-unaware AV (α = 0)'
+    base = baseline if baseline is not None and len(baseline) == len(records) else None
+    thin = {'linestyle': '--', 'linewidth': 0.9, 'color': 'tab:grey'}
     axes[0].plot(t, [r.traffic_speed_mps for r in records], label='preceding traffic')
-    axes[0].plot(t, [r.av_speed_mps for r in records], label='AV')
+    axes[0].plot(t, [r.av_speed_mps for r in records], label=aware)
     axes[0].plot(t, [r.human_speed_mps for r in records], label='human', linestyle='--')
     axes[0].set_ylabel('speed (m/s)')
     axes[1].plot(t, [r.av_gap_m for r in records], label='AV to traffic')
     axes[1].plot(t, [r.human_gap_m for r in records], label='human to AV')
     axes[1].set_ylabel('gap (m)')
-    axes[2].plot(t, [r.av_accel_mps2 for r in records], label='AV')
+    axes[2].plot(t, [r.av_accel_mps2 for r in records], label=aware)
     axes[2].plot(t, [r.human_accel_mps2 for r in records], label='human', linestyle='--')
     axes[2].plot(t, [r.expected_plan_mps2[0] for r in records], label='expected (u_R^H)',
                  linestyle=':')
     axes[2].set_ylabel('acceleration (m/s²)')
-    axes[3].plot(t, [r.explicability for r in records], color='tab:red')
+    axes[3].plot(t, [r.explicability for r in records], color='tab:red', label=aware)
     axes[3].set_ylabel('explicability E')
-    axes[4].plot(t, [r.performance for r in records], color='tab:purple', label='P')
+    axes[3].set_title('E: 0 = the AV does what the human expects; higher = less explicable',
+                      fontsize=9, loc='left')
+    axes[4].plot(t, [r.performance for r in records], color='tab:purple', label=f'P{suffix}')
     axes[4].axhline(performance_threshold, color='black', linestyle='--', linewidth=0.9,
                     label=f'threshold P_thre = {performance_threshold:g}')
     axes[4].set_ylabel('performance P')
     # Trust is recorded after each step: after k steps of step_s, at most T(0) + delta*k*step_s.
     ceiling = trust_initial + trust_growth_rate * (np.asarray(t) + step_s)
-    axes[5].plot(t, ceiling, color='grey', linewidth=3.0, alpha=0.45,
-                 label=f'ceiling T(0) + δ·t (δ = {trust_growth_rate:g}/s)')
-    axes[5].plot(t, [r.trust for r in records], color='tab:green', label='trust T')
+    if trust_ceiling:
+        axes[5].plot(t, ceiling, color='grey', linewidth=3.0, alpha=0.45,
+                     label=f'ceiling T(0) + δ·t (δ = {trust_growth_rate:g}/s)')
+    axes[5].plot(t, [r.trust for r in records], color='tab:green', label=f'trust T{suffix}')
     axes[5].set_ylabel('trust T')
-    axes[5].set_xlabel('time since the start of the drive (s)')
-    for ax, corner in zip(axes, ('upper right',) * 4 + ('lower left', 'upper left'),
-                          strict=True):
+    axes[6].plot(t, ceiling - np.asarray([r.trust for r in records]), color='tab:green',
+                 label=aware)
+    axes[6].set_ylabel('ceiling − T' if trust_ceiling else 'T(0) + δ·t − T')
+    axes[6].set_title('trust lost against the ceiling (what α changes)', fontsize=9,
+                      loc='left')
+    axes[6].set_xlabel('time since the start of the drive (s)')
+    if base is not None:
+        axes[0].plot(t, [r.av_speed_mps for r in base], label=unaware, **thin)
+        axes[1].plot(t, [r.av_gap_m for r in base], label=f'AV to traffic, {unaware}', **thin)
+        axes[2].plot(t, [r.av_accel_mps2 for r in base], label=unaware, **thin)
+        axes[3].plot(t, [r.explicability for r in base], label=unaware, **thin)
+        axes[4].plot(t, [r.performance for r in base], label=f'P, {unaware}', **thin)
+        axes[5].plot(t, [r.trust for r in base], label=f'trust T, {unaware}', **thin)
+        axes[6].plot(t, ceiling - np.asarray([r.trust for r in base]), label=unaware, **thin)
+    for ax, corner in zip(axes, ('upper right',) * 4 + ('lower left', 'upper left',
+                                                        'upper left'), strict=True):
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc=corner, fontsize=8)
