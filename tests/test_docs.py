@@ -285,3 +285,17 @@ def test_the_site_needs_no_internet() -> None:
     for key in ('extra_javascript', 'extra_css'):
         assert not any('://' in str(entry) for entry in config.get(key, []))
     assert config['hooks'] == ['docs/hooks.py']
+
+
+def test_every_generated_table_says_where_to_find_it() -> None:
+    """In the Markdown source (on GitHub) a marker is a bare comment: the line after it says
+    where the table is; the site replaces both with the table."""
+    marker = re.compile(r'^<!-- generated: [a-z_]+ -->\n(.*)$', re.MULTILINE)
+    pages = [p for p in DOCS.rglob('*.md') if marker.search(p.read_text())]
+    assert len(pages) >= 4
+    for page in pages:
+        text = page.read_text()
+        assert all(line.startswith('> Generated table: ') for line in marker.findall(text)), \
+            page.name
+        filled = reference.fill(text)
+        assert '<!-- generated' not in filled and '> Generated table:' not in filled
