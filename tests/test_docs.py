@@ -32,7 +32,7 @@ from trust_monitor.common.topics import TOPICS, topic_table_markdown
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = REPO / 'docs'
-TUTORIALS = sorted((DOCS / 'tutorials').glob('*.md'))
+TUTORIALS = sorted((DOCS / 'tutorials').glob('*.md')) + sorted((DOCS / 'how-to').glob('*.md'))
 WALL_CLOCK_PAGES = {'connect-a-vehicle.md'}      # trust-av shadow runs at real time
 PLUGIN_PAGES = {'write-a-plugin.md'}     # run with the example plug-in installed
 INCLUDE = '--8<-- '                      # a block that includes a repository file
