@@ -23,11 +23,11 @@ stamp="$venv/.trust_av_stamp"
 say() { echo "[bootstrap] $*" >&2; }
 
 # pip install "$@", its output reduced to a count of the requirements it has gone through
-# (label $1, expected count $2).
+# (label $1, expected count $2); pip's whole output is kept in .venv/pip-install.log.
 pip_counted() {
   local label="$1" total="$2"; shift 2
   "$venv/bin/python" -m pip install --disable-pip-version-check --progress-bar off "$@" \
-    2> >(grep -v "^WARNING: Location" >&2) | {
+    2> >(grep -v "^WARNING: Location" >&2) | tee "$venv/pip-install.log" | {
     local n=0 line name
     while IFS= read -r line; do
       case "$line" in
