@@ -18,7 +18,6 @@ import numpy as np
 from human_driver_sim.driver_mpc import DriverConfig, DriverResult
 from trust_monitor.common import registry
 from trust_monitor.common.params import check_fields, param, require
-from trust_monitor.errors import did_you_mean
 
 
 class Follower(Protocol):
@@ -46,8 +45,7 @@ class FollowerConfig:
         check_fields(self)
         drivers = registry.names(registry.DRIVERS)
         require(self.driver_model in drivers,
-                f'driver_model must be one of {list(drivers)}, got {self.driver_model!r}'
-                f'{did_you_mean(self.driver_model, drivers)}')
+                registry.not_one_of('driver_model', self.driver_model, drivers))
 
 
 def make_follower(driver: DriverConfig, follower: FollowerConfig | None = None,

@@ -42,7 +42,6 @@ from trust_monitor.common.params import (
     require,
 )
 from trust_monitor.common.solver import nmpc_solver_options, solve
-from trust_monitor.errors import did_you_mean
 from trust_monitor.trust_interface import TrustModel, make_trust_model
 from trust_monitor.trust_interface import explicability_bound as trust_bound
 from trust_monitor.trust_model import TrustConfig, explicability
@@ -153,8 +152,7 @@ class PlannerConfig:
                 f'{self.speed_max_mps}')
         predictors = registry.names(registry.PREDICTORS)
         require(self.predictor in predictors,
-                f'predictor must be one of {list(predictors)}, got {self.predictor!r}'
-                f'{did_you_mean(self.predictor, predictors)}')
+                registry.not_one_of('predictor', self.predictor, predictors))
         require(self.stale_decel_mps2 >= self.accel_min_mps2,
                 f'stale_decel_mps2 must be >= accel_min_mps2 = {self.accel_min_mps2:g}, got '
                 f'{self.stale_decel_mps2:g}')

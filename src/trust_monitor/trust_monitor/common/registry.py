@@ -17,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
@@ -74,6 +74,12 @@ class Component:
         if unknown:
             raise RegistryError(f'component {self.name!r} needs unknown {sorted(unknown)} '
                                 f'(known: {sorted(KNOWN_NEEDS)})')
+
+
+def not_one_of(what: str, name: str, known: Sequence[str]) -> str:
+    """The one line refusing ``name`` for ``what`` (a parameter that names a registered
+    component), with a "did you mean" from ``known``."""
+    return f'{what} must be one of {list(known)}, got {name!r}{did_you_mean(name, known)}'
 
 
 def _group_name(group: str) -> str:
