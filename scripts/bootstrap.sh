@@ -31,9 +31,10 @@ pip_counted() {
     local n=0 line name
     while IFS= read -r line; do
       case "$line" in
-        "Collecting "*|"Requirement already satisfied: "*)
+        "Collecting "*|"Requirement already satisfied: "*|"Processing "*)
           n=$((n + 1)); name="${line#Collecting }"; name="${name#Requirement already satisfied: }"
-          name="${name%% *}"
+          name="${name#Processing }"; name="${name%% *}"; name="${name##*/}"
+          [ "$n" -gt "$total" ] && total=$n   # a requirement that pulls in one more
           if [ -t 2 ]; then printf '\r[bootstrap] %s: %d/%d %-50.50s' "$label" "$n" "$total" "$name" >&2
           elif [ $((n % 25)) = 0 ]; then say "$label: $n/$total ($name)"; fi ;;
         "Installing collected packages: "*)
