@@ -39,7 +39,7 @@ pip_counted() {
           elif [ $((n % 25)) = 0 ]; then say "$label: $n/$total ($name)"; fi ;;
         "Installing collected packages: "*)
           [ -t 2 ] && printf '\n' >&2
-          say "$label: resolved; installing $(( $(tr -cd , <<<"$line" | wc -c) + 1 )) packages (pip shows no progress while it unpacks)" ;;
+          say "$label: resolved; installing $(( $(tr -cd , <<<"$line" | wc -c) + 1 )) packages (pip shows nothing while it unpacks: counted every 10 s)" ;;
       esac
     done
     [ -t 2 ] && [ "$n" -gt 0 ] && printf '\n' >&2
@@ -61,7 +61,19 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   setup_began=$SECONDS
   pins=$(grep -c '^[A-Za-z0-9].*==' "$root/requirements.txt")
   say "step 2/4: installing $pins pinned dependencies (requirements.txt; with pip's cache warm about a minute, cold a few)"
+  # pip prints nothing while it unpacks (minutes for torch on a busy machine): count the
+  # installed distributions every 10 s meanwhile
+  site="$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_path("purelib"))')"
+  ( last=""
+    while sleep 10 && kill -0 $$ 2>/dev/null; do   # ends with this shell, whatever happens
+      count=$(find "$site" -maxdepth 1 -name '*.dist-info' | wc -l)
+      [ "$count" != "$last" ] && [ -n "$last" ] && say "dependencies: $count distributions installed so far"
+      last=$count
+    done ) &
+  watcher=$!
   pip_counted dependencies "$pins" -r "$root/requirements.txt"
+  kill "$watcher" 2>/dev/null || true
+  wait "$watcher" 2>/dev/null || true
   say "step 2/4 done in $((SECONDS - setup_began)) s"
   step_began=$SECONDS
   say "step 3/4: installing the ${#packages[@]} project packages (editable: ${packages[*]})"
