@@ -5,6 +5,7 @@ table, and the progress bar (tqdm)."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -255,6 +256,19 @@ def trust_ceiling(config: RunConfig, trace: SpeedTrace) -> float | None:
     if config.trust.trust_model != 'paper':
         return None
     return config.trust.trust_initial + config.trust.trust_growth_rate * trace.steps * trace.dt_s
+
+
+def process_age_s() -> float:
+    """How long this process has run, s (Linux's /proc; 0.0 where it cannot be read): what a
+    command's timings add to its own clock for Python's start-up and imports."""
+    try:
+        with open('/proc/self/stat', encoding='ascii') as stat, \
+                open('/proc/uptime', encoding='ascii') as uptime:
+            started_ticks = int(stat.read().rsplit(')', 1)[1].split()[19])
+            return max(0.0, float(uptime.read().split()[0])
+                       - started_ticks / os.sysconf('SC_CLK_TCK'))
+    except (OSError, ValueError, IndexError):
+        return 0.0
 
 
 class Progress:
