@@ -17,8 +17,38 @@ stamp_inputs() {
 want="$(stamp_inputs | sha256sum | cut -d' ' -f1)"
 stamp="$venv/.trust_av_stamp"
 
+# Every step says what it does, how far it is and how long it took: pip's lines are counted
+# (one line per package on a terminal, redrawn; every 25th in a log), the tf2_msgs build shows
+# cmake's percentage.
+say() { echo "[bootstrap] $*" >&2; }
+
+# pip install "$@", its output reduced to a count of the requirements it has gone through
+# (label $1, expected count $2); pip's whole output is kept in .venv/pip-install.log.
+pip_counted() {
+  local label="$1" total="$2"; shift 2
+  "$venv/bin/python" -m pip install --disable-pip-version-check --progress-bar off "$@" \
+    2> >(grep -v "^WARNING: Location" >&2) | tee "$venv/pip-install.log" | {
+    local n=0 line name
+    while IFS= read -r line; do
+      case "$line" in
+        "Collecting "*|"Requirement already satisfied: "*|"Processing "*)
+          n=$((n + 1)); name="${line#Collecting }"; name="${name#Requirement already satisfied: }"
+          name="${name#Processing }"; name="${name%% *}"; name="${name##*/}"
+          [ "$n" -gt "$total" ] && total=$n   # a requirement that pulls in one more
+          if [ -t 2 ]; then printf '\r[bootstrap] %s: %d/%d %-50.50s' "$label" "$n" "$total" "$name" >&2
+          elif [ $((n % 25)) = 0 ]; then say "$label: $n/$total ($name)"; fi ;;
+        "Installing collected packages: "*)
+          [ -t 2 ] && printf '\n' >&2
+          say "$label: resolved; installing $(( $(tr -cd , <<<"$line" | wc -c) + 1 )) packages (pip shows nothing while it unpacks: counted every 10 s)" ;;
+      esac
+    done
+    [ -t 2 ] && [ "$n" -gt 0 ] && printf '\n' >&2
+    true
+  }
+}
+
 if [ ! -x "$venv/bin/python" ]; then
-  echo "[bootstrap] creating virtual environment $venv ($("$python_bin" --version))" >&2
+  say "step 1/4: creating the virtual environment $venv ($("$python_bin" --version))"
   "$python_bin" -m venv "$venv"
 fi
 # colcon never crawls the environment (its share/ holds the message wheels' package.xml files):
@@ -28,17 +58,42 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   # the pins need CPython 3.11.5 or a later 3.11 (pymdown-extensions 13.1.2, for one); Debian
   # 12's python3 is 3.11.2: say so in one line instead of pip's page of versions
   if ! "$venv/bin/python" -c 'import sys; sys.exit(not (3, 11, 5) <= sys.version_info[:3] < (3, 12))'; then
-    echo "[bootstrap] error: $venv has $("$venv/bin/python" --version 2>&1); the pinned dependencies need Python 3.11.5 or a later 3.11: remove $venv and run again with PYTHON=/path/to/that/python" >&2
+    say "error: $venv has $("$venv/bin/python" --version 2>&1); the pinned dependencies need Python 3.11.5 or a later 3.11: remove $venv and run again with PYTHON=/path/to/that/python"
     exit 2
   fi
-  echo "[bootstrap] installing pinned dependencies (first run takes about a minute)" >&2
-  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$root/requirements.txt" 2> >(grep -v "^WARNING: Location" >&2)
+  setup_began=$SECONDS
+  pins=$(grep -c '^[A-Za-z0-9].*==' "$root/requirements.txt")
+  say "step 2/4: installing $pins pinned dependencies (requirements.txt; with pip's cache warm about a minute, cold a few)"
+  # pip prints nothing while it unpacks (minutes for torch on a busy machine): count the
+  # installed distributions every 10 s meanwhile
+  site="$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_path("purelib"))')"
+  ( last=""
+    while sleep 10 && kill -0 $$ 2>/dev/null; do   # ends with this shell, whatever happens
+      count=$(find "$site" -maxdepth 1 -name '*.dist-info' | wc -l)
+      [ "$count" != "$last" ] && [ -n "$last" ] && say "dependencies: $count distributions installed so far"
+      last=$count
+    done ) &
+  watcher=$!
+  pip_counted dependencies "$pins" -r "$root/requirements.txt"
+  kill "$watcher" 2>/dev/null || true
+  wait "$watcher" 2>/dev/null || true
+  say "step 2/4 done in $((SECONDS - setup_began)) s"
+  step_began=$SECONDS
+  say "step 3/4: installing the ${#packages[@]} project packages (editable: ${packages[*]})"
   args=()
   for p in "${packages[@]}"; do args+=(-e "$root/src/$p"); done
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation "${args[@]}" 2> >(grep -v "^WARNING: Location" >&2)
+  say "step 3/4 done in $((SECONDS - step_began)) s"
   # tf2_msgs has no wheel: built from vendor/tf2_msgs (about a minute, once per environment)
-  "$venv/bin/python" -c 'import tf2_msgs.msg' 2>/dev/null || bash "$root/scripts/build_tf2_msgs.sh" "$venv"
+  if "$venv/bin/python" -c 'import tf2_msgs.msg' 2>/dev/null; then
+    say "step 4/4: tf2_msgs is already built"
+  else
+    step_began=$SECONDS
+    bash "$root/scripts/build_tf2_msgs.sh" "$venv"
+    say "step 4/4 done in $((SECONDS - step_began)) s"
+  fi
   echo "$want" > "$stamp"
+  say "set-up done in $((SECONDS - setup_began)) s"
 fi
 # The driver-in-the-loop tests drive Debian's chromium through Playwright (never a downloaded
 # browser); installed when absent and when this runs as root (CI), quietly.

@@ -11,13 +11,24 @@ venv="$(cd "$1" && pwd)"
 src="$root/vendor/tf2_msgs"
 build="$(mktemp -d)"
 trap 'rm -rf "$build"' EXIT
-echo "[bootstrap] building tf2_msgs (no wheel exists) into $venv" >&2
+echo "[bootstrap] step 4/4: building the message package tf2_msgs (no wheel exists) into $venv: about a minute" >&2
+echo "[bootstrap] tf2_msgs: installing the build tools (vendor/tf2_msgs/requirements-build.txt)" >&2
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$src/requirements-build.txt" 2> >(grep -v "^WARNING: Location" >&2)
+echo "[bootstrap] tf2_msgs: configuring (cmake)" >&2
 export PATH="$venv/bin:$PATH"
 cmake -S "$src" -B "$build" -DCMAKE_PREFIX_PATH="$venv" -DCMAKE_INSTALL_PREFIX="$venv" \
   -DPython3_EXECUTABLE="$venv/bin/python" -DBUILD_TESTING=OFF > "$build/configure.log" 2>&1 \
   || { cat "$build/configure.log" >&2; exit 1; }
-cmake --build "$build" -j "$(nproc)" > "$build/build.log" 2>&1 || { tail -50 "$build/build.log" >&2; exit 1; }
+# cmake's "[ 42%]" lines are the build's progress: shown every 10 %
+cmake --build "$build" -j "$(nproc)" 2>&1 | tee "$build/build.log" | {
+  shown=-10
+  while IFS= read -r line; do
+    if [[ "$line" =~ ^\[\ *([0-9]+)%\] ]] && [ "${BASH_REMATCH[1]}" -ge $((shown + 10)) ]; then
+      shown=${BASH_REMATCH[1]}
+      echo "[bootstrap] tf2_msgs: compiling, $shown %" >&2
+    fi
+  done
+} || { tail -50 "$build/build.log" >&2; exit 1; }
 cmake --install "$build" > /dev/null
 "$venv/bin/python" -c 'from tf2_msgs.msg import TFMessage' \
   || { echo "[bootstrap] tf2_msgs was built but does not import" >&2; exit 1; }

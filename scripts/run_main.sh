@@ -6,5 +6,10 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
+began=$SECONDS
+echo "[run_main] set-up: .venv (created and installed on first use, checked otherwise)" >&2
 source scripts/bootstrap.sh
+setup_s=$((SECONDS - began))
+echo "[run_main] set-up done in ${setup_s} s; running the ROS 2 graph (6 node processes) on the US06 cycle, 600 steps of 1 s: its progress follows" >&2
 trust-av run --trace us06 --bag bags/main_us06 --overwrite "$@"
+echo "[run_main] first result in $((SECONDS - began)) s: set-up ${setup_s} s, trust-av run $((SECONDS - began - setup_s)) s (from its start to its exit; its own time line above stops at its last output)" >&2

@@ -202,3 +202,16 @@ def test_cli_one_line_error_and_replay(good_bag: Path, tmp_path: Path) -> None:
                            'nycc', str(out)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     shutil.rmtree(out)
+
+
+def test_write_trace_bag_creates_missing_parent_folders(tmp_path: Path) -> None:
+    bag = tmp_path / 'bags' / 'sub' / 'trace'
+    assert write_trace_bag(np.arange(3.0), np.ones(3), bag, TOPIC) == 3
+    assert (bag / 'metadata.yaml').is_file()
+    assert [p.name for p in bag.parent.iterdir()] == ['trace']     # no staging left
+
+
+def test_write_trace_bag_under_a_file_names_it(tmp_path: Path) -> None:
+    (tmp_path / 'notes').write_text('x')
+    with pytest.raises(BagError, match=r'cannot write bag \(.*notes is not a folder\)'):
+        write_trace_bag(np.arange(3.0), np.ones(3), tmp_path / 'notes' / 'trace', TOPIC)

@@ -2,9 +2,11 @@
 reference tables hold what the code holds (the site itself is built in strict mode by
 scripts/test.sh).
 
-Tutorial blocks run in order, one page per test, in a scratch directory that has the
-repository's ``config/`` and the shipped bags under ``bags/`` (links), with the project's
-``.venv/bin`` first on ``PATH``: the commands work as a user types them from the repository.
+Tutorial blocks (and README.md's) run in order, one page per test, in an empty scratch
+directory that has only the repository's inputs the page names (``config/``, the shipped bags
+``bags/commute_*`` when the page uses them, links), with the project's ``.venv/bin`` first on
+``PATH``: the commands work as a user types them from a fresh clone, and every folder a
+command writes into is one it creates itself.
 A block titled with a file name (```` ```yaml title="my.yaml" ````) is written to that file
 (a params file among them is checked by ``load_run_config``); a block preceded by
 ``<!-- not run: REASON -->`` is skipped.
@@ -30,7 +32,7 @@ from trust_monitor.common.topics import TOPICS, topic_table_markdown
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = REPO / 'docs'
-TUTORIALS = sorted((DOCS / 'tutorials').glob('*.md'))
+TUTORIALS = sorted((DOCS / 'tutorials').glob('*.md')) + sorted((DOCS / 'how-to').glob('*.md'))
 WALL_CLOCK_PAGES = {'connect-a-vehicle.md'}      # trust-av shadow runs at real time
 PLUGIN_PAGES = {'write-a-plugin.md'}     # run with the example plug-in installed
 INCLUDE = '--8<-- '                      # a block that includes a repository file
@@ -62,14 +64,21 @@ def blocks(page: Path) -> list[Block]:
     return found
 
 
-def scratch(tmp_path: Path) -> Path:
-    """A working directory that looks like the repository's root to a tutorial."""
+SHIPPED_BAGS = ('commute_am', 'commute_pm')   # tracked under bags/ (.gitignore)
+README_INPUTS = ('scripts', 'src', 'vendor', 'requirements.txt')   # what run_main.sh reads
+
+
+def scratch(tmp_path: Path, page_text: str = '') -> Path:
+    """An empty working directory with only the repository's inputs that ``page_text``
+    names: ``config/`` always, a shipped bag when the page names ``bags/<it>``. Nothing a
+    command writes exists yet (no ``bags/``, no ``results/``)."""
     work = tmp_path / 'work'
-    (work / 'bags').mkdir(parents=True)
+    work.mkdir(parents=True)
     (work / 'config').symlink_to(REPO / 'config')
-    for entry in (REPO / 'bags').iterdir():
-        if entry.is_dir():
-            (work / 'bags' / entry.name).symlink_to(entry)
+    for name in SHIPPED_BAGS:
+        if f'bags/{name}' in page_text:
+            (work / 'bags').mkdir(exist_ok=True)
+            (work / 'bags' / name).symlink_to(REPO / 'bags' / name)
     return work
 
 
@@ -89,9 +98,26 @@ def run_block(block: Block, page: Path, work: Path, base_env: dict[str, str]) ->
                  marks=[pytest.mark.wall_clock] if p.name in WALL_CLOCK_PAGES else [])
     for p in TUTORIALS])
 def test_tutorial_blocks_run(page: Path, tmp_path: Path) -> None:
-    work = scratch(tmp_path)
+    work = scratch(tmp_path, page.read_text(encoding='utf-8'))
     env = (install_example_plugin(tmp_path / 'plugin') if page.name in PLUGIN_PAGES
            else dict(os.environ))
+    assert run_page(page, work, env), f'{page.name} has no runnable block'
+
+
+def test_readme_blocks_run(tmp_path: Path) -> None:
+    """README.md's commands, from a folder laid out as a fresh clone (its scripts and
+    sources, this environment as its .venv): the main job writes ``bags/`` itself."""
+    work = scratch(tmp_path, (REPO / 'README.md').read_text(encoding='utf-8'))
+    for name in README_INPUTS:
+        (work / name).symlink_to(REPO / name)
+    env = {**os.environ, 'TRUST_AV_VENV': str(Path(sys.executable).parents[1])}
+    assert run_page(REPO / 'README.md', work, env) >= 1
+    assert (work / 'bags' / 'main_us06' / 'metadata.yaml').is_file()
+    assert (work / 'bags' / 'main_us06.png').is_file()
+
+
+def run_page(page: Path, work: Path, env: dict[str, str]) -> int:
+    """Run the blocks of ``page`` in order in ``work``; the number of blocks run."""
     ran = 0
     for block in blocks(page):
         if block.skip_reason:
@@ -109,7 +135,7 @@ def test_tutorial_blocks_run(page: Path, tmp_path: Path) -> None:
         elif block.lang in RUN:
             run_block(block, page, work, env)
             ran += 1
-    assert ran, f'{page.name} has no runnable block'
+    return ran
 
 
 def test_block_parsing_sees_titles_and_skips(tmp_path: Path) -> None:
@@ -259,3 +285,17 @@ def test_the_site_needs_no_internet() -> None:
     for key in ('extra_javascript', 'extra_css'):
         assert not any('://' in str(entry) for entry in config.get(key, []))
     assert config['hooks'] == ['docs/hooks.py']
+
+
+def test_every_generated_table_says_where_to_find_it() -> None:
+    """In the Markdown source (on GitHub) a marker is a bare comment: the line after it says
+    where the table is; the site replaces both with the table."""
+    marker = re.compile(r'^<!-- generated: [a-z_]+ -->\n(.*)$', re.MULTILINE)
+    pages = [p for p in DOCS.rglob('*.md') if marker.search(p.read_text())]
+    assert len(pages) >= 4
+    for page in pages:
+        text = page.read_text()
+        assert all(line.startswith('> Generated table: ') for line in marker.findall(text)), \
+            page.name
+        filled = reference.fill(text)
+        assert '<!-- generated' not in filled and '> Generated table:' not in filled

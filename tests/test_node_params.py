@@ -311,6 +311,7 @@ def test_hand_started_nodes(tmp_path: Path) -> None:
     assert errors['p_typo'] == ['error: /trust_monitor: unknown parameter(s) alhpa (not a '
                                 'parameter of this node or of any node of the graph) (from '
                                 'the command line (-p))']
-    assert errors['file_typo'] == ['error: /trust_monitor: unknown parameter(s) epsilon (not a '
+    assert errors['file_typo'] == ['error: /trust_monitor: unknown parameter(s) epsilon (did '
+                                   "you mean 'epsilon_mps2'?) (not a "
                                    'parameter of this node or of any node of the graph) (from '
                                    f'{typo}: section trust_monitor)']

@@ -99,7 +99,7 @@ def test_unknown_names_of_wildcard_sections_are_ignored_with_a_line(
     typo = tmp_path / 'typo.yaml'
     typo.write_text('/**/planner:\n  ros__parameters:\n    alhpa: 0.25\n')
     with pytest.raises(ParamsError, match=r'section /\*\*/planner: unknown parameter\(s\) '
-                                          r'alhpa$'):
+                                          r"alhpa \(did you mean 'alpha'\?\)$"):
         load_run_config(typo)
 
 

@@ -348,7 +348,7 @@ def test_params_files_layer_in_reproduce(tmp_path: Path, short_trace: str) -> No
 
 
 def test_unregistered_names_are_refused_in_one_line(tmp_path: Path) -> None:
-    for option, value, message in (('--predictors', 'ca,nope', "unknown predictor(s) ['nope']"),
+    for option, value, message in (('--predictors', 'ca,nope', 'unknown predictor(s) nope;'),
                                    ('--driver-models', 'nope', 'unknown driver model(s)'),
                                    ('--trust-models', 'nope', 'unknown trust model(s)'),
                                    ('--alphas', '0,2', 'alpha must be in [0, 1]')):

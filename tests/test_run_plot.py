@@ -90,3 +90,25 @@ def test_a_ceiling_is_drawn_only_for_a_model_that_declares_one(
     fig = drawn_figure(us06_records, tmp_path, monkeypatch, performance_threshold=0.8,
                        ceiling=None)
     assert [line.get_label() for line in fig.axes[5].get_lines()] == ['trust T']
+
+
+def test_the_trust_unaware_av_is_drawn_beside_with_e_labelled(
+        us06_records: list[Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The main job's figure: the alpha = 0 run of the same drive beside the trust-aware one
+    (speed, E, P, trust and trust lost against the ceiling), E's direction said."""
+    config = load_run_config(overrides={'planner': {'alpha': 0.0}})
+    trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), STEPS)
+    unaware = simulate(config.for_trace(trace), trace).records
+    fig = drawn_figure(us06_records, tmp_path, monkeypatch, performance_threshold=0.8,
+                       ceiling=(0.0, 0.1), baseline=unaware)
+    e_axis, lost_axis = fig.axes[3], fig.axes[6]
+    assert 'higher = less explicable' in e_axis.get_title(loc='left')
+    e_lines = {line.get_label(): line for line in e_axis.get_lines()}
+    assert list(e_lines['trust-unaware AV (α = 0)'].get_ydata()) == \
+        [r.explicability for r in unaware]
+    assert list(e_lines['trust-aware AV'].get_ydata()) == \
+        [r.explicability for r in us06_records]
+    lost = {line.get_label(): line for line in lost_axis.get_lines()}
+    ceiling = 0.1 * np.arange(1, STEPS + 1)
+    assert np.allclose(lost['trust-unaware AV (α = 0)'].get_ydata(),
+                       ceiling - np.asarray([r.trust for r in unaware]))

@@ -53,7 +53,7 @@ class FollowerConfig:
         check_fields(self)
         drivers = registry.names(registry.DRIVERS)
         require(self.driver_model in drivers,
-                f'driver_model must be one of {list(drivers)}, got {self.driver_model!r}')
+                registry.not_one_of('driver_model', self.driver_model, drivers))
 
 
 def make_follower(driver: DriverConfig, follower: FollowerConfig | None = None,

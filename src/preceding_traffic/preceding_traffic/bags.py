@@ -204,6 +204,7 @@ def odometry_messages(times_s: np.ndarray, speeds_mps: np.ndarray,
 def write_trace_bag(times_s: np.ndarray, speeds_mps: np.ndarray, path: Path, topic: str, *,
                     frame_id: str = 'odom', child_frame_id: str = 'preceding_vehicle') -> int:
     """Write samples as a rosbag2 MCAP bag of ``nav_msgs/msg/Odometry``; log time = stamp.
+    Missing parent folders of ``path`` are created.
 
     Returns:
         The number of messages written.
@@ -216,12 +217,18 @@ def write_trace_bag(times_s: np.ndarray, speeds_mps: np.ndarray, path: Path, top
         raise BagError(f'{path}: a symbolic link; give a real path for the bag directory')
     if path.exists():
         raise BagError(f'{path}: exists already; remove it or choose another name')
+    ancestor = path.parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise BagError(f'{path}: cannot write bag ({ancestor} is not a folder)')
     count = 0
     # written in a temporary directory beside it and renamed when finished: a stop or a
     # full disk half-way leaves no bag (rosbags' Writer would close a shorter one that looks
     # finished)
     staging: Path | None = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(dir=path.parent, prefix=f'.{path.name}.'))
         with Writer(staging / path.name, version=9,
                     storage_plugin=StoragePlugin.MCAP) as writer:

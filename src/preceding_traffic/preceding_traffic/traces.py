@@ -24,6 +24,7 @@ import numpy as np
 from preceding_traffic.errors import PrecedingTrafficError
 from trust_monitor.common.input_files import not_regular
 from trust_monitor.common.params import MAX_STAMP_S, ParamsError, check_fields, param
+from trust_monitor.errors import did_you_mean
 
 MAX_SPEED_MPS = 100.0
 """Fastest speed a trace may hold, m/s (360 km/h: above any road vehicle; a faster sample is
@@ -262,7 +263,8 @@ def read_samples(path: Path, config: TraceConfig) -> tuple[np.ndarray, np.ndarra
     try:
         handle = path.open(newline='', encoding='utf-8-sig')
     except OSError as err:
-        raise TraceError(f'{path}: cannot open trace ({err.strerror})') from err
+        hint = did_you_mean(path.name, SHIPPED_TRACES) if path.parent == Path() else ''
+        raise TraceError(f'{path}: cannot open trace ({err.strerror}){hint}') from err
     with handle:
         if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
             raise TraceError(f'{path}: not a regular file (expected a time_s,speed_mps CSV)')

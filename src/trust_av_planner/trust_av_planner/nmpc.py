@@ -151,7 +151,7 @@ class PlannerConfig:
                 f'{self.speed_max_mps}')
         predictors = registry.names(registry.PREDICTORS)
         require(self.predictor in predictors,
-                f'predictor must be one of {list(predictors)}, got {self.predictor!r}')
+                registry.not_one_of('predictor', self.predictor, predictors))
         require(self.stale_decel_mps2 >= self.accel_min_mps2,
                 f'stale_decel_mps2 must be >= accel_min_mps2 = {self.accel_min_mps2:g}, got '
                 f'{self.stale_decel_mps2:g}')

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
+
 
 class TrustMonitorError(ValueError):
     """Bad input to the trust monitor or the shared floor (a params file, a parameter value,
@@ -14,3 +17,20 @@ def one_line(err: BaseException) -> str:
     (a YAML parser's caret diagram, say, passed on inside ours) joined with single spaces."""
     return ' '.join(' '.join(line.split()) for line in str(err).splitlines() if line.strip()) \
         or type(err).__name__
+
+
+def did_you_mean(name: object, known: Iterable[object]) -> str:
+    """``" (did you mean 'x'?)"`` naming the known names closest to a mistyped ``name``
+    (:func:`difflib.get_close_matches`, at most three, best first), or ``''`` when none is
+    close. Appended to the one line that refuses an unknown name."""
+    close = difflib.get_close_matches(str(name), [str(k) for k in known], n=3, cutoff=0.6)
+    if not close:
+        return ''
+    return f' (did you mean {" or ".join(repr(c) for c in close)}?)'
+
+
+def with_suggestions(unknown: Iterable[object], known: Iterable[object]) -> str:
+    """``unknown`` names, comma-separated, each followed by :func:`did_you_mean` from
+    ``known``: ``"predictr (did you mean 'predictor'?), foo"``."""
+    known = [str(k) for k in known]
+    return ', '.join(f'{name}{did_you_mean(name, known)}' for name in unknown)

@@ -33,7 +33,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'integrated along x, header stamps and log times at the recorded times '
                     '(holes kept as they are). The bag replays with --trace BAG.')
     parser.add_argument('trace', help=f'one of {", ".join(SHIPPED_TRACES)} or a CSV path')
-    parser.add_argument('out', type=Path, help='bag directory to create (must not exist)')
+    parser.add_argument('out', type=Path,
+                        help='bag directory to create (must not exist; missing parent '
+                             'folders are created)')
     parser.add_argument('--topic', default=None,
                         help="topic name (default: the params file's bag_topic)")
     add_params_file_option(parser)

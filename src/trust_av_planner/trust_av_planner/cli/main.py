@@ -19,6 +19,7 @@ import sys
 
 from human_driver_sim.errors import HumanDriverSimError
 from preceding_traffic.errors import PrecedingTrafficError
+from trust_av_planner.cli.parser import Parser
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph import stop_signals
 from trust_monitor.errors import TrustMonitorError, one_line
@@ -40,7 +41,7 @@ COMMAND_MODULES = (
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``trust-av`` parser with every registered subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog='trust-av',
         description='Trust-aware longitudinal control of an automated vehicle followed by a '
                     'human driver (Ozkan & Ma): simulate the closed loop, run the ROS 2 graph, '

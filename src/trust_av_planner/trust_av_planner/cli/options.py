@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -14,16 +15,17 @@ from types import TracebackType
 
 from tqdm import tqdm
 
-from preceding_traffic.traces import SHIPPED_TRACES
+from preceding_traffic.traces import SHIPPED_TRACES, SpeedTrace
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph import stop_signals
 from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, RunConfig
 from trust_av_planner.system.metrics import Metrics
 from trust_monitor.common import registry
 from trust_monitor.common.output_files import cannot_write, link_refused, odd_path
 from trust_monitor.common.params import field_spec
 from trust_monitor.common.wall_clock import WallClockConfig
+from trust_monitor.trust_interface import trust_ceiling
 
 
 def alpha_value(text: str) -> float:
@@ -242,12 +244,18 @@ def _figure(value: float, spec: str) -> str:
     return format(value, spec) if math.isfinite(value) else 'none (not finite)'
 
 
-def format_metrics(metrics: Metrics, title: str) -> str:
+def format_metrics(metrics: Metrics, title: str, *,
+                   trust_ceiling: float | None = None) -> str:
     """The metrics table printed at the end of a run; a figure computed from no finite value
-    reads ``none``, and the last row says ``collision`` and where, or ``none``."""
+    reads ``none``, and the last row says ``collision`` and where, or ``none``.
+    ``trust_ceiling`` (the trust model's declared T(0) + delta * t over the run, see
+    :func:`ceiling_at_end`) is shown under the final trust when given."""
     crash = metrics.collision
+    ceiling = [] if trust_ceiling is None else [
+        ('trust ceiling T(0) + delta*t', f'{trust_ceiling:.3f}')]
     rows = [('steps', f'{metrics.steps}'),
             ('final trust', _figure(metrics.final_trust, '.3f')),
+            *ceiling,
             ('mean explicability E', _figure(metrics.mean_explicability, '.5f')),
             ('prediction RMSE (m/s^2)', _figure(metrics.rmse_mps2, '.4f')),
             ('min AV gap (m)', _figure(metrics.min_av_gap_m, '.3f')),
@@ -271,6 +279,29 @@ def collision_exit(metrics: Metrics, command: str) -> int:
     return EXIT_COLLISION
 
 
+def ceiling_at_end(config: RunConfig, trace: SpeedTrace) -> float | None:
+    """The most trust the configured trust model can reach on ``trace``, T(0) + delta * t
+    at its end, from the ceiling the model declares
+    (:func:`~trust_monitor.trust_interface.trust_ceiling`); None when it declares none."""
+    ceiling = trust_ceiling(config.trust_model())
+    if ceiling is None:
+        return None
+    return ceiling[0] + ceiling[1] * trace.steps * trace.dt_s
+
+
+def process_age_s() -> float:
+    """How long this process has run, s (Linux's /proc; 0.0 where it cannot be read): what a
+    command's timings add to its own clock for Python's start-up and imports."""
+    try:
+        with open('/proc/self/stat', encoding='ascii') as stat, \
+                open('/proc/uptime', encoding='ascii') as uptime:
+            started_ticks = int(stat.read().rsplit(')', 1)[1].split()[19])
+            return max(0.0, float(uptime.read().split()[0])
+                       - started_ticks / os.sysconf('SC_CLK_TCK'))
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
 class Progress:
     """A progress bar on stderr (tqdm) fed with absolute counts (``update(done, total)``, the
     ``on_step`` callback of the runners). On a terminal it is redrawn at most every 0.1 s;
@@ -282,11 +313,15 @@ class Progress:
         label: what is counted, e.g. ``simulate us06``.
         total: the expected count.
         shown: False writes nothing (``--no-progress``).
+        timed: the final line gives the elapsed time (False: the command prints its own
+            timings, which this one would not agree with).
     """
 
-    def __init__(self, label: str, total: int, *, shown: bool = True) -> None:
+    def __init__(self, label: str, total: int, *, shown: bool = True,
+                 timed: bool = True) -> None:
         self.label = label
         self.shown = shown
+        self.timed = timed
         self.interactive = shown and sys.stderr.isatty()
         self._start = time.monotonic()
         self._bar = tqdm(total=max(total, 1), desc=label, unit='step', mininterval=0.1,
@@ -308,7 +343,8 @@ class Progress:
         self._bar.close()
         if self.shown and not self.interactive:
             elapsed = time.monotonic() - self._start
-            print(f'{self.label}: {self.done}/{self.total} in {elapsed:.1f} s', file=sys.stderr)
+            timing = f' in {elapsed:.1f} s' if self.timed else ' steps'
+            print(f'{self.label}: {self.done}/{self.total}{timing}', file=sys.stderr)
 
     def __enter__(self) -> Progress:
         return self

@@ -26,8 +26,11 @@ from trust_monitor.common.params import PARAM_METADATA_KEY, ParamSpec, read_para
 from trust_monitor.common.topics import TOPICS, WALL_QOS_TEXT, topic_table_markdown
 from trust_monitor.estimate import build_parser as estimate_parser
 
-MARKER = re.compile(r'^<!-- generated: ([a-z_]+) -->$', re.MULTILINE)
-"""A line a page holds where a generated table goes."""
+MARKER = re.compile(r'^<!-- generated: ([a-z_]+) -->$(?:\n> Generated table:[^\n]*$)?',
+                    re.MULTILINE)
+"""A line a page holds where a generated table goes, and the line after it that tells a
+reader of the Markdown source (on GitHub, say) where to find the table (``> Generated
+table: ...``); both are replaced by the table."""
 
 
 REPO = DEFAULT_PARAMS_FILE.resolve().parents[1]

@@ -140,6 +140,33 @@ def trend_checks(results: dict[Case, dict[str, Any]], traces: list[str],
     return lines
 
 
+def unsafe_cases(every: dict[Case, dict[str, Any]]) -> str:
+    """One line naming the cases whose gaps went below the safety minimum (the study's
+    warnings, summarised once; '' when none did)."""
+    unsafe = {case: result['metrics']['unsafe_steps'] for case, result in every.items()
+              if result['metrics']['unsafe_steps']}
+    if not unsafe:
+        return ''
+    names = ', '.join(f'{c.trace} {c.predictor} alpha {c.alpha:g}'
+                      f'{"".join(" " + m for m in (c.driver_model, c.trust_model) if m)}'
+                      f'{f" driver {c.driver}" if c.driver else ""}'
+                      f' ({steps} steps)' for c, steps in sorted(
+                          unsafe.items(), key=lambda item: -item[1]))
+    return (f'gap below the safety minimum in {len(unsafe)} of {len(every)} cases '
+            f'(unsafe steps in all_runs.csv): {names}')
+
+
+def truncation_note(max_steps: int, dt_s: float, trace_steps: list[int]) -> str:
+    """The line every comparison with the paper carries when ``--max-steps`` cut a run short
+    ('' when every run is whole)."""
+    cut = [steps for steps in trace_steps if 0 < max_steps < steps]
+    if not cut:
+        return ''
+    return (f'TRUNCATED: --max-steps {max_steps} stopped each run after {max_steps * dt_s:g} s '
+            f"of {max(cut) * dt_s:g} s; the paper's values are for the whole drive, so no "
+            'column or ratio here is comparable with them')
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av reproduce``."""
     for option in ('--traces', '--predictors', '--alphas', '--driver-models', '--trust-models'):
@@ -181,6 +208,9 @@ def run(args: argparse.Namespace) -> int:
         executor = sweep.RayExecutor(args.ray_address, args.workers)
     else:
         executor = sweep.LocalExecutor(args.workers)
+    note = truncation_note(args.max_steps, config.planner.dt_s,
+                           [load_trace(t, config.planner.dt_s, config.trace).steps
+                            for t in args.traces])
     bar = Progress('reproduce', len(cases), shown=not args.no_progress)
     start = time.monotonic()
     runner = 'graph' if args.graph else 'in-process'
@@ -218,10 +248,10 @@ def run(args: argparse.Namespace) -> int:
                 bound = ((us06_steps, config.trust)
                          if paper_bound_holds(config.trust_model()) else None)
                 tables.write_rows(out / name, *alpha_table(results, 'us06', predictor, paper,
-                                                           bound))
+                                                           bound), note=note)
                 written.append(f'{name}.md')
     tables.write_rows(out / 'table_IV_max_improvements',
-                         *improvement_table(results, args.traces, args.predictors))
+                         *improvement_table(results, args.traces, args.predictors), note=note)
     written.append('table_IV_max_improvements.md')
     traces = [load_trace(t, config.planner.dt_s, config.trace) for t in args.traces]
     speed_profiles(traces, out / 'figure_2_speed_profiles.png')
@@ -232,7 +262,7 @@ def run(args: argparse.Namespace) -> int:
                                        for a in args.alphas}
                   for p in args.predictors}
         trust_over_time(series, 'us06', out / 'figure_3_trust_us06.png',
-                        trust_ceiling(config.trust_model()))
+                        trust_ceiling(config.trust_model()), note=note)
         written.append('figure_3_trust_us06.png')
 
     for path in written:
@@ -252,6 +282,11 @@ def run(args: argparse.Namespace) -> int:
           f'{components or "none"} (the GRU was trained behind the default profile)')
     print(f'{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; outputs in {out}/: '
           + ', '.join(written))
+    unsafe = unsafe_cases(every)
+    if unsafe:
+        print(unsafe)
+    if note:
+        print(note)
     if args.graph:
         print(f'graph recordings (MCAP, one per case): {out / "graph_bags"}/')
     return 0

@@ -4,22 +4,26 @@ given ROS domain), recorded to a rosbag2 bag; metrics and a plot."""
 from __future__ import annotations
 
 import argparse
+import time
 from pathlib import Path
 
 from preceding_traffic.sources import load_trace
-from preceding_traffic.traces import truncate
+from preceding_traffic.traces import SpeedTrace, truncate
 from trust_av_planner.cli.options import (
     Progress,
     add_run_options,
+    ceiling_at_end,
     collision_exit,
     format_metrics,
     positive_seconds,
+    process_age_s,
     run_overrides,
     steps_value,
 )
 from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
 from trust_av_planner.system import run_record
-from trust_av_planner.system.config import load_run_config
+from trust_av_planner.system.closed_loop import SimResult, simulate
+from trust_av_planner.system.config import RunConfig, load_run_config
 from trust_av_planner.system.metrics import compute_metrics
 from trust_av_planner.system.outputs import replacing_outputs
 from trust_monitor.trust_interface import trust_ceiling
@@ -27,6 +31,7 @@ from trust_monitor.trust_interface import trust_ceiling
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av run``."""
+    began = time.monotonic() - process_age_s()     # Python's start-up and imports included
     # imported here: rclpy, rosbags and matplotlib cost about 1 CPU-s, which --help and a
     # refused option do not need to pay
     from trust_av_planner.graph.orchestrator import run_graph_records
@@ -40,7 +45,9 @@ def run(args: argparse.Namespace) -> int:
         f'run_{trace.name}_{config.planner.predictor}_alpha{config.planner.alpha:g}')
     with replacing_outputs(bag, overwrite=args.overwrite, command='run') as outputs:
         print(run_record.header(config), flush=True)
-        bar = Progress(f'graph {trace.name}', trace.steps, shown=not args.no_progress)
+        bar = Progress(f'graph {trace.name}', trace.steps, shown=not args.no_progress,
+                       timed=False)
+        graph_began = time.monotonic()
         try:
             result, records = run_graph_records(
                 config, config.trace.trace, trace, outputs.bag,
@@ -49,20 +56,35 @@ def run(args: argparse.Namespace) -> int:
                 namespace=namespace, domain_id=domain_id)
         finally:
             bar.close()
+        graph_s = time.monotonic() - graph_began
         metrics = compute_metrics(records, config.min_safe_gap_m)
         title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
                  f'alpha = {config.planner.alpha:g} (ROS 2 graph, domain {result.domain_id}'
                  f'{"" if namespace == "/" else ", namespace " + namespace})')
+        baseline = None
         if not args.no_plot:
             from trust_av_planner.study.plots import run_overview  # matplotlib: ~1 CPU-s
 
+            baseline = trust_unaware(args, config, trace)
             run_overview(records[:metrics.steps], title, outputs.plot,
                          performance_threshold=config.trust.performance_threshold,
-                         ceiling=trust_ceiling(config.trust_model()))
-    print(format_metrics(metrics, title))
-    print(f'wall time {result.wall_s:.1f} s (start-up {result.startup_s:.1f} s), '
-          f'{trace.steps * trace.dt_s / max(result.wall_s - result.startup_s, 1e-9):.0f}x '
-          'real time while stepping')
+                         ceiling=trust_ceiling(config.trust_model()),
+                         baseline=None if baseline is None
+                         else baseline.records[:metrics.steps])
+    print(format_metrics(metrics, title, trust_ceiling=ceiling_at_end(config, trace)))
+    if baseline is not None:
+        print(f'trust-unaware AV (alpha = 0, in-process, same drive; drawn beside it): final '
+              f'trust {baseline.metrics.final_trust:.3f}, mean E '
+              f'{baseline.metrics.mean_explicability:.5f}')
+    total_s = time.monotonic() - began
+    finishing_s = graph_s - result.startup_s - result.steps_s
+    print(f'time {total_s:.1f} s in all: start-up of the graph {result.startup_s:.1f} s, '
+          f'{trace.steps} steps {result.steps_s:.1f} s '
+          f'({trace.steps * trace.dt_s / max(result.steps_s, 1e-9):.0f}x real time), '
+          f'finishing and reading back the recording {finishing_s:.1f} s, Python start-up, '
+          'loading, metrics'
+          f'{"" if args.no_plot else ", the alpha = 0 comparison and the plot"} '
+          f'{total_s - graph_s:.1f} s')
     print(f'recording (rosbag2): {outputs.bag}')
     if not args.no_plot:
         print(f'plot: {outputs.plot}')
@@ -70,6 +92,17 @@ def run(args: argparse.Namespace) -> int:
     print(f'effective parameters of every node: {outputs.logs / run_record.PARAMS_FILE_NAME} '
           f"(and the bag's custom_data {run_record.PARAMS_KEY})")
     return collision_exit(metrics, 'run')
+
+
+def trust_unaware(args: argparse.Namespace, config: RunConfig,
+                  trace: SpeedTrace) -> SimResult | None:
+    """The same drive with alpha = 0 (the AV ignores explicability), in-process (the graph
+    gives the same trajectory); None when ``config`` is already at alpha = 0."""
+    if config.planner.alpha == 0.0:
+        return None
+    overrides = run_overrides(args)
+    overrides['planner'] = {**overrides['planner'], 'alpha': 0.0}
+    return simulate(load_run_config(args.params_files, overrides), trace)
 
 
 def domain_id_value(text: str) -> int:

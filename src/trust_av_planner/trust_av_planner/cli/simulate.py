@@ -10,6 +10,7 @@ from preceding_traffic.traces import truncate
 from trust_av_planner.cli.options import (
     Progress,
     add_run_options,
+    ceiling_at_end,
     collision_exit,
     format_metrics,
     output_file,
@@ -55,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     title = (f'TAC-{config.planner.predictor.upper()} on {trace.name}, '
              f'alpha = {config.planner.alpha:g} (in-process, {1.0 / trace.dt_s:g} Hz)')
     metrics = result.metrics
-    print(format_metrics(metrics, title))
+    print(format_metrics(metrics, title, trust_ceiling=ceiling_at_end(config, trace)))
     if args.out is not None:
         print(f'per-step table: {args.out}')
     return collision_exit(metrics, 'simulate')

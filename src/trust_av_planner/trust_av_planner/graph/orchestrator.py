@@ -95,6 +95,9 @@ class GraphRun:
     steps: int
     wall_s: float
     startup_s: float
+    steps_s: float = 0.0
+    """From the start signal to the last step recorded (within ``wall_s``, after
+    ``startup_s``; the rest of ``wall_s`` is finishing the recording)."""
 
 
 def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *,
@@ -173,6 +176,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                 startup = time.monotonic() - started
                 start_pub.publish(Empty())
                 _follow(session, trace.steps, step_timeout_s, on_step)
+                stepped = time.monotonic() - started - startup
         except TrustAvPlannerError as err:
             # The run failed: finish the recording, but a failure to do so must not hide
             # why the run failed (an exception raised in a `finally` would replace it).
@@ -200,7 +204,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
             raise
         _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
-                    wall_s=time.monotonic() - started, startup_s=startup)
+                    wall_s=time.monotonic() - started, startup_s=startup, steps_s=stepped)
 
 
 def write_record(config: RunConfig, trace: SpeedTrace, graph: Graph) -> dict[str, str]:

@@ -25,6 +25,7 @@ from trust_av_planner.study import sweep
 from trust_av_planner.study.sweep import Case
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, all_components
 from trust_monitor.common import output_files, registry
+from trust_monitor.errors import with_suggestions
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -47,7 +48,8 @@ def check_axes(predictors: Iterable[str], driver_models: Iterable[str],
         known = registry.names(group)
         unknown = [v for v in values if v and v not in known]
         if unknown:
-            raise TrustAvPlannerError(f'unknown {what}(s) {unknown}; registered: {list(known)}')
+            raise TrustAvPlannerError(f'unknown {what}(s) {with_suggestions(unknown, known)}; '
+                                      f'registered: {list(known)}')
     if any(trust_models) and not any(f.name == TRUST_MODEL_PARAMETER for c in all_components()
                                      for f in dataclasses.fields(c)):
         raise TrustAvPlannerError(f'trust models {[m for m in trust_models if m]}: no component '

@@ -79,9 +79,12 @@ def max_improvements(results: dict[Case, dict[str, Any]], trace: str,
     return out[0], out[1], out[2]
 
 
-def write_rows(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
-    """Write a CSV and a Markdown table with the same content (``path`` without suffix)."""
-    lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+def write_rows(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]],
+               note: str = '') -> None:
+    """Write a CSV and a Markdown table with the same content (``path`` without suffix);
+    ``note`` (a truncated run says so) is a paragraph above the Markdown table."""
+    lines = [f'**{note}**', ''] if note else []
+    lines += ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
     lines += ['| ' + ' | '.join(str(v) for v in row) + ' |' for row in rows]
     with replacing(path.with_suffix('.csv'), path.with_suffix('.md')) as (csv_path, md_path):
         with csv_path.open('w', newline='') as handle:

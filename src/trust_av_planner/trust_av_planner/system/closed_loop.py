@@ -225,6 +225,7 @@ def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | No
                        predictor=config.planner.predictor,
                        min_safe_gap_m=config.min_safe_gap_m,
                        plan_step_s=None if step_s == loop.period_s else step_s)
+    close = []
     for record in _keeping(loop.steps(), result):
         result.records.append(record)
         crash = collision(len(result.records) - 1, record.t_s, record.av_gap_m,
@@ -235,11 +236,16 @@ def simulate(config: RunConfig, trace: SpeedTrace, *, initial: InitialState | No
                 on_step(len(result.records), trace.steps)
             break
         if min(record.av_gap_m, record.human_gap_m) < config.min_safe_gap_m:
-            LOG.warning('t = %.1f s: gap below the safety minimum %.2f m (AV %.3f m, human '
-                        '%.3f m)', record.t_s, config.min_safe_gap_m, record.av_gap_m,
-                        record.human_gap_m)
+            close.append(record)
         if on_step is not None:
             on_step(len(result.records), trace.steps)
+    if close:   # one line per run, naming it (a study runs many, in parallel)
+        least = min(close, key=lambda r: min(r.av_gap_m, r.human_gap_m))
+        LOG.warning('%s, TAC-%s, alpha = %g, %s follower: gap below the safety minimum %.2f m '
+                    'at %d steps from t = %.1f s (least: AV %.3f m, human %.3f m at t = %.1f s)',
+                    trace.name, config.planner.predictor.upper(), config.planner.alpha,
+                    config.follower.driver_model, config.min_safe_gap_m, len(close),
+                    close[0].t_s, least.av_gap_m, least.human_gap_m, least.t_s)
     return result
 
 

@@ -47,6 +47,7 @@ from trust_monitor.common.params import (
 from trust_monitor.common.rcl_values import ParsedParams
 from trust_monitor.common.topics import is_topic_name
 from trust_monitor.common.wall_clock import WallClockConfig
+from trust_monitor.errors import did_you_mean, with_suggestions
 from trust_monitor.trust_interface import TrustModel, make_trust_model, trust_model_config_types
 from trust_monitor.trust_model import MonitorConfig, TrustConfig
 
@@ -275,8 +276,8 @@ def check_sections(layers: Sequence[ParsedParams]) -> list[str]:
                 unknown = sorted(set(values) - known)
                 if unknown:
                     ignored.append(f'{layer.where}: section {section}: ignoring '
-                                   f'{", ".join(unknown)} (not a parameter of any node of '
-                                   'the graph)')
+                                   f'{with_suggestions(unknown, known)} (not a parameter of '
+                                   'any node of the graph)')
             elif target is None:
                 check_known(values, *every, where=f'{layer.where}: section {section}')
             elif target in NODE_COMPONENTS:
@@ -288,9 +289,10 @@ def check_sections(layers: Sequence[ParsedParams]) -> list[str]:
                                   'come from /**); node sections: '
                                   f'{", ".join(NODE_COMPONENTS)}')
             else:
+                node = section.rstrip('/').rsplit('/', 1)[-1]
                 raise ParamsError(f'{layer.where}: unknown node section {section!r} (known: '
                                   f'{", ".join(NODE_COMPONENTS)}, or a wildcard such as /** '
-                                  'or /**/planner)')
+                                  f'or /**/planner){did_you_mean(node, NODE_COMPONENTS)}')
     return ignored
 
 

@@ -25,7 +25,7 @@ from typing import Any, TypeVar
 import yaml
 
 from trust_monitor.common.input_files import not_regular
-from trust_monitor.errors import TrustMonitorError
+from trust_monitor.errors import TrustMonitorError, did_you_mean, with_suggestions
 
 WILDCARD = '/**'
 T = TypeVar('T')
@@ -71,7 +71,8 @@ class ParamSpec:
     def problem(self, name: str, value: Any) -> str:
         """Why ``value`` is not allowed for parameter ``name`` ('' when it is)."""
         if self.choices and value not in self.choices:
-            return f'{name} must be one of {list(self.choices)}, got {value!r}'
+            return (f'{name} must be one of {list(self.choices)}, got {value!r}'
+                    f'{did_you_mean(value, self.choices)}')
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             return ''
         too_low = self.low is not None and (value < self.low or
@@ -283,7 +284,7 @@ def check_known(params: Mapping[str, Any], *classes: type, where: str) -> None:
     known = {f.name for c in classes for f in dataclasses.fields(c)}
     unknown = sorted(set(params) - known)
     if unknown:
-        raise ParamsError(f'{where}: unknown parameter(s) {", ".join(unknown)}')
+        raise ParamsError(f'{where}: unknown parameter(s) {with_suggestions(unknown, known)}')
 
 
 def require(condition: bool, message: str) -> None:

@@ -19,12 +19,12 @@ import functools
 import inspect
 import logging
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
-from trust_monitor.errors import TrustMonitorError, one_line
+from trust_monitor.errors import TrustMonitorError, did_you_mean, one_line
 
 PREDICTORS = 'trust_av.predictors'
 """Entry-point group of the plan estimators (the plan the human expects, u_R^H)."""
@@ -90,6 +90,12 @@ class Component:
                                 f'(known: {sorted(KNOWN_NEEDS)})')
 
 
+def not_one_of(what: str, name: str, known: Sequence[str]) -> str:
+    """The one line refusing ``name`` for ``what`` (a parameter that names a registered
+    component), with a "did you mean" from ``known``."""
+    return f'{what} must be one of {list(known)}, got {name!r}{did_you_mean(name, known)}'
+
+
 def _group_name(group: str) -> str:
     return group.rsplit('.', 1)[-1].rstrip('s').replace('_', ' ')
 
@@ -128,7 +134,8 @@ def get(group: str, name: str) -> Component:
     found = [ep for ep in _entry_points(group) if ep.name == name]
     if not found:
         raise RegistryError(f'unknown {_group_name(group)} {name!r} (registered: '
-                            f'{", ".join(names(group)) or "none"})')
+                            f'{", ".join(names(group)) or "none"})'
+                            f'{did_you_mean(name, names(group))}')
     if len({ep.value for ep in found}) > 1:
         raise RegistryError(f'{_group_name(group)} {name!r} is registered twice: '
                             f'{", ".join(sorted(ep.value for ep in found))}')

@@ -54,6 +54,7 @@ from trust_monitor.common.params import (
     check_type,
 )
 from trust_monitor.common.rcl_yaml import node_matches
+from trust_monitor.errors import with_suggestions
 
 T = TypeVar('T')
 
@@ -287,7 +288,8 @@ def check_overrides(node: Node, args: Sequence[str] = ()) -> None:
     if refused:
         places = sorted({own[name] for name in refused if name in own})
         where = f' (from {"; ".join(places)})' if places else ''
-        raise ParamsError(f'{fqn}: unknown parameter(s) {", ".join(refused)} (not a parameter '
+        raise ParamsError(f'{fqn}: unknown parameter(s) {with_suggestions(refused, declared)} '
+                          '(not a parameter '
                           f'of this node or of any node of the graph){where}')
     node.get_logger().warning(f'ignoring parameter(s) {", ".join(sorted(unknown))} of a '
                               'wildcard section: not parameters of any node of the graph')
