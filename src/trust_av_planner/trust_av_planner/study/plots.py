@@ -102,8 +102,8 @@ def run_overview(records: Sequence[Any], title: str, path: Path, *,
                  performance_threshold: float, ceiling: tuple[float, float] | None,
                  baseline: Sequence[Any] | None = None) -> None:
     """One run: speeds, gaps, accelerations, E and P, trust, and (when the trust model
-    declares a ceiling) the trust lost against it, against time; beside it (thin dashed lines) the trust-unaware AV (alpha = 0) on
-    the same drive when ``baseline`` is given.
+    declares a ceiling) the trust lost against it, against time; beside it (thin dashed
+    lines) the trust-unaware AV (alpha = 0) on the same drive when ``baseline`` is given.
 
     Time runs from the start of the drive (the first record's stamp is 0 s), so a run timed
     by a bag's epoch stamps reads like a simulated one. The P panel draws the threshold
