@@ -33,6 +33,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from trust_av_planner.perturbations import LIBRARY
 from trust_monitor.common import kinematics, registry
 from trust_monitor.common.params import (
     PARAM_METADATA_KEY,
@@ -48,6 +49,8 @@ from trust_monitor.trust_model import TrustConfig, explicability
 
 LOG = logging.getLogger(__name__)
 
+PERTURBATIONS = LIBRARY
+"""Study conditions (:mod:`trust_av_planner.perturbations`)."""
 LEAD_PREVIEWS = ('recorded', 'constant_speed', 'constant_acceleration')
 """Where the lead's speed over the horizon comes from (parameter ``lead_preview``)."""
 
@@ -142,6 +145,13 @@ class PlannerConfig:
                                     'missing or stale (>= accel_min_mps2)', unit='m/s^2',
                                     low=-100.0, high=0.0, high_inclusive=False, default=-2.0,
                                     reason=SAFETY)
+    perturbation: str = param('study condition: when the AV departs from its planned command '
+                              '(trust_av_planner.perturbations; none = never)',
+                              choices=PERTURBATIONS, default='none',
+                              reason='the study condition of a run is fixed')
+    perturbation_seed: int = param('seed of a *_random perturbation (its event times)', low=0,
+                                   high=4294967295, default=0,
+                                   reason='the study condition of a run is fixed')
 
     def __post_init__(self) -> None:
         check_fields(self)
