@@ -55,13 +55,13 @@ class Event:
 
 
 def late_brake(start_s: float) -> Event:
-    """Hard braking (-3 m/s^2, the AV's Table I limit) for 2 s."""
-    return Event(BRAKE, start_s, 2.0, -3.0)
+    """Hard braking (-3 m/s^2, the AV's Table I limit) for 1 s."""
+    return Event(BRAKE, start_s, 1.0, -3.0)
 
 
 def hesitation(start_s: float) -> Event:
-    """A 4 s hesitation at -1.5 m/s^2."""
-    return Event(HESITATE, start_s, 4.0, -1.5)
+    """A 2 s hesitation at -1.5 m/s^2."""
+    return Event(HESITATE, start_s, 2.0, -1.5)
 
 
 def headway_change(start_s: float) -> Event:
@@ -71,15 +71,15 @@ def headway_change(start_s: float) -> Event:
 
 SCHEDULED: dict[str, tuple[Event, ...]] = {
     'none': (),
-    'late_brake': (late_brake(25.0), late_brake(55.0), late_brake(85.0)),
-    'hesitation': (hesitation(20.0), hesitation(50.0), hesitation(80.0)),
+    'late_brake': tuple(late_brake(t) for t in (20.0, 40.0, 60.0, 80.0, 100.0)),
+    'hesitation': tuple(hesitation(t) for t in (15.0, 35.0, 55.0, 75.0, 95.0)),
     'headway_change': (headway_change(40.0),),
     'mixed': (hesitation(15.0), late_brake(40.0), headway_change(65.0), late_brake(95.0)),
 }
 """Conditions at fixed moments (within the first 120 s: the study's default drive)."""
 RANDOM_WINDOW_S = (10.0, 110.0)
 """``*_random`` conditions place their events in this window, s."""
-RANDOM_EVENTS = 3
+RANDOM_EVENTS = 5
 """Events per ``*_random`` condition."""
 RANDOM_MIN_SPACING_S = 15.0
 """Least time between two random events, s (each recovers before the next)."""
@@ -139,9 +139,9 @@ class Perturbation:
         out = np.array(plan_mps2, dtype=float)
         times = t_s + step_s * np.arange(len(out))
         for e in self.events:
-            if e.kind == HEADWAY or not e.start_s <= t_s < e.start_s + e.duration_s:
+            end = e.start_s + e.duration_s
+            if e.kind == HEADWAY or not e.start_s <= t_s < end:
                 continue
-            inside = times < e.start_s + e.duration_s
-            cap = max(e.level_mps2, self.accel_min_mps2)
-            out[inside] = np.minimum(out[inside], cap)
+            inside = times < end
+            out[inside] = np.minimum(out[inside], max(e.level_mps2, self.accel_min_mps2))
         return out
