@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
+from trust_av_planner.errors import TrustAvPlannerError
 from trust_monitor.trust_interface import (
     FitParameter,
     TrustModel,
@@ -60,7 +61,7 @@ MAX_EVALUATIONS = 250
 TIME_TOLERANCE_S = 1e-9
 
 
-class FitError(ValueError):
+class FitError(TrustAvPlannerError):
     """Data a fit cannot use (named in one line)."""
 
 
