@@ -160,10 +160,12 @@ class Recovery:
 
 def recover(config: RunConfig, models: Sequence[str], participants: int, drives: int,
             seed: int = 0, noise: float = RATING_NOISE, values: dict[str, Any] | None = None,
-            on_participant: Callable[[str], None] | None = None) -> Recovery:
+            on_participant: Callable[[str], None] | None = None,
+            steps: int = DRIVE_S) -> Recovery:
     """For each true model in ``models``: ``participants`` synthetic participants with
     ``drives`` drives each (the first ``drives`` of :data:`CONDITIONS`, cycled), every
-    model fitted to each (parameters: full fit; best model: leave-one-drive-out elpd).
+    model fitted to each (parameters: full fit; best model: leave-one-drive-out elpd), each
+    drive ``steps`` control steps long.
 
     Raises:
         FitError: fewer than two drives (no held-out drive).
@@ -175,7 +177,7 @@ def recover(config: RunConfig, models: Sequence[str], participants: int, drives:
     def scores_of(condition: str, k: int) -> tuple[np.ndarray, np.ndarray]:
         key = (condition, k if condition.endswith('_random') else 0)
         if key not in cache:
-            cache[key] = drive_scores(config, condition, seed * 1000 + key[1])
+            cache[key] = drive_scores(config, condition, seed * 1000 + key[1], steps)
         return cache[key]
 
     pairs: dict[str, dict[str, list[tuple[float, float]]]] = {
