@@ -13,10 +13,12 @@ bench_trust_recovery.py``, docs/tutorials/fit-trust-models.md).
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -197,3 +199,34 @@ def recover(config: RunConfig, models: Sequence[str], participants: int, drives:
             if on_participant is not None:
                 on_participant(who.name)
     return Recovery(participants, drives, pairs, elpd)
+
+
+def synthetic_study(config: RunConfig, models: Sequence[str], per_model: int, drives: int,
+                    seed: int = 0, steps: int = DRIVE_S) -> list[Participant]:
+    """``per_model`` synthetic participants of each model in ``models``, ``drives`` drives
+    each (the first of :data:`CONDITIONS`, cycled; ``mixed_random`` seeded per participant)."""
+    rng = np.random.Generator(np.random.PCG64(seed))
+    out = []
+    for true in models:
+        spec = model_spec(config.trust, true)
+        for i in range(per_model):
+            data = [(c, *drive_scores(config, c, seed * 1000 + i, steps))
+                    for c in (CONDITIONS[j % len(CONDITIONS)] for j in range(drives))]
+            out.append(make_participant(spec, f'{true}_{i:02d}', data, rng))
+    return out
+
+
+def write_ratings_table(path: Path, participants: Sequence[Participant]) -> None:
+    """The participants' drives as a tidy ratings table (the format of
+    :mod:`trust_av_planner.drive.trust_fit_data`)."""
+    rows = []
+    for who in participants:
+        for d in who.drives:
+            rows += [(who.name, d.drive, float(t), repr(float(e)), '')
+                     for t, e in zip(d.times_s, d.scores, strict=True)]
+            rows += [(who.name, d.drive, float(t), '', f'{r:g}')
+                     for t, r in zip(d.rating_times_s, d.ratings, strict=True)]
+    with Path(path).open('w', newline='') as handle:
+        writer = csv.writer(handle, lineterminator='\n')
+        writer.writerow(('participant', 'drive', 't_s', 'explicability', 'rating'))
+        writer.writerows(rows)
