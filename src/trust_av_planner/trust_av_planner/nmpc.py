@@ -33,7 +33,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from trust_av_planner.perturbations import LIBRARY
+from trust_av_planner import perturbations
 from trust_monitor.common import kinematics, registry
 from trust_monitor.common.params import (
     PARAM_METADATA_KEY,
@@ -49,8 +49,6 @@ from trust_monitor.trust_model import TrustConfig, explicability
 
 LOG = logging.getLogger(__name__)
 
-PERTURBATIONS = LIBRARY
-"""Study conditions (:mod:`trust_av_planner.perturbations`)."""
 LEAD_PREVIEWS = ('recorded', 'constant_speed', 'constant_acceleration')
 """Where the lead's speed over the horizon comes from (parameter ``lead_preview``)."""
 
@@ -118,11 +116,9 @@ class PlannerConfig:
                                        'back', unit='s', low=0.0, low_inclusive=False,
                                        high=60.0, read_only=False)
     fallback_gap_gain_per_s2: float = param('gap gain of the fallback controller',
-                                            unit='1/s^2', low=0.0, high=1000.0,
-                                            reason=SAFETY)
+                                            unit='1/s^2', low=0.0, high=1000.0, reason=SAFETY)
     fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
-                                             unit='1/s', low=0.0, high=1000.0,
-                                             reason=SAFETY)
+                                             unit='1/s', low=0.0, high=1000.0, reason=SAFETY)
     predictor: str = param('estimator of the plan the human expects: a registered plan '
                            'estimator (entry-point group trust_av.predictors)',
                            reason=ESTIMATOR)
@@ -145,13 +141,8 @@ class PlannerConfig:
                                     'missing or stale (>= accel_min_mps2)', unit='m/s^2',
                                     low=-100.0, high=0.0, high_inclusive=False, default=-2.0,
                                     reason=SAFETY)
-    perturbation: str = param('study condition: when the AV departs from its planned command '
-                              '(trust_av_planner.perturbations; none = never)',
-                              choices=PERTURBATIONS, default='none',
-                              reason='the study condition of a run is fixed')
-    perturbation_seed: int = param('seed of a *_random perturbation (its event times)', low=0,
-                                   high=4294967295, default=0,
-                                   reason='the study condition of a run is fixed')
+    perturbation: str = perturbations.CONDITION_PARAM
+    perturbation_seed: int = perturbations.SEED_PARAM
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -163,9 +154,8 @@ class PlannerConfig:
         predictors = registry.names(registry.PREDICTORS)
         require(self.predictor in predictors,
                 f'predictor must be one of {list(predictors)}, got {self.predictor!r}')
-        require(self.stale_decel_mps2 >= self.accel_min_mps2,
-                f'stale_decel_mps2 must be >= accel_min_mps2 = {self.accel_min_mps2:g}, got '
-                f'{self.stale_decel_mps2:g}')
+        require(self.stale_decel_mps2 >= self.accel_min_mps2, 'stale_decel_mps2 must be >= '
+                f'accel_min_mps2 = {self.accel_min_mps2:g}, got {self.stale_decel_mps2:g}')
 
     @property
     def horizon_s(self) -> float:

@@ -32,7 +32,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trust_monitor.common.params import param
+
 BRAKE, HESITATE, HEADWAY = 'brake', 'hesitate', 'headway'
+FIXED_CONDITION = 'the study condition of a run is fixed'
+"""Why the planner's ``perturbation`` parameters are read-only."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +91,12 @@ RANDOM_KINDS = {'late_brake_random': (late_brake,), 'hesitation_random': (hesita
                 'mixed_random': (late_brake, hesitation)}
 LIBRARY: tuple[str, ...] = (*SCHEDULED, *RANDOM_KINDS)
 """Every condition name the ``perturbation`` parameter accepts."""
+CONDITION_PARAM = param('study condition: when the AV departs from its plan (none: never)',
+                        choices=LIBRARY, default='none', reason=FIXED_CONDITION)
+"""The planner's ``perturbation`` parameter (a field of its ``PlannerConfig``)."""
+SEED_PARAM = param('seed of a *_random perturbation (its event times)', low=0,
+                   high=2**32 - 1, default=0, reason=FIXED_CONDITION)
+"""The planner's ``perturbation_seed`` parameter."""
 
 
 def schedule(name: str, seed: int = 0) -> tuple[Event, ...]:
