@@ -87,9 +87,7 @@ def shadow_specs(config: RunConfig, trace: SpeedTrace, rate_hz: float,
                  {**wall, 'jitter_report_path': str(log_dir / 'planner.jitter.json'),
                   'human_odom_topic': '', 'speed_max_mps': cfg.planner.speed_max_mps,
                   'speed_max_from_trace': False, 'alpha': cfg.planner.alpha,
-                  'predictor': cfg.planner.predictor,
-                  'perturbation': cfg.planner.perturbation,
-                  'perturbation_seed': cfg.planner.perturbation_seed}),
+                  'predictor': cfg.planner.predictor}),
     ]
 
 
