@@ -19,8 +19,8 @@ bag, on the same clock:
   plant (s), z applied -> state sent to the page (s).
 
 The bag's ``custom_data`` (rosbag2 ``metadata.yaml``) holds the study metadata:
-participant, condition, alpha, predictor, trace, code version, seed, status and the
-latency percentiles.
+participant, condition, alpha, predictor, trace, perturbation and its seed, code version,
+seed, status and the latency percentiles.
 """
 
 from __future__ import annotations
