@@ -22,8 +22,9 @@ Pure numerics (no ROS, no files): :mod:`trust_av_planner.drive.trust_fit_data` r
   by maximising the profile likelihood times the declared normal prior (on the log scale
   for ``log_scale`` parameters: a MAP estimate) with ``scipy.optimize.minimize`` (Powell,
   within the bounds: a threshold parameter makes the likelihood piecewise constant, so the
-  search is derivative-free), started from the best of the prior mean and
-  :data:`STARTS` draws from the prior.
+  search is derivative-free), in units of prior standard deviations (one tolerance, 0.01
+  SD, for every parameter), started from the best of the prior mean and :data:`STARTS`
+  draws from the prior.
 - **Scores.** Held-out log predictive density of each rating under the fitted model and
   observation (nats, ratings on the 0-100 scale) and rating RMSE, from fits that did not see
   it: leave one drive out (per participant) and leave one participant out (pooled). Standard
@@ -228,16 +229,18 @@ class Fit:
 
 
 def _to_search(p: FitParameter, value: float) -> float:
-    return math.log(value) if p.log_scale else value
+    """A parameter value in search units: prior standard deviations from the prior mean
+    (on the log scale for ``log_scale``), so one tolerance suits every parameter."""
+    return ((math.log(value) if p.log_scale else value) - p.prior_mean) / p.prior_std
 
 
-def _from_search(p: FitParameter, x: float) -> float:
+def _from_search(p: FitParameter, z: float) -> float:
+    x = p.prior_mean + p.prior_std * z
     return math.exp(x) if p.log_scale else x
 
 
-def _prior(params: Sequence[FitParameter], x: np.ndarray) -> float:
-    return float(sum(-0.5 * ((xi - p.prior_mean) / p.prior_std) ** 2
-                     for p, xi in zip(params, x, strict=True)))
+def _prior(params: Sequence[FitParameter], z: np.ndarray) -> float:
+    return float(-0.5 * np.sum(np.asarray(z) ** 2)) if len(params) else 0.0
 
 
 def fit(spec: ModelSpec, drives: Sequence[RatedDrive], seed: int = 0) -> Fit:
@@ -274,12 +277,9 @@ def fit(spec: ModelSpec, drives: Sequence[RatedDrive], seed: int = 0) -> Fit:
         x_best = np.array([])
     else:
         rng = np.random.Generator(np.random.PCG64(seed))
-        mean = np.clip([p.prior_mean for p in params], [b[0] for b in box],
-                       [b[1] for b in box])
-        starts = [mean] + [np.clip(rng.normal([p.prior_mean for p in params],
-                                              [p.prior_std for p in params]),
-                                   [b[0] for b in box], [b[1] for b in box])
-                           for _ in range(STARTS)]
+        low, high = [b[0] for b in box], [b[1] for b in box]
+        starts = [np.clip(np.zeros(len(params)), low, high)] + [
+            np.clip(rng.normal(0.0, 1.0, len(params)), low, high) for _ in range(STARTS)]
         values = [objective(s) for s in starts]
         x0 = starts[int(np.argmin(values))]
         result = optimize.minimize(objective, x0, method='Powell', bounds=box,
