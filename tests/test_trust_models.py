@@ -12,7 +12,7 @@ import pytest
 
 from trust_av_planner.study.tables import BOUND_HEADER
 from trust_monitor.trust_interface import make_trust_model
-from trust_monitor.trust_model import TrustConfig, performance, trust_step
+from trust_monitor.trust_model import TrustConfig, trust_step
 from trust_monitor.trust_models import BetaState, OptimoConfig, OptimoModel
 
 BASE = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,

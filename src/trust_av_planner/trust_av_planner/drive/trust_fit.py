@@ -125,7 +125,8 @@ class ModelSpec:
 
     def build(self, theta: Mapping[str, float]) -> TrustModel:
         """The model with the fitted parameters set to ``theta``."""
-        shared = {k: v for k, v in theta.items() if k in TrustConfig.__dataclass_fields__}
+        shared: dict[str, Any] = {k: v for k, v in theta.items()
+                                  if k in TrustConfig.__dataclass_fields__}
         own = {**self.values, **{k: v for k, v in theta.items() if k not in shared}}
         return make_trust_model(dataclasses.replace(self.trust, **shared), own)
 

@@ -150,12 +150,12 @@ class Recovery:
         out: dict[str, dict[str, float | None]] = {}
         for name, pairs in self.true_and_fitted.items():
             row: dict[str, float | None] = {}
-            for p, values in pairs.items():
+            for param, values in pairs.items():
                 arr = np.array(values)
                 ok = len(arr) > 2 and np.std(arr[:, 0]) > 0 and np.std(arr[:, 1]) > 0
-                row[p] = float(np.corrcoef(arr[:, 0], arr[:, 1])[0, 1]) if ok else None
-            for p in specs[name].fixed:
-                row[p.name] = None
+                row[param] = float(np.corrcoef(arr[:, 0], arr[:, 1])[0, 1]) if ok else None
+            for fixed in specs[name].fixed:
+                row[fixed.name] = None
             out[name] = row
         return out
 
