@@ -127,16 +127,18 @@ def test_rating_at_a_time_reads_the_steps_completed_by_then() -> None:
 
 def test_fit_recovers_a_known_participant(
         scores: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
-    """Ratings from OPTIMo with w_p = 0.02 /s (2 points of noise): the fit finds it, and
-    held out it beats the paper's model."""
+    """Ratings from OPTIMo (2 points of noise): the fit finds its initial trust and its
+    drift in good stretches, w_b + w_p (w_b and w_p apart are told only by the few bad
+    seconds: docs/tutorials/fit-trust-models.md), and held out it beats the paper's model."""
     spec = model_spec(CONFIG.trust, 'optimo')
     rng = np.random.Generator(np.random.PCG64(1))
     data = [(c, *scores[c]) for c in ('late_brake', 'mixed_random')]
     who = make_participant(spec, 'p', data, rng, noise=2.0)
     fitted = fit(spec, who.drives)
-    for name, value in who.theta.items():
-        if name in ('optimo_performance_rate_per_s', 'optimo_initial_trust'):
-            assert fitted.theta[name] == pytest.approx(value, rel=0.2), name
+    true, got = who.theta, fitted.theta
+    assert got['optimo_initial_trust'] == pytest.approx(true['optimo_initial_trust'], abs=0.03)
+    drift = 'optimo_bias_rate_per_s', 'optimo_performance_rate_per_s'
+    assert sum(got[k] for k in drift) == pytest.approx(sum(true[k] for k in drift), rel=0.1)
     assert fitted.observation.s == pytest.approx(0.02, rel=0.5)
     paper = model_spec(CONFIG.trust, 'paper')
     own = held_out(spec, [[d] for d in who.drives], 'lodo')
