@@ -234,3 +234,33 @@ def test_unknown_model_one_line_exit_2(tmp_path: Path) -> None:
                            '--models', 'paper,nope'],
                           capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 2 and 'not registered: nope' in proc.stderr
+
+
+def test_a_study_is_read_from_its_drive_bags(tmp_path: Path,
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """Practice drives and earlier attempts are left out; E is recomputed from the recorded
+    plans with the run's eps; ratings (x in [0, 1] on driver/rating) come back as 0-100."""
+    from trust_av_planner.drive import bag_data
+    from trust_av_planner.drive.trust_fit_data import read_study
+    from trust_av_planner.drive.trust_rating import DriveSeries
+    from trust_monitor.trust_model import explicability
+
+    for name in ('drive_01_practice', 'drive_02_calm', 'drive_02_calm.attempt1',
+                 'drive_03_brake'):
+        (tmp_path / 'p7' / name).mkdir(parents=True)
+        (tmp_path / 'p7' / name / 'metadata.yaml').write_text('x: 1\n')
+    plans = [[0.0, 0.0, 0.0], [-3.0, 0.0, 0.0], [0.5, 0.5, 0.5]]
+    expected = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.5, 0.5, 0.5]]
+
+    def fake(bag: Path) -> bag_data.DriveBag:
+        series = DriveSeries(np.array([0.0, 1.0, 2.0]), plans, expected, np.zeros(3))
+        return bag_data.DriveBag(Path(bag), {'trust_av.participant': 'p7'}, series,
+                                 np.array([1.5]), np.array([0.42]), [], {})
+
+    monkeypatch.setattr(bag_data, 'read_drive', fake)
+    drives = read_study(tmp_path, 6.0)
+    assert [(d.participant, d.drive) for d in drives] == [('p7', 'drive_02_calm'),
+                                                        ('p7', 'drive_03_brake')]
+    assert drives[0].scores[1] == explicability(plans[1], expected[1], 6.0) > 0.05
+    assert drives[0].scores[0] == drives[0].scores[2] == 0.0
+    assert drives[0].ratings.tolist() == [42.0]
