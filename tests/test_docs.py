@@ -85,8 +85,12 @@ def scratch(tmp_path: Path, page_text: str = '') -> Path:
 def run_block(block: Block, page: Path, work: Path, base_env: dict[str, str]) -> None:
     env = {**base_env, 'PATH': f'{Path(sys.executable).parent}{os.pathsep}'
                                  f'{os.environ.get("PATH", "")}'}
-    command = ['bash', '-euo', 'pipefail', '-c', block.body] if block.lang == 'bash' \
-        else [sys.executable, '-c', block.body]
+    if block.lang == 'bash':
+        command = ['bash', '-euo', 'pipefail', '-c', block.body]
+    else:    # as a saved script, as a reader runs it (python -c would hide a missing
+        script = work / f'block_{block.line}.py'  # __main__ guard for worker processes)
+        script.write_text(block.body, encoding='utf-8')
+        command = [sys.executable, str(script)]
     proc = subprocess.run(command, cwd=work, env=env, capture_output=True, text=True,
                           timeout=600, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, (f'{page.name}:{block.line}: exit {proc.returncode}\n'

@@ -12,7 +12,7 @@ import pytest
 
 from trust_av_planner.study.tables import BOUND_HEADER
 from trust_monitor.trust_interface import make_trust_model
-from trust_monitor.trust_model import TrustConfig, performance, trust_step
+from trust_monitor.trust_model import TrustConfig, trust_step
 from trust_monitor.trust_models import BetaState, OptimoConfig, OptimoModel
 
 BASE = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,
@@ -26,48 +26,81 @@ def scores(n: int, seed: int) -> list[float]:
 
 @pytest.mark.parametrize('seed', range(5))
 def test_paper_is_a_special_case_of_optimo(seed: int) -> None:
-    """w_b = 0, w_p = delta, w_d = 0, sigma = 0 and P_thre: OPTIMo's mean is eqs. (10)-(11)."""
-    special = OptimoModel(BASE, OptimoConfig(optimo_bias_rate_per_s=0.0,
-                                             optimo_performance_rate_per_s=0.1,
+    """w_b = 0, w_p = delta, w_d = 0, sigma = 0 and P_thre: OPTIMo's mean is eqs. (10)-(11)
+    while it stays inside [0, 1] (here: delta 0.001 /s, from T(0) = 0.5, 200 steps)."""
+    base = dataclasses.replace(BASE, trust_growth_rate=0.001, trust_initial=0.5)
+    special = OptimoModel(base, OptimoConfig(optimo_bias_rate_per_s=0.0,
+                                             optimo_performance_rate_per_s=0.001,
                                              optimo_change_gain=0.0, optimo_noise_std=0.0,
+                                             optimo_initial_trust=0.5,
                                              optimo_performance_threshold=0.8))
-    state, trust = special.initial_state(), BASE.trust_initial
+    state, trust = special.initial_state(), base.trust_initial
     for score in scores(200, seed):
         state = special.step(state, score, 1.0)
-        trust = trust_step(trust, score, BASE)
+        trust = trust_step(trust, score, base)
         assert special.trust(state) == trust
         assert special.variance(state) == 0.0
     # ... and not for another w_d: the special case is a real restriction
-    other = OptimoModel(BASE, dataclasses.replace(special.params, optimo_change_gain=0.5))
+    other = OptimoModel(base, dataclasses.replace(special.params, optimo_change_gain=0.5))
     state = other.initial_state()
     for score in (0.0, 0.5):
         state = other.step(state, score, 1.0)
-    assert other.trust(state) != trust_step(trust_step(0.0, 0.0, BASE), 0.5, BASE)
+    assert other.trust(state) != trust_step(trust_step(0.5, 0.0, base), 0.5, base)
+
+
+def test_optimo_trust_stays_in_the_unit_interval() -> None:
+    """OPTIMo's trust is bounded: good performance saturates at 1, failures floor at 0, and
+    a reported trust cannot push it outside."""
+    model = OptimoModel(BASE, OptimoConfig(optimo_performance_rate_per_s=0.1))
+    state = model.step(model.initial_state(), 0.0, 60.0)        # P = 1 for a minute
+    assert model.trust(state) == 1.0
+    state = model.step(state, 1.0, 600.0)                       # P < P_thre for 10 min
+    assert model.trust(state) == 0.0
+    noisy = OptimoModel(BASE, OptimoConfig(optimo_noise_std=0.2))
+    state = noisy.step(noisy.initial_state(), 0.0, 1.0)
+    assert noisy.trust(noisy.observe(state, 5.0, 0.01)) == 1.0
 
 
 def test_optimo_variance_grows_and_a_report_shrinks_it() -> None:
     model = OptimoModel(BASE, OptimoConfig(optimo_noise_std=0.2))
-    state = model.step(model.initial_state(), 0.01, 4.0)
+    state = model.step(model.initial_state(), 0.5, 4.0)
     assert state.variance == pytest.approx(0.2 ** 2 * 4.0)
-    after = model.observe(state, 10.0, noise_variance=state.variance)
+    after = model.observe(state, 0.3, noise_variance=state.variance)
     assert after.variance == pytest.approx(state.variance / 2)
-    assert after.mean == pytest.approx((state.mean + 10.0) / 2)
+    assert after.mean == pytest.approx((state.mean + 0.3) / 2)
 
 
-def test_beta_bernoulli_updates_once_per_episode() -> None:
+def test_beta_bernoulli_counts_binary_episodes() -> None:
+    """Guo & Yang: an episode adds w_s to alpha when it succeeds (mean P >= threshold) and
+    w_f to beta when it fails, however far from the threshold P is."""
     model = make_trust_model(dataclasses.replace(BASE, trust_model='beta_bernoulli'),
                              {'beta_bernoulli_episode_s': 3.0,
-                              'beta_bernoulli_failure_weight': 2.0})
+                              'beta_bernoulli_failure_weight': 2.0,
+                              'beta_bernoulli_success_weight': 0.5})
     state = model.initial_state()
     for _ in range(2):
         state = model.step(state, 0.3, 1.0)
     assert (state.alpha, state.beta) == (1.0, 1.0)  # the episode is not over
-    state = model.step(state, 0.3, 1.0)
-    p = performance(0.3)
-    assert state == BetaState(1.0 + p, 1.0 + 2.0 * (1.0 - p))
-    assert model.trust(state) == pytest.approx((1 + p) / (2 + 2 * (1 - p) + p))
+    state = model.step(state, 0.3, 1.0)              # P = 0.709 < 0.8: a failure
+    assert state == BetaState(1.0, 3.0)
+    assert model.step(model.initial_state(), 0.9, 3.0) == state    # a worse failure: same
+    state = model.step(state, 0.1, 3.0)              # P = 0.900: a success
+    assert (state.alpha, state.beta) == (1.5, 3.0)
+    assert model.trust(state) == pytest.approx(1.5 / 4.5)
     a, b = state.alpha, state.beta
     assert model.variance(state) == pytest.approx(a * b / ((a + b) ** 2 * (a + b + 1)))
+
+
+def test_beta_bernoulli_forgets_towards_its_prior() -> None:
+    model = make_trust_model(dataclasses.replace(BASE, trust_model='beta_bernoulli'),
+                             {'beta_bernoulli_forgetting': 0.5})
+    state = model.initial_state()
+    for _ in range(3):                                # three successes: 1 + 1/2 + 1/4 + 1
+        state = model.step(state, 0.0, 1.0)
+    assert (state.alpha, state.beta) == pytest.approx((1.0 + 1.75, 1.0))
+    for _ in range(60):                               # a minute of failures
+        state = model.step(state, 1.0, 1.0)
+    assert state.alpha == pytest.approx(1.0) and state.beta == pytest.approx(3.0)
 
 
 def test_beta_bernoulli_step_across_an_episode_end_is_split() -> None:
@@ -76,8 +109,21 @@ def test_beta_bernoulli_step_across_an_episode_end_is_split() -> None:
     two = model.step(model.step(model.step(model.initial_state(), 0.1, 0.5), 0.9, 0.5), 0.9,
                      0.5)
     assert (one.alpha, one.beta) == pytest.approx((two.alpha, two.beta))
-    p_k = (performance(0.1) + performance(0.9)) / 2  # the first episode: half and half
-    assert one.alpha == pytest.approx(1.0 + p_k)
+    # the first episode: half at P(0.1) = 0.90, half at P(0.9) = 0.28: mean 0.59, a failure
+    assert (one.alpha, one.beta) == (1.0, 2.0)
+
+
+def test_every_shipped_model_maps_to_the_common_scale() -> None:
+    """paper/asymmetric: T(0) -> 0.5, T(0) +- delta 600 s -> 1 / 0; the others are on
+    [0, 1] already."""
+    from trust_monitor.trust_interface import common_trust
+    paper = make_trust_model(BASE)
+    assert common_trust(paper, 0.0) == 0.5
+    assert common_trust(paper, 60.0) == 1.0 and common_trust(paper, -30.0) == 0.25
+    assert common_trust(paper, 1e9) == 1.0
+    for name in ('beta_bernoulli', 'optimo'):
+        model = make_trust_model(dataclasses.replace(BASE, trust_model=name))
+        assert common_trust(model, model.initial_state()) == 0.5
 
 
 def test_asymmetric_loses_twice_what_it_gains() -> None:

@@ -33,6 +33,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from trust_av_planner import perturbations
 from trust_monitor.common import kinematics, registry
 from trust_monitor.common.params import (
     PARAM_METADATA_KEY,
@@ -114,11 +115,9 @@ class PlannerConfig:
                                        'back', unit='s', low=0.0, low_inclusive=False,
                                        high=60.0, read_only=False)
     fallback_gap_gain_per_s2: float = param('gap gain of the fallback controller',
-                                            unit='1/s^2', low=0.0, high=1000.0,
-                                            reason=SAFETY)
+                                            unit='1/s^2', low=0.0, high=1000.0, reason=SAFETY)
     fallback_speed_gain_per_s: float = param('speed gain of the fallback controller',
-                                             unit='1/s', low=0.0, high=1000.0,
-                                             reason=SAFETY)
+                                             unit='1/s', low=0.0, high=1000.0, reason=SAFETY)
     predictor: str = param('estimator of the plan the human expects: a registered plan '
                            'estimator (entry-point group trust_av.predictors)',
                            reason=ESTIMATOR)
@@ -141,6 +140,8 @@ class PlannerConfig:
                                     'missing or stale (>= accel_min_mps2)', unit='m/s^2',
                                     low=-100.0, high=0.0, high_inclusive=False, default=-2.0,
                                     reason=SAFETY)
+    perturbation: str = perturbations.CONDITION_PARAM
+    perturbation_seed: int = perturbations.SEED_PARAM
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -152,9 +153,8 @@ class PlannerConfig:
         predictors = registry.names(registry.PREDICTORS)
         require(self.predictor in predictors,
                 registry.not_one_of('predictor', self.predictor, predictors))
-        require(self.stale_decel_mps2 >= self.accel_min_mps2,
-                f'stale_decel_mps2 must be >= accel_min_mps2 = {self.accel_min_mps2:g}, got '
-                f'{self.stale_decel_mps2:g}')
+        require(self.stale_decel_mps2 >= self.accel_min_mps2, 'stale_decel_mps2 must be >= '
+                f'accel_min_mps2 = {self.accel_min_mps2:g}, got {self.stale_decel_mps2:g}')
 
     @property
     def horizon_s(self) -> float:

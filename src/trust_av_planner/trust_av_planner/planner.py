@@ -10,6 +10,7 @@ solves the trust-aware NMPC. At any control period: the NMPC predicts on its gri
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from trust_av_planner.nmpc import PlannerConfig, PlanResult, TrustAwareNmpc
+from trust_av_planner.perturbations import Perturbation
 from trust_av_planner.predictors import Observation, Predictor
 from trust_av_planner.predictors.sampling import ModelGridPredictor
 from trust_av_planner.preview import LeadPreview, hold_on_grid
@@ -179,6 +181,9 @@ class AvPlanner:
         self._last_accel: float | None = None
         self._last_t_s: float | None = None
         self._t_s = 0.0
+        self.perturbation = Perturbation(config.perturbation, config.perturbation_seed,
+                                         config.accel_min_mps2)
+        self._first_t_s: float | None = None
 
     @property
     def grid(self) -> tuple[float, int]:
@@ -221,7 +226,17 @@ class AvPlanner:
         expected = hold_on_grid(expected_model, self.config.dt_s, step_s, steps, age_s)
         preview = self.lead_preview(traffic, preview_mps, t_s)
         gap = gap_m(traffic, av, self.vehicle_length_m)
-        result = self.nmpc.step(gap, av.speed_mps, preview, expected, trust)
+        if self._first_t_s is None:
+            self._first_t_s = t_s
+        since_s = t_s - self._first_t_s
+        # a study condition (perturbations.py): the NMPC plans from a shorter gap after an
+        # unannounced headway change, and its command is capped during a brake/hesitation
+        planned_gap = gap - self.perturbation.headway_s(since_s) * av.speed_mps
+        result = self.nmpc.step(planned_gap, av.speed_mps, preview, expected, trust)
+        if self.perturbation.active:
+            commanded = self.perturbation.apply(result.plan_mps2, since_s, step_s)
+            if not np.array_equal(commanded, result.plan_mps2):
+                result = dataclasses.replace(result, plan_mps2=commanded)
         self.commanded(float(result.plan_mps2[0]), t_s)
         return PlannerOutput(result, expected, expected_model, preview, gap)
 

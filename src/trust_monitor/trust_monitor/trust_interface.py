@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 from trust_monitor.common.component_checks import PASSING, call, check_number, raised
@@ -63,7 +64,9 @@ class TrustModel(Protocol):
     eqs. (9)-(11) with the shared parameters (:func:`paper_bound_holds`); an attribute
     ``ceiling = (T0, rate_per_s)`` declares that its trust never exceeds ``T0 + rate_per_s *
     t`` (t in s since the start: what a perfectly explicable AV earns), which plots draw
-    (:func:`trust_ceiling`). A model without one gets no such line.
+    (:func:`trust_ceiling`; a model without one gets no such line); ``fit_parameters``
+    declares what ratings may fit (:func:`fit_parameters`); ``trust_range`` maps its trust
+    units to the common scale (:func:`common_trust`).
     """
 
     name: str
@@ -87,6 +90,74 @@ class TrustModel(Protocol):
     def variance(self, state: Any) -> float | None:
         """The variance of the trust estimate (trust units squared), None if the model
         has no uncertainty."""
+
+
+@dataclass(frozen=True)
+class FitParameter:
+    """A parameter of a trust model that ``trust-av fit-trust`` may fit to ratings.
+
+    A model declares them in an optional class attribute ``fit_parameters`` (a tuple of
+    these; absent: none, the fit then adjusts only the rating observation model). The
+    name is a field of the shared :class:`~trust_monitor.trust_model.TrustConfig` or of the
+    model's own ``config_type``.
+
+    Attributes:
+        name: the parameter's name (as in a params file).
+        low: smallest value tried.
+        high: largest value tried.
+        prior_mean: mean of the prior (a normal, on the log scale when ``log_scale``).
+        prior_std: its standard deviation (same scale).
+        log_scale: the parameter is positive and searched (and its prior is) in log.
+        identifiable: False when ratings cannot determine it (the reason in ``note``); the
+            fit still reports it, the recovery benchmark gives it no correlation.
+        note: why it is not identifiable, or '' .
+    """
+
+    name: str
+    low: float
+    high: float
+    prior_mean: float
+    prior_std: float
+    log_scale: bool = False
+    identifiable: bool = True
+    note: str = ''
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.low) and math.isfinite(self.high) and self.low < self.high
+                and self.prior_std > 0.0) or (self.log_scale and self.low <= 0.0):
+            raise ValueError(f'fit parameter {self.name!r}: need finite low < high, '
+                             f'prior_std > 0 and low > 0 on a log scale')
+
+
+def fit_parameters(model: TrustModel) -> tuple[FitParameter, ...]:
+    """The parameters ``model`` declares fittable (attribute ``fit_parameters``; () when it
+    declares none).
+
+    Raises:
+        TypeError: the attribute is not a tuple of :class:`FitParameter`.
+    """
+    declared = getattr(model, 'fit_parameters', ())
+    if not isinstance(declared, tuple) or not all(isinstance(p, FitParameter)
+                                                   for p in declared):
+        raise TypeError(f'trust model {getattr(model, "name", model)!r}: fit_parameters must '
+                        'be a tuple of FitParameter')
+    return declared
+
+
+COMMON_SCALE = (0.0, 1.0)
+"""The scale on which every model's trust is compared with ratings (rating / 100)."""
+
+
+def common_trust(model: TrustModel, state: Any) -> float:
+    """The trust of ``state`` on the common scale [0, 1] (:data:`COMMON_SCALE`).
+
+    A model declares how its own trust units map to it with an optional attribute
+    ``trust_range = (low, high)``: common = (T - low) / (high - low), clipped to [0, 1].
+    Without it the model's trust is taken to be on [0, 1] already (and is clipped).
+    """
+    low, high = getattr(model, 'trust_range', COMMON_SCALE)
+    value = (float(model.trust(state)) - low) / (high - low)
+    return min(max(value, 0.0), 1.0)
 
 
 def propagate(model: TrustModel, state: Any, score: float, steps: int,

@@ -35,6 +35,7 @@ COMMAND_MODULES = (
     'trust_av_planner.cli.train_gru',
     'trust_av_planner.cli.fit_driver',
     'trust_av_planner.cli.eval_driver',
+    'trust_av_planner.cli.fit_trust',
 )
 """Modules that add a subcommand (in help order)."""
 

@@ -64,6 +64,8 @@ class Condition:
     alpha: float
     predictor: str
     trace: str
+    perturbation: str = 'none'
+    """When the AV departs from its plan (:mod:`trust_av_planner.perturbations`)."""
 
 
 def balanced_latin_square_row(n: int, row: int) -> list[int]:

@@ -38,12 +38,15 @@ from trust_av_planner.drive.trust_rating import (
     agreement_lines,
     compare,
 )
+from trust_av_planner.perturbations import LIBRARY
 from trust_monitor.common.params import ParamsError, build_config, check_fields, param
 
 SECTION = '/drive'
 """The node name the drive's settings are read for (``/**/drive`` or ``/drive``)."""
 CONDITION_KEYS = ('condition_names', 'condition_alphas', 'condition_predictors',
                   'condition_traces')
+PERTURBATION_KEY = 'condition_perturbations'
+"""Optional fifth array: each condition's perturbation (default: none for every one)."""
 
 
 @dataclass(frozen=True)
@@ -93,13 +96,22 @@ def conditions_from(values: dict[str, Any], where: str) -> list[Condition]:
             or len({len(names), len(alphas), len(predictors), len(traces)}) != 1 or not names:
         raise ParamsError(f'{where}: {", ".join(CONDITION_KEYS)} must be non-empty arrays of '
                           'one length')
+    perturbations = values.get(PERTURBATION_KEY, ['none'] * len(names))
+    if not isinstance(perturbations, list) or len(perturbations) != len(names):
+        raise ParamsError(f'{where}: {PERTURBATION_KEY} must be an array of one length with '
+                          f'{", ".join(CONDITION_KEYS)}')
     out = []
-    for name, alpha, predictor, trace in zip(names, alphas, predictors, traces, strict=True):
+    for name, alpha, predictor, trace, perturbation in zip(
+            names, alphas, predictors, traces, perturbations, strict=True):
         if not isinstance(alpha, (int, float)) or isinstance(alpha, bool) \
                 or not 0.0 <= alpha <= 1.0:
             raise ParamsError(f'{where}: condition {name!r}: alpha must be in [0, 1], got '
                               f'{alpha!r}')
-        out.append(Condition(str(name), float(alpha), str(predictor), str(trace)))
+        if perturbation not in LIBRARY:
+            raise ParamsError(f'{where}: condition {name!r}: perturbation must be one of '
+                              f'{list(LIBRARY)}, got {perturbation!r}')
+        out.append(Condition(str(name), float(alpha), str(predictor), str(trace),
+                             str(perturbation)))
     return out
 
 
@@ -113,14 +125,15 @@ def load_drive_settings(path: Path) -> tuple[DriveConfig, FollowerConfig, list[C
 
     values = dict(layered_params([read_layer(path)], SECTION))
     known = {f.name for c in (DriveConfig, FollowerConfig) for f in dataclasses.fields(c)}
-    unknown = sorted(set(values) - known - set(CONDITION_KEYS))
+    unknown = sorted(set(values) - known - set(CONDITION_KEYS) - {PERTURBATION_KEY})
     if unknown:
         raise ParamsError(f'{path}: unknown parameter(s) {", ".join(unknown)}')
     return (build_config(DriveConfig, values), build_config(FollowerConfig, values),
             conditions_from(values, str(path)))
 
 
-SUMMARY_FIELDS = ('drive', 'condition', 'alpha', 'predictor', 'trace', 'status', 'driven_s',
+SUMMARY_FIELDS = ('drive', 'condition', 'alpha', 'predictor', 'trace', 'perturbation',
+                  'status', 'driven_s',
                   'ratings', 'mean_rating', 'final_monitor_trust', 'questionnaire_score',
                   'min_gap_m', 'collisions', 'ended_by', 'refused_messages', 'latency_p50_ms',
                   'latency_p99_ms', 'latency_samples', 'bag')
@@ -161,6 +174,7 @@ def drive_summary(bag: Path, condition: Condition | None, outcome: Any,
     summary = {
         'alpha': condition.alpha if condition else '', 'predictor':
         condition.predictor if condition else '', 'trace': condition.trace if condition else '',
+        'perturbation': condition.perturbation if condition else '',
         'driven_s': round(outcome.driven_s, 3), 'ratings': len(drive.ratings),
         'mean_rating': round(float(np.mean(drive.ratings)), 4) if len(drive.ratings) else '',
         'final_monitor_trust': round(float(monitor[-1]), 4)

@@ -33,8 +33,9 @@ stored (``custom_data`` ``trust_av.drive.refused``: the total, and
 ``trust_av.drive.refused.<reason>`` per reason, :func:`~trust_av_planner.drive.gate.reason_key`).
 
 The bag's ``custom_data`` (rosbag2 ``metadata.yaml``) holds the study metadata:
-participant, condition, alpha, predictor, trace, code version, seed, status, what ended
-the drive, the collisions, the refused messages and the latency percentiles.
+participant, condition, alpha, predictor, trace, perturbation and its seed, code version,
+seed, status, what ended the drive, the collisions, the refused messages and the latency
+percentiles.
 """
 
 from __future__ import annotations

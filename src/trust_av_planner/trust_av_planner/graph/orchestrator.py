@@ -76,6 +76,8 @@ def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: In
                   'driver_model': cfg.follower.driver_model}),
         NodeSpec('planner', 'trust_av_planner.planner_node',
                  {**shared, 'alpha': cfg.planner.alpha, 'predictor': cfg.planner.predictor,
+                  'perturbation': cfg.planner.perturbation,
+                  'perturbation_seed': cfg.planner.perturbation_seed,
                   'lead_preview': cfg.planner.lead_preview, 'autostart': False}),
         NodeSpec('preceding_traffic', 'preceding_traffic.traffic_node',
                  {'trace': trace_arg, 'initial_position_m': initial.traffic.position_m,

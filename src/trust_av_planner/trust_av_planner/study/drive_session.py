@@ -47,7 +47,8 @@ def run_session(args: argparse.Namespace) -> int:
     configs = {}
     for listed in conditions:      # every condition is checked before anything starts
         configs[listed.name] = load_run_config(args.params_files, {'planner': {
-            'alpha': listed.alpha, 'predictor': listed.predictor}})
+            'alpha': listed.alpha, 'predictor': listed.predictor,
+            'perturbation': listed.perturbation}})
         load_trace(listed.trace, base.planner.dt_s, base.trace)
         check_control_rate(configs[listed.name].planner, rate_hz)
     by_name = {c.name: c for c in conditions}
@@ -83,6 +84,9 @@ def run_session(args: argparse.Namespace) -> int:
             index, name, condition, bag, seed = next_drive(args.study, session, by_name,
                                                            drive.seed)
             config = configs[name] if condition is not None else base
+            # a *_random perturbation draws its moments from the drive's recorded seed
+            config = dataclasses.replace(config, planner=dataclasses.replace(
+                config.planner, perturbation_seed=seed))
             trace_name = condition.trace if condition is not None else conditions[0].trace
             trace = load_trace(trace_name, config.planner.dt_s, config.trace)
             duration = args.duration_s or (drive.practice_duration_s if condition is None
@@ -92,6 +96,8 @@ def run_session(args: argparse.Namespace) -> int:
                         'trust_av.condition': name, 'trust_av.drive': str(index),
                         'trust_av.alpha': f'{config.planner.alpha:g}',
                         'trust_av.predictor': config.planner.predictor,
+                        'trust_av.perturbation': config.planner.perturbation,
+                        'trust_av.perturbation_seed': str(config.planner.perturbation_seed),
                         'trust_av.trace': trace_name, 'trust_av.code_version': version,
                         'trust_av.seed': str(seed)}
             done = sum(1 for d in session.drives if d.status == 'done' and d.condition != PRACTICE)

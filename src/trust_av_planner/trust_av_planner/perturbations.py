@@ -1,0 +1,157 @@
+"""Study conditions in which trust moves: moments at which the AV is inexplicable.
+
+With the paper's parameters the AV's plan almost always matches the plan the person expects
+(E is small, P >= P_thre), so every trust model sits near its ceiling and ratings cannot tell
+the models apart (docs/concepts/trust-models.md, "Drives in which trust moves"). A
+*perturbation* is a documented, scheduled departure of the AV's command from what its NMPC
+planned, applied by the planner core (:class:`~trust_av_planner.planner.AvPlanner`) after the
+solve, so the in-process loop and the node graph apply it identically and the monitor scores
+the plan the AV actually commands.
+
+Event kinds (times relative to the first planning step of the run, s):
+
+- ``brake``: late hard braking. While ``start_s <= t < start_s + duration_s`` every plan
+  element that falls inside the window is capped at ``level_mps2`` (then clipped to the
+  planner's ``accel_min_mps2``); the NMPC did not ask for it and the plan gave no warning.
+- ``hesitate``: the AV hesitates, the same cap at a mild deceleration for longer, whatever
+  the NMPC wanted (also when the traffic ahead pulls away).
+- ``headway``: an unannounced headway change. From ``start_s`` on the NMPC plans from a gap
+  ``headway_s * v_AV`` shorter than the real one, so it opens the gap to the CTH headway
+  ``time_headway_s + headway_s`` (> 0 only: the real gap is always larger than planned).
+
+The library (:data:`LIBRARY`) names the conditions a study selects with the planner
+parameter ``perturbation`` (per condition in ``config/drive.yaml``:
+``condition_perturbations``); ``*_random`` conditions draw their times from
+``perturbation_seed`` (numpy's PCG64), so a drive is reproducible from its recorded seed.
+Pure: no ROS, no wall clock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trust_monitor.common.params import param
+
+BRAKE, HESITATE, HEADWAY = 'brake', 'hesitate', 'headway'
+FIXED_CONDITION = 'the study condition of a run is fixed'
+"""Why the planner's ``perturbation`` parameters are read-only."""
+
+
+@dataclass(frozen=True)
+class Event:
+    """One departure of the AV from its planned command.
+
+    Attributes:
+        kind: ``brake``, ``hesitate`` or ``headway``.
+        start_s: when it begins, s after the run's first step.
+        duration_s: how long a cap lasts, s (``headway``: ignored, it persists).
+        level_mps2: the cap on the commanded acceleration, m/s^2 (``brake``, ``hesitate``).
+        headway_s: added CTH headway, s (``headway``).
+    """
+
+    kind: str
+    start_s: float
+    duration_s: float = 0.0
+    level_mps2: float = 0.0
+    headway_s: float = 0.0
+
+
+def late_brake(start_s: float) -> Event:
+    """Hard braking (-3 m/s^2, the AV's Table I limit) for 1 s."""
+    return Event(BRAKE, start_s, 1.0, -3.0)
+
+
+def hesitation(start_s: float) -> Event:
+    """A 2 s hesitation at -1.5 m/s^2."""
+    return Event(HESITATE, start_s, 2.0, -1.5)
+
+
+def headway_change(start_s: float) -> Event:
+    """The AV silently keeps 1 s more headway from ``start_s`` on."""
+    return Event(HEADWAY, start_s, headway_s=1.0)
+
+
+SCHEDULED: dict[str, tuple[Event, ...]] = {
+    'none': (),
+    'late_brake': tuple(late_brake(t) for t in (20.0, 40.0, 60.0, 80.0, 100.0)),
+    'hesitation': tuple(hesitation(t) for t in (15.0, 35.0, 55.0, 75.0, 95.0)),
+    'headway_change': (headway_change(40.0),),
+    'mixed': (hesitation(15.0), late_brake(40.0), headway_change(65.0), late_brake(95.0)),
+}
+"""Conditions at fixed moments (within the first 120 s: the study's default drive)."""
+RANDOM_WINDOW_S = (10.0, 110.0)
+"""``*_random`` conditions place their events in this window, s."""
+RANDOM_EVENTS = 5
+"""Events per ``*_random`` condition."""
+RANDOM_MIN_SPACING_S = 15.0
+"""Least time between two random events, s (each recovers before the next)."""
+RANDOM_KINDS = {'late_brake_random': (late_brake,), 'hesitation_random': (hesitation,),
+                'mixed_random': (late_brake, hesitation)}
+LIBRARY: tuple[str, ...] = (*SCHEDULED, *RANDOM_KINDS)
+"""Every condition name the ``perturbation`` parameter accepts."""
+CONDITION_PARAM = param('study condition: when the AV departs from its plan (none: never)',
+                        choices=LIBRARY, default='none', reason=FIXED_CONDITION)
+"""The planner's ``perturbation`` parameter (a field of its ``PlannerConfig``)."""
+SEED_PARAM = param('seed of a *_random perturbation (its event times)', low=0,
+                   high=2**32 - 1, default=0, reason=FIXED_CONDITION)
+"""The planner's ``perturbation_seed`` parameter."""
+
+
+def schedule(name: str, seed: int = 0) -> tuple[Event, ...]:
+    """The events of condition ``name`` (seeded conditions: drawn from ``seed``).
+
+    Raises:
+        ValueError: ``name`` is not in :data:`LIBRARY`.
+    """
+    if name in SCHEDULED:
+        return SCHEDULED[name]
+    if name not in RANDOM_KINDS:
+        raise ValueError(f'perturbation must be one of {list(LIBRARY)}, got {name!r}')
+    rng = np.random.Generator(np.random.PCG64(seed))
+    low, high = RANDOM_WINDOW_S
+    # spaced times: sorted uniform draws in the window shrunk by the spacing, then spread
+    slack = high - low - (RANDOM_EVENTS - 1) * RANDOM_MIN_SPACING_S
+    times = np.sort(rng.uniform(0.0, slack, RANDOM_EVENTS)) + low \
+        + RANDOM_MIN_SPACING_S * np.arange(RANDOM_EVENTS)
+    makers = RANDOM_KINDS[name]
+    kinds = rng.integers(0, len(makers), RANDOM_EVENTS)
+    return tuple(makers[int(k)](round(float(t), 3)) for t, k in zip(times, kinds, strict=True))
+
+
+class Perturbation:
+    """A condition's events applied to the planner's steps.
+
+    Args:
+        name: a :data:`LIBRARY` name.
+        seed: the seed of a ``*_random`` condition.
+        accel_min_mps2: the planner's lower acceleration bound (caps never go below it).
+    """
+
+    def __init__(self, name: str, seed: int, accel_min_mps2: float) -> None:
+        self.name = name
+        self.events = schedule(name, seed)
+        self.accel_min_mps2 = accel_min_mps2
+
+    @property
+    def active(self) -> bool:
+        """Whether the condition has any event."""
+        return bool(self.events)
+
+    def headway_s(self, t_s: float) -> float:
+        """Headway added at ``t_s`` (s after the first step), s."""
+        return sum(e.headway_s for e in self.events if e.kind == HEADWAY and t_s >= e.start_s)
+
+    def apply(self, plan_mps2: np.ndarray, t_s: float, step_s: float) -> np.ndarray:
+        """The commanded plan at ``t_s``: ``plan_mps2`` (on a grid of ``step_s``) with every
+        cap in force applied to the elements inside its window (a new array)."""
+        out = np.array(plan_mps2, dtype=float)
+        times = t_s + step_s * np.arange(len(out))
+        for e in self.events:
+            end = e.start_s + e.duration_s
+            if e.kind == HEADWAY or not e.start_s <= t_s < end:
+                continue
+            inside = times < end
+            out[inside] = np.minimum(out[inside], max(e.level_mps2, self.accel_min_mps2))
+        return out
