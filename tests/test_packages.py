@@ -7,7 +7,8 @@ message classes by name (the recorder subscribes to every topic of
 ``trust_monitor.common.topics``). Third-party modules map to rosdep keys of rosdistro's
 ``rosdep/python.yaml`` (ros/rosdistro @ 8468e88, 2026-08-22): ``python3-numpy`` (line 5923),
 ``python3-yaml`` (9553), ``python3-matplotlib`` (5437), ``python3-tqdm`` (9009),
-``python3-torch`` (8957: Ubuntu ``python3-torch`` from noble on), and three keys that rosdep
+``python3-torch`` (8957: Ubuntu ``python3-torch`` from noble on), ``python3-scipy``, and
+three keys that rosdep
 installs with pip: ``casadi-pip`` (149), ``python3-rosbags-pip`` (7996) and
 ``mcap-ros2-support`` (328; the ``mcap`` module is its dependency). No key exists for
 ``ray`` (an optional extra, pip only, imported only inside the function that uses it).
@@ -33,6 +34,7 @@ ROSDEP_KEYS = {
     'matplotlib': 'python3-matplotlib',
     'tqdm': 'python3-tqdm',
     'torch': 'python3-torch',
+    'scipy': 'python3-scipy',
     'casadi': 'casadi-pip',
     'rosbags': 'python3-rosbags-pip',
     'mcap': 'mcap-ros2-support',
@@ -130,7 +132,8 @@ def test_package_xml_is_what_rosdep_reads(package: str) -> None:
 
 REPOSITORY_TESTS = {'test_colcon', 'test_suite_groups', 'test_layout', 'test_benchmarks',
                     'test_packages', 'test_docs', 'test_example_plugin',
-                    'test_compare_trust_models', 'test_cli_fuzz', 'test_limits'}
+                    'test_compare_trust_models', 'test_cli_fuzz', 'test_limits', 'test_code_map',
+                    'test_first_result'}
 """Test modules about the repository as a whole (the packages together, the suite, the
 benchmarks), which no single package's ``colcon test`` runs."""
 
