@@ -16,6 +16,7 @@ from typing import Any
 import yaml
 
 from trust_av_planner.system.config import RunConfig
+from trust_monitor.common import registry
 from trust_monitor.common.param_layers import node_fqn
 
 PARAMS_KEY = 'trust_av.params'
@@ -86,7 +87,15 @@ def custom_data(config: RunConfig,
 def header(config: RunConfig) -> str:
     """One line naming what runs: ``components: predictor ca, trust model paper, driver
     model mpc; parameters: FILE + FILE`` (the params files, bottom first; the command
-    line's options are over them)."""
+    line's options are over them). Each component is loaded first, so a plug-in that
+    cannot load is the command's one line and is never named as running.
+
+    Raises:
+        RegistryError: a chosen component does not load.
+    """
+    for group, name in zip((registry.PREDICTORS, registry.TRUST_MODELS, registry.DRIVERS),
+                           components(config).values(), strict=True):
+        registry.get(group, name)
     names = ', '.join(f'{group.replace("_", " ")} {name}'
                       for group, name in components(config).items())
     files = ' + '.join(str(path) for path in config.params_files) or 'defaults'
