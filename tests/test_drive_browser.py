@@ -533,3 +533,5 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
     trust = _messages(bag, '/driver/model_trust')
     assert len(trust) > 100 and list(trust[0].name) == list(names(TRUST_MODELS))
     assert all(np.isfinite(m.position).all() for m in trust)
+    assert all(((np.asarray(m.position) >= 0.0) & (np.asarray(m.position) <= 1.0)).all()
+               for m in trust)                  # the common scale

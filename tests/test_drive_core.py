@@ -307,3 +307,28 @@ def test_withdrawal_from_the_command_line(tmp_path: Path,
     assert main(['drive', '--study', str(tmp_path), '--participant', 'P07', '--withdraw',
                  '--yes']) == 0
     assert not (tmp_path / 'P07').exists() and 'every file deleted' in capsys.readouterr().out
+
+
+def test_every_model_s_live_trust_is_on_the_common_scale() -> None:
+    """What a drive records on /driver/model_trust: each registered model's trust after
+    each plan pair, mapped to [0, 1] by the model's declared ``trust_range`` (the paper's
+    model: T(0) +- delta * 600 s), not in the model's own units."""
+    from trust_av_planner.graph.drive_link import ModelTrust
+    from trust_av_planner.system.config import load_run_config
+    from trust_monitor.trust_interface import make_trust_model
+
+    config = load_run_config()
+    live = ModelTrust(config.trust, dict(config.trust_model_params))
+    paper = TrustEstimator(config.trust, make_trust_model(config.trust,
+                                                          dict(config.trust_model_params)))
+    plan, expected = [0.5, 0.0, -0.5], [0.4, 0.0, -0.4]
+    for k in range(5):
+        assert live.add('plan', k * 10**9, plan) is None        # waits for its pair
+        trust = live.add('expected', k * 10**9, expected)
+        assert trust is not None and len(trust) == len(names(TRUST_MODELS))
+        assert all(0.0 <= value <= 1.0 for value in trust), trust
+        paper.step(plan, expected, 0.1 if k == 0 else 1.0)   # its first pair: the 10 Hz period
+    low, high = paper.model.trust_range
+    assert trust[live.names.index('paper')] == pytest.approx(
+        (paper.trust - low) / (high - low), abs=1e-12)
+    assert paper.trust > 0.3      # five steps of growth: the own scale is not the common one

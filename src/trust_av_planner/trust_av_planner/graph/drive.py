@@ -20,7 +20,8 @@ bag, on the same clock:
   by the follower plant (s), z applied -> echo received (s). Only sequence numbers this
   process issued and sent are accepted, each once;
 - ``driver/model_trust`` (``sensor_msgs/msg/JointState``): every registered trust model's
-  trust in [0, 1] (``name`` the models), live at each plan pair
+  trust on the common scale [0, 1] (``name`` the models;
+  :func:`~trust_monitor.trust_interface.common_trust`), live at each plan pair
   (:class:`~trust_av_planner.graph.drive_link.ModelTrust`);
 - ``driver/events`` (``diagnostic_msgs/msg/DiagnosticArray``): the drive's events as the
   status message: ``waiting``, ``start``, ``end`` (``ended_by``), ``page_connected``,

@@ -188,7 +188,9 @@ class ModelTrust:
 
     def add(self, kind: str, stamp_ns: int, plan: list[float]) -> list[float] | None:
         """A plan (``kind`` ``plan`` or ``expected``) of step ``stamp_ns``; every model's
-        trust once both plans of the step are in, else None."""
+        trust on the common scale [0, 1]
+        (:func:`~trust_monitor.trust_interface.common_trust`: the model's declared
+        ``trust_range``) once both plans of the step are in, else None."""
         self.plans[kind][stamp_ns] = plan
         other = self.plans['expected' if kind == 'plan' else 'plan']
         if stamp_ns not in other:
@@ -201,11 +203,16 @@ class ModelTrust:
         if self.last_ns is not None and stamp_ns > self.last_ns:
             self.period_s = (stamp_ns - self.last_ns) / 1e9
         self.last_ns = stamp_ns
-        return [float(e.step(plan_r, expected, self.period_s).trust) for e in self.estimators]
+        from trust_monitor.trust_interface import common_trust
+        trust = []
+        for estimator in self.estimators:
+            estimator.step(plan_r, expected, self.period_s)
+            trust.append(common_trust(estimator.model, estimator.state))
+        return trust
 
     def message(self, stamp_ns: int, trust: list[float]) -> Any:
         """Every model's trust as a ``sensor_msgs/msg/JointState`` (``name`` the models,
-        ``position`` their trust in [0, 1])."""
+        ``position`` their trust on the common scale [0, 1])."""
         from sensor_msgs.msg import JointState
 
         from trust_monitor.common.topics import NO_FRAME
