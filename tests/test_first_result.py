@@ -13,7 +13,7 @@ import pytest
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
 from trust_av_planner.cli.main import main
-from trust_av_planner.cli.options import Progress, format_metrics, trust_ceiling
+from trust_av_planner.cli.options import Progress, ceiling_at_end, format_metrics
 from trust_av_planner.cli.reproduce import truncation_note, unsafe_cases
 from trust_av_planner.study.sweep import Case
 from trust_av_planner.system.closed_loop import simulate
@@ -23,10 +23,10 @@ from trust_av_planner.system.config import load_run_config
 def test_the_summary_names_the_ceiling() -> None:
     config = load_run_config()
     trace = load_trace('us06', config.planner.dt_s, config.trace)
-    ceiling = trust_ceiling(config, trace)
+    ceiling = ceiling_at_end(config, trace)
     assert ceiling == pytest.approx(60.0)                  # T(0) = 0, delta = 0.1/s, 600 s
     metrics = simulate(config, truncate(trace, 3)).metrics
-    table = format_metrics(metrics, 'x', trust_ceiling=trust_ceiling(config, truncate(trace, 3)))
+    table = format_metrics(metrics, 'x', trust_ceiling=ceiling_at_end(config, truncate(trace, 3)))
     assert re.search(r'^trust ceiling T\(0\) \+ delta\*t +0\.300$', table, re.MULTILINE)
     assert 'ceiling' not in format_metrics(metrics, 'x')
 
