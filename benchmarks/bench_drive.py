@@ -282,7 +282,7 @@ def main() -> int:
         text = re.sub(r'drive_duration_s: [0-9.]+', f'drive_duration_s: {args.duration_s}',
                       shipped).replace('port: 8765', 'port: 0')
         for key in ('condition_names', 'condition_alphas', 'condition_predictors',
-                    'condition_traces'):        # the first condition only
+                    'condition_traces', 'condition_perturbations'):   # the first condition only
             text = re.sub(rf'{key}: \[([^,\]]+)[^\]]*\]', rf'{key}: [\1]', text)
         settings.write_text(text)
         plan = [(n, False) for n in args.busy] + ([(0, True)] if args.flood else [])
