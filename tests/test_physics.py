@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from rosbags.rosbag2 import Reader
 
 from preceding_traffic.bags import write_trace_bag
 from preceding_traffic.errors import PrecedingTrafficError
@@ -24,6 +25,7 @@ from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SHIPPED_TRACES, TRAINING_TRACES, TraceConfig, trace_path
 from trust_av_planner.cli.options import EXIT_COLLISION, format_metrics
 from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.graph.bag_records import records_from_bag
 from trust_av_planner.planner import observe
 from trust_av_planner.study.sweep import sweep_cases
 from trust_av_planner.system import run_record
@@ -31,9 +33,11 @@ from trust_av_planner.system.closed_loop import simulate
 from trust_av_planner.system.config import load_run_config
 from trust_av_planner.system.metrics import compute_metrics
 from trust_monitor.common.kinematics import VehicleState, collision
+from trust_monitor.common.topics import TOPICS, qualified
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from rosbag2_rules import check_bag_directory  # the test-side oracle module
+from test_graph import assert_records_equal  # the graph == in-process comparison
 
 COLLISION_STEP = 8
 """The step at which the AV of the shipped configuration reaches a lead that brakes from
@@ -242,6 +246,27 @@ def test_graph_collision_ends_with_exit_3_and_the_in_process_summary(
         ('steps', 'final trust', 'min ', 'collision'))]
     assert f'collision                          step {COLLISION_STEP}, AV into' in proc.stdout
     assert check_bag_directory(bag) == []          # complete and readable by rosbag2's rules
+
+
+@pytest.mark.slow
+def test_graph_collision_ends_the_recording_at_that_step(
+        graph_collision: tuple[subprocess.CompletedProcess[str], Path, Path]) -> None:
+    """The graph stops at the collision step as the in-process loop does: the bag holds
+    every message of the steps up to and including it and none after (31 trace steps)."""
+    _, bag, trace = graph_collision
+    config = load_run_config([bag.parent / 'model.yaml'], {'planner': {'alpha': 0.25}})
+    reference = simulate(config, load_trace(str(trace), config.planner.dt_s,
+                                            config.trace)).records
+    assert len(reference) == COLLISION_STEP + 1
+    records = records_from_bag(bag)
+    assert_records_equal(records, reference)
+    with Reader(bag) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts == {qualified(row.name, '/'): row.messages(COLLISION_STEP + 1)
+                      for row in TOPICS if 'recorder' in row.subscribers}
+    logs = bag.with_name(bag.name + '.logs')
+    assert f'done: collision at step {COLLISION_STEP}' in (
+        logs / 'preceding_traffic.log').read_text()
 
 
 @pytest.mark.slow

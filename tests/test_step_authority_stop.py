@@ -37,7 +37,8 @@ node.publish_step = lambda step: (published.append(step), publish_step(step))
 def complete(step):
     # The step's outputs as the other nodes publish them: odometry stamped at its end.
     for name, cls, offset in (('ego', Odometry, 1), ('human', Odometry, 1),
-                              ('trust', Vector3Stamped, 0), ('status', DiagnosticArray, 0)):
+                              ('trust', Vector3Stamped, 0), ('status', DiagnosticArray, 0),
+                              ('driver', DiagnosticArray, 0)):
         msg = cls()
         msg.header.stamp = time_msg(node.stamp(step + offset))
         node.on_done(name, msg, offset)

@@ -28,7 +28,7 @@ def test_chain_is_the_protocol_of_graph_interface() -> None:
     expected = {
         'preceding_traffic': (
             {Port('ego/odom', 1), Port('human/odom', 1), Port('trust_monitor/trust', 0),
-             Port('ego/planner_status', 0)},
+             Port('ego/planner_status', 0), Port('human/driver_status', 0)},
             {Port('clock', 0), Port('preceding_vehicle/odom', 0),
              Port('preceding_vehicle/speed_preview', 0), Port('tf', 0)}),
         'planner': (
@@ -108,6 +108,7 @@ def test_gate_waits_for_previous_step_input_and_ignores_the_initial_state() -> N
     for topic in ('ego/odom', 'human/odom'):
         assert source.put(topic, DT_NS) == []
     assert source.put('trust_monitor/trust', 0) == []
+    assert source.put('human/driver_status', 0) == []   # its gap: a collision ends the run
     assert source.put('ego/planner_status', 0) == [0]
 
 

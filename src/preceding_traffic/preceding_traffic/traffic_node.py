@@ -6,12 +6,14 @@ odometry ``preceding_vehicle/odom`` with its transform on ``tf`` (``odom`` ->
 (the trace's future; a replayed bag's recorded future). All names are relative (the node's
 namespace). It starts after ``sim/start`` and
 advances to t + 1 only when the step's outputs are in: ego and human odometry stamped
-t + dt, the trust and the planner status stamped t (lock-step, see
+t + dt, the trust, the planner and the driver status stamped t (lock-step, see
 :mod:`trust_monitor.graph_interface`), and, with ``recorder_window_steps`` > 0 (a recorded
 run), only while the recorder has acknowledged (``recorder/ack``) every step but the last
 ``recorder_window_steps``: back-pressure, so that a suspended or slow recorder holds the
 graph back instead of losing messages (:mod:`trust_monitor.common.record_window`). Once
-asked to stop it completes the step in progress and starts no other. After the last step
+asked to stop it completes the step in progress and starts no other. A step whose statuses
+show a gap at or below 0 m (a collision, :func:`step_collision`) is the last step, as in
+the in-process loop: the recorder ends the recording with it. After the last step
 it logs ``done`` and keeps its publishers alive until it is stopped: a writer that exits
 takes the samples a slow subscriber (the recorder) has not acknowledged yet with it.
 
@@ -40,12 +42,19 @@ from trajectory_msgs.msg import JointTrajectory
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig, truncate
+from trust_monitor.common.kinematics import Collision, collision
 from trust_monitor.common.lockstep import StepBuffer, stamp_ns
 from trust_monitor.common.params import MAX_POSITION_M, check_fields, control_step_param, param
 from trust_monitor.common.record_window import ACK_TOPIC, may_start, window_steps
 from trust_monitor.common.topics import VEHICLE_FRAMES
 from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
-from trust_monitor.ros.messages import TrajectoryBytes, VehicleOdometry, msg_ns, time_msg
+from trust_monitor.ros.messages import (
+    TrajectoryBytes,
+    VehicleOdometry,
+    msg_ns,
+    status_gap_m,
+    time_msg,
+)
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS, topic_qos
 from trust_monitor.ros.raw_inputs import subscribe
@@ -94,7 +103,7 @@ class TrafficNode(Node):
         self.position_m = self.run.initial_position_m
         self.step = -1
         self.done = False
-        self.buffer = StepBuffer(['ego', 'human', 'trust', 'status'])
+        self.buffer = StepBuffer(['ego', 'human', 'trust', 'status', 'driver'])
         self.frame = VEHICLE_FRAMES['preceding_traffic']
         self.preview_bytes = TrajectoryBytes('velocities', self.frame)
         self.vehicle = VehicleOdometry(self.frame)
@@ -127,6 +136,8 @@ class TrafficNode(Node):
                   lambda m: self.on_done('trust', m, 0), QOS['STEP'])
         self.create_subscription(DiagnosticArray, 'ego/planner_status',
                                  lambda m: self.on_done('status', m, 0), QOS['STEP'])
+        self.create_subscription(DiagnosticArray, 'human/driver_status',
+                                 lambda m: self.on_done('driver', m, 0), QOS['STEP'])
         self.get_logger().info(f'trace {trace.name}: {trace.steps} steps of {trace.dt_s} s; '
                                f'waiting for {self.resolve_topic_name("sim/start")}')
 
@@ -208,13 +219,29 @@ class TrafficNode(Node):
             return  # the initial odometry, published before the first step
         self.buffer.put(name, step, msg)
         if self.step >= 0 and self.buffer.ready(self.step):
-            self.buffer.pop(self.step)
+            outputs = self.buffer.pop(self.step)
             self.position_m += float(self.trace.speeds_mps[self.step]) * self.run.dt_s
-            if self.step + 1 >= self.trace.steps:
+            crash = step_collision(self.step, self.trace.time_s(self.step),
+                                   outputs['status'], outputs['driver'])  # type: ignore[arg-type]
+            if crash is not None:
+                self.get_logger().info(f'done: {crash.line()}; no further step')
+                self.done = True
+            elif self.step + 1 >= self.trace.steps:
                 self.get_logger().info(f'done: {self.trace.steps} steps')
                 self.done = True
             else:
                 self.advance(self.step + 1)
+
+
+def step_collision(step: int, t_s: float, planner_status: DiagnosticArray,
+                   driver_status: DiagnosticArray) -> Collision | None:
+    """The collision a complete step's statuses show (the gaps its record holds, see
+    :func:`trust_av_planner.graph.bag_records.records_from_bag`), or None: the run ends with
+    that step, as the in-process loop does."""
+    av_gap = status_gap_m(planner_status)
+    if av_gap is None:
+        return None
+    return collision(step, t_s, av_gap, status_gap_m(driver_status))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -79,8 +79,8 @@ def run(args: argparse.Namespace) -> int:
     total_s = time.monotonic() - began
     finishing_s = graph_s - result.startup_s - result.steps_s
     print(f'time {total_s:.1f} s in all: start-up of the graph {result.startup_s:.1f} s, '
-          f'{trace.steps} steps {result.steps_s:.1f} s '
-          f'({trace.steps * trace.dt_s / max(result.steps_s, 1e-9):.0f}x real time), '
+          f'{result.steps} steps {result.steps_s:.1f} s '
+          f'({result.steps * trace.dt_s / max(result.steps_s, 1e-9):.0f}x real time), '
           f'finishing and reading back the recording {finishing_s:.1f} s, Python start-up, '
           'loading, metrics'
           f'{"" if args.no_plot else ", the alpha = 0 comparison and the plot"} '
@@ -129,10 +129,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'topic to a rosbag2 bag directory (metadata.yaml + MCAP), then print the '
                     'metrics and write a plot (BAG.png) and the node logs (BAG.logs/) beside '
                     'it. However the run ends the bag is finished and readable. Exit codes: 0 '
-                    'done, 3 a collision (a gap at or below 0 m: the summary ends at that step '
-                    'and says so; the bag is complete), 2 bad input, a node failed (named) or '
-                    'the disk is full, 130 interrupted (SIGINT), 143 terminated (SIGTERM), '
-                    '129 its terminal closed (SIGHUP; not under nohup).')
+                    'done, 3 a collision (a gap at or below 0 m: the run ends with that '
+                    'step, the summary says so; the bag is complete up to it), 2 bad input, '
+                    'a node failed (named) or the disk is full, 130 interrupted (SIGINT), '
+                    '143 terminated (SIGTERM), 129 its terminal closed (SIGHUP; not under '
+                    'nohup).')
     add_run_options(parser)
     parser.add_argument('--bag', type=Path, default=None,
                         help='bag directory to write (default: bags/run_<trace>_<predictor>_'

@@ -51,7 +51,7 @@ from trust_av_planner.graph.stalls import BUSY_SHARE, cpu_s, waiting_for
 from trust_av_planner.system import run_record
 from trust_av_planner.system.closed_loop import InitialState, equilibrium_start
 from trust_av_planner.system.config import RunConfig
-from trust_av_planner.system.metrics import StepRecord
+from trust_av_planner.system.metrics import StepRecord, first_collision
 from trust_monitor.common.output_files import stop_signals_held
 from trust_monitor.common.record_window import window_steps
 from trust_monitor.common.topics import qualified
@@ -434,7 +434,7 @@ def _finish_recording(graph: Graph, bag: Path) -> None:
 
 def run_graph_records(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path,
                       **options: Any) -> tuple[GraphRun, list[StepRecord]]:
-    """:func:`run_graph`, then the recording read back (rosbags) as one record per step.
+    """:func:`run_graph`, then its recording read back: a record per step, to a collision.
 
     Raises:
         GraphError: as :func:`run_graph`.
@@ -442,7 +442,9 @@ def run_graph_records(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag:
     """
     result = run_graph(config, trace_arg, trace, bag, **options)
     records = records_from_bag(bag, options.get('namespace', '/'))
-    if len(records) != trace.steps:
+    crash = first_collision(records)
+    if len(records) != trace.steps and (crash is None or crash.step != len(records) - 1):
         raise TrustAvPlannerError(f'{bag}: {len(records)} complete steps recorded, expected '
                                   f'{trace.steps}')
+    result.steps = len(records)
     return result, records

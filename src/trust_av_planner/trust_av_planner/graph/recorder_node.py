@@ -16,7 +16,9 @@ step).
 - **Slow disk** (tests only): the environment variable :data:`WRITE_DELAY_ENV` makes every
   chunk write sleep that many seconds first.
 - **End**: it finishes the bag and exits by itself once it holds every message of
-  ``expected_steps`` steps (0: record until stopped); on SIGINT/SIGTERM/SIGHUP, or when the
+  ``expected_steps`` steps (0: record until stopped), or of the steps up to a collision (a
+  step status, ``ego/planner_status`` or ``human/driver_status``, with a ``gap_m`` at or
+  below 0 m: the step authority starts no step after it); on SIGINT/SIGTERM/SIGHUP, or when the
   orchestrator that started it dies, it takes what is still queued and finishes the bag.
   A full disk finishes the bag with every complete step, one line on stderr, exit code 3.
 """
@@ -32,6 +34,7 @@ from pathlib import Path
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import UInt64
 
 from trust_av_planner.errors import TrustAvPlannerError
@@ -41,7 +44,7 @@ from trust_monitor.common.params import check_fields, param
 from trust_monitor.common.record_window import ACK_EVERY_STEPS, ACK_TOPIC, recorded_topics
 from trust_monitor.common.topics import TOPICS
 from trust_monitor.common.wall_clock import WallClockConfig
-from trust_monitor.ros.messages import diagnostics, message_class
+from trust_monitor.ros.messages import diagnostics, message_class, status_gap_m
 from trust_monitor.ros.parameters import declare_config
 from trust_monitor.ros.qos import QOS
 from trust_monitor.ros.spin import spin_node
@@ -119,6 +122,8 @@ class RecorderNode(Node):
             self.subscriptions_by_topic[name] = self.create_subscription(
                 message_class(topic.msgtype), topic.name,
                 lambda data, t=name: self.on_message(t, data), QOS[topic.qos], raw=True)
+        self.gap_topics = {self.resolve_topic_name(name)
+                           for name in ('ego/planner_status', 'human/driver_status')}
         self.step_topic = self.resolve_topic_name(
             next(t.name for t in TOPICS if t.msgtype == 'rosgraph_msgs/msg/Clock'))
         self.pub_status = self.create_publisher(DiagnosticArray, STATUS_TOPIC, QOS['LATCHED'])
@@ -168,6 +173,10 @@ class RecorderNode(Node):
         row = self.ack_rows.get(topic)
         if row is not None and self.pub_ack is not None:
             self.acknowledge(topic, row)
+        if topic in self.gap_topics and self.needed and self.collided(topic, data):
+            if self.incomplete == 0:
+                self.complete()
+            return
         needed = self.needed.get(topic)
         if needed is not None and self.bag.count(topic) == needed:
             self.incomplete -= 1
@@ -176,6 +185,23 @@ class RecorderNode(Node):
                 return
         if time.monotonic() - self.last_status_s >= STATUS_PERIOD_S and self.ready:
             self.publish_status('recording')
+
+    def collided(self, topic: str, data: bytes) -> bool:
+        """Lock-step: a step status (``data`` on ``topic``) whose gap is at or below 0 m
+        makes that step the run's last (the step authority starts no other): the run is
+        complete with every message of the steps up to it (``needed`` and ``incomplete``
+        recounted). True if it is a collision."""
+        gap = status_gap_m(deserialize_message(data, DiagnosticArray))
+        if gap is None or gap > 0.0:
+            return False
+        steps = self.bag.count(topic)         # this status is the step's: one per step
+        for row in TOPICS:
+            name = self.resolve_topic_name(row.name)
+            if name in self.needed:
+                self.needed[name] = min(self.needed[name], row.messages(steps))
+        self.incomplete = sum(1 for name, needed in self.needed.items()
+                              if self.bag.count(name) < needed)
+        return True
 
     def acknowledge(self, topic: str, row: tuple[int, int]) -> None:
         """Count one message of a recorded per-step topic; acknowledge the complete steps

@@ -81,8 +81,8 @@ def compute_metrics(records: list[StepRecord], min_safe_gap_m: float,
     ``plan_step_s``: the step of the plans' grid when it is not the control period
     (``prediction_grid: model_step`` at a faster rate); None = the control period.
     A run that collided (:func:`first_collision`) is summarised up to and including the
-    collision step (a graph run records the steps after it; they are not a car-following
-    run any more), and ``collision`` names it.
+    collision step (records after it, if given any, are not a car-following run any more),
+    and ``collision`` names it.
 
     Raises:
         ValueError: no records (there is nothing to summarise).

@@ -315,3 +315,10 @@ def diagnostics(ns: int, name: str, level_ok: bool, message: str,
 def diagnostic_values(msg: DiagnosticArray) -> dict[str, str]:
     """Key/values of the first status."""
     return {kv.key: kv.value for kv in msg.status[0].values}
+
+
+def status_gap_m(msg: DiagnosticArray) -> float | None:
+    """The ``gap_m`` a step status (``ego/planner_status``, ``human/driver_status``) carries,
+    or None when it carries none (a follower that reports no gap)."""
+    gap = diagnostic_values(msg).get('gap_m') if msg.status else None
+    return None if gap is None else float(gap)
