@@ -5,7 +5,8 @@
 # test suite (pytest) on four workers for
 # two cores (pytest-xdist, --dist loadgroup: tests/conftest.py puts the wall-clock tests,
 # which mostly wait for real time, on one worker, and the CPU-bound tests run on the other
-# three meanwhile; many of them also wait, for node start-up and stops). Extra arguments go
+# three meanwhile; many of them also wait, for node start-up and stops), and shows the 15
+# slowest tests of every run (--durations). Extra arguments go
 # to pytest, e.g.
 # `bash scripts/test.sh -k nmpc`, or `bash scripts/test.sh -n 0` for one process.
 set -euo pipefail
@@ -26,4 +27,4 @@ docs_site="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$docs_site"
 rm -rf "$docs_site"
 echo '== pytest' >&2
-python -m pytest -n 4 --dist loadgroup "$@"
+python -m pytest -n 4 --dist loadgroup --durations=15 "$@"
