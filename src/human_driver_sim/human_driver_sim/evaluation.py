@@ -274,15 +274,16 @@ def evaluate(models: Mapping[str, Follower], pairs: Sequence[FollowingPair], *,
 def paired_difference(result: Evaluation, protocol: str, model: str,
                       other: str) -> dict[str, Any]:
     """Gap NRMSE of ``model`` minus ``other`` pair by pair: mean, 95 % CI half-width (Student
-    t over pairs), the number of pairs and of pairs where ``model`` is better (lower)."""
+    t over pairs), the number of pairs and of pairs where ``model`` is better (lower), the
+    number of platoons and the cluster-bootstrap interval over them (:func:`cluster_ci95`)."""
     mine = result.per_pair[protocol][model]
     theirs = result.per_pair[protocol][other]
-    diffs = [mine[k].gap_nrmse - theirs[k].gap_nrmse for k in sorted(mine)]
-    mean, half = mean_ci95(diffs)
-    low, high = cluster_ci95(dict(zip(sorted(mine), diffs, strict=True)))
+    diffs = {k: mine[k].gap_nrmse - theirs[k].gap_nrmse for k in sorted(mine)}
+    mean, half = mean_ci95(list(diffs.values()))
+    low, high = cluster_ci95(diffs)
     return {'mean': mean, 'ci95': half, 'pairs': len(diffs),
-            'better': int(sum(d < 0.0 for d in diffs)),
-            'platoons': len(set(platoons(sorted(mine)).values())),
+            'better': int(sum(d < 0.0 for d in diffs.values())),
+            'platoons': len(set(platoons(list(diffs)).values())),
             'cluster_ci95': [low, high]}
 
 
