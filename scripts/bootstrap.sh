@@ -92,6 +92,13 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
     bash "$root/scripts/build_tf2_msgs.sh" "$venv"
     say "step 4/4 done in $((SECONDS - step_began)) s"
   fi
+  # the Autoware message packages the adapters use (src/trust_av_autoware) have no wheel
+  # either: built from vendor/ (a minute; skipped where a package of the name is installed)
+  if ! "$venv/bin/python" -c 'import autoware_control_msgs.msg, autoware_perception_msgs.msg' 2>/dev/null; then
+    step_began=$SECONDS
+    bash "$root/scripts/build_autoware_msgs.sh" "$venv"
+    say "step 4/4: Autoware message packages done in $((SECONDS - step_began)) s"
+  fi
   echo "$want" > "$stamp"
   say "set-up done in $((SECONDS - setup_began)) s"
 fi
