@@ -34,13 +34,15 @@ class Layer(NamedTuple):
     what: str
 
 
-PACKAGES = ('trust_monitor', 'preceding_traffic', 'human_driver_sim', 'trust_av_planner')
+PACKAGES = ('trust_monitor', 'preceding_traffic', 'human_driver_sim', 'trust_av_planner',
+            'trust_av_autoware')
 """The packages, each importing only those before it that ALLOWED_PACKAGES names."""
 ALLOWED_PACKAGES = {
     'trust_monitor': {'trust_monitor'},
     'preceding_traffic': {'trust_monitor', 'preceding_traffic'},
     'human_driver_sim': {'trust_monitor', 'human_driver_sim'},
-    'trust_av_planner': set(PACKAGES),
+    'trust_av_planner': set(PACKAGES) - {'trust_av_autoware'},
+    'trust_av_autoware': {'trust_monitor', 'trust_av_autoware'},
 }
 LAYERS: dict[str, dict[str, Layer]] = {
     # '' is the package's own top-level modules; every other key is a folder of the package
@@ -64,6 +66,11 @@ LAYERS: dict[str, dict[str, Layer]] = {
         'graph': Layer(2, False, 'the node graph: orchestrator, recorder, shadow runs'),
         'study': Layer(3, False, 'studies, tables, figures, GRU training'),
         'cli': Layer(4, False, 'the trust-av command line'),
+    },
+    'trust_av_autoware': {
+        '': Layer(0, True, 'Autoware adapters: lane geometry, lead choice, control command '
+                           '(pure), their nodes'),
+        'ros': Layer(1, False, "the adapters' topics and QoS profiles"),
     },
 }
 

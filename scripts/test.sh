@@ -21,7 +21,8 @@ echo '== mypy (pure core, strict)' >&2
 # untyped rclpy/message modules and are excluded; everything they call is in the checked core.
 mypy --exclude '(_node|cli/run|cli/shadow|setup)\.py$|/ros/|/graph/' \
   src/preceding_traffic/preceding_traffic src/trust_monitor/trust_monitor \
-  src/human_driver_sim/human_driver_sim src/trust_av_planner/trust_av_planner
+  src/human_driver_sim/human_driver_sim src/trust_av_planner/trust_av_planner \
+  src/trust_av_autoware/trust_av_autoware
 echo '== docs (mkdocs build --strict)' >&2
 docs_site="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$docs_site"

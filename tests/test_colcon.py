@@ -33,7 +33,8 @@ EXECUTABLES = {
 
 
 COLCON_TEST_K = ('test_known_pair_by_hand or test_resample_interpolates_onto_grid or '
-                 'test_textbook_and_bounds or test_mean_ci95_by_hand')
+                 'test_textbook_and_bounds or test_mean_ci95_by_hand or '
+                 'test_lead_is_the_nearest_object_ahead_on_the_lane')
 """One quick test of each package for `colcon test` (the suite runs them all itself)."""
 
 
@@ -61,9 +62,9 @@ def colcon(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The documented layout (docs/operations/colcon.md): the repository as
     ``ws/src/trust-av`` (a virtual environment inside it too, as scripts/bootstrap.sh makes
-    one), then plain ``colcon build`` in ``ws``: exactly the four packages, never
-    vendor/tf2_msgs (a one-message copy for the virtual environment that would overlay a
-    native tf2_msgs) nor the environment's own packages."""
+    one), then plain ``colcon build`` in ``ws``: exactly the five packages, never
+    vendor/ (tf2_msgs, a one-message copy for the virtual environment that would overlay a
+    native tf2_msgs, and the Autoware message packages) nor the environment's own packages."""
     assert (Path(sys.executable).parent / 'colcon').exists(), \
         'colcon-common-extensions is pinned in requirements.txt'
     ws = tmp_path_factory.mktemp('ws')
@@ -75,10 +76,11 @@ def install(tmp_path_factory: pytest.TempPathFactory) -> Path:
     listed = colcon('list', '--names-only', cwd=ws)
     assert listed.returncode == 0, listed.stdout + listed.stderr
     assert sorted(listed.stdout.split()) == ['human_driver_sim', 'preceding_traffic',
-                                             'trust_av_planner', 'trust_monitor']
+                                             'trust_av_autoware', 'trust_av_planner',
+                                             'trust_monitor']
     proc = colcon('build', cwd=ws)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert 'Summary: 4 packages finished' in proc.stdout
+    assert 'Summary: 5 packages finished' in proc.stdout
     install = ws / 'install'
     # each package installs the config files it holds (real files, no links out of it)
     share = install / 'trust_monitor' / 'share' / 'trust_monitor' / 'config'
@@ -226,11 +228,11 @@ def test_colcon_test_runs_each_package_s_tests(install: Path) -> None:
     proc = colcon('test', '--pytest-args', '-k', COLCON_TEST_K, '-p', 'no:cacheprovider',
                   cwd=ws)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert 'Summary: 4 packages finished' in proc.stdout, proc.stdout
+    assert 'Summary: 5 packages finished' in proc.stdout, proc.stdout
     result = colcon('test-result', '--all', cwd=ws)
     assert result.returncode == 0, result.stdout + result.stderr
     lines = [line for line in result.stdout.splitlines() if line.endswith('.xml: 1 test, 0 '
                                                                        'errors, 0 failures, '
                                                                        '0 skipped')]
-    assert len(lines) == 4, result.stdout
-    assert result.stdout.splitlines()[-1] == 'Summary: 4 tests, 0 errors, 0 failures, 0 skipped'
+    assert len(lines) == 5, result.stdout
+    assert result.stdout.splitlines()[-1] == 'Summary: 5 tests, 0 errors, 0 failures, 0 skipped'

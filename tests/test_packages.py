@@ -27,7 +27,8 @@ from catkin_pkg.package import parse_package
 from trust_monitor.common.topics import TOPICS
 
 SRC = Path(__file__).resolve().parents[1] / 'src'
-PACKAGES = ('trust_monitor', 'preceding_traffic', 'human_driver_sim', 'trust_av_planner')
+PACKAGES = ('trust_monitor', 'preceding_traffic', 'human_driver_sim', 'trust_av_planner',
+            'trust_av_autoware')
 ROSDEP_KEYS = {
     'numpy': 'python3-numpy',
     'yaml': 'python3-yaml',
@@ -45,7 +46,7 @@ ROSDEP_KEYS = {
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python',
                 'std_msgs', 'nav_msgs', 'geometry_msgs', 'trajectory_msgs', 'diagnostic_msgs',
                 'rosgraph_msgs', 'tf2_msgs', 'visualization_msgs', 'sensor_msgs', 'lifecycle_msgs',
-                *PACKAGES}
+                'autoware_perception_msgs', 'autoware_control_msgs', *PACKAGES}
 """Modules that are ROS 2 packages: the key is the package name."""
 OPTIONAL = {'ray': 'pip install ray==2.60.0 (trust-av reproduce --executor ray)'}
 """Modules with no rosdep key, installed by a documented pip step, imported lazily."""
