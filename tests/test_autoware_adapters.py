@@ -297,3 +297,67 @@ def test_autoware_in_autoware_out(tmp_path: Path) -> None:
     for name in ('planner', 'autoware_lane', 'autoware_control'):
         text = (tmp_path / f'{name}.log').read_text()
         assert 'Traceback' not in text and 'incompatible QoS' not in text, text[-2000:]
+
+
+def test_field_labels_name_trust_and_plan_values(tmp_path: Path) -> None:
+    """``field_labels`` republishes trust (Vector3Stamped x, y, z) and a plan (one-joint
+    JointTrajectory) as JointState with the values named, the source's stamp kept; a plan with
+    a NaN is dropped and counted."""
+    import rclpy
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+
+    from trust_av_autoware.labels_node import LabelsNode
+    from trust_av_planner.graph.domains import lease_domain
+    from trust_monitor.ros.messages import time_msg, trajectory
+
+    with lease_domain() as domain:
+        rclpy.init(args=['--ros-args', '--log-level', 'warn'], domain_id=domain)
+        try:
+            labels = LabelsNode()
+            node = rclpy.create_node('tool')
+            executor = SingleThreadedExecutor()
+            executor.add_node(labels)
+            executor.add_node(node)
+            got: dict[str, JointState] = {}
+            for topic in ('/labelled/trust', '/labelled/plan'):
+                node.create_subscription(JointState, topic,
+                                         lambda m, t=topic: got.__setitem__(t, m),
+                                         QoSProfile(depth=10))
+            trust = node.create_publisher(Vector3Stamped, '/trust_monitor/trust',
+                                          QoSProfile(depth=10))
+            plan = node.create_publisher(type(trajectory(0, 1.0, frame_id='ego',
+                                                         accelerations=[0.0])),
+                                         '/ego/plan', QoSProfile(depth=10))
+            deadline = time.monotonic() + 30.0
+            while time.monotonic() < deadline and (
+                    trust.get_subscription_count() < 1 or plan.get_subscription_count() < 1
+                    or labels.pub_trust.get_subscription_count() < 1):
+                executor.spin_once(timeout_sec=0.05)
+            msg = Vector3Stamped()
+            msg.header.stamp = time_msg(7_500_000_000)
+            msg.vector.x, msg.vector.y, msg.vector.z = 0.25, 0.5, 0.75
+            trust.publish(msg)
+            plan.publish(trajectory(7_500_000_000, 1.0, frame_id='ego',
+                                    accelerations=[0.5, -0.25, 0.0]))
+            plan.publish(trajectory(8_500_000_000, 1.0, frame_id='ego',
+                                    accelerations=[math.nan, 0.0, 0.0]))
+            while time.monotonic() < deadline and (
+                    len(got) < 2 or labels.status.counts['ego/plan_dropped_not_finite'] < 1):
+                executor.spin_once(timeout_sec=0.05)
+            counts = dict(labels.status.counts)
+            executor.shutdown()
+            labels.destroy_node()
+            node.destroy_node()
+        finally:
+            rclpy.try_shutdown()
+    assert list(got['/labelled/trust'].name) == ['explicability', 'performance', 'trust']
+    assert list(got['/labelled/trust'].position) == [0.25, 0.5, 0.75]
+    assert got['/labelled/trust'].header.stamp.sec == 7
+    assert list(got['/labelled/plan'].name) == ['accel_mps2_at_0s', 'accel_mps2_at_1s',
+                                                'accel_mps2_at_2s']
+    assert list(got['/labelled/plan'].position) == [0.5, -0.25, 0.0]
+    assert got['/labelled/plan'].header.frame_id == 'ego'
+    assert counts['ego/plan_dropped_not_finite'] == 1 and counts['ego/plan_used'] == 1

@@ -12,6 +12,7 @@ import pytest
 
 from trust_av_autoware.adapter_status import AdapterStatus
 from trust_av_autoware.control_output import ControlAdapterConfig, longitudinal
+from trust_av_autoware.labels import TRUST_NAMES, finite_values, plan_names
 from trust_av_autoware.lane_inputs import (
     BOUNDING_BOX,
     CYLINDER,
@@ -154,3 +155,10 @@ def test_the_status_says_what_is_missing_dropped_or_done() -> None:
     level, message, values = status.report(10**9, '', 'working')
     assert (level, message) == (OK, 'working')
     assert (values['a_received'], values['a_used'], values['out_published']) == ('2', '1', '1')
+
+
+def test_plan_values_are_named_by_their_time() -> None:
+    assert plan_names([0.0, 0.5, 1.0, 10.0]) == ['accel_mps2_at_0s', 'accel_mps2_at_0.5s',
+                                                 'accel_mps2_at_1s', 'accel_mps2_at_10s']
+    assert TRUST_NAMES == ('explicability', 'performance', 'trust')
+    assert finite_values([0.0, -1.0]) and not finite_values([0.0, math.nan])

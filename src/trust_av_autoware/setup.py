@@ -25,6 +25,7 @@ setup(
         'console_scripts': [
             'autoware_lane = trust_av_autoware.lane_adapter_node:main',
             'autoware_control = trust_av_autoware.control_adapter_node:main',
+            'field_labels = trust_av_autoware.labels_node:main',
         ],
     },
 )
