@@ -162,3 +162,24 @@ def test_plan_values_are_named_by_their_time() -> None:
                                                  'accel_mps2_at_1s', 'accel_mps2_at_10s']
     assert TRUST_NAMES == ('explicability', 'performance', 'trust')
     assert finite_values([0.0, -1.0]) and not finite_values([0.0, math.nan])
+
+
+def test_the_operations_page_lists_every_adapter_parameter_with_its_default() -> None:
+    """docs/operations/real-vehicle.md has a row per field of both adapters' configurations,
+    with the field's default (vehicle_length_m: the shipped /** value)."""
+    import dataclasses
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / 'docs' / 'operations' /
+            'real-vehicle.md').read_text()
+    rows = {line.split('|')[1].strip(): line.split('|')[2].strip()
+            for line in page.splitlines() if line.startswith('| `')}
+    for cls in (LaneAdapterConfig, ControlAdapterConfig):
+        for field in dataclasses.fields(cls):
+            default = field.default
+            if default is dataclasses.MISSING:
+                assert rows[f'`{field.name}`'] == 'the `/**` value (4.5)'
+            elif isinstance(default, str):
+                assert rows[f'`{field.name}`'] == f'`{default}`'
+            else:
+                assert rows[f'`{field.name}`'] == f'{default:g}', field.name

@@ -53,7 +53,7 @@ class LaneAdapterConfig:
                                 low=0.0, low_inclusive=False, high=50.0, default=3.5)
     base_link_to_front_m: float = param(
         "from the AV's base_link (Autoware: rear axle centre) to its front bumper along x "
-        '(Autoware vehicle_info: wheel_base_m + front_overhang_m)', unit='m', low=0.0,
+        '(Autoware vehicle_info: wheel_base + front_overhang)', unit='m', low=0.0,
         high=MAX_VEHICLE_LENGTH_M, default=3.79)
     ego_timeout_s: float = param('objects are used only while the newest kinematic state is '
                                  'at most this old', unit='s', low=0.0, low_inclusive=False,
