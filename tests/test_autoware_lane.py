@@ -47,7 +47,7 @@ def test_the_av_is_its_front_bumper_s_distance_along_the_lane_and_its_speed_alon
     assert skew.speed_mps == pytest.approx(10.0 * math.cos(math.radians(30.0)))
 
 
-def test_lead_is_the_nearest_object_ahead_on_the_lane() -> None:
+def test_the_lead_is_chosen_among_the_objects_on_a_bent_lane() -> None:
     ego_base = Planar(50.0, 0.0, 0.0, 10.0, 0.0)
     ego = ego_on_lane(LANE, ego_base, CONFIG)
     objects = [seen(Planar(30.0, 0.0, 0.0, 12.0, 0.0), 2.3),        # behind

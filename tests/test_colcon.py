@@ -34,7 +34,7 @@ EXECUTABLES = {
 
 COLCON_TEST_K = ('test_known_pair_by_hand or test_resample_interpolates_onto_grid or '
                  'test_textbook_and_bounds or test_mean_ci95_by_hand or '
-                 'test_lead_is_the_nearest_object_ahead_on_the_lane')
+                 'test_the_lead_is_chosen_among_the_objects_on_a_bent_lane')
 """One quick test of each package for `colcon test` (the suite runs them all itself)."""
 
 
