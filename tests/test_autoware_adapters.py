@@ -361,3 +361,34 @@ def test_field_labels_name_trust_and_plan_values(tmp_path: Path) -> None:
     assert list(got['/labelled/plan'].position) == [0.5, -0.25, 0.0]
     assert got['/labelled/plan'].header.frame_id == 'ego'
     assert counts['ego/plan_dropped_not_finite'] == 1 and counts['ego/plan_used'] == 1
+
+
+def test_the_message_build_never_builds_over_an_installed_package(tmp_path: Path) -> None:
+    """scripts/build_autoware_msgs.sh skips a package its environment already imports, and one
+    that a prefix on AMENT_PREFIX_PATH holds (a native Autoware): nothing is built, one line
+    says where it is."""
+    script = REPO / 'scripts' / 'build_autoware_msgs.sh'
+    env = dict(os.environ, AMENT_PREFIX_PATH='')
+    here = subprocess.run(['bash', str(script), sys.prefix], capture_output=True, text=True,
+                          env=env, timeout=120)
+    assert here.returncode == 0, here.stderr
+    assert here.stderr.splitlines() == [
+        f'[bootstrap] {name}: already importable, not built'
+        for name in ('autoware_control_msgs', 'autoware_perception_msgs')]
+    # an environment that cannot import them, beside a native prefix that has them
+    venv, native = tmp_path / 'venv', tmp_path / 'opt_autoware'
+    (venv / 'bin').mkdir(parents=True)
+    (venv / 'bin' / 'python').symlink_to(sys.executable)
+    index = native / 'share' / 'ament_index' / 'resource_index' / 'packages'
+    index.mkdir(parents=True)
+    for name in ('autoware_control_msgs', 'autoware_perception_msgs'):
+        (index / name).touch()
+    env = dict(os.environ, AMENT_PREFIX_PATH=f'{tmp_path / "empty"}:{native}',
+               PYTHONPATH='', PYTHONNOUSERSITE='1')
+    native_run = subprocess.run(['bash', str(script), str(venv)], capture_output=True,
+                                text=True, env=env, timeout=120, cwd=tmp_path)
+    assert native_run.returncode == 0, native_run.stderr
+    assert native_run.stderr.splitlines() == [
+        f'[bootstrap] {name}: installed in {native}, not built over it'
+        for name in ('autoware_control_msgs', 'autoware_perception_msgs')]
+    assert sorted(p.name for p in venv.iterdir()) == ['bin']
