@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import Any
 
 from geometry_msgs.msg import Vector3Stamped
 from rclpy.node import Node
@@ -68,7 +69,7 @@ class LabelsNode(Node):
                                           position=values))
         self.status.published('labelled_trust')
 
-    def on_plan(self, source: str, publisher: object, msg: JointTrajectory) -> None:
+    def on_plan(self, source: str, publisher: Any, msg: JointTrajectory) -> None:
         self.status.received(source, time.time_ns())
         if list(msg.joint_names) != [JOINT_NAME] or \
                 any(len(p.accelerations) != 1 for p in msg.points):
@@ -80,7 +81,7 @@ class LabelsNode(Node):
             self.status.dropped(source, 'not_finite', 'an acceleration is not finite')
             return
         self.status.used(source)
-        publisher.publish(JointState(  # type: ignore[attr-defined]
+        publisher.publish(JointState(
             header=msg.header, name=plan_names(trajectory_times(msg)), position=values))
         self.status.published(PLANS[source].replace('/', '_'))
 
