@@ -71,9 +71,14 @@ def parse_message(text: str | bytes) -> dict[str, Any]:
     """One message from the page.
 
     Raises:
-        ValueError: not a JSON object with a known ``type`` (named).
+        ValueError: not a JSON object with a known ``type`` (named), nested too deep for
+            the parser included.
     """
-    data = json.loads(text)
+    try:
+        data = json.loads(text)
+    except RecursionError as err:          # "[[[[...": 4 KB nest deeper than the stack
+        raise ValueError(f'not a page message (nested too deep): {str(text)[:80]!r}') \
+            from err
     if not isinstance(data, dict) or data.get('type') not in MESSAGE_TYPES:
         raise ValueError(f'not a page message: {str(text)[:80]!r}')
     return data

@@ -1,0 +1,95 @@
+"""Hostile messages a page (or a script with the page's token) can send that are valid JSON
+within 4 KB and still must not raise: integers too large for a float where a number is
+expected, and nesting deeper than the parser's stack. The gate refuses and counts them; the
+server counts them as not page messages and keeps the connection."""
+
+from __future__ import annotations
+
+import json
+import queue
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from websockets.sync.client import connect
+
+from trust_av_planner.drive.gate import DRIVING, READY, Gate, finite_number
+from trust_av_planner.drive.server import MAX_MESSAGE_BYTES, DriveServer, parse_message
+
+HUGE = 10 ** 400
+"""A JSON integer (401 digits) that no float holds."""
+
+
+def test_a_number_is_a_finite_float_or_nothing() -> None:
+    assert finite_number(3) == 3.0 and finite_number(-0.5) == -0.5
+    for bad in (HUGE, -HUGE, float('nan'), float('inf'), True, '1', None, [1], {'v': 1}):
+        assert finite_number(bad) is None, bad
+
+
+def test_the_gate_refuses_numbers_no_float_holds() -> None:
+    gate = Gate(10.0, -6.0, 2.5)
+    gate.set_phase(READY)
+    gate.set_phase(DRIVING)
+    assert gate.sample({'type': 'input', 'accel_mps2': HUGE}, 0) is None
+    prompt = gate.open_prompt(0)
+    assert gate.rating({'type': 'rating', 'id': prompt, 'value': HUGE}, 1) is None
+    assert gate.rating({'type': 'rating', 'id': HUGE, 'value': 50}, 1) is None
+    assert gate.echo({'type': 'ack', 'seq': HUGE}, 1) is None
+    assert gate.refused_counts() == {'input without a finite accel_mps2': 1,
+                                     'rating not in [0, 100]': 1,
+                                     'rating outside a prompt': 1, 'ack of no sent frame': 1}
+    # the prompt is still open and takes a real answer
+    assert gate.rating({'type': 'rating', 'id': prompt, 'value': 55}, 2)[:2] == (prompt, 55.0)
+
+
+DEEP = ['[' * (MAX_MESSAGE_BYTES // 2) + ']' * (MAX_MESSAGE_BYTES // 2),
+        '{"type": "input", "accel_mps2": ' + '[' * 2000 + ']' * 2000 + '}']
+
+
+@pytest.mark.parametrize('text', DEEP, ids=['array', 'in_a_message'])
+def test_nesting_deeper_than_the_parser_is_not_a_page_message(text: str) -> None:
+    assert len(text.encode()) <= MAX_MESSAGE_BYTES
+    with pytest.raises(ValueError, match='nested too deep'):
+        parse_message(text)
+
+
+@pytest.fixture
+def served() -> Iterator[tuple[DriveServer, queue.Queue[Any]]]:
+    inbox: queue.Queue[Any] = queue.Queue()
+    gate = Gate(10.0, -6.0, 2.5)
+    gate.set_phase(READY)
+    gate.set_phase(DRIVING)
+
+    def on_message(message: dict[str, Any], now_ns: int) -> None:
+        if gate.admit(message) and message['type'] == 'input':
+            inbox.put(('sample', gate.sample(message, now_ns)))
+
+    server = DriveServer(on_message, lambda: {'type': 'hello'},
+                         on_refused=lambda reason: inbox.put(('refused', reason)), port=0)
+    server.start()
+    try:
+        yield server, inbox
+    finally:
+        server.stop()
+
+
+def test_the_server_keeps_a_connection_that_sends_hostile_json(
+        served: tuple[DriveServer, queue.Queue[Any]]) -> None:
+    server, inbox = served
+    with connect(f'ws://127.0.0.1:{server.port}/ws?token={server.token}',
+                 additional_headers={'Origin': f'http://127.0.0.1:{server.port}'},
+                 open_timeout=10) as ws:
+        for text in DEEP:
+            ws.send(text)
+        ws.send(json.dumps({'type': 'input', 'seq': 1, 'accel_mps2': HUGE}))
+        ws.send(json.dumps({'type': 'input', 'seq': 2, 'accel_mps2': 1.0}))
+        seen = []
+        while ('sample', None) not in seen or not any(
+                kind == 'sample' and s is not None for kind, s in seen):
+            seen.append(inbox.get(timeout=10))
+        # the connection is still open and still driving: no handler failed
+        server.send({'type': 'state'})
+        while json.loads(ws.recv(timeout=10))['type'] != 'state':
+            pass
+    assert [r for kind, r in seen if kind == 'refused'] == ['not a page message'] * 2
+    assert [s.accel_mps2 for kind, s in seen if kind == 'sample' and s is not None] == [1.0]
