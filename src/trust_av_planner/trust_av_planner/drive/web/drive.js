@@ -4,8 +4,8 @@
 // behind the newest one. A pedal sample is sent at once on a key or pointer press or release,
 // on any other change of the pedal at most once per control period, and at the control rate
 // while nothing changes, all within the server's rate limit (a token bucket of inputBurst
-// samples refilled at the control rate): the page keeps its own bucket, refilled a little
-// slower, and one sample of it for a press or release, so the server never refuses one.
+// samples refilled at the control rate): the page keeps its own, smaller bucket, refilled a
+// little slower, and one sample of it for a press or release, so the server refuses none.
 // The server acknowledges samples in its frames; the page echoes each acknowledgement at
 // once (the server measures the latency, the page reports no time).
 'use strict';
@@ -17,6 +17,7 @@ const BRAKE_LIGHT_MPS2 = -0.3;          // the AV's commanded acceleration that 
 const EYE_BEHIND_BUMPER_M = 2.0, EYE_HEIGHT_M = 1.2, CAR_WIDTH_M = 1.8, CAR_HEIGHT_M = 1.5;
 const KEYS = ['ArrowUp', 'ArrowDown', 'KeyW', 'KeyS'];
 const BUCKET_REFILL_SHARE = 0.9;       // of the control rate: a margin for network jitter
+const PAGE_BURST = 3;                  // the page's bucket (the server's is larger: hello)
 
 const drive = {
   phase: 'connecting', controlRateHz: 10, inputBurst: 4, accelMax: 2.5, accelMin: -6.0, onCollision: 'continue',
@@ -177,10 +178,11 @@ function updatePedal(nowMs) {
 
 function pedalAccel(p) { return p >= 0 ? p * drive.accelMax : -p * drive.accelMin; }
 
-// The page's side of the server's rate limit: inputBurst - 1 samples at once, refilled at
-// BUCKET_REFILL_SHARE of the control rate; a periodic or ramp sample leaves one for a press.
+// The page's side of the server's rate limit: PAGE_BURST samples at once (fewer than the
+// server's inputBurst), refilled at BUCKET_REFILL_SHARE of the control rate; a periodic or
+// ramp sample leaves one for a press.
 function tokens(nowMs) {
-  const most = drive.inputBurst - 1;
+  const most = Math.min(PAGE_BURST, drive.inputBurst - 1);
   drive.tokens = Math.min(most, drive.tokens
     + Math.max(0, nowMs - drive.tokensAt) / 1000 * BUCKET_REFILL_SHARE * drive.controlRateHz);
   drive.tokensAt = nowMs;
