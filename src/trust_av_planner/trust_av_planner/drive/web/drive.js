@@ -54,7 +54,7 @@ function setStatus(text) { $('status').textContent = text; }
 function onMessage(msg) {
   if (msg.type === 'hello') {
     drive.controlRateHz = msg.control_rate_hz;
-    drive.inputBurst = msg.input_burst;
+    if (Number.isInteger(msg.input_burst) && msg.input_burst > 1) drive.inputBurst = msg.input_burst;
     drive.accelMax = msg.accel_max_mps2;
     drive.accelMin = msg.accel_min_mps2;
     drive.onCollision = msg.on_collision || 'continue';
