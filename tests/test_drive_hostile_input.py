@@ -1,20 +1,29 @@
-"""Hostile messages a page (or a script with the page's token) can send that are valid JSON
-within 4 KB and still must not raise: integers too large for a float where a number is
-expected, and nesting deeper than the parser's stack. The gate refuses and counts them; the
-server counts them as not page messages and keeps the connection."""
+"""Hostile traffic a page (or a script with the page's token) can send. Messages that are
+valid JSON within 4 KB and still must not raise: integers too large for a float where a
+number is expected, and nesting deeper than the parser's stack (the gate refuses and counts
+them; the server counts them as not page messages and keeps the connection). Connections
+beyond the server's limit: refused and counted until one closes."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import queue
+import time
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
+from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from trust_av_planner.drive.gate import DRIVING, READY, Gate, finite_number
-from trust_av_planner.drive.server import MAX_MESSAGE_BYTES, DriveServer, parse_message
+from trust_av_planner.drive.server import (
+    MAX_CONNECTIONS,
+    MAX_MESSAGE_BYTES,
+    DriveServer,
+    parse_message,
+)
 
 HUGE = 10 ** 400
 """A JSON integer (401 digits) that no float holds."""
@@ -93,3 +102,31 @@ def test_the_server_keeps_a_connection_that_sends_hostile_json(
             pass
     assert [r for kind, r in seen if kind == 'refused'] == ['not a page message'] * 2
     assert [s.accel_mps2 for kind, s in seen if kind == 'sample' and s is not None] == [1.0]
+
+
+def _open(server: DriveServer) -> Any:
+    return connect(f'ws://127.0.0.1:{server.port}/ws?token={server.token}',
+                   additional_headers={'Origin': f'http://127.0.0.1:{server.port}'},
+                   open_timeout=10)
+
+
+def test_connections_beyond_the_limit_are_refused_until_one_closes(
+        served: tuple[DriveServer, queue.Queue[Any]]) -> None:
+    server, inbox = served
+    with contextlib.ExitStack() as stack:
+        tabs = [stack.enter_context(_open(server)) for _ in range(MAX_CONNECTIONS)]
+        for tab in tabs:                      # each is served: greeted and told who drives
+            while json.loads(tab.recv(timeout=10))['type'] != 'control':
+                pass
+        with pytest.raises(InvalidStatus, match='403'):
+            _open(server)
+        tabs[-1].close()
+        deadline = time.monotonic() + 10      # the server notices the close
+        while len(server.clients) >= MAX_CONNECTIONS and time.monotonic() < deadline:
+            time.sleep(0.02)
+        with _open(server) as again:
+            assert json.loads(again.recv(timeout=10))['type'] == 'hello'
+    refused = []
+    while not inbox.empty():
+        refused.append(inbox.get())
+    assert refused == [('refused', f'more than {MAX_CONNECTIONS} WebSocket connections')]

@@ -56,6 +56,10 @@ FLOOD_MESSAGES_PER_S = 200
 """A connection that sends more messages than this within one second is dropped (its TCP
 connection aborted; the page reconnects by itself): a page sends about 2 x
 ``control_rate_hz`` a second."""
+MAX_CONNECTIONS = 8
+"""WebSocket connections served at once; a handshake beyond is refused (403) and counted
+(every connection gets every state frame: a script opening thousands would slow the
+driving tab's)."""
 
 
 class ServerError(TrustAvPlannerError):
@@ -183,6 +187,8 @@ class DriveServer:
                           if k == 'token'), '')
             if not hmac.compare_digest(token.encode(), self.token.encode()):
                 return self._refuse("a WebSocket without the page's token")
+            if len(self.clients) >= MAX_CONNECTIONS:
+                return self._refuse(f'more than {MAX_CONNECTIONS} WebSocket connections')
             return None                           # the WebSocket handshake goes on
         if path == '/favicon.ico':
             return Response(HTTPStatus.NO_CONTENT, 'No Content', Headers(), b'')
