@@ -2,13 +2,15 @@
 valid JSON within 4 KB and still must not raise: integers too large for a float where a
 number is expected, and nesting deeper than the parser's stack (the gate refuses and counts
 them; the server counts them as not page messages and keeps the connection). Connections
-beyond the server's limit: refused and counted until one closes."""
+beyond the server's limit: refused and counted until one closes. Requests with a header the
+checks read given twice: refused and counted (not a failed handler)."""
 
 from __future__ import annotations
 
 import contextlib
 import json
 import queue
+import socket
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -130,3 +132,27 @@ def test_connections_beyond_the_limit_are_refused_until_one_closes(
     while not inbox.empty():
         refused.append(inbox.get())
     assert refused == [('refused', f'more than {MAX_CONNECTIONS} WebSocket connections')]
+
+
+def _status(server: DriveServer, request: str) -> str:
+    with socket.create_connection(('127.0.0.1', server.port), timeout=10) as raw:
+        raw.sendall(request.encode())
+        return raw.recv(4096).decode(errors='replace').splitlines()[0]
+
+
+def test_a_header_given_twice_is_refused_and_counted(
+        served: tuple[DriveServer, queue.Queue[Any]]) -> None:
+    server, inbox = served
+    host = f'127.0.0.1:{server.port}'
+    upgrade = ('Upgrade: websocket\r\nConnection: Upgrade\r\n'
+               'Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n')
+    assert _status(server, f'GET / HTTP/1.1\r\nHost: {host}\r\nHost: evil.example\r\n'
+                           '\r\n') == 'HTTP/1.1 403 Forbidden'
+    assert _status(server, f'GET /ws?token={server.token} HTTP/1.1\r\nHost: {host}\r\n'
+                           f'Origin: http://{host}\r\nOrigin: http://evil.example\r\n'
+                           f'{upgrade}\r\n') == 'HTTP/1.1 403 Forbidden'
+    refused = []
+    while not inbox.empty():
+        refused.append(inbox.get())
+    assert refused == [('refused', 'a request for host None'),
+                       ('refused', 'a WebSocket from origin None')]

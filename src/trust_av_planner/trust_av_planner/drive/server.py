@@ -88,6 +88,13 @@ def parse_message(text: str | bytes) -> dict[str, Any]:
     return data
 
 
+def one_header(headers: Headers, name: str) -> str | None:
+    """The value of a header given once, else None (absent, or given twice: a request with
+    two ``Host`` or ``Origin`` headers is refused like one with a wrong one)."""
+    values = headers.get_all(name)
+    return values[0] if len(values) == 1 else None
+
+
 class DriveServer:
     """The page and its WebSocket, served from a background thread.
 
@@ -177,10 +184,11 @@ class DriveServer:
 
     def _http(self, _connection: ServerConnection, request: Request) -> Response | None:
         path, _, query = request.path.partition('?')
-        if request.headers.get('Host') not in self.hosts():
-            return self._refuse(f'a request for host {request.headers.get("Host")!r}')
+        host = one_header(request.headers, 'Host')
+        if host not in self.hosts():
+            return self._refuse(f'a request for host {host!r}')
         if path == '/ws':
-            origin = request.headers.get('Origin')
+            origin = one_header(request.headers, 'Origin')
             if origin not in {f'http://{host}' for host in self.hosts()}:
                 return self._refuse(f'a WebSocket from origin {origin!r}')
             token = next((v for k, _, v in (p.partition('=') for p in query.split('&'))
