@@ -5,7 +5,8 @@ the participant holds the gas on the start screen and keeps it held while the AV
 car hits the AV and stops at its rear bumper, never through it; the page says so; with
 ``end`` the drive ends there (the page says why, the questionnaire follows), with
 ``continue`` it goes on to its time. The bag (events and ``custom_data``), the summary and
-``session.json`` record the collision.
+``session.json`` record the collision; every field the page was told is one it may show
+(nothing about any model's trust).
 
 Stray messages in every phase (start screen, driving, a prompt open, nodes stopping,
 questionnaire, after the answers), sent on the driving tab's own connection: refused and
@@ -70,6 +71,33 @@ WATCH_MESSAGES = """() => {
 }"""
 """Everything the crash card and the message card showed, as it showed (a card may be
 replaced before a poll would see it)."""
+RECORD_RECEIVED = """(() => {
+    window.received = {};
+    const Native = window.WebSocket;
+    window.WebSocket = function (...args) {
+        const ws = new Native(...args);
+        ws.addEventListener('message', (event) => {
+            const msg = JSON.parse(event.data);
+            const keys = window.received[msg.type] = window.received[msg.type] || [];
+            for (const key of Object.keys(msg)) if (!keys.includes(key)) keys.push(key);
+        });
+        return ws;
+    };
+    Object.assign(window.WebSocket, Native);
+})();"""
+"""Every field of every message type the page receives."""
+PAGE_FIELDS = {
+    'hello': {'type', 'control_rate_hz', 'input_burst', 'participant', 'accel_max_mps2',
+              'accel_min_mps2', 'on_collision', 'prompts', 'phase', 'duration_s',
+              'practice', 'number', 'of'},
+    'control': {'type', 'controlling', 'other'},
+    'phase': {'type', 'phase', 'duration_s', 'practice', 'number', 'of', 'ended_by', 'items'},
+    'state': {'type', 't_s', 'left_s', 'vehicles', 'av_accel_mps2', 'collisions', 'crash',
+              'ack'},
+    'rate': {'type', 'id'}}
+"""What the page may be told (docs/concepts/driver-in-the-loop.md, The page): the vehicles,
+the AV's commanded acceleration, the time left, collisions, the phase; nothing about any
+model's trust."""
 
 
 class Drive:
@@ -149,6 +177,7 @@ def test_gas_held_at_the_start_hits_the_av_and_the_protocol_decides(
     drive = Drive(study, settings)
     try:
         page = browser.new_page(viewport={'width': 1000, 'height': 760})
+        page.add_init_script(RECORD_RECEIVED)
         page.goto(drive.url)
         page.wait_for_selector('#start', state='visible', timeout=120_000)
         page.evaluate(WATCH_MESSAGES)
@@ -170,9 +199,16 @@ def test_gas_held_at_the_start_hits_the_av_and_the_protocol_decides(
             page.check(f'input[name="item{i + 1}"][value="{value}"]')
         page.click('#questionnaire-submit')
         page.wait_for_function("window.drive.phase === 'finished'", timeout=60_000)
+        received = page.evaluate('window.received')
         output = drive.finish()
     finally:
         drive.kill()
+    # the page was told nothing it should not show (no model's trust), and it was told
+    # the collision and the state
+    assert set(received) <= set(PAGE_FIELDS), received
+    for kind, fields in received.items():
+        assert set(fields) <= PAGE_FIELDS[kind], (kind, fields)
+    assert {'vehicles', 'crash', 'collisions'} <= set(received['state'])
     drives_on = 'Your car hit the AV and stopped behind it. Drive on when the AV moves away.'
     ended = 'The drive ended: your car hit the AV. Please wait a moment.'
     seen = ' | '.join(shown)
