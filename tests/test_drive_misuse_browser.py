@@ -90,7 +90,7 @@ PAGE_FIELDS = {
     'hello': {'type', 'control_rate_hz', 'input_burst', 'participant', 'accel_max_mps2',
               'accel_min_mps2', 'on_collision', 'prompts', 'phase', 'duration_s',
               'practice', 'number', 'of'},
-    'control': {'type', 'controlling', 'other'},
+    'control': {'type', 'controlling', 'other', 'taken_over'},
     'phase': {'type', 'phase', 'duration_s', 'practice', 'number', 'of', 'ended_by', 'items'},
     'state': {'type', 't_s', 'left_s', 'vehicles', 'av_accel_mps2', 'collisions', 'crash',
               'ack'},
