@@ -103,6 +103,14 @@ def key_latency(bag: Path, presses_ns: list[int]) -> dict[str, dict[str, float]]
             'key_to_echo_ms': _stats(np.array(to_echo)), 'graph_ms': _stats(np.array(graph))}
 
 
+def _refused(bag: Path) -> dict[str, int]:
+    """The drive's refused messages by reason (the bag's metadata)."""
+    from trust_av_planner.drive.bag_data import custom_data
+    prefix = 'trust_av.drive.refused.'
+    return {k.removeprefix(prefix): int(v) for k, v in custom_data(bag).items()
+            if k.startswith(prefix)}
+
+
 def _largest_gap_ms(stamps_ns: list[int], start_ns: int, end_ns: int) -> float:
     inside = np.array(sorted(s for s in stamps_ns if start_ns <= s <= end_ns), dtype=np.int64)
     return round(float(np.diff(inside).max()) / 1e6, 1) if len(inside) > 1 else float('nan')
@@ -252,7 +260,8 @@ def run_once(settings: Path, study: Path, duration_s: float, busy: int, flood: b
     figures: dict[str, Any] = {'busy_processes': busy, 'key_presses': len(presses),
                                'load_average_1min': [round(load_before, 2),
                                                      round(load_after, 2)],
-                               **key_latency(bag, presses)}
+                               **key_latency(bag, presses),
+                               'refused': _refused(bag)}
     if flood:
         figures['flood'] = flood_effect(bag, (flood_ns[0], flood_ns[1]), watcher)
     return figures
@@ -300,6 +309,8 @@ def main() -> int:
             load = '-'.join(f'{v:.1f}' for v in run['load_average_1min'])
             print(f'{run["busy_processes"]:>4} {load:>11} {run["key_presses"]:>7} {part:>17} '
                   f'{stats["p50"]:>8.1f} {stats["p99"]:>8.1f} {stats["max"]:>8.1f}')
+        if run['refused']:
+            print('refused: ' + ', '.join(f'{k} {v}' for k, v in run['refused'].items()))
         if 'flood' in run:
             print('flood: ' + ', '.join(f'{k} {v}' for k, v in run['flood'].items()))
     print(f'{os.cpu_count()} cores (shared with other work: see the load); goal: key_to_echo '

@@ -26,9 +26,23 @@ ALLOWED = {READY: frozenset({'ready'}),
 """Message types each phase takes (``take_over`` is the server's, in every phase)."""
 ACK_KEEP_NS = 5_000_000_000
 """An acknowledgement not echoed within this long is forgotten (a lost frame)."""
-INPUT_BURST = 4
-"""Pedal samples the page may send at once above the control rate (key press and release
-between two periodic samples)."""
+INPUT_BURST = 10
+"""Pedal samples that may arrive at once above the control rate: the page keeps its own
+bucket of 3 (a press and a release between two periodic samples), the rest absorbs this
+process's own stalls (samples sent a control period apart arrive together after a stall
+of the server's thread, and the newest of them must not be the one refused)."""
+
+
+def finite_number(value: Any) -> float | None:
+    """``value`` as a finite float, or None: not a number (a bool is not), NaN, infinite, or
+    an integer too large for a float (JSON allows any number of digits)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
 
 
 def reason_key(reason: str) -> str:
@@ -99,9 +113,8 @@ class Gate:
         """An admitted ``input`` as a command, or None (refused and counted): not a finite
         number, or over the rate (a token bucket of ``INPUT_BURST`` samples refilled at the
         control rate)."""
-        value = message.get('accel_mps2')
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value):
+        value = finite_number(message.get('accel_mps2'))
+        if value is None:
             self.refuse('input without a finite accel_mps2')
             return None
         with self.lock:
@@ -113,7 +126,7 @@ class Gate:
                 return None
             self._tokens -= 1.0
             self._seq += 1
-            accel = min(self.accel_max, max(self.accel_min, float(value)))
+            accel = min(self.accel_max, max(self.accel_min, value))
             return Sample(self._seq, accel, accel != value)
 
     def open_prompt(self, now_ns: int) -> int:
@@ -133,18 +146,17 @@ class Gate:
         """An admitted ``rating`` as (prompt id, value 0-100, response time s measured here
         from the prompt), or None (refused and counted): no open prompt of that id, or a value
         that is not a number in [0, 100]."""
-        value, prompt = message.get('value'), message.get('id')
+        value, prompt = finite_number(message.get('value')), message.get('id')
         with self.lock:
             if isinstance(prompt, bool) or not isinstance(prompt, int) \
                     or prompt not in self._prompts:
                 self.refused['rating outside a prompt'] += 1
                 return None
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not math.isfinite(value) or not 0 <= value <= 100:
+            if value is None or not 0 <= value <= 100:
                 self.refused['rating not in [0, 100]'] += 1
                 return None
             shown = self._prompts.pop(prompt)
-        return prompt, float(value), max(0, now_ns - shown) / 1e9
+        return prompt, value, max(0, now_ns - shown) / 1e9
 
     def sent_ack(self, seq: int, arrived_ns: int, applied_ns: int, sent_ns: int) -> None:
         """A state frame acknowledging sample ``seq`` was sent to the page."""

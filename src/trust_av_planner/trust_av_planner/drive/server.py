@@ -56,6 +56,10 @@ FLOOD_MESSAGES_PER_S = 200
 """A connection that sends more messages than this within one second is dropped (its TCP
 connection aborted; the page reconnects by itself): a page sends about 2 x
 ``control_rate_hz`` a second."""
+MAX_CONNECTIONS = 8
+"""WebSocket connections served at once; a handshake beyond is refused (403) and counted
+(every connection gets every state frame: a script opening thousands would slow the
+driving tab's)."""
 
 
 class ServerError(TrustAvPlannerError):
@@ -71,12 +75,24 @@ def parse_message(text: str | bytes) -> dict[str, Any]:
     """One message from the page.
 
     Raises:
-        ValueError: not a JSON object with a known ``type`` (named).
+        ValueError: not a JSON object with a known ``type`` (named), nested too deep for
+            the parser included.
     """
-    data = json.loads(text)
+    try:
+        data = json.loads(text)
+    except RecursionError as err:          # "[[[[...": 4 KB nest deeper than the stack
+        raise ValueError(f'not a page message (nested too deep): {str(text)[:80]!r}') \
+            from err
     if not isinstance(data, dict) or data.get('type') not in MESSAGE_TYPES:
         raise ValueError(f'not a page message: {str(text)[:80]!r}')
     return data
+
+
+def one_header(headers: Headers, name: str) -> str | None:
+    """The value of a header given once, else None (absent, or given twice: a request with
+    two ``Host`` or ``Origin`` headers is refused like one with a wrong one)."""
+    values = headers.get_all(name)
+    return values[0] if len(values) == 1 else None
 
 
 class DriveServer:
@@ -168,16 +184,19 @@ class DriveServer:
 
     def _http(self, _connection: ServerConnection, request: Request) -> Response | None:
         path, _, query = request.path.partition('?')
-        if request.headers.get('Host') not in self.hosts():
-            return self._refuse(f'a request for host {request.headers.get("Host")!r}')
+        host = one_header(request.headers, 'Host')
+        if host not in self.hosts():
+            return self._refuse(f'a request for host {host!r}')
         if path == '/ws':
-            origin = request.headers.get('Origin')
+            origin = one_header(request.headers, 'Origin')
             if origin not in {f'http://{host}' for host in self.hosts()}:
                 return self._refuse(f'a WebSocket from origin {origin!r}')
             token = next((v for k, _, v in (p.partition('=') for p in query.split('&'))
                           if k == 'token'), '')
             if not hmac.compare_digest(token.encode(), self.token.encode()):
                 return self._refuse("a WebSocket without the page's token")
+            if len(self.clients) >= MAX_CONNECTIONS:
+                return self._refuse(f'more than {MAX_CONNECTIONS} WebSocket connections')
             return None                           # the WebSocket handshake goes on
         if path == '/favicon.ico':
             return Response(HTTPStatus.NO_CONTENT, 'No Content', Headers(), b'')

@@ -375,8 +375,8 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                     else:
                         write_own('/driver/questionnaire', msg, joint_state_cdr(msg))
                         outcome.questionnaire = [int(a) for a in msg.position[:-1]]
+                gate.set_phase(IDLE)       # nothing more is admitted: what was is handled
                 drain()
-                gate.set_phase(IDLE)
                 outcome.refused = gate.refused_counts()
                 latency = outcome.latency_ms()
                 recording.set_custom_data('trust_av.drive.status', outcome.status)

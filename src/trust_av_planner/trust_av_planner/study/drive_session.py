@@ -9,7 +9,7 @@ import sys
 from typing import Any
 
 from preceding_traffic.sources import load_trace
-from trust_av_planner.drive.gate import Gate
+from trust_av_planner.drive.gate import INPUT_BURST, Gate
 from trust_av_planner.drive.server import DriveServer
 from trust_av_planner.drive.sessions import PRACTICE, DriveRecord
 from trust_av_planner.drive.study import (
@@ -60,7 +60,8 @@ def run_session(args: argparse.Namespace) -> int:
     def hello() -> dict[str, Any]:
         """What a page is told when it connects: the settings and where the session is (a
         reopened tab shows the phase, the open rating prompt; frames give the time left)."""
-        return {'type': 'hello', 'control_rate_hz': rate_hz, 'participant': args.participant,
+        return {'type': 'hello', 'control_rate_hz': rate_hz, 'input_burst': INPUT_BURST,
+                'participant': args.participant,
                 'accel_max_mps2': follower.accel_max_mps2,
                 'accel_min_mps2': follower.accel_min_mps2,
                 'on_collision': drive.on_collision, 'prompts': link.gate.open_prompts(),

@@ -3,8 +3,11 @@
 // the view is drawn at the display's frame rate, interpolating the frames RENDER_DELAY_MS
 // behind the newest one. A pedal sample is sent at once on a key or pointer press or release,
 // on any other change of the pedal at most once per control period, and at the control rate
-// while nothing changes. The server acknowledges samples in its frames; the page echoes each
-// acknowledgement at once (the server measures the latency, the page reports no time).
+// while nothing changes, all within the server's rate limit (a token bucket of inputBurst
+// samples refilled at the control rate): the page keeps its own, smaller bucket, refilled a
+// little slower, and one sample of it for a press or release, so the server refuses none.
+// The server acknowledges samples in its frames; the page echoes each acknowledgement at
+// once (the server measures the latency, the page reports no time).
 'use strict';
 
 const RENDER_DELAY_MS = 100;
@@ -13,12 +16,15 @@ const KEY_GAS_PER_S = 1.5, KEY_BRAKE_PER_S = 2.5, KEY_RELEASE_PER_S = 4.0, KEY_S
 const BRAKE_LIGHT_MPS2 = -0.3;          // the AV's commanded acceleration that lights them
 const EYE_BEHIND_BUMPER_M = 2.0, EYE_HEIGHT_M = 1.2, CAR_WIDTH_M = 1.8, CAR_HEIGHT_M = 1.5;
 const KEYS = ['ArrowUp', 'ArrowDown', 'KeyW', 'KeyS'];
+const BUCKET_REFILL_SHARE = 0.9;       // of the control rate: a margin for network jitter
+const PAGE_BURST = 3;                  // the page's bucket (the server's is larger: hello)
 
 const drive = {
-  phase: 'connecting', controlRateHz: 10, accelMax: 2.5, accelMin: -6.0, onCollision: 'continue',
+  phase: 'connecting', controlRateHz: 10, inputBurst: 4, accelMax: 2.5, accelMin: -6.0, onCollision: 'continue',
   frames: [], displayed: null, pedal: 0, seq: 0, durationS: 0, keys: new Set(),
   pointerPedal: null, prompt: null, ws: null, inputTimer: null, source: 'none',
   controlling: false, final: false, lastSentMs: -1e9, lastSentPedal: null, acks: 0, frameTimes: [], drove: false,
+  tokens: 3, tokensAt: 0, pressWaiting: false, heldBack: 0,
   token: document.querySelector('meta[name="drive-token"]').content,
 };
 window.drive = drive;
@@ -48,6 +54,7 @@ function setStatus(text) { $('status').textContent = text; }
 function onMessage(msg) {
   if (msg.type === 'hello') {
     drive.controlRateHz = msg.control_rate_hz;
+    if (Number.isInteger(msg.input_burst) && msg.input_burst > 1) drive.inputBurst = msg.input_burst;
     drive.accelMax = msg.accel_max_mps2;
     drive.accelMin = msg.accel_min_mps2;
     drive.onCollision = msg.on_collision || 'continue';
@@ -171,9 +178,28 @@ function updatePedal(nowMs) {
 
 function pedalAccel(p) { return p >= 0 ? p * drive.accelMax : -p * drive.accelMin; }
 
-function sendSample(nowMs) {
+// The page's side of the server's rate limit: PAGE_BURST samples at once (fewer than the
+// server's inputBurst), refilled at BUCKET_REFILL_SHARE of the control rate; a periodic or
+// ramp sample leaves one for a press.
+function tokens(nowMs) {
+  const most = Math.min(PAGE_BURST, drive.inputBurst - 1);
+  drive.tokens = Math.min(most, drive.tokens
+    + Math.max(0, nowMs - drive.tokensAt) / 1000 * BUCKET_REFILL_SHARE * drive.controlRateHz);
+  drive.tokensAt = nowMs;
+  return drive.tokens;
+}
+
+// A pedal sample now; press: a key or pointer press or release (sent as soon as the bucket
+// allows: at once unless several come within a control period).
+function sendSample(nowMs, press = false) {
   if (drive.inputTimer === null) return;
   updatePedal(nowMs);
+  if (tokens(nowMs) < (press || drive.pressWaiting ? 1 : 2)) {
+    if (press) { drive.pressWaiting = true; drive.heldBack++; }
+    return;
+  }
+  drive.tokens -= 1;
+  drive.pressWaiting = false;
   drive.lastSentMs = nowMs;
   drive.lastSentPedal = drive.pedal;
   send({type: 'input', seq: ++drive.seq, accel_mps2: pedalAccel(drive.pedal)});
@@ -185,10 +211,10 @@ window.addEventListener('keydown', (e) => {
   e.preventDefault();
   if (drive.keys.has(e.code)) return;        // auto-repeat: the ramp goes on by itself
   drive.keys.add(e.code);
-  sendSample(performance.now());             // a press is sent at once
+  sendSample(performance.now(), true);       // a press is sent at once
 });
 window.addEventListener('keyup', (e) => {
-  if (drive.keys.delete(e.code)) sendSample(performance.now());
+  if (drive.keys.delete(e.code)) sendSample(performance.now(), true);
 });
 window.addEventListener('blur', () => drive.keys.clear());
 
@@ -199,10 +225,10 @@ function pointerValue(e) {
 }
 pedalEl.addEventListener('pointerdown', (e) => {
   pedalEl.setPointerCapture(e.pointerId); drive.pointerPedal = pointerValue(e); e.preventDefault();
-  sendSample(performance.now());
+  sendSample(performance.now(), true);
 });
 pedalEl.addEventListener('pointermove', (e) => { if (drive.pointerPedal !== null) drive.pointerPedal = pointerValue(e); });
-const releasePointer = () => { drive.pointerPedal = null; drive.pedal = 0; sendSample(performance.now()); };
+const releasePointer = () => { drive.pointerPedal = null; drive.pedal = 0; sendSample(performance.now(), true); };
 pedalEl.addEventListener('pointerup', releasePointer);
 pedalEl.addEventListener('pointercancel', releasePointer);
 
@@ -430,7 +456,7 @@ function draw(nowMs) {
   if (drive.phase === 'driving' && drive.inputTimer !== null) {
     updatePedal(nowMs);
     const changed = drive.lastSentPedal === null || Math.abs(drive.pedal - drive.lastSentPedal) > 1e-3;
-    if (changed && nowMs - drive.lastSentMs >= periodMs()) sendSample(nowMs);
+    if (drive.pressWaiting || (changed && nowMs - drive.lastSentMs >= periodMs())) sendSample(nowMs);
   }
   const s = interpolated(nowMs);
   drive.displayed = s;

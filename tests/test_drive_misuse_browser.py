@@ -1,0 +1,357 @@
+"""A participant's misuse through the real page (Debian's chromium, headless, Playwright).
+
+The impatient start, under both collision protocols of config/drive.yaml (``on_collision``):
+the participant holds the gas on the start screen and keeps it held while the AV waits. The
+car hits the AV and stops at its rear bumper, never through it; the page says so; with
+``end`` the drive ends there (the page says why, the questionnaire follows), with
+``continue`` it goes on to its time. The bag (events and ``custom_data``), the summary and
+``session.json`` record the collision; every field the page was told is one it may show
+(nothing about any model's trust).
+
+Stray messages in every phase (start screen, driving, a prompt open, nodes stopping,
+questionnaire, after the answers), sent on the driving tab's own connection: refused and
+counted by reason, never stored, and the connection never fails.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import queue
+import re
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from rosbag2_rules import check_bag_directory
+
+from trust_av_planner.drive.bag_data import custom_data, read_drive
+from trust_av_planner.drive.gate import reason_key
+from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+
+pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
+              pytest.mark.skipif(not Path(CHROMIUM).exists(),
+                                 reason='Debian chromium not installed (scripts/bootstrap.sh)')]
+
+DRIVE_S = 25.0
+ANSWERS = [3, 2, 2, 3, 1, 5, 6, 5, 4, 6, 6, 4]
+SETTINGS = """/**/drive:
+  ros__parameters:
+    drive_duration_s: {duration}
+    practice: false
+    rating_period_s: 60.0
+    abandon_after_s: 8.0
+    start_timeout_s: 120.0
+    questionnaire_timeout_s: 60.0
+    port: 0
+    on_collision: {protocol}
+    condition_names: [low_alpha]
+    condition_alphas: [0.0]
+    condition_predictors: [ca]
+    condition_traces: [us06]
+"""
+WATCH_MESSAGES = """() => {
+    window.shown = [];
+    const note = () => {
+        for (const id of ['crash', 'message']) {
+            const el = document.getElementById(id);
+            if (!el.hidden && !window.shown.includes(el.textContent)) {
+                window.shown.push(el.textContent);
+            }
+        }
+    };
+    new MutationObserver(note).observe(document.body, {subtree: true, childList: true,
+        attributes: true, characterData: true});
+}"""
+"""Everything the crash card and the message card showed, as it showed (a card may be
+replaced before a poll would see it)."""
+RECORD_RECEIVED = """(() => {
+    window.received = {};
+    const Native = window.WebSocket;
+    window.WebSocket = function (...args) {
+        const ws = new Native(...args);
+        ws.addEventListener('message', (event) => {
+            const msg = JSON.parse(event.data);
+            const keys = window.received[msg.type] = window.received[msg.type] || [];
+            for (const key of Object.keys(msg)) if (!keys.includes(key)) keys.push(key);
+        });
+        return ws;
+    };
+    Object.assign(window.WebSocket, Native);
+})();"""
+"""Every field of every message type the page receives."""
+PAGE_FIELDS = {
+    'hello': {'type', 'control_rate_hz', 'input_burst', 'participant', 'accel_max_mps2',
+              'accel_min_mps2', 'on_collision', 'prompts', 'phase', 'duration_s',
+              'practice', 'number', 'of'},
+    'control': {'type', 'controlling', 'other', 'taken_over'},
+    'phase': {'type', 'phase', 'duration_s', 'practice', 'number', 'of', 'ended_by', 'items'},
+    'state': {'type', 't_s', 'left_s', 'vehicles', 'av_accel_mps2', 'collisions', 'crash',
+              'ack'},
+    'rate': {'type', 'id'}}
+"""What the page may be told (docs/concepts/driver-in-the-loop.md, The page): the vehicles,
+the AV's commanded acceleration, the time left, collisions, the phase; nothing about any
+model's trust."""
+
+
+class Drive:
+    """``trust-av drive`` in a subprocess; its output lines in a queue."""
+
+    def __init__(self, study: Path, settings: Path) -> None:
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.output: list[str] = []
+        self.process = subprocess.Popen(
+            [sys.executable, '-m', 'trust_av_planner.cli', 'drive', '--study', str(study),
+             '--participant', 'P09', '--drive-file', str(settings)],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            env={**os.environ, 'PYTHONUNBUFFERED': '1'})
+        threading.Thread(target=self._read, daemon=True).start()
+        self.url = self.wait_for(r'open (http://\S+)').group(1)
+
+    def _read(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            self.lines.put(line)
+
+    def wait_for(self, pattern: str, timeout_s: float = 120.0) -> re.Match[str]:
+        while True:
+            try:
+                line = self.lines.get(timeout=timeout_s)
+            except queue.Empty:
+                raise AssertionError(f'no line matching {pattern!r}; output so far:\n'
+                                     + ''.join(self.output)) from None
+            self.output.append(line)
+            found = re.search(pattern, line)
+            if found:
+                return found
+
+    def finish(self, timeout_s: float = 120.0) -> str:
+        code = self.process.wait(timeout=timeout_s)
+        while not self.lines.empty():
+            self.output.append(self.lines.get())
+        text = ''.join(self.output)
+        assert code == 0, text
+        return text
+
+    def kill(self) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+            self.process.wait(timeout=60)
+
+
+@pytest.fixture
+def browser() -> Iterator[Any]:
+    from playwright.sync_api import sync_playwright
+    with sync_playwright() as playwright:
+        chromium = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            yield chromium
+        finally:
+            chromium.close()
+
+
+def _events(bag: Path) -> list[tuple[str, dict[str, str]]]:
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        connections = [c for c in reader.connections if c.topic == '/driver/events']
+        out = []
+        for c, _, raw in reader.messages(connections=connections):
+            status = reader.deserialize(raw, c.msgtype).status[0]
+            out.append((status.message, {v.key: v.value for v in status.values}))
+        return out
+
+
+@pytest.mark.parametrize('protocol', ['end', 'continue'])
+def test_gas_held_at_the_start_hits_the_av_and_the_protocol_decides(
+        tmp_path: Path, browser: Any, protocol: str) -> None:
+    settings = tmp_path / 'drive.yaml'
+    settings.write_text(SETTINGS.format(duration=DRIVE_S, protocol=protocol))
+    study = tmp_path / 'study'
+    drive = Drive(study, settings)
+    try:
+        page = browser.new_page(viewport={'width': 1000, 'height': 760})
+        page.add_init_script(RECORD_RECEIVED)
+        page.goto(drive.url)
+        page.wait_for_selector('#start', state='visible', timeout=120_000)
+        page.evaluate(WATCH_MESSAGES)
+        page.keyboard.down('ArrowUp')               # impatient: the gas before the start
+        page.click('#start')
+        if protocol == 'end':      # the drive ends at once: the page says why, then asks
+            page.wait_for_function("window.drive.phase === 'questionnaire'", timeout=90_000)
+        else:
+            page.wait_for_selector('#crash', state='visible', timeout=60_000)
+            # the car stopped at the AV's bumper (the page's own gap, never through it)
+            assert float(page.locator('#gap').get_attribute('data-m')) > -0.1
+            # the drive goes on, the gas still held: driving until its time is up
+            assert page.evaluate('window.drive.phase') == 'driving'
+            page.wait_for_function("window.drive.phase === 'questionnaire'",
+                                   timeout=(DRIVE_S + 60) * 1000)
+        page.keyboard.up('ArrowUp')
+        shown = page.evaluate('window.shown')
+        for i, value in enumerate(ANSWERS):
+            page.check(f'input[name="item{i + 1}"][value="{value}"]')
+        page.click('#questionnaire-submit')
+        page.wait_for_function("window.drive.phase === 'finished'", timeout=60_000)
+        received = page.evaluate('window.received')
+        output = drive.finish()
+    finally:
+        drive.kill()
+    # the page was told nothing it should not show (no model's trust), and it was told
+    # the collision and the state
+    assert set(received) <= set(PAGE_FIELDS), received
+    for kind, fields in received.items():
+        assert set(fields) <= PAGE_FIELDS[kind], (kind, fields)
+    assert {'vehicles', 'crash', 'collisions'} <= set(received['state'])
+    drives_on = 'Your car hit the AV and stopped behind it. Drive on when the AV moves away.'
+    ended = 'The drive ended: your car hit the AV. Please wait a moment.'
+    seen = ' | '.join(shown)
+    if protocol == 'end':
+        assert ended in seen and drives_on not in seen, shown
+    else:
+        assert drives_on in seen and ended not in seen, shown
+    assert re.search(r'drive 1 \(low_alpha\): done after [0-9.]+ s, [1-9]\d* collisions',
+                     output), output
+    session = json.loads((study / 'P09' / 'session.json').read_text())
+    (record,) = session['drives']
+    summary = record['summary']
+    assert record['status'] == 'done' and summary['collisions'] >= 1
+    assert summary['ended_by'] == ('collision' if protocol == 'end' else 'time')
+    if protocol == 'end':
+        assert summary['driven_s'] < DRIVE_S - 5.0
+    else:
+        assert summary['driven_s'] >= DRIVE_S - 0.5
+    with (study / 'P09' / 'summary.csv').open() as table:
+        (row,) = list(csv.DictReader(table))
+    assert int(row['collisions']) == summary['collisions']
+    assert row['ended_by'] == summary['ended_by']
+    assert float(row['min_gap_m']) > -0.2
+    bag = study / record['bag']
+    assert check_bag_directory(bag) == []
+    meta = custom_data(bag)
+    assert meta['trust_av.drive.on_collision'] == protocol
+    assert meta['trust_av.drive.ended_by'] == summary['ended_by']
+    assert int(meta['trust_av.drive.collisions']) == summary['collisions']
+    events = _events(bag)
+    kinds = [kind for kind, _ in events]
+    first = kinds.index('collision')
+    assert kinds.index('start') < first < kinds.index('end')
+    assert events[first][1] == {'count': '1', 'protocol': protocol}
+    assert events[kinds.index('end')][1]['ended_by'] == summary['ended_by']
+    # the car never went through the AV, and it was held there by the gas, not by luck
+    data = read_drive(bag)
+    you, av = data.odometry['/human/odom'], data.odometry['/ego/odom']
+    gaps = np.interp(you[:, 0], av[:, 0], av[:, 1]) - 4.5 - you[:, 1]
+    assert gaps.min() > -0.2
+    assert gaps.min() < 0.5
+    assert data.questionnaire[:12] == ANSWERS
+
+
+STRAYS = """(phase) => {
+    const ws = window.drive.ws, huge = '9'.repeat(400);
+    const raw = [
+        JSON.stringify({type: 'input', seq: 1, accel_mps2: 2.0}),
+        JSON.stringify({type: 'rating', id: 999, value: 100}),
+        JSON.stringify({type: 'ack', seq: 1}),
+        JSON.stringify({type: 'take_over'}),
+        JSON.stringify({type: 'hello'}), JSON.stringify({type: 'state'}), '[1, 2]', 'null',
+        `{"type": "input", "seq": 2, "accel_mps2": ${huge}}`,
+        `{"type": "rating", "id": ${window.drive.prompt || 1}, "value": ${huge}}`,
+        JSON.stringify({type: 'rating', id: window.drive.prompt || 1, value: 'NaN'}),
+        JSON.stringify({type: 'input', seq: 3, accel_mps2: true}),
+        JSON.stringify({type: 'questionnaire', answers: [...Array(12).fill(8)]}),
+        JSON.stringify({type: 'questionnaire', answers: 'seven'}),
+        '{"type": "input", "accel_mps2": ' + '['.repeat(2000) + ']'.repeat(2000) + '}',
+    ];
+    // what fits the phase is not a stray: a start on the start screen, answers while the
+    // questionnaire is open (a script in the page can give them, as the participant can)
+    if (phase !== 'ready') raw.push(JSON.stringify({type: 'ready'}));
+    if (phase !== 'questionnaire') {
+        raw.push(JSON.stringify({type: 'questionnaire', answers: Array(12).fill(7)}));
+    }
+    for (const text of raw) ws.send(text);
+    ws.send(new Uint8Array([0xff, 0xfe, 0x00]));
+    window.strays = (window.strays || []).concat([phase]);
+}"""
+"""Every kind of message, well-formed or not, that does not belong (sent from the driving
+tab's own connection: what a script in the participant's page can send)."""
+STRAYS_ON_PHASE = """(send) => {
+    const strays = eval(send);
+    window.drive.ws.addEventListener('message', (event) => {
+        const msg = JSON.parse(event.data);
+        if (msg.type === 'phase' && ['wait', 'questionnaire'].includes(msg.phase)) {
+            strays(msg.phase);
+        }
+    });
+}"""
+"""The strays again the moment the page is told the drive waits for its nodes to stop, and
+the moment the questionnaire opens (before the participant answers)."""
+
+
+def test_stray_messages_in_every_phase_are_refused_and_never_stored(
+        tmp_path: Path, browser: Any) -> None:
+    settings = tmp_path / 'drive.yaml'
+    settings.write_text(SETTINGS.format(duration=15.0, protocol='continue').replace(
+        'rating_period_s: 60.0', 'rating_period_s: 4.0'))
+    study = tmp_path / 'study'
+    drive = Drive(study, settings)
+    try:
+        page = browser.new_page(viewport={'width': 1000, 'height': 760})
+        page.goto(drive.url)
+        page.wait_for_selector('#start', state='visible', timeout=120_000)
+        page.wait_for_function('window.drive.controlling', timeout=30_000)
+        page.evaluate(STRAYS, 'ready')
+        page.wait_for_timeout(1000)
+        assert page.evaluate('window.drive.phase') == 'ready'     # nothing started it
+        page.evaluate(STRAYS_ON_PHASE, STRAYS)
+        page.click('#start')
+        page.wait_for_function("window.drive.phase === 'driving'", timeout=30_000)
+        page.evaluate(STRAYS, 'driving')
+        page.wait_for_selector('#rating', state='visible', timeout=30_000)
+        page.evaluate(STRAYS, 'driving with a prompt open')
+        page.locator('#rating-slider').fill('35')
+        page.click('#rating-submit')
+        page.wait_for_function("window.drive.phase === 'questionnaire'", timeout=60_000)
+        page.wait_for_function('window.strays.length === 5', timeout=10_000)
+        for i, value in enumerate(ANSWERS):
+            page.check(f'input[name="item{i + 1}"][value="{value}"]')
+        page.click('#questionnaire-submit')
+        page.evaluate(STRAYS, 'after the answers')
+        page.wait_for_function("window.drive.phase === 'finished'", timeout=60_000)
+        output = drive.finish()
+    finally:
+        drive.kill()
+    assert 'drive 1 (low_alpha): done' in output, output
+    assert page.evaluate('window.strays') == ['ready', 'driving', 'driving with a prompt open',
+                                              'wait', 'questionnaire', 'after the answers']
+    session = json.loads((study / 'P09' / 'session.json').read_text())
+    (record,) = session['drives']
+    bag = study / record['bag']
+    meta = custom_data(bag)
+    refused = {k.removeprefix('trust_av.drive.refused.'): int(v) for k, v in meta.items()
+               if k.startswith('trust_av.drive.refused.')}
+    assert sum(refused.values()) == int(meta['trust_av.drive.refused']) \
+        == record['summary']['refused_messages']
+    for reason in ('input during ready', 'rating during ready', 'questionnaire during ready',
+                   'ack during ready', 'questionnaire during driving', 'ready during driving',
+                   'rating outside a prompt', 'rating not in [0, 100]',
+                   'input without a finite accel_mps2', 'ack of no sent frame',
+                   'input during wait', 'questionnaire during wait', 'ready during wait',
+                   'input during questionnaire', 'rating during questionnaire',
+                   'ready during questionnaire', 'questionnaire with bad answers'):
+        assert refused.get(reason_key(reason), 0) >= 1, (reason, refused)
+    # 4 non-objects or unknown types, the deep nesting and the binary frame, 6 times (the
+    # last time the page may have closed its connection on the end screen)
+    assert 5 * 6 <= refused[reason_key('not a page message')] <= 6 * 6
+    # nothing refused was stored, and the connection never failed
+    data = read_drive(bag)
+    assert data.questionnaire[:12] == ANSWERS
+    np.testing.assert_allclose(data.ratings, [0.35])
+    kinds = [kind for kind, _ in _events(bag)]
+    assert 'page_lost' not in kinds and kinds.count('start') == 1

@@ -1,0 +1,75 @@
+"""The page keeps within the server's pedal rate limit by itself, in headless chromium
+against the drive's web server alone (no graph): key presses and releases faster than the
+control rate are all sent (none lost, the last one the release), and the server's gate,
+fed the samples as they arrived, refuses none of them."""
+
+from __future__ import annotations
+
+import queue
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from trust_av_planner.drive.gate import DRIVING, INPUT_BURST, READY, Gate
+from trust_av_planner.drive.server import DriveServer
+from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+
+pytestmark = [pytest.mark.wall_clock,
+              pytest.mark.skipif(not Path(CHROMIUM).exists(),
+                                 reason='Debian chromium not installed (scripts/bootstrap.sh)')]
+
+RATE_HZ = 10.0
+HELLO = {'type': 'hello', 'control_rate_hz': RATE_HZ, 'input_burst': INPUT_BURST,
+         'accel_max_mps2': 2.5, 'accel_min_mps2': -6.0}
+
+
+@pytest.fixture
+def served() -> Iterator[tuple[DriveServer, queue.Queue[tuple[dict[str, Any], int]]]]:
+    inbox: queue.Queue[tuple[dict[str, Any], int]] = queue.Queue()
+    server = DriveServer(lambda m, ns: inbox.put((m, ns)), lambda: HELLO, port=0)
+    server.start()
+    try:
+        yield server, inbox
+    finally:
+        server.stop()
+
+
+def test_fast_presses_stay_within_the_servers_rate_limit_and_none_is_lost(
+        served: tuple[DriveServer, queue.Queue[tuple[dict[str, Any], int]]]) -> None:
+    from playwright.sync_api import sync_playwright
+    server, inbox = served
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page()
+            page.goto(server.url)
+            page.wait_for_function('window.drive.ws && window.drive.ws.readyState === 1')
+            server.send({'type': 'phase', 'phase': 'driving', 'duration_s': 60.0})
+            page.wait_for_function("window.drive.phase === 'driving'")
+            for _ in range(20):              # a press and a release every 60 ms or so
+                page.keyboard.down('ArrowUp')
+                page.wait_for_timeout(30)
+                page.keyboard.up('ArrowUp')
+                page.wait_for_timeout(30)
+            page.wait_for_timeout(1000)      # released: the pedal back at zero
+            held_back = page.evaluate('window.drive.heldBack')
+        finally:
+            browser.close()
+    samples = []
+    while not inbox.empty():
+        message, arrived_ns = inbox.get()
+        if message['type'] == 'input':
+            samples.append((message, arrived_ns))
+    gate = Gate(RATE_HZ, -6.0, 2.5)
+    gate.set_phase(READY)
+    gate.set_phase(DRIVING)
+    for message, arrived_ns in samples:
+        gate.sample(message, arrived_ns)
+    assert gate.refused_counts() == {}
+    # 40 presses and releases in about 2.5 s: more than the rate allows, so the page held
+    # some back and sent them when it could; the newest value (the release) was sent
+    assert held_back > 0
+    assert samples[-1][0]['accel_mps2'] == 0.0
+    assert any(m['accel_mps2'] > 0.0 for m, _ in samples)
