@@ -1,6 +1,7 @@
 """Options and output shared by the ``trust-av`` commands: the run options (trace or bag,
-alpha, predictor, params file), their translation into params-file overrides, the metrics
-table, and the progress bar (tqdm)."""
+alpha, predictor, params file) and the argparse types that check values where they enter,
+the metrics table, and the progress bar (tqdm). The typed options the commands read are in
+:mod:`trust_av_planner.cli.typed_options`."""
 
 from __future__ import annotations
 
