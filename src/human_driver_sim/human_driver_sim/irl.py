@@ -48,15 +48,6 @@ def _gradient_function(config: DriverConfig) -> ca.Function:
     return ca.Function('feature_jacobian', [state, u, expected], [jac])
 
 
-def _nnls(a: np.ndarray, b: np.ndarray, iterations: int = 5000) -> np.ndarray:
-    """Non-negative least squares by projected gradient (no scipy)."""
-    x = np.maximum(np.linalg.lstsq(a, b, rcond=None)[0], 0.0)
-    step = 1.0 / max(float(np.linalg.norm(a, 2)) ** 2, 1e-12)
-    for _ in range(iterations):
-        x = np.maximum(x - step * (a.T @ (a @ x - b)), 0.0)
-    return np.asarray(x, dtype=float)
-
-
 def fit_inverse_kkt(config: DriverConfig, demos: Sequence[Demonstration]) -> np.ndarray:
     """Fit W = (1, w_ds, w_rs, w_rd) from demonstrations by inverse KKT.
 
@@ -71,7 +62,7 @@ def fit_inverse_kkt(config: DriverConfig, demos: Sequence[Demonstration]) -> np.
     stacked = np.vstack(blocks)  # (N * demos) x 4
     scale = np.linalg.norm(stacked[:, 1:], axis=0)
     scale[scale == 0.0] = 1.0
-    rest = _nnls(stacked[:, 1:] / scale, -stacked[:, 0])
+    rest = scipy.optimize.nnls(stacked[:, 1:] / scale, -stacked[:, 0])[0]
     return np.concatenate([[1.0], rest / scale])
 
 

@@ -1,6 +1,8 @@
-"""The driver fit's optimiser is scipy's Nelder-Mead (human_driver_sim.irl.nelder_mead): from
-the same start, simplex step and iteration count it reaches a loss no worse than the numpy
-Nelder-Mead the shipped driver fit was made with (kept here as the reference)."""
+"""The driver fit's optimisers are scipy's (human_driver_sim.irl): its Nelder-Mead, from the
+same start, simplex step and iteration count, reaches a loss no worse than the numpy
+Nelder-Mead the shipped driver fit was made with, and the inverse KKT's non-negative least
+squares (scipy.optimize.nnls) a residual no worse than the projected gradient it replaced
+(both kept here as the references)."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+import scipy.optimize
 from synthetic_car_following import leader_speed
 
 from human_driver_sim import fitting
@@ -94,3 +97,23 @@ def test_scipy_idm_fit_is_no_worse_than_the_reference_fit(
     assert found.loss <= reference.loss, (found.loss, reference.loss)
     for name, (lo, hi) in FIT_BOUNDS.items():
         assert lo <= found.params[name] <= hi
+
+
+def reference_nnls(a: np.ndarray, b: np.ndarray, iterations: int = 5000) -> np.ndarray:
+    """The projected-gradient non-negative least squares the inverse KKT used before."""
+    x = np.maximum(np.linalg.lstsq(a, b, rcond=None)[0], 0.0)
+    step = 1.0 / max(float(np.linalg.norm(a, 2)) ** 2, 1e-12)
+    for _ in range(iterations):
+        x = np.maximum(x - step * (a.T @ (a @ x - b)), 0.0)
+    return np.asarray(x, dtype=float)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_scipy_nnls_is_no_worse_than_the_projected_gradient(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(60, 3)) * np.array([1.0, 30.0, 0.05])   # badly scaled, as the KKT
+    b = a @ np.array([0.5, -0.2, 3.0]) + rng.normal(scale=0.1, size=60)   # one bound active
+    x = scipy.optimize.nnls(a, b)[0]
+    reference = reference_nnls(a, b)
+    assert np.all(x >= 0.0)
+    assert np.linalg.norm(a @ x - b) <= np.linalg.norm(a @ reference - b) + 1e-12
