@@ -119,9 +119,10 @@ def template(topic: str, msgtype: str, horizon: int, dt_s: float) -> tuple[Any, 
 
 def _make_step_node(name: str) -> Any:
     from rclpy.node import Node
+    from step_gate import StepGate
 
     from trust_monitor.common.lockstep import split_ns, stamp_ns
-    from trust_monitor.common.step_chain import StepGate, step_chain
+    from trust_monitor.common.step_chain import step_chain
     from trust_monitor.common.topics import TOPIC
     from trust_monitor.ros.messages import message_class
     from trust_monitor.ros.parameters import declare_config

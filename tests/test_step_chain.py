@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import dataclasses
+import sys
 from collections import Counter, deque
+from pathlib import Path
 
 import pytest
 
-from trust_monitor.common.step_chain import Port, StepChain, StepChainError, StepGate, step_chain
+from trust_monitor.common.step_chain import Port, StepChain, StepChainError, step_chain
 from trust_monitor.common.topics import TOPICS, Topic
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'benchmarks'))
+from step_gate import StepGate
 
 DT_NS = 1_000_000_000
 

@@ -88,7 +88,7 @@ class DriverNode(Node):
         self.model = declare_config(self, FollowerConfig)
         # Every registered follower's parameters are declared (and checked), the chosen
         # one's are used: as trust-av's node_components reads the section.
-        params = {c.name: declare_config(self, c.config_type)
+        params: dict[str, object] = {c.name: declare_config(self, c.config_type)
                   for c in registry.components(registry.DRIVERS) if c.config_type is not None}
         self.follower = declare_config(self, FollowerState)
         self.clock = declare_config(self, WallClockConfig)
@@ -172,7 +172,7 @@ class DriverNode(Node):
         self.buffer.put(name, ns, msg)
         if self.buffer.ready(ns):
             items = self.buffer.pop(ns)
-            self.drive(ns, items['expected'], items['ego'])  # type: ignore[arg-type]
+            self.drive(ns, items['expected'], items['ego'])
 
     def drive(self, ns: int, expected_msg: JointTrajectory, ego: Odometry) -> None:
         """Plan, publish, integrate one step (x += v dt, v += u dt), publish the odometry."""

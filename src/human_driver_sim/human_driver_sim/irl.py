@@ -7,7 +7,7 @@ is sum_j w_j grad_u f_j = 0, linear in W; with the normalisation w_a = 1 the rem
 weights are the non-negative least-squares solution of the stacked stationarity residuals.
 The per-pair weights are the driver population's source; the shipped W, tau_H and d_s come
 from the bounded replay fit (:mod:`human_driver_sim.fitting`), which uses
-:func:`nelder_mead` below.
+:func:`nelder_mead` below (scipy's).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+import scipy.optimize
 
 from human_driver_sim.car_following import FollowingPair
 from human_driver_sim.driver_mpc import DriverConfig, features
@@ -47,15 +48,6 @@ def _gradient_function(config: DriverConfig) -> ca.Function:
     return ca.Function('feature_jacobian', [state, u, expected], [jac])
 
 
-def _nnls(a: np.ndarray, b: np.ndarray, iterations: int = 5000) -> np.ndarray:
-    """Non-negative least squares by projected gradient (no scipy)."""
-    x = np.maximum(np.linalg.lstsq(a, b, rcond=None)[0], 0.0)
-    step = 1.0 / max(float(np.linalg.norm(a, 2)) ** 2, 1e-12)
-    for _ in range(iterations):
-        x = np.maximum(x - step * (a.T @ (a @ x - b)), 0.0)
-    return np.asarray(x, dtype=float)
-
-
 def fit_inverse_kkt(config: DriverConfig, demos: Sequence[Demonstration]) -> np.ndarray:
     """Fit W = (1, w_ds, w_rs, w_rd) from demonstrations by inverse KKT.
 
@@ -70,7 +62,7 @@ def fit_inverse_kkt(config: DriverConfig, demos: Sequence[Demonstration]) -> np.
     stacked = np.vstack(blocks)  # (N * demos) x 4
     scale = np.linalg.norm(stacked[:, 1:], axis=0)
     scale[scale == 0.0] = 1.0
-    rest = _nnls(stacked[:, 1:] / scale, -stacked[:, 0])
+    rest = scipy.optimize.nnls(stacked[:, 1:] / scale, -stacked[:, 0])[0]
     return np.concatenate([[1.0], rest / scale])
 
 
@@ -95,31 +87,17 @@ def demonstrations(pair: FollowingPair, horizon_steps: int) -> list[Demonstratio
 
 def nelder_mead(func: Callable[[np.ndarray], float], start: np.ndarray, *, step: float = 0.5,
                 iterations: int = 60) -> tuple[np.ndarray, float]:
-    """Derivative-free minimisation (Nelder & Mead 1965), numpy only."""
-    dim = len(start)
-    simplex = [np.asarray(start, dtype=float)]
-    simplex += [simplex[0] + step * np.eye(dim)[i] for i in range(dim)]
-    values = [func(x) for x in simplex]
-    for _ in range(iterations):
-        order = np.argsort(values)
-        simplex = [simplex[i] for i in order]
-        values = [values[i] for i in order]
-        centre = np.mean(simplex[:-1], axis=0)
-        reflected = centre + (centre - simplex[-1])
-        f_r = func(reflected)
-        if f_r < values[0]:
-            expanded = centre + 2.0 * (centre - simplex[-1])
-            f_e = func(expanded)
-            simplex[-1], values[-1] = (expanded, f_e) if f_e < f_r else (reflected, f_r)
-        elif f_r < values[-2]:
-            simplex[-1], values[-1] = reflected, f_r
-        else:
-            contracted = centre + 0.5 * (simplex[-1] - centre)
-            f_c = func(contracted)
-            if f_c < values[-1]:
-                simplex[-1], values[-1] = contracted, f_c
-            else:
-                simplex = [simplex[0] + 0.5 * (x - simplex[0]) for x in simplex]
-                values = [values[0]] + [func(x) for x in simplex[1:]]
-    best = int(np.argmin(values))
-    return simplex[best], float(values[best])
+    """Derivative-free minimisation by Nelder-Mead (scipy.optimize.minimize), from the
+    simplex ``start`` and ``start + step * e_i`` for ``iterations`` iterations (no other
+    stopping rule, so a fit's length is the same on every machine).
+
+    Returns:
+        The best point found and its value.
+    """
+    origin = np.asarray(start, dtype=float)
+    simplex = np.vstack([origin, origin + step * np.eye(origin.size)])
+    result = scipy.optimize.minimize(
+        func, origin, method='Nelder-Mead',
+        options={'initial_simplex': simplex, 'maxiter': iterations,
+                 'maxfev': np.iinfo(np.int64).max, 'xatol': 0.0, 'fatol': 0.0})
+    return np.asarray(result.x, dtype=float), float(result.fun)

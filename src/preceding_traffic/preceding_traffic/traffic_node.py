@@ -222,7 +222,7 @@ class TrafficNode(Node):
             outputs = self.buffer.pop(self.step)
             self.position_m += float(self.trace.speeds_mps[self.step]) * self.run.dt_s
             crash = step_collision(self.step, self.trace.time_s(self.step),
-                                   outputs['status'], outputs['driver'])  # type: ignore[arg-type]
+                                   outputs['status'], outputs['driver'])
             if crash is not None:
                 self.get_logger().info(f'done: {crash.line()}; no further step')
                 self.done = True

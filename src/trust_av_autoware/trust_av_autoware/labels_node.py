@@ -12,6 +12,7 @@ another joint or no acceleration, is dropped and counted (``/diagnostics``).
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from typing import Any
@@ -52,8 +53,8 @@ class LabelsNode(Node):
         for source, target in PLANS.items():
             publisher = self.create_publisher(JointState, target, OUT_QOS)
             self.create_subscription(
-                JointTrajectory, source,
-                lambda msg, s=source, p=publisher: self.on_plan(s, p, msg), IN_QOS)
+                JointTrajectory, source, functools.partial(self.on_plan, source, publisher),
+                IN_QOS)
         self.diagnostics = NodeDiagnostics(
             self, 'field_labels',
             lambda: self.status.report(time.time_ns(), '', 'labelling trust and plans'))

@@ -28,6 +28,7 @@ Trust: the latest estimate, ``trust_initial`` before the first. ``alpha``, ``tru
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 
@@ -125,7 +126,7 @@ class PlannerNode(ManagedNode):
         self.frames = declare_config(self, FrameConfig)
         # Every registered plan estimator's parameters are declared (and checked), the
         # chosen one's are used: as trust-av's node_components reads the section.
-        params = {c.name: declare_config(self, c.config_type)
+        params: dict[str, object] = {c.name: declare_config(self, c.config_type)
                   for c in registry.components(registry.PREDICTORS)
                   if c.config_type is not None}
         wall = self.wall = self.clock.wall
@@ -192,7 +193,7 @@ class PlannerNode(ManagedNode):
         for name, msgtype, topic in inputs:
             if topic:
                 subscribe(
-                    self, msgtype, topic, lambda m, n=name: callback(n, m),
+                    self, msgtype, topic, functools.partial(callback, name),
                     topic_qos(TABLE_TOPIC[name], self.clock), readers=not wall,
                     event_callbacks=input_events(self, name, self.missed, self.clock) if wall
                     else None)
@@ -263,7 +264,7 @@ class PlannerNode(ManagedNode):
         self.latest.put(name, time.monotonic_ns(), msg)
         self.missed.pop(name, None)
         if name == 'ego':
-            self.set_frame(body_frame(msg.child_frame_id, self.frames))  # type: ignore[union-attr]
+            self.set_frame(body_frame(msg.child_frame_id, self.frames))
 
     def problems(self, now_mono_ns: int) -> str:
         """Wall mode: why the required inputs cannot be used ('' when they can)."""
@@ -287,9 +288,10 @@ class PlannerNode(ManagedNode):
         if not self.active:
             return
         if not self.check_clock():   # no command: its stamp would be wrong; the status says why
-            return self.pub_status.publish(diagnostics(
+            self.pub_status.publish(diagnostics(
                 time.time_ns(), 'trust_aware_nmpc', False, 'not_running',
                 {'reason': self.blocked, 'commanding': 'False'}, error=True))
+            return
         ns, mono = now_ns(self), time.monotonic_ns()
         t_s = mono / NS_PER_S
         why = self.problems(mono)
@@ -347,7 +349,7 @@ class PlannerNode(ManagedNode):
             return
         self.buffer.put(name, msg_ns(msg.header.stamp), msg)
         if name == 'ego':
-            self.set_frame(body_frame(msg.child_frame_id, self.frames))  # type: ignore[union-attr]
+            self.set_frame(body_frame(msg.child_frame_id, self.frames))
         if self.active:
             self.try_plan()
 
@@ -400,13 +402,13 @@ class PlannerNode(ManagedNode):
         step_s, steps = self.planner.grid
         preview = None
         if items['preview'] is not None:
-            msg: JointTrajectory = items['preview']  # type: ignore[assignment]
+            msg: JointTrajectory = items['preview']
             preview = interp_at(np.array(trajectory_times(msg)),
                                 np.array(trajectory_values(msg, 'velocities')), step_s, steps)
-        out = self.planner.step(vehicle(items['traffic']), preview,  # type: ignore[arg-type]
-                                vehicle(items['ego']),  # type: ignore[arg-type]
+        out = self.planner.step(vehicle(items['traffic']), preview,
+                                vehicle(items['ego']),
                                 None if items['human'] is None
-                                else vehicle(items['human']),  # type: ignore[arg-type]
+                                else vehicle(items['human']),
                                 state, t_s)
         result = out.result
         self.record.solved(result.solve_time_s, result.fallback, result.status)

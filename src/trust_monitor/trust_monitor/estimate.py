@@ -217,12 +217,6 @@ def estimate_csv(in_path: Path, out_path: Path, config: TrustConfig,
     return len(rows)
 
 
-def trust_config(params_files: Sequence[Path]) -> TrustConfig:
-    """The trust monitor's configuration from the shipped file and ``params_files`` over it,
-    as the ``trust_monitor`` node in namespace ``/`` gets it."""
-    return trust_setup(params_files)[0]
-
-
 def trust_setup(params_files: Sequence[Path], trust_model: str | None = None,
                 ) -> tuple[TrustConfig, TrustModel]:
     """The trust monitor's configuration and its trust model, as the ``trust_monitor``

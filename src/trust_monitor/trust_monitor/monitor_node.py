@@ -17,6 +17,7 @@ period for the first). Loop jitter as in the planner.
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 
@@ -84,7 +85,7 @@ class MonitorNode(ManagedNode):
         self.trust_bytes = vector3_bytes(NO_FRAME)
         callback = self.on_latest if self.clock.wall else self.on_input
         for name, topic in (('plan', 'ego/plan'), ('expected', 'ego/expected_plan')):
-            subscribe(self, JointTrajectory, topic, lambda m, n=name: callback(n, m),
+            subscribe(self, JointTrajectory, topic, functools.partial(callback, name),
                       topic_qos(topic, self.clock), readers=not self.wall)
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
         self.get_logger().info(f'ready ({self.clock.clock_mode})')
@@ -146,7 +147,7 @@ class MonitorNode(ManagedNode):
     def score(self, ns: int) -> None:
         """Lock-step: score the plan pair of step ``ns`` and publish the trust."""
         items = self.buffer.pop(ns)
-        self.publish(ns, items['plan'], items['expected'], self.step_s)  # type: ignore[arg-type]
+        self.publish(ns, items['plan'], items['expected'], self.step_s)
 
     def resume(self) -> None:
         """``activate`` in lock-step: score the plan pairs that came while inactive."""

@@ -3,14 +3,25 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 from preceding_traffic.traces import SHIPPED_TRACES, TraceConfig, read_samples, trace_path
 from trust_av_planner.cli.options import add_params_file_option
+from trust_av_planner.cli.typed_options import ParamsFileOptions, command
 from trust_av_planner.system.config import load_run_config
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclasses.dataclass(frozen=True)
+class TraceToBagOptions(ParamsFileOptions):
+    """``trust-av trace-to-bag``'s options."""
+
+    trace: str
+    out: Path
+    topic: str | None
+
+
+def run(args: TraceToBagOptions) -> int:
     """Run ``trust-av trace-to-bag``."""
     from preceding_traffic.bags import write_trace_bag  # rosbags: only when a bag is written
 
@@ -39,4 +50,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--topic', default=None,
                         help="topic name (default: the params file's bag_topic)")
     add_params_file_option(parser)
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(TraceToBagOptions, run))

@@ -4,18 +4,35 @@ a study session of drives in counterbalanced order, recorded one bag per drive."
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 from pathlib import Path
 
 from trust_av_planner.cli.options import add_params_file_option, positive_seconds
+from trust_av_planner.cli.typed_options import ParamsFileOptions, command
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
 
 DEFAULT_DRIVE_FILE = DEFAULT_PARAMS_FILE.with_name('drive.yaml')
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclasses.dataclass(frozen=True)
+class DriveOptions(ParamsFileOptions):
+    """``trust-av drive``'s options."""
+
+    study: Path
+    participant: str
+    drive_file: Path
+    no_practice: bool
+    duration_s: float | None
+    port: int | None
+    withdraw: bool
+    yes: bool
+    startup_timeout_s: float
+
+
+def run(args: DriveOptions) -> int:
     """Run ``trust-av drive``."""
     from trust_av_planner.drive.sessions import SessionError, check_participant
 
@@ -32,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         raise TrustAvPlannerError(str(err)) from err
 
 
-def _withdraw(args: argparse.Namespace) -> int:
+def _withdraw(args: DriveOptions) -> int:
     """Delete the participant's folder, only if it is proven this study's, after a
     confirmation on the terminal (or ``--yes``)."""
     from trust_av_planner.drive.sessions import withdraw, withdrawal_folder
@@ -97,4 +114,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--startup-timeout-s', type=positive_seconds, default=60.0,
                         help='how long to wait for the nodes to connect (default: %(default)s)')
     add_params_file_option(parser)
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(DriveOptions, run))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -24,6 +25,7 @@ from human_driver_sim.idm import TEXTBOOK_MOTORWAY, IdmParams
 from human_driver_sim.ngsim import NGSIM_VEHICLE_LENGTH_M
 from human_driver_sim.population import DRIVER_FIT_FILE, DriverFitError, fitted_idm_params
 from trust_av_planner.cli.options import output_file
+from trust_av_planner.cli.typed_options import command
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import (
     DEFAULT_PARAMS_FILE,
@@ -39,6 +41,19 @@ TEXTBOOK_IDM = 'IDM, textbook motorway'
 CONSTANT_SPEED = 'constant speed'
 MAX_VEHICLE_LENGTH_M = 30.0
 """``--vehicle-length-m`` at most: longer than any road vehicle a chain could hold."""
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalDriverOptions:
+    """``trust-av eval-driver``'s options (one ``--params-file``, not layered)."""
+
+    data: Path
+    format: str | None
+    json: Path | None
+    params_file: Path
+    driver_fit: Path
+    window_s: float
+    vehicle_length_m: float
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -65,7 +80,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='re-initialised window length, s (default: %(default)s)')
     parser.add_argument('--vehicle-length-m', type=float, default=NGSIM_VEHICLE_LENGTH_M,
                         help='NGSIM: assumed leader length, m (default: %(default)s)')
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(EvalDriverOptions, run))
 
 
 def models(params_file: Path, driver_fit: Path) -> dict[str, Follower]:
@@ -87,7 +102,7 @@ def models(params_file: Path, driver_fit: Path) -> dict[str, Follower]:
             TEXTBOOK_IDM: IdmFollower(TEXTBOOK_MOTORWAY), CONSTANT_SPEED: ConstantSpeed()}
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: EvalDriverOptions) -> int:
     """Load, clean, score, print (and write JSON)."""
     if not (args.window_s > 0.0 and math.isfinite(args.window_s)):
         raise TrustAvPlannerError(f'--window-s must be > 0 and finite, got {args.window_s}')

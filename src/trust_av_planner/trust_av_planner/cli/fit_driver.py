@@ -35,6 +35,7 @@ from human_driver_sim.idm import PARAM_NAMES, TEXTBOOK_MOTORWAY, IdmParams
 from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from human_driver_sim.splits import Split, split_ngsim, split_openacc
 from trust_av_planner.cli.options import MAX_ITERATIONS, Progress, bounded_int, output_file
+from trust_av_planner.cli.typed_options import command
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph import stop_signals
 from trust_av_planner.system.config import (
@@ -61,6 +62,19 @@ ABLATION = 'MPC fitted caution, a_extra = 0'
 CAUTIOUS_MPC = 'MPC cautious (human_cautious.yaml)'
 IDM_POOLED = 'IDM pooled (bounded)'
 IDM_TEXTBOOK = 'IDM textbook'
+
+
+@dataclasses.dataclass(frozen=True)
+class FitDriverOptions:
+    """``trust-av fit-driver``'s options (one ``--params-file``, not layered)."""
+
+    data: Path
+    ngsim: Path | None
+    drives: Path | None
+    out: Path
+    params_file: Path
+    iterations: int
+    no_progress: bool
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -99,7 +113,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='Nelder-Mead iterations per start (default: %(default)s, the '
                              'shipped fit)')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(FitDriverOptions, run))
 
 
 def _code_version() -> str:
@@ -140,7 +154,7 @@ def compact(value: Any) -> Any:
     return value
 
 
-def _load(args: argparse.Namespace, dt_s: float) -> tuple[dict[str, Split], dict[str, Any]]:
+def _load(args: FitDriverOptions, dt_s: float) -> tuple[dict[str, Split], dict[str, Any]]:
     """Train / validation / test pairs per data set, and what cleaning did."""
     cleaning: dict[str, Any] = {}
     splits: dict[str, Split] = {}
@@ -196,7 +210,7 @@ def _target(evaluation: Evaluation, protocol: str, model: str,
             'mpc_min_gap_m': mpc['min_gap_m']}
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: FitDriverOptions) -> int:
     """Fit on train, select on validation, score once on test, write the fit and evaluation."""
     started = time.perf_counter()
     if args.iterations < 1:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import io
 import math
 import re
@@ -25,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from trust_av_planner.cli.typed_options import ParamsFileOptions, command
 from trust_av_planner.drive.trust_fit import (
     Fit,
     FitError,
@@ -49,6 +51,28 @@ SCORE_FIELDS = ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'elpd_
                 'elpd_diff_se', 'rmse', 'rmse_se')
 
 
+@dataclasses.dataclass(frozen=True)
+class FitTrustOptions(ParamsFileOptions):
+    """``trust-av fit-trust``'s options (``--study`` or ``--ratings``, one of them)."""
+
+    study: Path | None
+    ratings: Path | None
+    out: Path
+    models: str
+    no_figures: bool
+
+    def __post_init__(self) -> None:
+        if (self.study is None) == (self.ratings is None):
+            raise TypeError('fit-trust: the parser gives --study or --ratings, one of them')
+
+    @property
+    def ratings_table(self) -> Path:
+        """``--ratings`` (given when ``--study`` is not)."""
+        if self.ratings is None:
+            raise TypeError('fit-trust: no --ratings')
+        return self.ratings
+
+
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``fit-trust`` subcommand."""
     parser = subparsers.add_parser(
@@ -71,7 +95,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         default=[], help="params file(s) for eps and the models' "
                                          'configured values (repeatable)')
     parser.add_argument('--no-figures', action='store_true', help='tables only')
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(FitTrustOptions, run))
 
 
 def _models(option: str) -> list[str]:
@@ -137,12 +161,12 @@ def figure(path: Path, participant: str, drives: Sequence[RatedDrive],
     plt.close(fig)
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: FitTrustOptions) -> int:
     """Fit, score, write (see ``trust-av fit-trust --help``)."""
     models = _models(args.models)
     config = load_run_config(args.params_files)
     drives = (read_study(args.study, config.trust.epsilon_mps2) if args.study is not None
-              else read_ratings_table(args.ratings))
+              else read_ratings_table(args.ratings_table))
     rated = [d for d in drives if len(d.ratings)]
     if not rated:
         raise FitError(f'{args.study or args.ratings}: no drive has a rating')

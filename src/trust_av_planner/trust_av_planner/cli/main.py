@@ -1,8 +1,10 @@
 """``trust-av``: the project's command line.
 
 Each subcommand lives in its own module that exposes ``register(subparsers)``; the module
-adds its parser and sets ``func(args) -> int`` on it. The four packages' errors (each
-package has one base class: :class:`~trust_monitor.errors.TrustMonitorError`,
+adds its parser and sets ``func(args) -> int`` on it, which builds the command's typed
+options from the namespace and runs it (:func:`trust_av_planner.cli.typed_options.command`).
+The four packages' errors (each package has one base class:
+:class:`~trust_monitor.errors.TrustMonitorError`,
 :class:`~preceding_traffic.errors.PrecedingTrafficError`,
 :class:`~human_driver_sim.errors.HumanDriverSimError`,
 :class:`~trust_av_planner.errors.TrustAvPlannerError`) become one line on stderr and exit

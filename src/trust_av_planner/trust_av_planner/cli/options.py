@@ -1,6 +1,7 @@
 """Options and output shared by the ``trust-av`` commands: the run options (trace or bag,
-alpha, predictor, params file), their translation into params-file overrides, the metrics
-table, and the progress bar (tqdm)."""
+alpha, predictor, params file) and the argparse types that check values where they enter,
+the metrics table, and the progress bar (tqdm). The typed options the commands read are in
+:mod:`trust_av_planner.cli.typed_options`."""
 
 from __future__ import annotations
 
@@ -208,30 +209,6 @@ def positive_int(text: str) -> int:
     if value > MAX_WORKERS:
         raise argparse.ArgumentTypeError(f'must be <= {MAX_WORKERS}, got {text!r}')
     return value
-
-
-def run_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
-    """Params-file overrides from the command-line options."""
-    planner: dict[str, object] = {}
-    if getattr(args, 'lead_preview', None) is not None:
-        planner['lead_preview'] = args.lead_preview
-    if args.alpha is not None:
-        planner['alpha'] = args.alpha
-    if args.predictor is not None:
-        planner['predictor'] = args.predictor
-    traffic: dict[str, object] = {}
-    if args.trace is not None:
-        traffic['trace'] = args.trace
-    if args.bag_in is not None:
-        traffic['trace'] = str(args.bag_in)
-    if args.bag_topic is not None:
-        traffic['bag_topic'] = args.bag_topic
-    if args.bag_type is not None:
-        traffic['bag_message_type'] = args.bag_type
-    driver: dict[str, object] = {}
-    if getattr(args, 'driver_model', None) is not None:
-        driver['driver_model'] = args.driver_model
-    return {'planner': planner, 'preceding_traffic': traffic, 'human_driver': driver}
 
 
 EXIT_COLLISION = 3

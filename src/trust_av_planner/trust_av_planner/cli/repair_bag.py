@@ -4,16 +4,25 @@ recorder): every message of every complete chunk is kept, metadata.yaml is writt
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
+from trust_av_planner.cli.typed_options import command
 from trust_av_planner.errors import TrustAvPlannerError
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclasses.dataclass(frozen=True)
+class RepairBagOptions:
+    """``trust-av repair-bag``'s options."""
+
+    path: str
+
+
+def run(args: RepairBagOptions) -> int:
     """Run ``trust-av repair-bag``."""
     from trust_av_planner.graph.bag_repair import repair  # rosbags: only when repairing
 
-    raw: str = args.path
+    raw = args.path
     if raw == '' or '\x00' in raw:
         raise TrustAvPlannerError(f'{raw!r}: names no bag directory or .mcap file')
     path = Path(raw)
@@ -54,4 +63,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     "message, a complete recording, or the copy failed (nothing is changed "
                     "then).")
     parser.add_argument('path', metavar='PATH', help='bag directory or .mcap file')
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(RepairBagOptions, run))

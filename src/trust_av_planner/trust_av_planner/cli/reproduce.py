@@ -8,6 +8,7 @@ import argparse
 import dataclasses
 import itertools
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,7 @@ from trust_av_planner.cli.options import (
     positive_int,
     steps_value,
 )
+from trust_av_planner.cli.typed_options import ParamsFileOptions, command
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.study import population, sweep, tables
 from trust_av_planner.study.frame import (
@@ -103,8 +105,8 @@ def paper_cases(results: dict[Case, dict[str, Any]], cases: list[Case],
     return out
 
 
-def trend_checks(results: dict[Case, dict[str, Any]], traces: list[str],
-                 predictors: list[str], alphas: list[float]) -> list[str]:
+def trend_checks(results: dict[Case, dict[str, Any]], traces: Sequence[str],
+                 predictors: Sequence[str], alphas: Sequence[float]) -> list[str]:
     """The paper's trends (Tables II-IV), one line each: 'ok' or what broke (none with fewer
     than two alphas)."""
     lines: list[str] = []
@@ -167,10 +169,37 @@ def truncation_note(max_steps: int, dt_s: float, trace_steps: list[int]) -> str:
             'column or ratio here is comparable with them')
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclasses.dataclass(frozen=True)
+class ReproduceOptions(ParamsFileOptions):
+    """``trust-av reproduce``'s options (the axes each a tuple of values, in the order
+    given)."""
+
+    traces: tuple[str, ...]
+    predictors: tuple[str, ...]
+    alphas: tuple[float, ...]
+    driver_models: tuple[str, ...]
+    trust_models: tuple[str, ...]
+    executor: str
+    workers: int | None
+    ray_address: str | None
+    graph: bool
+    max_steps: int
+    drivers: int
+    drivers_seed: int
+    driver_fit: Path | None
+    profile: str
+    results_dir: Path | None
+    lead_preview: str | None
+    no_progress: bool
+
+
+def run(args: ReproduceOptions) -> int:
     """Run ``trust-av reproduce``."""
-    for option in ('--traces', '--predictors', '--alphas', '--driver-models', '--trust-models'):
-        sweep.check_axis(option, getattr(args, option[2:].replace('-', '_')))
+    sweep.check_axis('--traces', args.traces)
+    sweep.check_axis('--predictors', args.predictors)
+    sweep.check_axis('--alphas', args.alphas)
+    sweep.check_axis('--driver-models', args.driver_models)
+    sweep.check_axis('--trust-models', args.trust_models)
     check_axes(args.predictors, args.driver_models, args.trust_models, args.alphas)
     if args.profile != 'table_i' and args.params_files:
         raise TrustAvPlannerError('--profile and --params-file both choose the parameters: give '
@@ -369,4 +398,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     add_params_file_option(parser)  # repeatable, layered as in run and simulate
     add_lead_preview_option(parser)
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(ReproduceOptions, run))

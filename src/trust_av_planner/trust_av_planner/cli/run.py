@@ -4,6 +4,7 @@ given ROS domain), recorded to a rosbag2 bag; metrics and a plot."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -17,9 +18,9 @@ from trust_av_planner.cli.options import (
     format_metrics,
     positive_seconds,
     process_age_s,
-    run_overrides,
     steps_value,
 )
+from trust_av_planner.cli.typed_options import RunOptions, command
 from trust_av_planner.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
 from trust_av_planner.system import run_record
 from trust_av_planner.system.closed_loop import SimResult, simulate
@@ -29,7 +30,20 @@ from trust_av_planner.system.outputs import replacing_outputs
 from trust_monitor.trust_interface import trust_ceiling
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclasses.dataclass(frozen=True)
+class GraphRunOptions(RunOptions):
+    """``trust-av run``'s options."""
+
+    bag: Path | None
+    overwrite: bool
+    no_plot: bool
+    max_steps: int
+    namespace: str
+    domain_id: str | None
+    startup_timeout_s: float
+
+
+def run(args: GraphRunOptions) -> int:
     """Run ``trust-av run``."""
     began = time.monotonic() - process_age_s()     # Python's start-up and imports included
     # imported here: rclpy, rosbags and matplotlib cost about 1 CPU-s, which --help and a
@@ -38,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
 
     namespace = check_namespace(args.namespace, '--namespace')
     domain_id = None if args.domain_id is None else domain_id_value(args.domain_id)
-    config = load_run_config(args.params_files, run_overrides(args))
+    config = load_run_config(args.params_files, args.overrides())
     trace = truncate(load_trace(config.trace.trace, config.planner.dt_s, config.trace),
                      args.max_steps)
     bag: Path = args.bag or Path('bags') / (
@@ -94,13 +108,13 @@ def run(args: argparse.Namespace) -> int:
     return collision_exit(metrics, 'run')
 
 
-def trust_unaware(args: argparse.Namespace, config: RunConfig,
+def trust_unaware(args: RunOptions, config: RunConfig,
                   trace: SpeedTrace) -> SimResult | None:
     """The same drive with alpha = 0 (the AV ignores explicability), in-process (the graph
     gives the same trajectory); None when ``config`` is already at alpha = 0."""
     if config.planner.alpha == 0.0:
         return None
-    overrides = run_overrides(args)
+    overrides = args.overrides()
     overrides['planner'] = {**overrides['planner'], 'alpha': 0.0}
     return simulate(load_run_config(args.params_files, overrides), trace)
 
@@ -163,4 +177,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                              'free, private domain that nothing else uses')
     parser.add_argument('--startup-timeout-s', type=positive_seconds, default=30.0,
                         help='how long to wait for the graph to connect (default: %(default)s)')
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(GraphRunOptions, run))

@@ -5,6 +5,7 @@ their outputs; report loop jitter per node."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -17,6 +18,7 @@ from trust_av_planner.cli.options import (
     positive_hz,
     positive_seconds,
 )
+from trust_av_planner.cli.typed_options import ParamsFileOptions, command
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.planner import needs_follower_state
 from trust_av_planner.system import run_record
@@ -41,7 +43,25 @@ def summary_lines(result: ShadowRun) -> list[str]:
     return lines
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclasses.dataclass(frozen=True)
+class ShadowOptions(ParamsFileOptions):
+    """``trust-av shadow``'s options."""
+
+    bag: Path
+    bag_topic: str | None
+    bag_type: str | None
+    out: Path
+    overwrite: bool
+    duration_s: float | None
+    rate_hz: float | None
+    alpha: float | None
+    predictor: str | None
+    whole_graph: bool
+    json: Path | None
+    startup_timeout_s: float
+
+
+def run(args: ShadowOptions) -> int:
     """Run ``trust-av shadow``."""
     # imported here, as in `trust-av run`: --help and a refused option do not pay for rclpy
     from trust_av_planner.graph.shadow import run_shadow, run_wall_graph
@@ -141,4 +161,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--startup-timeout-s', type=positive_seconds, default=30.0,
                         help='how long to wait for the nodes to connect (default: %(default)s)')
     add_params_file_option(parser)
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(ShadowOptions, run))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 from pathlib import Path
 
 from preceding_traffic.traces import truncate
@@ -15,9 +16,9 @@ from trust_av_planner.cli.options import (
     format_metrics,
     output_file,
     positive_hz,
-    run_overrides,
     steps_value,
 )
+from trust_av_planner.cli.typed_options import RunOptions, command
 from trust_av_planner.system import run_record
 from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
 from trust_av_planner.system.config import check_control_rate, load_run_config
@@ -26,11 +27,20 @@ from trust_monitor.common.output_files import replacing
 from trust_monitor.common.output_lock import hold_output_lock
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclasses.dataclass(frozen=True)
+class SimulateOptions(RunOptions):
+    """``trust-av simulate``'s options."""
+
+    control_rate_hz: float | None
+    out: Path | None
+    max_steps: int
+
+
+def run(args: SimulateOptions) -> int:
     """Run ``trust-av simulate``."""
     if args.out is not None:
         output_file(args.out)
-    config = load_run_config(args.params_files, run_overrides(args))
+    config = load_run_config(args.params_files, args.overrides())
     if args.control_rate_hz is not None:  # the planner node's rule for control_rate_hz
         check_control_rate(config.planner, args.control_rate_hz)
     # --max-steps shortens the run only: the speed limit and the preview are the whole trace's
@@ -91,5 +101,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--max-steps', type=steps_value, default=0,
                         help='stop after this many control steps (default: the whole trace); '
                              "the steps equal the first ones of the whole trace's run")
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(SimulateOptions, run))
 

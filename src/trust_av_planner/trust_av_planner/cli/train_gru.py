@@ -24,6 +24,7 @@ from trust_av_planner.cli.options import (
     output_file,
     positive_int,
 )
+from trust_av_planner.cli.typed_options import ParamsFileOptions, command
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.graph import stop_signals
 from trust_av_planner.predictors.gru import MODELS_DIR
@@ -42,20 +43,32 @@ def default_jobs() -> int:
     return len(os.sched_getaffinity(0))
 
 
-def child_arguments(args: argparse.Namespace) -> list[str]:
+@dataclasses.dataclass(frozen=True)
+class TrainGruOptions(ParamsFileOptions):
+    """``trust-av train-gru``'s options (``verbose``: trust-av's ``-v``, for the child)."""
+
+    verbose: bool
+    out: Path
+    epochs: int | None
+    seed: int | None
+    dagger_rounds: int | None
+    jobs: int | None
+
+
+def child_arguments(args: TrainGruOptions) -> list[str]:
     """The ``trust-av train-gru`` arguments that repeat ``args`` in the pinned child."""
     argv = ['-m', 'trust_av_planner.cli', *(['-v'] if args.verbose else []), 'train-gru',
             '--out', os.path.abspath(args.out),
             *[arg for path in args.params_files
               for arg in ('--params-file', os.path.abspath(path))]]
-    for option in ('epochs', 'seed', 'dagger_rounds', 'jobs'):
-        value = getattr(args, option)
+    for option, value in (('--epochs', args.epochs), ('--seed', args.seed),
+                          ('--dagger-rounds', args.dagger_rounds), ('--jobs', args.jobs)):
         if value is not None:
-            argv += [f'--{option.replace("_", "-")}', str(value)]
+            argv += [option, str(value)]
     return argv
 
 
-def settings_from_args(args: argparse.Namespace) -> TrainingSettings:
+def settings_from_args(args: TrainGruOptions) -> TrainingSettings:
     """The shipped settings with the command line's overrides (checked)."""
     settings = TrainingSettings()
     if args.epochs is not None:
@@ -73,7 +86,7 @@ def settings_from_args(args: argparse.Namespace) -> TrainingSettings:
     return settings
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: TrainGruOptions) -> int:
     """Run ``trust-av train-gru``: in a fresh process with pinned numerics (module
     :mod:`~.pinned_numerics`), which is this function again in the child."""
     config = load_run_config(args.params_files)
@@ -153,4 +166,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help='processes for the closed-loop runs (default: the usable CPUs; '
                              'the result does not depend on it)')
     add_params_file_option(parser)
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=command(TrainGruOptions, run))

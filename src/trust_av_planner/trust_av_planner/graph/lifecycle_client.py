@@ -151,9 +151,11 @@ def lifecycle_manager(domain: int) -> Iterator[tuple[Any, Any]]:
     """A node and its executor on a private rclpy context in ``domain``, for a process that
     starts nodes without being a ROS node itself (benchmarks, tests)."""
     import rclpy
+    from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.utilities import try_shutdown
 
-    context = rclpy.Context()
+    context = Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('lifecycle_manager', context=context)
     executor = SingleThreadedExecutor(context=context)
@@ -163,7 +165,7 @@ def lifecycle_manager(domain: int) -> Iterator[tuple[Any, Any]]:
     finally:
         executor.shutdown()
         node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        try_shutdown(context=context)
 
 
 def _wait(executor: Any, deadline: float, done: Callable[[], bool], what: str,

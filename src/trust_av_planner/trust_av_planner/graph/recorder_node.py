@@ -25,6 +25,7 @@ step).
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import time
@@ -121,7 +122,7 @@ class RecorderNode(Node):
                 self.incomplete += 1
             self.subscriptions_by_topic[name] = self.create_subscription(
                 message_class(topic.msgtype), topic.name,
-                lambda data, t=name: self.on_message(t, data), QOS[topic.qos], raw=True)
+                functools.partial(self.on_message, name), QOS[topic.qos], raw=True)
         self.gap_topics = {self.resolve_topic_name(name)
                            for name in ('ego/planner_status', 'human/driver_status')}
         self.step_topic = self.resolve_topic_name(

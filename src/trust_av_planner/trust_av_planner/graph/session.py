@@ -85,6 +85,7 @@ def _probe(domain: int, namespace: str | None, wait_s: float | None) -> str:
     import rclpy
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
+    from rclpy.utilities import try_shutdown
 
     use_run_discovery(os.environ)
     context = Context()
@@ -104,7 +105,7 @@ def _probe(domain: int, namespace: str | None, wait_s: float | None) -> str:
         finally:
             node.destroy_node()
     finally:
-        rclpy.try_shutdown(context=context)
+        try_shutdown(context=context)
     found = [f'nodes {", ".join(names[:4])}'] if names else []
     if publishers:
         found.append(f'publishers on {", ".join(publishers[:4])}')
@@ -267,6 +268,7 @@ def graph_session(graph: Graph, name: str) -> Iterator[Session]:
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
+    from rclpy.utilities import try_shutdown
 
     use_run_discovery(os.environ)
     context = Context()
@@ -284,5 +286,5 @@ def graph_session(graph: Graph, name: str) -> Iterator[Session]:
             executor.shutdown()
             node.destroy_node()
     finally:
-        rclpy.try_shutdown(context=context)
+        try_shutdown(context=context)
         graph.stop()

@@ -3,10 +3,10 @@ write the summary and the comparison (the ROS side of :mod:`trust_av_planner.dri
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
-from typing import Any
+from pathlib import Path
+from typing import Any, Protocol
 
 from preceding_traffic.sources import load_trace
 from trust_av_planner.drive.gate import INPUT_BURST, Gate
@@ -29,7 +29,29 @@ from trust_monitor.common import output_files
 from trust_monitor.common.params import ParamsError
 
 
-def run_session(args: argparse.Namespace) -> int:
+class SessionOptions(Protocol):
+    """What a session reads of ``trust-av drive``'s options
+    (:class:`trust_av_planner.cli.drive.DriveOptions`)."""
+
+    @property
+    def study(self) -> Path: ...
+    @property
+    def participant(self) -> str: ...
+    @property
+    def drive_file(self) -> Path: ...
+    @property
+    def no_practice(self) -> bool: ...
+    @property
+    def duration_s(self) -> float | None: ...
+    @property
+    def port(self) -> int | None: ...
+    @property
+    def startup_timeout_s(self) -> float: ...
+    @property
+    def params_files(self) -> tuple[Path, ...]: ...
+
+
+def run_session(args: SessionOptions) -> int:
     """Run the participant's remaining drives (see ``trust-av drive --help``).
 
     Raises:

@@ -3,8 +3,10 @@
 :mod:`trust_monitor.graph_interface` states the protocol in words and lists the topics in
 :data:`~trust_monitor.graph_interface.TOPICS`; this module turns the table into the chain a
 node follows: for every node, which messages (topic, stamp) it must hold before it acts on
-step t, and the stamps of what it then publishes. The floor benchmark
-(``benchmarks/bench_floor.py``) replays the graph from it, so the replica follows the table.
+step t, and the stamps of what it then publishes. A stalled graph run names the node it
+waits for by the chain's order (:mod:`trust_av_planner.graph.stalls`); the floor benchmark
+(``benchmarks/bench_floor.py``, with its ``step_gate``) replays the graph from it, so the
+replica follows the table.
 
 Rules (each from the table, none from a second list):
 
@@ -94,41 +96,6 @@ class StepChain:
         raise KeyError(name)
 
 
-class StepGate:
-    """One node's inputs counted per step: which steps it may act on, in order.
-
-    Args:
-        node: the node's chain.
-        t0_ns: stamp of step 0, ns.
-        dt_ns: step, ns.
-    """
-
-    def __init__(self, node: NodeChain, t0_ns: int, dt_ns: int) -> None:
-        self.offset = {p.topic: p.offset for p in node.inputs}
-        self.node = node
-        self.t0_ns = t0_ns
-        self.dt_ns = dt_ns
-        self.next = 0
-        self._counts: dict[int, int] = {}
-
-    def put(self, topic: str, stamp_ns: int) -> list[int]:
-        """Count one message; the steps (oldest first) whose inputs are now complete.
-
-        A message for a step before the next one (the initial state, to the source) is
-        ignored.
-        """
-        step = (stamp_ns - self.t0_ns + self.dt_ns // 2) // self.dt_ns - self.offset[topic]
-        if step < self.next:
-            return []
-        self._counts[step] = self._counts.get(step, 0) + 1
-        ready = []
-        while 0 < self.node.needed(self.next) == self._counts.get(self.next, 0):
-            del self._counts[self.next]
-            ready.append(self.next)
-            self.next += 1
-        return ready
-
-
 def step_chain(topics: Iterable[Topic] = TOPICS) -> StepChain:
     """Derive the lock-step chain from a topic table (see the module docstring).
 
@@ -145,40 +112,58 @@ def step_chain(topics: Iterable[Topic] = TOPICS) -> StepChain:
     names = {p for t in table for p in t.publishers} | {s for t in table for s in t.subscribers}
     names -= {ORCHESTRATOR, RECORDER}
     step = [t for t in table if ORCHESTRATOR not in t.publishers]
-    # Same-step edges between nodes (not into the source, not state): publisher -> subscriber.
-    edges = {(p, s, t.name) for t in step for p in t.publishers for s in t.subscribers
-             if s in names and s != source and t.name not in state}
-    level = _levels(source, {(a, b) for a, b, _ in edges})
-    unreached = sorted(names - set(level))
-    if unreached:
-        raise StepChainError(f'nodes not reached from the step source {source}: '
-                             f'{", ".join(unreached)}')
-    pairs = {(a, b) for a, b, _ in edges}
-    back = {(a, name) for a, b, name in edges if level[b] < level[a] and _reaches(b, a, pairs)}
-    forward = {(a, b) for a, b, name in edges if (a, name) not in back}
-    order = _topological(names, forward)
-    chains = []
-    for node in order:
-        inputs = []
-        for t in step:
-            if node not in t.subscribers:
-                continue
-            if node == source:
-                offset = 1 if t.name in state else 0
-            else:
-                offset = -1 if any((p, t.name) in back for p in t.publishers) else 0
-            inputs.append(Port(t.name, offset))
-        outputs = tuple(Port(t.name, 1 if t.name in state else 0)
-                        for t in step if node in t.publishers)
-        chains.append(NodeChain(
-            name=node, inputs=tuple(inputs), outputs=outputs,
-            initial=tuple(t.name for t in step if node in t.publishers and t.name in state),
-            start=tuple(t.name for t in table if ORCHESTRATOR in t.publishers
-                        and node in t.subscribers)))
+    back, forward = _split_edges(source, names, step, state)
+    chains = [_node_chain(node, source, table, step, state, back)
+              for node in _topological(names, forward)]
     if not chains[0].start:
         raise StepChainError(f'the step source {source} subscribes no {ORCHESTRATOR} topic')
     return StepChain(source=source, nodes=tuple(chains),
                      state_topics=tuple(t.name for t in table if t.name in state))
+
+
+def _split_edges(source: str, names: set[str], step: list[Topic], state: set[str],
+                 ) -> tuple[set[tuple[str, str]], set[tuple[str, str]]]:
+    """The same-step edges between nodes (not into the source, not state), split into the
+    previous-step ones, as (publisher, topic), and the forward ones, as (publisher,
+    subscriber).
+
+    Raises:
+        StepChainError: a node the source does not reach.
+    """
+    edges = {(p, s, t.name) for t in step for p in t.publishers for s in t.subscribers
+             if s in names and s != source and t.name not in state}
+    pairs = {(a, b) for a, b, _ in edges}
+    level = _levels(source, pairs)
+    unreached = sorted(names - set(level))
+    if unreached:
+        raise StepChainError(f'nodes not reached from the step source {source}: '
+                             f'{", ".join(unreached)}')
+    back = {(a, name) for a, b, name in edges if level[b] < level[a] and _reaches(b, a, pairs)}
+    forward = {(a, b) for a, b, name in edges if (a, name) not in back}
+    return back, forward
+
+
+def _node_chain(node: str, source: str, table: tuple[Topic, ...], step: list[Topic],
+                state: set[str], back: set[tuple[str, str]]) -> NodeChain:
+    """One node's inputs (stamp offsets), outputs, initial states and start topics."""
+    inputs = tuple(Port(t.name, _input_offset(node, source, t, state, back))
+                   for t in step if node in t.subscribers)
+    outputs = tuple(Port(t.name, 1 if t.name in state else 0)
+                    for t in step if node in t.publishers)
+    return NodeChain(
+        name=node, inputs=inputs, outputs=outputs,
+        initial=tuple(t.name for t in step if node in t.publishers and t.name in state),
+        start=tuple(t.name for t in table if ORCHESTRATOR in t.publishers
+                    and node in t.subscribers))
+
+
+def _input_offset(node: str, source: str, topic: Topic, state: set[str],
+                  back: set[tuple[str, str]]) -> int:
+    """The stamp offset, in steps, of ``topic`` as an input of ``node``: the source waits
+    for the state after the step (+1), a previous-step input is one step old (-1)."""
+    if node == source:
+        return 1 if topic.name in state else 0
+    return -1 if any((p, topic.name) in back for p in topic.publishers) else 0
 
 
 def _levels(source: str, edges: set[tuple[str, str]]) -> dict[str, int]:

@@ -233,11 +233,13 @@ class ManagedNode(LifecycleNode):
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.configure_error = None
+        refused: tuple[type[BaseException], ...] = (
+            *self.user_errors, ParamsError, RegistryError, InvalidParameterValueException,
+            ParameterUninitializedException)
         try:
             self.build()
             check_overrides(self, self.command_line)
-        except (*self.user_errors, ParamsError, RegistryError, InvalidParameterValueException,
-                ParameterUninitializedException) as err:
+        except refused as err:
             return self._failed(err, FAILURE, one_line(err))
         except Exception as err:   # logged with its traceback, re-raised by start()
             return self._failed(err, ERROR, traceback.format_exc())
@@ -294,7 +296,7 @@ class ManagedNode(LifecycleNode):
         if not self._quiet:
             self.get_logger().error(f'configure failed: {text}')
         self._release()
-        return code  # type: ignore[no-any-return]
+        return code
 
     def _release(self) -> None:
         """Destroy what ``configure`` made (timers, subscriptions, publishers) and the core."""

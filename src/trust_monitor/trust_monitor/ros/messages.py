@@ -270,7 +270,7 @@ class TrajectoryBytes:
         template = self._templates.get(key)
         if template is None:
             msg = trajectory(0, dt_s, frame_id=self.frame_id,
-                             **{self.field: [0.0] * len(values)})  # type: ignore[arg-type]
+                             **{self.field: [0.0] * len(values)})
             template = SerializedTemplate(msg, [msg.header.stamp],
                                           [(point, self.field) for point in msg.points])
             self._templates[key] = template

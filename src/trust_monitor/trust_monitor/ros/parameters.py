@@ -70,15 +70,13 @@ def descriptor(field: dataclasses.Field[Any], hint: Any) -> ParameterDescriptor:
         spec = ParamSpec(field.name)
     result = ParameterDescriptor(name=field.name, description=spec.text(), type=kind.value,
                                  read_only=spec.read_only)
-    closed = (spec.low is not None and spec.high is not None and spec.low_inclusive
-              and spec.high_inclusive)
-    if closed and kind == Parameter.Type.DOUBLE:
-        result.floating_point_range = [FloatingPointRange(from_value=float(spec.low),
-                                                          to_value=float(spec.high))]
-    elif closed and kind == Parameter.Type.INTEGER:
-        result.integer_range = [IntegerRange(from_value=int(spec.low),  # type: ignore[arg-type]
-                                             to_value=int(spec.high),  # type: ignore[arg-type]
-                                             step=1)]
+    low, high = spec.low, spec.high
+    closed = low is not None and high is not None and spec.low_inclusive and spec.high_inclusive
+    if closed and low is not None and high is not None and kind == Parameter.Type.DOUBLE:
+        result.floating_point_range = [FloatingPointRange(from_value=float(low),
+                                                          to_value=float(high))]
+    elif closed and low is not None and high is not None and kind == Parameter.Type.INTEGER:
+        result.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
     if spec.choices:
         result.additional_constraints = f'one of: {", ".join(spec.choices)}'
     return result
@@ -180,7 +178,7 @@ def predeclare(node: Node, cls: type) -> None:
     hints = typing.get_type_hints(cls)
     overrides = node_overrides(node)
     shipped, _ = _shipped(node.get_fully_qualified_name())
-    for field in dataclasses.fields(cls):  # type: ignore[arg-type]
+    for field in dataclasses.fields(cls):
         name = field.name
         if node.has_parameter(name):
             continue

@@ -12,15 +12,17 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 import rclpy
-from rclpy.clock import Clock, ClockType
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException
-from rclpy.experimental import EventsExecutor
+from rclpy.executors import Executor, ExternalShutdownException
+from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import ok, try_shutdown
 
 from trust_monitor.common.component_checks import ComponentError
 from trust_monitor.common.params import ParamsError
@@ -226,6 +228,9 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
         _say(f'error: {one_line(err)}')
         return 2
     node = None
+    refused: tuple[type[BaseException], ...] = (
+        *user_errors, ParamsError, RegistryError, InvalidParameterValueException,
+        ParameterUninitializedException)
     executor = EventsExecutor()
     signal.signal(signal.SIGINT, request_stop)
     signal.signal(signal.SIGTERM, request_stop)
@@ -234,22 +239,21 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
     try:
         try:
             node = start_node(factory, args)
-        except (*user_errors, ParamsError, RegistryError, InvalidParameterValueException,
-                ParameterUninitializedException) as err:
+        except refused as err:
             _say(f'error: {one_line(err)}')
             return int(getattr(err, 'exit_code', 2))  # e.g. the recorder's disk-full code
         executor.add_node(node)
         graph_node: GraphNode = node  # type: ignore[assignment]
         parent = int(os.environ.get(PARENT_ENV, '0') or 0)
         try:
-            while not stop['requested'] and rclpy.ok() and not graph_node.finished:
+            while not stop['requested'] and ok() and not graph_node.finished:
                 executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
                 if parent and os.getppid() != parent:
                     stop['requested'] = True
         except ComponentError as err:   # a plug-in broke its interface: stop cleanly, exit 2
             _say(f'error: {one_line(err)}')
             graph_node.exit_code = 2
-        if not graph_node.finished and rclpy.ok():
+        if not graph_node.finished and ok():
             graph_node.stopping = True
             _hand_over(node)
             _drain(executor, node)
@@ -262,7 +266,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None,
         executor.shutdown()
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        try_shutdown()
     return 0 if node is None else int(node.exit_code)  # type: ignore[attr-defined]
 
 
@@ -282,7 +286,7 @@ def _say(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
 
-def _drain(executor: EventsExecutor, node: Node) -> None:
+def _drain(executor: Executor, node: Node) -> None:
     """Take what is queued (:data:`DRAIN_S`), then wait for the acknowledgements of what
     this node published (:data:`ACK_TIMEOUT_S` over all publishers); a topic whose
     subscribers have not acknowledged everything by then is named in a warning.
@@ -293,7 +297,7 @@ def _drain(executor: EventsExecutor, node: Node) -> None:
     wait ran into its timeout on every stop, acknowledged or not.
     """
     end = time.monotonic() + DRAIN_S
-    while time.monotonic() < end and rclpy.ok():
+    while time.monotonic() < end and ok():
         executor.spin_once(timeout_sec=0.02)
     deadline = time.monotonic() + ACK_TIMEOUT_S
     unacknowledged = []

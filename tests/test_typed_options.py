@@ -1,0 +1,104 @@
+"""Each ``trust-av`` command reads a frozen, typed options dataclass built from argparse's
+namespace (trust_av_planner.cli.typed_options): every option the parser defines is a field
+of the command's options, every field is an option of the parser, and a value of the wrong
+type is refused where the namespace becomes options."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from trust_av_planner.cli import (
+    bags,
+    drive,
+    eval_driver,
+    fit_driver,
+    fit_trust,
+    repair_bag,
+    reproduce,
+    run,
+    shadow,
+    simulate,
+    train_gru,
+)
+from trust_av_planner.cli.main import build_parser
+from trust_av_planner.cli.typed_options import RunOptions, options_from
+
+COMMANDS: dict[str, tuple[type, list[str]]] = {
+    'simulate': (simulate.SimulateOptions, []),
+    'run': (run.GraphRunOptions, []),
+    'shadow': (shadow.ShadowOptions, ['--bag', 'b', '--out', 'o']),
+    'drive': (drive.DriveOptions, ['--study', 's', '--participant', 'p']),
+    'reproduce': (reproduce.ReproduceOptions, []),
+    'trace-to-bag': (bags.TraceToBagOptions, ['us06', 'out']),
+    'repair-bag': (repair_bag.RepairBagOptions, ['bag']),
+    'train-gru': (train_gru.TrainGruOptions, []),
+    'fit-driver': (fit_driver.FitDriverOptions, ['--data', 'd']),
+    'eval-driver': (eval_driver.EvalDriverOptions, ['--data', 'd']),
+    'fit-trust': (fit_trust.FitTrustOptions, ['--ratings', 'r.csv', '--out', 'o']),
+}
+NOT_OPTIONS = {'help', 'func', 'command', 'verbose', 'params_file', 'params_files'}
+"""Namespace entries that are no command's own option: argparse's and main's, and the
+params file option, whose two entries a command reads one of."""
+
+
+def subparsers() -> dict[str, argparse.ArgumentParser]:
+    parser = build_parser()
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(action.choices)
+
+
+def test_every_command_has_typed_options() -> None:
+    assert set(COMMANDS) == set(subparsers())
+
+
+@pytest.mark.parametrize('name', sorted(COMMANDS))
+def test_options_are_the_parsers_options(name: str) -> None:
+    kind, argv = COMMANDS[name]
+    namespace = build_parser().parse_args(['-v', name, *argv])
+    options: object = options_from(kind, namespace)
+    assert dataclasses.is_dataclass(options)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        setattr(options, dataclasses.fields(options)[0].name, None)
+    fields = {f.name for f in dataclasses.fields(kind)}
+    dests = {a.dest for a in subparsers()[name]._actions} - NOT_OPTIONS
+    assert dests <= fields, f'{name}: options the command never reads: {dests - fields}'
+    assert fields - NOT_OPTIONS - {'verbose'} <= dests, fields - dests
+
+
+def test_lists_become_tuples_and_types_are_checked() -> None:
+    namespace = build_parser().parse_args(['simulate', '--params-file', 'a.yaml',
+                                           '--params-file', 'b.yaml', '--alpha', '0.25'])
+    options = options_from(simulate.SimulateOptions, namespace)
+    assert options.params_files == (Path('a.yaml'), Path('b.yaml'))
+    assert options.alpha == 0.25 and options.max_steps == 0
+    assert options.overrides()['planner'] == {'alpha': 0.25}
+    namespace.max_steps = '3'               # a parser whose type= was forgotten
+    with pytest.raises(TypeError, match=r'SimulateOptions.max_steps: .3. is not'):
+        options_from(simulate.SimulateOptions, namespace)
+    namespace.max_steps = True
+    with pytest.raises(TypeError, match='max_steps'):
+        options_from(simulate.SimulateOptions, namespace)
+    del namespace.max_steps
+    with pytest.raises(TypeError, match='sets no such option'):
+        options_from(simulate.SimulateOptions, namespace)
+
+
+def test_run_overrides_name_each_section() -> None:
+    namespace = build_parser().parse_args(['simulate', '--bag-in', 'x', '--bag-topic', '/t',
+                                           '--driver-model', 'idm', '--lead-preview',
+                                           'recorded'])
+    options = options_from(RunOptions, namespace)
+    assert options.overrides() == {
+        'planner': {'lead_preview': 'recorded'},
+        'preceding_traffic': {'trace': 'x', 'bag_topic': '/t'},
+        'human_driver': {'driver_model': 'idm'}}
+
+
+def test_fit_trust_takes_one_source() -> None:
+    with pytest.raises(TypeError, match='one of them'):
+        fit_trust.FitTrustOptions(params_files=(), study=None, ratings=None, out=Path('o'),
+                                  models='', no_figures=False)
