@@ -28,7 +28,7 @@ from trust_av_planner.cli.options import (
     steps_value,
 )
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.study import population, sweep, tables
+from trust_av_planner.study import population, sweep, tables, trace_reports
 from trust_av_planner.study.frame import (
     TRUST_MODEL_PARAMETER,
     check_axes,
@@ -197,7 +197,10 @@ def run(args: argparse.Namespace) -> int:
     except OSError as err:
         raise TrustAvPlannerError(f'--results-dir {out}: cannot create it '
                                   f'({err.strerror})') from err
-    for name in (*RESULT_FILES, f'params_lead_preview_{args.lead_preview}.yaml'):
+    per_trace = [path.relative_to(out) for paths in trace_reports.trace_paths(
+        out, args.traces).values() for path in paths]
+    for name in (*RESULT_FILES, f'params_lead_preview_{args.lead_preview}.yaml',
+                 *map(str, per_trace)):
         refused = output_files.link_refused(out / name)   # before the sweep, not after it
         if refused is not None:
             raise TrustAvPlannerError(f'--results-dir {out}: {name} is {refused}')
@@ -219,6 +222,10 @@ def run(args: argparse.Namespace) -> int:
     bar.close()
     elapsed = time.monotonic() - start
     write_tidy_csv(out / 'all_runs.csv', tidy_rows(cases, every))
+    # every trace's per-alpha table and trust figure, every axis kept (any traces)
+    trace_reports.write_trace_reports(out, cases, every, files, note)
+    print(f'per trace (every metric per alpha, every trust model and follower; trust over '
+          f'time): {out / "by_trace"}/<trace>/ ({", ".join(trace_reports.FILES)})')
     crashed = [f'{case.label}: {every[case]["collision"]}' for case in cases
                if every[case].get('collision')]
     if crashed:     # their metrics end at the collision (all_runs.csv, column collision)
