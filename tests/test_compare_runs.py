@@ -128,3 +128,42 @@ def test_a_graph_recording_compares_with_its_simulated_run(runs: tuple[Path, Pat
     proc = trust_av('compare', str(mcap), str(simulated), '--out', str(figure), env=env)
     assert proc.returncode == 0, proc.stderr
     assert figure.read_bytes()[:8] == PNG
+
+
+def test_a_drive_recording_reads_at_the_plan_times(tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """A trust-av drive bag (recognised by its start time in custom_data): odometry read at
+    each plan's time, gaps bumper to bumper, the AV's first planned acceleration, E from the
+    plan and the expected plan with the params file's eps."""
+    from trust_av_planner.drive import bag_data
+    from trust_av_planner.drive.trust_rating import DriveSeries
+    from trust_monitor.trust_model import explicability
+
+    bag = tmp_path / 'drive_02_calm'
+    bag.mkdir()
+    (bag / 'metadata.yaml').write_text(
+        'rosbag2_bagfile_information:\n  custom_data:\n    trust_av.drive.start_ns: "5"\n')
+    plans = [[0.0, 0.0], [-3.0, 0.0], [0.5, 0.5]]
+    expected = [[0.0, 0.0], [0.0, 0.0], [0.5, 0.5]]
+    odometry = {  # (t_s, position_m, speed_mps), sampled at twice the plan rate
+        '/preceding_vehicle/odom': np.array([[k / 2, 60.0 + k, 10.0] for k in range(6)]),
+        '/ego/odom': np.array([[k / 2, 30.0 + k, 10.0] for k in range(6)]),
+        '/human/odom': np.array([[k / 2, float(k), 10.0 + k] for k in range(6)])}
+
+    def fake(path: Path) -> bag_data.DriveBag:
+        series = DriveSeries(np.array([0.0, 1.0, 2.0]), plans, expected, np.zeros(3))
+        return bag_data.DriveBag(Path(path), {}, series, np.array([]), np.array([]), [],
+                                 odometry)
+
+    monkeypatch.setattr(bag_data, 'read_drive', fake)
+    run = read_run(bag)
+    config = load_run_config([])
+    length = config.shared.vehicle_length_m
+    np.testing.assert_allclose(run.values['av_gap_m'], 30.0 - length)
+    np.testing.assert_allclose(run.values['human_gap_m'], 30.0 - length)
+    np.testing.assert_allclose(run.values['human_speed_mps'], [10.0, 12.0, 14.0])
+    np.testing.assert_allclose(run.values['human_accel_mps2'], 2.0)
+    assert run.values['av_accel_mps2'].tolist() == [0.0, -3.0, 0.5]
+    assert run.values['explicability'][1] == explicability(plans[1], expected[1],
+                                                           config.trust.epsilon_mps2) > 0.05
+    assert run.values['explicability'][0] == 0.0

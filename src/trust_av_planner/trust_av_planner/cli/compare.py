@@ -44,8 +44,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'quantity on one scale: speeds (traffic, AV, human), gaps, '
                     'accelerations, explicability E, and the trust of every trust model run '
                     "over the run's E, on the common scale [0, 1]. A run is a rosbag2 "
-                    'recording (trust-av run --bag DIR, reproduce --graph: the directory or '
-                    'its .mcap) or a per-step CSV (trust-av simulate --out FILE). Prints each '
+                    'recording (trust-av run --bag DIR, reproduce --graph, a trust-av drive '
+                    "study's drive: the directory or its .mcap) or a per-step CSV (trust-av "
+                    'simulate --out FILE). Prints each '
                     "model's final trust per run. Bad input: one line, exit 2.")
     parser.add_argument('run_a', metavar='RUN_A', type=Path,
                         help='the first run: a bag directory, its .mcap, or a simulate CSV')

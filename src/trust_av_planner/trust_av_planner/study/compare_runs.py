@@ -5,6 +5,10 @@ A run is what the project records:
 
 - a rosbag2 recording of the node graph (``trust-av run --bag``, ``reproduce --graph``'s
   ``graph_bags/<case>/``): its directory, or the ``.mcap`` file in it;
+- a drive of the driver-in-the-loop study (``trust-av drive``: a bag of its study
+  directory), read as the analysis reads it (:func:`~trust_av_planner.drive.bag_data.read_drive`):
+  at each plan's time, the vehicles' odometry (gaps bumper to bumper, the person's
+  acceleration from their speed), the plan's first acceleration and its E;
 - the per-step CSV of the in-process simulator (``trust-av simulate --out``).
 
 Trust per model is every chosen trust model run over the run's explicability E (the same
@@ -32,6 +36,7 @@ from trust_av_planner.system.metrics import StepRecord
 from trust_monitor.common.registry import TRUST_MODELS, names
 from trust_monitor.errors import with_suggestions
 from trust_monitor.trust_interface import common_trust, make_trust_model
+from trust_monitor.trust_model import explicability
 
 SERIES = ('traffic_speed_mps', 'av_speed_mps', 'human_speed_mps', 'av_gap_m', 'human_gap_m',
           'av_accel_mps2', 'human_accel_mps2', 'explicability')
@@ -101,8 +106,48 @@ def read_csv_run(path: Path) -> RunSeries:
     return RunSeries(path.name, t - t[0], columns)
 
 
-def read_run(path: str | Path) -> RunSeries:
-    """A run from its recording (a bag directory or its ``.mcap``) or its simulate CSV.
+def read_drive_run(bag: Path, params_files: Sequence[str | Path] = ()) -> RunSeries:
+    """A ``trust-av drive`` recording as a run: every series at the AV's plan times.
+
+    Raises:
+        TrustAvPlannerError: not a complete drive (no plans, a vehicle without odometry).
+    """
+    from trust_av_planner.drive.bag_data import read_drive  # rosbags: only for a bag
+
+    config = load_run_config(list(params_files))
+    drive = read_drive(bag)
+    t = np.asarray(drive.series.times_s, float)
+    if len(t) < 2:
+        raise TrustAvPlannerError(f'{bag}: {len(t)} plan(s) recorded; a run to compare needs '
+                                  'at least two')
+    at: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for vehicle, topic in (('traffic', '/preceding_vehicle/odom'), ('av', '/ego/odom'),
+                           ('human', '/human/odom')):
+        rows = drive.odometry[topic]
+        if len(rows) < 2:
+            raise TrustAvPlannerError(f'{bag}: no odometry on {topic}')
+        at[vehicle] = (np.interp(t, rows[:, 0], rows[:, 1]), np.interp(t, rows[:, 0], rows[:, 2]))
+    length = config.shared.vehicle_length_m
+    scores = [explicability(p, e, config.trust.epsilon_mps2)
+              for p, e in zip(drive.series.plans, drive.series.expected, strict=True)]
+    values = {'traffic_speed_mps': at['traffic'][1], 'av_speed_mps': at['av'][1],
+              'human_speed_mps': at['human'][1],
+              'av_gap_m': at['traffic'][0] - at['av'][0] - length,
+              'human_gap_m': at['av'][0] - at['human'][0] - length,
+              'av_accel_mps2': np.array([p[0] for p in drive.series.plans], float),
+              'human_accel_mps2': np.gradient(at['human'][1], t),
+              'explicability': np.asarray(scores, float)}
+    return RunSeries(bag.name, t - t[0], values)
+
+
+def read_run(path: str | Path, params_files: Sequence[str | Path] = ()) -> RunSeries:
+    """A run from its recording (a bag directory or its ``.mcap``: the graph's or a
+    drive's) or its simulate CSV.
+
+    Args:
+        path: the run.
+        params_files: params files layered over the shipped one (a drive's E and gaps take
+            its epsilon and vehicle length).
 
     Raises:
         TrustAvPlannerError: no such file, not a run, or a run without two complete steps.
@@ -118,7 +163,10 @@ def read_run(path: str | Path) -> RunSeries:
         raise TrustAvPlannerError(f'{path}: not a run (neither a rosbag2 directory with '
                                   'metadata.yaml, its .mcap, nor a .csv)')
     # Imported here: reading a CSV needs no rosbags.
+    from trust_av_planner.drive.bag_data import custom_data
     from trust_av_planner.graph.bag_records import records_from_bag
+    if 'trust_av.drive.start_ns' in custom_data(bag):
+        return read_drive_run(bag, params_files)
     return from_records(bag.name, records_from_bag(bag))
 
 
@@ -235,7 +283,7 @@ def compare_runs(run_a: str | Path, run_b: str | Path, out: str | Path, *,
     chosen = model_names(models)
     if labels is not None and (len(labels) != 2 or not all(labels)):
         raise TrustAvPlannerError(f'labels: need two names, got {list(labels)}')
-    runs = [read_run(run_a), read_run(run_b)]
+    runs = [read_run(run_a, params_files), read_run(run_b, params_files)]
     if labels is not None:
         runs = [dataclasses.replace(run, name=label) for run, label in zip(runs, labels,
                                                                             strict=True)]
