@@ -12,7 +12,8 @@ of the study (shipped, CSV or bag alike), into ``<results>/by_trace/<trace>/``:
   the largest improvement over alpha = 0 of each combination;
 - ``improvements.csv``: that improvement, tidy (per driver);
 - ``trust.png``: trust over time on the common scale [0, 1], one panel per trust model
-  (columns) and plan estimator x follower (rows), one line per alpha.
+  (columns) and plan estimator x follower (rows; a single row wraps two panels wide), one
+  line per alpha.
 
 The model and follower names are the ones each run ran with (the params file's choice
 resolved), so no axis is folded into another: a study of three trust models has three
@@ -235,31 +236,36 @@ def trust_figure(trace: str, cases: Sequence[Case], results: dict[Case, dict[str
     alphas = sorted({case.alpha for case in cases})
     plt = pyplot()
     rows = list(series)
-    fig, axes = plt.subplots(len(rows), len(models), squeeze=False, sharex=True, sharey=True,
-                             figsize=(4.2 * len(models) + 0.6, 2.6 * len(rows) + 0.9))
+    panels = [(row_key, model) for row_key in rows for model in models]
+    # a panel per model and plan estimator x follower; one such row wraps two panels wide
+    columns = len(models) if len(rows) > 1 else min(len(models), 2)
+    lines = math.ceil(len(panels) / columns)
+    fig, axes = plt.subplots(lines, columns, squeeze=False, sharex=True, sharey=True,
+                             figsize=(4.6 * columns + 0.6, 2.8 * lines + 0.9))
     colors = plt.get_cmap('viridis')
-    for r, row_key in enumerate(rows):
-        for c, model in enumerate(models):
-            ax = axes[r, c]
-            for alpha, members in sorted(series[row_key].get(model, {}).items()):
-                length = min(len(m) for m in members)
-                mean = np.mean([m[:length] for m in members], axis=0)
-                t = times[(*row_key, model, alpha)][:length]
-                k = alphas.index(alpha)
-                label = f'α = {alpha:g}' + (f' (mean of {len(members)})'
-                                            if len(members) > 1 else '')
-                ax.plot(t, mean, color=colors(k / max(len(alphas) - 1, 1)), linewidth=1.1,
-                        label=label)
-            ax.set_title(f'{model} | TAC-{row_key[0].upper()} | follower {row_key[1]}',
-                         fontsize=9)
-            ax.grid(alpha=0.3)
-            if c == 0:
-                ax.set_ylabel('trust, common scale')
-            if r == len(rows) - 1:
-                ax.set_xlabel('time (s)')
-            if ax.get_legend_handles_labels()[0]:
-                ax.legend(fontsize=7, loc='lower right')
-    width = max(60, int(14 * (4.2 * len(models) + 0.6)))    # characters the figure holds
+    for index, (row_key, model) in enumerate(panels):
+        ax = axes[index // columns, index % columns]
+        for alpha, members in sorted(series[row_key].get(model, {}).items()):
+            length = min(len(m) for m in members)
+            mean = np.mean([m[:length] for m in members], axis=0)
+            t = times[(*row_key, model, alpha)][:length]
+            k = alphas.index(alpha)
+            label = f'α = {alpha:g}' + (f' (mean of {len(members)})'
+                                        if len(members) > 1 else '')
+            ax.plot(t, mean, color=colors(k / max(len(alphas) - 1, 1)), linewidth=1.1,
+                    label=label)
+        ax.set_title(f'{model} | TAC-{row_key[0].upper()} | follower {row_key[1]}',
+                     fontsize=9)
+        ax.grid(alpha=0.3)
+        if index % columns == 0:
+            ax.set_ylabel('trust, common scale')
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7, loc='lower right')
+    for ax in axes[-1, :]:
+        ax.set_xlabel('time (s)')
+    for index in range(len(panels), lines * columns):     # an odd panel count leaves one
+        axes[index // columns, index % columns].set_visible(False)
+    width = max(60, int(14 * (4.6 * columns + 0.6)))    # characters the figure holds
     fig.suptitle(f'{Path(trace).name}: trust over time per trust model and α (common scale [0, 1])'
                  + (f'\n{textwrap.fill(note, width)}' if note else ''), fontsize=10)
     fig.tight_layout()
