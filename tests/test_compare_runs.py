@@ -167,3 +167,11 @@ def test_a_drive_recording_reads_at_the_plan_times(tmp_path: Path,
     assert run.values['explicability'][1] == explicability(plans[1], expected[1],
                                                            config.trust.epsilon_mps2) > 0.05
     assert run.values['explicability'][0] == 0.0
+
+
+def test_the_cli_reference_documents_compare() -> None:
+    from trust_av_planner.cli import reference
+
+    page = reference.fill((Path(__file__).resolve().parents[1] / 'docs' / 'reference' /
+                           'cli.md').read_text())
+    assert '### `trust-av compare`' in page and '`--trust-models TRUST_MODELS`' in page

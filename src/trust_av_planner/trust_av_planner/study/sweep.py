@@ -25,9 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from human_driver_sim.population import (
-    WEIGHT_NAMES,
-)
+from human_driver_sim.population import WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
 from trust_av_planner.errors import TrustAvPlannerError
@@ -221,13 +219,8 @@ def case_config(case: Case, params_file: ParamsFiles) -> RunConfig:
 
 def run_case(case: Case, params_file: ParamsFiles,
              settings: RunSettings = RunSettings()) -> dict[str, Any]:
-    """Run one case and return its settings, metrics and the series the figures need.
-
-    Args:
-        case: the case.
-        params_file: the params file(s), layered in order over the shipped one.
-        settings: how it runs.
-    """
+    """Run ``case`` (with the params file(s) layered in order over the shipped one, as
+    ``settings`` say) and return its settings, metrics and the series the figures need."""
     config = case_config(case, params_file)
     trace = truncate(load_trace(case.trace, config.planner.dt_s, config.trace),
                      settings.max_steps)
