@@ -235,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
         if row['scope'] != 'pooled':
             totals.setdefault((row['scheme'], row['model']), []).append(row['elpd'])
     for (scheme, model), values in sorted(totals.items(), key=lambda item: -sum(item[1])):
-        print(f"{'all':>10s} {scheme:26s} {model:16s} elpd {sum(values):9.1f} summed over "
+        print(f"{'all':>10s} {scheme:36s} {model:16s} elpd {sum(values):9.1f} summed over "
               f'{len(values)} participant(s)')
     print(f'{len(people)} participant(s), {len(rated)} rated drive(s); tables and figures in '
           f'{args.out}')
