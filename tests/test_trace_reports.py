@@ -67,6 +67,8 @@ def test_reproduce_on_a_user_trace_writes_its_table_and_figure(tmp_path: Path,
     assert proc.returncode == 0, proc.stderr[-3000:]
     folder = out / 'by_trace' / 'my_drive'
     assert 'by_trace' in proc.stdout
+    assert ("Tables II-IV and Figure 3 are the paper's: 2 of 8 cases, the params file's "
+            'follower mpc and trust model paper') in proc.stdout
     rows = read_csv(folder / 'by_alpha.csv')
     assert len(rows) == 8
     assert {(r['trust_model'], r['driver_model'], r['alpha']) for r in rows} == {

@@ -232,6 +232,10 @@ def run(args: argparse.Namespace) -> int:
         print(f'{len(crashed)} of {len(cases)} cases collided: ' + '; '.join(crashed))
     trust_model = sweep.parameter_value(config, TRUST_MODEL_PARAMETER)
     results = paper_cases(every, cases, (config.follower.driver_model, trust_model or ''))
+    if results and len(results) < len(cases):
+        print(f"Tables II-IV and Figure 3 are the paper's: {len(results)} of {len(cases)} "
+              f"cases, the params file's follower {config.follower.driver_model} and trust "
+              f'model {trust_model}; every trust model and follower is in by_trace/<trace>/')
     written = ['all_runs.csv']
     if not results:
         print(f'{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; no case runs the '
