@@ -13,6 +13,7 @@ import pytest
 
 from trust_av_planner.cli import (
     bags,
+    compare,
     drive,
     eval_driver,
     fit_driver,
@@ -39,6 +40,7 @@ COMMANDS: dict[str, tuple[type, list[str]]] = {
     'fit-driver': (fit_driver.FitDriverOptions, ['--data', 'd']),
     'eval-driver': (eval_driver.EvalDriverOptions, ['--data', 'd']),
     'fit-trust': (fit_trust.FitTrustOptions, ['--ratings', 'r.csv', '--out', 'o']),
+    'compare': (compare.CompareOptions, ['a', 'b', '--out', 'f.png']),
 }
 NOT_OPTIONS = {'help', 'func', 'command', 'verbose', 'params_file', 'params_files'}
 """Namespace entries that are no command's own option: argparse's and main's, and the
@@ -101,4 +103,5 @@ def test_run_overrides_name_each_section() -> None:
 def test_fit_trust_takes_one_source() -> None:
     with pytest.raises(TypeError, match='one of them'):
         fit_trust.FitTrustOptions(params_files=(), study=None, ratings=None, out=Path('o'),
-                                  models='', no_figures=False)
+                                  models='', no_figures=False,
+                                  no_partial_pooling=False)

@@ -9,7 +9,14 @@ out per participant, leave one participant out pooled). Writes to ``--out``:
 - ``scores.csv``: scope, model, scheme, ratings, elpd, elpd_se, rmse, rmse_se;
 - ``comparison.csv``: the same per scope and scheme, best first, with elpd_diff (to the
   best) and elpd_diff_se;
-- ``participant_<id>.png``: each drive's ratings and every model's fitted prediction.
+- ``partial_pooling.csv`` (two or more participants): scope (a participant, or
+  ``population``), model, parameter, value, kind (``fitted``, ``observation``; for the
+  population ``center``: the pooled value, ``spread``: the between-participant standard
+  deviation in prior standard deviations): each participant's fit shrunk toward the pooled
+  one (:mod:`trust_av_planner.drive.trust_fit_pooling`); its held-out scores (three or more
+  participants) are the scheme ``leave_one_drive_out_partial_pooling`` of the two tables;
+- ``participant_<id>.png``: each drive's ratings and every model's fitted prediction (own
+  fit solid, partially pooled dashed).
 """
 
 from __future__ import annotations
@@ -41,6 +48,11 @@ from trust_av_planner.drive.trust_fit import (
     model_trust,
 )
 from trust_av_planner.drive.trust_fit_data import read_ratings_table, read_study
+from trust_av_planner.drive.trust_fit_pooling import (
+    MIN_PARTICIPANTS,
+    held_out_partial,
+    partial_fits,
+)
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.system.config import load_run_config
 from trust_monitor.common import output_files
@@ -60,6 +72,7 @@ class FitTrustOptions(ParamsFileOptions):
     out: Path
     models: str
     no_figures: bool
+    no_partial_pooling: bool
 
     def __post_init__(self) -> None:
         if (self.study is None) == (self.ratings is None):
@@ -95,6 +108,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         default=[], help="params file(s) for eps and the models' "
                                          'configured values (repeatable)')
     parser.add_argument('--no-figures', action='store_true', help='tables only')
+    parser.add_argument('--no-partial-pooling', action='store_true',
+                        help='skip the partially pooled fits (each participant shrunk toward '
+                             'the pooled fit by a fitted spread; about doubles the time)')
     parser.set_defaults(func=command(FitTrustOptions, run))
 
 
@@ -134,8 +150,10 @@ def _csv(fields: Sequence[str], rows: Sequence[dict[str, Any]]) -> str:
 
 
 def figure(path: Path, participant: str, drives: Sequence[RatedDrive],
-           fits: dict[str, tuple[ModelSpec, Fit]]) -> None:
-    """Each drive's ratings and every fitted model's predicted rating over time."""
+           fits: dict[str, tuple[ModelSpec, Fit]],
+           partial: dict[str, Fit] | None = None) -> None:
+    """Each drive's ratings and every fitted model's predicted rating over time (solid);
+    dashed in the same colour, its partially pooled fit when ``partial`` has one."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -146,10 +164,15 @@ def figure(path: Path, participant: str, drives: Sequence[RatedDrive],
         ax.scatter(drive.rating_times_s, drive.ratings, color='black', s=14, zorder=3,
                    label='ratings')
         t = np.asarray(drive.times_s)
+        ends = t + np.append(np.diff(t), np.median(np.diff(t)))
         for name, (spec, fitted) in fits.items():
             trust = model_trust(spec.build(fitted.theta), drive, every_step=True)[0]
-            ax.plot(t + np.append(np.diff(t), np.median(np.diff(t))),
-                    100.0 * fitted.observation.mean(trust), lw=1.2, label=name)
+            line = ax.plot(ends, 100.0 * fitted.observation.mean(trust), lw=1.2, label=name)
+            shrunk = (partial or {}).get(name)
+            if shrunk is not None:
+                trust = model_trust(spec.build(shrunk.theta), drive, every_step=True)[0]
+                ax.plot(ends, 100.0 * shrunk.observation.mean(trust), lw=1.0, linestyle='--',
+                        color=line[0].get_color(), label=f'{name} (partial pooling)')
         ax.set_title(f'{participant}: {drive.drive}', fontsize=9)
         ax.set_ylabel('rating (0-100)', fontsize=8)
         ax.set_ylim(-2, 102)
@@ -177,20 +200,43 @@ def run(args: FitTrustOptions) -> int:
     people = by_participant(rated)
     fit_rows: list[dict[str, Any]] = []
     score_rows: list[dict[str, Any]] = []
+    own_fits: dict[str, dict[str, Fit]] = {m: {} for m in models}
     for who, own in people.items():
-        fits = {m: (specs[m], fit(specs[m], own)) for m in models}
-        for _, fitted in fits.values():
-            fit_rows += _fit_rows(who, fitted)
+        for m in models:
+            own_fits[m][who] = fit(specs[m], own)
+            fit_rows += _fit_rows(who, own_fits[m][who])
         if len(own) >= 2:
             score_rows += _rows(who, [held_out(specs[m], [[d] for d in own], LODO)
                                       for m in models])
         else:
             print(f'{who}: one rated drive, no leave-one-drive-out score')
-        if not args.no_figures:
-            safe = re.sub(r'[^A-Za-z0-9_.-]', '_', who)
-            figure(args.out / f'participant_{safe}.png', who, own, fits)
+    pooled_fits = {m: fit(specs[m], rated) for m in models}
     for m in models:
-        fit_rows += _fit_rows('pooled', fit(specs[m], rated))
+        fit_rows += _fit_rows('pooled', pooled_fits[m])
+    partial: dict[str, dict[str, Fit]] = {who: {} for who in people}
+    if not args.no_partial_pooling and len(people) >= 2:
+        partial_rows: list[dict[str, Any]] = []
+        for m in models:
+            population, shrunk = partial_fits(specs[m], people, own_fits[m], pooled_fits[m])
+            partial_rows += [{'scope': 'population', 'model': m, 'parameter': k, 'value': v,
+                              'kind': kind} for kind, values in (
+                                  ('center', population.center), ('spread', population.spread))
+                             for k, v in values.items()]
+            for who, fitted in shrunk.items():
+                partial[who][m] = fitted
+                partial_rows += [r for r in _fit_rows(who, fitted) if r['kind'] != 'fixed']
+        output_files.write_text(args.out / 'partial_pooling.csv', _csv(
+            ('scope', 'model', 'parameter', 'value', 'kind'), partial_rows))
+        if len(people) >= MIN_PARTICIPANTS:
+            for who, own in people.items():
+                if len(own) >= 2:
+                    score_rows += _rows(who, [held_out_partial(specs[m], people, own_fits[m],
+                                                               who) for m in models])
+    if not args.no_figures:
+        for who, own in people.items():
+            safe = re.sub(r'[^A-Za-z0-9_.-]', '_', who)
+            figure(args.out / f'participant_{safe}.png', who, own,
+                   {m: (specs[m], own_fits[m][who]) for m in models}, partial[who])
     if len(people) >= 2:
         groups = list(people.values())
         score_rows += _rows('pooled', [held_out(specs[m], groups, LOPO) for m in models])
@@ -209,6 +255,13 @@ def run(args: FitTrustOptions) -> int:
                   f"{row['elpd']:9.1f} diff {row['elpd_diff']:7.1f}"
                   f" ± {diff if math.isfinite(diff) else float('nan'):.1f}  RMSE "
                   f"{row['rmse']:5.1f} ± {row['rmse_se']:.1f}")
+    totals: dict[tuple[str, str], list[float]] = {}
+    for row in score_rows:
+        if row['scope'] != 'pooled':
+            totals.setdefault((row['scheme'], row['model']), []).append(row['elpd'])
+    for (scheme, model), values in sorted(totals.items(), key=lambda item: -sum(item[1])):
+        print(f"{'all':>10s} {scheme:36s} {model:16s} elpd {sum(values):9.1f} summed over "
+              f'{len(values)} participant(s)')
     print(f'{len(people)} participant(s), {len(rated)} rated drive(s); tables and figures in '
           f'{args.out}')
     return 0

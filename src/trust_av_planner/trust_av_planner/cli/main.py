@@ -32,6 +32,7 @@ COMMAND_MODULES = (
     'trust_av_planner.cli.shadow',
     'trust_av_planner.cli.drive',
     'trust_av_planner.cli.reproduce',
+    'trust_av_planner.cli.compare',
     'trust_av_planner.cli.bags',
     'trust_av_planner.cli.repair_bag',
     'trust_av_planner.cli.train_gru',

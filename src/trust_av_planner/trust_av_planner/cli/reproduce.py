@@ -30,7 +30,7 @@ from trust_av_planner.cli.options import (
 )
 from trust_av_planner.cli.typed_options import ParamsFileOptions, command
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.study import population, sweep, tables
+from trust_av_planner.study import population, sweep, tables, trace_reports
 from trust_av_planner.study.frame import (
     TRUST_MODEL_PARAMETER,
     check_axes,
@@ -226,7 +226,10 @@ def run(args: ReproduceOptions) -> int:
     except OSError as err:
         raise TrustAvPlannerError(f'--results-dir {out}: cannot create it '
                                   f'({err.strerror})') from err
-    for name in (*RESULT_FILES, f'params_lead_preview_{args.lead_preview}.yaml'):
+    per_trace = [path.relative_to(out) for paths in trace_reports.trace_paths(
+        out, args.traces).values() for path in paths]
+    for name in (*RESULT_FILES, f'params_lead_preview_{args.lead_preview}.yaml',
+                 *map(str, per_trace)):
         refused = output_files.link_refused(out / name)   # before the sweep, not after it
         if refused is not None:
             raise TrustAvPlannerError(f'--results-dir {out}: {name} is {refused}')
@@ -248,12 +251,20 @@ def run(args: ReproduceOptions) -> int:
     bar.close()
     elapsed = time.monotonic() - start
     write_tidy_csv(out / 'all_runs.csv', tidy_rows(cases, every))
+    # every trace's per-alpha table and trust figure, every axis kept (any traces)
+    trace_reports.write_trace_reports(out, cases, every, files, note)
+    print(f'per trace (every metric per alpha, every trust model and follower; trust over '
+          f'time): {out / "by_trace"}/<trace>/ ({", ".join(trace_reports.FILES)})')
     crashed = [f'{case.label}: {every[case]["collision"]}' for case in cases
                if every[case].get('collision')]
     if crashed:     # their metrics end at the collision (all_runs.csv, column collision)
         print(f'{len(crashed)} of {len(cases)} cases collided: ' + '; '.join(crashed))
     trust_model = sweep.parameter_value(config, TRUST_MODEL_PARAMETER)
     results = paper_cases(every, cases, (config.follower.driver_model, trust_model or ''))
+    if results and len(results) < len(cases):
+        print(f"Tables II-IV and Figure 3 are the paper's: {len(results)} of {len(cases)} "
+              f"cases, the params file's follower {config.follower.driver_model} and trust "
+              f'model {trust_model}; every trust model and follower is in by_trace/<trace>/')
     written = ['all_runs.csv']
     if not results:
         print(f'{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; no case runs the '

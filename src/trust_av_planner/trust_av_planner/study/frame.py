@@ -4,12 +4,15 @@ every metric a column.
 The axes are traces (shipped names, CSVs, bags) x plan estimators x trust models x follower
 models x alpha (x a sampled driver population); each case runs once, on the sweep's
 executors and cache (:mod:`trust_av_planner.study.sweep`). ``trust-av reproduce`` writes the
-table as ``all_runs.csv``; from Python :func:`study` returns it as a pandas DataFrame::
+table as ``all_runs.csv``; from Python :func:`study` returns it as a pandas DataFrame and
+writes each trace's tables and trust figure (:mod:`trust_av_planner.study.trace_reports`)::
 
     from trust_av_planner.study.frame import study
-    runs = study(['us06'], ['ca', 'cv'], [0.0, 1.0], driver_models=['mpc', 'idm'],
-                 results_dir='results/mine')
-    runs.groupby(['predictor', 'driver_model']).final_trust.mean()
+
+    if __name__ == '__main__':    # study() starts worker processes: run it as a script
+        runs = study(['us06'], ['ca', 'cv'], [0.0, 1.0], driver_models=['mpc', 'idm'],
+                     results_dir='results/mine')
+        print(runs.groupby(['predictor', 'driver_model']).final_trust.mean())
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.study import sweep
 from trust_av_planner.study.sweep import Case
+from trust_av_planner.study.trace_reports import write_trace_reports
 from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, all_components
 from trust_monitor.common import output_files, registry
 from trust_monitor.errors import with_suggestions
@@ -85,9 +89,16 @@ def study(traces: Iterable[str] = sweep.TRACES,
           driver_models: Iterable[str] = ('',), trust_models: Iterable[str] = ('',),
           params_files: str | Path | Sequence[str | Path] = DEFAULT_PARAMS_FILE,
           results_dir: str | Path = 'results/study', executor: sweep.Executor | None = None,
-          runner: str = 'in-process', max_steps: int = 0) -> pd.DataFrame:
+          runner: str = 'in-process', max_steps: int = 0,
+          trace_reports: bool = True) -> pd.DataFrame:
     """Run every combination (cached in ``results_dir/cache`` as ``trust-av reproduce``)
-    and return the tidy table as a DataFrame, the rows of ``reproduce``'s ``all_runs.csv``.
+    and return the tidy table as a DataFrame, the rows of ``reproduce``'s ``all_runs.csv``;
+    write each trace's per-alpha tables and trust figure into
+    ``results_dir/by_trace/<trace>/`` as ``reproduce`` does
+    (:mod:`~trust_av_planner.study.trace_reports`).
+
+    Call it from a script's ``if __name__ == '__main__':`` block: the local executor starts
+    worker processes, which import the script again.
 
     Args:
         traces: shipped trace names, CSV files or rosbag2 bags.
@@ -101,6 +112,7 @@ def study(traces: Iterable[str] = sweep.TRACES,
         executor: where cases run (default: a local process pool, one per core).
         runner: ``in-process`` or ``graph``.
         max_steps: stop each run after this many steps (0: the whole trace).
+        trace_reports: write the per-trace tables and figures (False: the table only).
 
     Raises:
         TrustAvPlannerError: an unregistered name, an alpha outside [0, 1], a case that
@@ -115,4 +127,6 @@ def study(traces: Iterable[str] = sweep.TRACES,
     results = sweep.run_sweep(cases, params_files, Path(results_dir),
                               executor or sweep.LocalExecutor(), runner=runner,
                               max_steps=max_steps)
+    if trace_reports:
+        write_trace_reports(Path(results_dir), cases, results, params_files)
     return pd.DataFrame(tidy_rows(cases, results))

@@ -25,9 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from human_driver_sim.population import (
-    WEIGHT_NAMES,
-)
+from human_driver_sim.population import WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
 from trust_av_planner.errors import TrustAvPlannerError
@@ -47,7 +45,8 @@ ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 METRICS = ('final_trust', 'mean_explicability', 'rmse_mps2')
 PACKAGES = ('preceding_traffic', 'trust_monitor', 'human_driver_sim', 'trust_av_planner')
 RUNNERS = ('in-process', 'graph')
-PRESENTATION_MODULES = ('plots.py', 'paper_results.py', 'tables.py', 'frame.py')
+PRESENTATION_MODULES = ('plots.py', 'paper_results.py', 'tables.py', 'frame.py',
+                        'trace_reports.py', 'compare_runs.py')
 """Files that cannot change a run's numbers: left out of the cache key (so is ``cli/``)."""
 
 
@@ -203,15 +202,9 @@ def case_settings(case: Case, config: RunConfig, settings: RunSettings) -> dict[
     return out
 
 
-def run_case(case: Case, params_file: ParamsFiles,
-             settings: RunSettings = RunSettings()) -> dict[str, Any]:
-    """Run one case and return its settings, metrics and the series the figures need.
-
-    Args:
-        case: the case.
-        params_file: the params file(s), layered in order over the shipped one.
-        settings: how it runs.
-    """
+def case_config(case: Case, params_file: ParamsFiles) -> RunConfig:
+    """The configuration ``case`` runs with: the params file(s) with the case's alpha,
+    plan estimator, driver and models set over them."""
     overrides: dict[str, dict[str, Any]] = {
         'planner': {'alpha': case.alpha, 'predictor': case.predictor}}
     driver: dict[str, Any] = dict(case.driver_params)
@@ -221,7 +214,14 @@ def run_case(case: Case, params_file: ParamsFiles,
         overrides['human_driver'] = driver
     if case.trust_model:
         overrides['/**'] = {'trust_model': case.trust_model}
-    config = load_run_config(layers(params_file), overrides)
+    return load_run_config(layers(params_file), overrides)
+
+
+def run_case(case: Case, params_file: ParamsFiles,
+             settings: RunSettings = RunSettings()) -> dict[str, Any]:
+    """Run ``case`` (with the params file(s) layered in order over the shipped one, as
+    ``settings`` say) and return its settings, metrics and the series the figures need."""
+    config = case_config(case, params_file)
     trace = truncate(load_trace(case.trace, config.planner.dt_s, config.trace),
                      settings.max_steps)
     records: list[StepRecord]
