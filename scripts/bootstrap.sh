@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Create (or reuse) the project's virtual environment in .venv and install everything the
-# project needs from its own files: requirements.txt (all pins) and the four packages in src/.
+# project needs from its own files: requirements.txt (all pins) and the six packages in src/.
 # Re-installs only when requirements.txt or a package's setup files changed (stamp file).
 # Usage: source from the other scripts, or run it alone: bash scripts/bootstrap.sh
 set -euo pipefail
@@ -8,7 +8,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="${TRUST_AV_VENV:-$root/.venv}"
 python_bin="${PYTHON:-python3.11}"
 command -v "$python_bin" >/dev/null 2>&1 || python_bin=python3
-packages=(preceding_traffic trust_monitor human_driver_sim trust_av_planner)
+packages=(trust_av_common preceding_traffic trust_monitor human_driver_sim trust_av_planner trust_av)
 
 stamp_inputs() {
   cat "$root/requirements.txt"

@@ -17,7 +17,7 @@ source scripts/bootstrap.sh
 echo '== ruff' >&2
 ruff check src tests benchmarks scripts
 echo '== mypy (pure core, strict)' >&2
-# The ROS adapters (nodes, trust_monitor/ros/, the graph, the commands that start it) talk to
+# The ROS adapters (nodes, trust_av_common/ros/, the graph, the commands that start it) talk to
 # untyped rclpy/message modules and are excluded; everything they call is in the checked core.
 mypy --exclude '(_node|cli/run|cli/shadow|setup)\.py$|/ros/|/graph/' \
   src/preceding_traffic/preceding_traffic src/trust_monitor/trust_monitor \

@@ -1,6 +1,6 @@
 """`ros2 run` compatibility: colcon builds the four ament_python packages; every installed
 executable (what `ros2 run <pkg> <exe>` starts) comes up with no params file, on the shipped
-values installed in share/trust_monitor/config (found through ament_index_python), and stops
+values installed in share/trust_av_common/config (found through ament_index_python), and stops
 cleanly; trust-monitor-estimate runs from the install."""
 
 from __future__ import annotations
@@ -104,7 +104,7 @@ def in_install(install: Path, command: str, tmp_path: Path, domain: str = '232',
 
 
 def test_installed_copy_finds_its_share(install: Path, tmp_path: Path) -> None:
-    proc = in_install(install, 'python3 -c "import trust_monitor.common.param_layers as m; '
+    proc = in_install(install, 'python3 -c "import trust_av_common.param_layers as m; '
                                'print(m.__file__); print(m.shipped_params_file()); '
                                "print(m.shipped_params_file('fastdds_graph.xml'))\"", tmp_path)
     assert proc.returncode == 0, proc.stderr

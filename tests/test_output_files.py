@@ -15,9 +15,9 @@ import pytest
 
 from preceding_traffic.bags import write_trace_bag
 from preceding_traffic.errors import PrecedingTrafficError
+from trust_av.study import gru_training
+from trust_av_common.output_files import OutputFileError, replacing, write_text
 from trust_av_planner.predictors.gru import load_weights
-from trust_av_planner.study import gru_training
-from trust_monitor.common.output_files import OutputFileError, replacing, write_text
 
 BIG = 'x' * 400_000             # larger than the small disk
 
@@ -86,7 +86,7 @@ def test_simulate_out_on_a_full_disk(small_disk: Path) -> None:
     out = small_disk / 'run.csv'
     out.write_text('old run')
     (small_disk / 'filler').write_bytes(b'\0' * 190_000)
-    done = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'simulate', '--trace',
+    done = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'simulate', '--trace',
                            'us06', '--no-progress', '--out', str(out)], capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 2
@@ -162,7 +162,7 @@ def test_a_link_is_refused_and_a_special_file_written_in_place(tmp_path: Path) -
 def test_json_to_stdout_through_a_pipe(tmp_path: Path) -> None:
     done = subprocess.run(
         [sys.executable, '-c', 'from pathlib import Path\n'
-         'from trust_monitor.common.output_files import write_text\n'
+         'from trust_av_common.output_files import write_text\n'
          "write_text(Path('/dev/stdout'), '{}')"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout == '{}' and os.path.islink('/dev/stdout')

@@ -1,4 +1,4 @@
-"""The lock-step chain derived from the topic table (trust_monitor.common.step_chain)."""
+"""The lock-step chain derived from the topic table (trust_av_common.step_chain)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from collections import Counter, deque
 
 import pytest
 
-from trust_monitor.common.step_chain import Port, StepChain, StepChainError, StepGate, step_chain
-from trust_monitor.common.topics import TOPICS, Topic
+from trust_av_common.step_chain import Port, StepChain, StepChainError, StepGate, step_chain
+from trust_av_common.topics import TOPICS, Topic
 
 DT_NS = 1_000_000_000
 

@@ -38,7 +38,7 @@ from preceding_traffic.traces import (
     check_sample,
     resample,
 )
-from trust_monitor.common.input_files import not_regular
+from trust_av_common.input_files import not_regular
 
 ODOMETRY = 'nav_msgs/msg/Odometry'
 TWIST_STAMPED = 'geometry_msgs/msg/TwistStamped'

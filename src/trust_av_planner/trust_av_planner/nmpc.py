@@ -8,17 +8,17 @@ the plan influences)::
     s.t. d_min <= d^k <= d_max,  v_min <= v^k <= v_max,  u_min <= u^k <= u_max,
          E(u, u^H) <= E_max(T)                     (the trust constraint T^k >= T_min)
 
-with the dynamics of :mod:`trust_monitor.common.kinematics` and E of
-:func:`trust_monitor.trust_model.explicability` (each written once). The trust constraint is
+with the dynamics of :mod:`trust_av_common.kinematics` and E of
+:func:`trust_monitor.paper_trust.explicability` (each written once). The trust constraint is
 the exact smooth equivalent of propagating the trust model's update over the horizon: the
-largest admissible E of :func:`trust_monitor.trust_interface.explicability_bound` (a closed
+largest admissible E of :func:`trust_monitor.model_interface.explicability_bound` (a closed
 form for ``paper``, a bisection on their own update for the others).
 
 The NLP is built once (CasADi SX, ``sqpmethod`` with the ``qrqp`` active-set QP solver),
 warm-started from the shifted previous plan. A solve that fails, that (against the wall
 clock only: ``cpu_budget``) uses more thread CPU time than ``solver_cpu_budget_s``, or whose
 plan breaks a bound by more than :data:`BOUND_TOLERANCE`, is replaced by the documented
-fallback plan (:func:`trust_monitor.common.kinematics.hold_gap_plan`), reported in the status.
+fallback plan (:func:`trust_av_common.kinematics.hold_gap_plan`), reported in the status.
 """
 
 from __future__ import annotations
@@ -33,18 +33,18 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from trust_av_planner import perturbations
-from trust_monitor.common import kinematics, registry
-from trust_monitor.common.params import (
+from trust_av_common import kinematics, registry
+from trust_av_common.params import (
     PARAM_METADATA_KEY,
     check_fields,
     control_step_param,
     param,
     require,
 )
-from trust_monitor.common.solver import nmpc_solver_options, solve
-from trust_monitor.trust_interface import CheckedBound, TrustModel, make_trust_model
-from trust_monitor.trust_model import TrustConfig, explicability
+from trust_av_common.solver import nmpc_solver_options, solve
+from trust_av_planner import perturbations
+from trust_monitor.model_interface import CheckedBound, TrustModel, make_trust_model
+from trust_monitor.paper_trust import TrustConfig, explicability
 
 LOG = logging.getLogger(__name__)
 

@@ -1,0 +1,1 @@
+"""trust_av.graph (a regular package, so that setuptools' find_packages installs it)."""

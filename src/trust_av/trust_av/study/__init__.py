@@ -1,0 +1,1 @@
+"""trust_av.study (a regular package, so that setuptools' find_packages installs it)."""

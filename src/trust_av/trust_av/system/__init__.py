@@ -1,0 +1,1 @@
+"""trust_av.system (a regular package, so that setuptools' find_packages installs it)."""
