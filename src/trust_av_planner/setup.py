@@ -17,7 +17,8 @@ setup(
     zip_safe=False,
     maintainer='trust-av maintainers',
     maintainer_email='maintainers@trust-av.invalid',
-    description='Trust-aware NMPC for the automated vehicle: the planner, ego-plant and stand-in nodes.',
+    description=('Trust-aware NMPC for the automated vehicle: the plan estimators, the planner, '
+                 'ego-plant and stand-in nodes.'),
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
