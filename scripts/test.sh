@@ -19,9 +19,10 @@ ruff check src tests benchmarks scripts
 echo '== mypy (pure core, strict)' >&2
 # The ROS adapters (nodes, trust_av_common/ros/, the graph, the commands that start it) talk to
 # untyped rclpy/message modules and are excluded; everything they call is in the checked core.
-mypy --exclude '(_node|cli/run|cli/shadow|setup)\.py$|/ros/|/graph/' \
-  src/preceding_traffic/preceding_traffic src/trust_monitor/trust_monitor \
-  src/human_driver_sim/human_driver_sim src/trust_av_planner/trust_av_planner
+mypy --exclude '(_node|cli/run|cli/shadow|drive/graph_run|drive/link|setup)\.py$|/ros/|/graph/' \
+  src/trust_av_common/trust_av_common src/preceding_traffic/preceding_traffic \
+  src/trust_monitor/trust_monitor src/human_driver_sim/human_driver_sim \
+  src/trust_av_planner/trust_av_planner src/trust_av/trust_av
 echo '== docs (mkdocs build --strict)' >&2
 docs_site="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$docs_site"

@@ -134,7 +134,7 @@ def test_package_xml_is_what_rosdep_reads(package: str) -> None:
 REPOSITORY_TESTS = {'test_colcon', 'test_suite_groups', 'test_layout', 'test_benchmarks',
                     'test_packages', 'test_docs', 'test_example_plugin',
                     'test_compare_trust_models', 'test_cli_fuzz', 'test_limits', 'test_code_map',
-                    'test_first_result', 'test_moved_imports'}
+                    'test_first_result', 'test_moved_imports', 'test_public_api'}
 """Test modules about the repository as a whole (the packages together, the suite, the
 benchmarks), which no single package's ``colcon test`` runs."""
 

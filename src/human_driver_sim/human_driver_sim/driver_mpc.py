@@ -42,6 +42,8 @@ from trust_av_common.params import check_fields, control_step_param, param, requ
 from trust_av_common.registry import Component
 from trust_av_common.solver import qp_options, solve
 
+__all__ = ['COMPONENT', 'DriverConfig', 'DriverMpc', 'DriverResult', 'bound_av_accels', 'features']
+
 LOG = logging.getLogger(__name__)
 
 FEATURE_NAMES = ('acceleration', 'desired_speed', 'relative_speed', 'relative_distance')

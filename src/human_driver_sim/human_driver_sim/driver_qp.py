@@ -31,6 +31,8 @@ import numpy as np
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc, bound_av_accels
 
+__all__ = ['BatchDriver']
+
 _FEASIBILITY_TOL = 1e-9
 
 

@@ -36,6 +36,11 @@ from human_driver_sim.idm import IdmParams, idm_accel_array
 from trust_av_common import kinematics
 from trust_av_common.stats import mean_ci95
 
+__all__ = ['MIN_WINDOW_STEPS', 'NOISE_FLOOR', 'PROTOCOLS', 'WINDOW_S', 'ConstantSpeed',
+           'Evaluation', 'Follower', 'IdmFollower', 'MpcFollower', 'Run', 'cluster_ci95',
+           'evaluate', 'format_table', 'make_runs', 'mean_gap_nrmse', 'paired_difference',
+           'platoons', 'simulate']
+
 WINDOW_S = 30.0
 """Length of a re-initialised window, s."""
 MIN_WINDOW_STEPS = 5

@@ -24,6 +24,9 @@ from dataclasses import dataclass
 
 from trust_av_common.params import check_fields, param
 
+__all__ = ['APPLIED_TOPIC', 'COLLISION_CLEAR_M', 'COMMAND_TOPIC', 'FollowerConfig',
+           'applied_accel', 'contact']
+
 COMMAND_TOPIC = 'human/accel_cmd'
 """The person's pedal: ``geometry_msgs/msg/AccelStamped``, ``accel.linear.x`` in m/s^2."""
 APPLIED_TOPIC = 'human/accel_applied'

@@ -27,6 +27,8 @@ from trust_av_common.component_checks import (
 )
 from trust_av_common.params import check_fields, param, require
 
+__all__ = ['CheckedFollower', 'Follower', 'FollowerConfig', 'make_follower']
+
 
 class Follower(Protocol):
     """Interface of a follower model (the human driving behind the AV)."""

@@ -26,6 +26,10 @@ from trust_av_common.errors import did_you_mean
 from trust_av_common.input_files import not_regular
 from trust_av_common.params import MAX_STAMP_S, ParamsError, check_fields, param
 
+__all__ = ['MAX_SPEED_MPS', 'MAX_TRACE_STEPS', 'SHIPPED_TRACES', 'TRAINING_TRACES', 'SpeedTrace',
+           'TraceConfig', 'TraceError', 'check_accelerations', 'check_sample', 'read_samples',
+           'resample', 'trace_path', 'truncate']
+
 MAX_SPEED_MPS = 100.0
 """Fastest speed a trace may hold, m/s (360 km/h: above any road vehicle; a faster sample is
 a unit or column mistake)."""

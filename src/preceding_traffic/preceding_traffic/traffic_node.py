@@ -60,6 +60,8 @@ from trust_av_common.ros.spin import WallLoop, now_ns, spin_node
 from trust_av_common.topics import VEHICLE_FRAMES
 from trust_av_common.wall_clock import NS_PER_S, WallClockConfig
 
+__all__ = ['main']
+
 
 @dataclass(frozen=True)
 class TrafficRunConfig:

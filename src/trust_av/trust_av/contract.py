@@ -7,21 +7,19 @@
         check_component('trust_av.predictors', 'ses')               # in-process rules
         check_component('trust_av.predictors', 'ses', graph=True)   # and graph == in-process
 
-:func:`check_component` raises :class:`ContractError` naming every rule broken and returns
-a :class:`ContractReport` of the rules kept: it **loads** (a ``Component`` whose factory
-takes ``(shared, params)``); its **declaration** (a description; parameters a frozen
-dataclass of ``param()`` fields with valid defaults and names no other component or its
-node uses; a trust model's start with its name); it **builds** from the shipped
-configuration; its **outputs** over seeded inputs pass the loop's own per-step checks
-(:mod:`trust_av_common.component_checks`); it is **deterministic**; a **bad
-parameter** is refused in one line naming it; a trust model's **time consistency**, **pure
-step**, **monotone** update, **bound** and **closed form**; with ``graph=True``, **graph ==
-in-process** over 30 steps (it starts processes: 10-30 s). docs/reference/components.md
-says each in full.
+:func:`check_component` raises :class:`ContractError` naming every rule broken and returns a
+:class:`ContractReport` of the rules kept: it **loads** (a ``Component`` whose factory takes
+``(shared, params)``); its **declaration** (a description; parameters a frozen dataclass of
+``param()`` fields with valid defaults and names no other component or its node uses; a trust
+model's start with its name); it **builds** from the shipped configuration; its **outputs** over
+seeded inputs pass the loop's own per-step checks (:mod:`trust_av_common.component_checks`); it
+is **deterministic**; a **bad parameter** is refused in one line naming it; a trust model's
+**time consistency**, **pure step**, **monotone** update, **bound** and **closed form**; with
+``graph=True``, **graph == in-process** over 30 steps (it starts processes: 10-30 s).
+docs/reference/components.md says each in full.
 
-It checks a component inside the system it plugs into, so it drives the packages above
-this floor (the configuration, the planner, the loop, the CLI): it imports them when
-called, by name, as the registry loads a component; importing it loads none of them.
+It drives the system a component plugs into (the configuration, the planner, the loop, the
+CLI), imported when called: importing the contract loads none of them.
 """
 
 from __future__ import annotations
@@ -44,6 +42,8 @@ import numpy as np
 from trust_av_common import registry
 from trust_av_common.errors import TrustAvError, one_line
 from trust_av_common.params import PARAM_METADATA_KEY, ParamsError, ParamSpec, build_config
+
+__all__ = ['ContractError', 'ContractReport', 'check_component']
 
 GRAPH_STEPS = 30
 """Steps of the graph == in-process rule."""

@@ -13,3 +13,6 @@ rclpy and no message types.
 - :mod:`~trust_av_common.lockstep`: stamps and the step buffer of the lock-step protocol.
 - :mod:`~trust_av_common.wall_clock`: real-vehicle (wall-clock) mode.
 """
+
+__all__: list[str] = []
+

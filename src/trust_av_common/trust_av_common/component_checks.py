@@ -29,6 +29,9 @@ import numpy as np
 from trust_av_common.errors import one_line
 from trust_av_common.registry import RegistryError, describe
 
+__all__ = ['BOUND_TOLERANCE', 'PASSING', 'ComponentError', 'call', 'check_number', 'check_plan',
+           'check_type', 'raised']
+
 T = TypeVar('T')
 
 BOUND_TOLERANCE = 1e-6

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 from trust_av_common.params import check_fields, param, require
 
+__all__ = ['FrameConfig', 'body_frame', 'position_frame_problem']
+
 STARTUP = 'the frames of the outputs are fixed at start-up'
 
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ['grid_times', 'hold_at', 'interp_at']
+
 TIME_TOLERANCE_S = 1e-9
 """Times closer than this are the same instant (grids built from floats, ns durations)."""
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from collections import deque
 
+__all__ = ['Report', 'SolveRecord', 'age']
+
 OK, WARN, ERROR = 0, 1, 2
 """``diagnostic_msgs/msg/DiagnosticStatus`` levels (its constants OK, WARN, ERROR)."""
 

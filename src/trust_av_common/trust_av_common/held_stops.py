@@ -28,6 +28,8 @@ from collections.abc import Iterator
 from types import FrameType
 from typing import Any
 
+__all__ = ['STOP_SIGNALS', 'held']
+
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 """The signals that stop a command (Ctrl-C; ``timeout``, ``docker stop``, systemd; a closed
 terminal)."""

@@ -12,6 +12,8 @@ import os
 import stat
 from pathlib import Path
 
+__all__ = ['not_regular']
+
 
 def not_regular(path: str | Path) -> str | None:
     """What ``path`` is if it exists and is not a regular file (``'a FIFO'``, ``'a

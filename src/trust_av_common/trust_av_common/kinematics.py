@@ -20,6 +20,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+__all__ = ['Collision', 'VehicleState', 'advance', 'collision', 'gap_m', 'hardest_plan',
+           'hold_gap_plan', 'integrate', 'lead_speeds', 'reachable_gap_bounds', 'rollout', 'step']
+
 
 @dataclass(frozen=True)
 class VehicleState:

@@ -23,6 +23,8 @@ import numpy as np
 
 from trust_av_common.errors import TrustAvError
 
+__all__ = ['Centreline', 'LaneError', 'OnLane', 'lead_on_lane']
+
 
 class LaneError(TrustAvError):
     """A centreline or a point that cannot be used (one line naming it)."""

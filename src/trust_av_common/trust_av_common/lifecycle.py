@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 from trust_av_common.params import param
 
+__all__ = ['LifecycleConfig']
+
 AUTOSTART_REASON = 'read once when the node is made, before it is configured'
 
 

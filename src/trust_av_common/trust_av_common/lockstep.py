@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections import defaultdict
 from collections.abc import Iterable
 
+__all__ = ['StepBuffer', 'split_ns', 'stamp_ns']
+
 
 def stamp_ns(t_s: float) -> int:
     """Integer nanoseconds of a time in seconds (the key that pairs messages of a step)."""

@@ -27,6 +27,9 @@ from pathlib import Path
 from trust_av_common.errors import TrustAvError
 from trust_av_common.held_stops import STOP_SIGNALS, held
 
+__all__ = ['HELD_SIGNALS', 'OutputFileError', 'cannot_create_in', 'cannot_write', 'link_refused',
+           'odd_path', 'replacing', 'stop_signals_held', 'write_text']
+
 HELD_SIGNALS = set(STOP_SIGNALS)
 """Held back while a set of files is renamed into place, so a stop cannot split the set."""
 

@@ -22,6 +22,8 @@ from pathlib import Path
 from trust_av_common.errors import TrustAvError
 from trust_av_common.output_files import odd_path
 
+__all__ = ['OutputLockedError', 'hold_output_lock', 'lock_path']
+
 PID_WAIT_S = 0.2
 """How long a refused command looks for the holder's entry in the kernel's lock table."""
 

@@ -33,6 +33,9 @@ from trust_av_common.params import ParamsError
 from trust_av_common.rcl_values import ParsedParams
 from trust_av_common.rcl_yaml import params_for_node, parse_params_text
 
+__all__ = ['Layered', 'layer_files', 'layered_params', 'node_fqn', 'read_layer', 'read_layers',
+           'section_target', 'shipped_params_file', 'text_layer', 'to_params_text']
+
 SHIPPED_PARAMS = 'trust_av.yaml'
 """File name of the shipped params file (every parameter of the graph, the paper's values)."""
 SHARE_PACKAGE = 'trust_av_common'

@@ -27,6 +27,11 @@ import yaml
 from trust_av_common.errors import TrustAvError, did_you_mean, with_suggestions
 from trust_av_common.input_files import not_regular
 
+__all__ = ['CONTROL_STEP_RANGE_S', 'MAX_POSITION_M', 'MAX_STAMP_S', 'MAX_VEHICLE_LENGTH_M',
+           'PARAM_METADATA_KEY', 'ParamSpec', 'ParamsError', 'build_config', 'check_fields',
+           'check_known', 'check_type', 'control_step_param', 'field_spec', 'param',
+           'read_params_file', 'require']
+
 WILDCARD = '/**'
 T = TypeVar('T')
 PARAM_METADATA_KEY = 'trust_av_param'

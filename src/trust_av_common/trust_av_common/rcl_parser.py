@@ -42,6 +42,8 @@ from typing import Any
 
 from trust_av_common.params import ParamsError
 
+__all__ = ['PARSER_LIBRARY', 'RclParseError', 'parse_files', 'rcl_error_line']
+
 PARSER_LIBRARY = 'librcl_yaml_param_parser.so'
 """The shared library of rcl's params-file parser."""
 # What librcl_yaml_param_parser.so needs (readelf -d, Jazzy wheels), in load order.

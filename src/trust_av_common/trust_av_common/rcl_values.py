@@ -10,6 +10,8 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
+__all__ = ['PARAMS_KEY', 'TOPIC_NAME_MAX', 'ParsedParams', 'namespace_problem']
+
 PARAMS_KEY = 'ros__parameters'
 """``rcl_yaml_param_parser/src/impl/types.h``: the key that opens a node's parameters."""
 

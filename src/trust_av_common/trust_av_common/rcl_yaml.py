@@ -34,6 +34,8 @@ from trust_av_common.params import ParamsError
 from trust_av_common.rcl_parser import RclParseError, parse_files
 from trust_av_common.rcl_values import PARAMS_KEY, ParsedParams, _name
 
+__all__ = ['node_matches', 'params_for_node', 'parse_params_text']
+
 
 def _events(text: str) -> tuple[list[tuple[int, yaml.Event]], yaml.YAMLError | None]:
     """libyaml's events for ``text`` with their 1-based lines, up to the first syntax error,

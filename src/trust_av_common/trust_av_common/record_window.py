@@ -26,6 +26,9 @@ from collections.abc import Iterable, Mapping
 
 from trust_av_common.topics import TOPICS, Topic
 
+__all__ = ['ACK_EVERY_STEPS', 'ACK_TOPIC', 'HISTORY_DEPTH', 'held_steps', 'may_start',
+           'recorded_topics', 'window_steps']
+
 HISTORY_DEPTH = 1000
 """Samples kept per topic by every lock-step publisher and subscription (``KEEP_LAST``)."""
 ACK_EVERY_STEPS = 8

@@ -26,6 +26,10 @@ from typing import Any
 
 from trust_av_common.errors import TrustAvError, did_you_mean, one_line
 
+__all__ = ['DRIVERS', 'FOLLOWER_STATE', 'GROUPS', 'KNOWN_NEEDS', 'PREDICTORS', 'TRUST_MODELS',
+           'Component', 'RegistryError', 'build', 'components', 'config_of', 'config_types',
+           'describe', 'get', 'names', 'not_one_of']
+
 PREDICTORS = 'trust_av.predictors'
 """Entry-point group of the plan estimators (the plan the human expects, u_R^H)."""
 TRUST_MODELS = 'trust_av.trust_models'

@@ -8,6 +8,8 @@ from typing import Any
 
 from trust_av_common.held_stops import held
 
+__all__ = ['nmpc_solver_options', 'qp_options', 'solve', 'sqp_options']
+
 
 def solve(solver: Callable[..., dict[str, Any]], **arguments: Any) -> dict[str, Any]:
     """``solver(**arguments)`` (a CasADi ``Function``) with the stop signals held until it

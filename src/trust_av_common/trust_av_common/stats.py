@@ -12,6 +12,8 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import stats
 
+__all__ = ['mean_ci95', 't_quantile_975']
+
 
 def t_quantile_975(dof: int) -> float:
     """The 0.975 quantile of Student's t (two-sided 95 %): 12.706 for 1 degree of freedom,

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 from trust_av_common.errors import TrustAvError
 from trust_av_common.topics import TOPICS, Topic
 
+__all__ = ['RECORDER', 'Port', 'StepChain', 'StepChainError', 'StepGate', 'step_chain']
+
 CLOCK_TOPIC = 'clock'
 INITIAL_STATE_MARK = '+ the initial state'
 """Text of a topic's ``rate`` that makes it a state topic (published at start-up too)."""

@@ -41,6 +41,10 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+__all__ = ['JOINT_NAME', 'NO_FRAME', 'ODOM_FRAME', 'TOPIC', 'TOPICS', 'VEHICLE_FRAMES',
+           'WALL_QOS_TEXT', 'Topic', 'expected_endpoints', 'is_topic_name', 'qualified',
+           'topic_table_markdown']
+
 ODOM_FRAME = 'odom'
 """The world-fixed frame (REP-105 ``odom``): x along the road in the direction of travel,
 y to the left, z up (REP-103); a simulated run starts the human driver's front bumper at 0."""

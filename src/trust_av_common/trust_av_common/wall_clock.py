@@ -14,6 +14,8 @@ import numpy as np
 
 from trust_av_common.params import check_fields, param
 
+__all__ = ['NS_PER_S', 'LatestInputs', 'LoopStats', 'WallClockConfig', 'format_summary']
+
 CLOCK_MODES = ('lockstep', 'wall')
 STARTUP = 'the timer, the QoS profiles and the subscriptions are made at start-up'
 NS_PER_S = 1_000_000_000

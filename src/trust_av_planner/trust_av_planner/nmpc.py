@@ -27,7 +27,7 @@ import dataclasses
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -43,8 +43,12 @@ from trust_av_common.params import (
 )
 from trust_av_common.solver import nmpc_solver_options, solve
 from trust_av_planner import perturbations
+from trust_av_planner.plan_result import PlanResult
 from trust_monitor.model_interface import CheckedBound, TrustModel, make_trust_model
 from trust_monitor.paper_trust import TrustConfig, explicability
+
+__all__ = ['BOUND_TOLERANCE', 'LEAD_PREVIEWS', 'PlannerConfig', 'TrustAwareNmpc',
+           'prediction_grid']
 
 LOG = logging.getLogger(__name__)
 
@@ -64,7 +68,6 @@ STATIONARY_STATUS = 'Search_Direction_Becomes_Too_Small'
 """SQP stopped because its step vanished: the iterate cannot move. Accepted when it passes the
 bound check (it happens at standstill at d_min, where the feasible set shrinks to one point and
 the active gap and speed bounds have opposite gradients); otherwise the step falls back."""
-
 
 BUILT = 'built into the NMPC at start-up'
 SAFETY = 'a safety bound: fixed while the vehicle drives'
@@ -194,36 +197,6 @@ def prediction_grid(config: PlannerConfig, period_s: float | None = None) -> tup
                          f'{steps} steps (at most {MAX_GRID_STEPS}); lower the control rate '
                          'or use prediction_grid model_step')
     return period_s, steps
-
-
-@dataclass(frozen=True)
-class PlanResult:
-    """Outcome of one NMPC step.
-
-    Attributes:
-        plan_mps2: accelerations u_R^0..u_R^{N-1} to apply (solver's or fallback's).
-        status: solver return status, or ``fallback: <reason>``.
-        success: the solver's plan was used.
-        iterations: SQP iterations.
-        solve_time_s: wall time of the solver call (instrumentation only).
-        explicability_max: E_max of the trust constraint for this step.
-        cost: objective value of the returned plan.
-        gap_bounds_relaxed: the gap bounds were what the vehicle can reach (status: to what).
-    """
-
-    plan_mps2: np.ndarray
-    status: str
-    success: bool
-    iterations: int
-    solve_time_s: float
-    explicability_max: float
-    cost: float = field(default=float('nan'))
-    gap_bounds_relaxed: bool = False
-
-    @property
-    def fallback(self) -> bool:
-        """True when the fallback plan replaced the solver's."""
-        return not self.success
 
 
 class TrustAwareNmpc:

@@ -34,6 +34,8 @@ import numpy as np
 
 from trust_av_common.params import param
 
+__all__ = ['CONDITION_PARAM', 'LIBRARY', 'SEED_PARAM', 'Perturbation', 'schedule']
+
 BRAKE, HESITATE, HEADWAY = 'brake', 'hesitate', 'headway'
 FIXED_CONDITION = 'the study condition of a run is fixed'
 """Why the planner's ``perturbation`` parameters are read-only."""

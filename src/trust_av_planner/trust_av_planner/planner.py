@@ -29,6 +29,8 @@ from trust_av_planner.preview import LeadPreview, hold_on_grid
 from trust_monitor.model_interface import TrustModel
 from trust_monitor.paper_trust import TrustConfig
 
+__all__ = ['AvPlanner', 'CheckedPredictor', 'make_predictor', 'needs_follower_state', 'observe']
+
 
 def make_predictor(config: PlannerConfig, params: Any = None) -> Predictor:
     """The plan estimator registered under the ``predictor`` parameter's name.

@@ -73,6 +73,8 @@ from trust_av_planner.planner_params import PlannerTopics, SharedConfig, check_c
 from trust_monitor.model_interface import build_trust_model
 from trust_monitor.paper_trust import TrustConfig
 
+__all__ = ['WARM_UP', 'PlannerNode', 'main']
+
 WARM_UP = True
 """Wall mode: ``configure`` warms the outputs and the NMPC (:meth:`PlannerNode.warm_up`);
 False only for the cold case of benchmarks/bench_lifecycle.py."""

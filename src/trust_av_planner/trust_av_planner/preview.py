@@ -25,6 +25,8 @@ import numpy as np
 
 from trust_av_common.grids import grid_times, hold_at
 
+__all__ = ['LeadPreview', 'hold_on_grid']
+
 
 def hold_on_grid(values: np.ndarray, source_step_s: float, step_s: float, steps: int,
                  offset_s: float = 0.0) -> np.ndarray:

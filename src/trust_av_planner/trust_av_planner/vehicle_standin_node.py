@@ -49,6 +49,8 @@ from trust_av_common.ros.qos import command_deadline_s, topic_qos
 from trust_av_common.ros.spin import spin_node
 from trust_av_common.wall_clock import NS_PER_S, WallClockConfig
 
+__all__ = ['main']
+
 EGO_TOPIC = '/vehicle/odom'
 LEAD_TOPIC = '/perception/lead_vehicle/odom'
 COMMAND_TOPIC = '/control/accel_cmd'

@@ -46,6 +46,8 @@ from trust_monitor.model_interface import (
 )
 from trust_monitor.paper_trust import TrustConfig, TrustEstimator
 
+__all__ = ['EstimateError', 'build_parser', 'estimate_csv', 'main']
+
 MAX_ACCEL_MPS2 = 100.0
 """Largest plan acceleration magnitude accepted, m/s^2 (about 10 g)."""
 MAX_LINE_CHARS = 65536

@@ -35,6 +35,9 @@ from dataclasses import dataclass
 
 from trust_monitor.paper_trust import performance, trust_input
 
+__all__ = ['extremal_scores', 'lenient_row_bound', 'row_bound', 'score_threshold', 'shortfall',
+           'shortfall_constant', 'trust_lower_bound', 'warmup_bounds']
+
 # Largest shortfall of one step for any E >= 0: 1 + tanh E < 2.
 SHORTFALL_SUP = 2.0
 

@@ -44,6 +44,11 @@ from trust_av_common.component_checks import PASSING, call, check_number, raised
 from trust_av_common.params import build_config
 from trust_av_common.registry import TRUST_MODELS, Component, build, config_types, get
 
+__all__ = ['CheckedBound', 'ClosedForm', 'FitParameter', 'TrustModel', 'build_trust_model',
+           'common_trust', 'explicability_bound', 'fit_parameters', 'make_trust_model',
+           'numeric_bound', 'paper_bound_holds', 'trust_ceiling', 'trust_model_component',
+           'trust_model_config_types']
+
 BOUND_TOLERANCE = 1e-12
 """Bisection stops when the bracket of E_max is this narrow (E is dimensionless, < 1)."""
 

@@ -45,6 +45,8 @@ from trust_av_common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_monitor.model_interface import build_trust_model
 from trust_monitor.paper_trust import MonitorConfig, TrustConfig, TrustEstimator
 
+__all__ = ['main']
+
 
 class MonitorNode(ManagedNode):
     """Thin adapter over :class:`trust_monitor.paper_trust.TrustEstimator`, a managed node

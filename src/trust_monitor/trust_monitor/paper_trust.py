@@ -29,6 +29,10 @@ from trust_av_common.component_checks import PASSING, call, check_number, raised
 from trust_av_common.params import ParamsError, check_fields, param
 from trust_av_common.registry import TRUST_MODELS
 
+__all__ = ['SAME_MODEL', 'MonitorConfig', 'TrustConfig', 'TrustEstimator', 'explicability',
+           'paper_explicability_bound', 'performance', 'propagate_trust', 'trust_input',
+           'trust_step']
+
 SAME_MODEL = 'the planner and the monitor must run the same trust model'
 
 

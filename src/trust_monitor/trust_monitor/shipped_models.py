@@ -36,6 +36,9 @@ from trust_monitor.paper_trust import (
     trust_step,
 )
 
+__all__ = ['ASYMMETRIC', 'BETA_BERNOULLI', 'OPTIMO', 'PAPER', 'BetaState', 'OptimoConfig',
+           'OptimoModel']
+
 EPISODE_TOLERANCE_S = 1e-9
 """An episode counts as complete this close to its length (ten 0.1 s steps sum to
 0.9999999999999999 s)."""

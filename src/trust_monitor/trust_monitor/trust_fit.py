@@ -52,6 +52,9 @@ from trust_monitor.model_interface import (
 )
 from trust_monitor.paper_trust import TrustConfig
 
+__all__ = ['Fit', 'FitError', 'ModelSpec', 'Observation', 'RatedDrive', 'Score', 'by_participant',
+           'compare', 'fit', 'held_out', 'model_spec', 'model_trust']
+
 OBSERVATIONS = ('linear', 'direct')
 MIN_RATING_STD = 0.5 / 100.0
 """The observation noise s is at least half a rating point (ratings are whole numbers)."""

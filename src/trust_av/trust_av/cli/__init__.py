@@ -12,4 +12,6 @@ the graph's nodes and the sweep's workers inherit it.
 
 import os
 
+__all__: list[str] = []
+
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')

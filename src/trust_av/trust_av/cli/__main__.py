@@ -6,4 +6,6 @@ import sys
 
 from trust_av.cli.main import main
 
+__all__: list[str] = []
+
 sys.exit(main())

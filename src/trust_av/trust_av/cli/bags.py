@@ -9,6 +9,8 @@ from preceding_traffic.traces import SHIPPED_TRACES, TraceConfig, read_samples, 
 from trust_av.cli.options import add_params_file_option
 from trust_av.system.config import load_run_config
 
+__all__: list[str] = []
+
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av trace-to-bag``."""

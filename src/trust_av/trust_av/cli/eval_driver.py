@@ -32,6 +32,8 @@ from trust_av.system.config import (
 from trust_av_common import output_files
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__: list[str] = []
+
 SHIPPED = 'driver MPC (params file)'
 CAUTIOUS = 'driver MPC, cautious (human_cautious.yaml)'
 BOUNDED_IDM = 'IDM, bounded fit'

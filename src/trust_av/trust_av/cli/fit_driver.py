@@ -44,6 +44,8 @@ from trust_av.system.config import (
 from trust_av_common.output_files import replacing
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__: list[str] = []
+
 TARGET_RATIO = 0.9
 """The target: the driver's test gap NRMSE at most 0.9 x the best IDM's."""
 MPC_NAMES = tuple(MPC_BOUNDS)

@@ -44,6 +44,8 @@ from trust_monitor.trust_fit import (
     model_trust,
 )
 
+__all__: list[str] = []
+
 LODO, LOPO = 'leave_one_drive_out', 'leave_one_participant_out'
 SCORE_FIELDS = ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'elpd_diff',
                 'elpd_diff_se', 'rmse', 'rmse_se')

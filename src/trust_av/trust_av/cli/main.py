@@ -18,6 +18,8 @@ from trust_av.cli.parser import Parser
 from trust_av.graph import stop_signals
 from trust_av_common.errors import TrustAvError, one_line
 
+__all__ = ['build_parser', 'main']
+
 COMMAND_MODULES = (
     'trust_av.cli.simulate',
     'trust_av.cli.run',

@@ -27,6 +27,12 @@ from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
 from trust_monitor.model_interface import trust_ceiling
 
+__all__ = ['EXIT_COLLISION', 'MAX_DRIVERS', 'MAX_ITERATIONS', 'MAX_SEED', 'MAX_WORKERS',
+           'Progress', 'add_lead_preview_option', 'add_params_file_option', 'add_run_options',
+           'alpha_value', 'bounded_int', 'ceiling_at_end', 'collision_exit', 'format_metrics',
+           'output_file', 'positive_hz', 'positive_int', 'positive_seconds', 'process_age_s',
+           'run_overrides', 'steps_value']
+
 
 def alpha_value(text: str) -> float:
     """argparse type for alpha: a number in the range of ``PlannerConfig.alpha``."""

@@ -11,6 +11,8 @@ from typing import NoReturn
 
 from trust_av_common.errors import did_you_mean
 
+__all__ = ['Parser', 'suggest']
+
 _INVALID_CHOICE = re.compile(r"invalid choice: (?P<value>'[^']*'|\"[^\"]*\") "
                              r'\(choose from (?P<choices>.*)\)$')
 

@@ -26,6 +26,8 @@ from trust_av_common.params import PARAM_METADATA_KEY, ParamSpec, read_params_fi
 from trust_av_common.topics import TOPICS, WALL_QOS_TEXT, topic_table_markdown
 from trust_monitor.estimate import build_parser as estimate_parser
 
+__all__ = ['UnknownTableError', 'fill', 'parameters_markdown']
+
 MARKER = re.compile(r'^<!-- generated: ([a-z_]+) -->$(?:\n> Generated table:[^\n]*$)?',
                     re.MULTILINE)
 """A line a page holds where a generated table goes, and the line after it that tells a

@@ -8,6 +8,8 @@ from pathlib import Path
 
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__: list[str] = []
+
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av repair-bag``."""

@@ -46,6 +46,8 @@ from trust_av_common import output_files, registry
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_monitor.model_interface import paper_bound_holds, trust_ceiling
 
+__all__ = ['lead_preview_layer', 'truncation_note', 'unsafe_cases']
+
 PROFILES = {'table_i': DEFAULT_PARAMS_FILE,
             'as_reported': DEFAULT_PARAMS_FILE.with_name('paper_as_reported.yaml'),
             'paper_fitted': DEFAULT_PARAMS_FILE.with_name('paper_fitted_threshold.yaml'),

@@ -28,6 +28,8 @@ from trust_av.system.metrics import compute_metrics
 from trust_av.system.outputs import replacing_outputs
 from trust_monitor.model_interface import trust_ceiling
 
+__all__: list[str] = []
+
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av run``."""

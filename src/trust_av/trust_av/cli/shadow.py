@@ -29,6 +29,8 @@ from trust_av_planner.planner_params import PlannerTopics, check_control_rate
 if TYPE_CHECKING:
     from trust_av.graph.shadow import ShadowRun
 
+__all__: list[str] = []
+
 
 def summary_lines(result: ShadowRun) -> list[str]:
     """The run's summary: messages per topic and one jitter line per loop."""

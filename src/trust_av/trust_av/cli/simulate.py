@@ -26,6 +26,8 @@ from trust_av_common.output_files import replacing
 from trust_av_common.output_lock import hold_output_lock
 from trust_av_planner.planner_params import check_control_rate
 
+__all__: list[str] = []
+
 
 def run(args: argparse.Namespace) -> int:
     """Run ``trust-av simulate``."""

@@ -36,6 +36,8 @@ from trust_av.system.config import load_run_config
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors.gru import MODELS_DIR
 
+__all__: list[str] = []
+
 
 def default_jobs() -> int:
     """Worker processes for the closed loops: the CPUs this process may use."""

@@ -10,3 +10,6 @@ who may connect and drive), :mod:`.gate` (what the driving page may send, when),
 ``web/``. The follower plant node is :mod:`.follower_node`; one drive through the graph is
 :mod:`trust_av.drive.graph_run`; a session, :mod:`trust_av.drive.run_session`.
 """
+
+__all__: list[str] = []
+

@@ -21,6 +21,9 @@ from human_driver_sim.splits import Split
 from trust_av.drive.trust_rating import DriveSeries
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['DriveBag', 'DriveBagError', 'custom_data', 'demonstration', 'drive_bag_pairs',
+           'read_drive', 'split_by_participant']
+
 NS = 1e-9
 
 

@@ -12,6 +12,8 @@ from trust_av.cli.options import add_params_file_option, positive_seconds
 from trust_av.system.config import DEFAULT_PARAMS_FILE
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__: list[str] = []
+
 DEFAULT_DRIVE_FILE = DEFAULT_PARAMS_FILE.with_name('drive.yaml')
 
 

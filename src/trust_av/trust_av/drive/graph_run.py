@@ -73,6 +73,8 @@ from trust_av.system.config import RunConfig
 from trust_av_common.topics import TOPICS, qualified
 from trust_av_common.wall_clock import NS_PER_S, WallClockConfig
 
+__all__ = ['run_drive']
+
 LOG = logging.getLogger(__name__)
 DRIVE_NODES = ('preceding_traffic', 'planner', 'ego_plant', 'follower_plant', 'trust_monitor')
 DRIVER_TOPICS = {'/human/accel_cmd': 'geometry_msgs/msg/AccelStamped',

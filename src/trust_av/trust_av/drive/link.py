@@ -17,6 +17,9 @@ import numpy as np
 from trust_av.drive.gate import Gate
 from trust_av.drive.trust_rating import ITEM_NAMES, SCORE_NAME, questionnaire_score
 
+__all__ = ['DriveLink', 'DriveOutcome', 'ModelTrust', 'code_version', 'event_msg',
+           'joint_state_cdr', 'questionnaire_msg', 'vector_msg']
+
 LOG = logging.getLogger(__name__)
 
 

@@ -29,6 +29,8 @@ from trust_av_common import output_files
 from trust_av_common.params import ParamsError
 from trust_av_planner.planner_params import check_control_rate
 
+__all__ = ['run_session']
+
 
 def run_session(args: argparse.Namespace) -> int:
     """Run the participant's remaining drives (see ``trust-av drive --help``).

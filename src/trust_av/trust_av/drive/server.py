@@ -42,6 +42,8 @@ from websockets.http11 import Request, Response
 
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['FLOOD_MESSAGES_PER_S', 'DriveServer', 'parse_message']
+
 LOG = logging.getLogger(__name__)
 PAGES = {'/': ('index.html', 'text/html; charset=utf-8'),
          '/drive.js': ('drive.js', 'text/javascript; charset=utf-8'),

@@ -39,6 +39,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+__all__ = ['MARKER', 'PRACTICE', 'Condition', 'DriveRecord', 'Session', 'SessionError',
+           'balanced_latin_square_row', 'check_participant', 'drive_dir', 'enrol', 'load_session',
+           'save_session', 'withdraw', 'withdrawal_folder']
+
 PARTICIPANT_ID = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,31}')
 """A pseudonymous participant id: letters, digits, '_' and '-', at most 32 characters."""
 PRACTICE = 'practice'

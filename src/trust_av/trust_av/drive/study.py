@@ -41,6 +41,9 @@ from trust_av.drive.trust_rating import (
 from trust_av_common.params import ParamsError, build_config, check_fields, param
 from trust_av_planner.perturbations import LIBRARY
 
+__all__ = ['DriveConfig', 'comparison_csv', 'comparison_text', 'conditions_from', 'drive_summary',
+           'load_drive_settings', 'next_drive', 'plan_session', 'record_drive', 'summary_csv']
+
 SECTION = '/drive'
 """The node name the drive's settings are read for (``/**/drive`` or ``/drive``)."""
 CONDITION_KEYS = ('condition_names', 'condition_alphas', 'condition_predictors',

@@ -17,6 +17,8 @@ from typing import Any
 
 from human_driver_sim.idm import IdmParams, idm_accel
 
+__all__ = ['CHROMIUM', 'CHROMIUM_ARGS', 'DRIVER', 'READ_DISPLAY', 'Participant', 'drive_once']
+
 CHROMIUM = '/usr/bin/chromium'
 CHROMIUM_ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic',
                  '--no-first-run', '--disable-background-networking',

@@ -29,6 +29,8 @@ import numpy as np
 from trust_monitor.paper_trust import explicability
 from trust_monitor.trust_fit import FitError, RatedDrive
 
+__all__ = ['read_ratings_table', 'read_study']
+
 COLUMNS = ('participant', 'drive', 't_s', 'explicability', 'rating')
 
 

@@ -25,6 +25,10 @@ import numpy as np
 
 from trust_monitor.paper_trust import TrustConfig, TrustEstimator
 
+__all__ = ['ITEM_NAMES', 'JIAN_ITEMS', 'SCORE_NAME', 'Agreement', 'DriveSeries', 'RatingError',
+           'TrustModel', 'agreement_lines', 'compare', 'paper_model', 'questionnaire_score',
+           'rating_value', 'registered_models']
+
 JIAN_ITEMS = (
     'The system is deceptive.',
     'The system behaves in an underhanded manner.',

@@ -23,6 +23,8 @@ from typing import Any
 import yaml
 from rosbags.interfaces import Qos
 
+__all__ = ['BagInfo', 'TopicInfo', 'qos_text']
+
 METADATA_VERSION = 9
 """rosbag2 metadata version written (Jazzy's)."""
 ROS_DISTRO = 'jazzy'

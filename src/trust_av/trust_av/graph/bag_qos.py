@@ -8,6 +8,8 @@ from rosbags.interfaces import Qos
 
 from trust_av.graph.bag_writer import qos_profile
 
+__all__ = ['offered_profiles', 'offered_qos']
+
 
 def offered_qos(profile: QoSProfile) -> Qos:
     """The bag's record of a topic's offered QoS (keep-last, the profile's depth and

@@ -18,6 +18,8 @@ from trust_av.system.metrics import StepRecord
 from trust_av_common.topics import qualified
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['TYPESTORE', 'message_stamp', 'read_topics', 'records_from_bag']
+
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 

@@ -38,6 +38,8 @@ from trust_av.graph.mcap_steps import RECORDER_LIBRARY
 from trust_av_common.errors import one_line
 from trust_av_common.output_files import stop_signals_held
 
+__all__ = ['complete_mcap', 'repair', 'repair_bag', 'written_here']
+
 FOREIGN_CHUNK_MESSAGES = 1000
 """Messages per chunk in the repaired copy of another tool's bag (it has no steps)."""
 

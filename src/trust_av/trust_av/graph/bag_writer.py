@@ -57,6 +57,10 @@ from trust_av.graph.bag_metadata import BagInfo, TopicInfo, qos_text
 from trust_av.graph.mcap_steps import RECORDER_LIBRARY, WholeWrites, new_writer, replay
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['EXIT_DISK_FULL', 'RESERVE_BASE_BYTES', 'RESERVE_NAME', 'RESERVE_PER_CHUNK_BYTES',
+           'RESERVE_STEP_CHUNKS', 'STAMP_IN_FIRST_ELEMENT', 'TYPESTORE', 'BagWriteError',
+           'BagWriter', 'DiskFullError', 'header_stamp_ns', 'qos_profile']
+
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 RESERVE_BASE_BYTES = 48 * 1024
 """Room kept for finishing a bag besides the chunk indexes: the rosbag2 metadata record,

@@ -28,6 +28,9 @@ from trust_av_common.rcl_values import TOPIC_NAME_MAX, namespace_problem
 from trust_av_common.topics import TOPICS, qualified
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['DOMAIN_ID_MAX', 'check_domain_id', 'check_namespace', 'domain_ports_in_use',
+           'lease_domain']
+
 DOMAIN_ID_MAX = 232
 """The largest ROS domain id Fast DDS (Jazzy's rmw_fastrtps) can use: it derives every UDP
 port from the domain id (RTPS port mapping, ``include/fastdds/rtps/common/PortParameters.h``

@@ -24,6 +24,8 @@ from typing import Any
 from trust_av.graph import stop_signals
 from trust_av.graph.processes import Graph, GraphError
 
+__all__ = ['MANAGED_NODES', 'lifecycle_manager', 'set_states']
+
 MANAGED_NODES = ('planner', 'trust_monitor')
 """The project's managed (lifecycle) nodes: what an orchestrator configures and activates."""
 UNCONFIGURED, INACTIVE, ACTIVE = 1, 2, 3

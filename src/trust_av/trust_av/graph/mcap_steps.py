@@ -22,6 +22,8 @@ from mcap.records import Channel, Header, Message, MessageIndex, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
+__all__ = ['RECORDER_LIBRARY', 'WholeWrites', 'new_writer', 'replay']
+
 RECORDER_LIBRARY = 'trust_av.bag_writer'
 """What the MCAP header's ``library`` field of a bag this project wrote starts with (followed
 by `` (mcap-python/VERSION)``): how :mod:`~trust_av.graph.bag_repair` tells its own

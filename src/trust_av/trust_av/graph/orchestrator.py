@@ -41,11 +41,7 @@ from trust_av.graph.bag_writer import EXIT_DISK_FULL, DiskFullError
 from trust_av.graph.domains import check_domain_id, check_namespace, lease_domain
 from trust_av.graph.lifecycle_client import MANAGED_NODES, set_states
 from trust_av.graph.processes import RECORDER, Graph, GraphError, NodeSpec
-from trust_av.graph.session import (
-    clashing_participants,
-    foreign_participants,
-    graph_session,
-)
+from trust_av.graph.session import clashing_participants, foreign_participants, graph_session
 from trust_av.graph.stalls import BUSY_SHARE, cpu_s, waiting_for
 from trust_av.system import run_record
 from trust_av.system.closed_loop import InitialState, equilibrium_start
@@ -55,6 +51,9 @@ from trust_av_common.output_files import stop_signals_held
 from trust_av_common.record_window import window_steps
 from trust_av_common.topics import qualified
 from trust_av_planner.errors import TrustAvPlannerError
+
+__all__ = ['GraphRun', 'missing_messages', 'node_specs', 'run_graph', 'run_graph_records',
+           'write_record']
 
 
 def node_specs(config: RunConfig, trace_arg: str, trace: SpeedTrace, initial: InitialState,

@@ -25,6 +25,9 @@ from trust_av.graph import stop_signals
 from trust_av_common.param_layers import node_fqn, shipped_params_file, to_params_text
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['DDS_PROFILE', 'PROFILE_VARIABLES', 'RECORDER', 'Graph', 'GraphError', 'NodeSpec',
+           'use_run_discovery']
+
 GRACE_S = {'SIGINT': 5.0, 'SIGTERM': 3.0}
 
 

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['Lost', 'PublicationLedger', 'Publisher', 'RecordingLossError', 'check_lossless']
+
 Publisher = tuple[str, str]
 """(topic, node) of one publisher."""
 

@@ -49,6 +49,8 @@ from trust_av_common.topics import TOPICS
 from trust_av_common.wall_clock import WallClockConfig
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['READY_CHECK_PERIOD_S', 'main']
+
 STATUS_TOPIC = 'recorder/status'
 STATUS_PERIOD_S = 0.5
 READY_CHECK_PERIOD_S = 0.05

@@ -25,6 +25,9 @@ from trust_av.graph.domains import domain_ports_in_use
 from trust_av.graph.processes import RECORDER, Graph, GraphError, use_run_discovery
 from trust_av_common.topics import TOPICS, expected_endpoints, qualified
 
+__all__ = ['PROBE_S', 'RECORDER_STATUS', 'clashing_participants', 'foreign_participants',
+           'graph_session']
+
 RECORDER_STATUS = 'recorder/status'
 """The recorder's latched status (``state`` ready/recording/finished/disk_full, ``steps``)."""
 PROBE_S = 3.5

@@ -37,12 +37,7 @@ from trust_av.graph.domains import lease_domain
 from trust_av.graph.lifecycle_client import MANAGED_NODES, set_states
 from trust_av.graph.orchestrator import node_specs, write_record
 from trust_av.graph.processes import Graph, GraphError, NodeSpec
-from trust_av.graph.publication_ledger import (
-    Lost,
-    PublicationLedger,
-    Publisher,
-    check_lossless,
-)
+from trust_av.graph.publication_ledger import Lost, PublicationLedger, Publisher, check_lossless
 from trust_av.graph.session import foreign_participants, graph_session
 from trust_av.system.closed_loop import equilibrium_start
 from trust_av.system.config import RunConfig
@@ -50,6 +45,8 @@ from trust_av_common.kinematics import VehicleState, advance
 from trust_av_common.topics import TOPIC, TOPICS, VEHICLE_FRAMES, qualified
 from trust_av_common.wall_clock import NS_PER_S, LoopStats, WallClockConfig
 from trust_av_planner.planner_params import PlannerTopics
+
+__all__ = ['AFTER_START', 'ShadowRun', 'run_shadow', 'run_wall_graph']
 
 OUTPUTS = ('/ego/plan', '/ego/expected_plan', '/ego/accel_cmd', '/ego/planner_status',
            '/trust_monitor/trust')

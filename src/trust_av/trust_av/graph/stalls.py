@@ -24,6 +24,8 @@ from pathlib import Path
 from trust_av_common.step_chain import step_chain
 from trust_av_common.topics import TOPICS, qualified
 
+__all__ = ['BUSY_SHARE', 'cpu_s', 'steps_done', 'waiting_for']
+
 BUSY_SHARE = 0.5
 """A node that used more than this share of the stall's wall time on a CPU is busy."""
 

@@ -41,6 +41,9 @@ from typing import Any
 
 from trust_av_common.held_stops import STOP_SIGNALS
 
+__all__ = ['Stopped', 'continue_with_parent', 'deferred', 'deliver_pending', 'escalations',
+           'handle', 'installed', 'spin_once', 'stop_with_parent', 'stopping', 'unraisable_hook']
+
 _state: dict[str, int] = {'deferring': 0, 'pending': 0, 'raised': 0, 'quiet': 0,
                           'escalations': 0}
 

@@ -30,6 +30,8 @@ from trust_av_planner.errors import TrustAvPlannerError
 if TYPE_CHECKING:
     import pandas as pd
 
+__all__ = ['TRUST_MODEL_PARAMETER', 'check_axes', 'study', 'tidy_rows', 'write_tidy_csv']
+
 TRUST_MODEL_PARAMETER = 'trust_model'
 """The parameter (``/**`` section) that names the registered trust model a run uses."""
 

@@ -36,6 +36,9 @@ from trust_av_common.output_files import replacing
 from trust_av_planner.planner import observe
 from trust_av_planner.predictors.gru import FEATURES, GruConfig, GruWeights, gru_forward
 
+__all__ = ['TrainingSettings', 'build_dataset', 'samples_from_run', 'save_model', 'train',
+           'train_with_dagger']
+
 
 @dataclass(frozen=True)
 class TrainingSettings:

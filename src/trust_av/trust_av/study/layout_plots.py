@@ -23,6 +23,9 @@ from typing import Any
 from trust_av_common.output_files import OutputFileError, link_refused
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['LAYOUT_FILE', 'LayoutError', 'load_layout', 'main', 'parse_path', 'read_series',
+           'render_plots']
+
 LAYOUT_FILE = Path(__file__).resolve().parents[1] / 'config' / 'foxglove_layout.json'
 """The shipped layout (the repository's ``config/``; ``share/trust_av_planner/config/`` holds
 a copy when installed by colcon)."""

@@ -23,6 +23,8 @@ from trust_av.system.metrics import StepRecord
 from trust_av_planner.nmpc import PlannerConfig, TrustAwareNmpc
 from trust_monitor.paper_trust import TrustConfig
 
+__all__ = ['ReferenceNmpc', 'compare_on_records']
+
 
 class ReferenceNmpc:
     """Opti + IPOPT with default options, built once with parameters."""

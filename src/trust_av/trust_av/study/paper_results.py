@@ -6,6 +6,9 @@ paper's unpublished commute trips; our stand-ins are the traces ``commute_am``/`
 
 from __future__ import annotations
 
+__all__ = ['MAX_IMPROVEMENT_PERCENT', 'TABLE_III_TAC_CA_US06', 'TABLE_II_TAC_GRU_US06',
+           'TRACE_LABELS']
+
 # (final trust, average explicability score, RMSE m/s^2) per alpha, US06.
 TABLE_II_TAC_GRU_US06 = {
     0.0: (44.360, 0.038, 0.518), 0.25: (49.160, 0.024, 0.435), 0.5: (51.707, 0.019, 0.393),

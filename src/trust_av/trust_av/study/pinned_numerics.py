@@ -63,6 +63,9 @@ from trust_av.graph import stop_signals
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors.gru import FEATURES
 
+__all__ = ['CHILD_MARK', 'check_pinned', 'in_pinned_child', 'main', 'numerics_report',
+           'run_pinned', 'unsupported_reason']
+
 PINNED_NUMPY_TARGET = 'X86_V3'
 """The highest numpy dispatch group the pinned process may use."""
 

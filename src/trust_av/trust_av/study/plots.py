@@ -12,6 +12,8 @@ from preceding_traffic.traces import SpeedTrace
 from trust_av.study.paper_results import TRACE_LABELS
 from trust_av_common.output_files import replacing
 
+__all__ = ['pyplot', 'run_overview', 'save_figure', 'speed_profiles', 'trust_over_time']
+
 
 def pyplot() -> Any:
     """``matplotlib.pyplot`` on the Agg backend, imported when a figure is drawn (about

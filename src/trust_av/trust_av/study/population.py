@@ -22,6 +22,8 @@ from human_driver_sim.population import (
 from trust_av.study.sweep import Case
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['by_driver', 'population_cases', 'population_mean']
+
 
 def population_cases(cases: Sequence[Case], drivers: int, seed: int,
                      driver_fit: Path = DRIVER_FIT_FILE) -> list[Case]:

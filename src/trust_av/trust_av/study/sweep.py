@@ -3,11 +3,11 @@ on a pluggable executor (the paper's sweep is traces x TAC-GRU/TAC-CA x alpha).
 
 Every case is one closed loop: in-process by default, or through the ROS 2 node graph
 (:class:`RunSettings`, ``--graph``; each case then leaves its MCAP recording in
-``<results>/graph_bags/``). A finished case is cached as JSON under
-``<results>/cache/<key>.json``; the key hashes the case, the run settings, the whole params
-file and the source of the four packages (so a code or parameter change re-runs what it
-affects and an unchanged rerun is read back). Cases run on an :class:`Executor`: local
-processes by default (one per core), or Ray (optional extra, ``--executor ray``).
+``<results>/graph_bags/``). A finished case is cached as JSON under ``<results>/cache/<key>.json``;
+the key hashes the case, the run settings, the whole params file and the source of the six packages
+(so a code or parameter change re-runs what it affects and an unchanged rerun is read back). Cases
+run on an :class:`Executor`: local processes by default (one per core), or Ray (optional extra,
+``--executor ray``).
 """
 
 from __future__ import annotations
@@ -25,9 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from human_driver_sim.population import (
-    WEIGHT_NAMES,
-)
+from human_driver_sim.population import WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
 from trust_av.study.workers import worker_pool
@@ -36,6 +34,10 @@ from trust_av.system.config import RunConfig, load_run_config
 from trust_av.system.metrics import StepRecord, compute_metrics
 from trust_av_common import output_files, registry
 from trust_av_planner.errors import TrustAvPlannerError
+
+__all__ = ['ALPHAS', 'METRICS', 'PAPER_PREDICTORS', 'TRACES', 'Case', 'Executor', 'LocalExecutor',
+           'RayExecutor', 'RunSettings', 'check_axis', 'check_ray_address', 'code_fingerprint',
+           'parameter_value', 'plugin_sources', 'run_case', 'run_sweep', 'sweep_cases']
 
 LOG = logging.getLogger(__name__)
 
@@ -93,7 +95,7 @@ class Case:
 
 
 def plugin_sources() -> list[Path]:
-    """The source files of the registered components from outside the four packages (the
+    """The source files of the registered components from outside the six packages (the
     installed plug-ins' modules), in name order."""
     files = set()
     for group in registry.GROUPS:
@@ -105,7 +107,7 @@ def plugin_sources() -> list[Path]:
 
 
 def code_fingerprint() -> str:
-    """Hash of the source and data files of the four packages that results depend on, and
+    """Hash of the source and data files of the six packages that results depend on, and
     of the installed plug-ins' component modules."""
     digest = hashlib.sha256()
     for path in plugin_sources():

@@ -23,6 +23,9 @@ from trust_av_common.stats import mean_ci95
 from trust_monitor.final_trust_bound import row_bound
 from trust_monitor.paper_trust import TrustConfig
 
+__all__ = ['BOUND_HEADER', 'alpha_table', 'improvement_percent', 'improvement_table',
+           'population_alpha_table', 'population_improvement_table', 'write_rows']
+
 NO_VALUE = '—'
 """A cell with nothing to show (no paper value for the case, no improvement over alpha 0)."""
 

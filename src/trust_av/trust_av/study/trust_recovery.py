@@ -36,6 +36,8 @@ from trust_monitor.trust_fit import (
     model_trust,
 )
 
+__all__ = ['RATING_NOISE', 'RATING_PERIOD_S', 'drive_scores', 'make_participant', 'recover']
+
 CONDITIONS = ('late_brake', 'hesitation', 'headway_change', 'mixed_random')
 """The drives of a synthetic participant, in order (``mixed_random`` seeded per participant)."""
 DRIVE_S = 120

@@ -38,6 +38,8 @@ from trust_av.graph import stop_signals
 from trust_av_common.held_stops import STOP_SIGNALS, held
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['worker_pool']
+
 T = TypeVar('T')
 
 WORKER_GRACE_S = 20.0

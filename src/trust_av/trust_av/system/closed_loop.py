@@ -42,6 +42,9 @@ from trust_av_common.kinematics import VehicleState, collision, gap_m, integrate
 from trust_av_planner.planner import AvPlanner
 from trust_monitor.paper_trust import TrustEstimator
 
+__all__ = ['ClosedLoop', 'InitialState', 'SimResult', 'control_trace', 'equilibrium_start',
+           'simulate']
+
 LOG = logging.getLogger(__name__)
 
 

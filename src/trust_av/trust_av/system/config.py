@@ -47,6 +47,9 @@ from trust_av_planner.planner_params import PlannerTopics, SharedConfig, check_c
 from trust_monitor.model_interface import TrustModel, make_trust_model, trust_model_config_types
 from trust_monitor.paper_trust import MonitorConfig, TrustConfig
 
+__all__ = ['COMPONENT_GROUPS', 'DEFAULT_PARAMS_FILE', 'HUMAN_CAUTIOUS_PARAMS_FILE',
+           'NODE_COMPONENTS', 'RunConfig', 'all_components', 'load_run_config', 'node_components']
+
 DEFAULT_PARAMS_FILE = shipped_params_file()
 """The shipped params file (``config/trust_av.yaml``; ``share/trust_av_common/config/`` when
 installed by colcon): the bottom layer of every run."""

@@ -11,6 +11,10 @@ import numpy as np
 
 from trust_av_common.kinematics import Collision, collision
 
+__all__ = ['Metrics', 'StepRecord', 'compute_metrics', 'expectation_errors',
+           'explicability_by_age', 'first_collision', 'step_change_rms_mps2',
+           'ticks_per_model_step']
+
 
 @dataclass(frozen=True)
 class StepRecord:

@@ -34,6 +34,8 @@ from trust_av_common.output_files import cannot_create_in, odd_path, stop_signal
 from trust_av_common.output_lock import hold_output_lock
 from trust_av_planner.errors import TrustAvPlannerError
 
+__all__ = ['MARKER', 'RunOutputs', 'marked_outputs', 'prepare_outputs', 'replacing_outputs']
+
 MARKER = '.trust_av_output'
 """The marker file a command writes into each output directory it creates."""
 

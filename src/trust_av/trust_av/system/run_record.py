@@ -19,6 +19,9 @@ from trust_av.system.config import RunConfig
 from trust_av_common import registry
 from trust_av_common.param_layers import node_fqn
 
+__all__ = ['COMPONENT_KEYS', 'PARAMS_FILE_NAME', 'PARAMS_KEY', 'RECORD_FILE_NAME', 'custom_data',
+           'header']
+
 PARAMS_KEY = 'trust_av.params'
 """``custom_data`` key of the effective parameters (YAML text in params-file format: one
 section per node under its fully qualified name)."""

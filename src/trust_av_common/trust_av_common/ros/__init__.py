@@ -7,3 +7,6 @@ graph orchestration that imports rclpy or message packages).
 - :mod:`~trust_av_common.ros.spin`: a node's main loop (init, spin, shutdown) and the
   wall-clock control loop.
 """
+
+__all__: list[str] = []
+

@@ -60,6 +60,8 @@ from trust_av_common.ros.diagnostics import NodeDiagnostics, Report
 from trust_av_common.ros.parameters import check_overrides
 from trust_av_common.ros.spin import WallLoop
 
+__all__ = ['ManagedNode']
+
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
 ERROR = TransitionCallbackReturn.ERROR

@@ -27,6 +27,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 from trust_av_common.lockstep import split_ns
 from trust_av_common.topics import JOINT_NAME, NO_FRAME, ODOM_FRAME
 
+__all__ = ['SerializedTemplate', 'TrajectoryBytes', 'VehicleMarkers', 'VehicleOdometry',
+           'accel_command_bytes', 'diagnostic_values', 'diagnostics', 'header', 'message_class',
+           'msg_ns', 'odometry', 'status_gap_m', 'time_msg', 'trajectory', 'trajectory_times',
+           'trajectory_values', 'vector3_bytes', 'vehicle_markers']
+
 
 def message_class(msgtype: str) -> Any:
     """The Python class of ``pkg/msg/Name``."""

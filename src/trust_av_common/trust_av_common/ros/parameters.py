@@ -56,6 +56,9 @@ from trust_av_common.params import (
 )
 from trust_av_common.rcl_yaml import node_matches
 
+__all__ = ['check_overrides', 'declare_component_params', 'declare_config', 'predeclare',
+           'predeclare_component']
+
 T = TypeVar('T')
 
 

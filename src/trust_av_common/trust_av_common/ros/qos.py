@@ -21,6 +21,9 @@ from trust_av_common.record_window import HISTORY_DEPTH as RECORD_HISTORY_DEPTH
 from trust_av_common.topics import TOPIC
 from trust_av_common.wall_clock import WallClockConfig
 
+__all__ = ['QOS', 'RECORD_QOS', 'command_deadline_s', 'input_events', 'record_qos', 'topic_qos',
+           'wall_qos']
+
 HISTORY_DEPTH = RECORD_HISTORY_DEPTH
 """Samples kept per topic on both sides. A reader whose history overflows drops samples even
 on a reliable topic (seen with depth 10 on a loaded machine: 6 steps lost); the recorder may

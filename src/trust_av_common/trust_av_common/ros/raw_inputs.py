@@ -36,6 +36,8 @@ from rclpy.serialization import deserialize_message
 
 from trust_av_common.errors import TrustAvError
 
+__all__ = ['INPUTS_ENV', 'READERS', 'subscribe', 'type_name']
+
 INPUTS_ENV = 'TRUST_AV_INPUTS'
 """Set to ``rclpy`` to take every input as an rclpy message instead (how
 ``benchmarks/bench_graph.py --rclpy-inputs`` measures what the readers save)."""

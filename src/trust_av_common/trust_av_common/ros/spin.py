@@ -30,6 +30,8 @@ from trust_av_common.ros.diagnostics import OK, NodeDiagnostics
 from trust_av_common.ros.parameters import check_overrides
 from trust_av_common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
 
+__all__ = ['PARENT_ENV', 'GraphNode', 'WallLoop', 'now_ns', 'spin_node', 'start_node']
+
 
 class WallLoop:
     """A node's wall-clock control loop: a timer at ``control_rate_hz`` whose every tick is

@@ -23,6 +23,8 @@ from rclpy.parameter import Parameter
 
 from trust_av_common.params import ParamsError, build_config, field_spec
 
+__all__ = ['Tunable', 'check_request', 'enable_tuning']
+
 
 @dataclass
 class Tunable:

@@ -22,6 +22,8 @@ from typing import Protocol
 
 import numpy as np
 
+__all__ = ['Observation', 'Predictor']
+
 
 @dataclass(frozen=True)
 class Observation:

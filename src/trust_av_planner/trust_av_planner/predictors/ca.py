@@ -12,6 +12,8 @@ from trust_av_planner.predictors import Observation
 if TYPE_CHECKING:
     from trust_av_planner.nmpc import PlannerConfig
 
+__all__ = ['COMPONENT', 'ConstantAccelerationPredictor']
+
 
 class ConstantAccelerationPredictor:
     """u_R^H = (u_R(t-1), ..., u_R(t-1)); zero before the first observation.

@@ -18,6 +18,8 @@ from trust_av_planner.predictors import Observation
 if TYPE_CHECKING:
     from trust_av_planner.nmpc import PlannerConfig
 
+__all__ = ['COMPONENT']
+
 
 class ConstantVelocityPredictor:
     """u_R^H = 0 over the horizon: the AV is expected to keep its current speed.

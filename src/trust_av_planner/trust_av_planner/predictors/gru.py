@@ -30,6 +30,9 @@ from trust_av_planner.predictors import Observation
 if TYPE_CHECKING:
     from trust_av_planner.nmpc import PlannerConfig
 
+__all__ = ['COMPONENT', 'FEATURES', 'MODELS_DIR', 'GruConfig', 'GruPredictor', 'GruWeights',
+           'ModelError', 'gru_forward', 'load_weights']
+
 MODELS_DIR = Path(__file__).resolve().parents[1] / 'models'
 FEATURES = ('gap_m', 'relative_speed_mps', 'time_headway_s', 'av_accel_mps2')
 ARRAYS = ('weight_ih', 'weight_hh', 'bias_ih', 'bias_hh', 'out_weight', 'out_bias',
