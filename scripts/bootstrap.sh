@@ -52,7 +52,7 @@ if [ ! -x "$venv/bin/python" ]; then
   "$python_bin" -m venv "$venv"
 fi
 # colcon never crawls the environment (its share/ holds the message wheels' package.xml files):
-# a clone in a colcon workspace (docs/operations/colcon.md) builds only the four packages
+# a clone in a colcon workspace (docs/operations/colcon.md) builds only the six packages
 [ -f "$venv/COLCON_IGNORE" ] || touch "$venv/COLCON_IGNORE"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   # the pins need CPython 3.11.5 or a later 3.11 (pymdown-extensions 13.1.2, for one); Debian

@@ -156,11 +156,11 @@ def test_odd_output_paths_are_refused_before_anything_starts(
 
 
 def _config_classes() -> list[type]:
-    """Every dataclass with param() fields in the four packages (nodes included: their
+    """Every dataclass with param() fields in the six packages (nodes included: their
     fields become the rcl descriptors)."""
     found: dict[str, type] = {}
-    for package in ('trust_monitor', 'trust_av_planner', 'human_driver_sim',
-                    'preceding_traffic'):
+    for package in ('trust_av_common', 'trust_monitor', 'trust_av_planner', 'human_driver_sim',
+                    'preceding_traffic', 'trust_av'):
         root = importlib.import_module(package)
         for info in pkgutil.walk_packages(root.__path__, package + '.'):
             if info.name.endswith('__main__'):
