@@ -8,6 +8,8 @@ state are shared, never copied). A moved package's old name covers its submodule
 one added after the move. ``python -m`` with an old name runs the new module.
 """
 
+# import-rewrite: keep (the docstring's example names an old path on purpose)
+
 from __future__ import annotations
 
 import importlib

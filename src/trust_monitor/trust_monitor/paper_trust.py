@@ -286,6 +286,7 @@ class TrustEstimator:
         return trust, variance
 
 
+# import-rewrite: off (the old name, on purpose)
 def __getattr__(name: str) -> Any:
     """``explicability_bound``, this module's name for :func:`paper_explicability_bound`
     until the cut (one name per concept: :func:`trust_monitor.model_interface.explicability_bound`
@@ -296,3 +297,4 @@ def __getattr__(name: str) -> Any:
                       'in the next release', DeprecationWarning, stacklevel=2)
         return paper_explicability_bound
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+# import-rewrite: on
