@@ -76,3 +76,32 @@ def test_the_api_reference_shows_only_declared_names() -> None:
         module_name, _, name = target.rpartition('.')
         module = importlib.import_module(module_name)
         assert name in module.__all__, f'{target} is not in {module_name}.__all__'
+
+
+NOT_ERRORS = {
+    'trust_av_common.ros.raw_inputs.OtherEncodingError':
+        'a signal inside the raw decoder: not plain CDR, read with rclpy instead',
+    'trust_av.contract._DoesNotApplyError': 'a signal inside the contract: a rule not applying',
+}
+"""Exception classes that are control flow inside one module, never raised to a caller."""
+
+
+def test_every_project_exception_derives_from_the_one_base() -> None:
+    """So that ``trust-av`` catches one class (TrustAvError) and prints one line; a stop
+    (KeyboardInterrupt: Ctrl-C, SIGTERM) is not an error."""
+    from trust_av_common.errors import TrustAvError
+
+    found = {}
+    for name in modules():
+        if name.endswith('__main__'):
+            continue
+        module = importlib.import_module(name)
+        for value in vars(module).values():
+            if (isinstance(value, type) and issubclass(value, BaseException)
+                    and value.__module__ == name):
+                found[f'{name}.{value.__qualname__}'] = value
+    assert len(found) > 30
+    astray = sorted(qualified for qualified, cls in found.items()
+                    if not issubclass(cls, (TrustAvError, KeyboardInterrupt))
+                    and qualified not in NOT_ERRORS)
+    assert astray == []

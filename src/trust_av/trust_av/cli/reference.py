@@ -22,6 +22,7 @@ from collections.abc import Callable
 
 from trust_av.cli.main import build_parser
 from trust_av.system.config import DEFAULT_PARAMS_FILE, NODE_COMPONENTS, node_components
+from trust_av_common.errors import TrustAvError
 from trust_av_common.params import PARAM_METADATA_KEY, ParamSpec, read_params_file
 from trust_av_common.topics import TOPICS, WALL_QOS_TEXT, topic_table_markdown
 from trust_monitor.estimate import build_parser as estimate_parser
@@ -39,7 +40,7 @@ REPO = DEFAULT_PARAMS_FILE.resolve().parents[1]
 """The repository (or install prefix) the shipped params file is in."""
 
 
-class UnknownTableError(KeyError):
+class UnknownTableError(TrustAvError, KeyError):
     """A page names a generated table that does not exist."""
 
 

@@ -1,14 +1,16 @@
-"""Driver in the loop, pure part: a person drives the follower behind the trust-aware AV
-from a browser page.
+"""Driver in the loop, every application part of it in one place: a person drives the
+follower behind the trust-aware AV from a browser page.
 
-:mod:`.follower` (the participant's car and its reaction to a lost participant),
 :mod:`.trust_rating` (questionnaire scoring, ratings vs trust models), :mod:`.sessions`
 (participants, counterbalancing, resume, withdrawal), :mod:`.study` (settings, summaries),
 :mod:`.bag_data` (a drive's bag read back), :mod:`.server` (the page and its WebSocket:
 who may connect and drive), :mod:`.gate` (what the driving page may send, when),
 :mod:`.synthetic` (a synthetic participant for tests and benchmarks); the page itself is in
-``web/``. The follower plant node is :mod:`.follower_node`; one drive through the graph is
-:mod:`trust_av.drive.graph_run`; a session, :mod:`trust_av.drive.run_session`.
+``web/``. One drive through the graph is :mod:`.graph_run` (its messages to and from the
+page: :mod:`.link`); a participant's session, :mod:`.run_session`; the command
+``trust-av drive``, :mod:`.command`. The participant's car (the person-driven follower plant
+and its node) is :mod:`human_driver_sim.follower_plant`; fitting trust models to the
+ratings, :mod:`trust_monitor.trust_fit`.
 """
 
 __all__: list[str] = []

@@ -39,6 +39,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from trust_av_common.errors import TrustAvError
+
 __all__ = ['MARKER', 'PRACTICE', 'Condition', 'DriveRecord', 'Session', 'SessionError',
            'balanced_latin_square_row', 'check_participant', 'drive_dir', 'enrol', 'load_session',
            'save_session', 'withdraw', 'withdrawal_folder']
@@ -55,7 +57,7 @@ STUDY_FILE = 'study.json'
 """The study's enrolment counter and id."""
 
 
-class SessionError(ValueError):
+class SessionError(TrustAvError):
     """A bad participant id, condition list or session file; the message names it."""
 
 

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from trust_av_common.errors import TrustAvError
 from trust_monitor.paper_trust import TrustConfig, TrustEstimator
 
 __all__ = ['ITEM_NAMES', 'JIAN_ITEMS', 'SCORE_NAME', 'Agreement', 'DriveSeries', 'RatingError',
@@ -54,7 +55,7 @@ SCORE_NAME = 'trust_score'
 """Name of the score in the recorded questionnaire message."""
 
 
-class RatingError(ValueError):
+class RatingError(TrustAvError):
     """A rating or a questionnaire answer is out of range; the message names it."""
 
 
