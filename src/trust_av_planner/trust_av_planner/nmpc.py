@@ -47,7 +47,7 @@ from trust_av_planner.plan_result import PlanResult
 from trust_monitor.model_interface import CheckedBound, TrustModel, make_trust_model
 from trust_monitor.paper_trust import TrustConfig, explicability
 
-__all__ = ['BOUND_TOLERANCE', 'LEAD_PREVIEWS', 'PlannerConfig', 'TrustAwareNmpc',
+__all__ = ['BOUND_TOLERANCE', 'LEAD_PREVIEWS', 'PlanResult', 'PlannerConfig', 'TrustAwareNmpc',
            'prediction_grid']
 
 LOG = logging.getLogger(__name__)

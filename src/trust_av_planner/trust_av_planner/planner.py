@@ -21,8 +21,9 @@ import numpy as np
 from trust_av_common import registry
 from trust_av_common.component_checks import PASSING, call, check_plan, raised
 from trust_av_common.kinematics import VehicleState, gap_m
-from trust_av_planner.nmpc import PlannerConfig, PlanResult, TrustAwareNmpc
+from trust_av_planner.nmpc import PlannerConfig, TrustAwareNmpc
 from trust_av_planner.perturbations import Perturbation
+from trust_av_planner.plan_result import PlanResult
 from trust_av_planner.predictors import Observation, Predictor
 from trust_av_planner.predictors.sampling import ModelGridPredictor
 from trust_av_planner.preview import LeadPreview, hold_on_grid
