@@ -17,7 +17,7 @@ from preceding_traffic.bags import write_trace_bag
 from preceding_traffic.errors import PrecedingTrafficError
 from trust_av.study import gru_training
 from trust_av_common.output_files import OutputFileError, replacing, write_text
-from trust_av_planner.predictors.gru import load_weights
+from trust_av_planner.predictors.gru import MODELS_DIR, load_weights
 
 BIG = 'x' * 400_000             # larger than the small disk
 
@@ -65,7 +65,7 @@ def test_a_full_disk_is_one_line_and_keeps_the_old_file(small_disk: Path) -> Non
 
 def test_a_trained_model_on_a_full_disk_keeps_the_shipped_one(small_disk: Path) -> None:
     """The model, its card and its curve replace the old three together or not at all."""
-    shipped = Path(gru_training.__file__).parents[1] / 'models' / 'gru_plan_estimator.npz'
+    shipped = MODELS_DIR / 'gru_plan_estimator.npz'
     out = small_disk / 'gru.npz'
     old = {out: b'old weights', out.with_suffix('.json'): b'old card',
            out.with_suffix('.png'): b'old curve'}
