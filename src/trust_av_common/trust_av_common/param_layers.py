@@ -51,7 +51,7 @@ _DBL_MIN = 2.2250738585072014e-308  # smallest normal double: strtod gives ERANG
 def shipped_params_file(name: str = SHIPPED_PARAMS) -> Path:
     """A shipped params file: ``share/trust_av_common/config/<name>`` when this package was
     installed by colcon (found through ament_index_python), else the source tree's
-    ``config/<name>`` (an editable install), else ``<sys.prefix>/share/trust_monitor/config``
+    ``config/<name>`` (an editable install), else ``<sys.prefix>/share/trust_av_common/config``
     (a wheel).
 
     Raises:
@@ -73,7 +73,7 @@ def shipped_params_file(name: str = SHIPPED_PARAMS) -> Path:
 
 
 def _colcon_share(module: Path) -> Path | None:
-    """``share/trust_monitor`` of the colcon install ``module`` belongs to (None: the module
+    """``share/trust_av_common`` of the colcon install ``module`` belongs to (None: the module
     is not an installed copy, or there is no ament index at all, as in a bare venv)."""
     try:
         from ament_index_python.packages import (

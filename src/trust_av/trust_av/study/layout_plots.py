@@ -27,7 +27,7 @@ __all__ = ['LAYOUT_FILE', 'LayoutError', 'load_layout', 'main', 'parse_path', 'r
            'render_plots']
 
 LAYOUT_FILE = Path(__file__).resolve().parents[1] / 'config' / 'foxglove_layout.json'
-"""The shipped layout (the repository's ``config/``; ``share/trust_av_planner/config/`` holds
+"""The shipped layout (the repository's ``config/``; ``share/trust_av/config/`` holds
 a copy when installed by colcon)."""
 
 _SEGMENT = re.compile(
