@@ -2,7 +2,7 @@
 
 Records ``--steps`` lock-step steps of ``--topics`` topics (one ``nav_msgs/msg/Odometry``
 each per step, about as many bytes as the graph's largest messages) with
-:class:`~trust_av_planner.graph.bag_writer.BagWriter` into a temporary directory, ``--repeats``
+:class:`~trust_av.graph.bag_writer.BagWriter` into a temporary directory, ``--repeats``
 times: process CPU microseconds per step (``write`` of every topic + ``end_step``: one MCAP
 chunk through to the file), milliseconds to ``finish`` (summary, metadata.yaml) and the bag's
 size. Prints medians and ranges; writes benchmarks/results_bag_writer.json (or ``--out``)
@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from preceding_traffic.bags import ODOMETRY, TYPESTORE, odometry_messages
-from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
+from trust_av.graph.bag_writer import BagWriter, qos_profile
 
 
 def run_once(directory: Path, steps: int, topics: int) -> dict[str, float]:

@@ -1,7 +1,7 @@
 """Benchmark of the per-step checks of the components' outputs against a step of the loop.
 
 Every step the loop checks what its components give it
-(:mod:`trust_monitor.common.component_checks`): the plan estimator's prediction
+(:mod:`trust_av_common.component_checks`): the plan estimator's prediction
 (``planner.CheckedPredictor``), the follower's result (``followers.CheckedFollower``), the
 trust model's trust and variance (``trust_model.TrustEstimator``) and the NMPC's E_max with
 the trust it starts from (``trust_interface.CheckedBound``); each call into a component goes
@@ -33,12 +33,12 @@ import numpy as np
 from human_driver_sim.driver_mpc import DriverResult
 from human_driver_sim.followers import CheckedFollower
 from preceding_traffic.traces import truncate
+from trust_av.system.closed_loop import ClosedLoop, control_trace
+from trust_av.system.config import load_run_config
 from trust_av_planner.planner import CheckedPredictor
 from trust_av_planner.predictors import Observation
-from trust_av_planner.system.closed_loop import ClosedLoop, control_trace
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.trust_interface import CheckedBound, explicability_bound
-from trust_monitor.trust_model import TrustEstimator, explicability, performance
+from trust_monitor.model_interface import CheckedBound, explicability_bound
+from trust_monitor.paper_trust import TrustEstimator, explicability, performance
 
 
 class Stand:

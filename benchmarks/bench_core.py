@@ -33,9 +33,9 @@ import numpy as np
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SpeedTrace, truncate
-from trust_av_planner.study.nmpc_reference import compare_on_records
-from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
-from trust_av_planner.system.config import RunConfig, load_run_config
+from trust_av.study.nmpc_reference import compare_on_records
+from trust_av.system.closed_loop import SimResult, control_trace, simulate
+from trust_av.system.config import RunConfig, load_run_config
 
 
 def percentiles_ms(seconds: list[float]) -> dict[str, float]:

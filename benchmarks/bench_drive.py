@@ -105,7 +105,7 @@ def key_latency(bag: Path, presses_ns: list[int]) -> dict[str, dict[str, float]]
 
 def _refused(bag: Path) -> dict[str, int]:
     """The drive's refused messages by reason (the bag's metadata)."""
-    from trust_av_planner.drive.bag_data import custom_data
+    from trust_av.drive.bag_data import custom_data
     prefix = 'trust_av.drive.refused.'
     return {k.removeprefix(prefix): int(v) for k, v in custom_data(bag).items()
             if k.startswith(prefix)}
@@ -138,7 +138,7 @@ def flood_effect(bag: Path, flood_ns: tuple[int, int], other_client: dict[str, A
 def _keyboard_drive(page: Any, duration_s: float, seed: int, flood: Any) -> list[int]:
     """Drive by key presses until the drive ends; the press times (wall ns)."""
     from human_driver_sim.idm import idm_accel
-    from trust_av_planner.drive.synthetic import DRIVER, READ_DISPLAY
+    from trust_av.drive.synthetic import DRIVER, READ_DISPLAY
 
     rng = random.Random(seed)
     presses: list[int] = []
@@ -208,13 +208,13 @@ def run_once(settings: Path, study: Path, duration_s: float, busy: int, flood: b
     """One drive; its figures."""
     from playwright.sync_api import sync_playwright
 
-    from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+    from trust_av.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
 
     burners = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
                for _ in range(busy)]
     try:
         process = subprocess.Popen(
-            [sys.executable, '-m', 'trust_av_planner.cli', 'drive', '--study', str(study),
+            [sys.executable, '-m', 'trust_av.cli', 'drive', '--study', str(study),
              '--participant', 'BENCH', '--drive-file', str(settings), '--no-practice'],
             stdout=subprocess.PIPE, text=True, env={**os.environ, 'PYTHONUNBUFFERED': '1'})
         assert process.stdout is not None

@@ -3,8 +3,8 @@ frames, at the drive's web server alone (no graph, no browser: what the server i
 
     python benchmarks/bench_drive_flood.py [--floods 3] [--out benchmarks/results_drive_flood.json]
 
-The server (``trust_av_planner.drive.server.DriveServer``) runs with the drive's message gate
-(``trust_av_planner.drive.gate.Gate``, in the driving phase) behind it; a thread of this
+The server (``trust_av.drive.server.DriveServer``) runs with the drive's message gate
+(``trust_av.drive.gate.Gate``, in the driving phase) behind it; a thread of this
 process sends a state frame every 50 ms (as the drive's loop does on each odometry), one
 client (with the page's origin and token, as a second tab) receives them and stamps their
 arrival, and another client, the driving one, sends 10,000 messages as fast as it can
@@ -39,8 +39,8 @@ def one_flood() -> dict[str, Any]:
     from websockets.exceptions import ConnectionClosed
     from websockets.sync.client import connect
 
-    from trust_av_planner.drive.gate import DRIVING, READY, Gate
-    from trust_av_planner.drive.server import DriveServer
+    from trust_av.drive.gate import DRIVING, READY, Gate
+    from trust_av.drive.server import DriveServer
 
     gate = Gate(10.0, -6.0, 2.5)
     gate.set_phase(READY)

@@ -23,9 +23,9 @@ import sys
 import time
 from pathlib import Path
 
+from trust_av.system.config import load_run_config
+from trust_av_common.kinematics import VehicleState
 from trust_av_planner.planner import AvPlanner
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common.kinematics import VehicleState
 
 
 def first_ticks(rate_hz: float, ticks: int, predictor: str) -> list[float]:

@@ -2,12 +2,12 @@
 
 The replica has the graph's nodes as separate processes on a leased ROS domain, started,
 connected, observed and stopped by the orchestrator's own machinery (its ``Graph`` and
-``graph_session``, :mod:`trust_av_planner.graph.session`), each node spun by
+``graph_session``, :mod:`trust_av.graph.session`), each node spun by
 :func:`trust_monitor.ros_support.spin_node` (the same executor). Built from the topic table
 (:data:`trust_monitor.graph_interface.TOPICS`): the same topics, message types and QoS
 profiles (:data:`trust_monitor.ros_support.QOS`), one message per topic and step plus the
 initial states, and the same lock-step chain (who waits for which stamps,
-:func:`trust_monitor.common.step_chain.step_chain`). A node publishes constant messages of the
+:func:`trust_av_common.step_chain.step_chain`). A node publishes constant messages of the
 graph's shapes (N-point trajectories, diagnostics with as many key/values as the graph's)
 where only the stamp changes, and the recorder takes raw CDR and writes it to MCAP (zstd
 chunks, as the project's recorder) with nothing else per message. So the floor changes
@@ -88,7 +88,7 @@ def template(topic: str, msgtype: str, horizon: int, dt_s: float) -> tuple[Any, 
     from geometry_msgs.msg import TransformStamped
     from tf2_msgs.msg import TFMessage
 
-    from trust_monitor.ros.messages import (
+    from trust_av_common.ros.messages import (
         diagnostics,
         header,
         message_class,
@@ -121,12 +121,12 @@ def _make_step_node(name: str) -> Any:
     from rclpy.node import Node
     from step_gate import StepGate
 
-    from trust_monitor.common.lockstep import split_ns, stamp_ns
-    from trust_monitor.common.step_chain import step_chain
-    from trust_monitor.common.topics import TOPIC
-    from trust_monitor.ros.messages import message_class
-    from trust_monitor.ros.parameters import declare_config
-    from trust_monitor.ros.qos import QOS
+    from trust_av_common.lockstep import split_ns, stamp_ns
+    from trust_av_common.ros.messages import message_class
+    from trust_av_common.ros.parameters import declare_config
+    from trust_av_common.ros.qos import QOS
+    from trust_av_common.step_chain import step_chain
+    from trust_av_common.topics import TOPIC
 
     class FloorNode(Node):  # type: ignore[misc]
         """One node of the chain: waits as the graph's node does, publishes constants."""
@@ -204,14 +204,14 @@ def _make_recorder() -> Any:
     from rclpy.node import Node
     from rosbags.typesys import Stores, get_typestore
 
-    from trust_av_planner.graph.bag_writer import STAMP_IN_FIRST_ELEMENT
-    from trust_av_planner.graph.recorder_node import READY_CHECK_PERIOD_S
-    from trust_av_planner.graph.session import RECORDER_STATUS
-    from trust_monitor.common.step_chain import RECORDER, step_chain
-    from trust_monitor.common.topics import TOPICS
-    from trust_monitor.ros.messages import diagnostics, message_class
-    from trust_monitor.ros.parameters import declare_config
-    from trust_monitor.ros.qos import QOS
+    from trust_av.graph.bag_writer import STAMP_IN_FIRST_ELEMENT
+    from trust_av.graph.recorder_node import READY_CHECK_PERIOD_S
+    from trust_av.graph.session import RECORDER_STATUS
+    from trust_av_common.ros.messages import diagnostics, message_class
+    from trust_av_common.ros.parameters import declare_config
+    from trust_av_common.ros.qos import QOS
+    from trust_av_common.step_chain import RECORDER, step_chain
+    from trust_av_common.topics import TOPICS
 
     class FloorRecorder(Node):  # type: ignore[misc]
         """Raw subscriptions to every recorded topic; each message written as it comes.
@@ -279,8 +279,8 @@ def _make_recorder() -> Any:
 
 def node_main(argv: list[str]) -> int:
     """A floor node process (``--ros-args -r __node:=<name> ...``)."""
-    from trust_monitor.common.step_chain import RECORDER
-    from trust_monitor.ros.spin import spin_node
+    from trust_av_common.ros.spin import spin_node
+    from trust_av_common.step_chain import RECORDER
 
     name = next(a.split(':=', 1)[1] for a in argv if a.startswith('__node:='))
     factory: Callable[[], Any] = (_make_recorder if name == RECORDER
@@ -373,8 +373,8 @@ class StepClock:
 def _wait_connected(session: Any, nodes: tuple[str, ...], timeout_s: float) -> None:
     """Wait until every topic has its expected publishers and subscribers (the orchestrator's
     own /clock subscription not counted) and the recorder, if any, says ``ready``."""
-    from trust_av_planner.graph.processes import RECORDER, GraphError
-    from trust_monitor.common.topics import expected_endpoints
+    from trust_av.graph.processes import RECORDER, GraphError
+    from trust_av_common.topics import expected_endpoints
 
     expected = expected_endpoints(nodes)
     deadline = time.monotonic() + timeout_s
@@ -401,7 +401,7 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
     ``project_recorder``: the project's recorder node instead of the raw one (an ablation:
     the difference is the recorder's own cost over the floor's).
 
-    The sequence of :func:`trust_av_planner.graph.orchestrator.run_graph`: start the processes,
+    The sequence of :func:`trust_av.graph.orchestrator.run_graph`: start the processes,
     wait until connected, publish ``/sim/start``, spin the orchestrator's node until the
     recorder (or, without one, the source) exits, stop everything.
 
@@ -414,14 +414,14 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Empty
 
-    from trust_av_planner.graph.domains import lease_domain
-    from trust_av_planner.graph.processes import Graph, GraphError, NodeSpec
-    from trust_av_planner.graph.session import graph_session
-    from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
-    from trust_monitor.common.lockstep import stamp_ns
-    from trust_monitor.common.step_chain import RECORDER, step_chain
-    from trust_monitor.ros.messages import msg_ns
-    from trust_monitor.ros.qos import QOS
+    from trust_av.graph.domains import lease_domain
+    from trust_av.graph.processes import Graph, GraphError, NodeSpec
+    from trust_av.graph.session import graph_session
+    from trust_av.system.config import DEFAULT_PARAMS_FILE, load_run_config
+    from trust_av_common.lockstep import stamp_ns
+    from trust_av_common.ros.messages import msg_ns
+    from trust_av_common.ros.qos import QOS
+    from trust_av_common.step_chain import RECORDER, step_chain
 
     chain = step_chain()
     dt_ns = stamp_ns(load_run_config(DEFAULT_PARAMS_FILE).planner.dt_s)
@@ -433,7 +433,7 @@ def run_floor(steps: int, work: Path, *, recorder: bool = True, compression: str
     specs = [NodeSpec(name, MODULE, dict(params)) for name in names]  # no YAML aliases
     if recorder and project_recorder:
         bag = work / 'project_bag'
-        specs[0] = NodeSpec(RECORDER, 'trust_av_planner.graph.recorder_node',
+        specs[0] = NodeSpec(RECORDER, 'trust_av.graph.recorder_node',
                             {'bag_path': str(bag), 'expected_steps': steps})
     clock = StepClock(steps)
     with lease_domain() as domain:

@@ -14,7 +14,7 @@ benchmarks/results_graph.json (or --out) with the core count, date and load aver
     python benchmarks/bench_graph.py [--trace us06] [--repeats 3] [--quick] [--rclpy-inputs]
 
 ``--rclpy-inputs``: the graph's nodes take every input as an rclpy message (rclpy's own
-deserialisation) instead of reading the bytes (``trust_monitor.ros.raw_inputs``).
+deserialisation) instead of reading the bytes (``trust_av_common.ros.raw_inputs``).
 """
 
 from __future__ import annotations
@@ -36,11 +36,11 @@ from bench_floor import StepClock, describe, load, run_floor, summary
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SpeedTrace, truncate
-from trust_av_planner.graph.bag_records import records_from_bag
-from trust_av_planner.graph.orchestrator import GraphRun, run_graph
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import RunConfig, load_run_config
-from trust_av_planner.system.metrics import StepRecord
+from trust_av.graph.bag_records import records_from_bag
+from trust_av.graph.orchestrator import GraphRun, run_graph
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import RunConfig, load_run_config
+from trust_av.system.metrics import StepRecord
 
 
 def max_difference(recorded: list[StepRecord], reference: list[StepRecord]) -> float:
@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="the nodes read their inputs with rclpy's deserialisation")
     args = parser.parse_args(argv)
     if args.rclpy_inputs:
-        from trust_monitor.ros.raw_inputs import INPUTS_ENV
+        from trust_av_common.ros.raw_inputs import INPUTS_ENV
         os.environ[INPUTS_ENV] = 'rclpy'   # the graph's node processes inherit it
     repeats = args.repeats if args.repeats is not None else 1 if args.quick else 3
     if repeats < 1:

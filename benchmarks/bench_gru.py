@@ -21,10 +21,10 @@ import numpy as np
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
+from trust_av_common.kinematics import VehicleState
 from trust_av_planner.planner import make_predictor, observe
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common.kinematics import VehicleState
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -32,7 +32,7 @@ import json, sys, time
 import rclpy
 from rclpy.lifecycle import TransitionCallbackReturn
 import trust_av_planner.planner_node as planner_node
-from trust_monitor.ros.messages import odometry, trajectory
+from trust_av_common.ros.messages import odometry, trajectory
 SUCCESS = TransitionCallbackReturn.SUCCESS
 warm, ticks, predictor = sys.argv[1] == 'warm', int(sys.argv[2]), sys.argv[3]
 if not warm:

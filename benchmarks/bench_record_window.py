@@ -3,7 +3,7 @@
 Runs the whole graph on a trace, interleaved (window, none, window, none, ...; ``--repeats``
 each): ``window`` is what ``trust-av run`` does (the step authority runs at most
 ``recorder_window_steps`` ahead of the recorder's acknowledgement,
-trust_monitor.common.record_window); ``none`` sets the window to 0 (no waiting, the recorder
+trust_av_common.record_window); ``none`` sets the window to 0 (no waiting, the recorder
 may fall behind and lose messages). Timed from the ``/clock`` of every step as this
 process's node receives it: steady-state ms per step, first to last ``/clock``. Prints the
 medians and ranges and writes benchmarks/results_record_window.json (or ``--out``).
@@ -24,9 +24,9 @@ import time
 from pathlib import Path
 
 from preceding_traffic.sources import load_trace
-from trust_av_planner.graph import orchestrator
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common.record_window import window_steps
+from trust_av.graph import orchestrator
+from trust_av.system.config import load_run_config
+from trust_av_common.record_window import window_steps
 
 
 def steady_ms_per_step(window: bool, trace_name: str) -> float:

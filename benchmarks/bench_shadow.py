@@ -50,7 +50,7 @@ def main() -> int:
         return vehicle(args)
     with tempfile.TemporaryDirectory() as tmp:
         stats = Path(tmp) / 'shadow.json'
-        command = [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
+        command = [sys.executable, '-m', 'trust_av.cli', 'shadow', '--bag',
                    str(args.bag), '--out', str(Path(tmp) / 'shadow'), '--json', str(stats),
                    '--rate-hz', str(args.rate_hz)]
         if not args.whole:

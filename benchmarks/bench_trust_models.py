@@ -22,9 +22,9 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from trust_monitor.common.registry import TRUST_MODELS, names
-from trust_monitor.trust_interface import explicability_bound, make_trust_model, numeric_bound
-from trust_monitor.trust_model import TrustConfig
+from trust_av_common.registry import TRUST_MODELS, names
+from trust_monitor.model_interface import explicability_bound, make_trust_model, numeric_bound
+from trust_monitor.paper_trust import TrustConfig
 
 GRIDS = {'1 Hz': (3, 1.0), '10 Hz': (30, 0.1)}
 BASE = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,

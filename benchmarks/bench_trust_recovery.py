@@ -2,10 +2,10 @@
 
 For every registered trust model: ``--participants`` synthetic participants, each driving
 ``--drives`` drives of the study's conditions in which trust moves (the shipped follower in
-the in-process loop, :mod:`trust_av_planner.study.trust_recovery`), their ratings generated
+the in-process loop, :mod:`trust_av.study.trust_recovery`), their ratings generated
 by that model with parameters drawn from its declared prior, a known observation model and
 Gaussian rating noise (5 points, whole ratings in 0-100). Every model is fitted to every
-participant (``trust_av_planner.drive.trust_fit``). Reports:
+participant (``trust_monitor.trust_fit``). Reports:
 
 - ``parameter_r``: the correlation of true and fitted values per model and parameter
   (null for a parameter its model declares not identifiable);
@@ -31,10 +31,10 @@ from typing import Any
 
 import numpy as np
 
-from trust_av_planner.drive.trust_fit import model_spec
-from trust_av_planner.study.trust_recovery import RATING_NOISE, RATING_PERIOD_S, recover
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common.registry import TRUST_MODELS, names
+from trust_av.study.trust_recovery import RATING_NOISE, RATING_PERIOD_S, recover
+from trust_av.system.config import load_run_config
+from trust_av_common.registry import TRUST_MODELS, names
+from trust_monitor.trust_fit import model_spec
 
 POWER_SIZES = (2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96)
 

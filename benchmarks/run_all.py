@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
                                           work / f'{name}.json')
         else:
             print(f'== {name}: {script.name} not present, skipped')
-    sweep_cmd = [python, '-m', 'trust_av_planner.cli', 'reproduce', '--no-progress',
+    sweep_cmd = [python, '-m', 'trust_av.cli', 'reproduce', '--no-progress',
                  '--results-dir', str(work / 'sweep')]
     if args.quick:
         sweep_cmd += ['--traces', 'nycc', '--predictors', 'ca']

@@ -25,8 +25,8 @@ from pathlib import Path
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig, read_samples, trace_path
-from trust_av_planner.graph.orchestrator import run_graph
-from trust_av_planner.system.config import load_run_config
+from trust_av.graph.orchestrator import run_graph
+from trust_av.system.config import load_run_config
 
 
 def chained_trace(path: Path, duration_s: float, config: TraceConfig) -> float:

@@ -4,7 +4,7 @@
 
 ``benchmarks/soak.py`` steps an hour of sim time through the lock-step graph in seconds;
 this runs every node on its wall-clock timer (``trust-av shadow --whole-graph``, i.e.
-:func:`trust_av_planner.graph.shadow.run_wall_graph`; CA predictor unless ``--predictor
+:func:`trust_av.graph.shadow.run_wall_graph`; CA predictor unless ``--predictor
 gru``) for ``--duration-min``
 minutes of wall time after ``/sim/start``. This process records every topic to a rosbag2
 bag directory, as in that mode.
@@ -67,7 +67,7 @@ from typing import Any
 import numpy as np
 from soak_wall_checks import STOP_EDGE, Sequences, growth_checks, read_bag, topic_checks
 
-from trust_monitor.common import registry
+from trust_av_common import registry
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -121,7 +121,7 @@ def process_sample(pid: int) -> dict[str, float]:
 
 def recorded_topics() -> list[Any]:
     """The table's rows a wall run records (:data:`NOT_RECORDED` left out)."""
-    from trust_monitor.common.topics import TOPICS
+    from trust_av_common.topics import TOPICS
 
     return [t for t in TOPICS if t.name not in NOT_RECORDED]
 
@@ -129,10 +129,10 @@ def recorded_topics() -> list[Any]:
 class Sources:
     """Which publisher sent a recorded message: the only one of a single-publisher topic;
     on ``tf`` the node that owns the transform's child frame
-    (:data:`trust_monitor.common.topics.VEHICLE_FRAMES`)."""
+    (:data:`trust_av_common.topics.VEHICLE_FRAMES`)."""
 
     def __init__(self, topics: dict[str, Any]) -> None:
-        from trust_monitor.common.topics import VEHICLE_FRAMES
+        from trust_av_common.topics import VEHICLE_FRAMES
 
         self.topics = topics
         self.owner = {frame: node for node, frame in VEHICLE_FRAMES.items()}
@@ -148,7 +148,7 @@ class Sources:
                                f'{row.msgtype}, which this soak cannot tell apart')
         from rclpy.serialization import deserialize_message
 
-        from trust_monitor.ros.messages import message_class
+        from trust_av_common.ros.messages import message_class
 
         cls = self._classes.setdefault(row.msgtype, message_class(row.msgtype))
         frames = {t.child_frame_id for t in deserialize_message(data, cls).transforms}
@@ -183,9 +183,9 @@ class Sampler:
 def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     """Chain the trips, run the graph, read the bag back; returns the figures."""
     from preceding_traffic.sources import load_trace
-    from trust_av_planner.graph.shadow import run_wall_graph
-    from trust_av_planner.system.config import load_run_config
-    from trust_monitor.common.topics import qualified
+    from trust_av.graph.shadow import run_wall_graph
+    from trust_av.system.config import load_run_config
+    from trust_av_common.topics import qualified
 
     topics = {qualified(t.name): t for t in recorded_topics()}
     duration_s = args.duration_min * 60.0

@@ -1,11 +1,11 @@
 """One node's inputs counted per step, as the lock-step chain says them
-(:func:`trust_monitor.common.step_chain.step_chain`): which steps the node may act on, in
+(:func:`trust_av_common.step_chain.step_chain`): which steps the node may act on, in
 order. The floor benchmark's nodes wait with it (``bench_floor.py``); the graph's own nodes
 wait in their own code, so it lives here, with its one user."""
 
 from __future__ import annotations
 
-from trust_monitor.common.step_chain import NodeChain
+from trust_av_common.step_chain import NodeChain
 
 
 class StepGate:

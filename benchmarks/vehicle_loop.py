@@ -32,13 +32,13 @@ from typing import Any
 
 import yaml
 
-from trust_av_planner.graph.domains import lease_domain
-from trust_av_planner.graph.lifecycle_client import (
+from trust_av.graph.domains import lease_domain
+from trust_av.graph.lifecycle_client import (
     MANAGED_NODES,
     lifecycle_manager,
     set_states,
 )
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+from trust_av.system.config import DEFAULT_PARAMS_FILE
 
 REMAPS = {'/preceding_vehicle/odom': '/perception/lead_vehicle/odom',
           '/ego/odom': '/vehicle/odom', '/ego/accel_cmd': '/control/accel_cmd'}

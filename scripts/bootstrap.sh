@@ -8,7 +8,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="${TRUST_AV_VENV:-$root/.venv}"
 python_bin="${PYTHON:-python3.11}"
 command -v "$python_bin" >/dev/null 2>&1 || python_bin=python3
-packages=(preceding_traffic trust_monitor human_driver_sim trust_av_planner trust_av_autoware)
+packages=(trust_av_common preceding_traffic trust_monitor human_driver_sim trust_av_planner trust_av trust_av_autoware)
 
 stamp_inputs() {
   cat "$root/requirements.txt"

@@ -34,38 +34,52 @@ class Layer(NamedTuple):
     what: str
 
 
-PACKAGES = ('trust_monitor', 'preceding_traffic', 'human_driver_sim', 'trust_av_planner',
-            'trust_av_autoware')
+PACKAGES = ('trust_av_common', 'trust_monitor', 'preceding_traffic', 'human_driver_sim',
+            'trust_av_planner', 'trust_av', 'trust_av_autoware')
 """The packages, each importing only those before it that ALLOWED_PACKAGES names."""
 ALLOWED_PACKAGES = {
-    'trust_monitor': {'trust_monitor'},
-    'preceding_traffic': {'trust_monitor', 'preceding_traffic'},
-    'human_driver_sim': {'trust_monitor', 'human_driver_sim'},
-    'trust_av_planner': set(PACKAGES) - {'trust_av_autoware'},
-    'trust_av_autoware': {'trust_monitor', 'trust_av_autoware'},
+    'trust_av_common': {'trust_av_common'},
+    'trust_monitor': {'trust_av_common', 'trust_monitor'},
+    'preceding_traffic': {'trust_av_common', 'preceding_traffic'},
+    'human_driver_sim': {'trust_av_common', 'human_driver_sim'},
+    'trust_av_planner': {'trust_av_common', 'trust_monitor', 'preceding_traffic',
+                         'trust_av_planner'},
+    'trust_av': set(PACKAGES) - {'trust_av_autoware'},
+    'trust_av_autoware': {'trust_av_common', 'trust_av_autoware'},
 }
 LAYERS: dict[str, dict[str, Layer]] = {
     # '' is the package's own top-level modules; every other key is a folder of the package
+    'trust_av_common': {
+        '': Layer(0, True, 'the shared floor of every package: parameters, params files, '
+                           'registry, topics, output files, errors'),
+        'ros': Layer(1, False, 'the shared rclpy helpers of every node (QoS, spin, lifecycle, '
+                               'parameters, messages, raw inputs, diagnostics)'),
+    },
     'trust_monitor': {
-        'common': Layer(0, True, 'the shared floor of every package (pure)'),
-        'ros': Layer(1, False, 'the shared rclpy helpers of every node'),
-        '': Layer(2, True, 'trust models, explicability, offline estimation, the monitor node'),
+        '': Layer(0, True, 'trust models, explicability, their fit to ratings, offline '
+                           'estimation, the monitor node'),
     },
     'preceding_traffic': {
         '': Layer(0, True, 'traces, bags, replay, the traffic node'),
     },
     'human_driver_sim': {
-        '': Layer(0, True, 'followers (MPC, IDM), their fitting and data, the driver node'),
+        '': Layer(0, True, 'followers (MPC, IDM), their fitting and data, the driver node, '
+                           'the person-driven follower plant'),
     },
     'trust_av_planner': {
-        '': Layer(0, True, 'the NMPC, the per-step decision, the planner and plant nodes'),
+        '': Layer(0, True, 'the NMPC, the per-step decision, the planner, ego-plant and '
+                           'stand-in nodes'),
         'predictors': Layer(0, True, 'plan estimators (CA, CV, GRU)'),
+    },
+    'trust_av': {
         'system': Layer(1, True, 'the run configuration and the in-process closed loop'),
-        'drive': Layer(1, True, 'the driver-in-the-loop drive: web server and page, '
-                                'the person-driven follower, the study session'),
-        'graph': Layer(2, False, 'the node graph: orchestrator, recorder, shadow runs'),
-        'study': Layer(3, False, 'studies, tables, figures, GRU training'),
+        'graph': Layer(2, False, 'the node graph: orchestrator, recorder, bags, shadow runs'),
+        'study': Layer(4, False, 'studies, tables, figures, GRU training, two runs side by '
+                                 'side (graph and drive recordings: beside drive)'),
         'cli': Layer(4, False, 'the trust-av command line'),
+        'drive': Layer(4, False, 'the driver-in-the-loop drive: web server and page, study '
+                                 'design and sessions, ratings, its graph run and command'),
+        '': Layer(5, True, 'the plug-in contract'),
     },
     'trust_av_autoware': {
         '': Layer(0, True, 'Autoware adapters: lane geometry, lead choice, control command '
@@ -75,9 +89,7 @@ LAYERS: dict[str, dict[str, Layer]] = {
 }
 
 
-MODULE_LAYERS: dict[str, Layer] = {
-    'trust_monitor.errors': Layer(0, True, 'the exception base the floor raises'),
-}
+MODULE_LAYERS: dict[str, Layer] = {}
 """Single modules declared apart from their folder's layer."""
 
 

@@ -26,9 +26,9 @@ from pathlib import Path
 from typing import Any
 
 from preceding_traffic.traces import truncate
-from trust_av_planner.system.closed_loop import control_trace, simulate
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common.registry import TRUST_MODELS, names
+from trust_av.system.closed_loop import control_trace, simulate
+from trust_av.system.config import load_run_config
+from trust_av_common.registry import TRUST_MODELS, names
 
 
 def run(files: list[Path], trace: str, predictor: str, alpha: float, model: str | None,
@@ -75,8 +75,8 @@ def main() -> int:
     base_config, recorded = run(args.params_file, args.trace, args.predictor, args.alpha, None,
                                 args.max_steps)
     if args.bag is not None:
-        from trust_av_planner.graph.bag_records import records_from_bag
-        from trust_av_planner.system.metrics import compute_metrics
+        from trust_av.graph.bag_records import records_from_bag
+        from trust_av.system.metrics import compute_metrics
         records = records_from_bag(args.bag)
         m = compute_metrics(records, base_config.min_safe_gap_m)
     else:

@@ -24,10 +24,10 @@ from pathlib import Path
 from typing import Any
 
 from preceding_traffic.sources import load_trace
-from trust_av_planner.study.population import population_cases
-from trust_av_planner.study.sweep import Case
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
+from trust_av.study.population import population_cases
+from trust_av.study.sweep import Case
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
 
 TRACES = ('us06', 'nycc')
 

@@ -2,7 +2,7 @@
 
 Usage: python scripts/paper_bound_table.py
 The numbers of docs/RESULTS.md, "What the paper's equations allow", come from this script.
-The bound and its readings are in ``trust_monitor.trust_bound``; the paper's rows in
+The bound and its readings are in ``trust_monitor.final_trust_bound``; the paper's rows in
 ``trust_av_planner.paper_results``.
 """
 
@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import math
 
-from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
-from trust_monitor.trust_bound import (
+from trust_av.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
+from trust_monitor.final_trust_bound import (
     row_bound,
     score_threshold,
     shortfall_constant,

@@ -15,9 +15,9 @@ import argparse
 import time
 
 from preceding_traffic.traces import truncate
-from trust_av_planner.system.closed_loop import control_trace, simulate
-from trust_av_planner.system.config import load_run_config
-from trust_av_planner.system.metrics import (
+from trust_av.system.closed_loop import control_trace, simulate
+from trust_av.system.config import load_run_config
+from trust_av.system.metrics import (
     explicability_by_age,
     step_change_rms_mps2,
     ticks_per_model_step,

@@ -40,15 +40,15 @@ import casadi as ca
 import numpy as np
 
 from preceding_traffic.traces import SpeedTrace, truncate
+from trust_av.system.closed_loop import control_trace, simulate
+from trust_av.system.config import RunConfig, load_run_config
+from trust_av.system.metrics import StepRecord, expectation_errors, ticks_per_model_step
+from trust_av_common import kinematics
+from trust_av_common.solver import nmpc_solver_options
 from trust_av_planner import nmpc, planner
 from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
 from trust_av_planner.preview import hold_on_grid
-from trust_av_planner.system.closed_loop import control_trace, simulate
-from trust_av_planner.system.config import RunConfig, load_run_config
-from trust_av_planner.system.metrics import StepRecord, expectation_errors, ticks_per_model_step
-from trust_monitor import trust_model
-from trust_monitor.common import kinematics
-from trust_monitor.common.solver import nmpc_solver_options
+from trust_monitor import paper_trust as trust_model
 
 VARIANTS = ('main', 'sliding', 'ca-every-tick', 'mean-e', 'held-lead', 'model-step',
             'blocked-commands')

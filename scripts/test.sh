@@ -21,8 +21,9 @@ echo '== mypy (strict)' >&2
 # may call its few unannotated Node methods: pyproject.toml); an exclusion would go in
 # `--exclude`, and `python scripts/typing_report.py` counts the lines on each side.
 mypy \
-  src/preceding_traffic/preceding_traffic src/trust_monitor/trust_monitor \
-  src/human_driver_sim/human_driver_sim src/trust_av_planner/trust_av_planner \
+  src/trust_av_common/trust_av_common src/preceding_traffic/preceding_traffic \
+  src/trust_monitor/trust_monitor src/human_driver_sim/human_driver_sim \
+  src/trust_av_planner/trust_av_planner src/trust_av/trust_av \
   src/trust_av_autoware/trust_av_autoware
 echo '== docs (mkdocs build --strict)' >&2
 docs_site="$(mktemp -d)"

@@ -68,7 +68,7 @@ def installed_here(site: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[None
     """The plug-ins in ``site`` registered in this process too, while the context lasts
     (``site`` on the import path through ``monkeypatch``; the registry's scans are redone
     on entry and on exit)."""
-    from trust_monitor.common import registry
+    from trust_av_common import registry
 
     monkeypatch.syspath_prepend(str(site))
     registry._entry_points.cache_clear()

@@ -14,8 +14,8 @@ import pytest
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SpeedTrace
-from trust_av_planner.system.closed_loop import SimResult, simulate
-from trust_av_planner.system.config import RunConfig, load_run_config
+from trust_av.system.closed_loop import SimResult, simulate
+from trust_av.system.config import RunConfig, load_run_config
 
 ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
@@ -24,7 +24,7 @@ ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 def ros_domain() -> Iterator[str]:
     """A ROS domain id leased for one test (the runs' lease: no other test or run uses it
     meanwhile; 230-232 stay free for the tests that need fixed domains)."""
-    from trust_av_planner.graph.domains import lease_domain
+    from trust_av.graph.domains import lease_domain
 
     with lease_domain() as domain:
         yield str(domain)
@@ -66,8 +66,8 @@ def assert_every_topic_complete(bag: Path) -> int:
     the last complete step, complete + 1 once they had, complete + 2 when they had also
     finished the next step, which the other nodes had not.
     """
-    from trust_av_planner.graph.bag_records import read_topics, records_from_bag  # rosbags
-    from trust_monitor.common.topics import TOPICS
+    from trust_av.graph.bag_records import read_topics, records_from_bag  # rosbags
+    from trust_av_common.topics import TOPICS
     topics = read_topics(bag)
     complete = len(records_from_bag(bag))
     bad = {}

@@ -20,7 +20,7 @@ from typing import Any
 
 import pytest
 
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+from trust_av.system.config import DEFAULT_PARAMS_FILE
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'benchmarks'))
@@ -109,9 +109,9 @@ def test_autoware_in_autoware_out(tmp_path: Path) -> None:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-    from trust_av_planner.graph.domains import lease_domain
-    from trust_av_planner.graph.lifecycle_client import set_states
-    from trust_monitor.ros.messages import diagnostic_values, time_msg
+    from trust_av.graph.domains import lease_domain
+    from trust_av.graph.lifecycle_client import set_states
+    from trust_av_common.ros.messages import diagnostic_values, time_msg
 
     params = tmp_path / 'run.yaml'
     params.write_text("planner:\n  ros__parameters:\n    clock_mode: wall\n"
@@ -313,9 +313,9 @@ def test_field_labels_name_trust_and_plan_values(tmp_path: Path) -> None:
     from rclpy.qos import QoSProfile
     from sensor_msgs.msg import JointState
 
+    from trust_av.graph.domains import lease_domain
     from trust_av_autoware.labels_node import LabelsNode
-    from trust_av_planner.graph.domains import lease_domain
-    from trust_monitor.ros.messages import time_msg, trajectory
+    from trust_av_common.ros.messages import time_msg, trajectory
 
     with lease_domain() as domain:
         rclpy.init(args=['--ros-args', '--log-level', 'warn'], domain_id=domain)

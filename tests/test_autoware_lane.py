@@ -27,8 +27,8 @@ from trust_av_autoware.lane_inputs import (
     seen,
     yaw,
 )
-from trust_monitor.common.health import ERROR, OK, WARN
-from trust_monitor.common.params import ParamsError
+from trust_av_common.health import ERROR, OK, WARN
+from trust_av_common.params import ParamsError
 
 LANE = centreline_from_points([(0.0, 0.0), (100.0, 0.0), (100.0, 100.0)])
 CONFIG = LaneAdapterConfig(vehicle_length_m=4.5)   # lane 3.5 m, base_link to front 3.79 m

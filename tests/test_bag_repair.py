@@ -22,11 +22,11 @@ from rosbag2_rules import check_bag_directory
 from rosbags.rosbag2 import StoragePlugin, Writer
 from test_recording import QOS, TYPESTORE, odometry, record
 
-from trust_av_planner.cli.main import main
-from trust_av_planner.graph import bag_repair
-from trust_av_planner.graph.bag_repair import repair_bag, written_here
-from trust_av_planner.graph.bag_writer import BagWriteError, BagWriter
-from trust_av_planner.graph.mcap_steps import RECORDER_LIBRARY
+from trust_av.cli.main import main
+from trust_av.graph import bag_repair
+from trust_av.graph.bag_repair import repair_bag, written_here
+from trust_av.graph.bag_writer import BagWriteError, BagWriter
+from trust_av.graph.mcap_steps import RECORDER_LIBRARY
 
 FOREIGN_LIBRARY = 'mcap-cpp; rosbag2 jazzy'
 

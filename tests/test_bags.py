@@ -36,7 +36,7 @@ def test_bags_pass_rosbag2_jazzys_reader_rules(tmp_path: Path, bag: str) -> None
     path = REPO / 'bags' / bag
     if bag == 'written':
         path = tmp_path / 'us06_lead'
-        done = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'trace-to-bag',
+        done = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'trace-to-bag',
                                'us06', str(path)], capture_output=True, text=True, timeout=120)
         assert done.returncode == 0, done.stderr
         assert sorted(p.name for p in tmp_path.iterdir()) == ['us06_lead']
@@ -192,13 +192,13 @@ def test_existing_output_is_not_overwritten(good_bag: Path) -> None:
 def test_cli_one_line_error_and_replay(good_bag: Path, tmp_path: Path) -> None:
     holey = tmp_path / 'h'
     write_trace_bag(np.array([0.0, 1.0, 20.0]), np.ones(3), holey, TOPIC)
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'simulate',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'simulate',
                            '--trace', str(holey), '--no-progress'],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert proc.stderr.count('\n') == 1 and 'exceeds max_sample_gap_s' in proc.stderr
     out = tmp_path / 'again'
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'trace-to-bag',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'trace-to-bag',
                            'nycc', str(out)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     shutil.rmtree(out)

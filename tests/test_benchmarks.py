@@ -44,8 +44,8 @@ def test_floor_benchmark_smoke(tmp_path: Path, inputs: str) -> None:
     (no timing threshold)."""
     from mcap.reader import make_reader
 
-    from trust_monitor.common.step_chain import step_chain
-    from trust_monitor.common.topics import TOPICS
+    from trust_av_common.step_chain import step_chain
+    from trust_av_common.topics import TOPICS
 
     out = tmp_path / 'floor.json'
     proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'bench_floor.py'),
@@ -223,7 +223,7 @@ def test_soak_wall_two_minutes(tmp_path: Path) -> None:
                            '--duration-min', '2', '--baseline-min', '1', '--out', str(out)],
                           capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    from trust_monitor.common.topics import TOPICS, qualified
+    from trust_av_common.topics import TOPICS, qualified
 
     figures = json.loads(out.read_text())
     assert figures['problems'] == []

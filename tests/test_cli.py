@@ -18,16 +18,16 @@ from hypothesis import strategies as st
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
-from trust_av_planner.system.metrics import StepRecord
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
+from trust_av.system.metrics import StepRecord
 from trust_monitor.estimate import EstimateError, estimate_csv
 
 CONFIG = load_run_config()
 
 
 def trust_av(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', *args],
+    return subprocess.run([sys.executable, '-m', 'trust_av.cli', *args],
                           capture_output=True, text=True, timeout=300)
 
 
@@ -115,7 +115,7 @@ def test_every_command_and_option_says_what_it_is() -> None:
     markup), each command's --help has a description, and every option has a help text."""
     import argparse
 
-    from trust_av_planner.cli.main import build_parser
+    from trust_av.cli.main import build_parser
 
     parser = build_parser()
     commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))

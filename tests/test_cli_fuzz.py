@@ -21,8 +21,8 @@ import yaml
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
-from trust_av_planner.cli.main import main
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+from trust_av.cli.main import main
+from trust_av.system.config import DEFAULT_PARAMS_FILE
 
 TINY_TRACE = 'time_s,speed_mps\n0,10\n1,10.5\n2,11\n3,11\n'
 SHIPPED = yaml.safe_load(DEFAULT_PARAMS_FILE.read_text())
@@ -122,8 +122,8 @@ def listing(directory: Path) -> set[str]:
 
 @pytest.fixture
 def no_long_work(monkeypatch: pytest.MonkeyPatch) -> None:
-    from trust_av_planner.graph import orchestrator
-    from trust_av_planner.study import sweep
+    from trust_av.graph import orchestrator
+    from trust_av.study import sweep
     monkeypatch.setattr(orchestrator, 'run_graph_records', _started)
     monkeypatch.setattr(sweep, 'run_sweep', _started)
 
@@ -186,7 +186,7 @@ def test_repair_bag_on_a_damaged_recording_repairs_or_changes_nothing(
     from rosbag2_rules import check_bag_directory
     from test_recording import record
 
-    from trust_av_planner.graph.bag_writer import BagWriter
+    from trust_av.graph.bag_writer import BagWriter
     with fresh_directory() as here:
         bag = here / 'rec'
         record(BagWriter(bag), 5, finish=False)

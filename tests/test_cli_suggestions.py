@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from trust_av_planner.cli.main import main
-from trust_av_planner.cli.parser import suggest
-from trust_monitor.errors import did_you_mean, with_suggestions
+from trust_av.cli.main import main
+from trust_av.cli.parser import suggest
+from trust_av_common.errors import did_you_mean, with_suggestions
 
 
 def refused(capsys: pytest.CaptureFixture[str], *argv: str) -> list[str]:

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from conftest import ALPHAS, closed_loop, shipped_trace
 
+from trust_av_common import kinematics
 from trust_av_planner.nmpc import BOUND_TOLERANCE
-from trust_monitor.common import kinematics
 
 GOLDEN = Path(__file__).parent / 'golden' / 'us06_ca_alpha0.5_metrics.json'
 TRACES = ('us06', 'nycc')
@@ -89,8 +89,8 @@ def test_behind_tac_gru_the_human_comes_closer_and_the_av_keeps_d_s(alpha: float
 def test_the_cautious_human_keeps_d_s_behind_tac_gru(alpha: float, run_config) -> None:
     """The profile config/human_cautious.yaml plans the bound against the AV braking at
     u_R,min whatever it expects: behind the same TAC-GRU on US06 it never comes below d_s."""
-    from trust_av_planner.system.closed_loop import simulate
-    from trust_av_planner.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
+    from trust_av.system.closed_loop import simulate
+    from trust_av.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
     config = load_run_config(HUMAN_CAUTIOUS_PARAMS_FILE,
                              {'planner': {'alpha': alpha, 'predictor': 'gru'}})
     assert config.driver.cautious
@@ -105,8 +105,8 @@ def test_a_driver_stopped_behind_the_av_does_not_creep_below_d_s(run_config) -> 
     its tolerance, so the stopped human crept ~5e-8 m per step below d_s and then fell back
     (65 steps). The plan is now corrected to meet the bound exactly. The driver of the time was
     cautious (config/human_cautious.yaml), which promises d_s."""
-    from trust_av_planner.system.closed_loop import simulate
-    from trust_av_planner.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
+    from trust_av.system.closed_loop import simulate
+    from trust_av.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
     driver = {'weight_acceleration': 1.0, 'weight_desired_speed': 3.992764167065127e-09,
               'weight_relative_speed': 0.033816528119931986,
               'weight_relative_distance': 0.0007407111453434325,
@@ -133,7 +133,7 @@ def test_explicability_falls_and_trust_rises_with_alpha(trace: str) -> None:
 def test_same_command_same_numbers(run_config) -> None:
     from conftest import with_alpha
 
-    from trust_av_planner.system.closed_loop import simulate
+    from trust_av.system.closed_loop import simulate
     trace = shipped_trace('us06')
     first = simulate(with_alpha(run_config, 0.5), trace)
     second = simulate(with_alpha(run_config, 0.5), trace)
@@ -155,8 +155,8 @@ def test_the_shipped_human_follows_closer_than_the_cautious_one(run_config) -> N
     shipped human, planning its bound against the expected braking only, comes below d_s
     (measured 4.963 m; the cautious profile keeps 5.000 m) and falls back to hard braking more
     often (measured 25 steps), while the AV's own gap never goes below d_s."""
-    from trust_av_planner.system.closed_loop import simulate
-    from trust_av_planner.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
+    from trust_av.system.closed_loop import simulate
+    from trust_av.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
     d_s = run_config.planner.standstill_gap_m
     shipped = closed_loop('nycc', 0.0).metrics
     assert not run_config.driver.cautious

@@ -9,7 +9,7 @@ import math
 import pytest
 
 from human_driver_sim.evaluation import cluster_ci95, platoons
-from trust_monitor.common.stats import mean_ci95
+from trust_av_common.stats import mean_ci95
 
 
 def test_pairs_that_share_a_vehicle_are_one_platoon() -> None:

@@ -12,16 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trust_av_planner.study.compare_runs import compare_runs, read_run, trust_per_model
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.trust_interface import COMMON_SCALE
+from trust_av.study.compare_runs import compare_runs, read_run, trust_per_model
+from trust_av.system.config import load_run_config
+from trust_monitor.model_interface import COMMON_SCALE
 
 PNG = b'\x89PNG\r\n\x1a\n'
 
 
 def trust_av(*args: str, cwd: Path | None = None,
              env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', *args], cwd=cwd,
+    return subprocess.run([sys.executable, '-m', 'trust_av.cli', *args], cwd=cwd,
                           capture_output=True, text=True, timeout=600, env=env,
                           stdin=subprocess.DEVNULL)
 
@@ -135,9 +135,9 @@ def test_a_drive_recording_reads_at_the_plan_times(tmp_path: Path,
     """A trust-av drive bag (recognised by its start time in custom_data): odometry read at
     each plan's time, gaps bumper to bumper, the AV's first planned acceleration, E from the
     plan and the expected plan with the params file's eps."""
-    from trust_av_planner.drive import bag_data
-    from trust_av_planner.drive.trust_rating import DriveSeries
-    from trust_monitor.trust_model import explicability
+    from trust_av.drive import bag_data
+    from trust_av.drive.trust_rating import DriveSeries
+    from trust_monitor.paper_trust import explicability
 
     bag = tmp_path / 'drive_02_calm'
     bag.mkdir()
@@ -170,7 +170,7 @@ def test_a_drive_recording_reads_at_the_plan_times(tmp_path: Path,
 
 
 def test_the_cli_reference_documents_compare() -> None:
-    from trust_av_planner.cli import reference
+    from trust_av.cli import reference
 
     page = reference.fill((Path(__file__).resolve().parents[1] / 'docs' / 'reference' /
                            'cli.md').read_text())

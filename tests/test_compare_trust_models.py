@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from trust_monitor.common.registry import TRUST_MODELS, names
+from trust_av_common.registry import TRUST_MODELS, names
 
 SCRIPT = Path(__file__).resolve().parents[1] / 'scripts' / 'compare_trust_models.py'
 
@@ -35,7 +35,7 @@ def test_offline_on_a_graph_recording(tmp_path: Path) -> None:
     """--bag: the models are scored on a trust-av run recording; the paper model replayed
     over the bag's E gives the trust the graph's monitor recorded (= the in-process run)."""
     bag = tmp_path / 'run'
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'run', '--trace',
                            'us06', '--alpha', '0.5', '--predictor', 'ca', '--max-steps', '15',
                            '--bag', str(bag), '--no-progress', '--no-plot'],
                           capture_output=True, text=True, timeout=300, check=False)
@@ -47,7 +47,7 @@ def test_offline_on_a_graph_recording(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stdout + proc.stderr
     with (out / 'trust_models.csv').open() as handle:
         by = {(r['mode'], r['trust_model']): r for r in csv.DictReader(handle)}
-    from trust_av_planner.graph.bag_records import records_from_bag
+    from trust_av.graph.bag_records import records_from_bag
     recorded = records_from_bag(bag)
     assert len(recorded) == 15
     assert float(by['offline', 'paper']['final_trust']) == recorded[-1].trust

@@ -22,17 +22,17 @@ import numpy as np
 import pytest
 from broken_plugins import AT_IMPORT, broken, environment, install, installed_here
 
-from trust_av_planner.cli.main import main
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common import registry
-from trust_monitor.common.component_checks import (
+from trust_av.cli.main import main
+from trust_av.contract import ContractError, check_component
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
+from trust_av_common import registry
+from trust_av_common.component_checks import (
     BOUND_TOLERANCE,
     ComponentError,
     check_number,
     check_plan,
 )
-from trust_monitor.common.contract import ContractError, check_component
 
 STEPS = 8
 GOOD = broken.GOOD_STEPS
@@ -154,7 +154,7 @@ def test_a_broken_plugin_nobody_chose_stops_nothing(site: Path, trace_csv: Path,
     """Installed beside the shipped components (one of them exits at import): a command
     that does not choose one runs as without them; one that does is one line, exit 2."""
     env = environment(site)
-    command = [sys.executable, '-m', 'trust_av_planner.cli', 'simulate', '--trace',
+    command = [sys.executable, '-m', 'trust_av.cli', 'simulate', '--trace',
                str(trace_csv), '--no-progress']
     proc = subprocess.run(command, env=env, cwd=tmp_path, capture_output=True, text=True,
                           timeout=300, stdin=subprocess.DEVNULL)
@@ -180,10 +180,10 @@ one (the driver); the trust monitor is managed like the planner."""
 def test_a_broken_plugin_stops_the_graph_in_one_line(group: str, name: str, node: str,
                                                      shown: str, site: Path, trace_csv: Path,
                                                      tmp_path: Path) -> None:
-    from trust_av_planner.graph.bag_records import records_from_bag
+    from trust_av.graph.bag_records import records_from_bag
 
     bag = tmp_path / 'run'
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'run', '--trace',
                            str(trace_csv), OPTION[group], name, '--bag', str(bag),
                            '--no-plot', '--no-progress'], env=environment(site),
                           cwd=tmp_path, capture_output=True, text=True, timeout=300,
@@ -222,12 +222,12 @@ def test_the_checks_take_what_the_interface_allows() -> None:
 
 def test_a_refused_configure_is_named_by_the_orchestrator(tmp_path: Path) -> None:
     """A managed node whose component fails to build logs one ``configure failed:`` line
-    (trust_monitor.ros.lifecycle); the orchestrator's message is that line, not 'see its
+    (trust_av_common.ros.lifecycle); the orchestrator's message is that line, not 'see its
     log' (seen end to end by hand: ``node planner: transition configure failed: predictor
     'broken_factory_raises' (trust_av.predictors): its factory raised ValueError: ...``)."""
     from types import SimpleNamespace
 
-    from trust_av_planner.graph.lifecycle_client import _why
+    from trust_av.graph.lifecycle_client import _why
 
     log = tmp_path / 'planner.log'
     log.write_text('[INFO] [1.0] [planner]: unconfigured\n[ERROR] [2.0] [planner]: configure '

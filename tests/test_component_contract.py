@@ -2,7 +2,7 @@
 installed (a plug-in is tested by installing it into the environment and running this file).
 
 Parametrised from the registry at collection time. The rules themselves are the shipped
-contract, :func:`trust_monitor.common.contract.check_component` (declaration, build, output
+contract, :func:`trust_av.contract.check_component` (declaration, build, output
 shape and bounds, determinism, bad parameters, and with ``graph=True`` graph == in-process:
 30 steps through the node graph equal the in-process loop), which a plug-in's own CI runs
 the same way. Here also, through the command line: a bad value of one of its parameters in
@@ -22,10 +22,10 @@ from typing import Any
 
 import pytest
 
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common import registry
-from trust_monitor.common.contract import check_component
-from trust_monitor.common.params import PARAM_METADATA_KEY
+from trust_av.contract import check_component
+from trust_av.system.config import load_run_config
+from trust_av_common import registry
+from trust_av_common.params import PARAM_METADATA_KEY
 
 GRAPH_STEPS = 30
 SECTIONS = {registry.PREDICTORS: ('planner', 'predictor', '--predictor'),
@@ -37,7 +37,7 @@ IDS = [f'{group.rsplit(".", 1)[-1]}-{name}' for group, name in CASES]
 
 def cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     """``trust-av ARGS`` in a fresh process (which finds the components as a user's does)."""
-    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', *args], cwd=cwd,
+    return subprocess.run([sys.executable, '-m', 'trust_av.cli', *args], cwd=cwd,
                           capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
 
 
@@ -98,8 +98,8 @@ def test_the_declared_needs_decide_what_runs_without_the_follower(name: str,
                                                                   tmp_path: Path) -> None:
     """Without the follower's odometry the planner and ``trust-av shadow`` refuse exactly
     the estimators that declare ``follower_state``, whatever their name."""
+    from trust_av_common.kinematics import VehicleState
     from trust_av_planner.planner import AvPlanner
-    from trust_monitor.common.kinematics import VehicleState
 
     needs = registry.FOLLOWER_STATE in registry.get(registry.PREDICTORS, name).needs
     config = load_run_config(overrides={'planner': {'predictor': name}})

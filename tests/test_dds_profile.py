@@ -16,15 +16,15 @@ from pathlib import Path
 
 import pytest
 
-from trust_av_planner.graph import processes
-from trust_av_planner.graph.processes import (
+from trust_av.graph import processes
+from trust_av.graph.processes import (
     DDS_PROFILE,
     PROFILE_VARIABLES,
     Graph,
     GraphError,
     use_run_discovery,
 )
-from trust_monitor.common.param_layers import shipped_params_file
+from trust_av_common.param_layers import shipped_params_file
 
 SHIPPED = shipped_params_file(DDS_PROFILE)
 NODE = ('import rclpy; rclpy.init(); node = rclpy.create_node("profile_check"); '

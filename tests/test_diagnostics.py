@@ -1,7 +1,7 @@
 """``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``, as diagnostic_updater publishes it)
 and no silent state: a wall-mode node that cannot run as configured says why, on
-``/diagnostics``, in its status and in its log (trust_monitor/ros/diagnostics.py,
-trust_monitor/ros/lifecycle.py)."""
+``/diagnostics``, in its status and in its log (trust_av_common/ros/diagnostics.py,
+trust_av_common/ros/lifecycle.py)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from typing import Any
 
 from test_lifecycle import ACTIVATE, Manager, start, stop
 
-from trust_av_planner.graph.domains import lease_domain
+from trust_av.graph.domains import lease_domain
 
 WALL = ['-p', 'clock_mode:=wall', '-p', "human_odom_topic:=''", '-p', 'predictor:=ca',
         '-p', 'lead_preview:=constant_speed']
@@ -36,9 +36,9 @@ def listen(manager: Manager) -> None:
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import AccelStamped
 
-    from trust_monitor.common.wall_clock import WallClockConfig
-    from trust_monitor.ros.diagnostics import QOS
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av_common.ros.diagnostics import QOS
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
 
     wall = WallClockConfig(clock_mode='wall')
     manager.record(DiagnosticArray, '/diagnostics', QOS)
@@ -50,9 +50,9 @@ def odometry_inputs(manager: Manager, frames: dict[str, str]) -> None:
     """Lead and ego odometry at 100 Hz, stamped now, in ``frames[...]`` (changeable)."""
     from nav_msgs.msg import Odometry
 
-    from trust_monitor.common.wall_clock import WallClockConfig
-    from trust_monitor.ros.messages import odometry
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av_common.ros.messages import odometry
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
 
     wall = WallClockConfig(clock_mode='wall')
     pubs = {t: manager.node.create_publisher(Odometry, t, topic_qos(t, wall))
@@ -122,9 +122,9 @@ def test_diagnostics_once_a_second_with_solve_times_input_ages_and_frames(
     deceleration. Before it is configured it already reports its lifecycle state."""
     from nav_msgs.msg import Odometry
 
-    from trust_av_planner.system.config import load_run_config
-    from trust_monitor.common.wall_clock import WallClockConfig
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av.system.config import load_run_config
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
 
     frames = {'preceding_vehicle/odom': 'odom', 'ego/odom': 'odom'}
     with lease_domain() as domain:

@@ -25,10 +25,10 @@ import pytest
 import yaml
 from example_plugin import install_example_plugin
 
-from trust_av_planner.cli import reference
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_monitor.common.params import read_params_file
-from trust_monitor.common.topics import TOPICS, topic_table_markdown
+from trust_av.cli import reference
+from trust_av.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_common.params import read_params_file
+from trust_av_common.topics import TOPICS, topic_table_markdown
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = REPO / 'docs'

@@ -1,6 +1,6 @@
 """Driver in the loop through the real page: Debian's chromium, headless, driven by
 Playwright; ``trust-av drive`` runs the node graph in wall mode and serves the page. A
-synthetic participant (trust_av_planner.drive.synthetic: an IDM computing its pedal from the
+synthetic participant (trust_av.drive.synthetic: an IDM computing its pedal from the
 page's own displayed state, held on the page's pointer pedal) drives whole sessions.
 
 Checked: the bags hold every topic, the ratings and the questionnaire are recorded on the
@@ -29,18 +29,18 @@ import numpy as np
 import pytest
 from rosbag2_rules import check_bag_directory
 
-from trust_av_planner.drive.bag_data import (
+from trust_av.drive.bag_data import (
     DriveBagError,
     custom_data,
     demonstration,
     drive_bag_pairs,
     read_drive,
 )
-from trust_av_planner.drive.gate import reason_key
-from trust_av_planner.drive.sessions import balanced_latin_square_row
-from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
-from trust_av_planner.drive.trust_rating import questionnaire_score
-from trust_monitor.common.registry import TRUST_MODELS, names
+from trust_av.drive.gate import reason_key
+from trust_av.drive.sessions import balanced_latin_square_row
+from trust_av.drive.synthetic import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
+from trust_av.drive.trust_rating import questionnaire_score
+from trust_av_common.registry import TRUST_MODELS, names
 
 pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),
@@ -73,7 +73,7 @@ class Drive:
         self.lines: queue.Queue[str] = queue.Queue()
         self.output: list[str] = []
         self.process = subprocess.Popen(
-            [sys.executable, '-m', 'trust_av_planner.cli', 'drive', '--study', str(study),
+            [sys.executable, '-m', 'trust_av.cli', 'drive', '--study', str(study),
              '--participant', participant, '--drive-file', str(settings),
              *([] if practice else ['--no-practice'])],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,

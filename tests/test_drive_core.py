@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trust_av_planner.drive.follower import (
+from human_driver_sim.follower_plant import (
     BRAKE,
     COAST,
     HOLD,
@@ -20,8 +20,8 @@ from trust_av_planner.drive.follower import (
     FollowerConfig,
     applied_accel,
 )
-from trust_av_planner.drive.server import parse_message
-from trust_av_planner.drive.sessions import (
+from trust_av.drive.server import parse_message
+from trust_av.drive.sessions import (
     ABANDONED,
     DONE,
     PRACTICE,
@@ -35,12 +35,12 @@ from trust_av_planner.drive.sessions import (
     save_session,
     withdraw,
 )
-from trust_av_planner.drive.study import (
+from trust_av.drive.study import (
     DriveConfig,
     load_drive_settings,
     summary_csv,
 )
-from trust_av_planner.drive.trust_rating import (
+from trust_av.drive.trust_rating import (
     DriveSeries,
     RatingError,
     compare,
@@ -49,10 +49,10 @@ from trust_av_planner.drive.trust_rating import (
     rating_value,
     registered_models,
 )
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
-from trust_monitor.common.params import ParamsError
-from trust_monitor.common.registry import TRUST_MODELS, names
-from trust_monitor.trust_model import TrustConfig, TrustEstimator
+from trust_av.system.config import DEFAULT_PARAMS_FILE
+from trust_av_common.params import ParamsError
+from trust_av_common.registry import TRUST_MODELS, names
+from trust_monitor.paper_trust import TrustConfig, TrustEstimator
 
 CONFIG = FollowerConfig(input_timeout_s=0.5, coast_s=1.0, fallback_brake_mps2=-2.0)
 CONDITIONS = [Condition('a', 0.0, 'ca', 'us06'), Condition('b', 0.5, 'ca', 'us06'),
@@ -242,7 +242,7 @@ def test_page_messages_are_checked() -> None:
 
 def test_drive_demonstrations_hold_out_whole_participants() -> None:
     from human_driver_sim.car_following import FollowingPair
-    from trust_av_planner.drive.bag_data import DriveBagError, split_by_participant
+    from trust_av.drive.bag_data import DriveBagError, split_by_participant
 
     def pair(person: str, k: int) -> FollowingPair:
         one = np.ones(3)
@@ -262,7 +262,7 @@ def test_drive_demonstrations_hold_out_whole_participants() -> None:
 
 
 def test_fit_driver_refuses_a_study_without_complete_drives(tmp_path: Path) -> None:
-    from trust_av_planner.drive.bag_data import DriveBagError, drive_bag_pairs
+    from trust_av.drive.bag_data import DriveBagError, drive_bag_pairs
     with pytest.raises(DriveBagError, match='no complete drive'):
         drive_bag_pairs(tmp_path, 1.0, 4.5)
 
@@ -275,7 +275,7 @@ def test_fit_driver_refuses_a_study_without_complete_drives(tmp_path: Path) -> N
 def test_bad_drive_input_is_one_line_and_writes_nothing(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str],
         message: str) -> None:
-    from trust_av_planner.cli.main import main
+    from trust_av.cli.main import main
     study = tmp_path / 'study'
     args = [a if a != 'missing.yaml' else str(tmp_path / a) for a in args]
     assert main(['drive', '--study', str(study), *args]) == 2
@@ -288,7 +288,7 @@ def test_a_taken_port_is_one_line_and_enrols_nobody(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     import socket
 
-    from trust_av_planner.cli.main import main
+    from trust_av.cli.main import main
     with socket.socket() as taken:
         taken.bind(('127.0.0.1', 0))
         taken.listen()
@@ -302,7 +302,7 @@ def test_a_taken_port_is_one_line_and_enrols_nobody(
 
 def test_withdrawal_from_the_command_line(tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
-    from trust_av_planner.cli.main import main
+    from trust_av.cli.main import main
     enrol(tmp_path, 'P07', CONDITIONS)
     assert main(['drive', '--study', str(tmp_path), '--participant', 'P07', '--withdraw',
                  '--yes']) == 0
@@ -313,9 +313,9 @@ def test_every_model_s_live_trust_is_on_the_common_scale() -> None:
     """What a drive records on /driver/model_trust: each registered model's trust after
     each plan pair, mapped to [0, 1] by the model's declared ``trust_range`` (the paper's
     model: T(0) +- delta * 600 s), not in the model's own units."""
-    from trust_av_planner.graph.drive_link import ModelTrust
-    from trust_av_planner.system.config import load_run_config
-    from trust_monitor.trust_interface import make_trust_model
+    from trust_av.drive.link import ModelTrust
+    from trust_av.system.config import load_run_config
+    from trust_monitor.model_interface import make_trust_model
 
     config = load_run_config()
     live = ModelTrust(config.trust, dict(config.trust_model_params))

@@ -17,11 +17,11 @@ import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
-from trust_av_planner.drive.follower import COLLISION_CLEAR_M, contact
-from trust_av_planner.drive.gate import DRIVING, INPUT_BURST, QUESTIONNAIRE, READY, WAIT, Gate
-from trust_av_planner.drive.server import FLOOD_MESSAGES_PER_S, DriveServer
+from human_driver_sim.follower_plant import COLLISION_CLEAR_M, contact
+from trust_av.drive.gate import DRIVING, INPUT_BURST, QUESTIONNAIRE, READY, WAIT, Gate
+from trust_av.drive.server import FLOOD_MESSAGES_PER_S, DriveServer
+from trust_av_common.kinematics import VehicleState
 from trust_av_planner.planner import observe
-from trust_monitor.common.kinematics import VehicleState
 
 MS = 1_000_000
 

@@ -19,8 +19,8 @@ import pytest
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-from trust_av_planner.drive.gate import DRIVING, READY, Gate, finite_number
-from trust_av_planner.drive.server import (
+from trust_av.drive.gate import DRIVING, READY, Gate, finite_number
+from trust_av.drive.server import (
     MAX_CONNECTIONS,
     MAX_MESSAGE_BYTES,
     DriveServer,

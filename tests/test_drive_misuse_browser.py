@@ -31,9 +31,9 @@ import numpy as np
 import pytest
 from rosbag2_rules import check_bag_directory
 
-from trust_av_planner.drive.bag_data import custom_data, read_drive
-from trust_av_planner.drive.gate import reason_key
-from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+from trust_av.drive.bag_data import custom_data, read_drive
+from trust_av.drive.gate import reason_key
+from trust_av.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
 
 pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),
@@ -107,7 +107,7 @@ class Drive:
         self.lines: queue.Queue[str] = queue.Queue()
         self.output: list[str] = []
         self.process = subprocess.Popen(
-            [sys.executable, '-m', 'trust_av_planner.cli', 'drive', '--study', str(study),
+            [sys.executable, '-m', 'trust_av.cli', 'drive', '--study', str(study),
              '--participant', 'P09', '--drive-file', str(settings)],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
             env={**os.environ, 'PYTHONUNBUFFERED': '1'})

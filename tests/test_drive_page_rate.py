@@ -12,9 +12,9 @@ from typing import Any
 
 import pytest
 
-from trust_av_planner.drive.gate import DRIVING, INPUT_BURST, READY, Gate
-from trust_av_planner.drive.server import DriveServer
-from trust_av_planner.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+from trust_av.drive.gate import DRIVING, INPUT_BURST, READY, Gate
+from trust_av.drive.server import DriveServer
+from trust_av.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
 
 pytestmark = [pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),

@@ -25,7 +25,7 @@ from human_driver_sim.evaluation import (
 from human_driver_sim.fitting import MPC_BOUNDS, configured, fit_idm, fit_mpc
 from human_driver_sim.idm import FIT_BOUNDS, TEXTBOOK_MOTORWAY, IdmParams
 from human_driver_sim.ngsim import read_ngsim_pairs, split_by_follower
-from trust_monitor.common.stats import mean_ci95, t_quantile_975
+from trust_av_common.stats import mean_ci95, t_quantile_975
 
 CONFIG = DriverConfig(dt_s=1.0, horizon_steps=3, standstill_gap_m=5.0, speed_min_mps=0.0,
                       speed_max_mps=36.0, weight_acceleration=1.0, weight_desired_speed=0.002,

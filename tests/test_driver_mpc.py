@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc, features
-from trust_monitor.common import kinematics
+from trust_av_common import kinematics
 
 
 def test_step_and_rollout_by_hand() -> None:

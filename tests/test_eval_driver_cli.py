@@ -10,7 +10,7 @@ import yaml
 from synthetic_car_following import write_ngsim_chain, write_openacc
 
 from human_driver_sim.fitting import MPC_BOUNDS
-from trust_av_planner.cli.main import main
+from trust_av.cli.main import main
 
 MODELS = ('driver MPC (params file)', 'driver MPC, cautious (human_cautious.yaml)',
           'IDM, bounded fit', 'IDM, textbook motorway',

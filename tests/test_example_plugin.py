@@ -33,7 +33,7 @@ def trace_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def trust_av(env: dict[str, str], *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', *args], env=env,
+    return subprocess.run([sys.executable, '-m', 'trust_av.cli', *args], env=env,
                           cwd=cwd, capture_output=True, text=True, timeout=300,
                           stdin=subprocess.DEVNULL)
 
@@ -96,7 +96,7 @@ def test_study_cache_keys_on_the_plugins_code(plugin_env: dict[str, str],
                                               tmp_path: Path) -> None:
     """A cached case must not outlive a change of the plug-in's code: its module is part of
     the sweep's code fingerprint."""
-    code = ('from trust_av_planner.study import sweep; '
+    code = ('from trust_av.study import sweep; '
             'print([p.name for p in sweep.plugin_sources()]); print(sweep.code_fingerprint())')
     def run(env: dict[str, str]) -> list[str]:
         proc = subprocess.run([sys.executable, '-c', code], env=env, cwd=tmp_path,
@@ -172,7 +172,7 @@ def test_tutorial_includes_the_example_files() -> None:
 
 
 def test_components_reference_lists_every_shipped_component() -> None:
-    from trust_monitor.common import registry
+    from trust_av_common import registry
 
     text = (REPO / 'docs' / 'reference' / 'components.md').read_text()
     for group in (registry.PREDICTORS, registry.DRIVERS):

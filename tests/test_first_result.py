@@ -12,12 +12,12 @@ import pytest
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.cli.main import main
-from trust_av_planner.cli.options import Progress, ceiling_at_end, format_metrics
-from trust_av_planner.cli.reproduce import truncation_note, unsafe_cases
-from trust_av_planner.study.sweep import Case
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
+from trust_av.cli.main import main
+from trust_av.cli.options import Progress, ceiling_at_end, format_metrics
+from trust_av.cli.reproduce import truncation_note, unsafe_cases
+from trust_av.study.sweep import Case
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
 
 
 def test_the_summary_names_the_ceiling() -> None:

@@ -9,11 +9,11 @@ import pytest
 from human_driver_sim.driver_mpc import DriverMpc
 from human_driver_sim.followers import FollowerConfig, make_follower
 from human_driver_sim.idm import TEXTBOOK_MOTORWAY, IdmConfig, IdmFollower, idm_accel
+from trust_av.system.config import load_run_config
+from trust_av_common import registry
+from trust_av_common.params import ParamsError
 from trust_av_planner.planner import make_predictor
 from trust_av_planner.predictors import Observation
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common import registry
-from trust_monitor.common.params import ParamsError
 
 
 @pytest.fixture(scope='module')

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from rosbags.highlevel import AnyReader
 
-from trust_av_planner.graph.bag_records import TYPESTORE
-from trust_av_planner.study.layout_plots import (
+from trust_av.graph.bag_records import TYPESTORE
+from trust_av.study.layout_plots import (
     LAYOUT_FILE,
     LayoutError,
     load_layout,
@@ -25,7 +25,7 @@ from trust_av_planner.study.layout_plots import (
     read_series,
     render_plots,
 )
-from trust_monitor.common.topics import VEHICLE_FRAMES
+from trust_av_common.topics import VEHICLE_FRAMES
 
 STEPS = 20
 
@@ -33,7 +33,7 @@ STEPS = 20
 @pytest.fixture(scope='module')
 def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp('layout') / 'run'
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'run', '--trace',
                            'us06', '--max-steps', str(STEPS), '--bag', str(path),
                            '--no-progress', '--no-plot'], capture_output=True, text=True,
                           timeout=300)

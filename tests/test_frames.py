@@ -14,16 +14,7 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from trust_monitor.common.topics import (
-    NO_FRAME,
-    ODOM_FRAME,
-    TOPIC,
-    TOPICS,
-    VEHICLE_FRAMES,
-    is_topic_name,
-    qualified,
-)
-from trust_monitor.ros.messages import (
+from trust_av_common.ros.messages import (
     SerializedTemplate,
     TrajectoryBytes,
     VehicleMarkers,
@@ -34,7 +25,16 @@ from trust_monitor.ros.messages import (
     trajectory,
     vector3_bytes,
 )
-from trust_monitor.ros.messages import odometry as plain_odometry
+from trust_av_common.ros.messages import odometry as plain_odometry
+from trust_av_common.topics import (
+    NO_FRAME,
+    ODOM_FRAME,
+    TOPIC,
+    TOPICS,
+    VEHICLE_FRAMES,
+    is_topic_name,
+    qualified,
+)
 
 
 def test_every_row_is_relative_and_names_its_frames() -> None:
@@ -169,8 +169,8 @@ def test_serialised_messages_have_their_exact_cdr_length() -> None:
 
 
 def test_frame_ids_are_rep105_parameters_and_positions_must_share_one() -> None:
-    from trust_monitor.common.frames import FrameConfig, body_frame, position_frame_problem
-    from trust_monitor.common.params import ParamsError
+    from trust_av_common.frames import FrameConfig, body_frame, position_frame_problem
+    from trust_av_common.params import ParamsError
 
     config = FrameConfig()
     assert (config.map_frame_id, config.odom_frame_id, config.base_frame_id) == (
@@ -195,7 +195,7 @@ def test_centreline_projection_gives_distance_along_and_signed_offset() -> None:
     the velocity along the lane is the component along the leg."""
     import math
 
-    from trust_monitor.common.lane import Centreline, LaneError
+    from trust_av_common.lane import Centreline, LaneError
 
     lane = Centreline([(1000.0, 2000.0), (1100.0, 2000.0), (1100.0, 2050.0)])
     assert lane.length_m == 150.0
@@ -221,7 +221,7 @@ def test_centreline_projection_gives_distance_along_and_signed_offset() -> None:
 def test_lead_is_the_nearest_object_ahead_on_the_lane() -> None:
     """Behind the AV, beside the lane (more than half a lane width off) or farther ahead:
     not the lead; none qualifying: None."""
-    from trust_monitor.common.lane import LaneError, OnLane, lead_on_lane
+    from trust_av_common.lane import LaneError, OnLane, lead_on_lane
 
     objects = [OnLane(40.0, 0.2, 0.0),    # behind the AV at 50 m
                OnLane(70.0, 3.5, 0.0),    # next lane

@@ -27,12 +27,12 @@ from rosbags.highlevel import AnyReader
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.graph.bag_records import message_stamp, records_from_bag
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
-from trust_av_planner.system.metrics import StepRecord
-from trust_av_planner.system.outputs import MARKER
-from trust_monitor.common.topics import TOPICS, qualified
+from trust_av.graph.bag_records import message_stamp, records_from_bag
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
+from trust_av.system.metrics import StepRecord
+from trust_av.system.outputs import MARKER
+from trust_av_common.topics import TOPICS, qualified
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from rosbag2_rules import check_bag_directory  # the test-side oracle module
@@ -44,7 +44,7 @@ RECORDED = {qualified(t.name): t.messages(STEPS) for t in TOPICS if 'recorder' i
 
 def run_command(bag: Path, *extra: str, plot: bool = False) -> list[str]:
     """``trust-av run`` on US06 (TAC-CA, alpha 0.5); only ``graph_run`` draws the plot."""
-    return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
+    return [sys.executable, '-m', 'trust_av.cli', 'run', '--trace', 'us06',
             '--alpha', '0.5', '--predictor', 'ca', '--max-steps', str(STEPS), '--bag', str(bag),
             '--no-progress', *([] if plot else ['--no-plot']), *extra]
 
@@ -112,7 +112,7 @@ def test_graph_equals_in_process(graph_run: tuple[Path, str]) -> None:
 
 def test_every_node_stops_with_its_messages_acknowledged(graph_run: tuple[Path, str]) -> None:
     """On the stop every node waits until its subscribers have acknowledged what it
-    published, and says which topics were not (trust_monitor.ros.spin._drain). Readers
+    published, and says which topics were not (trust_av_common.ros.spin._drain). Readers
     acknowledge on their writer's heartbeat: with Fast DDS's default period (3 s) every
     node's wait ran into its 1 s timeout; the run's profile sets 100 ms."""
     bag, _ = graph_run
@@ -219,8 +219,8 @@ def test_killed_node_is_named_and_nothing_is_left(tmp_path: Path) -> None:
 
 def test_documented_topic_table_is_the_code_table() -> None:
     """The topics page of the site is filled from the code's table at build time."""
-    from trust_av_planner.cli.reference import fill
-    from trust_monitor.common.topics import topic_table_markdown
+    from trust_av.cli.reference import fill
+    from trust_av_common.topics import topic_table_markdown
     page = Path(__file__).resolve().parents[1] / 'docs' / 'reference' / 'topics-and-qos.md'
     assert topic_table_markdown() in fill(page.read_text())
 

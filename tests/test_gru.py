@@ -16,6 +16,22 @@ import pytest
 from conftest import shipped_trace
 
 from preceding_traffic.traces import truncate
+from trust_av.study.gru_training import (
+    TrainingSettings,
+    build_dataset,
+    samples_from_run,
+    train,
+    train_with_dagger,
+)
+from trust_av.study.pinned_numerics import (
+    CHILD_MARK,
+    numerics_report,
+    run_pinned,
+    unsupported_reason,
+)
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
+from trust_av_common.registry import RegistryError
 from trust_av_planner.planner import make_predictor
 from trust_av_planner.predictors import Observation
 from trust_av_planner.predictors.gru import (
@@ -26,22 +42,6 @@ from trust_av_planner.predictors.gru import (
     gru_forward,
     load_weights,
 )
-from trust_av_planner.study.gru_training import (
-    TrainingSettings,
-    build_dataset,
-    samples_from_run,
-    train,
-    train_with_dagger,
-)
-from trust_av_planner.study.pinned_numerics import (
-    CHILD_MARK,
-    numerics_report,
-    run_pinned,
-    unsupported_reason,
-)
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common.registry import RegistryError
 
 SHIPPED = MODELS_DIR / 'gru_plan_estimator.npz'
 
@@ -153,7 +153,7 @@ def test_reduced_retraining_with_dagger_reproduces_itself(tmp_path: Path) -> Non
 def retrain_shipped(out: Path, *options: str) -> subprocess.CompletedProcess[str]:
     """``trust-av train-gru --out OUT [options]`` as a user runs it (it trains in a child
     process with pinned numerics)."""
-    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'train-gru',
+    return subprocess.run([sys.executable, '-m', 'trust_av.cli', 'train-gru',
                            '--out', str(out), *options], capture_output=True, text=True)
 
 
@@ -269,7 +269,7 @@ def numerics_in_child(env: dict[str, str], *, pinned: bool,
     """:func:`numerics_report` of a fresh process with ``env`` on top of ours, pinned (the
     training process of `trust-av train-gru`) or not, of every library or of ``libraries``
     (comma-separated)."""
-    args = ['-m', 'trust_av_planner.study.pinned_numerics']
+    args = ['-m', 'trust_av.study.pinned_numerics']
     if libraries is not None:
         args += ['--libraries', libraries]
     if pinned:

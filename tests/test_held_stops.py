@@ -1,7 +1,7 @@
 """A stop signal that arrives while CasADi solves: CasADi polls for signals
 (``PyErr_CheckSignals``) and turned the handler's exception into its own error or a failed
 solve; the project's solves hold the stop signals until they return
-(``trust_monitor/common/held_stops.py``). Same on every CPU: nothing numeric is compared."""
+(``trust_av_common/held_stops.py``). Same on every CPU: nothing numeric is compared."""
 
 from __future__ import annotations
 
@@ -16,9 +16,9 @@ from typing import Any
 import casadi as ca
 import pytest
 
-from trust_av_planner.graph import stop_signals
-from trust_monitor.common.held_stops import held
-from trust_monitor.common.solver import solve, sqp_options
+from trust_av.graph import stop_signals
+from trust_av_common.held_stops import held
+from trust_av_common.solver import solve, sqp_options
 
 
 class SignalOnEvaluation(ca.Callback):
@@ -117,8 +117,8 @@ def test_the_solves_of_both_mpcs_go_through_the_hold() -> None:
 
 RENAMES_WITH_ANOTHER_THREAD = textwrap.dedent("""
     import os, signal, threading, time
-    from trust_av_planner.graph import stop_signals
-    from trust_monitor.common.output_files import stop_signals_held
+    from trust_av.graph import stop_signals
+    from trust_av_common.output_files import stop_signals_held
 
     done = threading.Event()
     other = threading.Thread(target=done.wait)

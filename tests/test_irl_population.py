@@ -14,10 +14,10 @@ from human_driver_sim.population import (
     sample_driver_params,
     sample_population,
 )
-from trust_av_planner.cli.main import main
+from trust_av.cli.main import main
+from trust_av.study.population import population_cases
+from trust_av.study.sweep import Case
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.study.population import population_cases
-from trust_av_planner.study.sweep import Case
 
 PER_PAIR = np.array([[1.0, 0.01, 0.05, 0.001], [1.0, 0.02, 0.06, 0.002]])
 

@@ -1,13 +1,14 @@
-"""The import rule of the layout (docs/reference/code-map.md), checked on every module of the four
+"""The import rule of the layout (docs/reference/code-map.md), checked on every module of the six
 packages by walking their imports (module level and inside functions), and the pure core's
 promise that importing it never loads rclpy or a message package (HOUSE_STYLE rule 1).
 
 The layers are declared once, in ``scripts/code_map.py`` (``LAYERS``), which also writes the
 code map. The rule:
 - every module is in a folder its package's layers declare: an unlisted folder fails;
-- packages: ``trust_monitor`` imports none of the other three; ``preceding_traffic`` and
-  ``human_driver_sim`` import only ``trust_monitor`` (and not each other); nothing imports
-  ``trust_av_planner``;
+- packages: ``trust_av_common`` (the floor) imports none of the others; ``trust_monitor``,
+  ``preceding_traffic`` and ``human_driver_sim`` import only the floor (and not each other);
+  ``trust_av_planner`` imports those but not ``trust_av`` (the application), which nothing
+  imports;
 - inside a package, a module imports only folders of the same or a lower rank; node modules
   (``*_node.py``) are started by name and imported by nobody;
 - pure folders' modules (except node modules and ``__main__``) never import rclpy, a message
@@ -184,29 +185,32 @@ def plant(tmp_path: Path, files: dict[str, str]) -> dict[str, Module]:
 def test_planted_violations_are_found(tmp_path: Path) -> None:
     """The checker is not vacuous: each kind of violation, planted once, is reported."""
     planted = {
-        'trust_monitor/trust_monitor/common/bad_ros.py': 'import rclpy\n',
-        'trust_monitor/trust_monitor/common/bad_up.py':
-            'from trust_monitor.trust_model import TrustConfig\n',
+        'trust_av_common/trust_av_common/bad_ros.py': 'import rclpy\n',
+        'trust_av_common/trust_av_common/bad_up.py':
+            'from trust_monitor.paper_trust import TrustConfig\n',
         'human_driver_sim/human_driver_sim/bad_planner.py':
             'from trust_av_planner.nmpc import PlannerConfig\n',
-        'trust_av_planner/trust_av_planner/system/bad_graph.py':
-            'def f():\n    from trust_av_planner.graph.orchestrator import run_graph\n',
+        'trust_av_planner/trust_av_planner/bad_app.py':
+            'from trust_av.system.config import RunConfig\n',
+        'trust_av/trust_av/system/bad_graph.py':
+            'def f():\n    from trust_av.graph.orchestrator import run_graph\n',
         'trust_av_planner/trust_av_planner/bad_msgs.py': 'from nav_msgs.msg import Odometry\n',
         'preceding_traffic/preceding_traffic/cycle_a.py': 'import preceding_traffic.cycle_b\n',
         'preceding_traffic/preceding_traffic/cycle_b.py': 'import preceding_traffic.cycle_a\n',
-        'trust_av_planner/trust_av_planner/webapp/server.py': 'import asyncio\n',
-        'trust_av_planner/trust_av_planner/study/bad_node.py':
+        'trust_av/trust_av/webapp/server.py': 'import asyncio\n',
+        'trust_av/trust_av/study/bad_node.py':
             'from trust_av_planner.planner_node import PlannerNode\n',
     }
     found = '\n'.join(violations(plant(tmp_path, planted)))
-    assert 'common.bad_ros imports rclpy: a pure module imports ROS' in found
-    assert ('common.bad_up imports trust_monitor.trust_model: layer 0 may not import '
-            'layer 2') in found
+    assert 'trust_av_common.bad_ros imports rclpy: a pure module imports ROS' in found
+    assert ('trust_av_common.bad_up imports trust_monitor.paper_trust: package trust_av_common '
+            'may not import trust_monitor') in found
     assert 'bad_planner imports trust_av_planner.nmpc: package human_driver_sim may not' in found
-    assert ('system.bad_graph imports trust_av_planner.graph.orchestrator: layer 1 may not '
+    assert ('bad_app imports trust_av.system.config: package trust_av_planner may not import '
+            'trust_av') in found
+    assert ('system.bad_graph imports trust_av.graph.orchestrator: layer 1 may not '
             'import layer 2') in found
-    assert ('trust_av_planner.webapp.server: folder trust_av_planner/webapp/ is in no declared '
-            'layer') in found
+    assert 'trust_av.webapp.server: folder trust_av/webapp/ is in no declared layer' in found
     assert 'bad_msgs imports nav_msgs.msg: a pure module imports ROS' in found
     assert 'import cycle: preceding_traffic.cycle_a -> preceding_traffic.cycle_b' in found
     assert 'bad_node imports trust_av_planner.planner_node: node modules' in found
@@ -216,7 +220,7 @@ def test_importing_the_pure_core_loads_no_ros() -> None:
     """At run time too (third-party imports included): every pure module, imported in a
     fresh interpreter, leaves rclpy and every message package unloaded."""
     pure = sorted(name for name, module in scan(SRC).items() if is_pure(module))
-    assert 'trust_av_planner.system.closed_loop' in pure and 'trust_monitor.ros.qos' not in pure
+    assert 'trust_av.system.closed_loop' in pure and 'trust_av_common.ros.qos' not in pure
     code = ('import sys\n'
             f'for m in {pure!r}: __import__(m)\n'
             f'roots = {ROS_ROOTS!r}\n'

@@ -13,7 +13,7 @@ The rules checked are rclpy's and rcl_lifecycle's, from their sources:
   to unconfigured. A transition not valid from the current state fails in
   ``rcl_lifecycle/src/rcl_lifecycle.c`` ("Transition is not registered"), which rclpy 7.1
   raises out of the service callback (ending the process); our nodes answer ``success``
-  False and stay in their state (``trust_monitor/ros/lifecycle.py``).
+  False and stay in their state (``trust_av_common/ros/lifecycle.py``).
 - ``lifecycle_msgs/msg/State``: ids 1 unconfigured, 2 inactive, 3 active;
   ``lifecycle_msgs/msg/Transition``: configure 1, activate 3, deactivate 4.
 - ``rclpy/lifecycle/publisher.py``: a ``LifecyclePublisher`` publishes nothing unless
@@ -35,7 +35,7 @@ from typing import Any
 
 import pytest
 
-from trust_av_planner.graph.domains import lease_domain
+from trust_av.graph.domains import lease_domain
 
 UNCONFIGURED, INACTIVE, ACTIVE = 1, 2, 3
 CONFIGURE, ACTIVATE, DEACTIVATE = 1, 3, 4
@@ -122,8 +122,8 @@ class Manager:
 
 
 def lockstep_qos(topic: str) -> Any:
-    from trust_monitor.common.wall_clock import WallClockConfig
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
 
     return topic_qos(topic, WallClockConfig())
 
@@ -136,7 +136,7 @@ def planner_inputs(manager: Manager) -> Iterator[Callable[[int], None]]:
     from nav_msgs.msg import Odometry
     from trajectory_msgs.msg import JointTrajectory
 
-    from trust_monitor.ros.messages import header, odometry, trajectory
+    from trust_av_common.ros.messages import header, odometry, trajectory
 
     node = manager.node
     pubs = {name: node.create_publisher(msgtype, name, lockstep_qos(name))
@@ -169,8 +169,8 @@ def test_hand_started_planner_is_driven_through_its_lifecycle(tmp_path: Path) ->
     that step's command (what held it was the state: the lock-step chain paused)."""
     from geometry_msgs.msg import AccelStamped
 
-    from trust_av_planner.system.config import load_run_config
-    from trust_monitor.ros.messages import msg_ns
+    from trust_av.system.config import load_run_config
+    from trust_av_common.ros.messages import msg_ns
 
     with lease_domain() as domain:
         proc = start(tmp_path, domain, 'trust_av_planner.planner_node', '-p', 'autostart:=false')
@@ -250,8 +250,8 @@ def test_wall_mode_planner_waits_inactive_then_hands_over(tmp_path: Path) -> Non
     SIGINT while active hands over too."""
     from geometry_msgs.msg import AccelStamped
 
-    from trust_monitor.common.wall_clock import WallClockConfig
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
 
     with lease_domain() as domain:
         proc = start(tmp_path, domain, 'trust_av_planner.planner_node', '-p', 'clock_mode:=wall',
@@ -287,7 +287,7 @@ def test_monitor_publishes_trust_only_while_active(tmp_path: Path) -> None:
     from geometry_msgs.msg import Vector3Stamped
     from trajectory_msgs.msg import JointTrajectory
 
-    from trust_monitor.ros.messages import trajectory
+    from trust_av_common.ros.messages import trajectory
 
     with lease_domain() as domain:
         proc = start(tmp_path, domain, 'trust_monitor.monitor_node', '-p', 'autostart:=false')
@@ -356,7 +356,7 @@ SIX = {'preceding_traffic.traffic_node': 'waiting for /sim/start',
                                         'file sets them, each run supplies them (trust-av does; '
                                         'by hand: pass --ros-args -p initial_position_m:=VALUE '
                                         '-p initial_speed_mps:=VALUE -p start_time_s:=VALUE)'),
-       'trust_av_planner.graph.recorder_node': ('parameter bag_path is missing (RecorderConfig): '
+       'trust_av.graph.recorder_node': ('parameter bag_path is missing (RecorderConfig): '
                                                 'no params file sets it, each run supplies it '
                                                 '(trust-av does; by hand: pass --ros-args -p '
                                                 'bag_path:=VALUE)')}
@@ -367,7 +367,7 @@ says it is up, or the one error line naming what a run must supply."""
 def test_the_six_executables_from_the_shipped_params_file_alone(tmp_path: Path) -> None:
     """Three come up (the managed ones active, lock-step autostart); the three with per-run
     values end with one ``error:`` line naming each value and who supplies it, exit 2."""
-    from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+    from trust_av.system.config import DEFAULT_PARAMS_FILE
 
     with lease_domain() as domain:
         procs = {module: start(tmp_path, domain, module, '--params-file',
@@ -465,7 +465,7 @@ def test_a_lost_answer_or_request_is_asked_again_and_nothing_is_sent_twice(
     """A service answer lost on its way back (a client made just before the server had
     matched it: ``no answer after 30 s`` in a loaded suite run) or a lost request: the state
     is asked again and the next transition chosen from it, so each is applied once."""
-    from trust_av_planner.graph import lifecycle_client
+    from trust_av.graph import lifecycle_client
     monkeypatch.setattr(lifecycle_client, 'ANSWER_S', 0.05)
     node = _LossyNode(lose)
     lifecycle_client.set_states(node, _Idle(), ['planner'], 'active', 5.0)
@@ -497,9 +497,9 @@ def wall_inputs(manager: Manager, node: str) -> Callable[[], None]:
     from nav_msgs.msg import Odometry
     from trajectory_msgs.msg import JointTrajectory
 
-    from trust_monitor.common.wall_clock import WallClockConfig
-    from trust_monitor.ros.messages import odometry, trajectory
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av_common.ros.messages import odometry, trajectory
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
 
     wall = WallClockConfig(clock_mode='wall')
     if node == 'planner':
@@ -537,10 +537,10 @@ def test_lifecycle_manager_sequences_with_inputs_flowing(tmp_path: Path, module:
     (a message taken before the subscription was destroyed reached the released node)."""
     from geometry_msgs.msg import AccelStamped, Vector3Stamped
 
-    from trust_av_planner.system.config import load_run_config
-    from trust_monitor.common.wall_clock import WallClockConfig
-    from trust_monitor.ros.messages import msg_ns
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av.system.config import load_run_config
+    from trust_av_common.ros.messages import msg_ns
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
 
     name = 'planner' if 'planner' in module else 'trust_monitor'
     topic, msgtype = (('ego/accel_cmd', AccelStamped) if name == 'planner'
@@ -601,9 +601,9 @@ def test_parameters_are_declared_while_unconfigured(tmp_path: Path, module: str)
     takes (the shipped file's, a ``-p`` override's); configure then keeps them."""
     from rcl_interfaces.srv import GetParameters, ListParameters
 
+    from trust_av.system.config import load_run_config
     from trust_av_planner.nmpc import PlannerConfig
-    from trust_av_planner.system.config import load_run_config
-    from trust_monitor.trust_model import TrustConfig
+    from trust_monitor.paper_trust import TrustConfig
 
     name = 'planner' if 'planner' in module else 'trust_monitor'
     with lease_domain() as domain:

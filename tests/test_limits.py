@@ -26,12 +26,12 @@ from rosbag2_rules import check_bag_directory
 from rosbags.rosbag2 import Reader
 from test_recording import fail_commit, record
 
-from trust_av_planner.cli.main import main
+from trust_av.cli.main import main
+from trust_av.graph.bag_writer import BagWriter
+from trust_av.study.sweep import check_ray_address
+from trust_av_common.kinematics import VehicleState, advance, integrate
+from trust_av_common.params import PARAM_METADATA_KEY
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph.bag_writer import BagWriter
-from trust_av_planner.study.sweep import check_ray_address
-from trust_monitor.common.kinematics import VehicleState, advance, integrate
-from trust_monitor.common.params import PARAM_METADATA_KEY
 
 TINY_TRACE = 'time_s,speed_mps\n0,10\n1,10.5\n2,11\n3,11\n'
 
@@ -156,11 +156,11 @@ def test_odd_output_paths_are_refused_before_anything_starts(
 
 
 def _config_classes() -> list[type]:
-    """Every dataclass with param() fields in the packages (nodes included: their fields
-    become the rcl descriptors)."""
+    """Every dataclass with param() fields in the seven packages (nodes included: their
+    fields become the rcl descriptors)."""
     found: dict[str, type] = {}
-    for package in ('trust_monitor', 'trust_av_planner', 'human_driver_sim',
-                    'preceding_traffic', 'trust_av_autoware'):
+    for package in ('trust_av_common', 'trust_monitor', 'trust_av_planner', 'human_driver_sim',
+                    'preceding_traffic', 'trust_av', 'trust_av_autoware'):
         root = importlib.import_module(package)
         for info in pkgutil.walk_packages(root.__path__, package + '.'):
             if info.name.endswith('__main__'):
@@ -206,7 +206,7 @@ import sys
 from pathlib import Path
 sys.path.insert(0, sys.argv[2])
 from test_recording import fail_commit, record
-from trust_av_planner.graph.bag_writer import BagWriter
+from trust_av.graph.bag_writer import BagWriter
 writer = BagWriter(Path(sys.argv[1]))
 record(writer, 100_000, finish=False)
 print(writer.steps)
@@ -283,8 +283,9 @@ def test_reproduce_a_few_steps(tmp_path: Path, steps: int) -> None:
 
 def test_a_rate_of_1e308_is_one_line() -> None:
     """It was an OverflowError traceback (an infinite prediction step count)."""
-    from trust_av_planner.system.config import check_control_rate, load_run_config
-    from trust_monitor.common.params import ParamsError
+    from trust_av.system.config import load_run_config
+    from trust_av_common.params import ParamsError
+    from trust_av_planner.planner_params import check_control_rate
     for argv in (['shadow', '--bag', 'x', '--out', 'y', '--rate-hz', '1e308'],
                  ['simulate', '--control-rate-hz', '1e308']):
         code, err = trust_av(*argv)

@@ -1,5 +1,5 @@
 """A recording loses nothing whatever the load: the step authority runs at most a window of
-steps ahead of what the recorder acknowledges (trust_monitor.common.record_window), so a
+steps ahead of what the recorder acknowledges (trust_av_common.record_window), so a
 recorder that is suspended (SIGSTOP) or writes slowly holds the graph back instead of
 dropping messages from an overflowing DDS history."""
 
@@ -16,10 +16,10 @@ import pytest
 from conftest import assert_every_topic_complete, children_of, long_trace, recorded_chunks
 from rosbags.rosbag2 import Reader
 
-from trust_av_planner.graph.bag_records import records_from_bag
-from trust_av_planner.graph.bag_writer import qos_profile
-from trust_monitor.common.output_lock import OutputLockedError, hold_output_lock, lock_path
-from trust_monitor.common.record_window import (
+from trust_av.graph.bag_records import records_from_bag
+from trust_av.graph.bag_writer import qos_profile
+from trust_av_common.output_lock import OutputLockedError, hold_output_lock, lock_path
+from trust_av_common.record_window import (
     ACK_EVERY_STEPS,
     HISTORY_DEPTH,
     held_steps,
@@ -27,7 +27,7 @@ from trust_monitor.common.record_window import (
     recorded_topics,
     window_steps,
 )
-from trust_monitor.common.topics import TOPICS, Topic
+from trust_av_common.topics import TOPICS, Topic
 from trust_monitor.errors import TrustMonitorError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -69,8 +69,8 @@ def test_a_bag_short_of_messages_is_named_topic_by_topic(tmp_path: Path) -> None
     """What the run says when the recorder did not receive every message."""
     from test_recording import odometry
 
-    from trust_av_planner.graph.bag_writer import BagWriter
-    from trust_av_planner.graph.orchestrator import missing_messages
+    from trust_av.graph.bag_writer import BagWriter
+    from trust_av.graph.orchestrator import missing_messages
 
     bag = tmp_path / 'short'
     writer = BagWriter(bag)
@@ -98,7 +98,7 @@ STOPS = 2
 
 def run(bag: Path, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
     trace = long_trace(bag.parent)
-    return subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
+    return subprocess.Popen([sys.executable, '-m', 'trust_av.cli', 'run', '--trace',
                              str(trace), '--max-steps', str(STEPS), '--bag', str(bag),
                              '--no-progress', '--no-plot'], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -112,7 +112,7 @@ def recorder_pid(run_pid: int) -> int:
                 command = Path(f'/proc/{pid}/cmdline').read_bytes()
             except OSError:
                 continue
-            if b'trust_av_planner.graph.recorder_node' in command:
+            if b'trust_av.graph.recorder_node' in command:
                 return pid
         time.sleep(0.1)
     raise AssertionError('no recorder process')
@@ -193,7 +193,7 @@ def test_a_lock_left_by_a_killed_holder_does_not_block(tmp_path: Path) -> None:
     holder = subprocess.Popen(
         [sys.executable, '-c', 'import sys, time\n'
          'from pathlib import Path\n'
-         'from trust_monitor.common.output_lock import hold_output_lock\n'
+         'from trust_av_common.output_lock import hold_output_lock\n'
          f'with hold_output_lock(Path({str(bag)!r})):\n'
          '    print("held", flush=True); time.sleep(60)\n'],
         stdout=subprocess.PIPE, text=True)
@@ -239,7 +239,7 @@ def test_two_runs_started_together_on_one_bag_one_records(tmp_path: Path) -> Non
     second has loaded): exactly one records the whole run, the other is
     refused with one line, exit 2, before it writes anything."""
     bag = tmp_path / 'shared'
-    command = [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', 'us06',
+    command = [sys.executable, '-m', 'trust_av.cli', 'run', '--trace', 'us06',
                '--max-steps', '600', '--bag', str(bag), '--no-progress', '--no-plot']
     runs = [subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                              text=True) for _ in range(2)]
@@ -303,9 +303,9 @@ def test_a_node_stopped_for_longer_than_the_stall_timeout_ends_the_run(
     step 50 and never continued by the test."""
     from preceding_traffic.sources import load_trace
     from preceding_traffic.traces import truncate
-    from trust_av_planner.graph.orchestrator import run_graph
-    from trust_av_planner.graph.processes import GraphError
-    from trust_av_planner.system.config import load_run_config
+    from trust_av.graph.orchestrator import run_graph
+    from trust_av.graph.processes import GraphError
+    from trust_av.system.config import load_run_config
 
     config = load_run_config()
     trace_path = long_trace(tmp_path)
@@ -313,7 +313,7 @@ def test_a_node_stopped_for_longer_than_the_stall_timeout_ends_the_run(
     bag = tmp_path / 'stopped'
     stopped: list[int] = []
     module = {'planner': b'trust_av_planner.planner_node',
-              'recorder': b'trust_av_planner.graph.recorder_node'}[node]
+              'recorder': b'trust_av.graph.recorder_node'}[node]
 
     def on_step(done: int, _total: int) -> None:
         if done >= 50 and not stopped:
@@ -340,7 +340,7 @@ def test_sigint_sigterm_sigint_in_quick_succession_stop_everything(tmp_path: Pat
     finished from its chunks); the command returns only once every node is gone, and says
     so."""
     bag = tmp_path / 'signals'
-    proc = subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
+    proc = subprocess.Popen([sys.executable, '-m', 'trust_av.cli', 'run', '--trace',
                              str(long_trace(tmp_path)), '--bag', str(bag), '--no-progress',
                              '--no-plot'], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, start_new_session=True)

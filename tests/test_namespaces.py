@@ -26,18 +26,18 @@ from test_graph import assert_records_equal  # the graph == in-process compariso
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
+from trust_av.graph.bag_records import records_from_bag
+from trust_av.graph.domains import check_domain_id, check_namespace, lease_domain
+from trust_av.graph.orchestrator import run_graph, run_graph_records
+from trust_av.graph.processes import GraphError
+from trust_av.graph.session import clashing_participants
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import DEFAULT_PARAMS_FILE, RunConfig, load_run_config
+from trust_av.system.metrics import StepRecord
+from trust_av_common.kinematics import VehicleState
+from trust_av_common.topics import TOPIC, TOPICS, qualified
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph.bag_records import records_from_bag
-from trust_av_planner.graph.domains import check_domain_id, check_namespace, lease_domain
-from trust_av_planner.graph.orchestrator import run_graph, run_graph_records
-from trust_av_planner.graph.processes import GraphError
-from trust_av_planner.graph.session import clashing_participants
 from trust_av_planner.planner import AvPlanner
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, RunConfig, load_run_config
-from trust_av_planner.system.metrics import StepRecord
-from trust_monitor.common.kinematics import VehicleState
-from trust_monitor.common.topics import TOPIC, TOPICS, qualified
 
 NAMESPACES = ('/car1', '/car2')
 # Per namespace: (traffic, ego, human) odometry (position m, speed m/s) at t = 0, and the
@@ -88,8 +88,8 @@ def test_two_namespaced_planners_do_not_hear_each_other(planners: int) -> None:
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
-    from trust_monitor.ros.messages import message_class, odometry, trajectory
-    from trust_monitor.ros.qos import QOS
+    from trust_av_common.ros.messages import message_class, odometry, trajectory
+    from trust_av_common.ros.qos import QOS
 
     context = Context()
     rclpy.init(context=context, domain_id=planners)
@@ -175,7 +175,7 @@ def bag_topics(bag: Path) -> dict[str, int]:
 def cli_run(bag: Path, namespace: str, domain: int, steps: int = GRAPH_STEPS,
             trace: str = 'us06') -> list[str]:
     settings = CARS[namespace]
-    return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', trace,
+    return [sys.executable, '-m', 'trust_av.cli', 'run', '--trace', trace,
             '--alpha', str(settings['alpha']), '--predictor', settings['predictor'],
             '--max-steps', str(steps), '--bag', str(bag), '--no-progress', '--no-plot',
             '--namespace', namespace, '--domain-id', str(domain)]
@@ -228,7 +228,7 @@ def intruder(domain: int, topic: str, *, on_go: bool = False) -> subprocess.Pope
     publisher is named as soon as it is discovered."""
     code = ('import rclpy, sys, time\n'
             'from trajectory_msgs.msg import JointTrajectory\n'
-            'from trust_monitor.ros.qos import QOS\n'
+            'from trust_av_common.ros.qos import QOS\n'
             'rclpy.init()\n'
             "node = rclpy.create_node('intruder', namespace='/elsewhere')\n"
             "print('ready', flush=True)\n"
@@ -301,7 +301,7 @@ def test_a_shared_domain_refuses_a_node_in_the_same_namespace(
     trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), 5)
     # Discovery of a participant can take up to Fast DDS's 3 s announcement period (what
     # the 1 s check misses, the watch during the run catches): here it must see it.
-    monkeypatch.setattr('trust_av_planner.graph.session.PROBE_S', 4.0)
+    monkeypatch.setattr('trust_av.graph.session.PROBE_S', 4.0)
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')    # as the graph's
     with lease_domain() as domain:
         context = Context()
@@ -387,7 +387,7 @@ def test_run_graph_checks_before_it_starts_anything(tmp_path: Path) -> None:
 ])
 def test_trust_av_run_refuses_bad_values_in_one_line(tmp_path: Path, option: str, value: str,
                                                      words: str) -> None:
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--bag',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'run', '--bag',
                            str(tmp_path / 'bag'), option, value], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 2, proc.stdout + proc.stderr

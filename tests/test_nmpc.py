@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from conftest import closed_loop, shipped_trace, with_alpha
 
+from trust_av.study.nmpc_reference import ReferenceNmpc, compare_on_records
 from trust_av_planner.nmpc import TrustAwareNmpc
-from trust_av_planner.study.nmpc_reference import ReferenceNmpc, compare_on_records
-from trust_monitor.trust_model import explicability
+from trust_monitor.paper_trust import explicability
 
 
 @pytest.mark.parametrize('alpha', [0.0, 0.5, 1.0])

@@ -20,13 +20,13 @@ from pathlib import Path
 import pytest
 
 from preceding_traffic.sources import load_trace
-from trust_av_planner.graph.domains import lease_domain
-from trust_av_planner.system.config import (
+from trust_av.graph.domains import lease_domain
+from trust_av.system.config import (
     DEFAULT_PARAMS_FILE,
     NODE_COMPONENTS,
     load_run_config,
 )
-from trust_monitor.common.param_layers import to_params_text
+from trust_av_common.param_layers import to_params_text
 
 # name: (file over the shipped one, trust-av accepts, every node accepts)
 CORPUS: dict[str, tuple[str, bool, bool]] = {
@@ -103,8 +103,8 @@ from preceding_traffic.traffic_node import TrafficNode
 from trust_av_planner.ego_plant_node import EgoPlantNode
 from trust_av_planner.planner_node import PlannerNode
 from trust_monitor.monitor_node import MonitorNode
-from trust_monitor.common.params import ParamsError
-from trust_monitor.ros.spin import init_rclpy, start_node
+from trust_av_common.params import ParamsError
+from trust_av_common.ros.spin import init_rclpy, start_node
 
 results = {}
 for name, args in json.loads(sys.argv[1]).items():

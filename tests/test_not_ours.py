@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from trust_av_planner.cli.main import main
+from trust_av.cli.main import main
 
 REPO = Path(__file__).resolve().parents[1]
 BAG = REPO / 'bags' / 'commute_am'
@@ -38,7 +38,7 @@ def _estimate(args: list[str]) -> int:
 
 
 def _layout_plots(args: list[str]) -> int:
-    from trust_av_planner.study.layout_plots import main as layout_main
+    from trust_av.study.layout_plots import main as layout_main
     return layout_main(args)
 
 
@@ -105,7 +105,7 @@ def test_dev_stdout_is_still_an_output(tmp_path: Path) -> None:
     with out.open('w') as handle:
         done = subprocess.run(
             [sys.executable, '-c', 'from pathlib import Path\n'
-             'from trust_monitor.common.output_files import write_text\n'
+             'from trust_av_common.output_files import write_text\n'
              "write_text(Path('/dev/stdout'), '{}')"], stdout=handle, stderr=subprocess.PIPE,
             text=True, timeout=60)
     assert done.returncode == 0, done.stderr
@@ -115,7 +115,7 @@ def test_dev_stdout_is_still_an_output(tmp_path: Path) -> None:
 # --- withdrawal ------------------------------------------------------------------------
 
 def _conditions() -> list:
-    from trust_av_planner.drive.sessions import Condition
+    from trust_av.drive.sessions import Condition
     return [Condition('a', 0.0, 'ca', 'us06'), Condition('b', 1.0, 'ca', 'us06')]
 
 
@@ -170,7 +170,7 @@ def test_withdrawal_never_deletes_a_foreign_folder(tmp_path: Path, with_study: b
     """`--study home --participant Documents` once deleted home/Documents: a folder that
     does not carry the study's marker (or, from before markers, its session) is refused in
     one line, exit 2, with --yes, and nothing anywhere is changed."""
-    from trust_av_planner.drive.sessions import enrol
+    from trust_av.drive.sessions import enrol
 
     if with_study:
         enrol(tmp_path, 'P01', _conditions())
@@ -183,7 +183,7 @@ def test_withdrawal_never_deletes_a_foreign_folder(tmp_path: Path, with_study: b
 
 def test_a_foreign_folder_is_never_enrolled(tmp_path: Path) -> None:
     """Enrolment never adopts a folder it did not make (it would then carry the marker)."""
-    from trust_av_planner.drive.sessions import SessionError, enrol
+    from trust_av.drive.sessions import SessionError, enrol
 
     for folder in _foreign_folders(tmp_path).values():
         before = _tree(tmp_path)
@@ -195,7 +195,7 @@ def test_a_foreign_folder_is_never_enrolled(tmp_path: Path) -> None:
 @pytest.mark.parametrize('where', ['participant folder', 'study directory', 'inside'])
 def test_withdrawal_refuses_a_symbolic_link(tmp_path: Path, where: str,
                                             capsys: pytest.CaptureFixture[str]) -> None:
-    from trust_av_planner.drive.sessions import enrol
+    from trust_av.drive.sessions import enrol
 
     real = tmp_path / 'real'
     enrol(real, 'P01', _conditions())
@@ -222,7 +222,7 @@ def test_withdrawal_deletes_our_folder_after_confirmation(
         monkeypatch: pytest.MonkeyPatch) -> None:
     import io
 
-    from trust_av_planner.drive.sessions import MARKER, enrol
+    from trust_av.drive.sessions import MARKER, enrol
 
     enrol(tmp_path, 'P01', _conditions())
     marker = json.loads((tmp_path / 'P01' / MARKER).read_text())
@@ -251,7 +251,7 @@ def test_a_folder_from_before_markers_is_recognised_by_its_session(tmp_path: Pat
     """A study made by an earlier version: its participant folders have a session.json of
     the participant and the study a study.json, but no marker. Resuming adds the marker;
     withdrawal deletes such a folder."""
-    from trust_av_planner.drive.sessions import MARKER, enrol, withdraw
+    from trust_av.drive.sessions import MARKER, enrol, withdraw
 
     for participant in ('P01', 'P02'):
         enrol(tmp_path, participant, _conditions())
@@ -326,7 +326,7 @@ def test_a_repair_keeps_attachments_metadata_and_quiet_channels(
     from rosbag2_rules import check_bag_directory
     from rosbags.rosbag2 import Reader
 
-    from trust_av_planner.graph.bag_repair import complete_mcap
+    from trust_av.graph.bag_repair import complete_mcap
 
     lone = tmp_path / 'drive.mcap'
     foreign_mcap(lone, finished=False)

@@ -24,11 +24,11 @@ from rosbag2_rules import check_bag_directory
 from synthetic_car_following import write_ngsim_chain
 from test_recording import interrupted_run
 
-from trust_av_planner.cli.main import main
-from trust_av_planner.graph.stalls import steps_done, waiting_for
+from trust_av.cli.main import main
+from trust_av.graph.stalls import steps_done, waiting_for
+from trust_av_common.kinematics import VehicleState
+from trust_av_common.topics import TOPICS, qualified
 from trust_av_planner.planner import observe
-from trust_monitor.common.kinematics import VehicleState
-from trust_monitor.common.topics import TOPICS, qualified
 
 
 def trust_av(*argv: str) -> tuple[int, str]:
@@ -242,7 +242,7 @@ def test_a_recorder_killed_with_its_orchestrator_leaves_a_bag_repair_restores(
     proc = interrupted_run(bag)
     wait_for_steps(bag, 8, proc=proc)
     nodes = children_of(proc.pid)
-    recorder = _node(nodes, b'trust_av_planner.graph.recorder_node')
+    recorder = _node(nodes, b'trust_av.graph.recorder_node')
     proc.send_signal(signal.SIGSTOP)         # so that it cannot repair the bag in between
     os.kill(recorder, signal.SIGKILL)
     proc.kill()
@@ -283,9 +283,9 @@ def test_a_swallowed_stop_is_raised_again_where_the_command_works(
     error): the command went on, and every further signal only escalated a stop that was
     not under way (fit-driver needed a third). The next progress update raises it again,
     and so does a command that returns success after it."""
-    import trust_av_planner.cli.simulate
-    from trust_av_planner.cli.options import Progress
-    from trust_av_planner.graph import stop_signals
+    import trust_av.cli.simulate
+    from trust_av.cli.options import Progress
+    from trust_av.graph import stop_signals
 
     with stop_signals.installed():
         with contextlib.suppress(stop_signals.Stopped):      # swallowed
@@ -300,7 +300,7 @@ def test_a_swallowed_stop_is_raised_again_where_the_command_works(
             stop_signals.handle(signal.SIGTERM, None)
         return 0
 
-    monkeypatch.setattr(trust_av_planner.cli.simulate, 'run', swallowing)
+    monkeypatch.setattr(trust_av.cli.simulate, 'run', swallowing)
     code, err = trust_av('simulate')
     assert code == 143 and 'stopped by SIGTERM' in err
 
@@ -361,10 +361,10 @@ class TestStopSignalsEndLongCommands:
         import subprocess
         import sys
 
-        from trust_av_planner.graph.stalls import cpu_s
+        from trust_av.graph.stalls import cpu_s
 
         argv = make(tmp_path / 'data')
-        proc = subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', *argv],
+        proc = subprocess.Popen([sys.executable, '-m', 'trust_av.cli', *argv],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         _until(lambda: _handles_sigterm(proc.pid) or proc.poll() is not None, 120,
                'no stop handler')
@@ -396,7 +396,7 @@ def test_sigterm_and_another_end_shadow_with_a_finished_bag(tmp_path: Path) -> N
     source = tmp_path / 'lead_bag'
     assert trust_av('trace-to-bag', str(lead), str(source))[0] == 0
     out = tmp_path / 'shadow'
-    proc = subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
+    proc = subprocess.Popen([sys.executable, '-m', 'trust_av.cli', 'shadow', '--bag',
                              str(source), '--out', str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _until(lambda: (out / f'{out.name}.mcap').exists() or proc.poll() is not None, 120,

@@ -15,9 +15,9 @@ import pytest
 
 from preceding_traffic.bags import write_trace_bag
 from preceding_traffic.errors import PrecedingTrafficError
-from trust_av_planner.predictors.gru import load_weights
-from trust_av_planner.study import gru_training
-from trust_monitor.common.output_files import OutputFileError, replacing, write_text
+from trust_av.study import gru_training
+from trust_av_common.output_files import OutputFileError, replacing, write_text
+from trust_av_planner.predictors.gru import MODELS_DIR, load_weights
 
 BIG = 'x' * 400_000             # larger than the small disk
 
@@ -65,7 +65,7 @@ def test_a_full_disk_is_one_line_and_keeps_the_old_file(small_disk: Path) -> Non
 
 def test_a_trained_model_on_a_full_disk_keeps_the_shipped_one(small_disk: Path) -> None:
     """The model, its card and its curve replace the old three together or not at all."""
-    shipped = Path(gru_training.__file__).parents[1] / 'models' / 'gru_plan_estimator.npz'
+    shipped = MODELS_DIR / 'gru_plan_estimator.npz'
     out = small_disk / 'gru.npz'
     old = {out: b'old weights', out.with_suffix('.json'): b'old card',
            out.with_suffix('.png'): b'old curve'}
@@ -86,7 +86,7 @@ def test_simulate_out_on_a_full_disk(small_disk: Path) -> None:
     out = small_disk / 'run.csv'
     out.write_text('old run')
     (small_disk / 'filler').write_bytes(b'\0' * 190_000)
-    done = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'simulate', '--trace',
+    done = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'simulate', '--trace',
                            'us06', '--no-progress', '--out', str(out)], capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 2
@@ -162,7 +162,7 @@ def test_a_link_is_refused_and_a_special_file_written_in_place(tmp_path: Path) -
 def test_json_to_stdout_through_a_pipe(tmp_path: Path) -> None:
     done = subprocess.run(
         [sys.executable, '-c', 'from pathlib import Path\n'
-         'from trust_monitor.common.output_files import write_text\n'
+         'from trust_av_common.output_files import write_text\n'
          "write_text(Path('/dev/stdout'), '{}')"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout == '{}' and os.path.islink('/dev/stdout')

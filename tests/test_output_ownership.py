@@ -14,16 +14,16 @@ from pathlib import Path
 import pytest
 from test_recording import record
 
-from trust_av_planner.cli.main import main
-from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph.bag_writer import BagWriter
-from trust_av_planner.system.outputs import (
+from trust_av.cli.main import main
+from trust_av.graph.bag_writer import BagWriter
+from trust_av.system.outputs import (
     MARKER,
     RunOutputs,
     marked_outputs,
     prepare_outputs,
     replacing_outputs,
 )
+from trust_av_planner.errors import TrustAvPlannerError
 
 
 def snapshot(directory: Path) -> dict[str, bytes]:
@@ -152,7 +152,7 @@ def test_an_overwrite_run_that_fails_at_start_up_keeps_the_previous_bag(
     bag = tmp_path / 'run'
     previous_run(bag)
     before = snapshot(tmp_path)
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'run', '--trace',
                            'us06', '--max-steps', '3', '--bag', str(bag), '--overwrite',
                            '--no-progress', '--no-plot', '--startup-timeout-s', '0.001'],
                           capture_output=True, text=True, timeout=180)

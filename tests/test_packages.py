@@ -4,7 +4,7 @@ ImportError, and declares nothing it does not use.
 The imports come from the code itself (every ``import`` in the AST, at module level or
 inside functions), plus the message packages of the topic table for a package that builds
 message classes by name (the recorder subscribes to every topic of
-``trust_monitor.common.topics``). Third-party modules map to rosdep keys of rosdistro's
+``trust_av_common.topics``). Third-party modules map to rosdep keys of rosdistro's
 ``rosdep/python.yaml`` (ros/rosdistro @ 8468e88, 2026-08-22): ``python3-numpy`` (line 5923),
 ``python3-yaml`` (9553), ``python3-matplotlib`` (5437), ``python3-tqdm`` (9009),
 ``python3-torch`` (8957: Ubuntu ``python3-torch`` from noble on), ``python3-scipy``, and
@@ -24,11 +24,11 @@ from pathlib import Path
 import pytest
 from catkin_pkg.package import parse_package
 
-from trust_monitor.common.topics import TOPICS
+from trust_av_common.topics import TOPICS
 
 SRC = Path(__file__).resolve().parents[1] / 'src'
-PACKAGES = ('trust_monitor', 'preceding_traffic', 'human_driver_sim', 'trust_av_planner',
-            'trust_av_autoware')
+PACKAGES = ('trust_av_common', 'trust_monitor', 'preceding_traffic', 'human_driver_sim',
+            'trust_av_planner', 'trust_av', 'trust_av_autoware')
 ROSDEP_KEYS = {
     'numpy': 'python3-numpy',
     'yaml': 'python3-yaml',
@@ -68,7 +68,7 @@ def imports(package: str) -> tuple[set[str], set[str], bool]:
             elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
                 names = [node.module]
                 by_name |= any(alias.name == 'message_class' for alias in node.names) and \
-                    package != 'trust_monitor'
+                    package != 'trust_av_common'
             roots = {name.split('.')[0] for name in names}
             anywhere |= roots
             if id(node) in module_level:
@@ -115,10 +115,10 @@ def test_optional_modules_are_imported_lazily_and_documented() -> None:
 
 
 def test_the_check_sees_imports_inside_functions() -> None:
-    """torch is imported only inside functions of trust_av_planner: still required."""
-    modules, top, by_name = imports('trust_av_planner')
+    """torch is imported only inside functions of trust_av: still required."""
+    modules, top, by_name = imports('trust_av')
     assert 'torch' in modules and 'torch' not in top and by_name
-    assert 'python3-torch' in needed('trust_av_planner')
+    assert 'python3-torch' in needed('trust_av')
 
 
 @pytest.mark.parametrize('package', PACKAGES)
@@ -134,8 +134,8 @@ def test_package_xml_is_what_rosdep_reads(package: str) -> None:
 REPOSITORY_TESTS = {'test_colcon', 'test_suite_groups', 'test_layout', 'test_benchmarks',
                     'test_packages', 'test_docs', 'test_example_plugin',
                     'test_compare_trust_models', 'test_cli_fuzz', 'test_limits', 'test_code_map',
-                    'test_first_result', 'test_typing_report',
-                    'test_docs_examples'}
+                    'test_first_result', 'test_typing_report', 'test_docs_examples',
+                    'test_moved_imports', 'test_public_api'}
 """Test modules about the repository as a whole (the packages together, the suite, the
 benchmarks), which no single package's ``colcon test`` runs."""
 

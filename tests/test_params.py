@@ -8,21 +8,21 @@ from pathlib import Path
 
 import pytest
 
-from trust_av_planner.cli.reference import parameters_markdown
-from trust_av_planner.system.config import (
+from trust_av.cli.reference import parameters_markdown
+from trust_av.system.config import (
     DEFAULT_PARAMS_FILE,
     NODE_COMPONENTS,
     all_components,
     load_run_config,
 )
-from trust_monitor.common.param_layers import (
+from trust_av_common.param_layers import (
     layered_params,
     read_layer,
     text_layer,
     to_params_text,
 )
-from trust_monitor.common.params import CONTROL_STEP_RANGE_S, ParamsError
-from trust_monitor.common.rcl_yaml import parse_params_text
+from trust_av_common.params import CONTROL_STEP_RANGE_S, ParamsError
+from trust_av_common.rcl_yaml import parse_params_text
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -23,17 +23,17 @@ from preceding_traffic.bags import write_trace_bag
 from preceding_traffic.errors import PrecedingTrafficError
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SHIPPED_TRACES, TRAINING_TRACES, TraceConfig, trace_path
-from trust_av_planner.cli.options import EXIT_COLLISION, format_metrics
+from trust_av.cli.options import EXIT_COLLISION, format_metrics
+from trust_av.graph.bag_records import records_from_bag
+from trust_av.study.sweep import sweep_cases
+from trust_av.system import run_record
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
+from trust_av.system.metrics import compute_metrics
+from trust_av_common.kinematics import VehicleState, collision
+from trust_av_common.topics import TOPICS, qualified
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph.bag_records import records_from_bag
 from trust_av_planner.planner import observe
-from trust_av_planner.study.sweep import sweep_cases
-from trust_av_planner.system import run_record
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
-from trust_av_planner.system.metrics import compute_metrics
-from trust_monitor.common.kinematics import VehicleState, collision
-from trust_monitor.common.topics import TOPICS, qualified
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from rosbag2_rules import check_bag_directory  # the test-side oracle module
@@ -57,7 +57,7 @@ def hard_stop(path: Path) -> Path:
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', *args],
+    return subprocess.run([sys.executable, '-m', 'trust_av.cli', *args],
                           capture_output=True, text=True, timeout=600, check=False)
 
 
@@ -178,7 +178,7 @@ def test_a_noisy_10_hz_trace_is_judged_over_1_s(tmp_path: Path) -> None:
 ])
 def test_study_axes_hold_each_case_once(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                         option: str, value: str, message: str) -> None:
-    from trust_av_planner.cli.main import main
+    from trust_av.cli.main import main
 
     out = tmp_path / 'results'
     code = main(['reproduce', option, value, '--max-steps', '2', '--results-dir', str(out),

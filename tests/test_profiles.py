@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_monitor.common.param_layers import read_layer
+from trust_av.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_common.param_layers import read_layer
 
 AS_REPORTED = Path(__file__).resolve().parents[1] / 'config' / 'paper_as_reported.yaml'
 
@@ -54,7 +54,7 @@ def test_the_shipped_driver_is_the_selected_fit_and_the_cautious_profile_changes
     import yaml
 
     from human_driver_sim.population import CAUTIOUS_FIT_FILE, DRIVER_FIT_FILE, WEIGHT_NAMES
-    from trust_av_planner.system.config import HUMAN_CAUTIOUS_PARAMS_FILE
+    from trust_av.system.config import HUMAN_CAUTIOUS_PARAMS_FILE
 
     names = (*WEIGHT_NAMES, 'time_headway_s', 'desired_standstill_gap_m')
     default = load_run_config()

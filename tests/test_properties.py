@@ -8,9 +8,9 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from trust_av.system.config import load_run_config
 from trust_av_planner.nmpc import BOUND_TOLERANCE, TrustAwareNmpc
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.trust_model import TrustEstimator, explicability, performance
+from trust_monitor.paper_trust import TrustEstimator, explicability, performance
 
 CONFIG = load_run_config()
 ACCEL = st.floats(min_value=-3.0, max_value=3.0, allow_nan=False)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from trust_av_planner.graph.publication_ledger import (
+from trust_av.graph.publication_ledger import (
     Lost,
     PublicationLedger,
     RecordingLossError,

@@ -1,4 +1,4 @@
-"""trust_monitor.ros.raw_inputs reads what rclpy's own deserialisation reads.
+"""trust_av_common.ros.raw_inputs reads what rclpy's own deserialisation reads.
 
 The oracle is rclpy (rosidl's typesupport): random messages serialised by
 ``rclpy.serialization.serialize_message`` read to the same field values, bit for bit,
@@ -19,7 +19,7 @@ from nav_msgs.msg import Odometry
 from rclpy.serialization import serialize_message
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from trust_monitor.ros.raw_inputs import READERS, subscribe, type_name
+from trust_av_common.ros.raw_inputs import READERS, subscribe, type_name
 
 
 def _text(rng: random.Random) -> str:
@@ -221,7 +221,7 @@ def test_fuzz_malformed_bytes_are_dropped_counted_and_reported(name: str,
     """Random bytes, truncations and corruptions of a valid message, on every input type,
     through both decoders: each either decodes (then the callback gets it) or is dropped and
     counted with a warning; nothing raises. Seeded (the same bytes every run)."""
-    from trust_monitor.ros.messages import message_class
+    from trust_av_common.ros.messages import message_class
     cls = message_class(name)
     rng = random.Random(name)
     valid = serialize_message(FIELDS[name][0](rng))
@@ -327,7 +327,7 @@ def test_zero_length_strings_and_empty_sequences_read_as_rclpy_reads_them(name: 
     the reader returns equals rclpy's."""
     from rclpy.serialization import deserialize_message
 
-    from trust_monitor.ros.messages import message_class
+    from trust_av_common.ros.messages import message_class
 
     make, paths = FIELDS[name]
     rng = random.Random(7)

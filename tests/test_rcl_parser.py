@@ -1,4 +1,4 @@
-"""The ctypes binding of rcl's params-file parser (trust_monitor.common.rcl_parser): found
+"""The ctypes binding of rcl's params-file parser (trust_av_common.rcl_parser): found
 without help from the loader's path, one line when missing, nothing left behind, rcl's
 messages made one line without the C source location or file content.
 
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from trust_monitor.common.params import ParamsError
-from trust_monitor.common.rcl_parser import (
+from trust_av_common.params import ParamsError
+from trust_av_common.rcl_parser import (
     PARSER_LIBRARY,
     RclParseError,
     parse_files,
@@ -38,7 +38,7 @@ def test_library_is_found_in_the_prefix_when_the_loader_cannot_find_it() -> None
     probe = _python('import ctypes\ntry:\n    ctypes.CDLL("librcl_yaml_param_parser.so")\n'
                     'except OSError:\n    print("not on the loader path")\n')
     assert probe.stdout.strip() == 'not on the loader path', probe.stderr
-    done = _python('from trust_monitor.common.rcl_parser import parse_files\n'
+    done = _python('from trust_av_common.rcl_parser import parse_files\n'
                    'print(parse_files([(b"/a:\\n  ros__parameters:\\n    x: [1.5]\\n", "f")]))')
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "{'/a': {'x': [1.5]}}"
@@ -47,11 +47,11 @@ def test_library_is_found_in_the_prefix_when_the_loader_cannot_find_it() -> None
 def test_missing_library_is_one_line_exit_2_from_the_cli(tmp_path: Path) -> None:
     """The CLI reads the shipped params file first: without rcl it stops with one line."""
     code = ('import runpy, sys\n'
-            'import trust_monitor.common.rcl_parser as binding\n'
+            'import trust_av_common.rcl_parser as binding\n'
             'binding._library_dirs = lambda: []\n'
             'sys.argv = ["trust-av", "simulate", "--max-steps", "1", "--no-progress", '
             f'"--out", {str(tmp_path / "run.csv")!r}]\n'
-            'runpy.run_module("trust_av_planner.cli", run_name="__main__")\n')
+            'runpy.run_module("trust_av.cli", run_name="__main__")\n')
     done = _python(code)
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()

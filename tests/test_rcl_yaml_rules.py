@@ -1,4 +1,4 @@
-"""trust_monitor.common.rcl_yaml (rcl's parser through ctypes, rclpy's section matching in
+"""trust_av_common.rcl_yaml (rcl's parser through ctypes, rclpy's section matching in
 Python) against a node started with the same files (the oracle: rcl through rclpy).
 
 For each case of the corpus below, one subprocess (for the whole corpus) runs what a node
@@ -26,8 +26,8 @@ from typing import Any
 
 import pytest
 
-from trust_monitor.common.params import ParamsError
-from trust_monitor.common.rcl_yaml import node_matches, params_for_node, parse_params_text
+from trust_av_common.params import ParamsError
+from trust_av_common.rcl_yaml import node_matches, params_for_node, parse_params_text
 
 NODES = ('/planner', '/car1/planner')
 

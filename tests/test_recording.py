@@ -30,13 +30,13 @@ from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
+from trust_av.graph import bag_writer, mcap_steps
+from trust_av.graph.bag_repair import _swap_into_place, repair_bag
+from trust_av.graph.bag_writer import BagWriteError, BagWriter, qos_profile
+from trust_av.graph.domains import lease_domain
+from trust_av.graph.processes import GraphError
+from trust_av.system.outputs import MARKER, prepare_outputs
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.graph import bag_writer, mcap_steps
-from trust_av_planner.graph.bag_repair import _swap_into_place, repair_bag
-from trust_av_planner.graph.bag_writer import BagWriteError, BagWriter, qos_profile
-from trust_av_planner.graph.domains import lease_domain
-from trust_av_planner.graph.processes import GraphError
-from trust_av_planner.system.outputs import MARKER, prepare_outputs
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from rosbag2_rules import check_bag_directory  # the test-side oracle module
@@ -145,7 +145,7 @@ def test_every_step_is_on_disk_before_the_bag_is_finished(tmp_path: Path) -> Non
     mcap.rename(cut / 'cut.mcap')
     with (cut / 'cut.mcap').open('r+b') as handle:
         handle.truncate(handle.seek(0, 2) - 200)       # inside the last step's chunk
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'repair-bag',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'repair-bag',
                            str(bag)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert check_bag_directory(bag) == []
@@ -158,7 +158,7 @@ def test_every_step_is_on_disk_before_the_bag_is_finished(tmp_path: Path) -> Non
 def test_repair_bag_on_nothing_readable_is_one_line(tmp_path: Path) -> None:
     junk = tmp_path / 'junk.mcap'
     junk.write_bytes(b'\x89MCAP0\r\n' + b'\x00' * 7)
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'repair-bag',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'repair-bag',
                            str(junk)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and proc.stderr.count('\n') == 1
     assert 'no readable MCAP channels' in proc.stderr
@@ -182,7 +182,7 @@ def test_repair_never_loses_the_recording(tmp_path: Path) -> None:
     taken = tmp_path / 'lone'
     taken.mkdir()
     (taken / 'notes.txt').write_text('not a bag')
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'repair-bag',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'repair-bag',
                            str(lone)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert proc.stderr == (f'trust-av repair-bag: error: {taken} exists already and the '
@@ -439,8 +439,8 @@ def test_a_domain_whose_rtps_ports_are_bound_is_not_private(tmp_path: Path) -> N
     format is read for both address families."""
     import socket
 
-    from trust_av_planner.graph.domains import domain_ports_in_use
-    from trust_av_planner.graph.session import foreign_participants
+    from trust_av.graph.domains import domain_ports_in_use
+    from trust_av.graph.session import foreign_participants
 
     with lease_domain() as domain:        # the lease every run takes: no run of ours is on it
         assert foreign_participants(domain) == ''
@@ -462,7 +462,7 @@ def test_a_domain_whose_rtps_ports_are_bound_is_not_private(tmp_path: Path) -> N
 # --- the whole graph ------------------------------------------------------------------------
 
 def run_command(bag: Path, steps: int = 600, *extra: str, trace: str = 'us06') -> list[str]:
-    return [sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace', trace,
+    return [sys.executable, '-m', 'trust_av.cli', 'run', '--trace', trace,
             '--max-steps', str(steps), '--bag', str(bag), '--no-progress', '--no-plot', *extra]
 
 
@@ -529,7 +529,7 @@ def intruder(domain: int) -> subprocess.Popen[str]:
     """Another user's process on ``domain``: publishes trust -999 on the graph's topic."""
     code = ('import rclpy, time\n'
             'from geometry_msgs.msg import Vector3Stamped\n'
-            'from trust_monitor.ros.qos import QOS\n'
+            'from trust_av_common.ros.qos import QOS\n'
             'rclpy.init()\n'
             "node = rclpy.create_node('intruder')\n"
             "pub = node.create_publisher(Vector3Stamped, '/trust_monitor/trust', QOS['STEP'])\n"
@@ -627,8 +627,8 @@ def test_a_plan_without_points_in_a_recording_is_one_line(
     IndexError; an empty expected plan stays allowed."""
     from types import SimpleNamespace as M
 
+    from trust_av.graph import bag_records
     from trust_av_planner.errors import TrustAvPlannerError
-    from trust_av_planner.graph import bag_records
 
     def diagnostics(**values: str) -> M:
         return M(status=[M(values=[M(key=k, value=v) for k, v in values.items()])])

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from trust_monitor.common import registry
-from trust_monitor.common.registry import Component, RegistryError
+from trust_av_common import registry
+from trust_av_common.registry import Component, RegistryError
 
 
 def test_unknown_name_lists_the_registered_ones() -> None:

@@ -10,10 +10,10 @@ from typing import Any
 
 import pytest
 
-from trust_av_planner.study import population, sweep, tables
-from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
-from trust_av_planner.study.sweep import Case
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av.study import population, sweep, tables
+from trust_av.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
+from trust_av.study.sweep import Case
+from trust_av.system.config import DEFAULT_PARAMS_FILE, load_run_config
 
 
 class InlineExecutor:
@@ -124,7 +124,7 @@ def test_paper_rows_carry_their_trust_bound() -> None:
 
 
 def test_profile_and_params_file_exclude_each_other(tmp_path: Path) -> None:
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'reproduce',
                            '--profile', 'as_reported', '--params-file',
                            str(DEFAULT_PARAMS_FILE), '--results-dir', str(tmp_path)],
                           capture_output=True, text=True, timeout=120)
@@ -133,7 +133,7 @@ def test_profile_and_params_file_exclude_each_other(tmp_path: Path) -> None:
 
 
 def test_reproduce_command_writes_tables_and_figures(tmp_path: Path) -> None:
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'reproduce',
                            '--traces', 'nycc', '--predictors', 'ca', '--results-dir',
                            str(tmp_path), '--no-progress', '--workers', '2'],
                           capture_output=True, text=True, timeout=300)
@@ -153,7 +153,7 @@ def test_graph_sweep_equals_in_process_sweep(tmp_path: Path) -> None:
     processes each run at once, each on its own ROS domain.
     """
     steps = 15
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'reproduce',
                            '--traces', 'nycc', '--predictors', 'ca', '--graph', '--max-steps',
                            str(steps), '--results-dir', str(tmp_path / 'graph'),
                            '--no-progress', '--workers', '2'],
@@ -232,7 +232,7 @@ def test_population_tables_give_mean_and_95_percent_interval() -> None:
 
 
 def test_reproduce_with_a_driver_population(tmp_path: Path) -> None:
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'reproduce',
                            '--traces', 'nycc', '--predictors', 'gru', '--drivers', '2',
                            '--max-steps', '40', '--results-dir', str(tmp_path),
                            '--no-progress', '--workers', '2'],
@@ -246,7 +246,7 @@ def test_reproduce_with_a_driver_population(tmp_path: Path) -> None:
     assert sorted({r.split(',')[5] for r in rows[1:]}) == ['1', '2']
     table = (tmp_path / 'table_IV_max_improvements.md').read_text()
     assert table.count(' ± ') == 3
-    bad = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+    bad = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'reproduce',
                           '--drivers', '-1', '--results-dir', str(tmp_path)],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and '--drivers must be >= 0, got -1' in bad.stderr
@@ -265,7 +265,7 @@ def test_the_population_draws_from_the_shipped_per_driver_fits(tmp_path: Path) -
     )
 
     def runs(out: Path, *args: str) -> list[dict[str, str]]:
-        proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+        proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'reproduce',
                                *args, '--traces', 'nycc', '--predictors', 'ca', '--drivers', '2',
                                '--alphas', '0,1', '--max-steps', '15', '--results-dir', str(out),
                                '--no-progress', '--workers', '2'],
@@ -291,7 +291,7 @@ def test_the_population_draws_from_the_shipped_per_driver_fits(tmp_path: Path) -
 
 
 def reproduce(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+    return subprocess.run([sys.executable, '-m', 'trust_av.cli', 'reproduce',
                            '--no-progress', *args], capture_output=True, text=True,
                           timeout=600, stdin=subprocess.DEVNULL)
 
@@ -302,7 +302,7 @@ def test_study_of_any_registered_parts(tmp_path: Path, short_trace: str) -> None
     cases (no KeyError ('cv', 'us06')), and from Python the same table is a DataFrame."""
     import pandas as pd
 
-    from trust_av_planner.study.frame import study
+    from trust_av.study.frame import study
 
     out = tmp_path / 'study'
     proc = reproduce('--traces', f'us06,{short_trace}', '--predictors', 'cv,ca',

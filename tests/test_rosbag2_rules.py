@@ -243,10 +243,10 @@ def test_counts_and_times_must_match_the_mcap(good_bag: Path, tmp_path: Path) ->
 
 
 def test_the_project_s_recorder_writes_what_rosbag2_reads(tmp_path: Path) -> None:
-    """The recorder's writer (trust_av_planner.graph.bag_writer.BagWriter: the mcap
+    """The recorder's writer (trust_av.graph.bag_writer.BagWriter: the mcap
     library's public Writer, one chunk per step) passes every rule; the same file without
     its metadata.yaml, as a lone .mcap, does not."""
-    from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
+    from trust_av.graph.bag_writer import BagWriter, qos_profile
 
     path = tmp_path / 'run'
     with BagWriter(path) as bag:
@@ -282,7 +282,7 @@ def test_the_recorder_never_writes_a_chunk_without_messages(tmp_path: Path) -> N
     """Steps without messages, a topic added mid-recording and one added after the last
     message: every message reads back in time order under the pinned reader's rule, and
     every chunk has a message index."""
-    from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
+    from trust_av.graph.bag_writer import BagWriter, qos_profile
 
     path = tmp_path / 'run'
     qos = qos_profile(reliable=True, transient_local=False, depth=1)
@@ -315,7 +315,7 @@ def test_the_recorder_writes_type_hashes_and_a_profile_per_publisher(tmp_path: P
     publishers has three offered profiles, in the channel and in metadata.yaml."""
     from rosbag2_rules import installed_type_hash
 
-    from trust_av_planner.graph.bag_writer import BagWriter, qos_profile
+    from trust_av.graph.bag_writer import BagWriter, qos_profile
 
     path = tmp_path / 'run'
     qos = qos_profile(reliable=True, transient_local=True, depth=1000)

@@ -12,9 +12,9 @@ import pytest
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.study import plots
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
+from trust_av.study import plots
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
 
 STEPS = 12
 EPOCH_S = 1_700_000_000.0
@@ -79,7 +79,7 @@ def test_a_ceiling_is_drawn_only_for_a_model_that_declares_one(
     """The ceiling is the trust model's declared property (``ceiling``), not a guess from
     its name: the paper's and asymmetric models declare T(0) + delta t, beta_bernoulli and
     optimo none, and their plots have no ceiling line."""
-    from trust_monitor.trust_interface import make_trust_model, trust_ceiling
+    from trust_monitor.model_interface import make_trust_model, trust_ceiling
 
     config = load_run_config()
     declared = {name: trust_ceiling(make_trust_model(

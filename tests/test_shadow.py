@@ -22,10 +22,10 @@ from rosbags.highlevel import AnyReader
 from preceding_traffic.bags import TYPESTORE
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.traces import SpeedTrace
-from trust_av_planner.graph.bag_records import message_stamp
-from trust_av_planner.graph.bag_writer import STAMP_IN_FIRST_ELEMENT, header_stamp_ns
-from trust_monitor.common.kinematics import advance
-from trust_monitor.common.topics import TOPICS, qualified
+from trust_av.graph.bag_records import message_stamp
+from trust_av.graph.bag_writer import STAMP_IN_FIRST_ELEMENT, header_stamp_ns
+from trust_av_common.kinematics import advance
+from trust_av_common.topics import TOPICS, qualified
 
 REPO = Path(__file__).resolve().parents[1]
 PARAMS = REPO / 'config' / 'trust_av.yaml'
@@ -36,7 +36,7 @@ ACCEL_MIN, ACCEL_MAX = -3.0, 3.0
 def shadow(tmp_path: Path, *extra: str) -> tuple[subprocess.CompletedProcess[str], Path, Path]:
     out, stats = tmp_path / 'shadow', tmp_path / 'shadow.json'
     result = subprocess.run(
-        [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
+        [sys.executable, '-m', 'trust_av.cli', 'shadow', '--bag',
          str(REPO / 'bags' / 'commute_am'), '--duration-s', SHADOW_S, '--out', str(out),
          '--json', str(stats), *extra], capture_output=True, text=True, timeout=120,
         check=False)
@@ -123,7 +123,7 @@ def test_bad_rate_is_one_line_before_anything_starts(tmp_path: Path, rate: str,
     the node's refusal)."""
     out = tmp_path / 'shadow'
     result = subprocess.run(
-        [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
+        [sys.executable, '-m', 'trust_av.cli', 'shadow', '--bag',
          str(REPO / 'bags' / 'commute_am'), '--duration-s', '1', '--out', str(out),
          '--rate-hz', rate], capture_output=True, text=True, timeout=60, check=False)
     assert result.returncode == 2, result.stdout + result.stderr
@@ -141,7 +141,7 @@ def test_a_full_disk_stops_a_wall_run_with_one_line_and_a_finished_bag(
     traceback, EBADF.)"""
     out = small_disk / 'shadow'
     proc = subprocess.run(
-        [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--bag',
+        [sys.executable, '-m', 'trust_av.cli', 'shadow', '--bag',
          str(REPO / 'bags' / 'commute_am'), '--duration-s', '60', '--out', str(out), *mode],
         capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 2, proc.stdout + proc.stderr
@@ -174,7 +174,7 @@ def test_whole_graph_in_wall_mode_drives_at_real_time(tmp_path: Path) -> None:
     out, stats = tmp_path / 'wall', tmp_path / 'wall.json'
     before_ns = time.time_ns()
     result = subprocess.run(
-        [sys.executable, '-m', 'trust_av_planner.cli', 'shadow', '--whole-graph', '--bag',
+        [sys.executable, '-m', 'trust_av.cli', 'shadow', '--whole-graph', '--bag',
          str(trace), '--predictor', 'gru', '--duration-s', SHADOW_S, '--out', str(out),
          '--json', str(stats)], capture_output=True, text=True, timeout=120, check=False)
     after_ns = time.time_ns()
@@ -230,11 +230,11 @@ def test_a_wall_recorder_that_falls_behind_names_what_it_lost(
     theirs) loses messages, and the run says which in one error naming every publisher,
     with a finished bag holding the rest. Checked against the nodes' own counts: for each
     publisher that starts after the recording, recorded + lost = published."""
-    import trust_monitor.ros.qos as qos
+    import trust_av_common.ros.qos as qos
     from preceding_traffic.sources import load_trace
-    from trust_av_planner.graph.publication_ledger import RecordingLossError
-    from trust_av_planner.graph.shadow import AFTER_START, run_wall_graph
-    from trust_av_planner.system.config import load_run_config
+    from trust_av.graph.publication_ledger import RecordingLossError
+    from trust_av.graph.shadow import AFTER_START, run_wall_graph
+    from trust_av.system.config import load_run_config
 
     monkeypatch.setattr(qos, 'HISTORY_DEPTH', 3)
     trace_csv = tmp_path / 'steady.csv'

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from trust_av_planner.study.tables import _cell
-from trust_monitor.common.stats import mean_ci95, t_quantile_975
+from trust_av.study.tables import _cell
+from trust_av_common.stats import mean_ci95, t_quantile_975
 
 
 @pytest.mark.parametrize(('dof', 'quantile'), [(1, 12.706), (2, 4.303), (4, 2.776),

@@ -16,7 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
+from trust_av.system.config import DEFAULT_PARAMS_FILE
 
 PROBE = r"""
 import json, sys
@@ -24,8 +24,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
 from preceding_traffic.traffic_node import TrafficNode
-from trust_monitor.ros.messages import time_msg
-from trust_monitor.ros.spin import init_rclpy, start_node
+from trust_av_common.ros.messages import time_msg
+from trust_av_common.ros.spin import init_rclpy, start_node
 
 init_rclpy(['probe', '--ros-args', '--params-file', sys.argv[1]])
 node = start_node(TrafficNode)

@@ -1,4 +1,4 @@
-"""The lock-step chain derived from the topic table (trust_monitor.common.step_chain)."""
+"""The lock-step chain derived from the topic table (trust_av_common.step_chain)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from trust_monitor.common.step_chain import Port, StepChain, StepChainError, step_chain
-from trust_monitor.common.topics import TOPICS, Topic
+from trust_av_common.step_chain import Port, StepChain, StepChainError, step_chain
+from trust_av_common.topics import TOPICS, Topic
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'benchmarks'))
 from step_gate import StepGate

@@ -22,8 +22,8 @@ from pathlib import Path
 import pytest
 from conftest import children_of
 
-from trust_av_planner.graph import stop_signals
-from trust_monitor.common import output_files
+from trust_av.graph import stop_signals
+from trust_av_common import output_files
 
 SIGNAL_IN_A_DESTRUCTOR = '''
 import contextlib, os, signal, sys
@@ -48,7 +48,7 @@ def run_python(code: str) -> subprocess.CompletedProcess[str]:
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_a_stop_discarded_in_a_destructor_is_raised_at_the_next_check(signum: int) -> None:
     program = SIGNAL_IN_A_DESTRUCTOR + f"""
-from trust_av_planner.graph import stop_signals
+from trust_av.graph import stop_signals
 
 def raise_it(signum, frame):
     raise KeyboardInterrupt(signum)
@@ -81,7 +81,7 @@ with context:
 
 def test_other_discarded_exceptions_are_still_printed() -> None:
     program = """
-    from trust_av_planner.graph import stop_signals
+    from trust_av.graph import stop_signals
     class Broken:
         def __del__(self):
             raise ValueError('a defect in a destructor')
@@ -119,7 +119,7 @@ def test_a_closed_terminal_stops_a_command_unless_started_under_nohup(nohup: boo
     ignored (a shell's background job) is still taken."""
     program = """
     import os, signal, sys, time
-    from trust_av_planner.graph import stop_signals
+    from trust_av.graph import stop_signals
     if sys.argv[1:] == ['nohup']:
         signal.signal(signal.SIGHUP, signal.SIG_IGN)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -145,8 +145,8 @@ def test_a_closed_terminal_stops_a_command_unless_started_under_nohup(nohup: boo
 def test_a_stop_lost_in_a_destructor_stops_trust_av_simulate_at_the_next_step() -> None:
     """Through the command: exit 130, its one line, no results; the run did not go on."""
     program = SIGNAL_IN_A_DESTRUCTOR + """
-import trust_av_planner.cli.simulate as command
-from trust_av_planner.cli.main import main
+import trust_av.cli.simulate as command
+from trust_av.cli.main import main
 
 simulate, steps = command.simulate, []
 
@@ -195,7 +195,7 @@ def assert_all_exit(pids: set[int]) -> None:
 
 def trust_av(*args: str) -> subprocess.Popen[str]:
     """``trust-av ARGS`` as the leader of its own process group (as a terminal starts it)."""
-    return subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', *args],
+    return subprocess.Popen([sys.executable, '-m', 'trust_av.cli', *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
 
@@ -235,7 +235,7 @@ def test_a_stop_ends_a_sweep_and_its_workers(tmp_path: Path, signum: int) -> Non
 
 CUT_OFF_RESULT = textwrap.dedent("""
     import os, struct, sys, time
-    from trust_av_planner.study.workers import worker_pool
+    from trust_av.study.workers import worker_pool
     try:
         with worker_pool(1) as pool:
             pool.submit(time.sleep, 60)
@@ -264,7 +264,7 @@ def test_a_result_cut_off_by_the_stop_does_not_hang_the_exit() -> None:
 CTRL_C_WHILE_WORKERS_START = textwrap.dedent("""
     import os, signal, sys, threading, time
     from pathlib import Path
-    from trust_av_planner.study.workers import worker_pool
+    from trust_av.study.workers import worker_pool
 
     def starting_worker() -> bool:
         for entry in Path('/proc').iterdir():
@@ -320,7 +320,7 @@ def test_train_gru_stops_its_pinned_child_and_workers(tmp_path: Path, how: str) 
     processes: a stop reaches each of them once, whichever way it comes, and nothing is
     left running or written."""
     out = tmp_path / 'model.npz'
-    proc = subprocess.Popen([sys.executable, '-m', 'trust_av_planner.cli', 'train-gru',
+    proc = subprocess.Popen([sys.executable, '-m', 'trust_av.cli', 'train-gru',
                              '--out', str(out), '--jobs', '2'], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     assert proc.stderr is not None

@@ -12,26 +12,26 @@ import pytest
 from conftest import shipped_trace
 
 from preceding_traffic.traces import truncate
-from trust_av_planner.nmpc import TrustAwareNmpc, prediction_grid
-from trust_av_planner.predictors import Observation
-from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
-from trust_av_planner.predictors.sampling import ModelGridPredictor
-from trust_av_planner.preview import LeadPreview, hold_on_grid
-from trust_av_planner.system.closed_loop import SimResult, control_trace, simulate
-from trust_av_planner.system.config import load_run_config
-from trust_av_planner.system.metrics import (
+from trust_av.system.closed_loop import SimResult, control_trace, simulate
+from trust_av.system.config import load_run_config
+from trust_av.system.metrics import (
     compute_metrics,
     expectation_errors,
     explicability_by_age,
     step_change_rms_mps2,
     ticks_per_model_step,
 )
-from trust_monitor.common.grids import hold_at, interp_at
-from trust_monitor.common.kinematics import rollout
-from trust_monitor.trust_model import (
+from trust_av_common.grids import hold_at, interp_at
+from trust_av_common.kinematics import rollout
+from trust_av_planner.nmpc import TrustAwareNmpc, prediction_grid
+from trust_av_planner.predictors import Observation
+from trust_av_planner.predictors.ca import ConstantAccelerationPredictor
+from trust_av_planner.predictors.sampling import ModelGridPredictor
+from trust_av_planner.preview import LeadPreview, hold_on_grid
+from trust_monitor.paper_trust import (
     TrustConfig,
     TrustEstimator,
-    explicability_bound,
+    paper_explicability_bound,
     performance,
     propagate_trust,
     trust_input,
@@ -72,7 +72,7 @@ def test_estimator_refuses_negative_time() -> None:
 def test_bound_on_a_fine_grid_is_the_propagated_per_second_rule(trust: float,
                                                                 trust_min: float) -> None:
     """E <= E_max exactly when every T^k >= T_min on a 0.1 s grid of 30 steps."""
-    bound = explicability_bound(trust, trust_min, CONFIG, 30, 0.1)
+    bound = paper_explicability_bound(trust, trust_min, CONFIG, 30, 0.1)
     for score in np.linspace(0.0, 0.999, 1500):
         propagated_ok = min(propagate_trust(trust, float(score), CONFIG, 30, 0.1)) >= trust_min
         bound_ok = bound is not None and score <= bound
@@ -83,8 +83,8 @@ def test_bound_on_a_fine_grid_is_the_propagated_per_second_rule(trust: float,
 def test_bound_over_the_same_seconds_agrees_when_trust_is_above_t_min() -> None:
     """Above T_min only the end of the horizon matters: 3 s is 3 s on either grid."""
     for trust in (0.2, 0.21, 0.25, 3.0):
-        assert explicability_bound(trust, 0.2, CONFIG, 30, 0.1) == pytest.approx(
-            explicability_bound(trust, 0.2, CONFIG, 3, 1.0), rel=1e-12)
+        assert paper_explicability_bound(trust, 0.2, CONFIG, 30, 0.1) == pytest.approx(
+            paper_explicability_bound(trust, 0.2, CONFIG, 3, 1.0), rel=1e-12)
 
 
 # --- the prediction grid and the NMPC at 10 Hz ---------------------------------------------

@@ -1,6 +1,6 @@
 """Every trace of a study gets its own per-alpha table (every metric, every trust model and
 follower an axis) and its trust figure: from ``trust-av reproduce`` on a user's trace and
-from :func:`trust_av_planner.study.frame.study`."""
+from :func:`trust_av.study.frame.study`."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ from typing import Any
 
 import pytest
 
-from trust_av_planner.study import sweep, trace_reports
-from trust_av_planner.study.sweep import Case
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE
-from trust_monitor.common.registry import TRUST_MODELS, names
+from trust_av.study import sweep, trace_reports
+from trust_av.study.sweep import Case
+from trust_av.system.config import DEFAULT_PARAMS_FILE
+from trust_av_common.registry import TRUST_MODELS, names
 
 MODELS = ('paper', 'beta_bernoulli')
 
@@ -59,7 +59,7 @@ def test_reproduce_on_a_user_trace_writes_its_table_and_figure(tmp_path: Path,
     table has one row per combination; the figure is a PNG."""
     out = tmp_path / 'study'
     proc = subprocess.run(
-        [sys.executable, '-m', 'trust_av_planner.cli', 'reproduce', '--no-progress',
+        [sys.executable, '-m', 'trust_av.cli', 'reproduce', '--no-progress',
          '--traces', str(user_trace), '--predictors', 'ca', '--alphas', '0,1',
          '--trust-models', ','.join(MODELS), '--driver-models', 'mpc,idm',
          '--max-steps', '6', '--results-dir', str(out), '--workers', '1'],
@@ -95,7 +95,7 @@ def test_reproduce_on_a_user_trace_writes_its_table_and_figure(tmp_path: Path,
 def test_study_writes_the_same_per_trace_outputs(tmp_path: Path, user_trace: Path) -> None:
     """study(), over a shipped trace and a CSV: one folder per trace with all four files;
     a population's Markdown shows mean ± CI and the number of drivers."""
-    from trust_av_planner.study.frame import study
+    from trust_av.study.frame import study
 
     out = tmp_path / 'py'
     frame = study(['nycc', str(user_trace)], ['ca'], [0.0, 0.5], trust_models=MODELS,

@@ -1,6 +1,6 @@
 """The final-trust bound of eqs. (9)-(11): no sequence of E beats it, one comes within 1 %.
 
-Sequences are run through the real :func:`trust_monitor.trust_model.trust_step`, not
+Sequences are run through the real :func:`trust_monitor.paper_trust.trust_step`, not
 through the bound module's own shortfall, so the bound is checked against the model.
 The paper's rows (Tables II and III) are taken from ``paper_results``.
 """
@@ -14,8 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trust_av_planner.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
-from trust_monitor.trust_bound import (
+from trust_av.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
+from trust_monitor.final_trust_bound import (
     extremal_scores,
     lenient_row_bound,
     row_bound,
@@ -25,7 +25,7 @@ from trust_monitor.trust_bound import (
     trust_lower_bound,
     warmup_bounds,
 )
-from trust_monitor.trust_model import TrustConfig, trust_step
+from trust_monitor.paper_trust import TrustConfig, trust_step
 
 DELTA = 0.1  # paper, Section III-C
 P_THRE = 0.8  # paper, Section III-C

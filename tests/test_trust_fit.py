@@ -15,22 +15,22 @@ from test_graph import assert_records_equal  # the graph == in-process compariso
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.drive.study import conditions_from
-from trust_av_planner.drive.trust_fit import (
+from trust_av.drive.study import conditions_from
+from trust_av.drive.trust_fit_data import read_ratings_table
+from trust_av.study.trust_recovery import drive_scores, make_participant, recover
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
+from trust_av_common.params import ParamsError
+from trust_av_planner.perturbations import LIBRARY, Perturbation, schedule
+from trust_monitor.model_interface import fit_parameters
+from trust_monitor.paper_trust import performance
+from trust_monitor.trust_fit import (
     RatedDrive,
     fit,
     held_out,
     model_spec,
     model_trust,
 )
-from trust_av_planner.drive.trust_fit_data import read_ratings_table
-from trust_av_planner.perturbations import LIBRARY, Perturbation, schedule
-from trust_av_planner.study.trust_recovery import drive_scores, make_participant, recover
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
-from trust_monitor.common.params import ParamsError
-from trust_monitor.trust_interface import fit_parameters
-from trust_monitor.trust_model import performance
 
 __all__ = ['trace_csv']
 CONFIG = load_run_config()
@@ -92,7 +92,7 @@ def test_trust_moves_only_in_a_perturbed_drive(
 def test_graph_applies_the_perturbation_as_in_process(tmp_path: Path, trace_csv: Path) -> None:
     """The perturbation is in the planner core: ``trust-av run`` (the node graph) equals the
     in-process loop through a late brake at 20 s."""
-    from trust_av_planner.graph.bag_records import records_from_bag
+    from trust_av.graph.bag_records import records_from_bag
 
     params = tmp_path / 'late.yaml'
     params.write_text('/**/planner:\n  ros__parameters:\n    perturbation: late_brake\n')
@@ -191,7 +191,7 @@ def test_fit_trust_from_a_ratings_table(tmp_path: Path,
     table = write_table(tmp_path / 'ratings.csv', table_rows(scores))
     assert [d.drive for d in read_ratings_table(table)] == ['late_brake', 'mixed_random'] * 2
     out = tmp_path / 'fit'
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'fit-trust',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'fit-trust',
                            '--ratings', str(table), '--out', str(out),
                            '--models', 'paper,beta_bernoulli'],
                           capture_output=True, text=True, timeout=600, check=False)
@@ -223,7 +223,7 @@ def test_fit_trust_from_a_ratings_table(tmp_path: Path,
 def test_bad_ratings_table_one_line_exit_2(tmp_path: Path, content: str, message: str) -> None:
     table = tmp_path / 'bad.csv'
     table.write_text(content)
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'fit-trust',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'fit-trust',
                            '--ratings', str(table), '--out', str(tmp_path / 'o')],
                           capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 2 and proc.stderr.count('\n') == 1, proc.stderr
@@ -231,7 +231,7 @@ def test_bad_ratings_table_one_line_exit_2(tmp_path: Path, content: str, message
 
 
 def test_unknown_model_one_line_exit_2(tmp_path: Path) -> None:
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'fit-trust',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'fit-trust',
                            '--ratings', str(tmp_path / 'none.csv'), '--out', str(tmp_path),
                            '--models', 'paper,nope'],
                           capture_output=True, text=True, timeout=120, check=False)
@@ -242,10 +242,10 @@ def test_a_study_is_read_from_its_drive_bags(tmp_path: Path,
                                              monkeypatch: pytest.MonkeyPatch) -> None:
     """Practice drives and earlier attempts are left out; E is recomputed from the recorded
     plans with the run's eps; ratings (x in [0, 1] on driver/rating) come back as 0-100."""
-    from trust_av_planner.drive import bag_data
-    from trust_av_planner.drive.trust_fit_data import read_study
-    from trust_av_planner.drive.trust_rating import DriveSeries
-    from trust_monitor.trust_model import explicability
+    from trust_av.drive import bag_data
+    from trust_av.drive.trust_fit_data import read_study
+    from trust_av.drive.trust_rating import DriveSeries
+    from trust_monitor.paper_trust import explicability
 
     for name in ('drive_01_practice', 'drive_02_calm', 'drive_02_calm.attempt1',
                  'drive_03_brake'):

@@ -13,8 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trust_av_planner.drive.trust_fit import Fit, Observation, by_participant, fit, model_spec
-from trust_av_planner.drive.trust_fit_pooling import (
+from trust_av.drive.trust_fit_pooling import (
     MIN_SPREAD,
     SCHEME,
     Population,
@@ -23,8 +22,9 @@ from trust_av_planner.drive.trust_fit_pooling import (
     population,
     shrunk,
 )
-from trust_av_planner.study.trust_recovery import synthetic_study, write_ratings_table
-from trust_av_planner.system.config import load_run_config
+from trust_av.study.trust_recovery import synthetic_study, write_ratings_table
+from trust_av.system.config import load_run_config
+from trust_monitor.trust_fit import Fit, Observation, by_participant, fit, model_spec
 
 
 def search(p, value: float) -> float:  # type: ignore[no-untyped-def]
@@ -116,7 +116,7 @@ def test_fit_trust_writes_and_scores_partial_pooling(tmp_path: Path, people) -> 
     table = tmp_path / 'ratings.csv'
     write_ratings_table(table, people)
     out = tmp_path / 'fit'
-    command = [sys.executable, '-m', 'trust_av_planner.cli', 'fit-trust', '--ratings',
+    command = [sys.executable, '-m', 'trust_av.cli', 'fit-trust', '--ratings',
                str(table), '--models', 'paper,optimo', '--no-figures']
     proc = subprocess.run([*command, '--out', str(out)], capture_output=True, text=True,
                           timeout=600, check=False)

@@ -8,11 +8,11 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from trust_monitor.trust_model import (
+from trust_monitor.paper_trust import (
     TrustConfig,
     TrustEstimator,
     explicability,
-    explicability_bound,
+    paper_explicability_bound,
     performance,
     propagate_trust,
     trust_input,
@@ -84,7 +84,7 @@ def test_estimator_accumulates_updates() -> None:
 @pytest.mark.parametrize('trust_min', [0.0, 0.2])
 def test_explicability_bound_is_the_propagated_constraint(trust: float, trust_min: float) -> None:
     """E <= E_max holds exactly when every propagated T^k >= T_min (k = 1..N)."""
-    bound = explicability_bound(trust, trust_min, CONFIG, 3)
+    bound = paper_explicability_bound(trust, trust_min, CONFIG, 3)
     for score in np.linspace(0.0, 0.999, 2000):
         propagated_ok = min(propagate_trust(trust, float(score), CONFIG, 3)) >= trust_min
         bound_ok = bound is not None and score <= bound
@@ -93,8 +93,8 @@ def test_explicability_bound_is_the_propagated_constraint(trust: float, trust_mi
 
 
 def test_bound_is_none_when_trust_cannot_recover() -> None:
-    assert explicability_bound(-0.2, 0.0, CONFIG, 3) is None   # needs u_T >= 2 > 1
-    assert explicability_bound(10.0, 0.0, CONFIG, 3) == math.inf
+    assert paper_explicability_bound(-0.2, 0.0, CONFIG, 3) is None   # needs u_T >= 2 > 1
+    assert paper_explicability_bound(10.0, 0.0, CONFIG, 3) == math.inf
 
 
 def test_config_rejects_bad_values() -> None:

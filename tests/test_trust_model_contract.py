@@ -2,7 +2,7 @@
 
 Parametrised from the registry (``trust_av.trust_models``), so a package that registers a
 model is held to the same rules, the shipped contract
-(:func:`trust_monitor.common.contract.check_component`): time consistency, determinism, a
+(:func:`trust_av.contract.check_component`): time consistency, determinism, a
 monotone update (what the numeric NMPC bound assumes), a numeric bound that keeps
 T >= T_min on the propagated update, the closed form equal to the numeric one, a one-line
 refusal of a bad parameter value, and graph == in-process: 30 lock-step steps of
@@ -21,11 +21,11 @@ from typing import Any
 
 import pytest
 
-from trust_monitor.common import registry
-from trust_monitor.common.contract import check_component
-from trust_monitor.common.params import ParamsError, build_config
-from trust_monitor.trust_interface import TrustModel, make_trust_model, trust_model_component
-from trust_monitor.trust_model import TrustConfig
+from trust_av.contract import check_component
+from trust_av_common import registry
+from trust_av_common.params import ParamsError, build_config
+from trust_monitor.model_interface import TrustModel, make_trust_model, trust_model_component
+from trust_monitor.paper_trust import TrustConfig
 
 NAMES = registry.names(registry.TRUST_MODELS)
 BASE = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,
@@ -151,7 +151,7 @@ def test_simulate_refuses_a_bad_model_parameter_in_one_line(name: str, tmp_path:
     params.write_text(f'/**:\n  ros__parameters:\n    trust_model: {name}\n'
                       f'    {bad[0]}: {bad[1]!r}\n')
     out = tmp_path / 'out'
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'simulate',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'simulate',
                            '--params-file', str(params), '--no-progress', '--out', str(out)],
                           capture_output=True, text=True, check=False, timeout=120)
     assert proc.returncode == 2, proc.stdout + proc.stderr

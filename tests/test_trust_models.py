@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from trust_av_planner.study.tables import BOUND_HEADER
-from trust_monitor.trust_interface import make_trust_model
-from trust_monitor.trust_model import TrustConfig, trust_step
-from trust_monitor.trust_models import BetaState, OptimoConfig, OptimoModel
+from trust_av.study.tables import BOUND_HEADER
+from trust_monitor.model_interface import make_trust_model
+from trust_monitor.paper_trust import TrustConfig, trust_step
+from trust_monitor.shipped_models import BetaState, OptimoConfig, OptimoModel
 
 BASE = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,
                    trust_initial=0.0)
@@ -116,7 +116,7 @@ def test_beta_bernoulli_step_across_an_episode_end_is_split() -> None:
 def test_every_shipped_model_maps_to_the_common_scale() -> None:
     """paper/asymmetric: T(0) -> 0.5, T(0) +- delta 600 s -> 1 / 0; the others are on
     [0, 1] already."""
-    from trust_monitor.trust_interface import common_trust
+    from trust_monitor.model_interface import common_trust
     paper = make_trust_model(BASE)
     assert common_trust(paper, 0.0) == 0.5
     assert common_trust(paper, 60.0) == 1.0 and common_trust(paper, -30.0) == 0.25
@@ -142,7 +142,7 @@ def test_tables_give_the_paper_bound_only_for_the_paper_model(model: str, has_bo
     params = tmp_path / 'model.yaml'
     params.write_text(f'/**:\n  ros__parameters:\n    trust_model: {model}\n')
     out = tmp_path / 'results'
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'reproduce',
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'reproduce',
                            '--traces', 'us06', '--predictors', 'ca', '--max-steps', '20',
                            '--params-file', str(params), '--results-dir', str(out),
                            '--workers', '1', '--no-progress'],
@@ -158,8 +158,8 @@ def test_tables_give_the_paper_bound_only_for_the_paper_model(model: str, has_bo
 def test_planner_and_monitor_run_one_model(values: dict[str, object]) -> None:
     """The model and its parameters have one value per graph: a planner section that
     differs from the monitor's is refused, naming both nodes."""
-    from trust_av_planner.system.config import load_run_config
-    from trust_monitor.common.params import ParamsError
+    from trust_av.system.config import load_run_config
+    from trust_av_common.params import ParamsError
     name = next(iter(values))
     with pytest.raises(ParamsError, match=rf'{name} is .* for planner but .* for '
                                           r'trust_monitor: the planner and the monitor must '
@@ -179,6 +179,6 @@ def test_bound_benchmark_smoke(tmp_path: Path) -> None:
                           capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr
     results = json.loads(out.read_text())
-    from trust_monitor.common.registry import TRUST_MODELS, names
+    from trust_av_common.registry import TRUST_MODELS, names
     assert set(results['models']) == set(names(TRUST_MODELS))
     assert results['models']['paper']['1 Hz']['closed_form'] is True

@@ -12,9 +12,9 @@ from test_graph import assert_records_equal, run_command
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
-from trust_av_planner.graph.bag_records import records_from_bag
-from trust_av_planner.system.closed_loop import simulate
-from trust_av_planner.system.config import load_run_config
+from trust_av.graph.bag_records import records_from_bag
+from trust_av.system.closed_loop import simulate
+from trust_av.system.config import load_run_config
 
 STEPS = 30
 BETA_BINDING = ('/**:\n  ros__parameters:\n    trust_model: beta_bernoulli\n'

@@ -1,5 +1,5 @@
 """Each ``trust-av`` command reads a frozen, typed options dataclass built from argparse's
-namespace (trust_av_planner.cli.typed_options): every option the parser defines is a field
+namespace (trust_av.cli.typed_options): every option the parser defines is a field
 of the command's options, every field is an option of the parser, and a value of the wrong
 type is refused where the namespace becomes options."""
 
@@ -11,10 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from trust_av_planner.cli import (
+from trust_av.cli import (
     bags,
     compare,
-    drive,
     eval_driver,
     fit_driver,
     fit_trust,
@@ -25,8 +24,9 @@ from trust_av_planner.cli import (
     simulate,
     train_gru,
 )
-from trust_av_planner.cli.main import build_parser
-from trust_av_planner.cli.typed_options import RunOptions, options_from
+from trust_av.cli.main import build_parser
+from trust_av.cli.typed_options import RunOptions, options_from
+from trust_av.drive import command as drive
 
 COMMANDS: dict[str, tuple[type, list[str]]] = {
     'simulate': (simulate.SimulateOptions, []),

@@ -24,7 +24,7 @@ def test_an_exclusion_moves_lines_from_checked_to_excluded() -> None:
     checked_ros, excluded_ros = typing_report.line_counts('/ros/')
     assert set(excluded_ros) == {n for n in checked if '/trust_monitor/ros/' in n}
     assert sum(checked_ros.values()) + sum(excluded_ros.values()) == total
-    spin = 'src/trust_monitor/trust_monitor/ros/spin.py'
+    spin = 'src/trust_av_common/trust_av_common/ros/spin.py'
     assert excluded_ros[spin] == len((SCRIPT.parents[1] / spin).read_text().splitlines())
 
 

@@ -16,10 +16,10 @@ from typing import Any
 
 import pytest
 
+from trust_av.system.config import DEFAULT_PARAMS_FILE, load_run_config
+from trust_av_common.ros.tuning import Tunable, check_request
+from trust_av_common.wall_clock import WallClockConfig
 from trust_av_planner.nmpc import PlannerConfig
-from trust_av_planner.system.config import DEFAULT_PARAMS_FILE, load_run_config
-from trust_monitor.common.wall_clock import WallClockConfig
-from trust_monitor.ros.tuning import Tunable, check_request
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'benchmarks'))
@@ -66,7 +66,7 @@ while time.monotonic() < end:
 print(during['deadline'], seen['deadline'], seen['incompatible'], seen['messages'])
 executor.shutdown(); node.destroy_node(); rclpy.try_shutdown()
 """
-    from trust_av_planner.graph.domains import lease_domain
+    from trust_av.graph.domains import lease_domain
     with lease_domain() as domain:
         proc = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                               timeout=60, env=dict(os.environ, ROS_DOMAIN_ID=str(domain),
@@ -148,7 +148,7 @@ def test_default_inputs_match_vehicle_stack_publishers(reliability: str,
         qos_check_compatible,
     )
 
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av_common.ros.qos import topic_qos
 
     stack = QoSProfile(depth=1, reliability=ReliabilityPolicy[reliability],
                        durability=DurabilityPolicy[durability])
@@ -180,10 +180,10 @@ def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile
 
-    from trust_av_planner.graph.domains import lease_domain
-    from trust_av_planner.graph.lifecycle_client import set_states
-    from trust_monitor.ros.messages import diagnostic_values, odometry
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av.graph.domains import lease_domain
+    from trust_av.graph.lifecycle_client import set_states
+    from trust_av_common.ros.messages import diagnostic_values, odometry
+    from trust_av_common.ros.qos import topic_qos
 
     params = tmp_path / 'run.yaml'
     params.write_text("planner:\n  ros__parameters:\n    clock_mode: wall\n"
@@ -274,10 +274,10 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from trust_av_planner.graph.domains import lease_domain
-    from trust_av_planner.graph.lifecycle_client import set_states
-    from trust_monitor.ros.messages import diagnostic_values, odometry
-    from trust_monitor.ros.qos import topic_qos
+    from trust_av.graph.domains import lease_domain
+    from trust_av.graph.lifecycle_client import set_states
+    from trust_av_common.ros.messages import diagnostic_values, odometry
+    from trust_av_common.ros.qos import topic_qos
 
     params = tmp_path / 'run.yaml'
     human_topic = "    human_odom_topic: ''\n" if predictor == 'ca' else ''
@@ -444,7 +444,7 @@ def test_vehicle_in_the_loop_outage_decelerates_then_recovers(
 
 
 def test_reproduce_with_lead_preview_adds_a_params_layer(tmp_path: Path) -> None:
-    from trust_av_planner.cli.reproduce import lead_preview_layer
+    from trust_av.cli.reproduce import lead_preview_layer
 
     path = lead_preview_layer('constant_speed', tmp_path)
     derived, shipped = load_run_config([DEFAULT_PARAMS_FILE, path]), load_run_config()
@@ -458,6 +458,6 @@ def test_reproduce_with_lead_preview_adds_a_params_layer(tmp_path: Path) -> None
     ('--control-rate-hz', '0', 'must be a finite rate > 0 Hz'),
     ('--lead-preview', 'v2v', "invalid choice: 'v2v'")])
 def test_simulate_rejects_bad_rate_and_preview(option: str, value: str, message: str) -> None:
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'simulate', option,
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'simulate', option,
                            value], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and message in proc.stderr

@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from trust_monitor.common.params import ParamsError, build_config
-from trust_monitor.common.wall_clock import (
+from trust_av_common.params import ParamsError, build_config
+from trust_av_common.wall_clock import (
     NS_PER_S,
     LatestInputs,
     LoopStats,
@@ -68,8 +68,8 @@ def test_loop_stats_percentiles(tmp_path) -> None:  # type: ignore[no-untyped-de
 def test_planner_core_without_follower_observes_the_av_only(run_config) -> None:  # type: ignore[no-untyped-def]
     import dataclasses
 
+    from trust_av_common.kinematics import VehicleState
     from trust_av_planner.planner import AvPlanner
-    from trust_monitor.common.kinematics import VehicleState
 
     planner = AvPlanner(run_config.planner, run_config.trust, 4.5)
     lead, av = VehicleState(40.0, 10.0), VehicleState(0.0, 5.0)

@@ -21,8 +21,9 @@ setup(
     entry_points={
         'console_scripts': [
             'driver = human_driver_sim.driver_node:main',
+            'follower_plant = human_driver_sim.follower_plant_node:main',
         ],
-        # The follower models, registered like any plug-in (trust_monitor.common.registry).
+        # The follower models, registered like any plug-in (trust_av_common.registry).
         'trust_av.drivers': [
             'idm = human_driver_sim.idm:COMPONENT',
             'mpc = human_driver_sim.driver_mpc:COMPONENT',

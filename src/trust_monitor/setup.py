@@ -1,5 +1,3 @@
-from glob import glob
-
 from setuptools import find_packages, setup
 
 package_name = 'trust_monitor'
@@ -12,10 +10,6 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        # the shipped params files and the graph's Fast DDS profile, kept in the package
-        # (the repository's config/ links here)
-        ('share/' + package_name + '/config', sorted(glob(package_name + '/config/*.yaml')
-                                                     + glob(package_name + '/config/*.xml'))),
     ],
     install_requires=['setuptools'],
     extras_require={'test': ['pytest']},  # colcon test runs pytest (setup.cfg)
@@ -32,13 +26,13 @@ setup(
             'trust-monitor-estimate = trust_monitor.estimate:main',
             'monitor = trust_monitor.monitor_node:main',
         ],
-        # The trust models (trust_monitor.trust_interface); a plug-in package adds its own
+        # The trust models (trust_monitor.model_interface); a plug-in package adds its own
         # to this group the same way (docs/concepts/trust-models.md).
         'trust_av.trust_models': [
-            'paper = trust_monitor.trust_models:PAPER',
-            'asymmetric = trust_monitor.trust_models:ASYMMETRIC',
-            'beta_bernoulli = trust_monitor.trust_models:BETA_BERNOULLI',
-            'optimo = trust_monitor.trust_models:OPTIMO',
+            'paper = trust_monitor.shipped_models:PAPER',
+            'asymmetric = trust_monitor.shipped_models:ASYMMETRIC',
+            'beta_bernoulli = trust_monitor.shipped_models:BETA_BERNOULLI',
+            'optimo = trust_monitor.shipped_models:OPTIMO',
         ],
     },
 )

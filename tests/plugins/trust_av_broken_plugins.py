@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from human_driver_sim.driver_mpc import DriverResult
-from trust_monitor.common.registry import Component
+from trust_av_common.registry import Component
 
 GOOD_STEPS = 3
 """Steps each broken component gets right before it breaks (the recording keeps them)."""

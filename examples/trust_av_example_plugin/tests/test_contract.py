@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from trust_monitor.common.contract import check_component
+from trust_av.contract import check_component
 
 COMPONENTS = [('trust_av.predictors', 'ses'), ('trust_av.trust_models', 'leaky')]
 

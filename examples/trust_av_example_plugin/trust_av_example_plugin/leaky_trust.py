@@ -3,7 +3,7 @@
 Trust relaxes towards a baseline with time constant ``leaky_time_constant_s`` while the
 paper's input u_T (eq. 11) drives it: ``dT/dt = delta u_T - (T - T_base) / tau``. The
 update over ``dt`` is the ODE's exact solution for a constant plan, so ten 0.1 s steps equal
-one 1 s step to rounding (the contract of ``trust_monitor.trust_interface``), and the
+one 1 s step to rounding (the contract of ``trust_monitor.model_interface``), and the
 model's own discrete equation is that 1 s step. No closed form for the NMPC bound is given:
 the planner bisects on :meth:`LeakyTrustModel.step`.
 
@@ -20,9 +20,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from trust_monitor.common.params import check_fields, param
-from trust_monitor.common.registry import Component
-from trust_monitor.trust_model import SAME_MODEL, TrustConfig, performance, trust_input
+from trust_av_common.params import check_fields, param
+from trust_av_common.registry import Component
+from trust_monitor.paper_trust import SAME_MODEL, TrustConfig, performance, trust_input
 
 
 @dataclass(frozen=True)

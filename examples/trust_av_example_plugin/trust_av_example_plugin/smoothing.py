@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trust_av_common.params import check_fields, param
+from trust_av_common.registry import Component
 from trust_av_planner.nmpc import PlannerConfig
 from trust_av_planner.predictors import Observation
-from trust_monitor.common.params import check_fields, param
-from trust_monitor.common.registry import Component
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,9 @@ import numpy as np
 
 from human_driver_sim.errors import HumanDriverSimError
 
+__all__ = ['CarFollowingDataError', 'FollowingPair', 'LoadReport', 'Splice', 'numeric_table',
+           'read_rows', 'resample']
+
 
 class CarFollowingDataError(HumanDriverSimError):
     """A car-following data file is missing or malformed."""

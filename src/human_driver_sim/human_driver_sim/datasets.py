@@ -36,6 +36,8 @@ from human_driver_sim.car_following import (
 )
 from human_driver_sim.ngsim import NGSIM_VEHICLE_LENGTH_M, read_ngsim_pairs
 
+__all__ = ['FORMATS', 'load_directory', 'read_openacc_pairs']
+
 SPLICE_RESIDUAL_MPS = 5.0
 """|d IVS/dt - (v_lead - v_follow)| (1 s mean) above this is a splice artefact, m/s (the
 clean parts of the Vicolungo files stay below 3.4 m/s; the part3 splice reaches 11-55)."""

@@ -37,10 +37,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from trust_monitor.common import kinematics
-from trust_monitor.common.params import check_fields, control_step_param, param, require
-from trust_monitor.common.registry import Component
-from trust_monitor.common.solver import qp_options, solve
+from trust_av_common import kinematics
+from trust_av_common.params import check_fields, control_step_param, param, require
+from trust_av_common.registry import Component
+from trust_av_common.solver import qp_options, solve
+
+__all__ = ['COMPONENT', 'DriverConfig', 'DriverMpc', 'DriverResult', 'bound_av_accels', 'features']
 
 LOG = logging.getLogger(__name__)
 

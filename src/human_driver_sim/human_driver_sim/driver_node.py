@@ -9,7 +9,7 @@ with its transform on ``tf`` (``odom`` -> ``human``).
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` plans from the latest
 expected plan and AV odometry (both fresher than ``input_timeout_s``), applies the plan's
 first acceleration over the real time elapsed since the previous tick
-(:func:`trust_monitor.common.kinematics.advance`, no reversing) and publishes plan, status and
+(:func:`trust_av_common.kinematics.advance`, no reversing) and publishes plan, status and
 odometry stamped now; until ``sim/start`` it holds its initial state. With a missing or
 stale input it does not plan: the status says ``inputs_not_ready`` with the reason and the
 simulated human coasts (0 m/s^2).
@@ -31,20 +31,18 @@ from trajectory_msgs.msg import JointTrajectory
 
 from human_driver_sim.driver_mpc import DriverConfig
 from human_driver_sim.followers import FollowerConfig, make_follower
-from trust_monitor.common import registry
-from trust_monitor.common.grids import hold_at
-from trust_monitor.common.kinematics import advance
-from trust_monitor.common.lockstep import StepBuffer, stamp_ns
-from trust_monitor.common.params import (
+from trust_av_common import registry
+from trust_av_common.grids import hold_at
+from trust_av_common.kinematics import advance
+from trust_av_common.lockstep import StepBuffer, stamp_ns
+from trust_av_common.params import (
     MAX_POSITION_M,
     MAX_STAMP_S,
     MAX_VEHICLE_LENGTH_M,
     check_fields,
     param,
 )
-from trust_monitor.common.topics import VEHICLE_FRAMES
-from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
-from trust_monitor.ros.messages import (
+from trust_av_common.ros.messages import (
     TrajectoryBytes,
     VehicleOdometry,
     diagnostics,
@@ -52,10 +50,14 @@ from trust_monitor.ros.messages import (
     trajectory_times,
     trajectory_values,
 )
-from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import QOS, topic_qos
-from trust_monitor.ros.raw_inputs import subscribe
-from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
+from trust_av_common.ros.parameters import declare_config
+from trust_av_common.ros.qos import QOS, topic_qos
+from trust_av_common.ros.raw_inputs import subscribe
+from trust_av_common.ros.spin import WallLoop, now_ns, spin_node
+from trust_av_common.topics import VEHICLE_FRAMES
+from trust_av_common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+
+__all__ = ['main']
 
 
 @dataclass(frozen=True)
@@ -81,7 +83,7 @@ class DriverNode(Node):
 
     def __init__(self) -> None:
         super().__init__('human_driver')
-        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.finished = False  # runs until it is stopped (trust_av_common.ros.spin.GraphNode)
         self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.config = declare_config(self, DriverConfig)

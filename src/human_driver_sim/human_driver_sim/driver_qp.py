@@ -14,7 +14,7 @@ v_max (the paper's v_max = max(v_PT) of the trace the vehicle follows, Table I).
 ``tests/test_driver_fit.py`` checks the two against each other on random states, near the
 bounds too: if DriverMpc's constraints change, that test says so.
 
-Rollout (:mod:`trust_monitor.common.kinematics`), for k = 1..N and the AV's speeds
+Rollout (:mod:`trust_av_common.kinematics`), for k = 1..N and the AV's speeds
 r_0..r_{N-1} from its expected plan e::
 
     v_k = v_0 + dt sum_{i<k} u_i                       (L: ones on and below the diagonal)
@@ -30,6 +30,8 @@ import dataclasses
 import numpy as np
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverMpc, bound_av_accels
+
+__all__ = ['BatchDriver']
 
 _FEASIBILITY_TOL = 1e-9
 

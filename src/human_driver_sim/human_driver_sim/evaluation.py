@@ -14,7 +14,7 @@ Per pair (all segments and windows of one leader->follower pair together), the g
 is RMSE(gap) / mean recorded gap and the speed NRMSE RMSE(speed) / mean recorded speed
 (each mean floored at 0.1, m or m/s: a pair standing still or touching divides by no zero),
 over every simulated sample (the re-initialised first samples excluded). Pooled: the mean
-over pairs with a 95 % Student-t confidence interval (``trust_monitor.common.stats``).
+over pairs with a 95 % Student-t confidence interval (``trust_av_common.stats``).
 Every table carries the data's own noise floor: the follower's *recorded* speed replayed
 through the same gap computation.
 """
@@ -33,8 +33,13 @@ from human_driver_sim.car_following import FollowingPair
 from human_driver_sim.driver_mpc import DriverConfig
 from human_driver_sim.driver_qp import BatchDriver
 from human_driver_sim.idm import IdmParams, idm_accel_array
-from trust_monitor.common import kinematics
-from trust_monitor.common.stats import mean_ci95
+from trust_av_common import kinematics
+from trust_av_common.stats import mean_ci95
+
+__all__ = ['MIN_WINDOW_STEPS', 'NOISE_FLOOR', 'PROTOCOLS', 'WINDOW_S', 'ConstantSpeed',
+           'Evaluation', 'Follower', 'IdmFollower', 'MpcFollower', 'Run', 'cluster_ci95',
+           'evaluate', 'format_table', 'make_runs', 'mean_gap_nrmse', 'paired_difference',
+           'platoons', 'simulate']
 
 WINDOW_S = 30.0
 """Length of a re-initialised window, s."""

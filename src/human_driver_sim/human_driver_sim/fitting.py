@@ -23,6 +23,9 @@ from human_driver_sim.evaluation import IdmFollower, MpcFollower, Run, mean_gap_
 from human_driver_sim.idm import FIT_BOUNDS, PARAM_NAMES, TEXTBOOK_MOTORWAY, IdmParams
 from human_driver_sim.irl import nelder_mead
 
+__all__ = ['CAUTION_BOUNDS', 'MPC_BOUNDS', 'BoundedBox', 'FitResult', 'configured', 'fit_idm',
+           'fit_mpc']
+
 MPC_BOUNDS: dict[str, tuple[float, float]] = {
     'weight_desired_speed': (1e-6, 1.0), 'weight_relative_speed': (1e-4, 10.0),
     'weight_relative_distance': (1e-5, 1.0), 'time_headway_s': (0.5, 3.0),

@@ -1,6 +1,6 @@
 """The human follower model, chosen by name from the ``trust_av.drivers`` registry.
 
-A follower (driver) model is a :class:`~trust_monitor.common.registry.Component` of the
+A follower (driver) model is a :class:`~trust_av_common.registry.Component` of the
 entry-point group ``trust_av.drivers``: its ``factory(driver, params)`` takes the
 ``human_driver`` section's :class:`~human_driver_sim.driver_mpc.DriverConfig` (step,
 horizon, speed and acceleration bounds, standstill gap; the fitted MPC's weights) and an
@@ -16,8 +16,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverResult
-from trust_monitor.common import registry
-from trust_monitor.common.component_checks import (
+from trust_av_common import registry
+from trust_av_common.component_checks import (
     PASSING,
     call,
     check_number,
@@ -25,7 +25,9 @@ from trust_monitor.common.component_checks import (
     check_type,
     raised,
 )
-from trust_monitor.common.params import check_fields, param, require
+from trust_av_common.params import check_fields, param, require
+
+__all__ = ['CheckedFollower', 'Follower', 'FollowerConfig', 'make_follower']
 
 
 class Follower(Protocol):
@@ -76,7 +78,7 @@ def make_follower(driver: DriverConfig, follower: FollowerConfig | None = None,
 
 class CheckedFollower:
     """A follower whose every step is checked where it enters the loop
-    (:mod:`trust_monitor.common.component_checks`): the result must have a plan of
+    (:mod:`trust_av_common.component_checks`): the result must have a plan of
     ``horizon_steps`` finite accelerations within the driver's bounds, a ``str`` status, a
     ``bool`` success, an ``int`` iteration count and a finite solve time >= 0; anything the
     model raises names it. The in-process loop and the ``driver`` node both get one from

@@ -12,8 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from human_driver_sim.driver_mpc import DriverConfig, DriverResult
-from trust_monitor.common.params import check_fields, param
-from trust_monitor.common.registry import Component
+from trust_av_common.params import check_fields, param
+from trust_av_common.registry import Component
+
+__all__ = ['COMPONENT', 'FIT_BOUNDS', 'PARAM_NAMES', 'TEXTBOOK_MOTORWAY', 'IdmConfig',
+           'IdmFollower', 'IdmParams', 'idm_accel', 'idm_accel_array']
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,8 @@ import scipy.optimize
 from human_driver_sim.car_following import FollowingPair
 from human_driver_sim.driver_mpc import DriverConfig, features
 
+__all__ = ['Demonstration', 'demonstrations', 'fit_inverse_kkt', 'nelder_mead']
+
 
 @dataclass(frozen=True)
 class Demonstration:

@@ -22,6 +22,8 @@ from human_driver_sim.car_following import (
     resample,
 )
 
+__all__ = ['NGSIM_VEHICLE_LENGTH_M', 'read_ngsim_pairs', 'split_by_follower']
+
 NGSIM_VEHICLE_LENGTH_M = 4.5
 """Assumed length of every NGSIM leader (front-to-front spacing -> gap), m; the project's
 ``vehicle_length_m``. Not given in the chains; docs/DRIVER_IRL.md shows what it changes."""

@@ -9,6 +9,10 @@ import yaml
 
 from human_driver_sim.errors import HumanDriverSimError
 
+__all__ = ['CAUTIOUS_FIT_FILE', 'DRIVER_FIT_FILE', 'SAMPLED_SCALARS', 'WEIGHT_NAMES',
+           'DriverFitError', 'fitted_idm_params', 'fitted_time_headway_s', 'per_driver_fits',
+           'per_pair_weights', 'sample_driver_params', 'sample_population']
+
 
 def sample_population(per_pair_weights: np.ndarray, count: int, *, seed: int) -> np.ndarray:
     """Sample ``count`` weight vectors from a log-normal fitted to per-pair log-weights.

@@ -19,6 +19,8 @@ from typing import NamedTuple
 
 from human_driver_sim.car_following import CarFollowingDataError, FollowingPair
 
+__all__ = ['Split', 'cut_in_time', 'ngsim_role', 'split_ngsim', 'split_openacc']
+
 OPENACC_FIT_PART = 'JRC-VC_280219_part2'
 OPENACC_TEST_PART = 'JRC-VC_280219_part3'
 TRAIN_SHARE = 0.7

@@ -1,1 +1,4 @@
 """Preceding-traffic speed source: drive-cycle traces, validation, resampling and preview."""
+
+__all__: list[str] = []
+

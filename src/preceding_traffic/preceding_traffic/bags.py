@@ -38,7 +38,10 @@ from preceding_traffic.traces import (
     check_sample,
     resample,
 )
-from trust_monitor.common.input_files import not_regular
+from trust_av_common.input_files import not_regular
+
+__all__ = ['ODOMETRY', 'TWIST_STAMPED', 'TYPESTORE', 'BagError', 'load_bag_trace',
+           'odometry_messages', 'read_bag_samples', 'write_trace_bag']
 
 ODOMETRY = 'nav_msgs/msg/Odometry'
 TWIST_STAMPED = 'geometry_msgs/msg/TwistStamped'

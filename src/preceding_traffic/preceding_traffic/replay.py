@@ -13,6 +13,8 @@ import numpy as np
 
 from preceding_traffic.traces import SpeedTrace
 
+__all__ = ['LeadReplay']
+
 
 class LeadState(NamedTuple):
     """The replayed vehicle's odometry: position (m) and speed (m/s)."""

@@ -20,6 +20,8 @@ from preceding_traffic.traces import (
     trace_path,
 )
 
+__all__ = ['load_trace']
+
 
 def is_bag(path: Path) -> bool:
     """A rosbag2 bag: a directory with ``metadata.yaml``, or an ``.mcap``/``.db3`` file."""

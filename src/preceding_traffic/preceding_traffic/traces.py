@@ -22,16 +22,20 @@ from typing import TextIO
 import numpy as np
 
 from preceding_traffic.errors import PrecedingTrafficError
-from trust_monitor.common.input_files import not_regular
-from trust_monitor.common.params import MAX_STAMP_S, ParamsError, check_fields, param
-from trust_monitor.errors import did_you_mean
+from trust_av_common.errors import did_you_mean
+from trust_av_common.input_files import not_regular
+from trust_av_common.params import MAX_STAMP_S, ParamsError, check_fields, param
+
+__all__ = ['MAX_SPEED_MPS', 'MAX_TRACE_STEPS', 'SHIPPED_TRACES', 'TRAINING_TRACES', 'SpeedTrace',
+           'TraceConfig', 'TraceError', 'check_accelerations', 'check_sample', 'read_samples',
+           'resample', 'trace_path', 'truncate']
 
 MAX_SPEED_MPS = 100.0
 """Fastest speed a trace may hold, m/s (360 km/h: above any road vehicle; a faster sample is
 a unit or column mistake)."""
 MAX_TIME_S = MAX_STAMP_S
 """Latest sample time a trace may hold, s: a run stamps its messages with the trace's time
-(:data:`trust_monitor.common.params.MAX_STAMP_S`)."""
+(:data:`trust_av_common.params.MAX_STAMP_S`)."""
 MAX_TRACE_STEPS = 200_000
 """Most control steps a trace may have (55 h at 1 s, 5.5 h at 0.1 s): the in-process loop
 keeps one record per step (2.9 kB measured on US06), so this bounds it to about 0.6 GB."""

@@ -10,7 +10,7 @@ t + dt, the trust, the planner and the driver status stamped t (lock-step, see
 :mod:`trust_monitor.graph_interface`), and, with ``recorder_window_steps`` > 0 (a recorded
 run), only while the recorder has acknowledged (``recorder/ack``) every step but the last
 ``recorder_window_steps``: back-pressure, so that a suspended or slow recorder holds the
-graph back instead of losing messages (:mod:`trust_monitor.common.record_window`). Once
+graph back instead of losing messages (:mod:`trust_av_common.record_window`). Once
 asked to stop it completes the step in progress and starts no other. A step whose statuses
 show a gap at or below 0 m (a collision, :func:`step_collision`) is the last step, as in
 the in-process loop: the recorder ends the recording with it. After the last step
@@ -42,23 +42,25 @@ from trajectory_msgs.msg import JointTrajectory
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig, truncate
-from trust_monitor.common.kinematics import Collision, collision
-from trust_monitor.common.lockstep import StepBuffer, stamp_ns
-from trust_monitor.common.params import MAX_POSITION_M, check_fields, control_step_param, param
-from trust_monitor.common.record_window import ACK_TOPIC, may_start, window_steps
-from trust_monitor.common.topics import VEHICLE_FRAMES
-from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
-from trust_monitor.ros.messages import (
+from trust_av_common.kinematics import Collision, collision
+from trust_av_common.lockstep import StepBuffer, stamp_ns
+from trust_av_common.params import MAX_POSITION_M, check_fields, control_step_param, param
+from trust_av_common.record_window import ACK_TOPIC, may_start, window_steps
+from trust_av_common.ros.messages import (
     TrajectoryBytes,
     VehicleOdometry,
     msg_ns,
     status_gap_m,
     time_msg,
 )
-from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import QOS, topic_qos
-from trust_monitor.ros.raw_inputs import subscribe
-from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
+from trust_av_common.ros.parameters import declare_config
+from trust_av_common.ros.qos import QOS, topic_qos
+from trust_av_common.ros.raw_inputs import subscribe
+from trust_av_common.ros.spin import WallLoop, now_ns, spin_node
+from trust_av_common.topics import VEHICLE_FRAMES
+from trust_av_common.wall_clock import NS_PER_S, WallClockConfig
+
+__all__ = ['main']
 
 
 @dataclass(frozen=True)
@@ -92,7 +94,7 @@ class TrafficNode(Node):
 
     def __init__(self) -> None:
         super().__init__('preceding_traffic')
-        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.finished = False  # runs until it is stopped (trust_av_common.ros.spin.GraphNode)
         self.exit_code = 0
         self.stopping = False  # a stop was requested: no further step
         self.run = declare_config(self, TrafficRunConfig)
@@ -236,7 +238,7 @@ class TrafficNode(Node):
 def step_collision(step: int, t_s: float, planner_status: DiagnosticArray,
                    driver_status: DiagnosticArray) -> Collision | None:
     """The collision a complete step's statuses show (the gaps its record holds, see
-    :func:`trust_av_planner.graph.bag_records.records_from_bag`), or None: the run ends with
+    :func:`trust_av.graph.bag_records.records_from_bag`), or None: the run ends with
     that step, as the in-process loop does."""
     av_gap = status_gap_m(planner_status)
     if av_gap is None:

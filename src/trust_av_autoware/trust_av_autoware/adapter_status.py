@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections import Counter
 
-from trust_monitor.common.health import ERROR, OK, WARN, Report, age
+from trust_av_common.health import ERROR, OK, WARN, Report, age
 
 
 class AdapterStatus:

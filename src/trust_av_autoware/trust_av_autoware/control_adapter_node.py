@@ -40,12 +40,12 @@ from trust_av_autoware.ros.qos import (
     LATERAL_QOS,
     LATERAL_TOPIC,
 )
-from trust_monitor.common.wall_clock import WallClockConfig
-from trust_monitor.ros.diagnostics import NodeDiagnostics
-from trust_monitor.ros.messages import time_msg
-from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import wall_qos
-from trust_monitor.ros.spin import spin_node
+from trust_av_common.ros.diagnostics import NodeDiagnostics
+from trust_av_common.ros.messages import time_msg
+from trust_av_common.ros.parameters import declare_config
+from trust_av_common.ros.qos import wall_qos
+from trust_av_common.ros.spin import spin_node
+from trust_av_common.wall_clock import WallClockConfig
 
 
 class ControlAdapterNode(Node):

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from trust_av_autoware.lane_inputs import InputError, finite
-from trust_monitor.common.params import check_fields, param
+from trust_av_common.params import check_fields, param
 
 
 @dataclass(frozen=True)

@@ -25,10 +25,10 @@ from trajectory_msgs.msg import JointTrajectory
 
 from trust_av_autoware.adapter_status import AdapterStatus
 from trust_av_autoware.labels import TRUST_NAMES, finite_values, plan_names
-from trust_monitor.common.topics import JOINT_NAME
-from trust_monitor.ros.diagnostics import NodeDiagnostics
-from trust_monitor.ros.messages import trajectory_times
-from trust_monitor.ros.spin import spin_node
+from trust_av_common.ros.diagnostics import NodeDiagnostics
+from trust_av_common.ros.messages import trajectory_times
+from trust_av_common.ros.spin import spin_node
+from trust_av_common.topics import JOINT_NAME
 
 IN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                     reliability=ReliabilityPolicy.BEST_EFFORT,

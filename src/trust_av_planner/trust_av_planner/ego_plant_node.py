@@ -8,7 +8,7 @@ Parameters: ``dt_s`` and the initial state.
 
 ``clock_mode: wall``: a wall-clock timer at ``control_rate_hz`` integrates the latest
 command over the real time elapsed since the previous tick
-(:func:`trust_monitor.common.kinematics.advance`, no reversing) and publishes the odometry stamped
+(:func:`trust_av_common.kinematics.advance`, no reversing) and publishes the odometry stamped
 now (sensor-data QoS) with its transform; until ``sim/start`` the vehicle holds its initial
 state (the traffic node starts its replay then). A command older than its deadline (two
 control periods, by its stamp; the command QoS carries the same deadline) or none yet is not
@@ -28,22 +28,24 @@ from rclpy.node import Node
 from std_msgs.msg import Empty
 from tf2_msgs.msg import TFMessage
 
-from trust_monitor.common.kinematics import VehicleState, advance, integrate
-from trust_monitor.common.lockstep import stamp_ns
-from trust_monitor.common.params import (
+from trust_av_common.kinematics import VehicleState, advance, integrate
+from trust_av_common.lockstep import stamp_ns
+from trust_av_common.params import (
     MAX_POSITION_M,
     MAX_STAMP_S,
     check_fields,
     control_step_param,
     param,
 )
-from trust_monitor.common.topics import VEHICLE_FRAMES
-from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
-from trust_monitor.ros.messages import VehicleOdometry, msg_ns
-from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import QOS, command_deadline_s, topic_qos
-from trust_monitor.ros.raw_inputs import subscribe
-from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
+from trust_av_common.ros.messages import VehicleOdometry, msg_ns
+from trust_av_common.ros.parameters import declare_config
+from trust_av_common.ros.qos import QOS, command_deadline_s, topic_qos
+from trust_av_common.ros.raw_inputs import subscribe
+from trust_av_common.ros.spin import WallLoop, now_ns, spin_node
+from trust_av_common.topics import VEHICLE_FRAMES
+from trust_av_common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+
+__all__ = ['main']
 
 
 @dataclass(frozen=True)
@@ -71,11 +73,11 @@ def command_problem(command: AccelStamped | None, now_ns: int, deadline_s: float
 
 
 class EgoPlantNode(Node):
-    """Explicit-Euler odometry of the AV (:func:`trust_monitor.common.kinematics.integrate`)."""
+    """Explicit-Euler odometry of the AV (:func:`trust_av_common.kinematics.integrate`)."""
 
     def __init__(self) -> None:
         super().__init__('ego_plant')
-        self.finished = False  # runs until it is stopped (trust_monitor.ros.spin.GraphNode)
+        self.finished = False  # runs until it is stopped (trust_av_common.ros.spin.GraphNode)
         self.stopping = False  # set by spin_node on a stop request
         self.exit_code = 0
         self.config = declare_config(self, PlantConfig)

@@ -8,17 +8,17 @@ the plan influences)::
     s.t. d_min <= d^k <= d_max,  v_min <= v^k <= v_max,  u_min <= u^k <= u_max,
          E(u, u^H) <= E_max(T)                     (the trust constraint T^k >= T_min)
 
-with the dynamics of :mod:`trust_monitor.common.kinematics` and E of
-:func:`trust_monitor.trust_model.explicability` (each written once). The trust constraint is
+with the dynamics of :mod:`trust_av_common.kinematics` and E of
+:func:`trust_monitor.paper_trust.explicability` (each written once). The trust constraint is
 the exact smooth equivalent of propagating the trust model's update over the horizon: the
-largest admissible E of :func:`trust_monitor.trust_interface.explicability_bound` (a closed
+largest admissible E of :func:`trust_monitor.model_interface.explicability_bound` (a closed
 form for ``paper``, a bisection on their own update for the others).
 
 The NLP is built once (CasADi SX, ``sqpmethod`` with the ``qrqp`` active-set QP solver),
 warm-started from the shifted previous plan. A solve that fails, that (against the wall
 clock only: ``cpu_budget``) uses more thread CPU time than ``solver_cpu_budget_s``, or whose
 plan breaks a bound by more than :data:`BOUND_TOLERANCE`, is replaced by the documented
-fallback plan (:func:`trust_monitor.common.kinematics.hold_gap_plan`), reported in the status.
+fallback plan (:func:`trust_av_common.kinematics.hold_gap_plan`), reported in the status.
 """
 
 from __future__ import annotations
@@ -27,24 +27,28 @@ import dataclasses
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
-from trust_av_planner import perturbations
-from trust_monitor.common import kinematics, registry
-from trust_monitor.common.params import (
+from trust_av_common import kinematics, registry
+from trust_av_common.params import (
     PARAM_METADATA_KEY,
     check_fields,
     control_step_param,
     param,
     require,
 )
-from trust_monitor.common.solver import nmpc_solver_options, solve
-from trust_monitor.trust_interface import CheckedBound, TrustModel, make_trust_model
-from trust_monitor.trust_model import TrustConfig, explicability
+from trust_av_common.solver import nmpc_solver_options, solve
+from trust_av_planner import perturbations
+from trust_av_planner.plan_result import PlanResult
+from trust_monitor.model_interface import CheckedBound, TrustModel, make_trust_model
+from trust_monitor.paper_trust import TrustConfig, explicability
+
+__all__ = ['BOUND_TOLERANCE', 'LEAD_PREVIEWS', 'PlanResult', 'PlannerConfig', 'TrustAwareNmpc',
+           'prediction_grid']
 
 LOG = logging.getLogger(__name__)
 
@@ -64,7 +68,6 @@ STATIONARY_STATUS = 'Search_Direction_Becomes_Too_Small'
 """SQP stopped because its step vanished: the iterate cannot move. Accepted when it passes the
 bound check (it happens at standstill at d_min, where the feasible set shrinks to one point and
 the active gap and speed bounds have opposite gradients); otherwise the step falls back."""
-
 
 BUILT = 'built into the NMPC at start-up'
 SAFETY = 'a safety bound: fixed while the vehicle drives'
@@ -194,36 +197,6 @@ def prediction_grid(config: PlannerConfig, period_s: float | None = None) -> tup
                          f'{steps} steps (at most {MAX_GRID_STEPS}); lower the control rate '
                          'or use prediction_grid model_step')
     return period_s, steps
-
-
-@dataclass(frozen=True)
-class PlanResult:
-    """Outcome of one NMPC step.
-
-    Attributes:
-        plan_mps2: accelerations u_R^0..u_R^{N-1} to apply (solver's or fallback's).
-        status: solver return status, or ``fallback: <reason>``.
-        success: the solver's plan was used.
-        iterations: SQP iterations.
-        solve_time_s: wall time of the solver call (instrumentation only).
-        explicability_max: E_max of the trust constraint for this step.
-        cost: objective value of the returned plan.
-        gap_bounds_relaxed: the gap bounds were what the vehicle can reach (status: to what).
-    """
-
-    plan_mps2: np.ndarray
-    status: str
-    success: bool
-    iterations: int
-    solve_time_s: float
-    explicability_max: float
-    cost: float = field(default=float('nan'))
-    gap_bounds_relaxed: bool = False
-
-    @property
-    def fallback(self) -> bool:
-        """True when the fallback plan replaced the solver's."""
-        return not self.success
 
 
 class TrustAwareNmpc:

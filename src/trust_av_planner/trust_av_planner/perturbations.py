@@ -32,7 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trust_monitor.common.params import param
+from trust_av_common.params import param
+
+__all__ = ['CONDITION_PARAM', 'LIBRARY', 'SEED_PARAM', 'Perturbation', 'schedule']
 
 BRAKE, HESITATE, HEADWAY = 'brake', 'hesitate', 'headway'
 FIXED_CONDITION = 'the study condition of a run is fixed'

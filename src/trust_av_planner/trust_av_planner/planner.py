@@ -18,16 +18,19 @@ from typing import Any
 
 import numpy as np
 
-from trust_av_planner.nmpc import PlannerConfig, PlanResult, TrustAwareNmpc
+from trust_av_common import registry
+from trust_av_common.component_checks import PASSING, call, check_plan, raised
+from trust_av_common.kinematics import VehicleState, gap_m
+from trust_av_planner.nmpc import PlannerConfig, TrustAwareNmpc
 from trust_av_planner.perturbations import Perturbation
+from trust_av_planner.plan_result import PlanResult
 from trust_av_planner.predictors import Observation, Predictor
 from trust_av_planner.predictors.sampling import ModelGridPredictor
 from trust_av_planner.preview import LeadPreview, hold_on_grid
-from trust_monitor.common import registry
-from trust_monitor.common.component_checks import PASSING, call, check_plan, raised
-from trust_monitor.common.kinematics import VehicleState, gap_m
-from trust_monitor.trust_interface import TrustModel
-from trust_monitor.trust_model import TrustConfig
+from trust_monitor.model_interface import TrustModel
+from trust_monitor.paper_trust import TrustConfig
+
+__all__ = ['AvPlanner', 'CheckedPredictor', 'make_predictor', 'needs_follower_state', 'observe']
 
 
 def make_predictor(config: PlannerConfig, params: Any = None) -> Predictor:
@@ -49,7 +52,7 @@ def make_predictor(config: PlannerConfig, params: Any = None) -> Predictor:
 
 class CheckedPredictor:
     """A plan estimator whose every call is checked where it enters the loop
-    (:mod:`trust_monitor.common.component_checks`): a prediction must be ``horizon_steps``
+    (:mod:`trust_av_common.component_checks`): a prediction must be ``horizon_steps``
     finite accelerations within the planner's bounds; anything the estimator raises names
     it. :class:`AvPlanner` (the in-process loop's and the ``planner`` node's) wraps its
     estimator in one.

@@ -1,29 +1,29 @@
 """``planner`` node (``ros2 run trust_av_planner planner``): the trust-aware AV planner.
 
-Subscribes the preceding vehicle's odometry and speed preview, the ego and human odometry
-and the monitor's trust; per step (inputs paired by header stamp) it runs
-:class:`trust_av_planner.planner.AvPlanner` (plan estimator + NMPC) and publishes the
-plan, the expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``),
-all three in the AV's body frame (the ``child_frame_id`` of its odometry: ``ego`` in the
-simulated graph; ``base_frame_id``, default ``base_link``, before the first), the solver
-status (``DiagnosticArray``) and the three vehicles' markers (``vehicle_markers``, each in
-its vehicle's frame). Topic names are relative (the node's namespace). Parameters: the
-``planner`` section of ``config/trust_av.yaml``.
+Subscribes the preceding vehicle's odometry and speed preview, the ego and human odometry and
+the monitor's trust; per step (inputs paired by header stamp) it runs
+:class:`trust_av_planner.planner.AvPlanner` (plan estimator + NMPC) and publishes the plan, the
+expected plan (``JointTrajectory``), the acceleration command (``AccelStamped``), all three in
+the AV's body frame (the ``child_frame_id`` of its odometry: ``ego`` in the simulated graph;
+``base_frame_id``, default ``base_link``, before the first), the solver status
+(``DiagnosticArray``) and the three vehicles' markers (``vehicle_markers``, each in its
+vehicle's frame). Topic names are relative (the node's namespace). Parameters: the ``planner``
+section of ``config/trust_av.yaml``.
 
-``clock_mode: wall`` (real-vehicle mode, docs/operations/real-vehicle.md): a steady-clock
-timer at ``control_rate_hz`` plans from the LATEST inputs (sensor-data QoS; with
+``clock_mode: wall`` (real-vehicle mode, docs/operations/real-vehicle.md): a steady-clock timer
+at ``control_rate_hz`` plans from the LATEST inputs (sensor-data QoS; with
 ``input_deadline_qos`` a QoS deadline of ``input_timeout_s``), the NMPC predicting on the
 control period's grid; outputs are stamped with the current time. While the lead or ego
-odometry (or a recorded preview) is missing, older than ``input_timeout_s``, past its
-deadline, or in frames it cannot relate (positions along the road need one world-fixed
-frame, ``odom_frame_id`` or ``map_frame_id``), it commands ``stale_decel_mps2`` with status
-ERROR naming why; it plans again as soon as they are usable. The human odometry is used
-when fresh (an empty ``human_odom_topic`` needs an estimator without the ``follower_state``
-need, such as CA or CV). With ``use_sim_time`` true it does not command at all and its
-status and ``/diagnostics`` say why (:meth:`ManagedNode.clock_problem
-<trust_monitor.ros.lifecycle.ManagedNode.clock_problem>`).
-Trust: the latest estimate, ``trust_initial`` before the first. ``alpha``, ``trust_min`` and
-``solver_cpu_budget_s`` can be changed with ``ros2 param set`` (from the next tick).
+odometry (or a recorded preview) is missing, older than ``input_timeout_s``, past its deadline,
+or in frames it cannot relate (positions along the road need one world-fixed frame,
+``odom_frame_id`` or ``map_frame_id``), it commands ``stale_decel_mps2`` with status ERROR
+naming why; it plans again as soon as they are usable. The human odometry is used when fresh
+(an empty ``human_odom_topic`` needs an estimator without the ``follower_state`` need, such as
+CA or CV). With ``use_sim_time`` true it does not command at all and its status and
+``/diagnostics`` say why (:meth:`ManagedNode.clock_problem
+<trust_av_common.ros.lifecycle.ManagedNode.clock_problem>`). Trust: the latest estimate,
+``trust_initial`` before the first. ``alpha``, ``trust_min`` and ``solver_cpu_budget_s`` can be
+changed with ``ros2 param set`` (from the next tick).
 """
 
 from __future__ import annotations
@@ -39,20 +39,15 @@ from nav_msgs.msg import Odometry
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.nmpc import PlannerConfig
-from trust_av_planner.planner import AvPlanner
-from trust_av_planner.system.config import PlannerTopics, SharedConfig, check_control_rate
-from trust_monitor.common import registry
-from trust_monitor.common.frames import FrameConfig, body_frame, position_frame_problem
-from trust_monitor.common.grids import interp_at
-from trust_monitor.common.health import Report, SolveRecord, age
-from trust_monitor.common.kinematics import VehicleState
-from trust_monitor.common.lifecycle import LifecycleConfig
-from trust_monitor.common.lockstep import StepBuffer
-from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
-from trust_monitor.ros.lifecycle import ManagedNode
-from trust_monitor.ros.messages import (
+from trust_av_common import registry
+from trust_av_common.frames import FrameConfig, body_frame, position_frame_problem
+from trust_av_common.grids import interp_at
+from trust_av_common.health import Report, SolveRecord, age
+from trust_av_common.kinematics import VehicleState
+from trust_av_common.lifecycle import LifecycleConfig
+from trust_av_common.lockstep import StepBuffer
+from trust_av_common.ros.lifecycle import ManagedNode
+from trust_av_common.ros.messages import (
     TrajectoryBytes,
     VehicleMarkers,
     accel_command_bytes,
@@ -61,24 +56,30 @@ from trust_monitor.ros.messages import (
     trajectory_times,
     trajectory_values,
 )
-from trust_monitor.ros.parameters import (
+from trust_av_common.ros.parameters import (
     declare_component_params,
     declare_config,
     predeclare,
     predeclare_component,
 )
-from trust_monitor.ros.qos import input_events, topic_qos
-from trust_monitor.ros.raw_inputs import subscribe
-from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
-from trust_monitor.ros.tuning import Tunable, enable_tuning
-from trust_monitor.trust_interface import build_trust_model
-from trust_monitor.trust_model import TrustConfig
+from trust_av_common.ros.qos import input_events, topic_qos
+from trust_av_common.ros.raw_inputs import subscribe
+from trust_av_common.ros.spin import WallLoop, now_ns, spin_node
+from trust_av_common.ros.tuning import Tunable, enable_tuning
+from trust_av_common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.nmpc import PlannerConfig
+from trust_av_planner.planner import AvPlanner
+from trust_av_planner.planner_params import PlannerTopics, SharedConfig, check_control_rate
+from trust_monitor.model_interface import build_trust_model
+from trust_monitor.paper_trust import TrustConfig
+
+__all__ = ['WARM_UP', 'PlannerNode', 'main']
 
 WARM_UP = True
 """Wall mode: ``configure`` warms the outputs and the NMPC (:meth:`PlannerNode.warm_up`);
 False only for the cold case of benchmarks/bench_lifecycle.py."""
-WARM_UP_SOLVES = 3
-"""Solves of the NMPC at ``configure`` in wall mode."""
+WARM_UP_SOLVES = 3  # solves of the NMPC at ``configure`` in wall mode
 STEP_INPUTS = ('traffic', 'preview', 'ego', 'human')
 TABLE_TOPIC = {'traffic': 'preceding_vehicle/odom', 'preview': 'preceding_vehicle/speed_preview',
                'ego': 'ego/odom', 'human': 'human/odom', 'trust': 'trust_monitor/trust'}
@@ -91,9 +92,8 @@ def vehicle(msg: Odometry) -> VehicleState:
 
 
 class PlannerNode(ManagedNode):
-    """Thin adapter over :class:`~trust_av_planner.planner.AvPlanner`, a managed node
-    (:mod:`trust_monitor.ros.lifecycle`): ``configure`` builds and warms it, ``activate``
-    starts the outputs, ``deactivate`` hands over (:meth:`handover`)."""
+    """Thin adapter over :class:`~trust_av_planner.planner.AvPlanner`, a managed node:
+    ``configure`` builds and warms it, ``activate`` starts outputs, ``deactivate`` hands over."""
 
     user_errors = (ValueError, TrustAvPlannerError)
     task = 'trust_aware_nmpc'
@@ -335,7 +335,7 @@ class PlannerNode(ManagedNode):
 
     def health(self) -> Report:
         """``/diagnostics`` (:meth:`ManagedNode.diagnose`): :meth:`SolveRecord.report
-        <trust_monitor.common.health.SolveRecord.report>`, with the input ages in wall mode."""
+        <trust_av_common.health.SolveRecord.report>`, with the input ages in wall mode."""
         mono = time.monotonic_ns()
         ages = {name: age(mono, self.latest.received(name)) for name in self.latest.names
                 if self.wall and (name != 'human' or self.has_human)}

@@ -5,7 +5,7 @@ A preview is what the planner assumes the preceding vehicle does over the horizo
 
 - ``recorded``: a speed preview received from outside (the replayed recording's future, or
   V2V), interpolated onto the prediction grid
-  (:func:`trust_monitor.common.grids.interp_at`);
+  (:func:`trust_av_common.grids.interp_at`);
 - ``constant_speed``: the lead keeps its current speed;
 - ``constant_acceleration``: the lead keeps its recent acceleration, its speed change over the
   last ``lead_accel_window_s`` (:class:`LeadPreview`), and stops at 0 m/s.
@@ -23,7 +23,9 @@ from collections import deque
 
 import numpy as np
 
-from trust_monitor.common.grids import grid_times, hold_at
+from trust_av_common.grids import grid_times, hold_at
+
+__all__ = ['LeadPreview', 'hold_on_grid']
 
 
 def hold_on_grid(values: np.ndarray, source_step_s: float, step_s: float, steps: int,

@@ -35,19 +35,21 @@ from rclpy.node import Node
 from preceding_traffic.replay import LeadReplay
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import TraceConfig
-from trust_monitor.common.kinematics import advance
-from trust_monitor.common.output_files import write_text
-from trust_monitor.common.params import (
+from trust_av_common.kinematics import advance
+from trust_av_common.output_files import write_text
+from trust_av_common.params import (
     MAX_STAMP_S,
     MAX_VEHICLE_LENGTH_M,
     check_fields,
     param,
 )
-from trust_monitor.common.wall_clock import NS_PER_S, WallClockConfig
-from trust_monitor.ros.messages import diagnostic_values, msg_ns, odometry
-from trust_monitor.ros.parameters import declare_config
-from trust_monitor.ros.qos import command_deadline_s, topic_qos
-from trust_monitor.ros.spin import spin_node
+from trust_av_common.ros.messages import diagnostic_values, msg_ns, odometry
+from trust_av_common.ros.parameters import declare_config
+from trust_av_common.ros.qos import command_deadline_s, topic_qos
+from trust_av_common.ros.spin import spin_node
+from trust_av_common.wall_clock import NS_PER_S, WallClockConfig
+
+__all__ = ['main']
 
 EGO_TOPIC = '/vehicle/odom'
 LEAD_TOPIC = '/perception/lead_vehicle/odom'

@@ -1,36 +1,32 @@
-"""The trust_monitor package's exception class."""
+"""The trust_monitor package's exception class.
+
+The message helpers that lived here (``one_line``, ``did_you_mean``, ``with_suggestions``)
+are :mod:`trust_av_common.errors`'s; importing them from here still works for one release
+and warns.
+"""
 
 from __future__ import annotations
 
-import difflib
-from collections.abc import Iterable
+import warnings
+from typing import Any
+
+from trust_av_common import errors as _common
+from trust_av_common.errors import TrustAvError
+
+__all__ = ['TrustMonitorError']
+
+_MOVED = ('one_line', 'did_you_mean', 'with_suggestions')
 
 
-class TrustMonitorError(ValueError):
-    """Bad input to the trust monitor or the shared floor (a params file, a parameter value,
-    a plans CSV); the message names the file, parameter or row. Every other exception of
-    this package derives from it."""
+class TrustMonitorError(TrustAvError):
+    """Bad input to the trust monitor (a plans CSV, a trust model's parameters, a ratings
+    table); the message names the file, parameter or row. Every other exception of this
+    package derives from it."""
 
 
-def one_line(err: BaseException) -> str:
-    """``err``'s message as the one line a command prints: the lines of a multi-line message
-    (a YAML parser's caret diagram, say, passed on inside ours) joined with single spaces."""
-    return ' '.join(' '.join(line.split()) for line in str(err).splitlines() if line.strip()) \
-        or type(err).__name__
-
-
-def did_you_mean(name: object, known: Iterable[object]) -> str:
-    """``" (did you mean 'x'?)"`` naming the known names closest to a mistyped ``name``
-    (:func:`difflib.get_close_matches`, at most three, best first), or ``''`` when none is
-    close. Appended to the one line that refuses an unknown name."""
-    close = difflib.get_close_matches(str(name), [str(k) for k in known], n=3, cutoff=0.6)
-    if not close:
-        return ''
-    return f' (did you mean {" or ".join(repr(c) for c in close)}?)'
-
-
-def with_suggestions(unknown: Iterable[object], known: Iterable[object]) -> str:
-    """``unknown`` names, comma-separated, each followed by :func:`did_you_mean` from
-    ``known``: ``"predictr (did you mean 'predictor'?), foo"``."""
-    known = [str(k) for k in known]
-    return ', '.join(f'{name}{did_you_mean(name, known)}' for name in unknown)
+def __getattr__(name: str) -> Any:
+    if name in _MOVED:
+        warnings.warn(f'trust_monitor.errors.{name} moved to trust_av_common.errors.{name}; '
+                      'the old name goes in the next release', DeprecationWarning, stacklevel=2)
+        return getattr(_common, name)
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

@@ -10,7 +10,7 @@ is valid and every estimate finite.
 
 The trust model is the registered one the params files' ``trust_model`` names (or
 ``--trust-model``), with its own parameters from the same files
-(:mod:`trust_monitor.trust_interface`).
+(:mod:`trust_monitor.model_interface`).
 
 Parameters: the trust monitor's, from the shipped params file with every ``--params-file``
 layered over it, read by rcl's rules as the ``trust_monitor`` node reads them.
@@ -29,21 +29,24 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
-from trust_monitor.common.input_files import not_regular
-from trust_monitor.common.lifecycle import LifecycleConfig
-from trust_monitor.common.output_files import cannot_write, link_refused, odd_path, replacing
-from trust_monitor.common.param_layers import layer_files, layered_params, read_layers
-from trust_monitor.common.params import build_config, check_known
-from trust_monitor.common.rcl_values import ParsedParams
-from trust_monitor.common.registry import TRUST_MODELS, names
-from trust_monitor.common.wall_clock import WallClockConfig
-from trust_monitor.errors import TrustMonitorError, one_line
-from trust_monitor.trust_interface import (
+from trust_av_common.errors import TrustAvError, one_line
+from trust_av_common.input_files import not_regular
+from trust_av_common.lifecycle import LifecycleConfig
+from trust_av_common.output_files import cannot_write, link_refused, odd_path, replacing
+from trust_av_common.param_layers import layer_files, layered_params, read_layers
+from trust_av_common.params import build_config, check_known
+from trust_av_common.rcl_values import ParsedParams
+from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.wall_clock import WallClockConfig
+from trust_monitor.errors import TrustMonitorError
+from trust_monitor.model_interface import (
     TrustModel,
     make_trust_model,
     trust_model_config_types,
 )
-from trust_monitor.trust_model import TrustConfig, TrustEstimator
+from trust_monitor.paper_trust import TrustConfig, TrustEstimator
+
+__all__ = ['EstimateError', 'build_parser', 'estimate_csv', 'main']
 
 MAX_ACCEL_MPS2 = 100.0
 """Largest plan acceleration magnitude accepted, m/s^2 (about 10 g)."""
@@ -271,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         count = estimate_csv(args.input, args.output,
                              *trust_setup(args.params_file, args.trust_model))
-    except TrustMonitorError as err:
+    except TrustAvError as err:
         print(f'trust-monitor-estimate: error: {one_line(err)}', file=sys.stderr)
         return 2
     print(f'wrote {count} rows to {args.output}')

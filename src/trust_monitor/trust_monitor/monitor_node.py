@@ -25,31 +25,33 @@ import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from trajectory_msgs.msg import JointTrajectory
 
-from trust_monitor.common.grids import hold_at
-from trust_monitor.common.lifecycle import LifecycleConfig
-from trust_monitor.common.lockstep import StepBuffer
-from trust_monitor.common.registry import TRUST_MODELS
-from trust_monitor.common.topics import NO_FRAME
-from trust_monitor.common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
-from trust_monitor.ros import diagnostics as diag
-from trust_monitor.ros.lifecycle import ManagedNode
-from trust_monitor.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
-from trust_monitor.ros.parameters import (
+from trust_av_common.grids import hold_at
+from trust_av_common.lifecycle import LifecycleConfig
+from trust_av_common.lockstep import StepBuffer
+from trust_av_common.registry import TRUST_MODELS
+from trust_av_common.ros import diagnostics as diag
+from trust_av_common.ros.lifecycle import ManagedNode
+from trust_av_common.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
+from trust_av_common.ros.parameters import (
     declare_component_params,
     declare_config,
     predeclare,
     predeclare_component,
 )
-from trust_monitor.ros.qos import topic_qos
-from trust_monitor.ros.raw_inputs import subscribe
-from trust_monitor.ros.spin import WallLoop, now_ns, spin_node
-from trust_monitor.trust_interface import build_trust_model
-from trust_monitor.trust_model import MonitorConfig, TrustConfig, TrustEstimator
+from trust_av_common.ros.qos import topic_qos
+from trust_av_common.ros.raw_inputs import subscribe
+from trust_av_common.ros.spin import WallLoop, now_ns, spin_node
+from trust_av_common.topics import NO_FRAME
+from trust_av_common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
+from trust_monitor.model_interface import build_trust_model
+from trust_monitor.paper_trust import MonitorConfig, TrustConfig, TrustEstimator
+
+__all__ = ['main']
 
 
 class MonitorNode(ManagedNode):
-    """Thin adapter over :class:`trust_monitor.trust_model.TrustEstimator`, a managed node
-    (:mod:`trust_monitor.ros.lifecycle`): ``configure`` builds the estimator, trust is
+    """Thin adapter over :class:`trust_monitor.paper_trust.TrustEstimator`, a managed node
+    (:mod:`trust_av_common.ros.lifecycle`): ``configure`` builds the estimator, trust is
     published only while active."""
 
     task = 'trust'

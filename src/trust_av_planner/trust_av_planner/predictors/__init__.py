@@ -5,8 +5,8 @@ accelerations from what the human has seen up to the previous step, and
 :meth:`Predictor.observe` adds the step just executed to the history.
 
 A plan estimator is a component of the entry-point group ``trust_av.predictors``
-(:mod:`trust_monitor.common.registry`): a
-:class:`~trust_monitor.common.registry.Component` whose ``factory(planner, params)`` takes
+(:mod:`trust_av_common.registry`): a
+:class:`~trust_av_common.registry.Component` whose ``factory(planner, params)`` takes
 the planner's :class:`~trust_av_planner.nmpc.PlannerConfig` (it reads ``horizon_steps``,
 ``dt_s`` and the acceleration bounds) and an instance of the component's ``config_type``
 (None when it has none) and returns a :class:`Predictor`. Declare ``needs={'follower_state'}``
@@ -21,6 +21,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+
+__all__ = ['Observation', 'Predictor']
 
 
 @dataclass(frozen=True)

@@ -12,11 +12,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from trust_av_common.registry import Component
 from trust_av_planner.predictors import Observation
-from trust_monitor.common.registry import Component
 
 if TYPE_CHECKING:
     from trust_av_planner.nmpc import PlannerConfig
+
+__all__ = ['COMPONENT']
 
 
 class ConstantVelocityPredictor:

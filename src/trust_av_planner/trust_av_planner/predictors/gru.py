@@ -3,7 +3,7 @@
 Inputs per step (eq. 6): gap d_H, relative speed rs_H = v_R - v_H, time headway tau_H and
 the AV's executed acceleration u_R, for the last H steps; output (eq. 7): the next N AV
 accelerations. The network is a one-layer GRU followed by a linear read-out, trained in
-torch (:mod:`trust_av_planner.study.gru_training`) and stored as plain arrays in an ``.npz``; the
+torch (:mod:`trust_av.study.gru_training`) and stored as plain arrays in an ``.npz``; the
 forward pass here is the same maths in numpy (PyTorch's GRU equations), so that a control
 step costs tens of microseconds and loads without torch. A test checks numpy == torch.
 
@@ -22,13 +22,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from trust_av_common.params import check_fields, param, require
+from trust_av_common.registry import FOLLOWER_STATE, Component
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors import Observation
-from trust_monitor.common.params import check_fields, param, require
-from trust_monitor.common.registry import FOLLOWER_STATE, Component
 
 if TYPE_CHECKING:
     from trust_av_planner.nmpc import PlannerConfig
+
+__all__ = ['COMPONENT', 'FEATURES', 'MODELS_DIR', 'GruConfig', 'GruPredictor', 'GruWeights',
+           'ModelError', 'gru_forward', 'load_weights']
 
 MODELS_DIR = Path(__file__).resolve().parents[1] / 'models'
 FEATURES = ('gap_m', 'relative_speed_mps', 'time_headway_s', 'av_accel_mps2')

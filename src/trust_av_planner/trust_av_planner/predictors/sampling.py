@@ -19,6 +19,8 @@ import numpy as np
 
 from trust_av_planner.predictors import Observation, Predictor
 
+__all__ = ['ModelGridPredictor']
+
 TIME_TOLERANCE_S = 1e-6
 """Tick times within this of a sample time count as that time (float grids, wall stamps)."""
 

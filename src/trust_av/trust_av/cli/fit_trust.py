@@ -1,0 +1,269 @@
+"""``trust-av fit-trust``: fit every registered trust model to a study's trust ratings.
+
+Per participant and pooled over participants, through an explicit observation model
+(:mod:`trust_monitor.trust_fit`); scored on held-out ratings (leave one drive
+out per participant, leave one participant out pooled). Writes to ``--out``:
+
+- ``fits.csv``: scope (a participant or ``pooled``), model, parameter, value, kind
+  (``fitted``, ``fixed``: declared but not identifiable, ``observation``: a, b, s);
+- ``scores.csv``: scope, model, scheme, ratings, elpd, elpd_se, rmse, rmse_se;
+- ``comparison.csv``: the same per scope and scheme, best first, with elpd_diff (to the
+  best) and elpd_diff_se;
+- ``partial_pooling.csv`` (two or more participants): scope (a participant, or
+  ``population``), model, parameter, value, kind (``fitted``, ``observation``; for the
+  population ``center``: the pooled value, ``spread``: the between-participant standard
+  deviation in prior standard deviations): each participant's fit shrunk toward the pooled
+  one (:mod:`trust_av.drive.trust_fit_pooling`); its held-out scores (three or more
+  participants) are the scheme ``leave_one_drive_out_partial_pooling`` of the two tables;
+- ``participant_<id>.png``: each drive's ratings and every model's fitted prediction (own
+  fit solid, partially pooled dashed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import io
+import math
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.drive.trust_fit_data import read_ratings_table, read_study
+from trust_av.drive.trust_fit_pooling import (
+    MIN_PARTICIPANTS,
+    held_out_partial,
+    partial_fits,
+)
+from trust_av.system.config import load_run_config
+from trust_av_common import output_files
+from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_planner.errors import TrustAvPlannerError
+from trust_monitor.trust_fit import (
+    Fit,
+    FitError,
+    ModelSpec,
+    RatedDrive,
+    Score,
+    by_participant,
+    compare,
+    fit,
+    held_out,
+    model_spec,
+    model_trust,
+)
+
+__all__: list[str] = []
+
+LODO, LOPO = 'leave_one_drive_out', 'leave_one_participant_out'
+SCORE_FIELDS = ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'elpd_diff',
+                'elpd_diff_se', 'rmse', 'rmse_se')
+
+
+@dataclasses.dataclass(frozen=True)
+class FitTrustOptions(ParamsFileOptions):
+    """``trust-av fit-trust``'s options (``--study`` or ``--ratings``, one of them)."""
+
+    study: Path | None
+    ratings: Path | None
+    out: Path
+    models: str
+    no_figures: bool
+    no_partial_pooling: bool
+
+    def __post_init__(self) -> None:
+        if (self.study is None) == (self.ratings is None):
+            raise TypeError('fit-trust: the parser gives --study or --ratings, one of them')
+
+    @property
+    def ratings_table(self) -> Path:
+        """``--ratings`` (given when ``--study`` is not)."""
+        if self.ratings is None:
+            raise TypeError('fit-trust: no --ratings')
+        return self.ratings
+
+
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the ``fit-trust`` subcommand."""
+    parser = subparsers.add_parser(
+        'fit-trust', help="fit the trust models to a study's trust ratings and compare them",
+        description=(
+            "Fit every registered trust model's declared parameters and a rating "
+            'observation model to the trust ratings of each participant and of all '
+            'participants pooled; score each model on held-out ratings (leave one drive out, '
+            'leave one participant out: log predictive density and RMSE with standard errors); '
+            'write tables and a figure per participant (docs/tutorials/fit-trust-models.md).'))
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument('--study', type=Path, help='a study directory of trust-av drive')
+    source.add_argument('--ratings', type=Path,
+                        help='a tidy ratings table (CSV: participant, drive, t_s, '
+                             'explicability, rating)')
+    parser.add_argument('--out', type=Path, required=True, help='output directory')
+    parser.add_argument('--models', default='',
+                        help='comma-separated registered trust models (default: all)')
+    parser.add_argument('--params-file', dest='params_files', type=Path, action='append',
+                        default=[], help="params file(s) for eps and the models' "
+                                         'configured values (repeatable)')
+    parser.add_argument('--no-figures', action='store_true', help='tables only')
+    parser.add_argument('--no-partial-pooling', action='store_true',
+                        help='skip the partially pooled fits (each participant shrunk toward '
+                             'the pooled fit by a fitted spread; about doubles the time)')
+    parser.set_defaults(func=command(FitTrustOptions, run))
+
+
+def _models(option: str) -> list[str]:
+    registered = list(names(TRUST_MODELS))
+    chosen = [m.strip() for m in option.split(',') if m.strip()] or registered
+    unknown = [m for m in chosen if m not in registered]
+    if unknown:
+        raise TrustAvPlannerError(f'--models: not registered: {", ".join(unknown)} '
+                                  f'(registered: {", ".join(registered)})')
+    return chosen
+
+
+def _rows(scope: str, scores: Sequence[Score]) -> list[dict[str, Any]]:
+    return [{'scope': scope, **row} for row in compare(scores)]
+
+
+def _fit_rows(scope: str, fitted: Fit) -> list[dict[str, Any]]:
+    rows = [{'scope': scope, 'model': fitted.model, 'parameter': k, 'value': v,
+             'kind': 'fitted'} for k, v in fitted.theta.items()]
+    rows += [{'scope': scope, 'model': fitted.model, 'parameter': k, 'value': v,
+              'kind': 'fixed'} for k, v in fitted.fixed.items()]
+    obs = fitted.observation
+    rows += [{'scope': scope, 'model': fitted.model, 'parameter': k, 'value': v,
+              'kind': 'observation'} for k, v in (('a', obs.a), ('b', obs.b), ('s', obs.s))]
+    return rows
+
+
+def _csv(fields: Sequence[str], rows: Sequence[dict[str, Any]]) -> str:
+    out = io.StringIO()
+    writer = csv.DictWriter(out, list(fields), extrasaction='ignore', lineterminator='\n')
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: (f'{v:.6g}' if isinstance(v, float) else v)
+                         for k, v in row.items()})
+    return out.getvalue()
+
+
+def figure(path: Path, participant: str, drives: Sequence[RatedDrive],
+           fits: dict[str, tuple[ModelSpec, Fit]],
+           partial: dict[str, Fit] | None = None) -> None:
+    """Each drive's ratings and every fitted model's predicted rating over time (solid);
+    dashed in the same colour, its partially pooled fit when ``partial`` has one."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(drives), 1, figsize=(8.0, 2.4 * len(drives)),
+                             squeeze=False, sharey=True)
+    for ax, drive in zip(axes[:, 0], drives, strict=True):
+        ax.scatter(drive.rating_times_s, drive.ratings, color='black', s=14, zorder=3,
+                   label='ratings')
+        t = np.asarray(drive.times_s)
+        ends = t + np.append(np.diff(t), np.median(np.diff(t)))
+        for name, (spec, fitted) in fits.items():
+            trust = model_trust(spec.build(fitted.theta), drive, every_step=True)[0]
+            line = ax.plot(ends, 100.0 * fitted.observation.mean(trust), lw=1.2, label=name)
+            shrunk = (partial or {}).get(name)
+            if shrunk is not None:
+                trust = model_trust(spec.build(shrunk.theta), drive, every_step=True)[0]
+                ax.plot(ends, 100.0 * shrunk.observation.mean(trust), lw=1.0, linestyle='--',
+                        color=line[0].get_color(), label=f'{name} (partial pooling)')
+        ax.set_title(f'{participant}: {drive.drive}', fontsize=9)
+        ax.set_ylabel('rating (0-100)', fontsize=8)
+        ax.set_ylim(-2, 102)
+    axes[-1, 0].set_xlabel('time in the drive (s)', fontsize=8)
+    axes[0, 0].legend(fontsize=7, ncol=3, loc='lower right')
+    fig.tight_layout()
+    with output_files.replacing(path) as (temporary,):
+        fig.savefig(temporary, dpi=100, format='png')
+    plt.close(fig)
+
+
+def run(args: FitTrustOptions) -> int:
+    """Fit, score, write (see ``trust-av fit-trust --help``)."""
+    models = _models(args.models)
+    config = load_run_config(args.params_files)
+    drives = (read_study(args.study, config.trust.epsilon_mps2) if args.study is not None
+              else read_ratings_table(args.ratings_table))
+    rated = [d for d in drives if len(d.ratings)]
+    if not rated:
+        raise FitError(f'{args.study or args.ratings}: no drive has a rating')
+    if args.out.exists() and not args.out.is_dir():
+        raise TrustAvPlannerError(f'--out {args.out}: exists and is not a directory')
+    args.out.mkdir(parents=True, exist_ok=True)
+    specs = {m: model_spec(config.trust, m, dict(config.trust_model_params)) for m in models}
+    people = by_participant(rated)
+    fit_rows: list[dict[str, Any]] = []
+    score_rows: list[dict[str, Any]] = []
+    own_fits: dict[str, dict[str, Fit]] = {m: {} for m in models}
+    for who, own in people.items():
+        for m in models:
+            own_fits[m][who] = fit(specs[m], own)
+            fit_rows += _fit_rows(who, own_fits[m][who])
+        if len(own) >= 2:
+            score_rows += _rows(who, [held_out(specs[m], [[d] for d in own], LODO)
+                                      for m in models])
+        else:
+            print(f'{who}: one rated drive, no leave-one-drive-out score')
+    pooled_fits = {m: fit(specs[m], rated) for m in models}
+    for m in models:
+        fit_rows += _fit_rows('pooled', pooled_fits[m])
+    partial: dict[str, dict[str, Fit]] = {who: {} for who in people}
+    if not args.no_partial_pooling and len(people) >= 2:
+        partial_rows: list[dict[str, Any]] = []
+        for m in models:
+            population, shrunk = partial_fits(specs[m], people, own_fits[m], pooled_fits[m])
+            partial_rows += [{'scope': 'population', 'model': m, 'parameter': k, 'value': v,
+                              'kind': kind} for kind, values in (
+                                  ('center', population.center), ('spread', population.spread))
+                             for k, v in values.items()]
+            for who, fitted in shrunk.items():
+                partial[who][m] = fitted
+                partial_rows += [r for r in _fit_rows(who, fitted) if r['kind'] != 'fixed']
+        output_files.write_text(args.out / 'partial_pooling.csv', _csv(
+            ('scope', 'model', 'parameter', 'value', 'kind'), partial_rows))
+        if len(people) >= MIN_PARTICIPANTS:
+            for who, own in people.items():
+                if len(own) >= 2:
+                    score_rows += _rows(who, [held_out_partial(specs[m], people, own_fits[m],
+                                                               who) for m in models])
+    if not args.no_figures:
+        for who, own in people.items():
+            safe = re.sub(r'[^A-Za-z0-9_.-]', '_', who)
+            figure(args.out / f'participant_{safe}.png', who, own,
+                   {m: (specs[m], own_fits[m][who]) for m in models}, partial[who])
+    if len(people) >= 2:
+        groups = list(people.values())
+        score_rows += _rows('pooled', [held_out(specs[m], groups, LOPO) for m in models])
+    else:
+        print('one participant: no leave-one-participant-out score')
+    output_files.write_text(args.out / 'fits.csv', _csv(
+        ('scope', 'model', 'parameter', 'value', 'kind'), fit_rows))
+    output_files.write_text(args.out / 'scores.csv', _csv(
+        ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'rmse', 'rmse_se'),
+        score_rows))
+    output_files.write_text(args.out / 'comparison.csv', _csv(SCORE_FIELDS, score_rows))
+    for row in score_rows:
+        if row['scope'] == 'pooled' or len(people) == 1:
+            diff = row['elpd_diff_se']
+            print(f"{row['scope']:>10s} {row['scheme']:26s} {row['model']:16s} elpd "
+                  f"{row['elpd']:9.1f} diff {row['elpd_diff']:7.1f}"
+                  f" ± {diff if math.isfinite(diff) else float('nan'):.1f}  RMSE "
+                  f"{row['rmse']:5.1f} ± {row['rmse_se']:.1f}")
+    totals: dict[tuple[str, str], list[float]] = {}
+    for row in score_rows:
+        if row['scope'] != 'pooled':
+            totals.setdefault((row['scheme'], row['model']), []).append(row['elpd'])
+    for (scheme, model), values in sorted(totals.items(), key=lambda item: -sum(item[1])):
+        print(f"{'all':>10s} {scheme:36s} {model:16s} elpd {sum(values):9.1f} summed over "
+              f'{len(values)} participant(s)')
+    print(f'{len(people)} participant(s), {len(rated)} rated drive(s); tables and figures in '
+          f'{args.out}')
+    return 0

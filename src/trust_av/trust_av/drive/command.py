@@ -1,0 +1,119 @@
+"""``trust-av drive``: a person drives the follower behind the trust-aware AV in a browser;
+a study session of drives in counterbalanced order, recorded one bag per drive."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+from pathlib import Path
+
+from trust_av.cli.options import add_params_file_option, positive_seconds
+from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.system.config import DEFAULT_PARAMS_FILE
+from trust_av_planner.errors import TrustAvPlannerError
+
+__all__: list[str] = []
+
+DEFAULT_DRIVE_FILE = DEFAULT_PARAMS_FILE.with_name('drive.yaml')
+
+
+@dataclasses.dataclass(frozen=True)
+class DriveOptions(ParamsFileOptions):
+    """``trust-av drive``'s options."""
+
+    study: Path
+    participant: str
+    drive_file: Path
+    no_practice: bool
+    duration_s: float | None
+    port: int | None
+    withdraw: bool
+    yes: bool
+    startup_timeout_s: float
+
+
+def run(args: DriveOptions) -> int:
+    """Run ``trust-av drive``."""
+    from trust_av.drive.sessions import SessionError, check_participant
+
+    try:
+        check_participant(args.participant)
+        if args.withdraw:
+            return _withdraw(args)
+    except SessionError as err:
+        raise TrustAvPlannerError(str(err)) from err
+    from trust_av.drive.run_session import run_session
+    try:
+        return run_session(args)
+    except SessionError as err:
+        raise TrustAvPlannerError(str(err)) from err
+
+
+def _withdraw(args: DriveOptions) -> int:
+    """Delete the participant's folder, only if it is proven this study's, after a
+    confirmation on the terminal (or ``--yes``)."""
+    from trust_av.drive.sessions import withdraw, withdrawal_folder
+
+    directory = withdrawal_folder(args.study, args.participant)
+    if directory is None:
+        print(f'participant {args.participant}: no data in this study')
+        return 0
+    files = sum(len(names) for _, _, names in os.walk(directory))
+    if not args.yes:
+        if sys.stdin is None or not sys.stdin.isatty():
+            raise TrustAvPlannerError(f'--withdraw would delete {directory} ({files} files); '
+                                      'no terminal to confirm on, pass --yes')
+        try:
+            answer = input(f'delete {directory} and its {files} files for good? [y/N] ')
+        except EOFError:
+            answer = ''
+        if answer.strip().lower() not in ('y', 'yes'):
+            print(f'participant {args.participant}: nothing deleted')
+            return 0
+    withdraw(args.study, args.participant)      # checked again just before deleting
+    print(f'participant {args.participant}: every file deleted ({directory}, {files} files)')
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``drive`` to ``trust-av``."""
+    parser = subparsers.add_parser(
+        'drive', help='a person drives behind the AV in a browser (driver-in-the-loop study)',
+        description='Serve a page on localhost (the URL is printed) where a participant drives '
+                    'the car behind the trust-aware AV with keyboard, pointer or gamepad; the '
+                    'node graph runs in wall mode with the follower_plant node integrating the '
+                    "person's pedal. A session: a practice drive, then every condition of the "
+                    'drive file in a balanced Latin square order, in-drive trust ratings, the '
+                    'Jian et al. (2000) questionnaire after each drive, one rosbag2 bag per '
+                    'drive under STUDY/PARTICIPANT/, a summary table and the comparison of the '
+                    "person's ratings with every trust model. Run again to resume. Exit codes: "
+                    '0 done (or stopped by an abandoned drive: run again to resume; a withdrawal '
+                    'done or declined), 2 bad input, a node failed or a withdrawal refused, '
+                    '130 interrupted.')
+    parser.add_argument('--study', type=Path, required=True,
+                        help='study directory (created; one sub-directory per participant)')
+    parser.add_argument('--participant', required=True,
+                        help='pseudonymous participant id (1-32 letters, digits, _ or -)')
+    parser.add_argument('--drive-file', type=Path, default=DEFAULT_DRIVE_FILE,
+                        help='study settings and conditions (default: the shipped '
+                             f'{DEFAULT_DRIVE_FILE.name})')
+    parser.add_argument('--no-practice', action='store_true',
+                        help='a new session starts without the practice drive')
+    parser.add_argument('--duration-s', type=positive_seconds, default=None,
+                        help="wall time of each drive, s (default: the drive file's)")
+    parser.add_argument('--port', type=int, default=None,
+                        help="TCP port of the page (0: any free; default: the drive file's)")
+    parser.add_argument('--withdraw', action='store_true',
+                        help='delete every file of the participant in this study and exit: '
+                             'only a folder trust-av made for them (its '
+                             '.trust_av_participant marker, or a session.json of theirs '
+                             'from before markers), never through a symbolic link; asks '
+                             'for confirmation on the terminal')
+    parser.add_argument('--yes', action='store_true',
+                        help='--withdraw without asking (needed when stdin is not a terminal)')
+    parser.add_argument('--startup-timeout-s', type=positive_seconds, default=60.0,
+                        help='how long to wait for the nodes to connect (default: %(default)s)')
+    add_params_file_option(parser)
+    parser.set_defaults(func=command(DriveOptions, run))

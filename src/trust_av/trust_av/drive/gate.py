@@ -1,0 +1,197 @@
+"""What the driving page may send, pure part: which messages fit the study's phase, how
+fast pedal samples may come, which rating prompts and acknowledgements are open, and a
+count of everything refused (never stored).
+
+One :class:`Gate` per drive, fed every message of the controlling tab (the server refuses
+other tabs' messages before this). Thread-safe: the server's thread checks messages, the
+drive's loop changes the phase and opens prompts. Times are passed in (ns); no rclpy.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import threading
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ['INPUT_BURST', 'Gate', 'reason_key']
+
+READY, DRIVING, WAIT, QUESTIONNAIRE, IDLE = 'ready', 'driving', 'wait', 'questionnaire', 'idle'
+"""The drive's phases as the gate sees them (IDLE: between drives)."""
+ALLOWED = {READY: frozenset({'ready'}),
+           DRIVING: frozenset({'input', 'ack', 'rating'}),
+           WAIT: frozenset({'ack', 'rating'}),
+           QUESTIONNAIRE: frozenset({'questionnaire'}),
+           IDLE: frozenset()}
+"""Message types each phase takes (``take_over`` is the server's, in every phase)."""
+ACK_KEEP_NS = 5_000_000_000
+"""An acknowledgement not echoed within this long is forgotten (a lost frame)."""
+INPUT_BURST = 10
+"""Pedal samples that may arrive at once above the control rate: the page keeps its own
+bucket of 3 (a press and a release between two periodic samples), the rest absorbs this
+process's own stalls (samples sent a control period apart arrive together after a stall
+of the server's thread, and the newest of them must not be the one refused)."""
+
+
+def finite_number(value: Any) -> float | None:
+    """``value`` as a finite float, or None: not a number (a bool is not), NaN, infinite, or
+    an integer too large for a float (JSON allows any number of digits)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
+
+
+def reason_key(reason: str) -> str:
+    """A refusal reason as a metadata key: lower-case words joined by ``_``
+    (``'input over the control rate'`` -> ``input_over_the_control_rate``)."""
+    return re.sub(r'[^a-z0-9]+', '_', reason.lower()).strip('_')
+
+
+@dataclass(frozen=True)
+class Sample:
+    """An accepted pedal sample: the server's sequence number, the command (clipped to the
+    pedal's range, m/s^2) and whether clipping changed it."""
+
+    seq: int
+    accel_mps2: float
+    clipped: bool
+
+
+class Gate:
+    """The drive's message policy.
+
+    Args:
+        control_rate_hz: pedal samples per second allowed on average.
+        accel_min_mps2: full brake (samples below are clipped).
+        accel_max_mps2: full gas (samples above are clipped).
+    """
+
+    def __init__(self, control_rate_hz: float, accel_min_mps2: float,
+                 accel_max_mps2: float) -> None:
+        self.rate_hz = control_rate_hz
+        self.accel_min, self.accel_max = accel_min_mps2, accel_max_mps2
+        self.lock = threading.Lock()
+        self.phase = IDLE
+        self.refused: Counter[str] = Counter()
+        self._tokens = float(INPUT_BURST)
+        self._tokens_at = 0
+        self._seq = 0
+        self._prompts: dict[int, int] = {}           # prompt id -> sent at, ns
+        self._next_prompt = 1
+        self._acks: dict[int, tuple[int, int, int]] = {}   # seq -> arrived, applied, sent
+        self.questionnaire_taken = False
+
+    def set_phase(self, phase: str) -> None:
+        """The drive moved to ``phase`` (a new ``READY`` starts a new drive's bookkeeping)."""
+        with self.lock:
+            if phase == READY:
+                self._prompts.clear()
+                self._acks.clear()
+                self.questionnaire_taken = False
+            if phase in (QUESTIONNAIRE, IDLE, READY):
+                self._prompts.clear()
+            self.phase = phase
+
+    def refuse(self, reason: str) -> None:
+        """Count one refused message."""
+        with self.lock:
+            self.refused[reason] += 1
+
+    def admit(self, message: dict[str, Any]) -> bool:
+        """Whether the message's type fits the phase (refused and counted if not)."""
+        with self.lock:
+            if message['type'] in ALLOWED[self.phase]:
+                return True
+            self.refused[f'{message["type"]} during {self.phase}'] += 1
+            return False
+
+    def sample(self, message: dict[str, Any], now_ns: int) -> Sample | None:
+        """An admitted ``input`` as a command, or None (refused and counted): not a finite
+        number, or over the rate (a token bucket of ``INPUT_BURST`` samples refilled at the
+        control rate)."""
+        value = finite_number(message.get('accel_mps2'))
+        if value is None:
+            self.refuse('input without a finite accel_mps2')
+            return None
+        with self.lock:
+            elapsed = max(0, now_ns - self._tokens_at) / 1e9
+            self._tokens = min(float(INPUT_BURST), self._tokens + elapsed * self.rate_hz)
+            self._tokens_at = now_ns
+            if self._tokens < 1.0:
+                self.refused['input over the control rate'] += 1
+                return None
+            self._tokens -= 1.0
+            self._seq += 1
+            accel = min(self.accel_max, max(self.accel_min, value))
+            return Sample(self._seq, accel, accel != value)
+
+    def open_prompt(self, now_ns: int) -> int:
+        """Open a rating prompt; its id (the page answers with it)."""
+        with self.lock:
+            prompt = self._next_prompt
+            self._next_prompt += 1
+            self._prompts[prompt] = now_ns
+            return prompt
+
+    def open_prompts(self) -> list[int]:
+        """The prompts not yet answered (a reopened tab shows them)."""
+        with self.lock:
+            return sorted(self._prompts)
+
+    def rating(self, message: dict[str, Any], now_ns: int) -> tuple[int, float, float] | None:
+        """An admitted ``rating`` as (prompt id, value 0-100, response time s measured here
+        from the prompt), or None (refused and counted): no open prompt of that id, or a value
+        that is not a number in [0, 100]."""
+        value, prompt = finite_number(message.get('value')), message.get('id')
+        with self.lock:
+            if isinstance(prompt, bool) or not isinstance(prompt, int) \
+                    or prompt not in self._prompts:
+                self.refused['rating outside a prompt'] += 1
+                return None
+            if value is None or not 0 <= value <= 100:
+                self.refused['rating not in [0, 100]'] += 1
+                return None
+            shown = self._prompts.pop(prompt)
+        return prompt, value, max(0, now_ns - shown) / 1e9
+
+    def sent_ack(self, seq: int, arrived_ns: int, applied_ns: int, sent_ns: int) -> None:
+        """A state frame acknowledging sample ``seq`` was sent to the page."""
+        with self.lock:
+            for old in [s for s, v in self._acks.items() if sent_ns - v[2] > ACK_KEEP_NS]:
+                del self._acks[old]
+            self._acks[seq] = (arrived_ns, applied_ns, sent_ns)
+
+    def echo(self, message: dict[str, Any], now_ns: int) -> tuple[float, float, float] | None:
+        """An admitted ``ack`` (the page echoing an acknowledgement) as the sample's latency,
+        s, measured on this clock: (round trip arrival -> echo, arrival -> applied by the
+        follower plant, applied -> echo); None (refused and counted) for a sequence number
+        not sent or already echoed."""
+        seq = message.get('seq')
+        with self.lock:
+            found = self._acks.pop(seq, None) if isinstance(seq, int) \
+                and not isinstance(seq, bool) else None
+            if found is None:
+                self.refused['ack of no sent frame'] += 1
+                return None
+        arrived, applied, _sent = found
+        return ((now_ns - arrived) / 1e9, (applied - arrived) / 1e9, (now_ns - applied) / 1e9)
+
+    def take_questionnaire(self) -> bool:
+        """Whether this is the phase's first questionnaire (later ones are refused)."""
+        with self.lock:
+            if self.questionnaire_taken:
+                self.refused['a second questionnaire'] += 1
+                return False
+            self.questionnaire_taken = True
+            return True
+
+    def refused_counts(self) -> dict[str, int]:
+        """Refused messages by reason."""
+        with self.lock:
+            return dict(self.refused)

@@ -1,0 +1,4 @@
+"""trust_av.graph (a regular package, so that setuptools' find_packages installs it)."""
+
+__all__: list[str] = []
+

@@ -1,0 +1,234 @@
+"""Synthetic participants for the trust-model fit: can it recover what generated the ratings?
+
+Each synthetic participant drives (the shipped follower in the in-process closed loop,
+:func:`trust_av.system.closed_loop.simulate`) the study's conditions in which trust
+moves (:mod:`trust_av_planner.perturbations`); the explicability of every applied plan is
+recorded, and ratings are generated from a *known* trust model with known parameters (drawn
+from the model's declared prior, within its bounds) through a known observation model with
+known rating noise. :func:`recover` fits every registered model to them
+(:mod:`trust_monitor.trust_fit`) and reports how well the true parameters are
+recovered and which model scores best on held-out drives (``benchmarks/
+bench_trust_recovery.py``, docs/tutorials/fit-trust-models.md).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trust_av.system.closed_loop import control_trace, simulate
+from trust_av.system.config import RunConfig
+from trust_monitor.trust_fit import (
+    ModelSpec,
+    Observation,
+    RatedDrive,
+    Score,
+    fit,
+    held_out,
+    model_spec,
+    model_trust,
+)
+
+__all__ = ['RATING_NOISE', 'RATING_PERIOD_S', 'drive_scores', 'make_participant', 'recover']
+
+CONDITIONS = ('late_brake', 'hesitation', 'headway_change', 'mixed_random')
+"""The drives of a synthetic participant, in order (``mixed_random`` seeded per participant)."""
+DRIVE_S = 120
+"""Length of a drive, s (the study's ``drive_duration_s``)."""
+RATING_PERIOD_S = 5.0
+"""A synthetic participant rates this often, s (the shipped study asks every 15 s)."""
+RATING_NOISE = 5.0
+"""Standard deviation of the rating noise, rating points."""
+RATING_SPAN = (40.0, 60.0)
+"""``linear`` observation: the model's trust range over the participant's drives is mapped to
+a span of ratings drawn from this interval (rating points), starting at 20-30."""
+
+
+@dataclass(frozen=True)
+class Participant:
+    """A synthetic participant: the true model, its parameters, the observation, the drives."""
+
+    name: str
+    model: str
+    theta: dict[str, float]
+    observation: Observation
+    drives: tuple[RatedDrive, ...]
+
+
+def drive_scores(config: RunConfig, perturbation: str, seed: int,
+                 steps: int = DRIVE_S) -> tuple[np.ndarray, np.ndarray]:
+    """(times, E) of one in-process drive of ``steps`` control steps under ``perturbation``."""
+    cfg = dataclasses.replace(config, planner=dataclasses.replace(
+        config.planner, perturbation=perturbation, perturbation_seed=seed))
+    trace = dataclasses.replace(control_trace(cfg), step_limit=steps)
+    result = simulate(cfg, trace)
+    times = np.array([r.t_s for r in result.records]) - result.records[0].t_s
+    return times, np.array([r.explicability for r in result.records])
+
+
+def draw_theta(spec: ModelSpec, rng: np.random.Generator) -> dict[str, float]:
+    """Parameters drawn from the declared prior (truncated to the bounds)."""
+    out = {}
+    for p in spec.parameters:
+        low, high = (math.log(p.low), math.log(p.high)) if p.log_scale else (p.low, p.high)
+        x = float(np.clip(rng.normal(p.prior_mean, p.prior_std), low, high))
+        out[p.name] = math.exp(x) if p.log_scale else x
+    return out
+
+
+def make_participant(spec: ModelSpec, name: str, drives: Sequence[tuple[str, np.ndarray,
+                                                                        np.ndarray]],
+                     rng: np.random.Generator, noise: float = RATING_NOISE,
+                     rating_period_s: float = RATING_PERIOD_S) -> Participant:
+    """A participant whose ratings ``spec`` generates over ``drives`` ((name, times, E))."""
+    theta = draw_theta(spec, rng)
+    model = spec.build(theta)
+    rated = []
+    for drive, times, scores in drives:
+        rating_times = np.arange(rating_period_s, times[-1] + 1.0 + 1e-9, rating_period_s)
+        rated.append(RatedDrive(name, drive, times, scores, rating_times,
+                                np.zeros(len(rating_times))))
+    trusts = [model_trust(model, d)[1] for d in rated]
+    if spec.observation == 'direct':
+        obs = Observation(0.0, 1.0, noise / 100.0)
+    else:
+        low = min(float(t.min()) for t in trusts)
+        high = max(float(t.max()) for t in trusts)
+        span = rng.uniform(*RATING_SPAN) / 100.0
+        b = span / max(high - low, 1e-6)
+        obs = Observation(rng.uniform(0.2, 0.3) - b * low, b, noise / 100.0)
+    out = []
+    for d, trust in zip(rated, trusts, strict=True):
+        ratings = np.clip(np.round(100.0 * obs.mean(trust)
+                                   + rng.normal(0.0, noise, len(trust))), 0.0, 100.0)
+        out.append(dataclasses.replace(d, ratings=ratings))
+    return Participant(name, spec.name, theta, obs, tuple(out))
+
+
+@dataclass
+class Recovery:
+    """What :func:`recover` measured."""
+
+    participants: int
+    drives_per_participant: int
+    true_and_fitted: dict[str, dict[str, list[tuple[float, float]]]]
+    elpd: dict[str, list[dict[str, float]]]
+    """Per true model, per participant: every model's leave-one-drive-out elpd."""
+
+    @property
+    def confusion(self) -> dict[str, dict[str, int]]:
+        """{true model: {best-scoring model: participants}}."""
+        out = {true: dict.fromkeys(self.elpd, 0) for true in self.elpd}
+        for true, rows in self.elpd.items():
+            for row in rows:
+                out[true][max(row, key=lambda m: row[m])] += 1
+        return out
+
+    def power(self, true: str, other: str, participants: int, draws: int = 2000,
+              seed: int = 0) -> float:
+        """Simulated power to prefer ``true`` over ``other`` with ``participants``
+        participants generated by ``true``: the fraction of bootstrap samples (participants
+        resampled from the recovery's) whose summed elpd difference is positive by more
+        than 1.645 standard errors (one-sided, 5 %)."""
+        diff = np.array([row[true] - row[other] for row in self.elpd[true]])
+        rng = np.random.Generator(np.random.PCG64(seed))
+        sample = diff[rng.integers(0, len(diff), (draws, participants))]
+        mean = sample.mean(axis=1)
+        se = sample.std(axis=1, ddof=1) / math.sqrt(participants) if participants > 1 \
+            else np.full(draws, np.inf)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            return float(np.mean(mean > 1.645 * se))
+
+    def parameter_r(self, specs: dict[str, ModelSpec]) -> dict[str, dict[str, float | None]]:
+        """Correlation of true and fitted values per model and parameter (None for a
+        parameter its model declares not identifiable, or when either side is constant)."""
+        out: dict[str, dict[str, float | None]] = {}
+        for name, pairs in self.true_and_fitted.items():
+            row: dict[str, float | None] = {}
+            for param, values in pairs.items():
+                arr = np.array(values)
+                ok = len(arr) > 2 and np.std(arr[:, 0]) > 0 and np.std(arr[:, 1]) > 0
+                row[param] = float(np.corrcoef(arr[:, 0], arr[:, 1])[0, 1]) if ok else None
+            for fixed in specs[name].fixed:
+                row[fixed.name] = None
+            out[name] = row
+        return out
+
+
+def recover(config: RunConfig, models: Sequence[str], participants: int, drives: int,
+            seed: int = 0, noise: float = RATING_NOISE, values: dict[str, Any] | None = None,
+            on_participant: Callable[[str], None] | None = None,
+            steps: int = DRIVE_S) -> Recovery:
+    """For each true model in ``models``: ``participants`` synthetic participants with
+    ``drives`` drives each (the first ``drives`` of :data:`CONDITIONS`, cycled), every
+    model fitted to each (parameters: full fit; best model: leave-one-drive-out elpd), each
+    drive ``steps`` control steps long.
+
+    Raises:
+        FitError: fewer than two drives (no held-out drive).
+    """
+    rng = np.random.Generator(np.random.PCG64(seed))
+    specs = {m: model_spec(config.trust, m, values) for m in models}
+    cache: dict[tuple[str, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    def scores_of(condition: str, k: int) -> tuple[np.ndarray, np.ndarray]:
+        key = (condition, k if condition.endswith('_random') else 0)
+        if key not in cache:
+            cache[key] = drive_scores(config, condition, seed * 1000 + key[1], steps)
+        return cache[key]
+
+    pairs: dict[str, dict[str, list[tuple[float, float]]]] = {
+        m: {p.name: [] for p in specs[m].parameters} for m in models}
+    elpd: dict[str, list[dict[str, float]]] = {m: [] for m in models}
+    for true in models:
+        for i in range(participants):
+            conditions = [CONDITIONS[j % len(CONDITIONS)] for j in range(drives)]
+            data = [(c, *scores_of(c, i)) for c in conditions]
+            who = make_participant(specs[true], f'{true}_{i:02d}', data, rng, noise)
+            fitted = fit(specs[true], who.drives, seed)
+            for p in specs[true].parameters:
+                pairs[true][p.name].append((who.theta[p.name], fitted.theta[p.name]))
+            held: list[Score] = [held_out(specs[m], [[d] for d in who.drives],
+                                          'leave_one_drive_out', seed) for m in models]
+            elpd[true].append({s.model: s.elpd for s in held})
+            if on_participant is not None:
+                on_participant(who.name)
+    return Recovery(participants, drives, pairs, elpd)
+
+
+def synthetic_study(config: RunConfig, models: Sequence[str], per_model: int, drives: int,
+                    seed: int = 0, steps: int = DRIVE_S) -> list[Participant]:
+    """``per_model`` synthetic participants of each model in ``models``, ``drives`` drives
+    each (the first of :data:`CONDITIONS`, cycled; ``mixed_random`` seeded per participant)."""
+    rng = np.random.Generator(np.random.PCG64(seed))
+    out = []
+    for true in models:
+        spec = model_spec(config.trust, true)
+        for i in range(per_model):
+            data = [(c, *drive_scores(config, c, seed * 1000 + i, steps))
+                    for c in (CONDITIONS[j % len(CONDITIONS)] for j in range(drives))]
+            out.append(make_participant(spec, f'{true}_{i:02d}', data, rng))
+    return out
+
+
+def write_ratings_table(path: Path, participants: Sequence[Participant]) -> None:
+    """The participants' drives as a tidy ratings table (the format of
+    :mod:`trust_av.drive.trust_fit_data`)."""
+    rows = []
+    for who in participants:
+        for d in who.drives:
+            rows += [(who.name, d.drive, float(t), repr(float(e)), '')
+                     for t, e in zip(d.times_s, d.scores, strict=True)]
+            rows += [(who.name, d.drive, float(t), '', f'{r:g}')
+                     for t, r in zip(d.rating_times_s, d.ratings, strict=True)]
+    with Path(path).open('w', newline='') as handle:
+        writer = csv.writer(handle, lineterminator='\n')
+        writer.writerow(('participant', 'drive', 't_s', 'explicability', 'rating'))
+        writer.writerows(rows)

@@ -1,9 +1,0 @@
-"""rclpy helpers shared by every node of the graph (the only place besides the nodes and the
-graph orchestration that imports rclpy or message packages).
-
-- :mod:`~trust_monitor.ros.qos`: the named QoS profiles.
-- :mod:`~trust_monitor.ros.parameters`: declare a configuration dataclass as ROS parameters.
-- :mod:`~trust_monitor.ros.messages`: message builders and readers.
-- :mod:`~trust_monitor.ros.spin`: a node's main loop (init, spin, shutdown) and the
-  wall-clock control loop.
-"""

@@ -1,0 +1,412 @@
+"""Fit trust models to trust ratings, and score them on ratings they were not fitted to.
+
+Pure numerics (no ROS, no files): :mod:`trust_av.drive.trust_fit_data` reads drives,
+``trust-av fit-trust`` writes the tables and figures. The method
+(docs/tutorials/fit-trust-models.md):
+
+- **Data.** A :class:`RatedDrive` is one drive of one participant: the explicability E of
+  each applied plan (step ``i`` applies E_i from ``times_s[i]`` to ``times_s[i+1]``) and the
+  trust ratings given during it (0-100, at their times).
+- **Model trust.** A registered trust model runs over the drive's E with each update scaled
+  by its step, and its trust is read on the common scale [0, 1]
+  (:func:`~trust_monitor.model_interface.common_trust`) after every step completed by the
+  rating's time.
+- **Observation model** (its parameters are fitted too). ``linear`` (default):
+  ``rating / 100 = a + b T + e``, ``b >= 0``; ``direct`` (a model that declares
+  ``rating_observation = 'direct'``: ``optimo``, ``beta_bernoulli``, whose trust is itself a
+  probability of trusting): ``rating / 100 = T + e``; ``e ~ N(0, s^2)`` in both. For given
+  model parameters a, b and s have closed-form maximum-likelihood values (least squares),
+  so they are profiled out exactly and the optimiser searches the model's parameters only.
+- **Parameters** come from the model's own declaration
+  (:func:`~trust_monitor.model_interface.fit_parameters`): the identifiable ones are fitted
+  by maximising the profile likelihood times the declared normal prior (on the log scale
+  for ``log_scale`` parameters: a MAP estimate) with ``scipy.optimize.minimize`` (Powell,
+  within the bounds: a threshold parameter makes the likelihood piecewise constant, so the
+  search is derivative-free), in units of prior standard deviations (one tolerance, 0.01
+  SD, for every parameter), started from the best of the prior mean and :data:`STARTS`
+  draws from the prior.
+- **Scores.** Held-out log predictive density of each rating under the fitted model and
+  observation (nats, ratings on the 0-100 scale) and rating RMSE, from fits that did not see
+  it: leave one drive out (per participant) and leave one participant out (pooled). Standard
+  errors from the pointwise values (sqrt(n) x their standard deviation for a sum).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import optimize
+
+from trust_monitor.errors import TrustMonitorError
+from trust_monitor.model_interface import (
+    FitParameter,
+    TrustModel,
+    common_trust,
+    fit_parameters,
+    make_trust_model,
+)
+from trust_monitor.paper_trust import TrustConfig
+
+__all__ = ['Fit', 'FitError', 'ModelSpec', 'Observation', 'RatedDrive', 'Score', 'by_participant',
+           'compare', 'fit', 'held_out', 'model_spec', 'model_trust']
+
+OBSERVATIONS = ('linear', 'direct')
+MIN_RATING_STD = 0.5 / 100.0
+"""The observation noise s is at least half a rating point (ratings are whole numbers)."""
+STARTS = 4
+"""Random starts drawn from the prior besides its mean; the best seeds the search."""
+MAX_EVALUATIONS = 250
+"""Objective evaluations per fit (Powell's ``maxfev``)."""
+TIME_TOLERANCE_S = 1e-9
+
+
+class FitError(TrustMonitorError):
+    """Data a fit cannot use (named in one line)."""
+
+
+@dataclass(frozen=True)
+class RatedDrive:
+    """One drive: E per applied plan and the ratings given during it.
+
+    Attributes:
+        participant: who drove.
+        drive: the drive's name (unique per participant).
+        times_s: start of each step, s (increasing).
+        scores: E of the plan applied from ``times_s[i]`` to the next time (the last for
+            the median step), dimensionless in [0, 1].
+        rating_times_s: when each rating was given, s.
+        ratings: the ratings, 0-100.
+    """
+
+    participant: str
+    drive: str
+    times_s: np.ndarray
+    scores: np.ndarray
+    rating_times_s: np.ndarray
+    ratings: np.ndarray
+
+    def __post_init__(self) -> None:
+        where = f'participant {self.participant!r} drive {self.drive!r}'
+        t, e = np.asarray(self.times_s, float), np.asarray(self.scores, float)
+        rt, r = np.asarray(self.rating_times_s, float), np.asarray(self.ratings, float)
+        if t.ndim != 1 or len(t) < 2 or len(e) != len(t):
+            raise FitError(f'{where}: need at least two steps with one score each')
+        if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
+            raise FitError(f'{where}: step times must be finite and increasing')
+        if not (np.all(np.isfinite(e)) and e.min() >= 0.0 and e.max() <= 1.0):
+            raise FitError(f'{where}: explicability must be in [0, 1]')
+        if len(rt) != len(r) or not (np.all(np.isfinite(rt)) and np.all(np.isfinite(r))):
+            raise FitError(f'{where}: ratings and their times must be finite and paired')
+        if len(r) and (r.min() < 0.0 or r.max() > 100.0):
+            raise FitError(f'{where}: ratings must be in [0, 100]')
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """A registered model as the fit sees it: how to build it with given parameter values.
+
+    Attributes:
+        name: the registered name.
+        trust: the shared trust parameters the fit starts from.
+        values: the model's own parameters (params-file values).
+        parameters: the fitted (identifiable) parameters.
+        fixed: the declared parameters held at their configured value.
+        observation: ``linear`` or ``direct``.
+    """
+
+    name: str
+    trust: TrustConfig
+    values: Mapping[str, Any]
+    parameters: tuple[FitParameter, ...]
+    fixed: tuple[FitParameter, ...]
+    observation: str
+
+    def build(self, theta: Mapping[str, float]) -> TrustModel:
+        """The model with the fitted parameters set to ``theta``."""
+        shared: dict[str, Any] = {k: v for k, v in theta.items()
+                                  if k in TrustConfig.__dataclass_fields__}
+        own = {**self.values, **{k: v for k, v in theta.items() if k not in shared}}
+        return make_trust_model(dataclasses.replace(self.trust, **shared), own)
+
+    def configured(self, name: str) -> float:
+        """The configured value of a declared parameter."""
+        if name in TrustConfig.__dataclass_fields__:
+            return float(getattr(self.trust, name))
+        model = make_trust_model(self.trust, self.values)
+        return float(getattr(getattr(model, 'params', None), name))
+
+
+def model_spec(trust: TrustConfig, name: str, values: Mapping[str, Any] | None = None
+               ) -> ModelSpec:
+    """The fit's view of the registered model ``name`` (its declaration, no edit needed).
+
+    Raises:
+        RegistryError: not registered.
+        FitError: a declared observation model this fit does not know.
+    """
+    cfg = dataclasses.replace(trust, trust_model=name)
+    model = make_trust_model(cfg, values)
+    declared = fit_parameters(model)
+    observation = getattr(model, 'rating_observation', 'linear')
+    if observation not in OBSERVATIONS:
+        raise FitError(f'trust model {name!r}: rating_observation must be one of '
+                       f'{list(OBSERVATIONS)}, got {observation!r}')
+    return ModelSpec(name, cfg, dict(values or {}),
+                     tuple(p for p in declared if p.identifiable),
+                     tuple(p for p in declared if not p.identifiable), observation)
+
+
+def model_trust(model: TrustModel, drive: RatedDrive,
+                every_step: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The model's trust on the common scale at each rating time (after every step
+    completed by then; before any: the initial trust), and after each step when
+    ``every_step`` (else an empty array: the fit reads the rating times only)."""
+    t = np.asarray(drive.times_s, float)
+    steps = np.diff(t)
+    dt = np.append(steps, np.median(steps))
+    done = np.searchsorted(t + dt, np.asarray(drive.rating_times_s, float) + TIME_TOLERANCE_S,
+                           side='right')
+    state = model.initial_state()
+    initial = common_trust(model, state)
+    wanted = set(int(k) - 1 for k in done if k > 0)
+    after = np.full(len(t), np.nan)
+    last = max(wanted) if wanted and not every_step else len(t) - 1
+    for i in range(last + 1):
+        state = model.step(state, float(drive.scores[i]), float(dt[i]))
+        if every_step or i in wanted:
+            after[i] = common_trust(model, state)
+    at = np.where(done > 0, after[np.maximum(done - 1, 0)], initial)
+    return (after if every_step else np.array([])), at
+
+
+@dataclass(frozen=True)
+class Observation:
+    """Fitted observation model: rating / 100 = a + b T + N(0, s^2)."""
+
+    a: float
+    b: float
+    s: float
+
+    def mean(self, trust: np.ndarray) -> np.ndarray:
+        """Predicted rating / 100."""
+        return self.a + self.b * np.asarray(trust)
+
+
+def fit_observation(kind: str, trust: np.ndarray, y: np.ndarray) -> Observation:
+    """Least-squares (= maximum likelihood) a, b >= 0 and s for ratings / 100 ``y``."""
+    if kind == 'direct':
+        a, b = 0.0, 1.0
+    else:
+        spread = float(np.var(trust))
+        b = (float(np.mean((trust - trust.mean()) * (y - y.mean()))) / spread
+             if spread > 1e-12 else 0.0)
+        b = max(b, 0.0)
+        a = float(y.mean() - b * trust.mean())
+    s = math.sqrt(float(np.mean((y - a - b * trust) ** 2)))
+    return Observation(a, b, max(s, MIN_RATING_STD))
+
+
+def log_density(obs: Observation, trust: np.ndarray, ratings: np.ndarray) -> np.ndarray:
+    """Pointwise log density of ratings (0-100 scale) under the observation model."""
+    sd = 100.0 * obs.s
+    z = (np.asarray(ratings) - 100.0 * obs.mean(trust)) / sd
+    result: np.ndarray = -0.5 * z * z - math.log(sd * math.sqrt(2.0 * math.pi))
+    return result
+
+
+@dataclass
+class Fit:
+    """A fitted model: parameter values, observation model and the objective reached."""
+
+    model: str
+    theta: dict[str, float]
+    observation: Observation
+    log_posterior: float
+    ratings: int
+    evaluations: int
+    fixed: dict[str, float] = field(default_factory=dict)
+
+
+def _to_search(p: FitParameter, value: float) -> float:
+    """A parameter value in search units: prior standard deviations from the prior mean
+    (on the log scale for ``log_scale``), so one tolerance suits every parameter."""
+    return ((math.log(value) if p.log_scale else value) - p.prior_mean) / p.prior_std
+
+
+def _from_search(p: FitParameter, z: float) -> float:
+    x = p.prior_mean + p.prior_std * z
+    return math.exp(x) if p.log_scale else x
+
+
+def _prior(params: Sequence[FitParameter], z: np.ndarray) -> float:
+    return float(-0.5 * np.sum(np.asarray(z) ** 2)) if len(params) else 0.0
+
+
+def fit(spec: ModelSpec, drives: Sequence[RatedDrive], seed: int = 0) -> Fit:
+    """Fit ``spec``'s identifiable parameters and its observation model to ``drives``.
+
+    Raises:
+        FitError: no ratings in ``drives``.
+    """
+    y = np.concatenate([np.asarray(d.ratings, float) for d in drives]) / 100.0 \
+        if drives else np.array([])
+    if len(y) == 0:
+        raise FitError('no ratings to fit')
+    params = spec.parameters
+    box = [(_to_search(p, p.low), _to_search(p, p.high)) for p in params]
+    evaluations = [0]
+
+    def theta_of(x: np.ndarray) -> dict[str, float]:
+        return {p.name: min(max(_from_search(p, float(v)), p.low), p.high)
+                for p, v in zip(params, x, strict=True)}
+
+    def trust_at(x: np.ndarray) -> np.ndarray:
+        model = spec.build(theta_of(x))
+        return np.concatenate([model_trust(model, d)[1] for d in drives])
+
+    def objective(x: np.ndarray) -> float:
+        evaluations[0] += 1
+        x = np.clip(x, [b[0] for b in box], [b[1] for b in box])
+        trust = trust_at(x)
+        obs = fit_observation(spec.observation, trust, y)
+        loglik = float(log_density(obs, trust, 100.0 * y).sum())
+        return -(loglik + _prior(params, x))
+
+    if not params:
+        x_best = np.array([])
+    else:
+        rng = np.random.Generator(np.random.PCG64(seed))
+        low, high = [b[0] for b in box], [b[1] for b in box]
+        starts = [np.clip(np.zeros(len(params)), low, high)] + [
+            np.clip(rng.normal(0.0, 1.0, len(params)), low, high) for _ in range(STARTS)]
+        values = [objective(s) for s in starts]
+        x0 = starts[int(np.argmin(values))]
+        result = optimize.minimize(objective, x0, method='Powell', bounds=box,
+                                   options={'maxfev': MAX_EVALUATIONS, 'xtol': 1e-2,
+                                            'ftol': 1e-4})
+        x_best = result.x if result.fun <= min(values) else x0
+    trust = trust_at(x_best)
+    obs = fit_observation(spec.observation, trust, y)
+    return Fit(spec.name, theta_of(x_best), obs, -objective(x_best), len(y), evaluations[0],
+               {p.name: spec.configured(p.name) for p in spec.fixed})
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """A fitted model on drives it may not have seen: trust and ratings at rating times."""
+
+    trust: np.ndarray
+    ratings: np.ndarray
+    predicted: np.ndarray
+    log_density: np.ndarray
+
+
+def predict(spec: ModelSpec, fitted: Fit, drives: Sequence[RatedDrive]) -> Prediction:
+    """``fitted`` applied to ``drives``: predicted ratings and their log densities."""
+    model = spec.build(fitted.theta)
+    trust = np.concatenate([model_trust(model, d)[1] for d in drives]) if drives \
+        else np.array([])
+    ratings = np.concatenate([np.asarray(d.ratings, float) for d in drives]) if drives \
+        else np.array([])
+    return Prediction(trust, ratings, 100.0 * fitted.observation.mean(trust),
+                      log_density(fitted.observation, trust, ratings))
+
+
+@dataclass(frozen=True)
+class Score:
+    """Held-out scores of one model for one participant (or pooled).
+
+    Attributes:
+        model: the model.
+        scheme: ``leave_one_drive_out`` or ``leave_one_participant_out``.
+        pointwise: held-out log density of every rating (nats, 0-100 scale).
+        errors: held-out rating errors, rating points.
+    """
+
+    model: str
+    scheme: str
+    pointwise: np.ndarray
+    errors: np.ndarray
+
+    @property
+    def elpd(self) -> float:
+        """Sum of the held-out log densities."""
+        return float(self.pointwise.sum())
+
+    @property
+    def elpd_se(self) -> float:
+        """Its standard error: sqrt(n) x the pointwise standard deviation."""
+        n = len(self.pointwise)
+        return float(math.sqrt(n) * np.std(self.pointwise, ddof=1)) if n > 1 else math.nan
+
+    @property
+    def rmse(self) -> float:
+        """Root mean squared held-out rating error, rating points."""
+        return float(math.sqrt(np.mean(self.errors ** 2)))
+
+    @property
+    def rmse_se(self) -> float:
+        """Its standard error (delta method on the mean squared error)."""
+        n = len(self.errors)
+        if n < 2 or self.rmse == 0.0:
+            return math.nan
+        return float(np.std(self.errors ** 2, ddof=1) / math.sqrt(n) / (2.0 * self.rmse))
+
+
+def held_out(spec: ModelSpec, groups: Sequence[Sequence[RatedDrive]], scheme: str,
+             seed: int = 0) -> Score:
+    """Score ``spec`` leaving each group out in turn (fit on the others, predict it).
+
+    Raises:
+        FitError: fewer than two groups, or a fold without ratings to fit.
+    """
+    if len(groups) < 2:
+        raise FitError(f'{scheme} needs at least two held-out units, got {len(groups)}')
+    points, errors = [], []
+    for k, group in enumerate(groups):
+        train = [d for j, g in enumerate(groups) if j != k for d in g]
+        fitted = fit(spec, train, seed)
+        out = predict(spec, fitted, group)
+        points.append(out.log_density)
+        errors.append(out.ratings - out.predicted)
+    return Score(spec.name, scheme, np.concatenate(points), np.concatenate(errors))
+
+
+def compare(scores: Sequence[Score]) -> list[dict[str, Any]]:
+    """Rows of the model comparison: each model's elpd, its difference to the best and the
+    difference's standard error (pointwise over the same ratings), RMSE; best first.
+
+    Raises:
+        FitError: the scores are not over the same ratings.
+    """
+    if not scores:
+        return []
+    n = {len(s.pointwise) for s in scores}
+    if len(n) != 1:
+        raise FitError('scores to compare must be over the same ratings')
+    best = max(scores, key=lambda s: s.elpd)
+    rows = []
+    for s in sorted(scores, key=lambda s: -s.elpd):
+        diff = s.pointwise - best.pointwise
+        rows.append({'model': s.model, 'scheme': s.scheme, 'ratings': len(s.pointwise),
+                     'elpd': s.elpd, 'elpd_se': s.elpd_se, 'elpd_diff': float(diff.sum()),
+                     'elpd_diff_se': float(math.sqrt(len(diff)) * np.std(diff, ddof=1))
+                     if len(diff) > 1 else math.nan,
+                     'rmse': s.rmse, 'rmse_se': s.rmse_se})
+    return rows
+
+
+def by_participant(drives: Sequence[RatedDrive]) -> dict[str, list[RatedDrive]]:
+    """Drives grouped by participant, in first-seen order."""
+    out: dict[str, list[RatedDrive]] = {}
+    for d in drives:
+        out.setdefault(d.participant, []).append(d)
+    return out
+
+
+ProgressFn = Callable[[str], None]
