@@ -18,6 +18,7 @@ from rosbags.rosbag2 import Reader
 
 from trust_av.graph.bag_records import records_from_bag
 from trust_av.graph.bag_writer import qos_profile
+from trust_av_common.errors import TrustAvError
 from trust_av_common.output_lock import OutputLockedError, hold_output_lock, lock_path
 from trust_av_common.record_window import (
     ACK_EVERY_STEPS,
@@ -28,7 +29,6 @@ from trust_av_common.record_window import (
     window_steps,
 )
 from trust_av_common.topics import TOPICS, Topic
-from trust_monitor.errors import TrustMonitorError
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from rosbag2_rules import check_bag_directory  # the test-side oracle module
@@ -214,11 +214,11 @@ def test_a_lock_file_that_is_a_link_or_a_directory_is_one_line(tmp_path: Path) -
     target = tmp_path / 'elsewhere'
     lock_path(tmp_path / 'bag').symlink_to(target)
     link = r'bag.lock: cannot create the lock file \(a symbolic link\)'
-    with pytest.raises(TrustMonitorError, match=link), hold_output_lock(tmp_path / 'bag'):
+    with pytest.raises(TrustAvError, match=link), hold_output_lock(tmp_path / 'bag'):
         pass
     assert not target.exists()
     lock_path(tmp_path / 'other').mkdir()
-    with pytest.raises(TrustMonitorError, match=r'other\.lock: cannot create the lock file'), \
+    with pytest.raises(TrustAvError, match=r'other\.lock: cannot create the lock file'), \
             hold_output_lock(tmp_path / 'other'):
         pass
 

@@ -283,7 +283,7 @@ def test_a_swallowed_stop_is_raised_again_where_the_command_works(
     error): the command went on, and every further signal only escalated a stop that was
     not under way (fit-driver needed a third). The next progress update raises it again,
     and so does a command that returns success after it."""
-    import trust_av.cli.simulate
+    from trust_av.cli import simulate
     from trust_av.cli.options import Progress
     from trust_av.graph import stop_signals
 
@@ -300,7 +300,7 @@ def test_a_swallowed_stop_is_raised_again_where_the_command_works(
             stop_signals.handle(signal.SIGTERM, None)
         return 0
 
-    monkeypatch.setattr(trust_av.cli.simulate, 'run', swallowing)
+    monkeypatch.setattr(simulate, 'run', swallowing)
     code, err = trust_av('simulate')
     assert code == 143 and 'stopped by SIGTERM' in err
 

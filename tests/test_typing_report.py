@@ -22,7 +22,7 @@ def test_an_exclusion_moves_lines_from_checked_to_excluded() -> None:
     assert not excluded and len(checked) > 100
     total = sum(checked.values())
     checked_ros, excluded_ros = typing_report.line_counts('/ros/')
-    assert set(excluded_ros) == {n for n in checked if '/trust_monitor/ros/' in n}
+    assert set(excluded_ros) == {n for n in checked if '/ros/' in n} != set()
     assert sum(checked_ros.values()) + sum(excluded_ros.values()) == total
     spin = 'src/trust_av_common/trust_av_common/ros/spin.py'
     assert excluded_ros[spin] == len((SCRIPT.parents[1] / spin).read_text().splitlines())

@@ -428,17 +428,17 @@ class PlannerNode(ManagedNode):
     def publish(self, ns: int, plan: np.ndarray, expected: np.ndarray, accel_mps2: float,
                 trust: float, *, status: str, ok: bool, extra: dict[str, str],
                 error: bool = False) -> None:
-        """The four outputs of a step, stamped ``ns`` (plans on the prediction grid, in the
-        AV's frame), then the vehicles' markers."""
+        """The vehicles' markers, then the step's four outputs (they complete its recorded
+        chunk), stamped ``ns``; plans on the prediction grid, in the AV's frame."""
         step_s = self.planner.grid[0]
         self.record.published(trust, accel_mps2)
+        self.pub_markers.publish(self.markers.update(ns))
         self.pub_plan.publish(self.plan_bytes.render(ns, step_s, plan.tolist()))
         self.pub_expected.publish(self.plan_bytes.render(ns, step_s, expected.tolist()))
         self.pub_accel.publish(self.command_bytes.render(ns, accel_mps2))
         self.pub_status.publish(diagnostics(ns, 'trust_aware_nmpc', ok, status,
                                             {'status': status, **extra, 'trust': repr(trust),
                                              'command_mps2': repr(accel_mps2)}, error=error))
-        self.pub_markers.publish(self.markers.update(ns))
 
 
 def main(args: list[str] | None = None) -> int:
