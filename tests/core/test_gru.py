@@ -13,7 +13,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-from support.closed_loop import shipped_trace
+from support.closed_loop import shipped_trace, with_alpha
+from support.paths import GOLDEN
 
 from preceding_traffic.traces import truncate
 from trust_av_planner.planner import make_predictor
@@ -150,48 +151,9 @@ def test_reduced_retraining_with_dagger_reproduces_itself(tmp_path: Path) -> Non
         np.testing.assert_array_equal(getattr(first, name), getattr(second, name))
 
 
-def retrain_shipped(out: Path, *options: str) -> subprocess.CompletedProcess[str]:
-    """``trust-av train-gru --out OUT [options]`` as a user runs it (it trains in a child
-    process with pinned numerics)."""
-    return subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'train-gru',
-                           '--out', str(out), *options], capture_output=True, text=True)
-
-
-def shipped_and_new_cards(out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The shipped model's card and the one written with ``out``, after checking that both
-    were trained with the same pinned kernel bits (fingerprint) and settings."""
-    card = json.loads(SHIPPED.with_suffix('.json').read_text())
-    new = json.loads(out.with_suffix('.json').read_text())
-    assert new['numerics_fingerprint'] == card['numerics_fingerprint'], (
-        'the pinned numerics differ from the ones the shipped model was trained with '
-        f"(this machine: {new['numerics']}; card: {card['numerics']})")
-    assert new['settings'] == card['settings']
-    return card, new
-
-
-def assert_is_the_shipped_model(out: Path) -> None:
-    """The model written to ``out`` is the shipped one: same numerics fingerprint, the
-    model card's results (every float, every round's best epoch) and the weights bit for
-    bit (the ``.npz`` byte for byte)."""
-    card, new = shipped_and_new_cards(out)
-    assert new['results'] == card['results']
-    with np.load(SHIPPED) as shipped, np.load(out) as retrained:
-        assert sorted(shipped.files) == sorted(retrained.files)
-        for name in shipped.files:
-            np.testing.assert_array_equal(retrained[name], shipped[name], err_msg=name)
-    assert out.read_bytes() == SHIPPED.read_bytes()
-
-
 TRAINED_ON = ('AuthenticAMD', False)
-"""(CPU vendor, AVX-512) of the machines the shipped model was trained and retrained on bit
-for bit: AMD EPYC without AVX-512 (docs/GRU.md)."""
-
-RESULT_RTOL = 1e-5
-"""Relative tolerance of the card's float results on other CPUs. Measured on an Intel Xeon
-with AVX-512 (Sapphire Rapids, 2026-11-25): validation RMSEs 1.8e-7 and 2.2e-7 apart."""
-WEIGHT_ATOL = 2e-3
-"""Absolute tolerance of the weights on other CPUs (the same machine: 7.3e-5 apart; they are
-of order 1)."""
+"""(CPU vendor, AVX-512) of the machines the shipped model and tests/golden/gru_small were
+trained and retrained on bit for bit: AMD EPYC without AVX-512 (docs/GRU.md)."""
 
 
 def cpu_class() -> tuple[str, bool]:
@@ -202,11 +164,38 @@ def cpu_class() -> tuple[str, bool]:
     return vendor, ' avx512f' in info
 
 
-def assert_close_to_the_shipped_model(out: Path) -> None:
-    """What holds on every supported CPU: the same pinned kernel bits (fingerprint), settings,
-    sample counts, epochs and best epochs, the float results to :data:`RESULT_RTOL` and the
-    weights to :data:`WEIGHT_ATOL`."""
-    card, new = shipped_and_new_cards(out)
+def rmse_resolution(card: dict[str, Any]) -> float:
+    """The relative resolution of a card's validation RMSEs: 1 / sqrt(2 n), n the smallest
+    validation set they were computed on (round 0's; each DAgger round adds as many).
+
+    An RMSE is the root of a mean of n squared errors; its standard error is RMSE /
+    sqrt(2 n) for normal errors (the mean square's is MSE sqrt(2 / n)). Two models whose
+    RMSEs are closer than that cannot be told apart on the card's validation data, so that
+    is what a figure can be asserted to on a CPU that trains other bits: the retraining
+    there starts from the same data and settings, and ends in another rounding of the same
+    optimisation (one ulp apart in round 0 on an Intel Xeon with AVX-512, docs/GRU.md). It
+    follows from the sample count, not from the difference one other machine showed."""
+    results = card['results']
+    return float(1.0 / np.sqrt(2.0 * results['samples_validation']
+                               / (results['dagger_rounds'] + 1)))
+
+
+def assert_same_model_up_to_resolution(out: Path, reference: Path, settings: TrainingSettings,
+                                       trace: str) -> None:
+    """What holds for a model retrained on any supported CPU: the same pinned kernel bits
+    (fingerprint) and settings, the same sample counts, epochs and best epochs; every
+    float of the card within :func:`rmse_resolution` (relative); and the retrained GRU's
+    predictions on the histories of a TAC-CA run of ``trace`` within the same resolution of
+    the reference model's RMSE from the reference's predictions (the weights themselves are
+    not compared one by one: many weight sets give one function)."""
+    card = json.loads(reference.with_suffix('.json').read_text())
+    new = json.loads(out.with_suffix('.json').read_text())
+    assert new['numerics_fingerprint'] == card['numerics_fingerprint'], (
+        'the pinned numerics differ from the ones the reference was trained with '
+        f"(this machine: {new['numerics']}; card: {card['numerics']})")
+    assert new['settings'] == card['settings'] == json.loads(json.dumps(
+        dataclasses.asdict(settings)))
+    tolerance = rmse_resolution(card)
 
     def same(a: Any, b: Any) -> None:
         if isinstance(b, dict):
@@ -218,16 +207,85 @@ def assert_close_to_the_shipped_model(out: Path) -> None:
             for x, y in zip(a, b, strict=True):
                 same(x, y)
         elif isinstance(b, float):
-            assert a == pytest.approx(b, rel=RESULT_RTOL)
+            assert a == pytest.approx(b, rel=tolerance)
         else:
             assert a == b
 
     same(new['results'], card['results'])
-    with np.load(SHIPPED) as shipped, np.load(out) as retrained:
+    config = load_run_config()
+    weights = [load_weights(path, config.planner.horizon_steps) for path in (out, reference)]
+    records = simulate(with_alpha(config, 0.5), shipped_trace(trace)).records
+    x, _, _, _ = samples_from_run(records, settings.history_steps, config.planner.horizon_steps,
+                                  config.shared.vehicle_length_m,
+                                  config.planner.time_headway_cap_s)
+    new_pred, ref_pred = ([gru_forward(w, (h - w.feature_mean) / w.feature_std) for h in x]
+                          for w in weights)
+    apart = float(np.sqrt(np.mean((np.array(new_pred) - np.array(ref_pred)) ** 2)))
+    assert apart <= tolerance * card['results']['validation_rmse_gru'], apart
+
+
+def assert_bit_for_bit(out: Path, reference: Path) -> None:
+    """The model written to ``out`` is ``reference``: the model card's results (every
+    float, every round's best epoch) and the weights byte for byte (the ``.npz``)."""
+    card = json.loads(reference.with_suffix('.json').read_text())
+    new = json.loads(out.with_suffix('.json').read_text())
+    assert new['results'] == card['results']
+    with np.load(reference) as shipped, np.load(out) as retrained:
         assert sorted(shipped.files) == sorted(retrained.files)
         for name in shipped.files:
-            np.testing.assert_allclose(retrained[name], shipped[name], rtol=0, atol=WEIGHT_ATOL,
-                                       err_msg=name)
+            np.testing.assert_array_equal(retrained[name], shipped[name], err_msg=name)
+    assert out.read_bytes() == reference.read_bytes()
+
+
+SMALL = TrainingSettings(traces=('hwfet',), alphas=(0.5, 1.0), hidden=8, epochs=4,
+                         dagger_rounds=1)
+"""The small case of the retraining (tests/golden/gru_small.npz): every stage of the
+shipped one (TAC-CA data, training, a DAgger round of TAC-GRU runs with the first model,
+retraining, the card) on one trace, two alphas, 8 hidden units and 4 epochs: 2,400
+training samples against the shipped 46,665, about 5 s of CPU against 120."""
+
+SMALL_TRAINING = """
+import json, sys, tempfile
+from pathlib import Path
+from trust_av_planner.study.gru_training import TrainingSettings, save_model, train_with_dagger
+from trust_av_planner.study.pinned_numerics import check_pinned
+from trust_av_planner.system.config import load_run_config
+check_pinned()
+given = json.loads(sys.argv[2])
+settings = TrainingSettings(**{k: tuple(v) if isinstance(v, list) else v
+                               for k, v in given.items()})
+with tempfile.TemporaryDirectory() as work:
+    weights, report = train_with_dagger(load_run_config(), settings, Path(work))
+save_model(weights, report, settings, Path(sys.argv[1]))
+"""
+"""What `trust-av train-gru` runs in its pinned child (cli/train_gru.py), with SMALL."""
+
+SMALL_GOLDEN = GOLDEN / 'gru_small.npz'
+
+
+def train_small(out: Path) -> None:
+    """The SMALL retraining in a pinned child, as `trust-av train-gru` trains (run_pinned)."""
+    proc = run_pinned(['-c', SMALL_TRAINING, str(out),
+                       json.dumps(dataclasses.asdict(SMALL))],
+                      stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_small_retraining_reproduces_its_stored_model(tmp_path: Path) -> None:
+    """The retraining pipeline with pinned numerics, on the small case: bit for bit the
+    stored model on the class of machine it was trained on (:data:`TRAINED_ON`), and on
+    other x86-64 CPUs with AVX2 the same model up to what its validation data resolve
+    (:func:`assert_same_model_up_to_resolution`). The shipped model's own retraining (the
+    same code with the shipped settings, 2 minutes of CPU) is
+    test_retraining_reproduces_the_shipped_model."""
+    reason = unsupported_reason()
+    if reason is not None:
+        pytest.skip(f'the pinned training numerics need x86-64 with AVX2: {reason}')
+    out = tmp_path / 'gru_small.npz'
+    train_small(out)
+    assert_same_model_up_to_resolution(out, SMALL_GOLDEN, SMALL, 'hwfet')
+    if cpu_class() == TRAINED_ON:
+        assert_bit_for_bit(out, SMALL_GOLDEN)
 
 
 RETRAINING_TIMEOUT_S = 1200
@@ -237,9 +295,16 @@ CPU on an AMD EPYC in a slow period (2026-11-25: the in-process loop at 1,353 st
 the 4,153 of docs/CHANGELOG.md), and 302 s with the rest of the suite on the other workers,
 past the 300 s every other test gets (pyproject.toml)."""
 
+FULL_RETRAINING = 'TRUST_AV_FULL_RETRAINING'
+"""Set to 1 to run the shipped model's retraining (test_retraining_reproduces_the_shipped_model):
+2 minutes of CPU, more than the rest of the core tier together; the suite's 5-minute command
+runs the small case instead (test_small_retraining_reproduces_its_stored_model)."""
+
 
 @pytest.mark.slow
 @pytest.mark.timeout(RETRAINING_TIMEOUT_S)
+@pytest.mark.skipif(os.environ.get(FULL_RETRAINING) != '1',
+                    reason=f"the shipped model's 2-minute retraining: {FULL_RETRAINING}=1 runs it")
 def test_retraining_reproduces_the_shipped_model(tmp_path: Path) -> None:
     """`trust-av train-gru` rebuilds the shipped model (it pins numpy's, OpenBLAS's,
     PyTorch's and MKL's CPU paths in its training process: pinned_numerics.py), whatever
@@ -248,20 +313,20 @@ def test_retraining_reproduces_the_shipped_model(tmp_path: Path) -> None:
 
     Across CPUs only what is stable across them is asserted: on the class of machine the
     model was trained on (:data:`TRAINED_ON`) the weights byte for byte and every float of the
-    card; on other x86-64 CPUs with AVX2 the same kernel bits, counts and epochs, and floats
-    and weights to measured tolerances (an Intel Xeon with AVX-512 trains other bits from the
-    first DAgger round on, cause not found: docs/GRU.md)."""
+    card; on other x86-64 CPUs with AVX2 the same kernel bits, counts and epochs, and the
+    model up to what its validation data resolve (:func:`assert_same_model_up_to_resolution`;
+    an Intel Xeon with AVX-512 trains other bits from the first round on, cause not found:
+    docs/GRU.md)."""
     reason = unsupported_reason()
     if reason is not None:
         pytest.skip(f'the pinned training numerics need x86-64 with AVX2: {reason}')
-    card = json.loads(SHIPPED.with_suffix('.json').read_text())
-    assert card['settings'] == json.loads(json.dumps(dataclasses.asdict(TrainingSettings())))
     out = tmp_path / 'gru.npz'
-    proc = retrain_shipped(out)
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'train-gru',
+                           '--out', str(out)], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    assert_close_to_the_shipped_model(out)
+    assert_same_model_up_to_resolution(out, SHIPPED, TrainingSettings(), 'us06')
     if cpu_class() == TRAINED_ON:
-        assert_is_the_shipped_model(out)
+        assert_bit_for_bit(out, SHIPPED)
 
 
 def numerics_in_child(env: dict[str, str], *, pinned: bool,
