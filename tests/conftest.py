@@ -29,6 +29,26 @@ def run_config() -> RunConfig:
     return load_run_config()
 
 
+@pytest.fixture(scope='session')
+def us06_graph_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """One graph run read by many tests (test_graph, test_foxglove_layout,
+    test_compare_trust_models): ``trust-av run`` on US06, TAC-CA, alpha 0.5, 120 steps, with
+    its plot (support.graph.run_command); the bag directory and the command's stdout. Tests
+    only read it. The tests that use it form one xdist group (pytest_collection_modifyitems),
+    so the suite runs it once."""
+    from support.graph import run_command
+
+    bag = tmp_path_factory.mktemp('graph') / 'us06'
+    proc = subprocess.run(run_command(bag, plot=True), capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return bag, proc.stdout
+
+
+SHARED_RUNS = ('us06_graph_run',)
+"""Session fixtures that record a run many modules' tests read: each is one xdist group."""
+
+
 TESTS = Path(__file__).resolve().parent
 TIERS = ('core', 'graph', 'browser')
 """The suite's tiers, one folder each, and the marker every test of the folder carries:
@@ -52,7 +72,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     ``pytest -n 4 --dist loadgroup`` (scripts/test.sh).
 
     * Tests that share a module-scoped fixture (a colcon build, one graph run read by many
-      tests) form one xdist group per module, so that the fixture is built once.
+      tests) form one xdist group per module, and the tests of any module that read a
+      shared run (:data:`SHARED_RUNS`) one group per run, so that the fixture is built once.
     * Every other test is a unit of its own, handed to whichever worker is free. A
       ``wall_clock`` test (it mostly waits for real time, e.g. a soak at 10 Hz) runs beside
       the others: its assertions hold on a busy machine (none is a timing threshold that
@@ -67,6 +88,10 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         name = tier(item.path)
         if name is not None:
             item.add_marker(getattr(pytest.mark, name))
+        shared = [name for name in SHARED_RUNS if name in getattr(item, 'fixturenames', ())]
+        if shared:
+            item.add_marker(pytest.mark.xdist_group(shared[0]))
+            continue
         fixture_info = getattr(item, '_fixtureinfo', None)
         if fixture_info is None:
             continue

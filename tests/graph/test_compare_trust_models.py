@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from support.graph import STEPS
 from support.paths import REPO
 
 from trust_monitor.common.registry import TRUST_MODELS, names
@@ -33,24 +34,21 @@ def test_every_model_is_scored_offline_and_in_closed_loop(tmp_path: Path) -> Non
     assert (tmp_path / 'trust_models.png').stat().st_size > 10_000
 
 
-def test_offline_on_a_graph_recording(tmp_path: Path) -> None:
-    """--bag: the models are scored on a trust-av run recording; the paper model replayed
-    over the bag's E gives the trust the graph's monitor recorded (= the in-process run)."""
-    bag = tmp_path / 'run'
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
-                           'us06', '--alpha', '0.5', '--predictor', 'ca', '--max-steps', '15',
-                           '--bag', str(bag), '--no-progress', '--no-plot'],
-                          capture_output=True, text=True, timeout=300, check=False)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+def test_offline_on_a_graph_recording(us06_graph_run: tuple[Path, str],
+                                      tmp_path: Path) -> None:
+    """--bag: the models are scored on a trust-av run recording (the suite's shared US06
+    run: TAC-CA, alpha 0.5, STEPS steps); the paper model replayed over the bag's E gives
+    the trust the graph's monitor recorded (= the in-process run of as many steps)."""
+    bag, _ = us06_graph_run
     out = tmp_path / 'out'
-    proc = subprocess.run([sys.executable, str(SCRIPT), '--max-steps', '15', '--bag', str(bag),
-                           '--out', str(out)], capture_output=True, text=True, timeout=600,
-                          check=False)
+    proc = subprocess.run([sys.executable, str(SCRIPT), '--max-steps', str(STEPS), '--bag',
+                           str(bag), '--out', str(out)], capture_output=True, text=True,
+                          timeout=600, check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     with (out / 'trust_models.csv').open() as handle:
         by = {(r['mode'], r['trust_model']): r for r in csv.DictReader(handle)}
     from trust_av_planner.graph.bag_records import records_from_bag
     recorded = records_from_bag(bag)
-    assert len(recorded) == 15
+    assert len(recorded) == STEPS
     assert float(by['offline', 'paper']['final_trust']) == recorded[-1].trust
     assert by['offline', 'paper']['final_trust'] == by['closed loop', 'paper']['final_trust']

@@ -2,19 +2,19 @@
 topic, message path and frame it names exists in a bag the graph recorded, every plot line
 reads one number from every message of its topic, and the lines are labelled in words.
 
-The bag is recorded by the graph (a short run) rather than built from the topic table: a
-layout path is only worth something if the nodes really publish that field with that type.
+The bag is recorded by the graph (the suite's shared US06 run, which other modules read
+too) rather than built from the topic table: a layout path is only worth something if the
+nodes really publish that field with that type.
 """
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 from rosbags.highlevel import AnyReader
+from support.graph import STEPS
 
 from trust_av_planner.graph.bag_records import TYPESTORE
 from trust_av_planner.study.layout_plots import (
@@ -27,18 +27,11 @@ from trust_av_planner.study.layout_plots import (
 )
 from trust_monitor.common.topics import VEHICLE_FRAMES
 
-STEPS = 20
 
-
-@pytest.fixture(scope='module')
-def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp('layout') / 'run'
-    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.cli', 'run', '--trace',
-                           'us06', '--max-steps', str(STEPS), '--bag', str(path),
-                           '--no-progress', '--no-plot'], capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return path
+@pytest.fixture
+def bag(us06_graph_run: tuple[Path, str]) -> Path:
+    """The suite's shared US06 graph run (tests/conftest.py), STEPS steps."""
+    return us06_graph_run[0]
 
 
 def recorded(bag: Path) -> tuple[dict[str, int], set[str]]:

@@ -54,27 +54,18 @@ def interrupted_run(bag: Path) -> tuple[subprocess.Popen[str], str]:
     return proc, trace
 
 
-@pytest.fixture(scope='module')
-def graph_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
-    bag = tmp_path_factory.mktemp('graph') / 'us06'
-    proc = subprocess.run(run_command(bag, plot=True), capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return bag, proc.stdout
-
-
-def test_graph_equals_in_process(graph_run: tuple[Path, str]) -> None:
-    bag, stdout = graph_run
+def test_graph_equals_in_process(us06_graph_run: tuple[Path, str]) -> None:
+    bag, stdout = us06_graph_run
     assert_records_equal(records_from_bag(bag), in_process())
     assert 'final trust' in stdout and bag.with_name('us06.png').stat().st_size > 10_000
 
 
-def test_every_node_stops_with_its_messages_acknowledged(graph_run: tuple[Path, str]) -> None:
+def test_every_node_stops_with_its_messages_acknowledged(us06_graph_run: tuple[Path, str]) -> None:
     """On the stop every node waits until its subscribers have acknowledged what it
     published, and says which topics were not (trust_monitor.ros.spin._drain). Readers
     acknowledge on their writer's heartbeat: with Fast DDS's default period (3 s) every
     node's wait ran into its 1 s timeout; the run's profile sets 100 ms."""
-    bag, _ = graph_run
+    bag, _ = us06_graph_run
     logs = sorted(bag.with_name('us06.logs').glob('*.log'))
     assert {p.stem for p in logs} >= {'preceding_traffic', 'planner', 'ego_plant',
                                       'human_driver', 'trust_monitor', 'recorder'}
@@ -82,10 +73,10 @@ def test_every_node_stops_with_its_messages_acknowledged(graph_run: tuple[Path, 
         assert 'not acknowledged' not in log.read_text(), log.read_text()
 
 
-def test_the_graphs_own_ego_odometry_replays_as_a_lead(graph_run: tuple[Path, str]) -> None:
+def test_the_graphs_own_ego_odometry_replays_as_a_lead(us06_graph_run: tuple[Path, str]) -> None:
     """The ego plant never reports a negative speed (it reported -2e-18 m/s, and -0.0, when
     braked exactly to a stop), so its /ego/odom loads as a preceding-vehicle trace."""
-    bag, _ = graph_run
+    bag, _ = us06_graph_run
     config = load_run_config(overrides={'preceding_traffic': {'bag_topic': '/ego/odom'}})
     trace = load_trace(str(bag), config.planner.dt_s, config.trace)
     assert trace.steps >= STEPS - 1
@@ -93,12 +84,12 @@ def test_the_graphs_own_ego_odometry_replays_as_a_lead(graph_run: tuple[Path, st
     assert min(speeds) >= 0.0 and not any(math.copysign(1.0, v) < 0 for v in speeds)
 
 
-def test_recording_is_a_rosbag2_bag_by_rosbag2s_rules(graph_run: tuple[Path, str]) -> None:
+def test_recording_is_a_rosbag2_bag_by_rosbag2s_rules(us06_graph_run: tuple[Path, str]) -> None:
     """metadata.yaml and the MCAP pass the rules of rosbag2 Jazzy's reader
     (tests/support/rosbag2_rules.py, derived from rosbag2_storage yaml.hpp and the MCAP
     plugin), and rosbags' own rosbag2 reader opens the directory."""
     from rosbags.rosbag2 import Reader
-    bag, _ = graph_run
+    bag, _ = us06_graph_run
     assert sorted(p.name for p in bag.iterdir()) == [MARKER, 'metadata.yaml', 'us06.mcap']
     assert check_bag_directory(bag) == []
     with Reader(bag) as reader:
@@ -106,8 +97,8 @@ def test_recording_is_a_rosbag2_bag_by_rosbag2s_rules(graph_run: tuple[Path, str
         assert {c.topic for c in reader.connections} == set(RECORDED)
 
 
-def test_bag_reads_back_with_rosbags(graph_run: tuple[Path, str]) -> None:
-    bag, _ = graph_run
+def test_bag_reads_back_with_rosbags(us06_graph_run: tuple[Path, str]) -> None:
+    bag, _ = us06_graph_run
     with AnyReader([bag]) as reader:
         topics = {c.topic: c.msgcount for c in reader.connections}
         assert topics == RECORDED         # odometry and tf: + the initial states
@@ -116,8 +107,8 @@ def test_bag_reads_back_with_rosbags(graph_run: tuple[Path, str]) -> None:
             assert log_time == stamp.sec * 10**9 + stamp.nanosec     # log time = sim time
 
 
-def test_bag_decodes_with_mcap_ros2(graph_run: tuple[Path, str]) -> None:
-    bag, _ = graph_run
+def test_bag_decodes_with_mcap_ros2(us06_graph_run: tuple[Path, str]) -> None:
+    bag, _ = us06_graph_run
     with (bag / f'{bag.name}.mcap').open('rb') as handle:
         reader = make_reader(handle, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == 'ros2'
