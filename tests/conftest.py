@@ -78,9 +78,10 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
       ``wall_clock`` test (it mostly waits for real time, e.g. a soak at 10 Hz) runs beside
       the others: its assertions hold on a busy machine (none is a timing threshold that
       needs an idle CPU), so two of them may wait at the same time.
-    * The long ones start first, so that none of them ends the run alone: ``slow`` tests
-      (CPU-bound and long, e.g. the GRU retraining), then ``wall_clock`` ones, then groups,
-      then the rest (scripts/test.sh keeps this order: ``--no-loadscope-reorder``).
+    * The long ones start first, so that none of them ends the run alone: ``wall_clock``
+      tests (the longest: the soak's 2 minutes, the browser sessions), then ``slow`` ones
+      (CPU-bound and long), then groups, then the rest (scripts/test.sh keeps this order:
+      ``--no-loadscope-reorder``).
     Without xdist the groups do nothing and only the order changes.
     """
     del config
@@ -102,9 +103,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.xdist_group(f'{item.module.__name__}.module_fixtures'))
 
     def rank(item: pytest.Item) -> int:
-        if item.get_closest_marker('slow') is not None:
-            return 0
         if item.get_closest_marker('wall_clock') is not None:
+            return 0
+        if item.get_closest_marker('slow') is not None:
             return 1
         return 2 if item.get_closest_marker('xdist_group') is not None else 3
 
