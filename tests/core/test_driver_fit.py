@@ -179,6 +179,7 @@ def test_bounded_idm_fit_stays_inside_and_recovers() -> None:
     assert found.params['time_headway_s'] == pytest.approx(1.2, rel=0.1)
 
 
+@pytest.mark.slow
 def test_mpc_fit_recovers_headway_and_standstill_gap() -> None:
     """Demonstrations by our MPC with tau_H = 1.3 s, d_s = 7 m; the fit starts elsewhere.
 
@@ -224,6 +225,7 @@ def test_shared_data_cleaned_as_documented() -> None:
     assert floor['gap_nrmse'] < 0.05
 
 
+@pytest.mark.slow
 def test_mpc_fit_recovers_the_fitted_caution() -> None:
     """Demonstrations by a driver whose gap bound allows for the AV braking 1.5 m/s^2 beyond
     its expected plan (not cautious); the fit starts at 0.3 and 2.5 m/s^2 and finds it.

@@ -137,6 +137,7 @@ def test_shipped_model_loads_and_its_card_is_consistent() -> None:
     assert set(card['data']['traces']) == {'udds', 'hwfet', 'wltc_3b'}
 
 
+@pytest.mark.slow
 def test_reduced_retraining_with_dagger_reproduces_itself(tmp_path: Path) -> None:
     """Fast tier: the whole pipeline (TAC-CA data, training, a DAgger round with
     TAC-GRU runs of the first model, retraining) run twice from scratch with the same seed
@@ -271,6 +272,7 @@ def train_small(out: Path) -> None:
     assert proc.returncode == 0, proc.stderr
 
 
+@pytest.mark.slow
 def test_small_retraining_reproduces_its_stored_model(tmp_path: Path) -> None:
     """The retraining pipeline with pinned numerics, on the small case: bit for bit the
     stored model on the class of machine it was trained on (:data:`TRAINED_ON`), and on
@@ -348,6 +350,7 @@ def numerics_in_child(env: dict[str, str], *, pinned: bool,
     return report
 
 
+@pytest.mark.slow
 def test_numerics_fingerprint_is_stable_and_sees_the_cpu_path() -> None:
     """Same process, same report. Unpinned, each CPU path a user can select here changes
     the kernel bits the fingerprint hashes: numpy baseline-only (where the CPU has X86_V3),

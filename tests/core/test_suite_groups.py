@@ -21,12 +21,14 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
 from support.paths import REPO, TESTS
 
 ROOT = REPO
 CONFTEST = TESTS / 'conftest.py'
 
 
+@pytest.mark.slow
 def test_groups_stay_on_one_worker(tmp_path: Path) -> None:
     (tmp_path / 'conftest.py').write_text(textwrap.dedent(f"""
         import importlib.util
@@ -97,6 +99,7 @@ def test_groups_stay_on_one_worker(tmp_path: Path) -> None:
     assert len(workers['wall clock']) == 2, rows
 
 
+@pytest.mark.slow
 def test_a_test_that_times_out_fails_alone_and_the_run_goes_on(tmp_path: Path) -> None:
     """Under the suite's own settings (pyproject.toml: pytest-timeout's thread method; the
     scheduler of tests/conftest.py) and ``-n 2 --dist loadgroup``, a hung test is reported

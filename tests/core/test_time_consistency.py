@@ -325,6 +325,7 @@ def test_ten_hz_keeps_trust_and_safety(trace: str, predictor: str, alpha: float)
     assert min(r.av_gap_m for r in ten.records) >= 5.0 - 1e-6
 
 
+@pytest.mark.slow
 def test_ten_hz_on_a_whole_held_out_trace_never_falls_back() -> None:
     """NYCC at 10 Hz, TAC-CA, alpha 1, the whole trace (not one of the 8 cases): the run that
     once crept 1e-7 m/s at a stop and then failed every solve of it (28 fallbacks). Now no
