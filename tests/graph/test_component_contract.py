@@ -18,12 +18,14 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from support.contract import cli
+from support.contract import cli, trace_csv
 
 from trust_av_planner.system.config import load_run_config
 from trust_monitor.common import registry
 from trust_monitor.common.contract import check_component
 from trust_monitor.common.params import PARAM_METADATA_KEY
+
+__all__ = ['trace_csv']   # the shared fixture, found by pytest by its name
 
 SECTIONS = {registry.PREDICTORS: ('planner', 'predictor', '--predictor'),
             registry.DRIVERS: ('human_driver', 'driver_model', '--driver-model')}
