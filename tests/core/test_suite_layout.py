@@ -9,7 +9,7 @@ import ast
 import contextlib
 from pathlib import Path
 
-from support.paths import TESTS
+from support.paths import REPO, TESTS
 
 TIERS = ('core', 'graph', 'browser')
 
@@ -69,3 +69,22 @@ def test_every_test_module_is_in_a_tier_folder() -> None:
                if path.relative_to(TESTS).parts[0] not in TIERS]
     assert outside == []
     assert all(any((TESTS / tier).glob('test_*.py')) for tier in TIERS)
+
+
+def test_every_cited_test_file_exists() -> None:
+    """Every ``tests/...py`` the docs, the code and the configuration name is there: the
+    suite's, or an example package's own (the plug-in tutorial runs its tests from the
+    package's folder); the changelog keeps the paths of its day."""
+    import re
+
+    cited = re.compile(r'(?<![\w/.])tests/[\w/]+\.py\b')  # a path's start
+    roots = [REPO / 'README.md', *(REPO / 'docs').rglob('*.md'), *(REPO / 'src').rglob('*.py'),
+             *(REPO / 'src').rglob('setup.cfg'), *(REPO / 'scripts').rglob('*'),
+             *(REPO / 'benchmarks').rglob('*.py'), *TESTS.rglob('*.py'), REPO / 'pyproject.toml']
+    missing = {}
+    for path in roots:
+        if path.is_file() and path.name != 'CHANGELOG.md':
+            for name in cited.findall(path.read_text(encoding='utf-8', errors='replace')):
+                if not (REPO / name).is_file() and not any((REPO / 'examples').glob(f'*/{name}')):
+                    missing.setdefault(str(path.relative_to(REPO)), []).append(name)
+    assert missing == {}
