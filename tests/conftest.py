@@ -89,7 +89,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         name = tier(item.path)
         if name is not None:
             item.add_marker(getattr(pytest.mark, name))
-        shared = [name for name in SHARED_RUNS if name in getattr(item, 'fixturenames', ())]
+        shared = [run for run in SHARED_RUNS if run in getattr(item, 'fixturenames', ())]
         if shared:
             item.add_marker(pytest.mark.xdist_group(shared[0]))
             continue
