@@ -15,7 +15,7 @@ participant (``trust_monitor.trust_fit``). Reports:
   over the synthetic participants, one-sided 5 %); null when not reached by 96.
 
 Writes DIR/trust_recovery.json and DIR/trust_recovery.png. Not a test; the suite runs a
-small version (tests/test_trust_fit.py).
+small version (tests/graph/test_trust_fit.py).
 
     python benchmarks/bench_trust_recovery.py --out DIR [--participants 24] [--drives 4]
 """

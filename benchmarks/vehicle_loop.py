@@ -13,7 +13,7 @@ lead silent for 1 s at 30 s), and ``planner`` and ``trust_monitor`` in wall mode
 recorded future), no follower (``human_odom_topic: ''``, CA predictor). Writes one JSON: the
 stand-in's log (every tick's gap, applied command and its age, what was sent, the planner
 status and trust it heard) and each node's loop statistics (jitter, compute time).
-``tests/test_vehicle_loop.py`` checks the behaviour; ``bench_shadow.py --vehicle`` reports
+``tests/graph/test_vehicle_loop.py`` checks the behaviour; ``bench_shadow.py --vehicle`` reports
 the jitter. Timing figures here are indicative only.
 """
 

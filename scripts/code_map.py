@@ -1,8 +1,8 @@
 """The code map (docs/reference/code-map.md), generated from the tree: every package, every
 folder with its declared layer, every module with the first sentence of its docstring.
 
-``LAYERS`` is the one declaration of the layers: tests/test_layout.py checks every module's
-imports against it and fails on a folder it does not list, and tests/test_code_map.py checks
+``LAYERS`` is the one declaration of the layers: tests/core/test_layout.py checks every module's
+imports against it and fails on a folder it does not list, and tests/core/test_code_map.py checks
 that the page is what this script writes.
 
 Usage: python scripts/code_map.py [--check]   (writes the page; --check only compares)

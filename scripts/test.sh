@@ -1,18 +1,28 @@
 #!/usr/bin/env bash
 # The project's test command (README): set up .venv if needed, then lint (ruff), type-check
-# every module (mypy --strict), build the documentation site in strict
-# mode (mkdocs: a broken link or anchor, or a generated table that cannot be built, fails),
-# and run the whole test suite (pytest) on four workers for
-# two cores (pytest-xdist, --dist loadgroup: tests/conftest.py puts the wall-clock tests,
-# which mostly wait for real time, on one worker, and the CPU-bound tests run on the other
-# three meanwhile; many of them also wait, for node start-up and stops), and shows the 15
-# slowest tests of every run (--durations). Extra arguments go
-# to pytest, e.g.
-# `bash scripts/test.sh -k nmpc`, or `bash scripts/test.sh -n 0` for one process.
+# every module (mypy --strict), build the documentation site in strict mode (mkdocs: a
+# broken link or anchor, or a generated table that cannot be built, fails), and run the whole
+# test suite (pytest) on four workers for two cores (pytest-xdist, --dist loadgroup, the
+# queue in the suite's own order, --no-loadscope-reorder: tests/conftest.py starts the long
+# tests first, keeps the tests that share a module's fixture on one worker, and hands out
+# every other test on its own, so that the wall-clock tests, which mostly wait, wait side
+# by side while the CPU-bound ones compute), and shows the 15 slowest tests of every run
+# (--durations). Extra arguments go to pytest, e.g. `bash scripts/test.sh -k nmpc`, or
+# `bash scripts/test.sh -n 0` for one process.
+#
+# `bash scripts/test.sh --fast`: the fast lane, only `pytest tests/core -m "not slow"` (the
+# pure tier without its long tests) on two workers, under a minute on two cores; extra
+# arguments go to pytest as above.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 source scripts/bootstrap.sh
+
+if [[ "${1:-}" == --fast ]]; then
+  shift
+  echo '== pytest (fast lane: tests/core, not slow)' >&2
+  exec python -m pytest tests/core -m 'not slow' -n 2 --durations=15 "$@"
+fi
 
 echo '== ruff' >&2
 ruff check src tests benchmarks scripts
@@ -30,4 +40,4 @@ docs_site="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$docs_site"
 rm -rf "$docs_site"
 echo '== pytest' >&2
-python -m pytest -n 4 --dist loadgroup --durations=15 "$@"
+python -m pytest -n 4 --dist loadgroup --no-loadscope-reorder --durations=15 "$@"

@@ -1,23 +1,16 @@
-"""Shared fixtures: the shipped configuration and quick closed-loop runs (cached per session)."""
+"""The suite's fixtures (a leased ROS domain, the shipped configuration, a small disk), its
+tiers and its xdist grouping. Helpers shared between test modules are in ``support/``."""
 
 from __future__ import annotations
 
-import dataclasses
-import functools
 import subprocess
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from preceding_traffic.sources import load_trace
-from preceding_traffic.traces import SpeedTrace
-from trust_av.system.closed_loop import SimResult, simulate
 from trust_av.system.config import RunConfig, load_run_config
-
-ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 
 @pytest.fixture
@@ -36,72 +29,69 @@ def run_config() -> RunConfig:
     return load_run_config()
 
 
-def with_alpha(config: RunConfig, alpha: float, predictor: str = 'ca') -> RunConfig:
-    """``config`` with another alpha and predictor."""
-    return dataclasses.replace(
-        config, planner=dataclasses.replace(config.planner, alpha=alpha, predictor=predictor))
+@pytest.fixture(scope='session')
+def us06_graph_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """One graph run read by many tests (test_graph, test_foxglove_layout,
+    test_compare_trust_models): ``trust-av run`` on US06, TAC-CA, alpha 0.5, 120 steps, with
+    its plot (support.graph.run_command); the bag directory and the command's stdout. Tests
+    only read it. The tests that use it form one xdist group (pytest_collection_modifyitems),
+    so the suite runs it once."""
+    from support.graph import run_command
+
+    bag = tmp_path_factory.mktemp('graph') / 'us06'
+    proc = subprocess.run(run_command(bag, plot=True), capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return bag, proc.stdout
 
 
-@functools.cache
-def shipped_trace(name: str) -> SpeedTrace:
-    """A shipped trace on the default grid."""
-    config = load_run_config()
-    return load_trace(name, config.planner.dt_s, config.trace)
+SHARED_RUNS = ('us06_graph_run',)
+"""Session fixtures that record a run many modules' tests read: each is one xdist group."""
 
 
-@functools.cache
-def closed_loop(trace: str, alpha: float, predictor: str = 'ca') -> SimResult:
-    """One whole-trace in-process run with the shipped configuration (cached)."""
-    return simulate(with_alpha(load_run_config(), alpha, predictor), shipped_trace(trace))
+TESTS = Path(__file__).resolve().parent
+TIERS = ('core', 'graph', 'browser')
+"""The suite's tiers, one folder each, and the marker every test of the folder carries:
+``core`` the pure core and whatever runs without a ROS graph (no node process, no rclpy
+context), ``graph`` multi-process node-graph runs and rclpy contexts, ``browser`` the drive
+page in Chromium. ``pytest tests/core -m "not slow"`` is the fast lane (docs/contributing.md)."""
 
 
-def assert_every_topic_complete(bag: Path) -> int:
-    """Every recorded topic of the table holds every complete step, the topics within one
-    step of each other (a topic absent from the bag holds none); returns the number of
-    complete steps.
-
-    Step k is complete with the vehicles' odometry and tf at stamp k, which the plants
-    publish at the end of step k - 1 (stamp 0: the initial state, before the first step). So
-    these topics run ahead: complete stamps when the run stopped before the plants finished
-    the last complete step, complete + 1 once they had, complete + 2 when they had also
-    finished the next step, which the other nodes had not.
-    """
-    from trust_av.graph.bag_records import read_topics, records_from_bag  # rosbags
-    from trust_av_common.topics import TOPICS
-    topics = read_topics(bag)
-    complete = len(records_from_bag(bag))
-    bad = {}
-    for row in TOPICS:
-        if 'recorder' in row.subscribers:
-            name = row.name if row.name.startswith('/') else f'/{row.name}'
-            stamps = len(topics.get(name, {}))
-            ahead = name in ('/ego/odom', '/human/odom', '/tf')
-            low, high = (complete, complete + 2) if ahead else (complete, complete + 1)
-            if not low <= stamps <= high:
-                bad[name] = (stamps, (low, high))
-    assert not bad, f'{complete} complete steps; topics outside their range: {bad}'
-    return complete
+def tier(path: Path) -> str | None:
+    """The tier of the test module at ``path`` (None outside the tier folders)."""
+    try:
+        parts = path.resolve().relative_to(TESTS).parts
+    except ValueError:
+        return None
+    return parts[0] if len(parts) > 1 and parts[0] in TIERS else None
 
 
 @pytest.hookimpl(tryfirst=True)   # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Order and group the suite for ``pytest -n 4 --dist loadgroup`` (scripts/test.sh).
+    """Mark each test with its tier (its folder), then order and group the suite for
+    ``pytest -n 4 --dist loadgroup`` (scripts/test.sh).
 
-    * ``wall_clock`` tests (they mostly wait for real time, e.g. a soak at 10 Hz) form one
-      xdist group: one worker runs them one after the other, from the start of the run
-      (xdist hands out the largest group first), while the other workers run the
-      CPU-bound tests on the two cores; the waiting overlaps with computing instead of
-      adding to it.
-    * ``slow`` tests (CPU-bound and long, e.g. the GRU retraining) come first among the
-      rest, so that they start at once on the other workers instead of ending the run.
-    * Tests that share a module-scoped fixture (a colcon build, one graph run) stay on one
-      worker, so that the fixture is built once.
-    Without xdist the marks do nothing and only the order changes.
+    * Tests that share a module-scoped fixture (a colcon build, one graph run read by many
+      tests) form one xdist group per module, and the tests of any module that read a
+      shared run (:data:`SHARED_RUNS`) one group per run, so that the fixture is built once.
+    * Every other test is a unit of its own, handed to whichever worker is free. A
+      ``wall_clock`` test (it mostly waits for real time, e.g. a soak at 10 Hz) runs beside
+      the others: its assertions hold on a busy machine (none is a timing threshold that
+      needs an idle CPU), so two of them may wait at the same time.
+    * The long ones start first, so that none of them ends the run alone: ``wall_clock``
+      tests (the longest: the soak's 2 minutes, the browser sessions), then ``slow`` ones
+      (CPU-bound and long), then groups, then the rest (scripts/test.sh keeps this order:
+      ``--no-loadscope-reorder``).
+    Without xdist the groups do nothing and only the order changes.
     """
     del config
     for item in items:
-        if item.get_closest_marker('wall_clock') is not None:
-            item.add_marker(pytest.mark.xdist_group('wall_clock'))
+        name = tier(item.path)
+        if name is not None:
+            item.add_marker(getattr(pytest.mark, name))
+        shared = [run for run in SHARED_RUNS if run in getattr(item, 'fixturenames', ())]
+        if shared:
+            item.add_marker(pytest.mark.xdist_group(shared[0]))
             continue
         fixture_info = getattr(item, '_fixtureinfo', None)
         if fixture_info is None:
@@ -115,7 +105,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     def rank(item: pytest.Item) -> int:
         if item.get_closest_marker('wall_clock') is not None:
             return 0
-        return 1 if item.get_closest_marker('slow') is not None else 2
+        if item.get_closest_marker('slow') is not None:
+            return 1
+        return 2 if item.get_closest_marker('xdist_group') is not None else 3
 
     items.sort(key=rank)
 
@@ -161,59 +153,6 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | 
     return Scheduling(config, log)
 
 
-def recorded_chunks(mcap: Path) -> int:
-    """Chunks written so far to a growing MCAP (the recorder writes one chunk per step), read
-    with mcap's stream reader up to the first incomplete record."""
-    import struct
-
-    from mcap.exceptions import McapError
-    from mcap.records import Chunk
-    from mcap.stream_reader import StreamReader
-
-    chunks = 0
-    try:
-        with mcap.open('rb') as stream:
-            for record in StreamReader(stream, emit_chunks=True).records:
-                chunks += isinstance(record, Chunk)
-    except FileNotFoundError:
-        return 0                # not created yet
-    except (McapError, struct.error):
-        pass                    # the file ends mid-record while it is written: count so far
-    return chunks
-
-
-def wait_for_steps(bag: Path, steps: int, proc: subprocess.Popen[str] | None = None,
-                   timeout_s: float = 120.0) -> None:
-    """Wait until the run recording the bag directory ``bag`` holds ``steps`` steps (MCAP
-    chunks); fail if ``proc`` (the run) ends first or the time runs out."""
-    mcap = bag / f'{bag.name}.mcap'
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and recorded_chunks(mcap) < steps:
-        assert proc is None or proc.poll() is None, proc.communicate()
-        time.sleep(0.1)
-    assert recorded_chunks(mcap) >= steps, f'{mcap}: fewer than {steps} steps in {timeout_s:g} s'
-
-
-INTERRUPTED_RUN_STEPS = 3000
-"""Steps of :func:`long_trace`: a run a test stops midway must not be able to finish first."""
-
-
-def long_trace(directory: Path) -> Path:
-    """A 3000-step CSV trace (a smooth 5-15 m/s profile, 1 s steps) in ``directory``, for
-    runs that a test interrupts, kills or intrudes on after some recorded steps. With US06
-    (600 steps) a run could step through all of them before the stop arrived on a loaded
-    machine, where the recorder lags the graph (seen with four busy processes beside the
-    SIGINT test: all 600 steps recorded after waiting for 150), and the test would then not
-    test an interruption."""
-    import math
-
-    path = directory / 'long.csv'
-    path.write_text('time_s,speed_mps\n' + ''.join(
-        f'{t},{10.0 + 5.0 * math.sin(t / 30.0):.3f}\n'
-        for t in range(INTERRUPTED_RUN_STEPS + 1)))
-    return path
-
-
 @pytest.fixture
 def small_disk(tmp_path: Path) -> Iterator[Path]:
     """A real 200 kB tmpfs (needs the right to mount: skipped otherwise)."""
@@ -227,33 +166,3 @@ def small_disk(tmp_path: Path) -> Iterator[Path]:
         yield mount
     finally:
         subprocess.run(['umount', '--lazy', str(mount)], check=False)
-
-
-def children_of(pid: int) -> list[int]:
-    """Every live process whose parent is ``pid``."""
-    found = []
-    for entry in Path('/proc').iterdir():
-        if entry.name.isdigit():
-            try:
-                fields = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[1]) == pid and fields[0] != 'Z':
-                found.append(int(entry.name))
-    return found
-
-
-def wait_ready(process: subprocess.Popen[str]) -> None:
-    """Read ``process``'s stdout up to its ``ready`` line; Fast DDS may log a transport
-    error there first (seen: ``RTPS_TRANSPORT_SHM Error ... open_and_lock_file failed``).
-    If it ends without one, it is killed and the lines are the assertion's message (a
-    helper that raised with its process alive left an intruder on the domain for the next
-    tests)."""
-    assert process.stdout is not None
-    lines = [process.stdout.readline()]
-    while lines[-1] not in ('ready\n', ''):
-        lines.append(process.stdout.readline())
-    if lines[-1] != 'ready\n':
-        process.kill()
-        process.wait()
-        raise AssertionError(f'no ready line: {lines}')

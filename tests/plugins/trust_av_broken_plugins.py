@@ -2,7 +2,7 @@
 works for its first :data:`GOOD_STEPS` steps, then gives a bad output (NaN, inf, the wrong
 shape, the wrong type, out of its bounds), raises, or exits; and factories that raise,
 return the wrong type or have the wrong signature. Installed with real entry points by
-``tests/broken_plugins.py``; never shipped."""
+``tests/support/broken_plugins.py``; never shipped."""
 
 from __future__ import annotations
 
@@ -141,7 +141,7 @@ FACTORIES = {
 
 ENTRY_POINTS = {'trust_av.predictors': {**PREDICTORS, **FACTORIES},
                 'trust_av.drivers': FOLLOWERS, 'trust_av.trust_models': TRUST_MODELS}
-"""Group -> name -> component: what tests/broken_plugins.py registers."""
+"""Group -> name -> component: what tests/support/broken_plugins.py registers."""
 for _group, _table in ENTRY_POINTS.items():
     for _name, _component_of in _table.items():   # an entry point names a module attribute
         globals()[f'{_group.rsplit(".", 1)[-1].upper()}_{_name}'] = _component_of

@@ -11,7 +11,7 @@ against the cautious AV prediction); elsewhere
 :class:`BatchDriver` asks :class:`DriverMpc` itself, row by row. Each row may have its own
 v_max (the paper's v_max = max(v_PT) of the trace the vehicle follows, Table I).
 
-``tests/test_driver_fit.py`` checks the two against each other on random states, near the
+``tests/core/test_driver_fit.py`` checks the two against each other on random states, near the
 bounds too: if DriverMpc's constraints change, that test says so.
 
 Rollout (:mod:`trust_av_common.kinematics`), for k = 1..N and the AV's speeds

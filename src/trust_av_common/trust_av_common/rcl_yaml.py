@@ -15,7 +15,7 @@ node-name matching, which rcl does not expose and which is therefore reproduced 
 * rclpy ``rclpy/node.py: declare_parameters`` refuses an override without a value (rcl keeps
   ``a: []`` or ``a: {}`` as a name whose ``rcl_variant_t`` has no slot set).
 
-``tests/test_rcl_yaml_rules.py`` holds both to a node started with the same files.
+``tests/graph/test_rcl_yaml_rules.py`` holds both to a node started with the same files.
 
 rcl's refusals are reported in one line with rcl's own reason and line; this module adds
 the key or section at that line (found with PyYAML, which reads the text with libyaml as

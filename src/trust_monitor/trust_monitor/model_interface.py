@@ -7,8 +7,8 @@ pure (no ROS, no wall clock, no randomness).
 **Per-second rule.** :meth:`TrustModel.step` advances the state over ``dt_s`` seconds during
 which a plan with score E is applied. It must be *time-consistent*: ten steps of 0.1 s with
 the same E give the state of one 1 s step (within rounding), and one 1 s step is the model's
-own discrete equation (the paper's eq. (10) for ``paper``). ``tests/test_trust_model_contract.py``
-holds every registered model to it.
+own discrete equation (the paper's eq. (10) for ``paper``).
+``tests/core/test_trust_model_contract.py`` holds every registered model to it.
 
 **What the NMPC needs.** The trust constraint of eq. (12), ``T^k >= T_min`` for k = 1..N on
 the NMPC's grid, depends on the plan only through E (the plan is scored once and its E

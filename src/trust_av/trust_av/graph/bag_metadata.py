@@ -6,8 +6,8 @@ Written with PyYAML's ``safe_dump`` (block style, keys sorted), field for field 
 difference in the text: a long value, the type hash, is no longer folded onto the next
 line), which is what rosbag2's
 ``rosbag2_storage/src/rosbag2_storage/metadata_io.cpp`` (jazzy) reads: the fields are
-checked against that reader's rules by ``tests/rosbag2_rules.py``. An offered QoS profile is
-written as rosbag2's ``rosbag2_storage/src/rosbag2_storage/qos.cpp`` (jazzy) encodes a
+checked against that reader's rules by ``tests/support/rosbag2_rules.py``. An offered QoS
+profile is written as rosbag2's ``rosbag2_storage/src/rosbag2_storage/qos.cpp`` (jazzy) encodes a
 ``Rosbag2QoS`` for version 9: history, depth, reliability, durability, deadline, lifespan,
 liveliness, liveliness_lease_duration and avoid_ros_namespace_conventions, the durations as
 ``sec``/``nsec``.

@@ -10,7 +10,7 @@ definitions and RIHS01 hashes by the public ``Typestore.generate_msgdef`` and
 used. What rosbag2 Jazzy writes is kept: version-9 metadata; schemas ``ros2msg``; every
 channel's metadata holds ``offered_qos_profiles`` (one profile per publisher) and
 ``topic_type_hash`` (``rosbag2_storage_mcap`` ``mcap_storage.cpp`` ``create_topic``, jazzy
-L933-938); the format owner's reader rules are checked by ``tests/rosbag2_rules.py``.
+L933-938); the format owner's reader rules are checked by ``tests/support/rosbag2_rules.py``.
 On top of it, :class:`BagWriter` adds what a recording that must survive any end needs:
 
 - **a chunk per step**: :meth:`BagWriter.end_step` closes the MCAP chunk and writes it

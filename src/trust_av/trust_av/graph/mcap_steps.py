@@ -7,7 +7,7 @@ from the file after a step failed to be written.
 A step is one chunk: the writer's automatic chunking is off (a chunk size it never
 reaches) and ``Writer.flush`` closes the chunk at the end of each step (it writes no chunk
 without messages, so the first chunk always has a message index, as rosbag2's time-ordered
-read needs: ``tests/rosbag2_rules.py`` ``time_ordered_read``). Chunks are uncompressed."""
+read needs: ``tests/support/rosbag2_rules.py`` ``time_ordered_read``). Chunks are uncompressed."""
 
 from __future__ import annotations
 

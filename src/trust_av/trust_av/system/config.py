@@ -61,7 +61,7 @@ bound against the AV braking at u_R,min whatever it expects, and never comes clo
 T = TypeVar('T')
 
 # Node name -> the configuration classes its section may hold: what the node declares
-# (tests/test_node_params.py reads the nodes' declare_config calls), except the values
+# (tests/graph/test_node_params.py reads the nodes' declare_config calls), except the values
 # trust-av sets per run, plus SharedConfig where trust-av itself reads it (the metrics'
 # margin and the gaps of the in-process loop come from the preceding_traffic section).
 # The parameters of the registered components come on top (node_components); the trust

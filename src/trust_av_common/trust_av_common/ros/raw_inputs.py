@@ -17,7 +17,7 @@ bytes -- or a length of 0 and no bytes, which rclpy reads as ''; a sequence a ui
 count, then the elements, none for a count of 0; fixed arrays have no count). Every
 field of these types is read (covariances are skipped by their fixed size), so a message
 from any publisher -- the graph's own serialised templates, another DDS vendor, a real
-vehicle -- reads to the same values as rclpy's own deserialisation (tests/test_raw_inputs.py
+vehicle -- reads to the same values as rclpy's own deserialisation (tests/graph/test_raw_inputs.py
 compares both on random messages, and reads a hand-built big-endian one). Bytes in another
 encoding (XCDR2, parameter lists) are left to rclpy; a truncated or malformed message
 raises :class:`RawInputError` in a reader, and :func:`subscribe` drops it.
@@ -242,7 +242,7 @@ DECODE_ERRORS = (RawInputError, struct.error, UnicodeDecodeError, RuntimeError, 
 """What a message's decoding raises for bytes that are not a serialisation of its type: the
 readers' own errors, and rclpy's ``deserialize_message``: ``RMWError`` (a ``RuntimeError``),
 "failed to deserialize ROS message: Fast CDR exception ..." from ``rmw_deserialize``, seen for
-every kind of bytes tests/test_raw_inputs.py's fuzz test sends; the others for the
+every kind of bytes tests/graph/test_raw_inputs.py's fuzz test sends; the others for the
 conversions of decoded fields to Python."""
 
 

@@ -1,0 +1,160 @@
+"""Each package.xml declares what its package imports, so that ``rosdep install`` leaves no
+ImportError, and declares nothing it does not use.
+
+The imports come from the code itself (every ``import`` in the AST, at module level or
+inside functions), plus the message packages of the topic table for a package that builds
+message classes by name (the recorder subscribes to every topic of
+``trust_av_common.topics``). Third-party modules map to rosdep keys of rosdistro's
+``rosdep/python.yaml`` (ros/rosdistro @ 8468e88, 2026-08-22): ``python3-numpy`` (line 5923),
+``python3-yaml`` (9553), ``python3-matplotlib`` (5437), ``python3-tqdm`` (9009),
+``python3-torch`` (8957: Ubuntu ``python3-torch`` from noble on), ``python3-scipy``, and
+three keys that rosdep
+installs with pip: ``casadi-pip`` (149), ``python3-rosbags-pip`` (7996) and
+``mcap-ros2-support`` (328; the ``mcap`` module is its dependency). No key exists for
+``ray`` (an optional extra, pip only, imported only inside the function that uses it).
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+import xml.etree.ElementTree as ET
+
+import pytest
+from catkin_pkg.package import parse_package
+from support.paths import REPO
+
+from trust_av_common.topics import TOPICS
+
+SRC = REPO / 'src'
+PACKAGES = ('trust_av_common', 'trust_monitor', 'preceding_traffic', 'human_driver_sim',
+            'trust_av_planner', 'trust_av', 'trust_av_autoware')
+ROSDEP_KEYS = {
+    'numpy': 'python3-numpy',
+    'yaml': 'python3-yaml',
+    'matplotlib': 'python3-matplotlib',
+    'tqdm': 'python3-tqdm',
+    'torch': 'python3-torch',
+    'scipy': 'python3-scipy',
+    'casadi': 'casadi-pip',
+    'rosbags': 'python3-rosbags-pip',
+    'mcap': 'mcap-ros2-support',
+    'pandas': 'python3-pandas',
+    'websockets': 'python3-websockets',
+}
+"""Python module -> rosdep key (rosdistro rosdep/python.yaml; see the module docstring)."""
+ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'ament_index_python',
+                'std_msgs', 'nav_msgs', 'geometry_msgs', 'trajectory_msgs', 'diagnostic_msgs',
+                'rosgraph_msgs', 'tf2_msgs', 'visualization_msgs', 'sensor_msgs', 'lifecycle_msgs',
+                'autoware_perception_msgs', 'autoware_control_msgs', *PACKAGES}
+"""Modules that are ROS 2 packages: the key is the package name."""
+OPTIONAL = {'ray': 'pip install ray==2.60.0 (trust-av reproduce --executor ray)'}
+"""Modules with no rosdep key, installed by a documented pip step, imported lazily."""
+
+
+def imports(package: str) -> tuple[set[str], set[str], bool]:
+    """Top-level modules imported anywhere in a package, those imported at module level,
+    and whether it builds message classes by name (``message_class``)."""
+    anywhere: set[str] = set()
+    top: set[str] = set()
+    by_name = False
+    for path in (SRC / package / package).rglob('*.py'):
+        tree = ast.parse(path.read_text(), str(path))
+        module_level = {id(node) for node in tree.body}
+        for node in ast.walk(tree):
+            names: list[str] = []
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                names = [node.module]
+                by_name |= any(alias.name == 'message_class' for alias in node.names) and \
+                    package != 'trust_av_common'
+            roots = {name.split('.')[0] for name in names}
+            anywhere |= roots
+            if id(node) in module_level:
+                top |= roots
+    third_party = {m for m in anywhere if m not in sys.stdlib_module_names}
+    return third_party, top, by_name
+
+
+def declared(package: str) -> set[str]:
+    root = ET.parse(SRC / package / 'package.xml').getroot()
+    return {e.text or '' for e in root if e.tag in ('depend', 'exec_depend')}
+
+
+def needed(package: str) -> set[str]:
+    modules, _, by_name = imports(package)
+    keys = set()
+    for module in modules - {package} - set(OPTIONAL):
+        if module in ROS_PACKAGES:
+            keys.add(module)
+        else:
+            assert module in ROSDEP_KEYS, f'{package} imports {module}: add its rosdep key'
+            keys.add(ROSDEP_KEYS[module])
+    if by_name:
+        keys |= {topic.msgtype.split('/')[0] for topic in TOPICS}
+    return keys
+
+
+@pytest.mark.parametrize('package', PACKAGES)
+def test_package_xml_declares_what_the_package_imports(package: str) -> None:
+    missing = needed(package) - declared(package)
+    unused = declared(package) - needed(package)
+    assert not missing, f'{package}/package.xml misses {sorted(missing)}'
+    assert not unused, f'{package}/package.xml declares unused {sorted(unused)}'
+
+
+def test_optional_modules_are_imported_lazily_and_documented() -> None:
+    readme = (SRC.parent / 'docs' / 'operations' / 'colcon.md').read_text()
+    for package in PACKAGES:
+        modules, top, _ = imports(package)
+        for module, step in OPTIONAL.items():
+            assert module not in top, f'{package} imports {module} at module level'
+            if module in modules:
+                assert step.split(' (')[0] in readme
+
+
+def test_the_check_sees_imports_inside_functions() -> None:
+    """torch is imported only inside functions of trust_av: still required."""
+    modules, top, by_name = imports('trust_av')
+    assert 'torch' in modules and 'torch' not in top and by_name
+    assert 'python3-torch' in needed('trust_av')
+
+
+@pytest.mark.parametrize('package', PACKAGES)
+def test_package_xml_is_what_rosdep_reads(package: str) -> None:
+    """catkin_pkg (the parser of rosdep and colcon-ros) reads it as format 3 with no
+    warnings (an unescaped '&' in a description made two of them unreadable)."""
+    warnings: list[str] = []
+    manifest = parse_package(SRC / package / 'package.xml', warnings=warnings)
+    assert (manifest.name, manifest.package_format, warnings) == (package, 3, [])
+    assert {d.name for d in manifest.exec_depends} == declared(package)
+
+
+REPOSITORY_TESTS = {'test_colcon', 'test_suite_groups', 'test_layout', 'test_benchmarks',
+                    'test_packages', 'test_docs', 'test_example_plugin',
+                    'test_compare_trust_models', 'test_cli_fuzz', 'test_limits', 'test_code_map',
+                    'test_first_result', 'test_typing_report', 'test_docs_examples',
+                    'test_moved_imports', 'test_public_api', 'test_suite_layout'}
+"""Test modules about the repository as a whole (the packages together, the suite, the
+benchmarks), which no single package's ``colcon test`` runs."""
+
+
+def test_each_test_module_is_one_package_s_or_the_repository_s() -> None:
+    """``colcon test`` runs pytest in each package's directory; its setup.cfg points pytest at
+    that package's modules of tests/ (``testpaths``). Every module is in exactly one list,
+    or is one of the repository's own (:data:`REPOSITORY_TESTS`)."""
+    import configparser
+
+    owners: dict[str, list[str]] = {}
+    for package in PACKAGES:
+        config = configparser.ConfigParser()
+        config.read(SRC / package / 'setup.cfg')
+        paths = config['tool:pytest']['testpaths'].split()
+        for path in paths:
+            module = (SRC / package / path).resolve()
+            assert module.is_file(), f'{package}/setup.cfg: {path} does not exist'
+            owners.setdefault(module.stem, []).append(package)
+    modules = {path.stem for path in (SRC.parent / 'tests').rglob('test_*.py')}
+    assert {m: o for m, o in owners.items() if len(o) > 1} == {}
+    assert modules - set(owners) == REPOSITORY_TESTS
