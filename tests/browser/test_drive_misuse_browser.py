@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from rosbag2_rules import check_bag_directory
+from support.rosbag2_rules import check_bag_directory
 
 from trust_av.drive.bag_data import custom_data, read_drive
 from trust_av.drive.gate import reason_key

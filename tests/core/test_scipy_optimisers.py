@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 import scipy.optimize
-from synthetic_car_following import leader_speed
+from support.synthetic_car_following import leader_speed
 
 from human_driver_sim import fitting
 from human_driver_sim.car_following import FollowingPair

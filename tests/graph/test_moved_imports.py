@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from example_plugin import PLUGIN
+from support.example_plugin import PLUGIN
 
 import trust_av_planner
 import trust_monitor
