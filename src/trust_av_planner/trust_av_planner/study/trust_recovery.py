@@ -32,16 +32,43 @@ from trust_av_planner.drive.trust_fit import (
     held_out,
     model_spec,
     model_trust,
+    preferred,
 )
 from trust_av_planner.system.closed_loop import control_trace, simulate
 from trust_av_planner.system.config import RunConfig
 
-CONDITIONS = ('late_brake', 'hesitation', 'headway_change', 'mixed_random')
-"""The drives of a synthetic participant, in order (``mixed_random`` seeded per participant)."""
+CONDITIONS = ('rough_random', 'rough_random', 'rough_random', 'rough_random')
+"""The drives of a synthetic participant, in order (cycled), each ``*_random`` one with its
+own seed (:func:`drive_seed`)."""
+DRIVES_PER_SEED = 100
+"""Participant ``i``'s drive ``j`` is random draw ``DRIVES_PER_SEED i + j``."""
+
+
+def conditions(drives: int) -> list[str]:
+    """The conditions of a participant's ``drives`` drives (:data:`CONDITIONS`, cycled)."""
+    return [CONDITIONS[j % len(CONDITIONS)] for j in range(drives)]
+
+
+def drive_seed(seed: int, k: int) -> int:
+    """The ``perturbation_seed`` of random draw ``k`` of a study seeded ``seed``."""
+    return seed * 1_000_000 + k
 DRIVE_S = 120
 """Length of a drive, s (the study's ``drive_duration_s``)."""
-RATING_PERIOD_S = 5.0
-"""A synthetic participant rates this often, s (the shipped study asks every 15 s)."""
+RATING_PERIOD_S = 2.5
+"""A synthetic participant's rating is read this often, s: a continuous rating (a slider
+the person keeps at their trust) read every 2.5 s. The shipped study asks every 15 s; with
+a rating every 5 s a threshold is recovered with r of about 0.8 at best
+(docs/tutorials/fit-trust-models.md)."""
+TRUE_RANGES: dict[str, dict[str, tuple[float, float]]] = {
+    'paper': {'performance_threshold': (0.7, 0.98)},
+    'asymmetric': {'performance_threshold': (0.7, 0.98), 'asymmetric_loss_ratio': (2.0, 10.0)},
+}
+"""Where synthetic participants' true values are drawn uniformly (log-uniformly for a
+``log_scale`` parameter) instead of from the declared prior: the ranges in which the
+parameter changes the rating trajectory in these drives. Below 0.7 a threshold is crossed
+by under 4 % of the steps of a ``rough_random`` drive (it changes almost nothing); an
+asymmetric loss ratio within (0.5, 2) is ``paper`` up to the rating noise (the nested
+case: docs/tutorials/fit-trust-models.md says how much data separates them)."""
 RATING_NOISE = 5.0
 """Standard deviation of the rating noise, rating points."""
 RATING_SPAN = (40.0, 60.0)
@@ -72,11 +99,17 @@ def drive_scores(config: RunConfig, perturbation: str, seed: int,
 
 
 def draw_theta(spec: ModelSpec, rng: np.random.Generator) -> dict[str, float]:
-    """Parameters drawn from the declared prior (truncated to the bounds)."""
+    """Parameters drawn from the declared prior (truncated to the bounds), or uniformly
+    (log-uniformly for ``log_scale``) from :data:`TRUE_RANGES` where it names the parameter."""
     out = {}
+    ranges = TRUE_RANGES.get(spec.name, {})
     for p in spec.parameters:
         low, high = (math.log(p.low), math.log(p.high)) if p.log_scale else (p.low, p.high)
-        x = float(np.clip(rng.normal(p.prior_mean, p.prior_std), low, high))
+        if p.name in ranges:
+            a, b = ranges[p.name]
+            x = float(rng.uniform(*((math.log(a), math.log(b)) if p.log_scale else (a, b))))
+        else:
+            x = float(np.clip(rng.normal(p.prior_mean, p.prior_std), low, high))
         out[p.name] = math.exp(x) if p.log_scale else x
     return out
 
@@ -119,10 +152,23 @@ class Recovery:
     true_and_fitted: dict[str, dict[str, list[tuple[float, float]]]]
     elpd: dict[str, list[dict[str, float]]]
     """Per true model, per participant: every model's leave-one-drive-out elpd."""
+    chosen: dict[str, list[str]]
+    """Per true model, per participant: the preferred model
+    (:func:`~trust_av_planner.drive.trust_fit.preferred`)."""
 
     @property
     def confusion(self) -> dict[str, dict[str, int]]:
-        """{true model: {best-scoring model: participants}}."""
+        """{true model: {preferred model: participants}}."""
+        out = {true: dict.fromkeys(self.elpd, 0) for true in self.elpd}
+        for true, picks in self.chosen.items():
+            for pick in picks:
+                out[true][pick] += 1
+        return out
+
+    @property
+    def confusion_best(self) -> dict[str, dict[str, int]]:
+        """{true model: {model of the highest held-out elpd: participants}} (no
+        parsimony rule)."""
         out = {true: dict.fromkeys(self.elpd, 0) for true in self.elpd}
         for true, rows in self.elpd.items():
             for row in rows:
@@ -145,13 +191,15 @@ class Recovery:
             return float(np.mean(mean > 1.645 * se))
 
     def parameter_r(self, specs: dict[str, ModelSpec]) -> dict[str, dict[str, float | None]]:
-        """Correlation of true and fitted values per model and parameter (None for a
+        """Correlation of true and fitted values per model and parameter, of their logs
+        for a ``log_scale`` parameter (the scale it is declared and searched on; None for a
         parameter its model declares not identifiable, or when either side is constant)."""
         out: dict[str, dict[str, float | None]] = {}
         for name, pairs in self.true_and_fitted.items():
             row: dict[str, float | None] = {}
+            logs = {p.name for p in specs[name].parameters if p.log_scale}
             for param, values in pairs.items():
-                arr = np.array(values)
+                arr = np.log(np.array(values)) if param in logs else np.array(values)
                 ok = len(arr) > 2 and np.std(arr[:, 0]) > 0 and np.std(arr[:, 1]) > 0
                 row[param] = float(np.corrcoef(arr[:, 0], arr[:, 1])[0, 1]) if ok else None
             for fixed in specs[name].fixed:
@@ -179,26 +227,30 @@ def recover(config: RunConfig, models: Sequence[str], participants: int, drives:
     def scores_of(condition: str, k: int) -> tuple[np.ndarray, np.ndarray]:
         key = (condition, k if condition.endswith('_random') else 0)
         if key not in cache:
-            cache[key] = drive_scores(config, condition, seed * 1000 + key[1], steps)
+            cache[key] = drive_scores(config, condition, drive_seed(seed, key[1]), steps)
         return cache[key]
 
     pairs: dict[str, dict[str, list[tuple[float, float]]]] = {
         m: {p.name: [] for p in specs[m].parameters} for m in models}
     elpd: dict[str, list[dict[str, float]]] = {m: [] for m in models}
+    chosen: dict[str, list[str]] = {m: [] for m in models}
+    sizes = {m: len(specs[m].parameters) for m in models}
+    fit_seed = seed + 1   # not the participants' stream: a start must not be the truth
     for true in models:
         for i in range(participants):
-            conditions = [CONDITIONS[j % len(CONDITIONS)] for j in range(drives)]
-            data = [(c, *scores_of(c, i)) for c in conditions]
+            data = [(f'{c}_{j + 1}', *scores_of(c, DRIVES_PER_SEED * i + j))
+                    for j, c in enumerate(conditions(drives))]
             who = make_participant(specs[true], f'{true}_{i:02d}', data, rng, noise)
-            fitted = fit(specs[true], who.drives, seed)
+            fitted = fit(specs[true], who.drives, fit_seed)
             for p in specs[true].parameters:
                 pairs[true][p.name].append((who.theta[p.name], fitted.theta[p.name]))
             held: list[Score] = [held_out(specs[m], [[d] for d in who.drives],
-                                          'leave_one_drive_out', seed) for m in models]
+                                          'leave_one_drive_out', fit_seed) for m in models]
             elpd[true].append({s.model: s.elpd for s in held})
+            chosen[true].append(preferred(held, sizes))
             if on_participant is not None:
                 on_participant(who.name)
-    return Recovery(participants, drives, pairs, elpd)
+    return Recovery(participants, drives, pairs, elpd, chosen)
 
 
 def synthetic_study(config: RunConfig, models: Sequence[str], per_model: int, drives: int,
@@ -210,8 +262,9 @@ def synthetic_study(config: RunConfig, models: Sequence[str], per_model: int, dr
     for true in models:
         spec = model_spec(config.trust, true)
         for i in range(per_model):
-            data = [(c, *drive_scores(config, c, seed * 1000 + i, steps))
-                    for c in (CONDITIONS[j % len(CONDITIONS)] for j in range(drives))]
+            data = [(f'{c}_{j + 1}',
+                     *drive_scores(config, c, drive_seed(seed, DRIVES_PER_SEED * i + j), steps))
+                    for j, c in enumerate(conditions(drives))]
             out.append(make_participant(spec, f'{true}_{i:02d}', data, rng))
     return out
 
