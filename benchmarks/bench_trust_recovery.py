@@ -5,8 +5,8 @@ For every registered trust model: ``--participants`` synthetic participants, eac
 the in-process loop, :mod:`trust_av_planner.study.trust_recovery`), their ratings generated
 by that model with parameters drawn from its declared prior (or from the study's
 ``TRUE_RANGES``, where a parameter changes the ratings), a known observation model and
-Gaussian rating noise (5 points, whole ratings in 0-100, one every 2.5 s). Every model is fitted to every
-participant (``trust_av_planner.drive.trust_fit``). Reports:
+Gaussian rating noise (5 points, whole ratings in 0-100, one every 2.5 s from the start).
+Every model is fitted to every participant (``trust_av_planner.drive.trust_fit``). Reports:
 
 - ``parameter_r``: the correlation of true and fitted values per model and parameter, of
   their logs for a ``log_scale`` parameter (null for one its model declares not

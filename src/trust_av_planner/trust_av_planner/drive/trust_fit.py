@@ -62,7 +62,7 @@ STARTS = 8
 SPREAD_STARTS = 16
 """Starts spread over the whole box (a scrambled Sobol sequence): a true value far out in
 the prior's tail is searched for too."""
-SEARCHES = 1
+SEARCHES = 3
 """Searches per fit, from the best starts (a threshold parameter makes the likelihood
 piecewise constant, so one search can stop on a step far from the optimum)."""
 MAX_EVALUATIONS = 250

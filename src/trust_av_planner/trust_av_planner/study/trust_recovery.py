@@ -62,13 +62,17 @@ a rating every 5 s a threshold is recovered with r of about 0.8 at best
 TRUE_RANGES: dict[str, dict[str, tuple[float, float]]] = {
     'paper': {'performance_threshold': (0.7, 0.98)},
     'asymmetric': {'performance_threshold': (0.7, 0.98), 'asymmetric_loss_ratio': (2.0, 10.0)},
+    'optimo': {'optimo_performance_rate_per_s': (0.003, 0.02),
+               'optimo_bias_rate_per_s': (-0.005, 0.005), 'optimo_initial_trust': (0.2, 0.8)},
 }
 """Where synthetic participants' true values are drawn uniformly (log-uniformly for a
 ``log_scale`` parameter) instead of from the declared prior: the ranges in which the
 parameter changes the rating trajectory in these drives. Below 0.7 a threshold is crossed
 by under 4 % of the steps of a ``rough_random`` drive (it changes almost nothing); an
 asymmetric loss ratio within (0.5, 2) is ``paper`` up to the rating noise (the nested
-case: docs/tutorials/fit-trust-models.md says how much data separates them)."""
+case: docs/tutorials/fit-trust-models.md says how much data separates them). OPTIMo's trust
+saturates at 0 or 1 within a drive at the tails of its prior (a drift of 0.02 /s crosses
+[0, 1] in 50 s), and a saturated stretch says nothing about the parameters."""
 RATING_NOISE = 5.0
 """Standard deviation of the rating noise, rating points."""
 RATING_SPAN = (40.0, 60.0)
@@ -123,7 +127,7 @@ def make_participant(spec: ModelSpec, name: str, drives: Sequence[tuple[str, np.
     model = spec.build(theta)
     rated = []
     for drive, times, scores in drives:
-        rating_times = np.arange(rating_period_s, times[-1] + 1.0 + 1e-9, rating_period_s)
+        rating_times = np.arange(0.0, times[-1] + 1.0 + 1e-9, rating_period_s)
         rated.append(RatedDrive(name, drive, times, scores, rating_times,
                                 np.zeros(len(rating_times))))
     trusts = [model_trust(model, d)[1] for d in rated]
