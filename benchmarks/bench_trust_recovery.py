@@ -20,7 +20,8 @@ Every model is fitted to every participant (``trust_av_planner.drive.trust_fit``
   drives each) whose summed held-out elpd prefers the true model at 80 % power (bootstrap
   over the synthetic participants, one-sided 5 %); null when not reached by 96.
 
-Writes DIR/trust_recovery.json and DIR/trust_recovery.png. Not a test; the suite runs a
+Writes DIR/trust_recovery.json (with every participant's true and fitted values,
+``true_and_fitted``) and DIR/trust_recovery.png. Not a test; the suite runs a
 small version (tests/test_trust_fit.py).
 
     python benchmarks/bench_trust_recovery.py --out DIR [--participants 24] [--drives 4]
@@ -142,7 +143,8 @@ def main() -> int:
         'true_ranges': {m: {k: list(v) for k, v in TRUE_RANGES[m].items()}
                         for m in models if m in TRUE_RANGES},
         'unidentifiable': {m: {p.name: p.note for p in specs[m].fixed} for m in models},
-        'seed': args.seed}
+        'seed': args.seed,
+        'true_and_fitted': result.true_and_fitted}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / 'trust_recovery.json').write_text(json.dumps(out, indent=1) + '\n')
     figure(args.out / 'trust_recovery.png', result, specs, r)

@@ -59,7 +59,7 @@ MIN_RATING_STD = 0.5 / 100.0
 """The observation noise s is at least half a rating point (ratings are whole numbers)."""
 STARTS = 8
 """Random starts drawn from the prior besides its mean."""
-SPREAD_STARTS = 16
+SPREAD_STARTS = 64
 """Starts spread over the whole box (a scrambled Sobol sequence): a true value far out in
 the prior's tail is searched for too."""
 SEARCHES = 3
