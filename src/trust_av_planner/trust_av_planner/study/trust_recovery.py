@@ -3,12 +3,13 @@
 Each synthetic participant drives (the shipped follower in the in-process closed loop,
 :func:`trust_av_planner.system.closed_loop.simulate`) the study's conditions in which trust
 moves (:mod:`trust_av_planner.perturbations`); the explicability of every applied plan is
-recorded, and ratings are generated from a *known* trust model with known parameters (drawn
-from the model's declared prior, within its bounds) through a known observation model with
-known rating noise. :func:`recover` fits every registered model to them
+recorded, and ratings (one at the start of each drive, then every :data:`RATING_PERIOD_S`)
+are generated from a *known* trust model with known parameters (drawn from the model's
+declared prior within its bounds, or from :data:`TRUE_RANGES`) through a known observation
+model with known rating noise. :func:`recover` fits every registered model to them
 (:mod:`trust_av_planner.drive.trust_fit`) and reports how well the true parameters are
-recovered and which model scores best on held-out drives (``benchmarks/
-bench_trust_recovery.py``, docs/tutorials/fit-trust-models.md).
+recovered and which model held-out drives prefer (``benchmarks/bench_trust_recovery.py``,
+docs/tutorials/fit-trust-models.md).
 """
 
 from __future__ import annotations
@@ -218,7 +219,8 @@ def recover(config: RunConfig, models: Sequence[str], participants: int, drives:
             steps: int = DRIVE_S) -> Recovery:
     """For each true model in ``models``: ``participants`` synthetic participants with
     ``drives`` drives each (the first ``drives`` of :data:`CONDITIONS`, cycled), every
-    model fitted to each (parameters: full fit; best model: leave-one-drive-out elpd), each
+    model fitted to each (parameters: full fit; preferred model: leave-one-drive-out elpd
+    with :func:`~trust_av_planner.drive.trust_fit.preferred`'s parsimony rule), each
     drive ``steps`` control steps long.
 
     Raises:
@@ -260,7 +262,8 @@ def recover(config: RunConfig, models: Sequence[str], participants: int, drives:
 def synthetic_study(config: RunConfig, models: Sequence[str], per_model: int, drives: int,
                     seed: int = 0, steps: int = DRIVE_S) -> list[Participant]:
     """``per_model`` synthetic participants of each model in ``models``, ``drives`` drives
-    each (the first of :data:`CONDITIONS`, cycled; ``mixed_random`` seeded per participant)."""
+    each (:func:`conditions`; participant ``i``'s drive ``j`` seeded by :func:`drive_seed`
+    of ``DRIVES_PER_SEED i + j``, so participant ``i`` of every model drives the same)."""
     rng = np.random.Generator(np.random.PCG64(seed))
     out = []
     for true in models:
