@@ -3,18 +3,25 @@
 For every registered trust model: ``--participants`` synthetic participants, each driving
 ``--drives`` drives of the study's conditions in which trust moves (the shipped follower in
 the in-process loop, :mod:`trust_av.study.trust_recovery`), their ratings generated
-by that model with parameters drawn from its declared prior, a known observation model and
-Gaussian rating noise (5 points, whole ratings in 0-100). Every model is fitted to every
-participant (``trust_monitor.trust_fit``). Reports:
+by that model with parameters drawn from its declared prior (or from the study's
+``TRUE_RANGES``, where a parameter changes the ratings), a known observation model and
+Gaussian rating noise (5 points, whole ratings in 0-100, one every 2.5 s from the start).
+Every model is fitted to every participant (``trust_monitor.trust_fit``). Reports:
 
-- ``parameter_r``: the correlation of true and fitted values per model and parameter
-  (null for a parameter its model declares not identifiable);
-- ``confusion``: {true model: {best model by leave-one-drive-out elpd: participants}};
+- ``parameter_r``: the correlation of true and fitted values per model and parameter, of
+  their logs for a ``log_scale`` parameter (null for one its model declares not
+  identifiable);
+- ``confusion``: {true model: {preferred model: participants}}, preferred by
+  leave-one-drive-out elpd with the parsimony rule of
+  :func:`trust_monitor.trust_fit.preferred` (a model with more parameters must beat
+  a simpler one by more than one standard error of the elpd difference);
+  ``confusion_best_elpd``: the same without the rule;
 - ``power``: for each ordered pair (true, other), the fewest participants (at this many
   drives each) whose summed held-out elpd prefers the true model at 80 % power (bootstrap
   over the synthetic participants, one-sided 5 %); null when not reached by 96.
 
-Writes DIR/trust_recovery.json and DIR/trust_recovery.png. Not a test; the suite runs a
+Writes DIR/trust_recovery.json (with every participant's true and fitted values,
+``true_and_fitted``) and DIR/trust_recovery.png. Not a test; the suite runs a
 small version (tests/graph/test_trust_fit.py).
 
     python benchmarks/bench_trust_recovery.py --out DIR [--participants 24] [--drives 4]
@@ -31,10 +38,17 @@ from typing import Any
 
 import numpy as np
 
-from trust_av.study.trust_recovery import RATING_NOISE, RATING_PERIOD_S, recover
+from trust_av.study.trust_recovery import (
+    CONDITIONS,
+    DRIVE_S,
+    RATING_NOISE,
+    RATING_PERIOD_S,
+    TRUE_RANGES,
+    recover,
+)
 from trust_av.system.config import load_run_config
 from trust_av_common.registry import TRUST_MODELS, names
-from trust_monitor.trust_fit import model_spec
+from trust_monitor.trust_fit import PARSIMONY_SE, model_spec
 
 POWER_SIZES = (2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96)
 
@@ -70,7 +84,7 @@ def figure(path: Path, result: Any, specs: dict[str, Any], r: dict[str, Any]) ->
             ax.text(j, i, str(matrix[i, j]), ha='center', va='center', fontsize=8)
     ax.set_xticks(range(len(models)), models, rotation=45, ha='right', fontsize=7)
     ax.set_yticks(range(len(models)), models, fontsize=7)
-    ax.set_xlabel('best by held-out elpd', fontsize=8)
+    ax.set_xlabel('preferred by held-out elpd', fontsize=8)
     ax.set_ylabel('true model', fontsize=8)
     ax.set_title('confusion', fontsize=8)
     for extra in flat[len(panels) + 1:]:
@@ -119,13 +133,18 @@ def main() -> int:
     out: dict[str, Any] = {
         'participants': args.participants, 'drives_per_participant': args.drives,
         'wall_s': round(wall, 1), 'parameter_r': r, 'confusion': confusion,
+        'confusion_best_elpd': result.confusion_best, 'parsimony_se': PARSIMONY_SE,
         'confusion_diagonal_mean': float(np.mean(diagonal)),
         'confusion_diagonal_min': float(np.min(diagonal)),
         'participants_for_80_percent_power': power,
         'median_elpd_margin': margin,
         'rating_noise_points': RATING_NOISE, 'rating_period_s': RATING_PERIOD_S,
+        'drive_s': DRIVE_S, 'conditions': list(CONDITIONS),
+        'true_ranges': {m: {k: list(v) for k, v in TRUE_RANGES[m].items()}
+                        for m in models if m in TRUE_RANGES},
         'unidentifiable': {m: {p.name: p.note for p in specs[m].fixed} for m in models},
-        'seed': args.seed}
+        'seed': args.seed,
+        'true_and_fitted': result.true_and_fitted}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / 'trust_recovery.json').write_text(json.dumps(out, indent=1) + '\n')
     figure(args.out / 'trust_recovery.png', result, specs, r)

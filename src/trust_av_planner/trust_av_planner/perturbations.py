@@ -91,7 +91,26 @@ RANDOM_MIN_SPACING_S = 15.0
 """Least time between two random events, s (each recovers before the next)."""
 RANDOM_KINDS = {'late_brake_random': (late_brake,), 'hesitation_random': (hesitation,),
                 'mixed_random': (late_brake, hesitation)}
-LIBRARY: tuple[str, ...] = (*SCHEDULED, *RANDOM_KINDS)
+ROUGH = 'rough_random'
+"""Rough patches: trust falls in them and recovers between them (:func:`rough_patches`)."""
+ROUGH_FIRST_S = (8.0, 15.0)
+"""``rough_random``: the first patch starts in this interval, s."""
+ROUGH_PATCH_S = (20.0, 35.0)
+"""Length of a rough patch, s."""
+ROUGH_CALM_S = (8.0, 14.0)
+"""Calm between two patches, s (the AV is explicable: trust recovers)."""
+ROUGH_GAP_S = (2.0, 4.0)
+"""Time from the end of one event of a patch to the start of the next, s. Dense enough to
+inform a fit, but on US06 about 4 % of seeds end in a collision at about 40 s (the AV
+catches up into the lead's stop: docs/concepts/trust-models.md); closer events collide
+more often."""
+ROUGH_BRAKE_MPS2 = (-3.0, -0.8)
+"""Cap of a 1 s brake in a patch, m/s^2 (its depth sets how inexplicable it is)."""
+ROUGH_HESITATE_MPS2 = (-1.5, -0.5)
+"""Cap of a 2 s hesitation in a patch, m/s^2."""
+ROUGH_END_S = 110.0
+"""No event of ``rough_random`` starts after this, s (the study's 120 s drive)."""
+LIBRARY: tuple[str, ...] = (*SCHEDULED, *RANDOM_KINDS, ROUGH)
 """Every condition name the ``perturbation`` parameter accepts."""
 CONDITION_PARAM = param('study condition: when the AV departs from its plan (none: never)',
                         choices=LIBRARY, default='none', reason=FIXED_CONDITION)
@@ -109,6 +128,8 @@ def schedule(name: str, seed: int = 0) -> tuple[Event, ...]:
     """
     if name in SCHEDULED:
         return SCHEDULED[name]
+    if name == ROUGH:
+        return rough_patches(seed)
     if name not in RANDOM_KINDS:
         raise ValueError(f'perturbation must be one of {list(LIBRARY)}, got {name!r}')
     rng = np.random.Generator(np.random.PCG64(seed))
@@ -120,6 +141,36 @@ def schedule(name: str, seed: int = 0) -> tuple[Event, ...]:
     makers = RANDOM_KINDS[name]
     kinds = rng.integers(0, len(makers), RANDOM_EVENTS)
     return tuple(makers[int(k)](round(float(t), 3)) for t, k in zip(times, kinds, strict=True))
+
+
+def rough_patches(seed: int) -> tuple[Event, ...]:
+    """``rough_random``: patches of brakes and hesitations of random depth with calm
+    between them, all drawn from ``seed`` (PCG64).
+
+    A patch (:data:`ROUGH_PATCH_S` long) is a run of events, each a 1 s brake capped at a
+    level uniform in :data:`ROUGH_BRAKE_MPS2` or a 2 s hesitation capped in
+    :data:`ROUGH_HESITATE_MPS2` (even odds), the next one :data:`ROUGH_GAP_S` after its end;
+    patches are :data:`ROUGH_CALM_S` apart. Each event is explicable to a different degree,
+    so in a patch the performance P = 1 - tanh(E) takes values across (0.5, 1): where a
+    model's threshold lies decides which of them lower trust, and how much a fall weighs
+    against a gain decides whether trust falls in the patch or only rises more slowly.
+    """
+    rng = np.random.Generator(np.random.PCG64(seed))
+    events = []
+    t = float(rng.uniform(*ROUGH_FIRST_S))
+    while t < ROUGH_END_S:
+        end = min(t + float(rng.uniform(*ROUGH_PATCH_S)), ROUGH_END_S)
+        while t < end:
+            if rng.uniform() < 0.5:
+                event = Event(BRAKE, round(t, 3), 1.0,
+                              round(float(rng.uniform(*ROUGH_BRAKE_MPS2)), 3))
+            else:
+                event = Event(HESITATE, round(t, 3), 2.0,
+                              round(float(rng.uniform(*ROUGH_HESITATE_MPS2)), 3))
+            events.append(event)
+            t += event.duration_s + float(rng.uniform(*ROUGH_GAP_S))
+        t += float(rng.uniform(*ROUGH_CALM_S))
+    return tuple(events)
 
 
 class Perturbation:

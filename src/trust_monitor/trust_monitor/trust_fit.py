@@ -23,8 +23,9 @@ Pure numerics (no ROS, no files): :mod:`trust_av.drive.trust_fit_data` reads dri
   for ``log_scale`` parameters: a MAP estimate) with ``scipy.optimize.minimize`` (Powell,
   within the bounds: a threshold parameter makes the likelihood piecewise constant, so the
   search is derivative-free), in units of prior standard deviations (one tolerance, 0.01
-  SD, for every parameter), started from the best of the prior mean and :data:`STARTS`
-  draws from the prior.
+  SD, for every parameter), one search from each of the :data:`SEARCHES` best of the prior
+  mean, :data:`STARTS` draws from the prior and :data:`SPREAD_STARTS` points spread over
+  the bounds; the best end wins.
 - **Scores.** Held-out log predictive density of each rating under the fitted model and
   observation (nats, ratings on the 0-100 scale) and rating RMSE, from fits that did not see
   it: leave one drive out (per participant) and leave one participant out (pooled). Standard
@@ -41,6 +42,7 @@ from typing import Any
 
 import numpy as np
 from scipy import optimize
+from scipy.stats import qmc
 
 from trust_monitor.errors import TrustMonitorError
 from trust_monitor.model_interface import (
@@ -58,8 +60,14 @@ __all__ = ['Fit', 'FitError', 'ModelSpec', 'Observation', 'RatedDrive', 'Score',
 OBSERVATIONS = ('linear', 'direct')
 MIN_RATING_STD = 0.5 / 100.0
 """The observation noise s is at least half a rating point (ratings are whole numbers)."""
-STARTS = 4
-"""Random starts drawn from the prior besides its mean; the best seeds the search."""
+STARTS = 8
+"""Random starts drawn from the prior besides its mean."""
+SPREAD_STARTS = 64
+"""Starts spread over the whole box (a scrambled Sobol sequence): a true value far out in
+the prior's tail is searched for too."""
+SEARCHES = 3
+"""Searches per fit, from the best starts (a threshold parameter makes the likelihood
+piecewise constant, so one search can stop on a step far from the optimum)."""
 MAX_EVALUATIONS = 250
 """Objective evaluations per fit (Powell's ``maxfev``)."""
 TIME_TOLERANCE_S = 1e-9
@@ -282,14 +290,18 @@ def fit(spec: ModelSpec, drives: Sequence[RatedDrive], seed: int = 0) -> Fit:
     else:
         rng = np.random.Generator(np.random.PCG64(seed))
         low, high = [b[0] for b in box], [b[1] for b in box]
+        spread = qmc.Sobol(len(params), seed=rng).random(SPREAD_STARTS)
         starts = [np.clip(np.zeros(len(params)), low, high)] + [
-            np.clip(rng.normal(0.0, 1.0, len(params)), low, high) for _ in range(STARTS)]
+            np.clip(rng.normal(0.0, 1.0, len(params)), low, high) for _ in range(STARTS)] + [
+            np.asarray(qmc.scale(spread, low, high))[k] for k in range(SPREAD_STARTS)]
         values = [objective(s) for s in starts]
-        x0 = starts[int(np.argmin(values))]
-        result = optimize.minimize(objective, x0, method='Powell', bounds=box,
-                                   options={'maxfev': MAX_EVALUATIONS, 'xtol': 1e-2,
-                                            'ftol': 1e-4})
-        x_best = result.x if result.fun <= min(values) else x0
+        x_best, f_best = starts[int(np.argmin(values))], min(values)
+        for k in np.argsort(values)[:SEARCHES]:
+            result = optimize.minimize(objective, starts[int(k)], method='Powell', bounds=box,
+                                       options={'maxfev': MAX_EVALUATIONS, 'xtol': 1e-2,
+                                                'ftol': 1e-4})
+            if result.fun < f_best:
+                x_best, f_best = np.asarray(result.x), float(result.fun)
     trust = trust_at(x_best)
     obs = fit_observation(spec.observation, trust, y)
     return Fit(spec.name, theta_of(x_best), obs, -objective(x_best), len(y), evaluations[0],
@@ -399,6 +411,30 @@ def compare(scores: Sequence[Score]) -> list[dict[str, Any]]:
                      if len(diff) > 1 else math.nan,
                      'rmse': s.rmse, 'rmse_se': s.rmse_se})
     return rows
+
+
+PARSIMONY_SE = 1.0
+""":func:`preferred`: a model with more parameters must beat a simpler one by more than this
+many standard errors of the held-out elpd difference."""
+
+
+def preferred(scores: Sequence[Score], sizes: Mapping[str, int]) -> str:
+    """The model the held-out scores prefer, with a parsimony rule: the simplest model
+    (fewest fitted parameters, ``sizes``; then the higher elpd) whose elpd is within
+    :data:`PARSIMONY_SE` standard errors of the paired difference to the best model's. A
+    model nested in another (``paper`` in ``asymmetric``: loss ratio 1) fits at least as
+    well in sample and can win a held-out comparison by noise alone; this rule asks for
+    evidence before the extra parameter is preferred.
+
+    Raises:
+        FitError: no scores, or scores not over the same ratings.
+    """
+    rows = compare(scores)
+    if not rows:
+        raise FitError('no scores to choose from')
+    within = [r for r in rows if r['model'] == rows[0]['model']
+              or -r['elpd_diff'] <= PARSIMONY_SE * r['elpd_diff_se']]
+    return str(min(within, key=lambda r: (sizes[r['model']], -r['elpd']))['model'])
 
 
 def by_participant(drives: Sequence[RatedDrive]) -> dict[str, list[RatedDrive]]:

@@ -3,12 +3,13 @@
 Each synthetic participant drives (the shipped follower in the in-process closed loop,
 :func:`trust_av.system.closed_loop.simulate`) the study's conditions in which trust
 moves (:mod:`trust_av_planner.perturbations`); the explicability of every applied plan is
-recorded, and ratings are generated from a *known* trust model with known parameters (drawn
-from the model's declared prior, within its bounds) through a known observation model with
-known rating noise. :func:`recover` fits every registered model to them
+recorded, and ratings (one at the start of each drive, then every :data:`RATING_PERIOD_S`)
+are generated from a *known* trust model with known parameters (drawn from the model's
+declared prior within its bounds, or from :data:`TRUE_RANGES`) through a known observation
+model with known rating noise. :func:`recover` fits every registered model to them
 (:mod:`trust_monitor.trust_fit`) and reports how well the true parameters are
-recovered and which model scores best on held-out drives (``benchmarks/
-bench_trust_recovery.py``, docs/tutorials/fit-trust-models.md).
+recovered and which model held-out drives prefer (``benchmarks/bench_trust_recovery.py``,
+docs/tutorials/fit-trust-models.md).
 """
 
 from __future__ import annotations
@@ -34,16 +35,47 @@ from trust_monitor.trust_fit import (
     held_out,
     model_spec,
     model_trust,
+    preferred,
 )
 
 __all__ = ['RATING_NOISE', 'RATING_PERIOD_S', 'drive_scores', 'make_participant', 'recover']
 
-CONDITIONS = ('late_brake', 'hesitation', 'headway_change', 'mixed_random')
-"""The drives of a synthetic participant, in order (``mixed_random`` seeded per participant)."""
+CONDITIONS = ('rough_random', 'rough_random', 'rough_random', 'rough_random')
+"""The drives of a synthetic participant, in order (cycled), each ``*_random`` one with its
+own seed (:func:`drive_seed`)."""
+DRIVES_PER_SEED = 100
+"""Participant ``i``'s drive ``j`` is random draw ``DRIVES_PER_SEED i + j``."""
+
+
+def conditions(drives: int) -> list[str]:
+    """The conditions of a participant's ``drives`` drives (:data:`CONDITIONS`, cycled)."""
+    return [CONDITIONS[j % len(CONDITIONS)] for j in range(drives)]
+
+
+def drive_seed(seed: int, k: int) -> int:
+    """The ``perturbation_seed`` of random draw ``k`` of a study seeded ``seed``."""
+    return seed * 1_000_000 + k
 DRIVE_S = 120
 """Length of a drive, s (the study's ``drive_duration_s``)."""
-RATING_PERIOD_S = 5.0
-"""A synthetic participant rates this often, s (the shipped study asks every 15 s)."""
+RATING_PERIOD_S = 2.5
+"""A synthetic participant's rating is read this often, s: a continuous rating (a slider
+the person keeps at their trust) read every 2.5 s. The shipped study asks every 15 s; with
+a rating every 5 s a threshold is recovered with r of about 0.8 at best
+(docs/tutorials/fit-trust-models.md)."""
+TRUE_RANGES: dict[str, dict[str, tuple[float, float]]] = {
+    'paper': {'performance_threshold': (0.7, 0.98)},
+    'asymmetric': {'performance_threshold': (0.7, 0.98), 'asymmetric_loss_ratio': (2.0, 10.0)},
+    'optimo': {'optimo_performance_rate_per_s': (0.003, 0.02),
+               'optimo_bias_rate_per_s': (-0.005, 0.005), 'optimo_initial_trust': (0.2, 0.8)},
+}
+"""Where synthetic participants' true values are drawn uniformly (log-uniformly for a
+``log_scale`` parameter) instead of from the declared prior: the ranges in which the
+parameter changes the rating trajectory in these drives. Below 0.7 a threshold is crossed
+by under 4 % of the steps of a ``rough_random`` drive (it changes almost nothing); an
+asymmetric loss ratio within (0.5, 2) is ``paper`` up to the rating noise (the nested
+case: docs/tutorials/fit-trust-models.md says how much data separates them). OPTIMo's trust
+saturates at 0 or 1 within a drive at the tails of its prior (a drift of 0.02 /s crosses
+[0, 1] in 50 s), and a saturated stretch says nothing about the parameters."""
 RATING_NOISE = 5.0
 """Standard deviation of the rating noise, rating points."""
 RATING_SPAN = (40.0, 60.0)
@@ -74,11 +106,17 @@ def drive_scores(config: RunConfig, perturbation: str, seed: int,
 
 
 def draw_theta(spec: ModelSpec, rng: np.random.Generator) -> dict[str, float]:
-    """Parameters drawn from the declared prior (truncated to the bounds)."""
+    """Parameters drawn from the declared prior (truncated to the bounds), or uniformly
+    (log-uniformly for ``log_scale``) from :data:`TRUE_RANGES` where it names the parameter."""
     out = {}
+    ranges = TRUE_RANGES.get(spec.name, {})
     for p in spec.parameters:
         low, high = (math.log(p.low), math.log(p.high)) if p.log_scale else (p.low, p.high)
-        x = float(np.clip(rng.normal(p.prior_mean, p.prior_std), low, high))
+        if p.name in ranges:
+            a, b = ranges[p.name]
+            x = float(rng.uniform(*((math.log(a), math.log(b)) if p.log_scale else (a, b))))
+        else:
+            x = float(np.clip(rng.normal(p.prior_mean, p.prior_std), low, high))
         out[p.name] = math.exp(x) if p.log_scale else x
     return out
 
@@ -92,7 +130,7 @@ def make_participant(spec: ModelSpec, name: str, drives: Sequence[tuple[str, np.
     model = spec.build(theta)
     rated = []
     for drive, times, scores in drives:
-        rating_times = np.arange(rating_period_s, times[-1] + 1.0 + 1e-9, rating_period_s)
+        rating_times = np.arange(0.0, times[-1] + 1.0 + 1e-9, rating_period_s)
         rated.append(RatedDrive(name, drive, times, scores, rating_times,
                                 np.zeros(len(rating_times))))
     trusts = [model_trust(model, d)[1] for d in rated]
@@ -121,10 +159,23 @@ class Recovery:
     true_and_fitted: dict[str, dict[str, list[tuple[float, float]]]]
     elpd: dict[str, list[dict[str, float]]]
     """Per true model, per participant: every model's leave-one-drive-out elpd."""
+    chosen: dict[str, list[str]]
+    """Per true model, per participant: the preferred model
+    (:func:`~trust_monitor.trust_fit.preferred`)."""
 
     @property
     def confusion(self) -> dict[str, dict[str, int]]:
-        """{true model: {best-scoring model: participants}}."""
+        """{true model: {preferred model: participants}}."""
+        out = {true: dict.fromkeys(self.elpd, 0) for true in self.elpd}
+        for true, picks in self.chosen.items():
+            for pick in picks:
+                out[true][pick] += 1
+        return out
+
+    @property
+    def confusion_best(self) -> dict[str, dict[str, int]]:
+        """{true model: {model of the highest held-out elpd: participants}} (no
+        parsimony rule)."""
         out = {true: dict.fromkeys(self.elpd, 0) for true in self.elpd}
         for true, rows in self.elpd.items():
             for row in rows:
@@ -147,13 +198,15 @@ class Recovery:
             return float(np.mean(mean > 1.645 * se))
 
     def parameter_r(self, specs: dict[str, ModelSpec]) -> dict[str, dict[str, float | None]]:
-        """Correlation of true and fitted values per model and parameter (None for a
+        """Correlation of true and fitted values per model and parameter, of their logs
+        for a ``log_scale`` parameter (the scale it is declared and searched on; None for a
         parameter its model declares not identifiable, or when either side is constant)."""
         out: dict[str, dict[str, float | None]] = {}
         for name, pairs in self.true_and_fitted.items():
             row: dict[str, float | None] = {}
+            logs = {p.name for p in specs[name].parameters if p.log_scale}
             for param, values in pairs.items():
-                arr = np.array(values)
+                arr = np.log(np.array(values)) if param in logs else np.array(values)
                 ok = len(arr) > 2 and np.std(arr[:, 0]) > 0 and np.std(arr[:, 1]) > 0
                 row[param] = float(np.corrcoef(arr[:, 0], arr[:, 1])[0, 1]) if ok else None
             for fixed in specs[name].fixed:
@@ -168,7 +221,8 @@ def recover(config: RunConfig, models: Sequence[str], participants: int, drives:
             steps: int = DRIVE_S) -> Recovery:
     """For each true model in ``models``: ``participants`` synthetic participants with
     ``drives`` drives each (the first ``drives`` of :data:`CONDITIONS`, cycled), every
-    model fitted to each (parameters: full fit; best model: leave-one-drive-out elpd), each
+    model fitted to each (parameters: full fit; preferred model: leave-one-drive-out elpd
+    with :func:`~trust_monitor.trust_fit.preferred`'s parsimony rule), each
     drive ``steps`` control steps long.
 
     Raises:
@@ -181,39 +235,45 @@ def recover(config: RunConfig, models: Sequence[str], participants: int, drives:
     def scores_of(condition: str, k: int) -> tuple[np.ndarray, np.ndarray]:
         key = (condition, k if condition.endswith('_random') else 0)
         if key not in cache:
-            cache[key] = drive_scores(config, condition, seed * 1000 + key[1], steps)
+            cache[key] = drive_scores(config, condition, drive_seed(seed, key[1]), steps)
         return cache[key]
 
     pairs: dict[str, dict[str, list[tuple[float, float]]]] = {
         m: {p.name: [] for p in specs[m].parameters} for m in models}
     elpd: dict[str, list[dict[str, float]]] = {m: [] for m in models}
+    chosen: dict[str, list[str]] = {m: [] for m in models}
+    sizes = {m: len(specs[m].parameters) for m in models}
+    fit_seed = seed + 1   # not the participants' stream: a start must not be the truth
     for true in models:
         for i in range(participants):
-            conditions = [CONDITIONS[j % len(CONDITIONS)] for j in range(drives)]
-            data = [(c, *scores_of(c, i)) for c in conditions]
+            data = [(f'{c}_{j + 1}', *scores_of(c, DRIVES_PER_SEED * i + j))
+                    for j, c in enumerate(conditions(drives))]
             who = make_participant(specs[true], f'{true}_{i:02d}', data, rng, noise)
-            fitted = fit(specs[true], who.drives, seed)
+            fitted = fit(specs[true], who.drives, fit_seed)
             for p in specs[true].parameters:
                 pairs[true][p.name].append((who.theta[p.name], fitted.theta[p.name]))
             held: list[Score] = [held_out(specs[m], [[d] for d in who.drives],
-                                          'leave_one_drive_out', seed) for m in models]
+                                          'leave_one_drive_out', fit_seed) for m in models]
             elpd[true].append({s.model: s.elpd for s in held})
+            chosen[true].append(preferred(held, sizes))
             if on_participant is not None:
                 on_participant(who.name)
-    return Recovery(participants, drives, pairs, elpd)
+    return Recovery(participants, drives, pairs, elpd, chosen)
 
 
 def synthetic_study(config: RunConfig, models: Sequence[str], per_model: int, drives: int,
                     seed: int = 0, steps: int = DRIVE_S) -> list[Participant]:
     """``per_model`` synthetic participants of each model in ``models``, ``drives`` drives
-    each (the first of :data:`CONDITIONS`, cycled; ``mixed_random`` seeded per participant)."""
+    each (:func:`conditions`; participant ``i``'s drive ``j`` seeded by :func:`drive_seed`
+    of ``DRIVES_PER_SEED i + j``, so participant ``i`` of every model drives the same)."""
     rng = np.random.Generator(np.random.PCG64(seed))
     out = []
     for true in models:
         spec = model_spec(config.trust, true)
         for i in range(per_model):
-            data = [(c, *drive_scores(config, c, seed * 1000 + i, steps))
-                    for c in (CONDITIONS[j % len(CONDITIONS)] for j in range(drives))]
+            data = [(f'{c}_{j + 1}',
+                     *drive_scores(config, c, drive_seed(seed, DRIVES_PER_SEED * i + j), steps))
+                    for j, c in enumerate(conditions(drives))]
             out.append(make_participant(spec, f'{true}_{i:02d}', data, rng))
     return out
 

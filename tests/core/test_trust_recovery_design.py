@@ -1,0 +1,97 @@
+"""The recovery study's design: rough patches in which trust moves, true values drawn where
+they change the ratings, and the parsimony rule that picks a model from held-out scores."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from trust_av.study.trust_recovery import (
+    TRUE_RANGES,
+    conditions,
+    draw_theta,
+    drive_scores,
+    drive_seed,
+)
+from trust_av.system.config import load_run_config
+from trust_av_planner.perturbations import (
+    BRAKE,
+    ROUGH_BRAKE_MPS2,
+    ROUGH_END_S,
+    ROUGH_FIRST_S,
+    ROUGH_GAP_S,
+    ROUGH_HESITATE_MPS2,
+    schedule,
+)
+from trust_monitor.paper_trust import performance
+from trust_monitor.trust_fit import (
+    PARSIMONY_SE,
+    FitError,
+    Score,
+    model_spec,
+    preferred,
+)
+
+CONFIG = load_run_config()
+
+
+def test_rough_patches_are_seeded_spaced_and_of_varied_depth() -> None:
+    one, again, other = (schedule('rough_random', s) for s in (3, 3, 4))
+    assert one == again and one != other
+    assert ROUGH_FIRST_S[0] <= one[0].start_s <= ROUGH_FIRST_S[1]
+    assert all(e.start_s < ROUGH_END_S for e in one)
+    gaps = [b.start_s - (a.start_s + a.duration_s) for a, b in itertools.pairwise(one)]
+    assert min(gaps) >= ROUGH_GAP_S[0] - 1e-3
+    for e in one:
+        low, high = ROUGH_BRAKE_MPS2 if e.kind == BRAKE else ROUGH_HESITATE_MPS2
+        assert low <= e.level_mps2 <= high
+    assert len({e.level_mps2 for e in one}) == len(one)   # every event its own depth
+    assert len(one) >= 10            # patches of events, not five isolated ones
+
+
+def test_a_rough_drive_spreads_performance_across_the_thresholds() -> None:
+    """The plans of a rough drive fall at many depths, so where a threshold lies changes
+    which of them lower trust (what makes a threshold identifiable)."""
+    _, scores = drive_scores(CONFIG, 'rough_random', drive_seed(0, 1))
+    p = np.array([performance(e) for e in scores])
+    assert len(p) == 120
+    for low, high in ((0.4, 0.8), (0.8, 0.9), (0.9, 0.98)):
+        assert np.sum((p >= low) & (p < high)) >= 3, (low, high)
+    assert np.mean(p >= 0.98) > 0.5          # calm stretches in which trust recovers
+
+
+def test_true_values_come_from_the_ranges_where_they_matter() -> None:
+    rng = np.random.Generator(np.random.PCG64(0))
+    spec = model_spec(CONFIG.trust, 'asymmetric')
+    drawn = [draw_theta(spec, rng) for _ in range(50)]
+    for name, (low, high) in TRUE_RANGES['asymmetric'].items():
+        values = [d[name] for d in drawn]
+        assert low <= min(values) and max(values) <= high and np.std(values) > 0
+    assert conditions(5) == ['rough_random'] * 5
+    assert drive_seed(1, 2) != drive_seed(0, 2) and drive_seed(0, 1) != drive_seed(0, 2)
+
+
+def score(model: str, pointwise: list[float]) -> Score:
+    return Score(model, 'leave_one_drive_out', np.array(pointwise), np.zeros(len(pointwise)))
+
+
+def test_the_simpler_model_is_preferred_unless_the_richer_one_beats_it_by_an_se() -> None:
+    rng = np.random.Generator(np.random.PCG64(5))
+    base = rng.normal(-3.0, 1.0, 40)
+    noise = rng.normal(0.0, 0.5, 40)
+    sizes = {'simple': 1, 'rich': 2}
+    se = math.sqrt(40) * float(np.std(noise, ddof=1))
+    # the richer model better by less than one SE of the difference: the simpler one
+    close = score('rich', list(base + noise + 0.5 * PARSIMONY_SE * se / 40 - noise.mean()))
+    assert preferred([score('simple', list(base)), close], sizes) == 'simple'
+    # better by several SE: the richer one
+    far = score('rich', list(base + noise + 4.0 * se / 40 - noise.mean()))
+    assert preferred([score('simple', list(base)), far], sizes) == 'rich'
+    # the simpler model is best outright: it wins whatever the sizes say
+    assert preferred([score('simple', list(base + 1.0)), score('rich', list(base))],
+                     sizes) == 'simple'
+    with pytest.raises(FitError, match='no scores'):
+        preferred([], sizes)
