@@ -115,6 +115,11 @@ def test_readme_blocks_run(tmp_path: Path) -> None:
     for name in README_INPUTS:
         (work / name).symlink_to(REPO / name)
     env = {**os.environ, 'TRUST_AV_VENV': str(Path(sys.executable).parents[1])}
+    # the environment up to date from the repository itself first: were its stamp stale, the
+    # README's set-up would re-install the packages editable from this scratch folder
+    setup = subprocess.run(['bash', str(REPO / 'scripts' / 'bootstrap.sh')], env=env,
+                           capture_output=True, text=True, timeout=1800, check=False)
+    assert setup.returncode == 0, setup.stderr[-3000:]
     assert run_page(REPO / 'README.md', work, env) >= 1
     assert (work / 'bags' / 'main_us06' / 'metadata.yaml').is_file()
     assert (work / 'bags' / 'main_us06.png').is_file()
