@@ -158,3 +158,21 @@ def test_each_test_module_is_one_package_s_or_the_repository_s() -> None:
     modules = {path.stem for path in (SRC.parent / 'tests').rglob('test_*.py')}
     assert {m: o for m, o in owners.items() if len(o) > 1} == {}
     assert modules - set(owners) == REPOSITORY_TESTS
+
+
+@pytest.mark.parametrize('package', PACKAGES)
+def test_colcon_test_knows_the_suite_s_markers(package: str) -> None:
+    """``colcon test`` runs pytest with the package's setup.cfg and ``--strict-markers``: a
+    marker the suite sets (conftest.py marks every test by its tier folder) that the file
+    does not declare is an error there, and the package's tests do not run at all."""
+    import configparser
+    import tomllib
+
+    def names(lines: list[str]) -> set[str]:
+        return {line.split(':', 1)[0].strip() for line in lines if line.strip()}
+
+    suite = tomllib.loads((REPO / 'pyproject.toml').read_text())['tool']['pytest']
+    cfg = configparser.ConfigParser()
+    cfg.read(SRC / package / 'setup.cfg')
+    declared = names(cfg['tool:pytest']['markers'].splitlines())
+    assert declared == names(suite['ini_options']['markers'])
