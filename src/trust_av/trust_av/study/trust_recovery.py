@@ -38,7 +38,8 @@ from trust_monitor.trust_fit import (
     preferred,
 )
 
-__all__ = ['RATING_NOISE', 'RATING_PERIOD_S', 'drive_scores', 'make_participant', 'recover']
+__all__ = ['RATING_NOISE', 'RATING_PERIOD_S', 'Participant', 'drive_scores', 'make_participant',
+           'recover', 'synthetic_study', 'write_ratings_table']
 
 CONDITIONS = ('rough_random', 'rough_random', 'rough_random', 'rough_random')
 """The drives of a synthetic participant, in order (cycled), each ``*_random`` one with its
