@@ -142,7 +142,7 @@ def trust_lower_bound(mean_score: float, steps: int, trust_growth_rate: float,
 
     ``T_M >= T_0 + delta M (1 - s_hat(mean E))``, which is
     ``T_0 + delta M (1 - c mean E)`` for mean E <= E*. The infimum over all sequences: no
-    sequence goes below it and :func:`extremal_scores` comes within delta of it.
+    sequence goes below it, and one (module docstring, "Tightness") comes within delta of it.
 
     Args:
         mean_score: mean E over the M steps, >= 0.
