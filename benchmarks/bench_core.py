@@ -30,10 +30,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from nmpc_reference import compare_on_records  # beside this script
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SpeedTrace, truncate
-from trust_av.study.nmpc_reference import compare_on_records
 from trust_av.system.closed_loop import SimResult, control_trace, simulate
 from trust_av.system.config import RunConfig, load_run_config
 

@@ -137,8 +137,9 @@ def flood_effect(bag: Path, flood_ns: tuple[int, int], other_client: dict[str, A
 
 def _keyboard_drive(page: Any, duration_s: float, seed: int, flood: Any) -> list[int]:
     """Drive by key presses until the drive ends; the press times (wall ns)."""
+    from synthetic_participant import DRIVER, READ_DISPLAY
+
     from human_driver_sim.idm import idm_accel
-    from trust_av.drive.synthetic import DRIVER, READ_DISPLAY
 
     rng = random.Random(seed)
     presses: list[int] = []
@@ -207,8 +208,7 @@ def run_once(settings: Path, study: Path, duration_s: float, busy: int, flood: b
              seed: int) -> dict[str, Any]:
     """One drive; its figures."""
     from playwright.sync_api import sync_playwright
-
-    from trust_av.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+    from synthetic_participant import CHROMIUM, CHROMIUM_ARGS
 
     burners = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
                for _ in range(busy)]

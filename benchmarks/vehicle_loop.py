@@ -27,22 +27,41 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from trust_av.graph.domains import lease_domain
-from trust_av.graph.lifecycle_client import (
-    MANAGED_NODES,
-    lifecycle_manager,
-    set_states,
-)
+from trust_av.graph.lifecycle_client import MANAGED_NODES, set_states
 from trust_av.system.config import DEFAULT_PARAMS_FILE
 
 REMAPS = {'/preceding_vehicle/odom': '/perception/lead_vehicle/odom',
           '/ego/odom': '/vehicle/odom', '/ego/accel_cmd': '/control/accel_cmd'}
 """The planner's standard names -> the stand-in vehicle's."""
+
+
+@contextlib.contextmanager
+def lifecycle_manager(domain: int) -> Iterator[tuple[Any, Any]]:
+    """A node and its executor on a private rclpy context in ``domain``, for a process that
+    starts nodes without being a ROS node itself."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.utilities import try_shutdown
+
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node('lifecycle_manager', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        yield node, executor
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        try_shutdown(context=context)
 
 
 def node_command(module: str, name: str, params_files: list[Path],

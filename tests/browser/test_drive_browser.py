@@ -1,6 +1,6 @@
 """Driver in the loop through the real page: Debian's chromium, headless, driven by
 Playwright; ``trust-av drive`` runs the node graph in wall mode and serves the page. A
-synthetic participant (trust_av.drive.synthetic: an IDM computing its pedal from the
+synthetic participant (benchmarks/synthetic_participant.py: an IDM computing its pedal from the
 page's own displayed state, held on the page's pointer pedal) drives whole sessions.
 
 Checked: the bags hold every topic, the ratings and the questionnaire are recorded on the
@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from support.paths import REPO
 from support.rosbag2_rules import check_bag_directory
 
 from trust_av.drive.bag_data import (
@@ -38,9 +39,11 @@ from trust_av.drive.bag_data import (
 )
 from trust_av.drive.gate import reason_key
 from trust_av.drive.sessions import balanced_latin_square_row
-from trust_av.drive.synthetic import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
 from trust_av.drive.trust_rating import questionnaire_score
 from trust_av_common.registry import TRUST_MODELS, names
+
+sys.path.insert(0, str(REPO / 'benchmarks'))
+from synthetic_participant import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
 
 pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),

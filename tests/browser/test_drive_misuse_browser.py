@@ -29,11 +29,14 @@ from typing import Any
 
 import numpy as np
 import pytest
+from support.paths import REPO
 from support.rosbag2_rules import check_bag_directory
 
 from trust_av.drive.bag_data import custom_data, read_drive
 from trust_av.drive.gate import reason_key
-from trust_av.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+
+sys.path.insert(0, str(REPO / 'benchmarks'))
+from synthetic_participant import CHROMIUM, CHROMIUM_ARGS
 
 pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),

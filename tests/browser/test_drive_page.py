@@ -5,15 +5,19 @@ the non-blocking rating and reconnection. The state stream is played by the test
 from __future__ import annotations
 
 import queue
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from support.paths import REPO
 
 from trust_av.drive.server import DriveServer
-from trust_av.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+
+sys.path.insert(0, str(REPO / 'benchmarks'))
+from synthetic_participant import CHROMIUM, CHROMIUM_ARGS
 
 pytestmark = [pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),

@@ -6,15 +6,19 @@ fed the samples as they arrived, refuses none of them."""
 from __future__ import annotations
 
 import queue
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from support.paths import REPO
 
 from trust_av.drive.gate import DRIVING, INPUT_BURST, READY, Gate
 from trust_av.drive.server import DriveServer
-from trust_av.drive.synthetic import CHROMIUM, CHROMIUM_ARGS
+
+sys.path.insert(0, str(REPO / 'benchmarks'))
+from synthetic_participant import CHROMIUM, CHROMIUM_ARGS
 
 pytestmark = [pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),

@@ -24,7 +24,8 @@ from human_driver_sim.evaluation import (
 )
 from human_driver_sim.fitting import MPC_BOUNDS, configured, fit_idm, fit_mpc
 from human_driver_sim.idm import FIT_BOUNDS, TEXTBOOK_MOTORWAY, IdmParams
-from human_driver_sim.ngsim import read_ngsim_pairs, split_by_follower
+from human_driver_sim.ngsim import read_ngsim_pairs
+from human_driver_sim.splits import split_ngsim
 from trust_av_common.stats import mean_ci95, t_quantile_975
 
 CONFIG = DriverConfig(dt_s=1.0, horizon_steps=3, standstill_gap_m=5.0, speed_min_mps=0.0,
@@ -125,7 +126,8 @@ def test_ngsim_windows_deduplicated_and_split(tmp_path: Path) -> None:
     merged = pairs[1]
     assert len(merged.gap_m) == 26                        # 0..25 s: the union of both
     assert np.all(np.abs(merged.gap_m - (15.0 - 4.5)) < 4.0)   # spacing 15 m +- 3.6 m
-    fit, held_out = split_by_follower(pairs)
+    split = split_ngsim(pairs)                            # by follower ID: odd IDs test
+    fit, held_out = split.train + split.validation, split.test
     assert [p.driver for p in fit] == ['ngsim:12', 'ngsim:14']
     assert {p.key for p in fit}.isdisjoint({p.key for p in held_out})
     assert load_directory(tmp_path, 'ngsim', vehicle_length_m=3.0)[0].gap_m[0] == \

@@ -4,14 +4,18 @@ the trust constraint, and the fallback path."""
 from __future__ import annotations
 
 import dataclasses
+import sys
 
 import numpy as np
 import pytest
 from support.closed_loop import closed_loop, shipped_trace, with_alpha
+from support.paths import REPO
 
-from trust_av.study.nmpc_reference import ReferenceNmpc, compare_on_records
 from trust_av_planner.nmpc import TrustAwareNmpc
 from trust_monitor.paper_trust import explicability
+
+sys.path.insert(0, str(REPO / 'benchmarks'))
+from nmpc_reference import ReferenceNmpc, compare_on_records  # the benchmark's baseline
 
 
 @pytest.mark.parametrize('alpha', [0.0, 0.5, 1.0])

@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 from support.closed_loop import shipped_trace
+from support.trust_reference import propagate_trust
 
 from preceding_traffic.traces import truncate
 from trust_av.system.closed_loop import SimResult, control_trace, simulate
@@ -33,7 +34,6 @@ from trust_monitor.paper_trust import (
     TrustEstimator,
     paper_explicability_bound,
     performance,
-    propagate_trust,
     trust_input,
     trust_step,
 )

@@ -13,11 +13,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from support.trust_reference import extremal_scores, lenient_row_bound
 
 from trust_av.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_monitor.final_trust_bound import (
-    extremal_scores,
-    lenient_row_bound,
     row_bound,
     score_threshold,
     shortfall,

@@ -7,6 +7,7 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
+from support.trust_reference import propagate_trust
 
 from trust_monitor.paper_trust import (
     TrustConfig,
@@ -14,7 +15,6 @@ from trust_monitor.paper_trust import (
     explicability,
     paper_explicability_bound,
     performance,
-    propagate_trust,
     trust_input,
     trust_step,
 )

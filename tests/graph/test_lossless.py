@@ -24,12 +24,11 @@ from trust_av_common.output_lock import OutputLockedError, hold_output_lock, loc
 from trust_av_common.record_window import (
     ACK_EVERY_STEPS,
     HISTORY_DEPTH,
-    held_steps,
     may_start,
     recorded_topics,
     window_steps,
 )
-from trust_av_common.topics import TOPICS, Topic
+from trust_av_common.topics import TOPICS
 
 QOS_RECORDED = qos_profile(reliable=True, transient_local=True, depth=HISTORY_DEPTH)
 
@@ -51,14 +50,7 @@ def test_a_window_that_cannot_be_acknowledged_is_refused() -> None:
         window_steps(depth=6 * ACK_EVERY_STEPS)
 
 
-def test_held_steps_is_the_least_complete_topic() -> None:
-    table = (Topic('a', 'x/msg/A', ('p',), ('recorder',), 'STEP', '', '', ''),
-             Topic('tf', 'x/msg/B', ('p', 'q', 'r'), ('recorder',), 'STEP', '', '', '',
-                   per_step=3, initial=2),
-             Topic('s', 'x/msg/C', ('o',), ('p',), 'LATCHED', '', '', '', per_step=0))
-    assert held_steps({}, table) == 0
-    assert held_steps({'a': 10, 'tf': 2 + 3 * 7 + 2}, table) == 7
-    assert held_steps({'a': 4, 'tf': 2 + 3 * 7}, table) == 4
+def test_a_step_starts_only_within_the_window_of_the_acknowledgement() -> None:
     assert may_start(0, 0, 10) and may_start(9, 0, 10) and not may_start(10, 0, 10)
     assert may_start(10, 1, 10) and may_start(10**6, 0, 0)
 

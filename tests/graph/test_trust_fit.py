@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 from support.contract import GRAPH_STEPS, cli, trace_csv
 from support.graph import assert_records_equal  # the graph == in-process comparison
+from support.paths import REPO
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
 from trust_av.drive.study import conditions_from
 from trust_av.drive.trust_fit_data import read_ratings_table
-from trust_av.study.trust_recovery import drive_scores, make_participant, recover
+from trust_av.study.trust_recovery import drive_scores, make_participant
 from trust_av.system.closed_loop import simulate
 from trust_av.system.config import load_run_config
 from trust_av_common.params import ParamsError
@@ -33,6 +34,10 @@ from trust_monitor.trust_fit import (
 )
 
 __all__ = ['trace_csv']
+
+sys.path.insert(0, str(REPO / 'benchmarks'))
+from bench_trust_recovery import recover  # the benchmark's study, run small here
+
 CONFIG = load_run_config()
 
 

@@ -22,7 +22,7 @@ from human_driver_sim.car_following import (
     resample,
 )
 
-__all__ = ['NGSIM_VEHICLE_LENGTH_M', 'read_ngsim_pairs', 'split_by_follower']
+__all__ = ['NGSIM_VEHICLE_LENGTH_M', 'read_ngsim_pairs']
 
 NGSIM_VEHICLE_LENGTH_M = 4.5
 """Assumed length of every NGSIM leader (front-to-front spacing -> gap), m; the project's
@@ -147,25 +147,3 @@ def read_ngsim_pairs(paths: Sequence[Path], *, dt_s: float = 1.0,
     if report is not None:
         report.vehicle_length_m = vehicle_length_m
     return pairs
-
-
-def split_by_follower(pairs: Sequence[FollowingPair]) -> tuple[list[FollowingPair],
-                                                               list[FollowingPair]]:
-    """NGSIM fit / held-out split by vehicle: odd follower IDs are held out.
-
-    Every pair is kept whole (all its segments on one side), and a held-out driver is never
-    a follower in the fit set (NGSIM IDs are assigned in order of entry, so the parity is
-    unrelated to driving).
-
-    Raises:
-        CarFollowingDataError: A driver that is not ``ngsim:<integer ID>``.
-    """
-    fit: list[FollowingPair] = []
-    held_out: list[FollowingPair] = []
-    for pair in pairs:
-        ident = pair.driver.removeprefix('ngsim:')
-        if not ident.isdigit():
-            raise CarFollowingDataError(f'{pair.name}: driver {pair.driver!r} is not an '
-                                        f'NGSIM vehicle ID')
-        (held_out if int(ident) % 2 else fit).append(pair)
-    return fit, held_out

@@ -6,9 +6,9 @@ A reliable DDS topic still drops samples when a history overflows: the recorder'
 subscription and every publisher keep the last :data:`HISTORY_DEPTH` samples of a topic
 (``KEEP_LAST``), and a recorder that is suspended or slow (SIGSTOP, a slow disk, a busy
 host) stops taking them while the graph goes on. So the recorder acknowledges the steps it
-holds (:func:`held_steps`, published on ``recorder/ack`` every :data:`ACK_EVERY_STEPS`
-steps) and the step authority starts step ``s`` only when ``s < acked + window``
-(:func:`window_steps`).
+holds (the smallest, over the recorded topics, of ``(count - initial) // per_step``,
+published on ``recorder/ack`` every :data:`ACK_EVERY_STEPS` steps) and the step authority
+starts step ``s`` only when ``s < acked + window`` (:func:`window_steps`).
 
 Why nothing is lost (per recorded topic, ``per`` messages a step, ``initial`` before the
 first one): when step ``s`` starts, at most ``per * (s + 1) + initial`` messages of the
@@ -22,11 +22,11 @@ complete steps) and however long the recorder stands still.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 
 from trust_av_common.topics import TOPICS, Topic
 
-__all__ = ['ACK_EVERY_STEPS', 'ACK_TOPIC', 'HISTORY_DEPTH', 'held_steps', 'may_start',
+__all__ = ['ACK_EVERY_STEPS', 'ACK_TOPIC', 'HISTORY_DEPTH', 'may_start',
            'recorded_topics', 'window_steps']
 
 HISTORY_DEPTH = 1000
@@ -66,18 +66,6 @@ def window_steps(depth: int = HISTORY_DEPTH, topics: Iterable[Topic] = TOPICS) -
         raise ValueError(f'history depth {depth} leaves a recorder window of {window} steps, '
                          f'not more than the acknowledgement period {ACK_EVERY_STEPS}')
     return window
-
-
-def held_steps(counts: Mapping[str, int], topics: Iterable[Topic] = TOPICS) -> int:
-    """Complete steps the recorder holds, from its message counts per topic: the smallest,
-    over the recorded topics, of ``(count - initial) // per_step``.
-
-    Args:
-        counts: messages taken so far, by relative topic name (absent: none).
-        topics: the topic table.
-    """
-    return max(0, min((counts.get(t.name, 0) - t.initial) // t.per_step
-                      for t in recorded_topics(topics)))
 
 
 def may_start(step: int, acked: int, window: int) -> bool:

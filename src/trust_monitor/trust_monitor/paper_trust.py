@@ -30,7 +30,7 @@ from trust_av_common.params import ParamsError, check_fields, param
 from trust_av_common.registry import TRUST_MODELS
 
 __all__ = ['SAME_MODEL', 'MonitorConfig', 'TrustConfig', 'TrustEstimator', 'explicability',
-           'paper_explicability_bound', 'performance', 'propagate_trust', 'trust_input',
+           'paper_explicability_bound', 'performance', 'trust_input',
            'trust_step']
 
 SAME_MODEL = 'the planner and the monitor must run the same trust model'
@@ -125,17 +125,6 @@ def trust_step(trust: float, score: float, config: TrustConfig, dt_s: float = 1.
                                                                  config.performance_threshold)
 
 
-def propagate_trust(trust: float, score: float, config: TrustConfig, steps: int,
-                    dt_s: float = 1.0) -> list[float]:
-    """Trust over a horizon of ``steps`` steps of ``dt_s`` if the plan with score E were
-    kept: T^1..T^steps."""
-    out = []
-    for _ in range(steps):
-        trust = trust_step(trust, score, config, dt_s)
-        out.append(trust)
-    return out
-
-
 def paper_explicability_bound(trust: float, trust_min: float, config: TrustConfig,
                               steps: int, dt_s: float = 1.0) -> float | None:
     """Largest E whose propagated trust stays >= trust_min over the horizon (eq. 12).
@@ -145,8 +134,8 @@ def paper_explicability_bound(trust: float, trust_min: float, config: TrustConfi
     depends on the plan only through E, and u_T(E) is non-increasing in E. So the set of
     admissible plans is exactly ``E <= E_max`` with E_max computed here. The NMPC uses this
     smooth inequality instead of the discontinuous if-else of eq. (11): the same feasible
-    set, without a jump for the SQP solver. ``tests`` check the equivalence against
-    :func:`propagate_trust`.
+    set, without a jump for the SQP solver. ``tests`` check the equivalence against the
+    trust propagated step by step with :func:`trust_step`.
 
     Args:
         trust: current trust T(t).

@@ -27,8 +27,8 @@ from trust_av_common.errors import TrustAvError
 from trust_monitor.paper_trust import TrustConfig, TrustEstimator
 
 __all__ = ['ITEM_NAMES', 'JIAN_ITEMS', 'SCORE_NAME', 'Agreement', 'DriveSeries', 'RatingError',
-           'TrustModel', 'agreement_lines', 'compare', 'paper_model', 'questionnaire_score',
-           'rating_value', 'registered_models']
+           'TrustModel', 'agreement_lines', 'compare', 'questionnaire_score',
+           'registered_models']
 
 JIAN_ITEMS = (
     'The system is deceptive.',
@@ -81,18 +81,6 @@ def questionnaire_score(answers: Sequence[int]) -> float:
     return (float(np.mean(scored)) - low) / (high - low)
 
 
-def rating_value(rating: object) -> float:
-    """An in-drive rating (0-100) as trust in [0, 1].
-
-    Raises:
-        RatingError: not a number in [0, 100].
-    """
-    if isinstance(rating, bool) or not isinstance(rating, (int, float)) \
-            or not math.isfinite(rating) or not 0 <= rating <= 100:
-        raise RatingError(f'a trust rating must be a number in [0, 100], got {rating!r}')
-    return float(rating) / 100.0
-
-
 @dataclass(frozen=True)
 class DriveSeries:
     """What a drive recorded that trust models take: the AV's plans as the monitor saw them.
@@ -129,11 +117,6 @@ def trust_model_series(config: TrustConfig, values: Mapping[str, Any] | None = N
             out[i] = estimator.step(plan, expected, float(gaps[i])).trust
         return out
     return model
-
-
-def paper_model(config: TrustConfig) -> TrustModel:
-    """The paper's trust dynamics (eqs. 8-11) over a drive's plans."""
-    return trust_model_series(dataclasses.replace(config, trust_model='paper'))
 
 
 @dataclass(frozen=True)
@@ -179,7 +162,7 @@ def compare(rating_times_s: Sequence[float] | np.ndarray, ratings: Sequence[floa
         rating_times_s: when each rating was given, s since the drive started.
         ratings: the ratings, trust units in [0, 1].
         series: the drive's plans (what each model is run on).
-        models: (name, model) pairs, e.g. :func:`paper_model` and the registry's.
+        models: (name, model) pairs, e.g. :func:`registered_models`.
         max_lag_s: largest lag tried, s (>= 0).
         lag_step_s: lag grid step, s (> 0).
 

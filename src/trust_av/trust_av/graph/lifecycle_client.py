@@ -16,15 +16,14 @@ a state follows rcl_lifecycle's default state machine
 
 from __future__ import annotations
 
-import contextlib
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from trust_av.graph import stop_signals
 from trust_av.graph.processes import Graph, GraphError
 
-__all__ = ['MANAGED_NODES', 'lifecycle_manager', 'set_states']
+__all__ = ['MANAGED_NODES', 'set_states']
 
 MANAGED_NODES = ('planner', 'trust_monitor')
 """The project's managed (lifecycle) nodes: what an orchestrator configures and activates."""
@@ -146,28 +145,6 @@ def _answered(executor: Any, future: Any, until: float, alive: Callable[[], None
         stop_signals.spin_once(executor, 0.02)
         alive()
     return True
-
-
-@contextlib.contextmanager
-def lifecycle_manager(domain: int) -> Iterator[tuple[Any, Any]]:
-    """A node and its executor on a private rclpy context in ``domain``, for a process that
-    starts nodes without being a ROS node itself (benchmarks, tests)."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.utilities import try_shutdown
-
-    context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = rclpy.create_node('lifecycle_manager', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    try:
-        yield node, executor
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        try_shutdown(context=context)
 
 
 def _wait(executor: Any, deadline: float, done: Callable[[], bool], what: str,

@@ -250,7 +250,11 @@ def numerics_report(libraries: Sequence[str] = LIBRARIES) -> dict[str, Any]:
 
     ``libraries`` (a subset of :data:`LIBRARIES`) limits the kernels, the live settings
     and so the fingerprint to those libraries; without ``'torch'`` PyTorch is not imported
-    (about 1.5 CPU-s). The model card holds the whole fingerprint.
+    (about 1.5 CPU-s). The model card holds the whole fingerprint of the pinned training
+    process, and the retraining test demands bit equality when its own pinned process
+    gives the same one (retraining is bit-for-bit reproducible only with the same
+    numerics: the GRU's numpy forward pass feeds the DAgger closed loops, so one ulp of a
+    kernel moves the trained model).
     """
     check_libraries(libraries)
     rng = np.random.default_rng(0)
@@ -301,21 +305,6 @@ def _torch_kernels(x: np.ndarray, matrix: np.ndarray) -> str:
                 *[p.detach().numpy() for p in params])
         finally:
             torch.set_num_threads(threads)
-
-
-def numerics_fingerprint() -> str:
-    """A hash of :func:`numerics_report`: kernel bits, library versions and live settings.
-
-    Retraining is bit-for-bit reproducible only with the same numerics: numpy picks its
-    ``exp`` kernel by instruction set (with and without AVX-512 they differ by one ulp on
-    about 5 % of inputs), OpenBLAS and MKL their matrix kernels, PyTorch its vectorised
-    path, and the GRU's numpy forward pass feeds the DAgger closed loops, so such ulps move
-    the trained model. ``trust-av train-gru`` therefore trains in a process with pinned
-    numerics (this module); the model card stores that process's fingerprint
-    and the retraining test demands bit equality when its own pinned process gives the
-    same one.
-    """
-    return str(numerics_report()['fingerprint'])
 
 
 def main(argv: list[str] | None = None) -> int:

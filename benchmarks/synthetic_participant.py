@@ -1,6 +1,6 @@
-"""A synthetic participant for the driver-in-the-loop page, driven through Playwright (the
-tests and ``benchmarks/bench_drive.py``; Playwright is not imported here: the caller passes
-its page).
+"""A synthetic participant for the driver-in-the-loop page, driven through Playwright
+(``bench_drive.py`` and the browser tests; not part of the packages: nothing in them drives
+the page; Playwright is not imported here: the caller passes its page).
 
 It reads the state the page itself displays (``#gap``, ``#speed``, ``#av-speed``: their
 ``data-`` values), computes its pedal with an IDM (Treiber & Kesting's motorway parameters,

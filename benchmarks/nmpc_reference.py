@@ -1,7 +1,8 @@
 """A plain reference NMPC: eq. (12) written out with CasADi ``Opti`` and IPOPT defaults.
 
-Not used in the loop. It is the baseline the benchmark times our solver against, and an
-independent statement of the problem that tests compare our plans with: it re-derives the
+Not used in the loop (so not in the packages). It is the baseline ``bench_core.py`` times
+our solver against, and an independent statement of the problem that
+``tests/core/test_nmpc.py`` compares our plans with: it re-derives the
 dynamics, the cost and the Tanimoto distance from the paper instead of calling the
 project's helpers. Same inputs as :meth:`trust_av_planner.nmpc.TrustAwareNmpc.solve`, with
 the trust bound E_max given explicitly.
