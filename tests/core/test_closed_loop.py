@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import itertools
 import json
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 from support.closed_loop import ALPHAS, closed_loop, shipped_trace
 from support.paths import GOLDEN
 
+from trust_av.system.closed_loop import SimResult
 from trust_av_common import kinematics
 from trust_av_planner.nmpc import BOUND_TOLERANCE
 
@@ -24,11 +26,21 @@ MAX_FALLBACK_STEPS = 2  # measured: 0 in every run; more means the NMPC regresse
 MAX_DRIVER_FALLBACK_STEPS = 40
 
 
+@pytest.fixture(scope='module')
+def loop() -> Callable[..., SimResult]:
+    """:func:`support.closed_loop.closed_loop` (a whole-trace run, cached per process) as a
+    module-scoped fixture, so that the suite's xdist grouping (tests/conftest.py) runs the
+    tests that read these runs on one worker and each run is simulated once, not once per
+    worker."""
+    return closed_loop
+
+
 @pytest.mark.parametrize('trace', TRACES)
 @pytest.mark.parametrize('alpha', ALPHAS)
-def test_every_bound_holds_or_step_is_a_counted_fallback(trace: str, alpha: float,
+def test_every_bound_holds_or_step_is_a_counted_fallback(loop: Callable[..., SimResult],
+                                                         trace: str, alpha: float,
                                                          run_config) -> None:
-    result = closed_loop(trace, alpha)
+    result = loop(trace, alpha)
     cfg = run_config.for_trace(shipped_trace(trace)).planner
     fallbacks = 0
     for r in result.records:
@@ -51,8 +63,9 @@ def test_every_bound_holds_or_step_is_a_counted_fallback(trace: str, alpha: floa
 
 @pytest.mark.parametrize('trace', TRACES)
 @pytest.mark.parametrize('alpha', ALPHAS)
-def test_no_collision_and_physical_speeds(trace: str, alpha: float, run_config) -> None:
-    result = closed_loop(trace, alpha)
+def test_no_collision_and_physical_speeds(loop: Callable[..., SimResult], trace: str,
+                                          alpha: float, run_config) -> None:
+    result = loop(trace, alpha)
     d_s = run_config.planner.standstill_gap_m
     assert result.metrics.min_av_gap_m >= d_s - 0.5  # the NMPC's gap bound (Table I d_s)
     # The human plans eq. (13)'s d_s bound against the AV braking it expects (docs/MODEL.md,
@@ -70,13 +83,13 @@ def test_no_collision_and_physical_speeds(trace: str, alpha: float, run_config) 
 
 
 @pytest.mark.parametrize('alpha', ALPHAS)
-def test_behind_tac_gru_the_human_comes_closer_and_the_av_keeps_d_s(alpha: float,
-                                                                    run_config) -> None:
+def test_behind_tac_gru_the_human_comes_closer_and_the_av_keeps_d_s(
+        loop: Callable[..., SimResult], alpha: float, run_config) -> None:
     """TAC-GRU on US06 departs furthest from the plan the human expects: the shipped human
     (docs/DRIVER_IRL.md, "Closed-loop safety") then comes below the safety line on a few steps
     (measured: smallest 4.167 m, 8-11 steps below 4.5 m per alpha), never near a collision, while
     the AV's own gap never goes below d_s."""
-    metrics = closed_loop('us06', alpha, 'gru').metrics
+    metrics = loop('us06', alpha, 'gru').metrics
     d_s = run_config.planner.standstill_gap_m
     assert metrics.min_av_gap_m >= d_s - BOUND_TOLERANCE
     assert 4.0 <= metrics.min_human_gap_m < d_s - 0.5
@@ -120,8 +133,9 @@ def test_a_driver_stopped_behind_the_av_does_not_creep_below_d_s(run_config) -> 
 
 
 @pytest.mark.parametrize('trace', TRACES)
-def test_explicability_falls_and_trust_rises_with_alpha(trace: str) -> None:
-    metrics = [closed_loop(trace, a).metrics for a in ALPHAS]
+def test_explicability_falls_and_trust_rises_with_alpha(loop: Callable[..., SimResult],
+                                                          trace: str) -> None:
+    metrics = [loop(trace, a).metrics for a in ALPHAS]
     scores = [m.mean_explicability for m in metrics]
     trusts = [m.final_trust for m in metrics]
     rmses = [m.rmse_mps2 for m in metrics]
@@ -142,15 +156,16 @@ def test_same_command_same_numbers(run_config) -> None:
     assert strip == again
 
 
-def test_golden_metrics() -> None:
+def test_golden_metrics(loop: Callable[..., SimResult]) -> None:
     """US06, TAC-CA, alpha = 0.5 against the stored run (update deliberately, never loosen)."""
     golden = json.loads(GOLDEN_METRICS.read_text())
-    metrics = vars(closed_loop('us06', 0.5).metrics)
+    metrics = vars(loop('us06', 0.5).metrics)
     for key, value in golden.items():
         assert metrics[key] == pytest.approx(value, rel=1e-7, abs=1e-9), key
 
 
-def test_the_shipped_human_follows_closer_than_the_cautious_one(run_config) -> None:
+def test_the_shipped_human_follows_closer_than_the_cautious_one(
+        loop: Callable[..., SimResult], run_config) -> None:
     """NYCC, TAC-CA, alpha = 0 (where the AV departs most from the plan the human expects): the
     shipped human, planning its bound against the expected braking only, comes below d_s
     (measured 4.963 m; the cautious profile keeps 5.000 m) and falls back to hard braking more
@@ -158,7 +173,7 @@ def test_the_shipped_human_follows_closer_than_the_cautious_one(run_config) -> N
     from trust_av.system.closed_loop import simulate
     from trust_av.system.config import HUMAN_CAUTIOUS_PARAMS_FILE, load_run_config
     d_s = run_config.planner.standstill_gap_m
-    shipped = closed_loop('nycc', 0.0).metrics
+    shipped = loop('nycc', 0.0).metrics
     assert not run_config.driver.cautious
     assert shipped.min_av_gap_m >= d_s - BOUND_TOLERANCE
     assert run_config.min_safe_gap_m <= shipped.min_human_gap_m < d_s - 0.01

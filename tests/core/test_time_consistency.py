@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -291,13 +292,23 @@ reason (docs/MODEL.md, "Time consistency", with the definitions of E and RMSE tr
 reasons are asserted below for every case)."""
 
 
-@functools.cache
-def rate_pair(trace: str, predictor: str, alpha: float) -> tuple[SimResult, SimResult]:
-    """The same window at 1 Hz and at 10 Hz (cached for the module)."""
+RatePair = Callable[[str, str, float], tuple[SimResult, SimResult]]
+
+
+def _rate_pair(trace: str, predictor: str, alpha: float) -> tuple[SimResult, SimResult]:
+    """The same window at 1 Hz and at 10 Hz."""
     config = load_run_config(overrides={'planner': {'alpha': alpha, 'predictor': predictor},
                                         'preceding_traffic': {'trace': trace}})
     return tuple(simulate(config, truncate(control_trace(config, rate), round(WINDOW_S * rate)))
                  for rate in (1.0, 10.0))  # type: ignore[return-value]
+
+
+@pytest.fixture(scope='module')
+def rate_pair() -> RatePair:
+    """:func:`_rate_pair`, each case simulated once for the module's four tests that read it.
+    A module-scoped fixture, so that the suite's xdist grouping (tests/conftest.py) runs
+    these tests on one worker: a plain cache was filled again by every worker."""
+    return functools.cache(_rate_pair)
 
 
 def test_one_hz_is_the_paper_loop(run_config) -> None:  # type: ignore[no-untyped-def]
@@ -313,7 +324,8 @@ def test_one_hz_is_the_paper_loop(run_config) -> None:  # type: ignore[no-untype
 
 
 @pytest.mark.parametrize(('trace', 'predictor', 'alpha'), CASES)
-def test_ten_hz_keeps_trust_and_safety(trace: str, predictor: str, alpha: float) -> None:
+def test_ten_hz_keeps_trust_and_safety(rate_pair: RatePair, trace: str, predictor: str,
+                                       alpha: float) -> None:
     one, ten = rate_pair(trace, predictor, alpha)
     assert len(ten.records) == 10 * len(one.records)
     m1, m10 = one.metrics, ten.metrics
@@ -340,7 +352,8 @@ def test_ten_hz_on_a_whole_held_out_trace_never_falls_back() -> None:
 
 @pytest.mark.parametrize('metric', ['mean_explicability', 'rmse_mps2'])
 @pytest.mark.parametrize(('trace', 'predictor', 'alpha'), CASES)
-def test_ten_hz_mean_e_and_rmse_within_15_percent(trace: str, predictor: str, alpha: float,
+def test_ten_hz_mean_e_and_rmse_within_15_percent(rate_pair: RatePair, trace: str,
+                                                 predictor: str, alpha: float,
                                                  metric: str, request) -> None:  # type: ignore[no-untyped-def]
     if (trace, predictor, alpha, metric) in OUTSIDE_15_PERCENT:
         request.applymarker(pytest.mark.xfail(
@@ -350,7 +363,8 @@ def test_ten_hz_mean_e_and_rmse_within_15_percent(trace: str, predictor: str, al
 
 
 @pytest.mark.parametrize(('trace', 'predictor', 'alpha'), CASES)
-def test_ten_hz_av_changes_its_one_second_acceleration_less(trace: str, predictor: str,
+def test_ten_hz_av_changes_its_one_second_acceleration_less(rate_pair: RatePair, trace: str,
+                                                            predictor: str,
                                                             alpha: float) -> None:
     """The first reason E differs: the same drive is a different closed loop at 10 Hz, whose
     AV moves its 1 s mean acceleration less between seconds (what a held expectation
@@ -360,8 +374,8 @@ def test_ten_hz_av_changes_its_one_second_acceleration_less(trace: str, predicto
 
 
 @pytest.mark.parametrize(('trace', 'predictor', 'alpha'), CASES)
-def test_ten_hz_e_grows_with_the_expectations_age(trace: str, predictor: str,
-                                                  alpha: float) -> None:
+def test_ten_hz_e_grows_with_the_expectations_age(rate_pair: RatePair, trace: str,
+                                                  predictor: str, alpha: float) -> None:
     """The second reason: the expectation is refreshed on the 1 s grid, and E 0.9 s after a
     refresh is well above E at the refresh."""
     _, ten = rate_pair(trace, predictor, alpha)

@@ -4,13 +4,13 @@ input with one line and exit 2."""
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from support.graph import STEPS
 from support.paths import REPO
 
 from trust_av.study.compare_runs import compare_runs, read_run, trust_per_model
@@ -106,27 +106,25 @@ def test_help_names_what_a_run_is() -> None:
     assert 'rosbag2 recording' in text and 'simulate --out' in text and '--trust-models' in text
 
 
-@pytest.mark.slow
-def test_a_graph_recording_compares_with_its_simulated_run(runs: tuple[Path, Path, Path],
-                                                           tmp_path: Path,
-                                                           ros_domain: str) -> None:
-    """The same case through the node graph (a bag) and in-process (a CSV): the bag reads as
-    a run, and every model's replayed trust is the same on both."""
-    trace, _, simulated = runs
-    bag = tmp_path / 'graph_alpha1'
-    env = {**os.environ, 'ROS_DOMAIN_ID': ros_domain}
-    proc = trust_av('run', '--trace', str(trace), '--alpha', '1', '--max-steps', '12',
-                    '--bag', str(bag), '--no-plot', '--no-progress', env=env)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+def test_a_graph_recording_compares_with_its_simulated_run(us06_graph_run: tuple[Path, str],
+                                                           tmp_path: Path) -> None:
+    """The same case through the node graph (the suite's shared US06 run, a bag) and
+    in-process (``trust-av simulate``, a CSV): the bag reads as a run, and every model's
+    replayed trust is the same on both."""
+    bag, _ = us06_graph_run
+    simulated = tmp_path / 'us06.csv'
+    proc = trust_av('simulate', '--trace', 'us06', '--alpha', '0.5', '--predictor', 'ca',
+                    '--max-steps', str(STEPS), '--no-progress', '--out', str(simulated))
+    assert proc.returncode == 0, proc.stderr
     from_bag = read_run(bag)
-    assert len(from_bag.t_s) == 12
+    assert len(from_bag.t_s) == STEPS
     short = read_run(simulated)
     for name, series in trust_per_model(from_bag, ['paper', 'optimo']).items():
-        np.testing.assert_allclose(series, trust_per_model(short, [name])[name][:12],
+        np.testing.assert_allclose(series, trust_per_model(short, [name])[name][:STEPS],
                                    atol=1e-6)
     figure = tmp_path / 'graph_vs_sim.png'
     mcap = next(bag.glob('*.mcap'))                       # the file names the run too
-    proc = trust_av('compare', str(mcap), str(simulated), '--out', str(figure), env=env)
+    proc = trust_av('compare', str(mcap), str(simulated), '--out', str(figure))
     assert proc.returncode == 0, proc.stderr
     assert figure.read_bytes()[:8] == PNG
 
