@@ -41,8 +41,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import optimize
-from scipy.stats import qmc
 
 from trust_monitor.errors import TrustMonitorError
 from trust_monitor.model_interface import (
@@ -288,6 +286,9 @@ def fit(spec: ModelSpec, drives: Sequence[RatedDrive], seed: int = 0) -> Fit:
     if not params:
         x_best = np.array([])
     else:
+        from scipy import optimize  # lazy: importing scipy costs every trust-av start
+        from scipy.stats import qmc
+
         rng = np.random.Generator(np.random.PCG64(seed))
         low, high = [b[0] for b in box], [b[1] for b in box]
         spread = qmc.Sobol(len(params), seed=rng).random(SPREAD_STARTS)
