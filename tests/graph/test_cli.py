@@ -171,6 +171,7 @@ def test_offline_estimator_names_bad_row(tmp_path: Path) -> None:
                            str(tmp_path / 'o.csv')], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert f'{plans}:3: NaN or infinite value' in proc.stderr
+    assert proc.stderr.count('\n') == 1      # the whole process's stderr: no warning either
 
 
 @pytest.mark.parametrize(('body', 'message'), [
