@@ -1,4 +1,8 @@
-"""Command lines: trust-av simulate and trust-monitor-estimate, run as a user would."""
+"""Command lines: trust-av simulate and trust-monitor-estimate, run as a user would.
+
+Most cases call the commands' ``main`` in-process (exit code, stdout, stderr: what they
+check); the process itself (``python -m``, its exit status from the OS, its whole stderr) is
+started for real by one success and one refusal of each command."""
 
 from __future__ import annotations
 
@@ -14,6 +18,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support.cli import estimate_run, trust_av_run
 from support.closed_loop import closed_loop
 from support.paths import REPO
 
@@ -27,9 +32,14 @@ from trust_monitor.estimate import EstimateError, estimate_csv
 CONFIG = load_run_config()
 
 
-def trust_av(*args: str) -> subprocess.CompletedProcess[str]:
+def trust_av_process(*args: str) -> subprocess.CompletedProcess[str]:
+    """``python -m trust_av.cli args`` as its own process."""
     return subprocess.run([sys.executable, '-m', 'trust_av.cli', *args],
                           capture_output=True, text=True, timeout=300)
+
+
+trust_av = trust_av_run            # in-process: the same exit code, stdout and stderr
+estimate = estimate_run
 
 
 @pytest.fixture
@@ -43,8 +53,8 @@ def short_trace(tmp_path: Path) -> Path:
 
 def test_simulate_prints_metrics_and_writes_table(short_trace: Path, tmp_path: Path) -> None:
     out = tmp_path / 'run.csv'
-    proc = trust_av('simulate', '--trace', str(short_trace), '--alpha', '0.5', '--out', str(out),
-                    '--no-progress')
+    proc = trust_av_process('simulate', '--trace', str(short_trace), '--alpha', '0.5', '--out',
+                            str(out), '--no-progress')
     assert proc.returncode == 0, proc.stderr
     assert 'final trust' in proc.stdout and 'mean explicability E' in proc.stdout
     with out.open() as handle:
@@ -64,8 +74,10 @@ def test_simulate_max_steps_is_the_start_of_the_whole_run(tmp_path: Path) -> Non
         rows = list(csv.DictReader(handle))
     whole = simulate(CONFIG, load_trace('us06', CONFIG.planner.dt_s, CONFIG.trace)).records
     assert [float(r['trust']) for r in rows] == [r.trust for r in whole[:5]]
-    proc = trust_av('simulate', '--max-steps', '-5', '--no-progress')
+    proc = trust_av_process('simulate', '--max-steps', '-5', '--no-progress')
     assert proc.returncode == 2 and '--max-steps must be >= 0' in proc.stderr
+    assert proc.stderr.splitlines()[0].startswith('usage: trust-av simulate')   # argparse's
+    assert len(proc.stderr.splitlines()) == 2 and 'Traceback' not in proc.stderr
 
 
 @pytest.mark.parametrize(('args', 'message'), [
@@ -159,6 +171,7 @@ def test_offline_estimator_names_bad_row(tmp_path: Path) -> None:
                            str(tmp_path / 'o.csv')], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert f'{plans}:3: NaN or infinite value' in proc.stderr
+    assert proc.stderr.count('\n') == 1      # the whole process's stderr: no warning either
 
 
 @pytest.mark.parametrize(('body', 'message'), [
@@ -171,15 +184,9 @@ def test_offline_estimator_rejects_bad_files(tmp_path: Path, body: str, message:
     plans = tmp_path / 'plans.csv'
     plans.write_text(body)
     out = tmp_path / 'o.csv'
-    proc = subprocess.run([sys.executable, '-m', 'trust_monitor.estimate', str(plans), '-o',
-                           str(out)], capture_output=True, text=True, timeout=60)
+    proc = estimate(str(plans), '-o', str(out))
     assert proc.returncode == 2 and message in proc.stderr
     assert proc.stderr.count('\n') == 1 and not out.exists()
-
-
-def estimate(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, '-m', 'trust_monitor.estimate', *args],
-                          capture_output=True, text=True, timeout=60)
 
 
 @pytest.mark.parametrize(('data', 'message'), [

@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
-from scipy import stats
 
 from human_driver_sim.car_following import FollowingPair
 from human_driver_sim.driver_mpc import DriverConfig
@@ -335,6 +334,8 @@ def cluster_ci95(values: Mapping[str, float], *, seed: int = 0) -> tuple[float, 
         sizes[cluster[pair]] += 1
     if count < 2:
         return math.nan, math.nan
+    from scipy import stats  # lazy: importing scipy costs every trust-av start
+
     result = stats.bootstrap(
         (sums, sizes), lambda s, n, axis=-1: s.sum(axis=axis) / n.sum(axis=axis),
         paired=True, vectorized=True, n_resamples=CLUSTER_RESAMPLES, method='percentile',

@@ -17,7 +17,6 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-import scipy.optimize
 
 from human_driver_sim.car_following import FollowingPair
 from human_driver_sim.driver_mpc import DriverConfig, features
@@ -64,6 +63,8 @@ def fit_inverse_kkt(config: DriverConfig, demos: Sequence[Demonstration]) -> np.
     stacked = np.vstack(blocks)  # (N * demos) x 4
     scale = np.linalg.norm(stacked[:, 1:], axis=0)
     scale[scale == 0.0] = 1.0
+    import scipy.optimize  # lazy: importing scipy costs every trust-av start
+
     rest = scipy.optimize.nnls(stacked[:, 1:] / scale, -stacked[:, 0])[0]
     return np.concatenate([[1.0], rest / scale])
 
@@ -98,6 +99,8 @@ def nelder_mead(func: Callable[[np.ndarray], float], start: np.ndarray, *, step:
     """
     origin = np.asarray(start, dtype=float)
     simplex = np.vstack([origin, origin + step * np.eye(origin.size)])
+    import scipy.optimize  # lazy: importing scipy costs every trust-av start
+
     result = scipy.optimize.minimize(
         func, origin, method='Nelder-Mead',
         options={'initial_simplex': simplex, 'maxiter': iterations,

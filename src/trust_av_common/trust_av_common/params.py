@@ -15,6 +15,7 @@ reads the same ranges for its options.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import typing
 from collections.abc import Mapping
@@ -257,6 +258,13 @@ def check_type(name: str, value: Any, hint: Any) -> Any:
     raise TypeError(f'unsupported parameter type {hint!r} for {name}')
 
 
+@functools.cache
+def _field_types(cls: type) -> dict[str, Any]:
+    """``typing.get_type_hints(cls)``, once per class (a fit builds a model, and so its
+    config, at every evaluation of its objective: tens of thousands of times)."""
+    return typing.get_type_hints(cls)
+
+
 def build_config(cls: type[T], params: Mapping[str, Any]) -> T:
     """Build the frozen dataclass ``cls`` from the parameters whose names are its fields.
 
@@ -268,7 +276,7 @@ def build_config(cls: type[T], params: Mapping[str, Any]) -> T:
     """
     if not dataclasses.is_dataclass(cls):
         raise TypeError(f'{cls!r} is not a dataclass')
-    hints = typing.get_type_hints(cls)
+    hints = _field_types(cls)
     kwargs: dict[str, Any] = {}
     for field in dataclasses.fields(cls):
         if field.name not in params:

@@ -10,7 +10,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy import stats
 
 __all__ = ['mean_ci95', 't_quantile_975']
 
@@ -24,6 +23,10 @@ def t_quantile_975(dof: int) -> float:
     """
     if dof < 1:
         raise ValueError(f'degrees of freedom must be >= 1, got {dof}')
+    # imported here: scipy.stats takes ~0.6 CPU-s to import, and every start of trust-av
+    # imports this module (through the reproduce command's parser)
+    from scipy import stats
+
     return float(stats.t.ppf(0.975, dof))
 
 

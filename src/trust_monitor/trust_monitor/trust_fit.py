@@ -41,8 +41,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import optimize
-from scipy.stats import qmc
 
 from trust_monitor.errors import TrustMonitorError
 from trust_monitor.model_interface import (
@@ -169,23 +167,44 @@ def model_spec(trust: TrustConfig, name: str, values: Mapping[str, Any] | None =
                      tuple(p for p in declared if not p.identifiable), observation)
 
 
+@dataclass(frozen=True)
+class _Timeline:
+    """A drive's step lengths and, per rating, the number of steps completed by then (the
+    same for every model: a fit reads it once per drive, not at every evaluation)."""
+
+    scores: np.ndarray
+    dt: np.ndarray
+    done: np.ndarray
+
+    @classmethod
+    def of(cls, drive: RatedDrive) -> _Timeline:
+        t = np.asarray(drive.times_s, float)
+        steps = np.diff(t)
+        dt = np.append(steps, np.median(steps))
+        done = np.searchsorted(t + dt, np.asarray(drive.rating_times_s, float)
+                               + TIME_TOLERANCE_S, side='right')
+        return cls(np.asarray(drive.scores), dt, done)
+
+
 def model_trust(model: TrustModel, drive: RatedDrive,
                 every_step: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The model's trust on the common scale at each rating time (after every step
     completed by then; before any: the initial trust), and after each step when
     ``every_step`` (else an empty array: the fit reads the rating times only)."""
-    t = np.asarray(drive.times_s, float)
-    steps = np.diff(t)
-    dt = np.append(steps, np.median(steps))
-    done = np.searchsorted(t + dt, np.asarray(drive.rating_times_s, float) + TIME_TOLERANCE_S,
-                           side='right')
+    return _trust_on(model, _Timeline.of(drive), every_step)
+
+
+def _trust_on(model: TrustModel, timeline: _Timeline,
+              every_step: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`model_trust` on a drive's :class:`_Timeline`."""
+    dt, done = timeline.dt, timeline.done
     state = model.initial_state()
     initial = common_trust(model, state)
     wanted = set(int(k) - 1 for k in done if k > 0)
-    after = np.full(len(t), np.nan)
-    last = max(wanted) if wanted and not every_step else len(t) - 1
+    after = np.full(len(dt), np.nan)
+    last = max(wanted) if wanted and not every_step else len(dt) - 1
     for i in range(last + 1):
-        state = model.step(state, float(drive.scores[i]), float(dt[i]))
+        state = model.step(state, float(timeline.scores[i]), float(dt[i]))
         if every_step or i in wanted:
             after[i] = common_trust(model, state)
     at = np.where(done > 0, after[np.maximum(done - 1, 0)], initial)
@@ -273,9 +292,11 @@ def fit(spec: ModelSpec, drives: Sequence[RatedDrive], seed: int = 0) -> Fit:
         return {p.name: min(max(_from_search(p, float(v)), p.low), p.high)
                 for p, v in zip(params, x, strict=True)}
 
+    timelines = [_Timeline.of(d) for d in drives]
+
     def trust_at(x: np.ndarray) -> np.ndarray:
         model = spec.build(theta_of(x))
-        return np.concatenate([model_trust(model, d)[1] for d in drives])
+        return np.concatenate([_trust_on(model, timeline)[1] for timeline in timelines])
 
     def objective(x: np.ndarray) -> float:
         evaluations[0] += 1
@@ -288,6 +309,9 @@ def fit(spec: ModelSpec, drives: Sequence[RatedDrive], seed: int = 0) -> Fit:
     if not params:
         x_best = np.array([])
     else:
+        from scipy import optimize  # lazy: importing scipy costs every trust-av start
+        from scipy.stats import qmc
+
         rng = np.random.Generator(np.random.PCG64(seed))
         low, high = [b[0] for b in box], [b[1] for b in box]
         spread = qmc.Sobol(len(params), seed=rng).random(SPREAD_STARTS)
