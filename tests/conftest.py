@@ -33,9 +33,9 @@ def run_config() -> RunConfig:
 def us06_graph_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     """One graph run read by many tests (test_graph, test_foxglove_layout,
     test_compare_trust_models, test_compare_runs): ``trust-av run`` on US06, TAC-CA, alpha
-    0.5, 120 steps, with its plot (support.graph.run_command); the bag directory and the command's stdout. Tests
-    only read it. The tests that use it form one xdist group (pytest_collection_modifyitems),
-    so the suite runs it once."""
+    0.5, 120 steps, with its plot (support.graph.run_command); the bag directory and the
+    command's stdout. Tests only read it. The tests that use it form one xdist group
+    (pytest_collection_modifyitems), so the suite runs it once."""
     from support.graph import run_command
 
     bag = tmp_path_factory.mktemp('graph') / 'us06'
