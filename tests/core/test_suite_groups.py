@@ -125,7 +125,7 @@ def test_a_test_that_times_out_fails_alone_and_the_run_goes_on(tmp_path: Path) -
             return 1
 
 
-        @pytest.mark.timeout(2)
+        @pytest.mark.timeout(10)
         def test_hangs_beside_its_group(shared):
             time.sleep(120)
 
@@ -135,7 +135,7 @@ def test_a_test_that_times_out_fails_alone_and_the_run_goes_on(tmp_path: Path) -
             time.sleep(0.2)
 
 
-        @pytest.mark.timeout(2)
+        @pytest.mark.timeout(10)
         def test_hangs():
             time.sleep(120)
 
@@ -150,6 +150,9 @@ def test_a_test_that_times_out_fails_alone_and_the_run_goes_on(tmp_path: Path) -
          str(tmp_path), str(tmp_path / 'test_probe.py')],
         cwd=tmp_path, capture_output=True, text=True, timeout=600)  # a hang guard only
     out = proc.stdout + proc.stderr
+    # (the hung tests' 10 s: a worker killed while xdist still brings the workers up, as a
+    # 2 s timeout on a loaded machine did, is xdist's own INTERNALERROR; the suite's tests
+    # time out after 300 s, long after every worker is up)
     assert proc.returncode == 1, out
     assert 'INTERNALERROR' not in out, out
     # each hung test once, and every other test of its group (module fixture) still ran

@@ -51,13 +51,16 @@ from trust_monitor.model_interface import (
     make_trust_model,
 )
 from trust_monitor.paper_trust import TrustConfig
+from trust_monitor.rating_observation import (
+    OBSERVATIONS,
+    Observation,
+    fit_observation,
+    log_density,
+)
 
 __all__ = ['Fit', 'FitError', 'ModelSpec', 'Observation', 'RatedDrive', 'Score', 'by_participant',
            'compare', 'fit', 'held_out', 'model_spec', 'model_trust']
 
-OBSERVATIONS = ('linear', 'direct')
-MIN_RATING_STD = 0.5 / 100.0
-"""The observation noise s is at least half a rating point (ratings are whole numbers)."""
 STARTS = 8
 """Random starts drawn from the prior besides its mean."""
 SPREAD_STARTS = 64
@@ -209,41 +212,6 @@ def _trust_on(model: TrustModel, timeline: _Timeline,
             after[i] = common_trust(model, state)
     at = np.where(done > 0, after[np.maximum(done - 1, 0)], initial)
     return (after if every_step else np.array([])), at
-
-
-@dataclass(frozen=True)
-class Observation:
-    """Fitted observation model: rating / 100 = a + b T + N(0, s^2)."""
-
-    a: float
-    b: float
-    s: float
-
-    def mean(self, trust: np.ndarray) -> np.ndarray:
-        """Predicted rating / 100."""
-        return self.a + self.b * np.asarray(trust)
-
-
-def fit_observation(kind: str, trust: np.ndarray, y: np.ndarray) -> Observation:
-    """Least-squares (= maximum likelihood) a, b >= 0 and s for ratings / 100 ``y``."""
-    if kind == 'direct':
-        a, b = 0.0, 1.0
-    else:
-        spread = float(np.var(trust))
-        b = (float(np.mean((trust - trust.mean()) * (y - y.mean()))) / spread
-             if spread > 1e-12 else 0.0)
-        b = max(b, 0.0)
-        a = float(y.mean() - b * trust.mean())
-    s = math.sqrt(float(np.mean((y - a - b * trust) ** 2)))
-    return Observation(a, b, max(s, MIN_RATING_STD))
-
-
-def log_density(obs: Observation, trust: np.ndarray, ratings: np.ndarray) -> np.ndarray:
-    """Pointwise log density of ratings (0-100 scale) under the observation model."""
-    sd = 100.0 * obs.s
-    z = (np.asarray(ratings) - 100.0 * obs.mean(trust)) / sd
-    result: np.ndarray = -0.5 * z * z - math.log(sd * math.sqrt(2.0 * math.pi))
-    return result
 
 
 @dataclass
