@@ -15,18 +15,14 @@ says. No timing assertion: the latency figures are the benchmark's
 from __future__ import annotations
 
 import json
-import os
-import queue
-import re
-import subprocess
 import sys
 import threading
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from support.drive_process import Drive
 from support.paths import REPO
 from support.rosbag2_rules import check_bag_directory
 
@@ -43,7 +39,7 @@ from trust_av.drive.trust_rating import questionnaire_score
 from trust_av_common.registry import TRUST_MODELS, names
 
 sys.path.insert(0, str(REPO / 'benchmarks'))
-from synthetic_participant import CHROMIUM, CHROMIUM_ARGS, Participant, drive_once
+from synthetic_participant import CHROMIUM, Participant, drive_once
 
 pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),
@@ -66,64 +62,6 @@ SETTINGS = f"""/**/drive:
     condition_predictors: [ca, ca]
     condition_traces: [us06, us06]
 """
-
-
-class Drive:
-    """``trust-av drive`` in a subprocess; its output lines in a queue."""
-
-    def __init__(self, study: Path, participant: str, settings: Path,
-                 practice: bool = False) -> None:
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.output: list[str] = []
-        self.process = subprocess.Popen(
-            [sys.executable, '-m', 'trust_av.cli', 'drive', '--study', str(study),
-             '--participant', participant, '--drive-file', str(settings),
-             *([] if practice else ['--no-practice'])],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            env={**os.environ, 'PYTHONUNBUFFERED': '1'})
-        threading.Thread(target=self._read, daemon=True).start()
-        self.url = self.wait_for(r'open (http://\S+)').group(1)
-
-    def _read(self) -> None:
-        assert self.process.stdout is not None
-        for line in self.process.stdout:
-            self.lines.put(line)
-
-    def wait_for(self, pattern: str, timeout_s: float = 120.0) -> re.Match[str]:
-        while True:
-            try:
-                line = self.lines.get(timeout=timeout_s)
-            except queue.Empty:
-                raise AssertionError(f'no line matching {pattern!r}; output so far:\n'
-                                     + ''.join(self.output)) from None
-            self.output.append(line)
-            found = re.search(pattern, line)
-            if found:
-                return found
-
-    def finish(self, timeout_s: float = 120.0) -> str:
-        code = self.process.wait(timeout=timeout_s)
-        while not self.lines.empty():
-            self.output.append(self.lines.get())
-        text = ''.join(self.output)
-        assert code == 0, text
-        return text
-
-    def kill(self) -> None:
-        if self.process.poll() is None:
-            self.process.terminate()
-            self.process.wait(timeout=60)
-
-
-@pytest.fixture
-def browser() -> Iterator[Any]:
-    from playwright.sync_api import sync_playwright
-    with sync_playwright() as playwright:
-        chromium = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            yield chromium
-        finally:
-            chromium.close()
 
 
 def _messages(bag: Path, topic: str) -> list[Any]:

@@ -17,18 +17,14 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import queue
 import re
-import subprocess
 import sys
-import threading
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from support.drive_process import Drive
 from support.paths import REPO
 from support.rosbag2_rules import check_bag_directory
 
@@ -36,7 +32,7 @@ from trust_av.drive.bag_data import custom_data, read_drive
 from trust_av.drive.gate import reason_key
 
 sys.path.insert(0, str(REPO / 'benchmarks'))
-from synthetic_participant import CHROMIUM, CHROMIUM_ARGS
+from synthetic_participant import CHROMIUM
 
 pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),
@@ -103,62 +99,6 @@ the AV's commanded acceleration, the time left, collisions, the phase; nothing a
 model's trust."""
 
 
-class Drive:
-    """``trust-av drive`` in a subprocess; its output lines in a queue."""
-
-    def __init__(self, study: Path, settings: Path) -> None:
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.output: list[str] = []
-        self.process = subprocess.Popen(
-            [sys.executable, '-m', 'trust_av.cli', 'drive', '--study', str(study),
-             '--participant', 'P09', '--drive-file', str(settings)],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            env={**os.environ, 'PYTHONUNBUFFERED': '1'})
-        threading.Thread(target=self._read, daemon=True).start()
-        self.url = self.wait_for(r'open (http://\S+)').group(1)
-
-    def _read(self) -> None:
-        assert self.process.stdout is not None
-        for line in self.process.stdout:
-            self.lines.put(line)
-
-    def wait_for(self, pattern: str, timeout_s: float = 120.0) -> re.Match[str]:
-        while True:
-            try:
-                line = self.lines.get(timeout=timeout_s)
-            except queue.Empty:
-                raise AssertionError(f'no line matching {pattern!r}; output so far:\n'
-                                     + ''.join(self.output)) from None
-            self.output.append(line)
-            found = re.search(pattern, line)
-            if found:
-                return found
-
-    def finish(self, timeout_s: float = 120.0) -> str:
-        code = self.process.wait(timeout=timeout_s)
-        while not self.lines.empty():
-            self.output.append(self.lines.get())
-        text = ''.join(self.output)
-        assert code == 0, text
-        return text
-
-    def kill(self) -> None:
-        if self.process.poll() is None:
-            self.process.terminate()
-            self.process.wait(timeout=60)
-
-
-@pytest.fixture
-def browser() -> Iterator[Any]:
-    from playwright.sync_api import sync_playwright
-    with sync_playwright() as playwright:
-        chromium = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            yield chromium
-        finally:
-            chromium.close()
-
-
 def _events(bag: Path) -> list[tuple[str, dict[str, str]]]:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
@@ -177,7 +117,7 @@ def test_gas_held_at_the_start_hits_the_av_and_the_protocol_decides(
     settings = tmp_path / 'drive.yaml'
     settings.write_text(SETTINGS.format(duration=DRIVE_S, protocol=protocol))
     study = tmp_path / 'study'
-    drive = Drive(study, settings)
+    drive = Drive(study, 'P09', settings, practice=True)
     try:
         page = browser.new_page(viewport={'width': 1000, 'height': 760})
         page.add_init_script(RECORD_RECEIVED)
@@ -303,7 +243,7 @@ def test_stray_messages_in_every_phase_are_refused_and_never_stored(
     settings.write_text(SETTINGS.format(duration=15.0, protocol='continue').replace(
         'rating_period_s: 60.0', 'rating_period_s: 4.0'))
     study = tmp_path / 'study'
-    drive = Drive(study, settings)
+    drive = Drive(study, 'P09', settings, practice=True)
     try:
         page = browser.new_page(viewport={'width': 1000, 'height': 760})
         page.goto(drive.url)
