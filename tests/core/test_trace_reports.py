@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from support.study import InlineExecutor
 
 from trust_av.study import sweep, trace_reports
 from trust_av.study.sweep import Case
@@ -18,19 +19,6 @@ from trust_av.system.config import DEFAULT_PARAMS_FILE
 from trust_av_common.registry import TRUST_MODELS, names
 
 MODELS = ('paper', 'beta_bernoulli')
-
-
-class InlineExecutor:
-    """Runs cases in this process (a test's study needs no worker pool)."""
-
-    def __init__(self) -> None:
-        self.ran: list[Case] = []
-
-    def run(self, cases, params_file, on_result,  # type: ignore[no-untyped-def]
-            settings=None) -> None:
-        for case in cases:
-            self.ran.append(case)
-            on_result(case, sweep.run_case(case, params_file, settings or sweep.RunSettings()))
 
 
 @pytest.fixture

@@ -9,25 +9,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from support.study import InlineExecutor
 
 from trust_av.study import population, sweep, tables
 from trust_av.study.paper_results import TABLE_II_TAC_GRU_US06, TABLE_III_TAC_CA_US06
 from trust_av.study.sweep import Case
 from trust_av.system.config import DEFAULT_PARAMS_FILE, load_run_config
-
-
-class InlineExecutor:
-    """Runs cases in this process and remembers which it was asked to run."""
-
-    def __init__(self) -> None:
-        self.ran: list[Case] = []
-
-    def run(self, cases, params_file, on_result,  # type: ignore[no-untyped-def]
-            settings=None) -> None:
-        for case in cases:
-            self.ran.append(case)
-            on_result(case, sweep.run_case(case, params_file,
-                                               settings or sweep.RunSettings()))
 
 
 @pytest.fixture
