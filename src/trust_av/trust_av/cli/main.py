@@ -74,16 +74,24 @@ def main(argv: list[str] | None = None) -> int:
             stop_signals.deliver_pending(working=code == 0)
             return code
         except TrustAvError as err:
-            print(f'trust-av {args.command}: error: {one_line(err)}', file=sys.stderr)
+            say(f'trust-av {args.command}: error: {one_line(err)}')
             return 2
         except KeyboardInterrupt as err:
             # Everything started has been stopped and every recording finished on the way.
             signum = err.signum if isinstance(err, stop_signals.Stopped) else signal.SIGINT
             what = 'interrupted' if signum == signal.SIGINT else \
                 f'stopped by {signal.Signals(signum).name}'
-            print(f'trust-av {args.command}: {what}; everything it started was stopped and '
-                  'its recordings finished', file=sys.stderr)
+            say(f'trust-av {args.command}: {what}; everything it started was stopped and '
+                'its recordings finished')
             return 128 + int(signum)
+
+
+def say(line: str) -> None:
+    """``line`` and its newline on stderr in one write: with ``PYTHONUNBUFFERED`` print's two
+    writes can be split by another process writing to the same stderr (a child's
+    multiprocessing resource tracker warning at exit), and the line is no longer one line."""
+    sys.stderr.write(line + '\n')
+    sys.stderr.flush()
 
 
 if __name__ == '__main__':
