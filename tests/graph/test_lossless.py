@@ -295,9 +295,10 @@ def test_the_followers_own_pause_does_not_count_as_a_stall(
     way when the loop resumes, which the CLI test above cannot make sure of, as the nodes go
     on without a suspended ``trust-av run``), then both going on: the run succeeds, because
     a turn of the loop longer than ``OWN_PAUSE_S`` (2 s) is the process's own pause, not the
-    graph's. In process, with an 8 s stall timeout and the test-only slow disk (20 ms per
+    graph's. In process, with a 20 s stall timeout (8 s stalled once after the pause on a
+    loaded CI host) and the test-only slow disk (20 ms per
     chunk: the run lasts at least 6 s, so the pause comes mid-run); the pause is taken in
-    ``on_step`` once the recorder's progress has been reported twice, lasts 10 s, and the
+    ``on_step`` once the recorder's progress has been reported twice, lasts 24 s, and the
     recorder stays stopped 1 s beyond it, so that without the rule the first turn after the
     pause would end the run naming the stopped recorder."""
     from preceding_traffic.sources import load_trace
@@ -305,7 +306,7 @@ def test_the_followers_own_pause_does_not_count_as_a_stall(
     from trust_av.graph.orchestrator import run_graph
     from trust_av.system.config import load_run_config
 
-    step_timeout_s, pause_s = 8.0, 10.0
+    step_timeout_s, pause_s = 20.0, 24.0
     assert pause_s > step_timeout_s
     monkeypatch.setenv('TRUST_AV_TEST_WRITE_DELAY_S', '0.02')
     config = load_run_config()
