@@ -200,6 +200,13 @@ def trust_av(*args: str) -> subprocess.Popen[str]:
                             start_new_session=True)
 
 
+def stored_cases(cache: Path) -> list[Path]:
+    """The cases stored in a sweep's cache: ``<key>.json``, not the temporary file
+    ``.<key>.json.XXXX.tmp.json`` a case is written to before its rename (pathlib's glob
+    matches names that start with a dot; a stop before the rename removes it)."""
+    return [path for path in cache.glob('*.json') if not path.name.startswith('.')]
+
+
 @pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGHUP], ids=['SIGTERM', 'SIGHUP'])
 def test_a_stop_ends_a_sweep_and_its_workers(tmp_path: Path, signum: int) -> None:
     """SIGTERM to ``trust-av reproduce`` alone (as ``docker stop`` or systemd send it), or
@@ -213,7 +220,7 @@ def test_a_stop_ends_a_sweep_and_its_workers(tmp_path: Path, signum: int) -> Non
     proc = trust_av(*sweep)
     cache = tmp_path / 'cache'
     deadline = time.monotonic() + 120
-    while not list(cache.glob('*.json')) and time.monotonic() < deadline:
+    while not stored_cases(cache) and time.monotonic() < deadline:
         time.sleep(0.05)
     workers = descendants(proc.pid)
     assert len(workers) >= 2                     # the two workers (and Python's helpers)
@@ -226,11 +233,11 @@ def test_a_stop_ends_a_sweep_and_its_workers(tmp_path: Path, signum: int) -> Non
     assert err.splitlines() == [f'trust-av reproduce: stopped by {signal.Signals(signum).name}; '
                                 'everything it started was stopped and its recordings finished']
     assert_all_exit(workers)
-    stored = list(cache.glob('*.json'))
+    stored = stored_cases(cache)
     assert 1 <= len(stored) < cases, len(stored)
     for path in stored:
         json.loads(path.read_text())
-    assert not list(cache.glob('*.tmp'))
+    assert not list(cache.glob('.*')), 'a temporary file was left'
 
 
 CUT_OFF_RESULT = textwrap.dedent("""
