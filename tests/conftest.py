@@ -3,6 +3,7 @@ tiers and its xdist grouping. Helpers shared between test modules are in ``suppo
 
 from __future__ import annotations
 
+import signal
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -55,6 +56,24 @@ TIERS = ('core', 'graph', 'browser')
 ``core`` the pure core and whatever runs without a ROS graph (no node process, no rclpy
 context), ``graph`` multi-process node-graph runs and rclpy contexts, ``browser`` the drive
 page in Chromium. ``pytest tests/core -m "not slow"`` is the fast lane (docs/contributing.md)."""
+
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@pytest.fixture(autouse=True)
+def signal_handlers_kept() -> Iterator[None]:
+    """A test that leaves a stop signal's handler changed fails (and the handler is put
+    back): a child process inherits an ignored SIGINT or SIGHUP, so one test's leftover
+    would change what later tests in the same worker see (a Ctrl-C that never arrives)."""
+    before = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
+    yield
+    changed = {signal.Signals(signum).name: after for signum in STOP_SIGNALS
+               if (after := signal.getsignal(signum)) != before[signum]}
+    for signum, handler in before.items():
+        if handler is not None:
+            signal.signal(signum, handler)
+    assert not changed, f'the test left these signal handlers changed: {changed}'
 
 
 def tier(path: Path) -> str | None:

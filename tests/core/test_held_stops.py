@@ -84,7 +84,14 @@ def test_every_held_signal_is_delivered_in_order_and_the_first_stop_wins() -> No
 
 
 def test_an_ignored_signal_stays_ignored_and_other_threads_hold_nothing() -> None:
+    """SIGHUP ignored stays ignored through a hold; a hold in another thread leaves the
+    main thread's handler as it was (this test's own: what an earlier test in the same
+    worker process left on SIGINT does not matter)."""
+    def own_handler(_signum: int, _frame: Any) -> None:
+        raise AssertionError('SIGINT was delivered')
+
     previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    previous_int = signal.signal(signal.SIGINT, own_handler)
     try:
         with held():
             assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
@@ -97,9 +104,11 @@ def test_an_ignored_signal_stays_ignored_and_other_threads_hold_nothing() -> Non
         thread = threading.Thread(target=in_a_thread)
         thread.start()
         thread.join()
-        assert seen == [signal.default_int_handler]
+        assert seen == [own_handler]
+        assert signal.getsignal(signal.SIGINT) is own_handler
     finally:
         signal.signal(signal.SIGHUP, previous)
+        signal.signal(signal.SIGINT, previous_int)
 
 
 def test_the_solves_of_both_mpcs_go_through_the_hold() -> None:
