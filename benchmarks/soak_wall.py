@@ -15,15 +15,15 @@ after the previous trip's end, written with the project's own bag writer
 (:func:`preceding_traffic.bags.write_trace_bag`) as one rosbag2 bag in a temporary
 directory, which ``preceding_traffic`` replays at real-time speed.
 
-Every minute (and once in the last second) it samples each node process's and its own
-resident memory (``/proc/<pid>/status`` VmRSS), open file descriptors (``/proc/<pid>/fd``)
-and threads (``/proc/<pid>/task``). At the end it reads the bag back with rosbags and checks,
-every topic the run records (the table's topics but the step clock and ``/sim/start``; the
-bag holds exactly these), against its publishing nodes' own count of what they published
-(their loop statistics, ``jitter_report_path``, summed over the topic's publishers, plus the
-table's ``initial`` messages each node publishes before its loop starts) and the DDS
-publication sequence number of every recorded message (each publisher's own count, from 1;
-the publishers of ``/tf`` are told apart by the transform's child frame):
+Every minute (``--sample-s``; and once in the last second) it samples each node process's
+and its own resident memory (``/proc/<pid>/status`` VmRSS), open file descriptors
+(``/proc/<pid>/fd``) and threads (``/proc/<pid>/task``). At the end it reads the bag back
+with rosbags and checks, every topic the run records (the table's topics but the step clock
+and ``/sim/start``; the bag holds exactly these), against its publishing nodes' own count of
+what they published (their loop statistics, ``jitter_report_path``, summed over the topic's
+publishers, plus the table's ``initial`` messages each node publishes before its loop
+starts) and the DDS publication sequence number of every recorded message (each publisher's
+own count, from 1; the publishers of ``/tf`` are told apart by the transform's child frame):
 
 - holes: no sequence number of a publisher is missing between its first and last recorded
   message;
@@ -156,11 +156,12 @@ class Sources:
 
 
 class Sampler:
-    """The once-a-second callback of the run: a sample per process each minute and one in
-    the run's last second."""
+    """The once-a-second callback of the run: a sample per process every ``sample_s``
+    seconds (a minute by default) and one in the run's last second."""
 
-    def __init__(self, duration_s: float) -> None:
+    def __init__(self, duration_s: float, sample_s: float = 60.0) -> None:
         self.duration_s = duration_s
+        self.sample_s = sample_s
         self.series: dict[str, list[dict[str, float]]] = {}
         self.start_ns: int | None = None
         self._next_s = 0.0
@@ -173,7 +174,7 @@ class Sampler:
         if elapsed_s < self._next_s and not last:
             return
         if elapsed_s >= self._next_s:
-            self._next_s += 60.0
+            self._next_s += self.sample_s
         self._final = self._final or last
         for name, pid in {**pids, RECORDER: os.getpid()}.items():
             self.series.setdefault(name, []).append(
@@ -195,7 +196,7 @@ def run_soak(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     config = load_run_config((), {'preceding_traffic': {'trace': str(chain)},
                                   'planner': {'predictor': args.predictor}})
     trace = load_trace(str(chain), config.planner.dt_s, config.trace)
-    sampler = Sampler(duration_s)
+    sampler = Sampler(duration_s, args.sample_s)
     sequences: dict[str, Sequences] = {}
 
     sources = Sources(topics)
@@ -276,6 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--baseline-min', type=float, default=5.0,
                         help='growth is measured from this minute to the end (default: '
                              '%(default)s)')
+    parser.add_argument('--sample-s', type=float, default=60.0,
+                        help='seconds between two samples of every process (default: '
+                             '%(default)s; one more is taken in the last second)')
     parser.add_argument('--rss-limit-mb', type=float, default=20.0)
     parser.add_argument('--max-gap-s', type=float, default=1.0)
     parser.add_argument('--rate-hz', type=float, default=10.0)
@@ -290,6 +294,10 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.duration_min > args.baseline_min >= 0 and args.duration_min * 60 >= 2):
         print(f'error: --duration-min ({args.duration_min:g}) must exceed --baseline-min '
               f'({args.baseline_min:g}) >= 0', file=sys.stderr)
+        return 2
+    if not 1.0 <= args.sample_s <= args.duration_min * 60.0:
+        print(f'error: --sample-s ({args.sample_s:g}) must be 1 s or more and at most the '
+              'duration', file=sys.stderr)
         return 2
     if args.keep is not None:
         args.keep.mkdir(parents=True, exist_ok=True)

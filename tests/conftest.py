@@ -61,19 +61,38 @@ page in Chromium. ``pytest tests/core -m "not slow"`` is the fast lane (docs/con
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
+def os_signal_state() -> dict[str, set[str]]:
+    """The stop signals this thread blocks and this process ignores, as the kernel holds
+    them (``/proc/thread-self/status``: a C library can change them behind Python's back,
+    and a child process inherits both)."""
+    fields = dict(line.split(':', 1) for line in
+                  Path('/proc/thread-self/status').read_text().splitlines() if ':' in line)
+    return {key: {signal.Signals(signum).name for signum in STOP_SIGNALS
+                  if int(fields[key], 16) >> (signum - 1) & 1}
+            for key in ('SigBlk', 'SigIgn')}
+
+
 @pytest.fixture(autouse=True)
 def signal_handlers_kept() -> Iterator[None]:
-    """A test that leaves a stop signal's handler changed fails (and the handler is put
-    back): a child process inherits an ignored SIGINT or SIGHUP, so one test's leftover
-    would change what later tests in the same worker see (a Ctrl-C that never arrives)."""
+    """A test that leaves a stop signal's handler changed, or the signal blocked or ignored,
+    fails (and the state is put back): a child process inherits an ignored or blocked
+    SIGINT, so one test's leftover would change what later tests in the same worker see
+    (a Ctrl-C that never arrives)."""
     before = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
+    kernel_before = os_signal_state()
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, set())
     yield
-    changed = {signal.Signals(signum).name: after for signum in STOP_SIGNALS
-               if (after := signal.getsignal(signum)) != before[signum]}
+    changed: dict[str, object] = {signal.Signals(signum).name: after for signum in STOP_SIGNALS
+                                  if (after := signal.getsignal(signum)) != before[signum]}
+    kernel_after = os_signal_state()
+    if kernel_after != kernel_before:
+        changed['kernel'] = kernel_after
     for signum, handler in before.items():
         if handler is not None:
             signal.signal(signum, handler)
-    assert not changed, f'the test left these signal handlers changed: {changed}'
+    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    assert not changed, (f'the test left these signal handlers changed: {changed} '
+                         f'(before: {kernel_before})')
 
 
 def tier(path: Path) -> str | None:

@@ -213,14 +213,15 @@ def test_soak_wall_growth_checks() -> None:
 
 
 @pytest.mark.wall_clock
-def test_soak_wall_two_minutes(tmp_path: Path) -> None:
-    """benchmarks/soak_wall.py for 2 minutes of wall time (baseline minute 1): every node
-    and the recorder sampled each minute, every published message in the bag but the
+def test_soak_wall_short(tmp_path: Path) -> None:
+    """benchmarks/soak_wall.py for 45 s of wall time (baseline at 15 s): every node and
+    the recorder sampled every 15 s, every published message in the bag but the
     documented start and stop edges, no hole, no gap over 1 s, no fd or thread growth (the
     30-minute run: `python benchmarks/soak_wall.py`; no timing threshold)."""
     out = tmp_path / 'soak_wall.json'
     proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'soak_wall.py'),
-                           '--duration-min', '2', '--baseline-min', '1', '--out', str(out)],
+                           '--duration-min', '0.75', '--baseline-min', '0.25', '--sample-s', '15',
+                           '--out', str(out)],
                           capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     from trust_av_common.topics import TOPICS, qualified
@@ -228,7 +229,7 @@ def test_soak_wall_two_minutes(tmp_path: Path) -> None:
     figures = json.loads(out.read_text())
     assert figures['problems'] == []
     assert set(figures['growth']) == {*NODES, RECORDER}
-    assert all(len(s) >= 3 for s in figures['series'].values())
+    assert all(len(s) >= 4 for s in figures['series'].values())   # 0, 15, 30 s, the end
     assert all(g['fds'] <= 0 and g['threads'] <= 0 and g['rss_mb'] <= 20.0
                for g in figures['growth'].values())
     table = {qualified(t.name): t for t in recorded_topics()}
@@ -239,7 +240,7 @@ def test_soak_wall_two_minutes(tmp_path: Path) -> None:
         assert row['publishers_seen'] == len(publishers), row
         assert row['holes'] == 0 and 0 <= row['stop_edge'] <= STOP_EDGE * len(publishers), row
         assert row['published'] - row['recorded'] == row['start_edge'] + row['stop_edge'], row
-        assert row['recorded'] >= 0.5 * 120 * figures['rate_hz'], row
+        assert row['recorded'] >= 0.5 * 45 * figures['rate_hz'], row
         assert row['max_gap_s'] <= 1.0, row
     assert all(figures['loops'][node]['ticks'] > 0 for node in NODES)
 

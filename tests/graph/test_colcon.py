@@ -109,7 +109,8 @@ def in_install(install: Path, command: str, tmp_path: Path, domain: str = '232',
 
 
 def test_installed_copy_finds_its_share(install: Path, tmp_path: Path) -> None:
-    proc = in_install(install, 'python3 -c "import trust_av_common.param_layers as m; '
+    # this interpreter (the venv's, with ament_index_python) whether or not PATH leads to it
+    proc = in_install(install, f'{sys.executable} -c "import trust_av_common.param_layers as m; '
                                'print(m.__file__); print(m.shipped_params_file()); '
                                "print(m.shipped_params_file('fastdds_graph.xml'))\"", tmp_path)
     assert proc.returncode == 0, proc.stderr

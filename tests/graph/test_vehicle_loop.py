@@ -378,17 +378,19 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
 
 
 _VEHICLE_RUNS: list[dict[str, Any]] = []
+LOOP_S = 40.0     # the vehicle-in-the-loop run's wall time, s
+OUTAGE_S = 15.0   # when the lead falls silent for 1 s
 
 
 @pytest.fixture(scope='module')
 def vehicle_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    """60 s at 10 Hz against the stand-in vehicle (commute_am; measurements 50 ms late,
-    5 % dropped, the lead silent for 1 s at 30 s), connected by remapping only. Run once per
+    """40 s at 10 Hz against the stand-in vehicle (commute_am; measurements 50 ms late,
+    5 % dropped, the lead silent for 1 s at 15 s), connected by remapping only. Run once per
     test process: an xdist worker handed one test at a time tears module fixtures down
     between the two tests that read it."""
     if not _VEHICLE_RUNS:
         out = tmp_path_factory.mktemp('vehicle_loop')
-        data = run_vehicle_loop(out, duration_s=60.0, rate_hz=10.0, outage_start_s=30.0,
+        data = run_vehicle_loop(out, duration_s=LOOP_S, rate_hz=10.0, outage_start_s=OUTAGE_S,
                                 outage_s=1.0, drop_fraction=0.05, seed=1)
         (out / 'report.json').write_text(json.dumps(data))
         _VEHICLE_RUNS.append(data)
@@ -399,7 +401,7 @@ def vehicle_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 def test_vehicle_in_the_loop_gap_and_commands(vehicle_run: dict[str, Any]) -> None:
     config = load_run_config()
     ticks = vehicle_run['ticks']
-    assert ticks[-1]['t_s'] >= 59.0 and len(ticks) >= 550
+    assert ticks[-1]['t_s'] >= LOOP_S - 1.0 and len(ticks) >= 0.9 * LOOP_S * 10
     margin = config.planner.standstill_gap_m - config.shared.safety_gap_margin_m
     assert min(t['gap_m'] for t in ticks) >= margin
     deadline = vehicle_run['command_deadline_s']
@@ -409,7 +411,7 @@ def test_vehicle_in_the_loop_gap_and_commands(vehicle_run: dict[str, Any]) -> No
     assert max(ages) <= deadline             # ... and none older than its deadline
     assert all(t['applied_mps2'] == 0.0 for t in ticks if t['command_age_s'] is None)
     sent = vehicle_run['sent']
-    dropped = sum(not s['sent'] for s in sent if not 30.0 <= s['t_s'] < 31.0)
+    dropped = sum(not s['sent'] for s in sent if not OUTAGE_S <= s['t_s'] < OUTAGE_S + 1.0)
     assert 0.02 < dropped / len(sent) < 0.09
     assert max(t['ego_speed_mps'] for t in ticks) > 5.0  # it drove
 
@@ -431,16 +433,17 @@ def test_vehicle_in_the_loop_outage_decelerates_then_recovers(
     first_plan = min(s['t_s'] for s in statuses if s['level'] == 0)
     assert all(s['reason'].startswith('missing') for s in stale if s['t_s'] < first_plan)
     outage = [s for s in stale if s['t_s'] > first_plan]
-    assert outage and all(30.3 <= s['t_s'] <= 31.8 for s in outage), [  # 30-31 s + 0.5 s
-        (s['t_s'], s['reason']) for s in stale]
-    assert min(s['t_s'] for s in outage) <= 30.8
-    applied = [t for t in vehicle_run['ticks'] if 30.8 <= t['t_s'] <= 31.2]
+    assert outage and all(OUTAGE_S + 0.3 <= s['t_s'] <= OUTAGE_S + 1.8 for s in outage), [
+        (s['t_s'], s['reason']) for s in stale]             # the 1 s outage + 0.5 s stale
+    assert min(s['t_s'] for s in outage) <= OUTAGE_S + 0.8
+    applied = [t for t in vehicle_run['ticks'] if OUTAGE_S + 0.8 <= t['t_s'] <= OUTAGE_S + 1.2]
     assert any(t['applied_mps2'] == -2.0 for t in applied)
-    after = [s for s in statuses if s['t_s'] > 32.0]
+    after = [s for s in statuses if s['t_s'] > OUTAGE_S + 2.0]
     assert after and all(s['level'] != 2 for s in after)  # normal planning resumed
     trust = vehicle_run['trust']
-    late = [t for t in trust if t['t_s'] > 32.0]
-    assert len(late) >= 200 and late[-1]['trust'] > late[0]['trust'] > 0.0  # trust goes on
+    late = [t for t in trust if t['t_s'] > OUTAGE_S + 2.0]
+    assert len(late) >= 0.8 * (LOOP_S - OUTAGE_S - 2.0) * 10          # trust goes on ...
+    assert late[-1]['trust'] > late[0]['trust'] > 0.0                # ... and grows
 
 
 def test_reproduce_with_lead_preview_adds_a_params_layer(tmp_path: Path) -> None:

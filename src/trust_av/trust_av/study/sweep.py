@@ -13,14 +13,16 @@ default (one per core), or Ray (optional extra, ``--executor ray``).
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
 import hashlib
 import json
 import logging
 import os
+import signal
 import socket
-import sys
-from collections.abc import Callable, Iterable, Sequence
+import threading
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -28,11 +30,12 @@ from typing import Any, Protocol
 from human_driver_sim.population import WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
+from trust_av.study.fingerprint import code_fingerprint, plugin_sources
 from trust_av.study.workers import worker_pool
 from trust_av.system.closed_loop import simulate
 from trust_av.system.config import RunConfig, load_run_config
 from trust_av.system.metrics import StepRecord, compute_metrics
-from trust_av_common import output_files, registry
+from trust_av_common import output_files
 from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['ALPHAS', 'METRICS', 'PAPER_PREDICTORS', 'TRACES', 'Case', 'Executor', 'LocalExecutor',
@@ -46,14 +49,7 @@ PAPER_PREDICTORS = ('gru', 'ca')
 """The paper's plan estimators (TAC-GRU, TAC-CA): ``reproduce``'s default axis."""
 ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 METRICS = ('final_trust', 'mean_explicability', 'rmse_mps2')
-PACKAGES = ('trust_av_common', 'preceding_traffic', 'trust_monitor', 'human_driver_sim',
-            'trust_av_planner', 'trust_av')
 RUNNERS = ('in-process', 'graph')
-PRESENTATION_MODULES = ('plots.py', 'paper_results.py', 'tables.py', 'frame.py',
-                        'trace_reports.py', 'compare_runs.py')
-"""Files that cannot change a run's numbers: left out of the cache key (so is ``cli/``)."""
-
-
 @dataclass(frozen=True)
 class Case:
     """One closed loop of the sweep.
@@ -92,38 +88,6 @@ class Case:
     def base(self) -> Case:
         """The same case with the params file's driver (population members grouped)."""
         return dataclasses.replace(self, driver=0, driver_params=())
-
-
-def plugin_sources() -> list[Path]:
-    """The source files of the registered components from outside the six packages (the
-    installed plug-ins' modules), in name order."""
-    files = set()
-    for group in registry.GROUPS:
-        for component in registry.components(group):
-            module = sys.modules[component.factory.__module__]
-            if module.__name__.split('.')[0] not in PACKAGES and module.__file__:
-                files.add(Path(module.__file__))
-    return sorted(files)
-
-
-def code_fingerprint() -> str:
-    """Hash of the source and data files of the six packages that results depend on, and
-    of the installed plug-ins' component modules."""
-    digest = hashlib.sha256()
-    for path in plugin_sources():
-        digest.update(path.name.encode())
-        digest.update(path.read_bytes())
-    for package in PACKAGES:
-        module = __import__(package)
-        root = Path(next(iter(module.__path__)))
-        for path in sorted(root.rglob('*')):
-            relative = path.relative_to(root)
-            if path.name in PRESENTATION_MODULES or relative.parts[0] == 'cli':
-                continue
-            if path.is_file() and path.suffix in {'.py', '.csv', '.npz', '.json', '.pt'}:
-                digest.update(str(path.relative_to(root)).encode())
-                digest.update(path.read_bytes())
-    return digest.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -348,8 +312,9 @@ class RayExecutor:
                                '(pip install ray)') from err
         started = not ray.is_initialized()
         if started:
-            ray.init(address=self.address, num_cpus=self.num_cpus, include_dashboard=False,
-                     log_to_driver=False)
+            with _stop_handlers_kept():   # ray.init installs a SIGTERM handler of its own
+                ray.init(address=self.address, num_cpus=self.num_cpus,
+                         include_dashboard=False, log_to_driver=False)
         try:
             remote = ray.remote(run_case)
             pending = {remote.remote(case, params_file, settings): case for case in cases}
@@ -364,6 +329,24 @@ class RayExecutor:
         finally:
             if started:
                 ray.shutdown()
+
+
+@contextlib.contextmanager
+def _stop_handlers_kept() -> Iterator[None]:
+    """Put the stop signals' handlers back after the block: ``ray.init`` replaces this
+    process's SIGTERM handler with one that exits at once, so a ``docker stop`` would have
+    ended a sweep without the command's own stop (workers ended, its one line)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    signums = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    handlers = {signum: signal.getsignal(signum) for signum in signums}
+    try:
+        yield
+    finally:
+        for signum, handler in handlers.items():
+            if handler is not None:
+                signal.signal(signum, handler)
 
 
 def check_axis(name: str, values: Sequence[str] | Sequence[float]) -> None:
