@@ -316,7 +316,8 @@ def _follow(session: Any, steps: int, step_timeout_s: float,
             on_step: Callable[[int, int], None] | None) -> None:
     """Until the recorder has every step and exits: health, privacy, progress, stalls.
 
-    A stall is ``step_timeout_s`` without a step recorded, not counting the time this
+    A stall is ``step_timeout_s`` without a step recorded (once every step is, without a
+    message recorded: the recorder may still be taking a backlog), not counting the time this
     process was suspended itself (a loop turn longer than :data:`OWN_PAUSE_S`: the nodes
     went on without it). Time a node of the graph spends stopped (SIGSTOP, a debugger),
     deadlocked or busy does count: it makes no progress, and the run ends naming it
@@ -325,6 +326,7 @@ def _follow(session: Any, steps: int, step_timeout_s: float,
     graph = session.graph
     recorder = graph.by_name(RECORDER)
     last, last_change = -1, time.monotonic()
+    messages = -1
     turn = last_change
     cpu_at_change = _cpu(graph)
     while recorder.popen.poll() is None:
@@ -339,6 +341,8 @@ def _follow(session: Any, steps: int, step_timeout_s: float,
             cpu_at_change = _cpu(graph)
             if on_step is not None:
                 on_step(min(last, steps), steps)
+        elif last >= steps and session.recorder_messages != messages:
+            messages, last_change = session.recorder_messages, now
         elif now - last_change > step_timeout_s:
             if last >= steps:
                 raise IncompleteRecordingError(

@@ -158,11 +158,12 @@ class RecorderNode(Node):
         self.get_logger().info('ready: every recorded topic has its publishers')
 
     def publish_status(self, state: str) -> None:
-        """``recorder/status``: the state and the steps written so far."""
+        """``recorder/status``: the state, the steps and the messages written so far."""
         self.last_status_s = time.monotonic()
         self.pub_status.publish(diagnostics(
             0, 'recorder', self.exit_code == 0, state,
-            {'state': state, 'steps': str(self.bag.steps), 'bag': str(self.bag.path)}))
+            {'state': state, 'steps': str(self.bag.steps),
+             'messages': str(sum(self.bag.counts.values())), 'bag': str(self.bag.path)}))
 
     def on_message(self, topic: str, data: bytes) -> None:
         """Write one raw message; a ``clock`` tick closes the step before it."""

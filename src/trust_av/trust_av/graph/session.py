@@ -134,6 +134,7 @@ class Session:
         self.executor = executor
         self.recorder_state = ''
         self.recorder_steps = 0
+        self.recorder_messages = 0
         self._ours = {(graph.namespace.rstrip('/') or '/', spec.name) for spec in graph.specs}
         self._ours.add((node.get_namespace(), node.get_name()))
         self._next_watch = 0.0
@@ -154,6 +155,7 @@ class Session:
         values = {kv.key: kv.value for kv in msg.status[0].values}
         self.recorder_state = values.get('state', '')
         self.recorder_steps = int(values.get('steps', '0'))
+        self.recorder_messages = int(values.get('messages', '0'))
 
     def spin(self, timeout_s: float) -> None:
         """Process this node's callbacks for at most ``timeout_s`` (a stop signal is raised
