@@ -59,6 +59,7 @@ page in Chromium. ``pytest tests/core -m "not slow"`` is the fast lane (docs/con
 
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+SIGNALS_BEFORE = pytest.StashKey[tuple[dict[int, Any], dict[str, set[str]], set[int]]]()
 
 
 def os_signal_state() -> dict[str, set[str]]:
@@ -72,27 +73,38 @@ def os_signal_state() -> dict[str, set[str]]:
             for key in ('SigBlk', 'SigIgn')}
 
 
-@pytest.fixture(autouse=True)
-def signal_handlers_kept() -> Iterator[None]:
-    """A test that leaves a stop signal's handler changed, or the signal blocked or ignored,
-    fails (and the state is put back): a child process inherits an ignored or blocked
-    SIGINT, so one test's leftover would change what later tests in the same worker see
-    (a Ctrl-C that never arrives)."""
-    before = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
-    kernel_before = os_signal_state()
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, set())
-    yield
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Note the stop signals' state before the test and its fixtures are set up (see
+    :func:`pytest_runtest_teardown`)."""
+    item.stash[SIGNALS_BEFORE] = (
+        {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}, os_signal_state(),
+        signal.pthread_sigmask(signal.SIG_BLOCK, set()))
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item: pytest.Item) -> Iterator[None]:
+    """A test (its fixtures included, module-wide ones too) that leaves a stop signal's
+    handler changed, or the signal blocked or ignored, fails in its teardown, and the state
+    is put back: a child process inherits an ignored or blocked SIGINT, so one test's
+    leftover would change what later tests in the same worker see (a Ctrl-C that never
+    arrives)."""
+    result = yield
+    if SIGNALS_BEFORE not in item.stash:
+        return result
+    handlers, kernel_before, mask = item.stash[SIGNALS_BEFORE]
     changed: dict[str, object] = {signal.Signals(signum).name: after for signum in STOP_SIGNALS
-                                  if (after := signal.getsignal(signum)) != before[signum]}
+                                  if (after := signal.getsignal(signum)) != handlers[signum]}
     kernel_after = os_signal_state()
     if kernel_after != kernel_before:
         changed['kernel'] = kernel_after
-    for signum, handler in before.items():
+    for signum, handler in handlers.items():
         if handler is not None:
-            signal.signal(signum, handler)
+            signal.signal(signum, handler)   # the kernel's state follows Python's again
     signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-    assert not changed, (f'the test left these signal handlers changed: {changed} '
-                         f'(before: {kernel_before})')
+    assert not changed, (f'the test or its fixtures left these signal handlers changed: '
+                         f'{changed} (before: {kernel_before})')
+    return result
 
 
 def tier(path: Path) -> str | None:

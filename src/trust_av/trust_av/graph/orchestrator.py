@@ -42,7 +42,7 @@ from trust_av.graph.domains import check_domain_id, check_namespace, lease_domai
 from trust_av.graph.lifecycle_client import MANAGED_NODES, set_states
 from trust_av.graph.processes import RECORDER, Graph, GraphError, NodeSpec
 from trust_av.graph.session import clashing_participants, foreign_participants, graph_session
-from trust_av.graph.stalls import BUSY_SHARE, cpu_s, waiting_for
+from trust_av.graph.stalls import BUSY_SHARE, cpu_s, waited_for
 from trust_av.system import run_record
 from trust_av.system.closed_loop import InitialState, equilibrium_start
 from trust_av.system.config import RunConfig
@@ -192,7 +192,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
             if lost:
                 raise GraphError(f'{err}; the bag lacks {lost} messages') from err
             if isinstance(err, StallError):
-                raise GraphError(f'{err}{_waited_for(bag, namespace)}') from err
+                raise GraphError(f'{err}{waited_for(bag, namespace)}') from err
             if _drop_if_no_step(bag, namespace):
                 raise GraphError(f'{err}; no step was recorded, so no bag was kept') from err
             low_disk = '' if isinstance(err, DiskFullError) else _low_disk(bag)
@@ -273,7 +273,7 @@ class IncompleteRecordingError(GraphError):
 
 class StallError(GraphError):
     """No step recorded for the stall timeout, and no node stopped or busy: the finished
-    bag tells which node the chain waits for (:func:`_waited_for`)."""
+    bag tells which node the chain waits for (:func:`trust_av.graph.stalls.waited_for`)."""
 
 
 def _drop_if_no_step(bag: Path, namespace: str) -> bool:
@@ -297,36 +297,19 @@ def _drop_if_no_step(bag: Path, namespace: str) -> bool:
     return True
 
 
-def _waited_for(bag: Path, namespace: str) -> str:
-    """``'; the chain waits for node NAME ...'`` from the finished bag's counts ('' if they
-    do not tell or the bag does not read)."""
-    from rosbags.rosbag2 import Reader, ReaderError
-
-    try:
-        with Reader(bag) as reader:
-            counts = {c.topic: c.msgcount for c in reader.connections}
-    except (ReaderError, OSError):
-        return ''
-    node = waiting_for(counts, namespace)
-    return (f'; the chain waits for node {node} (it has every input of its next step and '
-            'published nothing for it)' if node else '')
-
-
 def _follow(session: Any, steps: int, step_timeout_s: float,
             on_step: Callable[[int, int], None] | None) -> None:
     """Until the recorder has every step and exits: health, privacy, progress, stalls.
 
-    A stall is ``step_timeout_s`` without a step recorded (once every step is, without a
-    message recorded: the recorder may still be taking a backlog), not counting the time this
-    process was suspended itself (a loop turn longer than :data:`OWN_PAUSE_S`: the nodes
-    went on without it). Time a node of the graph spends stopped (SIGSTOP, a debugger),
-    deadlocked or busy does count: it makes no progress, and the run ends naming it
-    (:mod:`trust_av.graph.stalls`).
+    A stall is ``step_timeout_s`` without a step recorded (once every step is: a message),
+    not counting the time this process was suspended itself (a loop turn longer than
+    :data:`OWN_PAUSE_S`: the nodes went on without it). Time a node of the graph spends
+    stopped (SIGSTOP, a debugger), deadlocked or busy does count: it makes no progress, and
+    the run ends naming it (:mod:`trust_av.graph.stalls`).
     """
     graph = session.graph
     recorder = graph.by_name(RECORDER)
-    last, last_change = -1, time.monotonic()
-    messages = -1
+    last, messages, last_change = -1, -1, time.monotonic()
     turn = last_change
     cpu_at_change = _cpu(graph)
     while recorder.popen.poll() is None:

@@ -24,7 +24,7 @@ from pathlib import Path
 from trust_av_common.step_chain import step_chain
 from trust_av_common.topics import TOPICS, qualified
 
-__all__ = ['BUSY_SHARE', 'cpu_s', 'steps_done', 'waiting_for']
+__all__ = ['BUSY_SHARE', 'cpu_s', 'steps_done', 'waited_for', 'waiting_for']
 
 BUSY_SHARE = 0.5
 """A node that used more than this share of the stall's wall time on a CPU is busy."""
@@ -71,3 +71,18 @@ def waiting_for(counts: Mapping[str, int], namespace: str = '/') -> str:
         if node.name in done and done[node.name] < source:
             return node.name
     return ''
+
+
+def waited_for(bag: Path, namespace: str) -> str:
+    """``'; the chain waits for node NAME ...'`` from the finished bag's counts ('' if they
+    do not tell or the bag does not read)."""
+    from rosbags.rosbag2 import Reader, ReaderError
+
+    try:
+        with Reader(bag) as reader:
+            counts = {c.topic: c.msgcount for c in reader.connections}
+    except (ReaderError, OSError):
+        return ''
+    node = waiting_for(counts, namespace)
+    return (f'; the chain waits for node {node} (it has every input of its next step and '
+            'published nothing for it)' if node else '')
