@@ -23,7 +23,6 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'benchmarks'))
 from synthetic_participant import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 
-VIEWPORT = {'width': 1000, 'height': 760}
 HELLO = {'type': 'hello', 'control_rate_hz': 10.0, 'input_burst': 4,
          'accel_max_mps2': 2.5, 'accel_min_mps2': -6.0, 'on_collision': 'continue'}
 READY = {'type': 'phase', 'phase': 'ready', 'duration_s': 120.0, 'practice': False,
@@ -57,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport=VIEWPORT)
+            page = browser.new_page(viewport={'width': 1000, 'height': 760})
             page.goto(server.url)
             page.wait_for_function('window.drive.ws && window.drive.ws.readyState === 1')
             server.send(READY)
