@@ -193,6 +193,8 @@ def test_the_drivers_eye_view_is_drawn_by_the_vendored_library_from_the_page_s_o
     assert tab.evaluate('Konva.version') == KONVA_VERSION
     assert tab.evaluate('drive.view.stage instanceof Konva.Stage && '
                         "drive.view.stage.container() === document.getElementById('road')")
+    assert tab.evaluate("Array.from(document.querySelectorAll('#road canvas'))"   # no frame yet
+                        ".every((c) => c.style.display === 'none')")
     server.send({'type': 'phase', 'phase': 'driving', 'duration_s': 60.0})
     tab.wait_for_function("window.drive.phase === 'driving'")
     _states(server, 0.0)

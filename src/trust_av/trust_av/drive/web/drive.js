@@ -1,10 +1,11 @@
 // trust-av drive: the participant's page. Plain JS, no build step, nothing fetched from
 // elsewhere: the view is drawn by view.js with the vendored Konva (vendor/README.md). State
 // frames arrive over the WebSocket (a few per control period); the view is drawn at the
-// display's frame rate, interpolating the frames RENDER_DELAY_MS behind the newest one. A pedal sample is sent at once on a key or pointer press or release,
-// on any other change of the pedal at most once per control period, and at the control rate
-// while nothing changes, all within the server's rate limit (a token bucket of inputBurst
-// samples refilled at the control rate): the page keeps its own, smaller bucket, refilled a
+// display's frame rate, interpolating the frames RENDER_DELAY_MS behind the newest one. A
+// pedal sample is sent at once on a key or pointer press or release, on any other change of
+// the pedal at most once per control period, and at the control rate while nothing changes,
+// all within the server's rate limit (a token bucket of inputBurst samples refilled at the
+// control rate): the page keeps its own, smaller bucket, refilled a
 // little slower, and one sample of it for a press or release, so the server refuses none.
 // The server acknowledges samples in its frames; the page echoes each acknowledgement at
 // once (the server measures the latency, the page reports no time).

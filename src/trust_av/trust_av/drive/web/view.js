@@ -186,12 +186,13 @@ window.DriveView = (() => {
     };
     fit();
     window.addEventListener('resize', fit);
-    let shown = null;
-    function show(layer) {
+    let shown;
+    function show(layer) {                      // one layer, or none (the page's background)
       if (shown === layer) return;
       for (const l of [driver.layer, top.layer]) l.visible(l === layer);
       shown = layer;
     }
+    show(null);                                 // nothing drawn before the first frame
     return {
       stage, driver, top,
       draw(s, topDown) {
