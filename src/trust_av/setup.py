@@ -8,7 +8,9 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={package_name: ['py.typed', 'drive/web/*']},
+    # the drive page and the library it draws with (every file under drive/web)
+    package_data={package_name: ['py.typed', 'drive/web/*', 'drive/web/vendor/*',
+                                 'drive/web/vendor/konva/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

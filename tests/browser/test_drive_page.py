@@ -1,6 +1,8 @@
-"""The drive page's inputs in headless chromium, against the drive's web server alone (no
-graph): keyboard ramps, the pointer pedal, a gamepad, stamped samples at the control rate,
-the non-blocking rating and reconnection. The state stream is played by the test."""
+"""The drive page in headless chromium, against the drive's web server alone (no graph): its
+inputs (keyboard ramps, the pointer pedal, a gamepad, stamped samples at the control rate),
+the non-blocking rating and reconnection, and its view (drawn by the vendored Konva, the AV's
+brake lights lit while it is commanded to brake, nothing loaded from another origin). The
+state stream is played by the test."""
 
 from __future__ import annotations
 
@@ -148,3 +150,71 @@ def test_rating_prompt_does_not_stop_the_input_and_reconnection_resumes(
     page.wait_for_function('window.drive.ws.readyState === 1', timeout=10_000)
     server.send({'type': 'phase', 'phase': 'driving', 'duration_s': 60.0})
     assert _inputs(inbox, 1.0)                            # and the input comes back
+
+
+KONVA_VERSION = '10.9.1'
+"""The vendored Konva (src/trust_av/trust_av/drive/web/vendor/README.md)."""
+LIT_PIXELS = """() => {
+    const canvas = Array.from(document.querySelectorAll('#road .konvajs-content canvas'))
+        .find((c) => c.style.display !== 'none');
+    const data = canvas.getContext('2d').getImageData(0, 0, canvas.width, canvas.height).data;
+    let lit = 0;
+    const colours = new Set();
+    for (let i = 0; i < data.length; i += 4) {
+        if (data[i] > 200 && data[i + 1] < 90 && data[i + 2] < 90) lit++;
+        colours.add((data[i] >> 4) * 256 + (data[i + 1] >> 4) * 16 + (data[i + 2] >> 4));
+    }
+    return [lit, colours.size]; }"""
+"""Bright red pixels (a lit brake light) and distinct colours (4 bits a channel) on the
+canvas the view shows."""
+
+
+def _states(server: DriveServer, av_accel_mps2: float, seconds: float = 0.6) -> None:
+    """State frames at 20 Hz, the AV 20 m ahead and commanded ``av_accel_mps2``."""
+    for k in range(round(seconds * 20)):
+        you = 100.0 + 0.5 * k
+        server.send({'type': 'state', 't_s': k * 0.05, 'left_s': 50.0,
+                     'vehicles': {'lead': [you + 60.0, 10.0], 'av': [you + 24.5, 10.0],
+                                  'you': [you, 10.0]}, 'av_accel_mps2': av_accel_mps2})
+        time.sleep(0.05)
+
+
+def test_the_drivers_eye_view_is_drawn_by_the_vendored_library_from_the_page_s_origin(
+        served: tuple[DriveServer, Any], browser: Any) -> None:
+    server, _ = served
+    tab = browser.new_page()
+    requests: list[str] = []
+    tab.on('request', lambda request: requests.append(request.url))
+    tab.on('websocket', lambda socket: requests.append(socket.url))
+    response = tab.goto(server.url)
+    assert "default-src 'none'" in response.headers['content-security-policy']
+    tab.wait_for_function('window.drive.ws && window.drive.ws.readyState === 1')
+    # the view is a Konva stage (the vendored build, served by the drive server)
+    assert tab.evaluate('Konva.version') == KONVA_VERSION
+    assert tab.evaluate('drive.view.stage instanceof Konva.Stage && '
+                        "drive.view.stage.container() === document.getElementById('road')")
+    assert tab.evaluate("Array.from(document.querySelectorAll('#road canvas'))"   # no frame yet
+                        ".every((c) => c.style.display === 'none')")
+    server.send({'type': 'phase', 'phase': 'driving', 'duration_s': 60.0})
+    tab.wait_for_function("window.drive.phase === 'driving'")
+    _states(server, 0.0)
+    dark, colours = tab.evaluate(LIT_PIXELS)
+    assert colours > 20 and tab.evaluate('drive.view.driver.layer.isVisible()')
+    # the AV commanded to brake: its brake lights are lit; released: dark again
+    _states(server, -3.0)
+    lit, _ = tab.evaluate(LIT_PIXELS)
+    _states(server, 0.5)
+    dark_again, _ = tab.evaluate(LIT_PIXELS)
+    assert lit > 100 + 10 * max(dark, dark_again), (dark, lit, dark_again)
+    # the view from above, still drawn with the library
+    tab.check('#top-down')
+    _states(server, 0.0, 0.3)
+    assert tab.evaluate('drive.view.top.layer.isVisible() && !drive.view.driver.layer.isVisible()')
+    assert tab.evaluate("Array.from(document.querySelectorAll('#road canvas'))"
+                        ".filter((c) => c.style.display !== 'none').length") == 1
+    assert tab.evaluate(LIT_PIXELS)[1] > 5
+    # everything the page loaded or connected to is the drive server's
+    origin = server.url.rstrip('/').removeprefix('http://')
+    assert f'{server.url}vendor/konva/konva.min.js' in requests
+    assert requests and all(url.split('/')[2] == origin for url in requests), requests
+    tab.close()

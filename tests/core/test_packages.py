@@ -17,8 +17,11 @@ installs with pip: ``casadi-pip`` (149), ``python3-rosbags-pip`` (7996) and
 from __future__ import annotations
 
 import ast
+import hashlib
+import os
 import sys
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import pytest
 from catkin_pkg.package import parse_package
@@ -177,3 +180,37 @@ def test_colcon_test_knows_the_suite_s_markers(package: str) -> None:
     cfg.read(SRC / package / 'setup.cfg')
     declared = names(cfg['tool:pytest']['markers'].splitlines())
     assert declared == names(suite['ini_options']['markers'])
+
+
+def test_the_drive_page_s_files_ship_in_the_package_and_are_served_from_it(
+        tmp_path: Path) -> None:
+    """What ``pip install`` and ``colcon build`` install of trust_av (setup.py ``build_py``:
+    its modules and ``package_data``) holds every file of the drive page, the vendored
+    library and its licence included, and the drive server serves every page file from that
+    copy byte for byte."""
+    import subprocess
+
+    built = subprocess.run([sys.executable, 'setup.py', '-q', 'build_py', '--build-lib',
+                            str(tmp_path)], cwd=SRC / 'trust_av', capture_output=True,
+                           text=True, check=False)
+    assert built.returncode == 0, built.stderr
+    web = SRC / 'trust_av' / 'trust_av' / 'drive' / 'web'
+    shipped = tmp_path / 'trust_av' / 'drive' / 'web'
+    files = sorted(str(p.relative_to(web)) for p in web.rglob('*') if p.is_file())
+    assert sorted(str(p.relative_to(shipped)) for p in shipped.rglob('*') if p.is_file()) \
+        == files
+    assert {'vendor/konva/konva.min.js', 'vendor/konva/LICENSE', 'vendor/README.md'} <= \
+        set(files)
+    served = subprocess.run(
+        [sys.executable, '-c', 'import hashlib, trust_av.drive.server as s; '
+         'print(s.__file__); [print(p, hashlib.sha256(s.page_file(n)).hexdigest()) '
+         'for p, (n, _) in sorted(s.PAGES.items())]'],
+        env={**os.environ, 'PYTHONPATH': str(tmp_path)}, capture_output=True, text=True,
+        check=False)
+    assert served.returncode == 0, served.stderr
+    module, *pages = served.stdout.splitlines()
+    assert Path(module).is_relative_to(tmp_path)
+    from trust_av.drive.server import PAGES
+    assert pages == [f'{path} {hashlib.sha256((web / name).read_bytes()).hexdigest()}'
+                     for path, (name, _) in sorted(PAGES.items())]
+    assert '/vendor/konva/konva.min.js' in PAGES

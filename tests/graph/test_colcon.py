@@ -5,6 +5,7 @@ cleanly; trust-monitor-estimate runs from the install."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import queue
 import shutil
@@ -119,6 +120,25 @@ def test_installed_copy_finds_its_share(install: Path, tmp_path: Path) -> None:
     share = install / 'trust_av_common' / 'share' / 'trust_av_common' / 'config'
     assert Path(shipped) == share / 'trust_av.yaml'
     assert Path(profile) == share / 'fastdds_graph.xml' and Path(profile).is_file()
+
+
+def test_installed_drive_server_serves_the_page_and_its_library(install: Path,
+                                                                  tmp_path: Path) -> None:
+    """The colcon install of trust_av serves every file of the drive page from itself, the
+    vendored Konva included, byte for byte as in the repository."""
+    proc = in_install(install, 'python3 -c "import hashlib, trust_av.drive.server as s; '
+                               'print(s.__file__); [print(p, hashlib.sha256(s.page_file(n))'
+                               '.hexdigest()) for p, (n, _) in sorted(s.PAGES.items())]"',
+                      tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    module, *pages = proc.stdout.splitlines()
+    assert Path(module).is_relative_to(install / 'trust_av')
+    web = REPO / 'src' / 'trust_av' / 'trust_av' / 'drive' / 'web'
+    served = dict(line.split() for line in pages)
+    assert served['/vendor/konva/konva.min.js'] == hashlib.sha256(
+        (web / 'vendor' / 'konva' / 'konva.min.js').read_bytes()).hexdigest()
+    assert served['/'] == hashlib.sha256((web / 'index.html').read_bytes()).hexdigest()
+    assert len(served) == len(list(web.glob('*.*'))) + 1     # every page file + the library
 
 
 @pytest.mark.parametrize(('package', 'executable'), sorted(EXECUTABLES))

@@ -1,6 +1,7 @@
-"""The drive's web server: the page (plain HTML/JS/canvas shipped in ``drive/web``) and one
-WebSocket (``/ws``) that carries pedal samples, ratings and the questionnaire in, and the
-vehicles' state out. Runs its own asyncio loop in a thread; localhost only by default.
+"""The drive's web server: the page (HTML, JS and the vendored Konva it draws with, shipped
+in ``drive/web``) and one WebSocket (``/ws``) that carries pedal samples, ratings and the
+questionnaire in, and the vehicles' state out. Runs its own asyncio loop in a thread;
+localhost only by default.
 
 Only the served page drives: the page and the WebSocket answer only requests whose ``Host``
 is the server's own address, the WebSocket handshake needs the page's own ``Origin`` and the
@@ -47,8 +48,20 @@ __all__ = ['FLOOD_MESSAGES_PER_S', 'DriveServer', 'parse_message']
 LOG = logging.getLogger(__name__)
 PAGES = {'/': ('index.html', 'text/html; charset=utf-8'),
          '/drive.js': ('drive.js', 'text/javascript; charset=utf-8'),
-         '/drive.css': ('drive.css', 'text/css; charset=utf-8')}
-"""Path -> (file in ``trust_av/drive/web``, content type)."""
+         '/drive.css': ('drive.css', 'text/css; charset=utf-8'),
+         '/view.js': ('view.js', 'text/javascript; charset=utf-8'),
+         '/vendor/konva/konva.min.js': ('vendor/konva/konva.min.js',
+                                        'text/javascript; charset=utf-8')}
+"""Path -> (file in ``trust_av/drive/web``, content type): the page, its script and style
+and the library it draws with (vendored: ``web/vendor/README.md``)."""
+CONTENT_SECURITY_POLICY = ("default-src 'none'; script-src 'self' 'unsafe-eval'; "
+                           "style-src 'self'; img-src 'self'; connect-src 'self'; "
+                           "base-uri 'none'; form-action 'none'; frame-ancestors 'none'")
+"""Sent with every file: the page runs scripts, styles and images only from its own origin
+(no inline script) and connects only to it (its WebSocket: ``'self'`` covers ``ws:`` on the
+same host and port), so nothing is fetched from elsewhere even by mistake. The page
+evaluates no string; ``'unsafe-eval'`` is there for the browser tests and the synthetic
+participant, whose Playwright ``wait_for_function`` evaluates its predicate in the page."""
 MESSAGE_TYPES = frozenset({'ready', 'input', 'ack', 'rating', 'questionnaire', 'take_over'})
 MAX_MESSAGE_BYTES = 4096
 TOKEN_MARK = b'__DRIVE_TOKEN__'
@@ -70,7 +83,7 @@ class ServerError(TrustAvPlannerError):
 
 def page_file(name: str) -> bytes:
     """One of the page's files, as shipped in the package."""
-    return resources.files('trust_av.drive').joinpath('web', name).read_bytes()
+    return resources.files('trust_av.drive').joinpath('web', *name.split('/')).read_bytes()
 
 
 def parse_message(text: str | bytes) -> dict[str, Any]:
@@ -209,7 +222,8 @@ class DriveServer:
         body = page_file(name).replace(TOKEN_MARK, self.token.encode())
         return Response(HTTPStatus.OK, 'OK', Headers([
             ('Content-Type', kind), ('Content-Length', str(len(body))),
-            ('Cache-Control', 'no-store')]), body)
+            ('Content-Security-Policy', CONTENT_SECURITY_POLICY),
+            ('X-Content-Type-Options', 'nosniff'), ('Cache-Control', 'no-store')]), body)
 
     async def _handler(self, connection: ServerConnection) -> None:
         self.clients.add(connection)

@@ -1,10 +1,11 @@
-// trust-av drive: the participant's page. Plain JS and Canvas 2D, no build step, nothing
-// fetched from elsewhere. State frames arrive over the WebSocket (a few per control period);
-// the view is drawn at the display's frame rate, interpolating the frames RENDER_DELAY_MS
-// behind the newest one. A pedal sample is sent at once on a key or pointer press or release,
-// on any other change of the pedal at most once per control period, and at the control rate
-// while nothing changes, all within the server's rate limit (a token bucket of inputBurst
-// samples refilled at the control rate): the page keeps its own, smaller bucket, refilled a
+// trust-av drive: the participant's page. Plain JS, no build step, nothing fetched from
+// elsewhere: the view is drawn by view.js with the vendored Konva (vendor/README.md). State
+// frames arrive over the WebSocket (a few per control period); the view is drawn at the
+// display's frame rate, interpolating the frames RENDER_DELAY_MS behind the newest one. A
+// pedal sample is sent at once on a key or pointer press or release, on any other change of
+// the pedal at most once per control period, and at the control rate while nothing changes,
+// all within the server's rate limit (a token bucket of inputBurst samples refilled at the
+// control rate): the page keeps its own, smaller bucket, refilled a
 // little slower, and one sample of it for a press or release, so the server refuses none.
 // The server acknowledges samples in its frames; the page echoes each acknowledgement at
 // once (the server measures the latency, the page reports no time).
@@ -13,8 +14,6 @@
 const RENDER_DELAY_MS = 100;
 const VEHICLE_LENGTH_M = 4.5;
 const KEY_GAS_PER_S = 1.5, KEY_BRAKE_PER_S = 2.5, KEY_RELEASE_PER_S = 4.0, KEY_STEP = 0.15;
-const BRAKE_LIGHT_MPS2 = -0.3;          // the AV's commanded acceleration that lights them
-const EYE_BEHIND_BUMPER_M = 2.0, EYE_HEIGHT_M = 1.2, CAR_WIDTH_M = 1.8, CAR_HEIGHT_M = 1.5;
 const KEYS = ['ArrowUp', 'ArrowDown', 'KeyW', 'KeyS'];
 const BUCKET_REFILL_SHARE = 0.9;       // of the control rate: a margin for network jitter
 const PAGE_BURST = 3;                  // the page's bucket (the server's is larger: hello)
@@ -30,6 +29,8 @@ const drive = {
 window.drive = drive;
 
 const $ = (id) => document.getElementById(id);
+const view = window.DriveView.create($('road'));
+drive.view = view;                     // the Konva stage and its layers (tests, screenshots)
 
 function connect() {
   if (drive.final) return;
@@ -321,137 +322,6 @@ function interpolated(nowMs) {
   return out;
 }
 
-function drawTopDown(ctx, W, H, s) {
-  ctx.fillStyle = '#3a3f47'; ctx.fillRect(0, 0, W, H);
-  ctx.fillStyle = '#555b64'; ctx.fillRect(0, H / 2 - 50, W, 100);
-  const scale = 8, origin = W * 0.2;
-  const toX = (x) => origin + (x - s.you[0]) * scale;
-  ctx.strokeStyle = '#ddd'; ctx.lineWidth = 3; ctx.setLineDash([30, 30]);
-  ctx.lineDashOffset = (s.you[0] * scale) % 60;
-  for (const y of [H / 2 + 50, H / 2 - 50]) { ctx.beginPath(); ctx.moveTo(0, y); ctx.lineTo(W, y); ctx.stroke(); }
-  ctx.setLineDash([]);
-  for (const [name, colour, label] of [['lead', '#9e9e9e', 'lead'], ['av', '#1e88e5', 'AV'], ['you', '#fb8c00', 'you']]) {
-    const v = s[name];
-    if (!v) continue;
-    const x = toX(v[0]);
-    ctx.fillStyle = colour;
-    ctx.fillRect(x - VEHICLE_LENGTH_M * scale, H / 2 - 9, VEHICLE_LENGTH_M * scale, 18);
-    if (name === 'av' && s.avAccel !== null && s.avAccel < BRAKE_LIGHT_MPS2) {
-      ctx.fillStyle = '#ff1744'; ctx.fillRect(x - VEHICLE_LENGTH_M * scale, H / 2 - 9, 4, 18);
-    }
-    ctx.fillStyle = '#fff'; ctx.font = '14px sans-serif';
-    ctx.fillText(label, x - VEHICLE_LENGTH_M * scale, H / 2 - 16);
-  }
-}
-
-// The driver's seat: a pinhole camera EYE_HEIGHT_M above the road, EYE_BEHIND_BUMPER_M
-// behind your front bumper, looking down the road; f in px.
-function drawDriverView(ctx, W, H, s) {
-  const horizon = H * 0.40, f = W * 1.1, cx = W / 2;
-  const sky = ctx.createLinearGradient(0, 0, 0, horizon);
-  sky.addColorStop(0, '#5b86b5'); sky.addColorStop(1, '#b9cfe3');
-  ctx.fillStyle = sky; ctx.fillRect(0, 0, W, horizon);
-  ctx.fillStyle = '#5d7d46'; ctx.fillRect(0, horizon, W, H - horizon);
-  const yAt = (z) => horizon + EYE_HEIGHT_M * f / z;            // road at distance z
-  const xAt = (x, z) => cx + x * f / z;                          // lateral x (m) at z
-  const near = 1.0, far = 600;
-  // road and its edges
-  ctx.fillStyle = '#4a4d52';
-  ctx.beginPath();
-  ctx.moveTo(xAt(-5.5, near), yAt(near)); ctx.lineTo(xAt(-5.5, far), yAt(far));
-  ctx.lineTo(xAt(5.5, far), yAt(far)); ctx.lineTo(xAt(5.5, near), yAt(near)); ctx.fill();
-  ctx.strokeStyle = '#e8e8e8'; ctx.lineWidth = 2;
-  for (const x of [-5.4, 5.4]) {
-    ctx.beginPath(); ctx.moveTo(xAt(x, near), yAt(near)); ctx.lineTo(xAt(x, far), yAt(far)); ctx.stroke();
-  }
-  // lane dashes, fixed to the road (they move past as you drive): 3 m every 12 m
-  const you = s.you[0];
-  ctx.fillStyle = '#f0f0f0';
-  for (let k = Math.floor((you - 2) / 12); k * 12 < you + 200; k++) {
-    for (const x of [-1.85, 1.85]) {
-      const z0 = k * 12 - you + EYE_BEHIND_BUMPER_M, z1 = z0 + 3;
-      if (z1 <= near) continue;
-      const a = Math.max(z0, near);
-      ctx.beginPath();
-      ctx.moveTo(xAt(x - 0.08, a), yAt(a)); ctx.lineTo(xAt(x - 0.08, z1), yAt(z1));
-      ctx.lineTo(xAt(x + 0.08, z1), yAt(z1)); ctx.lineTo(xAt(x + 0.08, a), yAt(a)); ctx.fill();
-    }
-  }
-  // the lead vehicle, then the AV in front of it
-  const braking = s.avAccel !== null && s.avAccel !== undefined && s.avAccel < BRAKE_LIGHT_MPS2;
-  const strength = braking ? Math.min(1, 0.5 + (-s.avAccel) / 4) : 0;
-  if (s.lead) drawRear(ctx, s.lead[0] - VEHICLE_LENGTH_M - you + EYE_BEHIND_BUMPER_M, '#8d939b', 0, '', xAt, yAt, f);
-  if (s.av) drawRear(ctx, s.av[0] - VEHICLE_LENGTH_M - you + EYE_BEHIND_BUMPER_M, '#dfe3e8', strength, 'AV', xAt, yAt, f);
-  // your bonnet
-  ctx.fillStyle = '#1f2a36';
-  ctx.beginPath(); ctx.moveTo(0, H); ctx.lineTo(W * 0.12, H * 0.86); ctx.quadraticCurveTo(cx, H * 0.80, W * 0.88, H * 0.86);
-  ctx.lineTo(W, H); ctx.fill();
-  drawDashboard(ctx, W, H, s);
-}
-
-function drawRear(ctx, z, colour, brake, label, xAt, yAt, f) {
-  if (z < 0.6) z = 0.6;                       // at (or in) your bumper: drawn at the windscreen
-  const half = CAR_WIDTH_M / 2, ground = yAt(z), px = f / z;
-  const left = xAt(-half, z), width = CAR_WIDTH_M * px, height = CAR_HEIGHT_M * px;
-  const top = ground - height;
-  ctx.fillStyle = '#00000055';                 // shadow
-  ctx.fillRect(left - 0.1 * px, ground - 0.05 * px, width + 0.2 * px, 0.12 * px);
-  ctx.fillStyle = colour;                      // body
-  ctx.beginPath();
-  ctx.moveTo(left, ground - 0.25 * px); ctx.lineTo(left, top + 0.55 * height);
-  ctx.lineTo(left + 0.15 * width, top); ctx.lineTo(left + 0.85 * width, top);
-  ctx.lineTo(left + width, top + 0.55 * height); ctx.lineTo(left + width, ground - 0.25 * px); ctx.fill();
-  ctx.fillStyle = '#2b3440';                   // rear window
-  ctx.fillRect(left + 0.2 * width, top + 0.08 * height, 0.6 * width, 0.32 * height);
-  ctx.fillStyle = '#222';                      // tyres and bumper
-  ctx.fillRect(left + 0.05 * width, ground - 0.3 * px, 0.18 * width, 0.3 * px);
-  ctx.fillRect(left + 0.77 * width, ground - 0.3 * px, 0.18 * width, 0.3 * px);
-  ctx.fillStyle = '#3a3a3a'; ctx.fillRect(left, ground - 0.45 * px, width, 0.18 * px);
-  // rear lights: dim red; bright, with a glow, while the AV is commanded to brake
-  const lit = brake > 0;
-  ctx.fillStyle = lit ? '#ff1f1f' : '#5e1b1b';
-  if (lit) { ctx.shadowColor = '#ff2020'; ctx.shadowBlur = 10 + 30 * brake; }
-  const lampW = 0.22 * width, lampH = 0.12 * height, lampY = top + 0.58 * height;
-  ctx.fillRect(left + 0.02 * width, lampY, lampW, lampH);
-  ctx.fillRect(left + width - 0.02 * width - lampW, lampY, lampW, lampH);
-  ctx.fillRect(left + 0.42 * width, top + 0.02 * height, 0.16 * width, 0.04 * height);  // third light
-  ctx.shadowBlur = 0;
-  if (label) {                                 // the plate
-    ctx.fillStyle = '#f4f4f4'; ctx.fillRect(left + 0.38 * width, lampY + 0.02 * height, 0.24 * width, 0.1 * height);
-    ctx.fillStyle = '#0d47a1'; ctx.font = `bold ${Math.max(8, 0.08 * height)}px sans-serif`;
-    ctx.textAlign = 'center'; ctx.fillText(label, left + width / 2, lampY + 0.1 * height); ctx.textAlign = 'start';
-  }
-}
-
-function drawDashboard(ctx, W, H, s) {
-  const cx = W * 0.2, cy = H - 12, r = 70;
-  ctx.fillStyle = '#0e1319ee';
-  ctx.beginPath(); ctx.arc(cx, cy, r + 12, Math.PI, 2 * Math.PI); ctx.fill();
-  ctx.strokeStyle = '#9fb3c8'; ctx.lineWidth = 2;
-  for (let v = 0; v <= 160; v += 20) {          // km/h ticks
-    const a = Math.PI + (v / 160) * Math.PI;
-    ctx.beginPath(); ctx.moveTo(cx + Math.cos(a) * (r - 8), cy + Math.sin(a) * (r - 8));
-    ctx.lineTo(cx + Math.cos(a) * r, cy + Math.sin(a) * r); ctx.stroke();
-  }
-  const kmh = s.you[1] * 3.6, a = Math.PI + Math.min(1, Math.max(0, kmh / 160)) * Math.PI;
-  ctx.strokeStyle = '#ff7043'; ctx.lineWidth = 4;
-  ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(cx + Math.cos(a) * (r - 6), cy + Math.sin(a) * (r - 6)); ctx.stroke();
-  ctx.fillStyle = '#fff'; ctx.textAlign = 'center';
-  ctx.font = 'bold 24px sans-serif'; ctx.fillText(kmh.toFixed(0), cx, cy - 22);
-  ctx.font = '12px sans-serif'; ctx.fillText('km/h', cx, cy - 6);
-  const gx = W * 0.8;
-  ctx.fillStyle = '#0e1319ee';
-  ctx.beginPath(); ctx.arc(gx, cy, r + 12, Math.PI, 2 * Math.PI); ctx.fill();
-  ctx.fillStyle = '#fff';
-  if (s.av) {
-    const gap = s.av[0] - VEHICLE_LENGTH_M - s.you[0];
-    ctx.fillStyle = gap < 10 ? '#ffab40' : '#fff';
-    ctx.font = 'bold 24px sans-serif'; ctx.fillText(`${Math.max(0, gap).toFixed(1)} m`, gx, cy - 22);
-    ctx.fillStyle = '#fff'; ctx.font = '12px sans-serif'; ctx.fillText('gap to the AV', gx, cy - 6);
-  }
-  ctx.textAlign = 'start';
-}
-
 function draw(nowMs) {
   if (drive.phase === 'driving' && drive.inputTimer !== null) {
     updatePedal(nowMs);
@@ -460,10 +330,8 @@ function draw(nowMs) {
   }
   const s = interpolated(nowMs);
   drive.displayed = s;
-  const canvas = $('road'), ctx = canvas.getContext('2d');
-  const W = canvas.width, H = canvas.height;
   if (s && s.you) {
-    if ($('top-down').checked) drawTopDown(ctx, W, H, s); else drawDriverView(ctx, W, H, s);
+    view.draw(s, $('top-down').checked);
     $('speed').textContent = `${(s.you[1] * 3.6).toFixed(1)} km/h`;
     $('speed').dataset.mps = s.you[1].toFixed(3);
     if (s.av) {
@@ -479,7 +347,7 @@ function draw(nowMs) {
       $('time-left').dataset.s = left.toFixed(2);
     }
   } else {
-    ctx.fillStyle = '#2a2f36'; ctx.fillRect(0, 0, W, H);
+    view.blank();
   }
   $('pedal-value').textContent = drive.pedal.toFixed(2);
   $('pedal-mark').style.top = `${(1 - drive.pedal) / 2 * 196}px`;
