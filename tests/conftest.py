@@ -59,6 +59,8 @@ page in Chromium. ``pytest tests/core -m "not slow"`` is the fast lane (docs/con
 
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+LAST_ENDED: list[tuple[str, dict[str, set[str]]]] = []
+"""The last test this process ended, and the stop signals' state it left."""
 SIGNALS_BEFORE = pytest.StashKey[tuple[dict[int, Any], dict[str, set[str]], set[int]]]()
 
 
@@ -76,7 +78,13 @@ def os_signal_state() -> dict[str, set[str]]:
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_setup(item: pytest.Item) -> None:
     """Note the stop signals' state before the test and its fixtures are set up (see
-    :func:`pytest_runtest_teardown`)."""
+    :func:`pytest_runtest_teardown`); fail if it changed since the previous test ended (a
+    thread or process that test left behind)."""
+    kernel_now = os_signal_state()
+    if LAST_ENDED and LAST_ENDED[-1][1] != kernel_now:
+        previous, kernel_then = LAST_ENDED.pop()
+        raise AssertionError(f'the stop signals changed from {kernel_then} to {kernel_now} '
+                             f'after the previous test in this process ended: {previous}')
     item.stash[SIGNALS_BEFORE] = (
         {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}, os_signal_state(),
         signal.pthread_sigmask(signal.SIG_BLOCK, set()))
@@ -102,6 +110,7 @@ def pytest_runtest_teardown(item: pytest.Item) -> Iterator[None]:
         if handler is not None:
             signal.signal(signum, handler)   # the kernel's state follows Python's again
     signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    LAST_ENDED[:] = [(item.nodeid, os_signal_state())]
     assert not changed, (f'the test or its fixtures left these signal handlers changed: '
                          f'{changed} (before: {kernel_before})')
     return result
