@@ -75,6 +75,15 @@ def os_signal_state() -> dict[str, set[str]]:
             for key in ('SigBlk', 'SigIgn')}
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Take SIGINT as a command started from a terminal does, in this process and in each
+    worker: a shell starts a background job (``cmd &``) with SIGINT ignored, a child
+    process inherits that, and the suite's Ctrl-C tests would then send Ctrl-C to children
+    that never see it."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_setup(item: pytest.Item) -> None:
     """Note the stop signals' state before the test and its fixtures are set up (see

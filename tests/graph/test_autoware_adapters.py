@@ -164,11 +164,15 @@ def test_autoware_in_autoware_out(tmp_path: Path) -> None:
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         controls: list[Control] = []
+        # reliable and volatile as vehicle_cmd_gate subscribes (rclcpp::QoS{1}); a deeper
+        # history of its own (depth does not take part in QoS matching), so that a test
+        # process slowed by a loaded host keeps every message it is sent
+        every = QoSProfile(depth=100)
         node.create_subscription(Control, '/control/trust_av/control_cmd', controls.append,
-                                 autoware)      # as vehicle_cmd_gate subscribes
+                                 every)
         planned: list[float] = []
         node.create_subscription(AccelStamped, '/ego/accel_cmd',
-                                 lambda m: planned.append(m.accel.linear.x), autoware)
+                                 lambda m: planned.append(m.accel.linear.x), every)
         odoms: dict[str, Odometry] = {}
         for topic in ('/ego/odom', '/preceding_vehicle/odom'):
             node.create_subscription(Odometry, topic,
