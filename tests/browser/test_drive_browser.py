@@ -46,13 +46,14 @@ pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
                                  reason='Debian chromium not installed (scripts/bootstrap.sh)')]
 
 DRIVE_S = 20.0
+SESSION_DRIVE_S = 12.0   # the whole synthetic session's drives (after a 6 s practice drive)
 ANSWERS = [2, 1, 2, 3, 1, 5, 6, 5, 5, 6, 6, 4]
-SETTINGS = f"""/**/drive:
+SETTINGS = """/**/drive:
   ros__parameters:
-    drive_duration_s: {DRIVE_S}
+    drive_duration_s: {drive_s}
     practice: true
-    practice_duration_s: 10.0
-    rating_period_s: 5.0
+    practice_duration_s: {practice_s}
+    rating_period_s: 4.0
     abandon_after_s: 6.0
     start_timeout_s: 120.0
     questionnaire_timeout_s: 60.0
@@ -91,7 +92,7 @@ def _phases(bag: Path) -> list[str]:
 def test_a_synthetic_participant_completes_a_session_through_the_page(
         tmp_path: Path, browser: Any) -> None:
     settings = tmp_path / 'drive.yaml'
-    settings.write_text(SETTINGS)
+    settings.write_text(SETTINGS.format(drive_s=SESSION_DRIVE_S, practice_s=6.0))
     study = tmp_path / 'study'
     drive = Drive(study, 'P01', settings, practice=True)
     who = Participant()
@@ -140,13 +141,13 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
         # the ratings sit on the drive's clock, inside the drive, beside the monitor's trust
         # (one may be given as the nodes stop)
         assert drive_data.rating_times_s.min() > 0
-        assert drive_data.rating_times_s.max() < DRIVE_S + 5.0
+        assert drive_data.rating_times_s.max() < SESSION_DRIVE_S + 5.0
         assert np.isfinite(drive_data.series.monitor_trust).any()
         # the person drove: the follower moved, and the drive is a demonstration for the fit
         you = drive_data.odometry['/human/odom']
-        assert you[:, 2].max() > 3.0
+        assert you[:, 2].max() > 1.0          # from standstill (US06 starts slowly)
         pair = demonstration(drive_data, 1.0, 4.5)
-        assert len(pair.gap_m) >= DRIVE_S - 2 and pair.driver == 'drive:P01'
+        assert len(pair.gap_m) >= SESSION_DRIVE_S - 2 and pair.driver == 'drive:P01'
     assert ratings_recorded == len(who.ratings)
     comparison = (study / 'P01' / 'comparison.csv').read_text().splitlines()
     assert comparison[0].startswith('drive,condition,model,ratings,rmse,correlation')
@@ -167,7 +168,7 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
 def test_a_lost_connection_and_a_closed_tab_behave_as_documented(
         tmp_path: Path, browser: Any) -> None:
     settings = tmp_path / 'drive.yaml'
-    settings.write_text(SETTINGS)
+    settings.write_text(SETTINGS.format(drive_s=DRIVE_S, practice_s=10.0))
     study = tmp_path / 'study'
     drive = Drive(study, 'P02', settings)
     who = Participant()
@@ -240,7 +241,7 @@ def test_a_lost_connection_and_a_closed_tab_behave_as_documented(
 def test_a_session_resumes_after_the_command_is_killed(tmp_path: Path, browser: Any) -> None:
     import signal
     settings = tmp_path / 'drive.yaml'
-    settings.write_text(SETTINGS)
+    settings.write_text(SETTINGS.format(drive_s=DRIVE_S, practice_s=10.0))
     study = tmp_path / 'study'
     drive = Drive(study, 'P03', settings)
     try:
