@@ -126,7 +126,7 @@ def test_installed_drive_server_serves_the_page_and_its_library(install: Path,
                                                                   tmp_path: Path) -> None:
     """The colcon install of trust_av serves every file of the drive page from itself, the
     vendored Konva included, byte for byte as in the repository."""
-    proc = in_install(install, 'python3 -c "import hashlib, trust_av.drive.server as s; '
+    proc = in_install(install, f'{sys.executable} -c "import hashlib, trust_av.drive.server as s; '
                                'print(s.__file__); [print(p, hashlib.sha256(s.page_file(n))'
                                '.hexdigest()) for p, (n, _) in sorted(s.PAGES.items())]"',
                       tmp_path)
