@@ -211,6 +211,13 @@ def test_fit_trust_from_a_ratings_table(tmp_path: Path,
     assert float(pooled[0]['elpd_diff']) == 0.0 and float(pooled[0]['elpd_diff_se']) == 0.0
     assert float(pooled[1]['elpd_diff']) < 0.0 and float(pooled[1]['elpd_diff_se']) > 0.0
     assert float(pooled[1]['elpd']) < float(pooled[0]['elpd'])
+    for scope in ('a', 'b', 'pooled'):     # one preferred model per scope, by the named rule
+        marked = [r for r in rows if r['scope'] == scope]
+        assert sorted(r['preferred'] for r in marked) == ['0', '1']
+        assert {r['rule'] for r in marked} == {'parsimony_1se'}
+    chosen = next(r['model'] for r in pooled if r['preferred'] == '1')
+    assert f'preferred leave_one_participant_out: {chosen}' in proc.stdout
+    assert 'preferred leave_one_drive_out: ' in proc.stdout and 'parsimony rule' in proc.stdout
     fits = (out / 'fits.csv').read_text()
     assert 'pooled,beta_bernoulli,beta_bernoulli_failure_weight' in fits
     assert 'beta_bernoulli_beta0' in fits and ',fixed' in fits
