@@ -24,11 +24,12 @@ far behind; its NMPC (3 s preview) then closes the gap at full acceleration and 
 fast to stop when the lead stopped beyond the preview (``rough_random`` on US06 collided at
 about 40 s on 7 of seeds 0-299). So while a condition is active every command is also capped
 by :func:`stopping_cap_mps2`: after the step the AV can still brake at its own limit to a
-stop at least :data:`STOP_MARGIN_M` behind where the lead stops, the lead braking no harder
-than the AV can from the speed the NMPC's preview gives it at the next step. A step at the
-limit keeps that true (the invariant in the function's docstring), so from a state the cap
-allowed, braking at the limit is always enough. In rough drives the cap binds on about 3 %
-of the steps (the AV closing fast on a slower lead). A run without a condition (``none``:
+stop at least its standstill gap d_s (``standstill_gap_m``) behind where the lead stops,
+the lead braking no harder than the AV can from the speed the NMPC's preview gives it at
+the next step. A step at the limit keeps that true (the invariant in the function's
+docstring), so from a state the cap allowed, braking at the limit is always enough. In
+rough drives the cap changes about 4 % of the commands (the AV closing fast on a slower
+lead). A run without a condition (``none``:
 the paper's runs, Tables II-IV) is not capped at all.
 
 The library (:data:`LIBRARY`) names the conditions a study selects with the planner
@@ -223,11 +224,6 @@ class Perturbation:
         return out
 
 
-STOP_MARGIN_M = 1.0
-""":func:`stopping_cap_mps2`: the AV must be able to stop at least this far behind the lead's
-stop, m (a collision is a gap at or below 0; US06's lead brakes up to 3.08 m/s^2, the
-AV's limit is 3, for one sample)."""
-
 ROOM_TOLERANCE_M = 1e-9
 """Rounding allowed at the edge of :func:`stopping_cap_mps2`'s bound, m."""
 
@@ -243,7 +239,7 @@ def stopping_distance_m(speed_mps: float, brake_mps2: float, dt_s: float) -> flo
 
 def stopping_cap_mps2(speed_mps: float, gap_m: float, lead_speed_mps: float,
                       lead_next_mps: float, dt_s: float, brake_mps2: float,
-                      margin_m: float = STOP_MARGIN_M) -> float:
+                      margin_m: float) -> float:
     """The largest acceleration for the next step after which the AV can still stop at
     least ``margin_m`` behind the lead's stop, both braking at ``brake_mps2`` (> 0) from
     the next step on (the lead's speed then: ``lead_next_mps``, from the preview);

@@ -242,7 +242,7 @@ class AvPlanner:
             c = self.config
             lead_next = float(np.interp(self.period_s, step_s * np.arange(steps), preview))
             cap = stopping_cap_mps2(av.speed_mps, gap, traffic.speed_mps, lead_next,
-                                    self.period_s, -c.accel_min_mps2)
+                                    self.period_s, -c.accel_min_mps2, c.standstill_gap_m)
             commanded[0] = max(min(commanded[0], cap), c.accel_min_mps2)
             if not np.array_equal(commanded, result.plan_mps2):
                 result = dataclasses.replace(result, plan_mps2=commanded)
