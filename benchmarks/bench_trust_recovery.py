@@ -21,8 +21,8 @@ Every model is fitted to every participant (``trust_monitor.trust_fit``). Report
   over the synthetic participants, one-sided 5 %); null when not reached by 96.
 
 Writes DIR/trust_recovery.json (with every participant's true and fitted values,
-``true_and_fitted``) and DIR/trust_recovery.png. Not a test; the suite runs a
-small version (tests/graph/test_trust_fit.py).
+``true_and_fitted``, preferred model and held-out elpds, in the same order) and
+DIR/trust_recovery.png. Not a test; the suite runs a small version (tests/graph/test_trust_fit.py).
 
     python benchmarks/bench_trust_recovery.py --out DIR [--participants 24] [--drives 4]
         [--seed 0] [--workers 1]
@@ -304,7 +304,8 @@ def main() -> int:
                         for m in models if m in TRUE_RANGES},
         'unidentifiable': {m: {p.name: p.note for p in specs[m].fixed} for m in models},
         'seed': args.seed,
-        'true_and_fitted': result.true_and_fitted}
+        'true_and_fitted': result.true_and_fitted,
+        'preferred_per_participant': result.chosen, 'elpd_per_participant': result.elpd}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / 'trust_recovery.json').write_text(json.dumps(out, indent=1) + '\n')
     figure(args.out / 'trust_recovery.png', result, specs, r)
