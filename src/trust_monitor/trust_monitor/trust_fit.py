@@ -36,6 +36,7 @@ Pure numerics (no ROS, no files): :mod:`trust_av.drive.trust_fit_data` reads dri
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -179,9 +180,11 @@ class _Timeline:
     """A drive's step lengths and, per rating, the number of steps completed by then (the
     same for every model: a fit reads it once per drive, not at every evaluation)."""
 
-    scores: np.ndarray
-    dt: np.ndarray
+    steps: tuple[tuple[float, float], ...]
+    """(E, dt) per step as Python floats (read at every evaluation: no numpy indexing)."""
     done: np.ndarray
+    wanted: frozenset[int]
+    """The steps after which some rating is read."""
 
     @classmethod
     def of(cls, drive: RatedDrive) -> _Timeline:
@@ -190,7 +193,8 @@ class _Timeline:
         dt = np.append(steps, np.median(steps))
         done = np.searchsorted(t + dt, np.asarray(drive.rating_times_s, float)
                                + TIME_TOLERANCE_S, side='right')
-        return cls(np.asarray(drive.scores), dt, done)
+        pairs = tuple(zip(np.asarray(drive.scores, float).tolist(), dt.tolist(), strict=True))
+        return cls(pairs, done, frozenset(int(k) - 1 for k in done if k > 0))
 
 
 def model_trust(model: TrustModel, drive: RatedDrive,
@@ -204,16 +208,16 @@ def model_trust(model: TrustModel, drive: RatedDrive,
 def _trust_on(model: TrustModel, timeline: _Timeline,
               every_step: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """:func:`model_trust` on a drive's :class:`_Timeline`."""
-    dt, done = timeline.dt, timeline.done
+    done, wanted, step = timeline.done, timeline.wanted, model.step
     state = model.initial_state()
     initial = common_trust(model, state)
-    wanted = set(int(k) - 1 for k in done if k > 0)
-    after = np.full(len(dt), np.nan)
-    last = max(wanted) if wanted and not every_step else len(dt) - 1
-    for i in range(last + 1):
-        state = model.step(state, float(timeline.scores[i]), float(dt[i]))
+    values = [math.nan] * len(timeline.steps)
+    last = max(wanted) if wanted and not every_step else len(values) - 1
+    for i, (score, dt) in enumerate(itertools.islice(timeline.steps, last + 1)):
+        state = step(state, score, dt)
         if every_step or i in wanted:
-            after[i] = common_trust(model, state)
+            values[i] = common_trust(model, state)
+    after = np.array(values)
     at = np.where(done > 0, after[np.maximum(done - 1, 0)], initial)
     return (after if every_step else np.array([])), at
 
