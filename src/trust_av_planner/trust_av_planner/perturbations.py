@@ -114,7 +114,7 @@ ROUGH_PATCH_S = (20.0, 35.0)
 """Length of a rough patch, s."""
 ROUGH_CALM_S = (8.0, 14.0)
 """Calm between two patches, s (the AV is explicable: trust recovers)."""
-ROUGH_GAP_S = (2.0, 4.0)
+ROUGH_GAP_S = (1.0, 2.5)
 """Time from the end of one event of a patch to the start of the next, s (dense enough to
 inform a fit; the AV that falls far behind in a patch is kept able to stop when it catches
 up: :func:`stopping_cap_mps2`)."""
