@@ -22,13 +22,14 @@ Event kinds (times relative to the first planning step of the run, s):
 **A condition never makes the AV hit the car ahead.** A brake or hesitation leaves the AV
 far behind; its NMPC (3 s preview) then closes the gap at full acceleration and could be too
 fast to stop when the lead stopped beyond the preview (``rough_random`` on US06 collided at
-about 40 s on 7 of seeds 0-299). So while a condition is active every command is also capped
+about 40 s on 7 of seeds 0-299, then with 2-4 s between events). So while a condition is
+active every command is also capped
 by :func:`stopping_cap_mps2`: after the step the AV can still brake at its own limit to a
 stop at least its standstill gap d_s (``standstill_gap_m``) behind where the lead stops,
 the lead braking no harder than the AV can from the speed the NMPC's preview gives it at
 the next step. A step at the limit keeps that true (the invariant in the function's
 docstring), so from a state the cap allowed, braking at the limit is always enough. In
-rough drives the cap changes about 4 % of the commands (the AV closing fast on a slower
+rough drives the cap changes about 8 % of the commands (the AV closing fast on a slower
 lead). A run without a condition (``none``:
 the paper's runs, Tables II-IV) is not capped at all.
 
