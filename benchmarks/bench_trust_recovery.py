@@ -21,10 +21,11 @@ Every model is fitted to every participant (``trust_monitor.trust_fit``). Report
   over the synthetic participants, one-sided 5 %); null when not reached by 96.
 
 Writes DIR/trust_recovery.json (with every participant's true and fitted values,
-``true_and_fitted``) and DIR/trust_recovery.png. Not a test; the suite runs a
-small version (tests/graph/test_trust_fit.py).
+``true_and_fitted``, preferred model and held-out elpds, in the same order) and
+DIR/trust_recovery.png. Not a test; the suite runs a small version (tests/graph/test_trust_fit.py).
 
     python benchmarks/bench_trust_recovery.py --out DIR [--participants 24] [--drives 4]
+        [--seed 0] [--workers 1]
 """
 
 from __future__ import annotations
@@ -133,47 +134,78 @@ class Recovery:
         return out
 
 
+_JOB: dict[str, Any] = {}
+"""What a worker process needs (set before the pool forks; read by :func:`_score_one`)."""
+
+
+def _scores_of(key: tuple[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    config, seed, steps = _JOB['config'], _JOB['seed'], _JOB['steps']
+    return drive_scores(config, key[0], drive_seed(seed, key[1]), steps)
+
+
+def _score_one(who: Any) -> tuple[dict[str, float], dict[str, float], str]:
+    """One participant: its true model's fit, every model's leave-one-drive-out elpd, the
+    preferred model."""
+    specs, sizes, fit_seed = _JOB['specs'], _JOB['sizes'], _JOB['fit_seed']
+    fitted = fit(specs[who.model], who.drives, fit_seed)
+    held: list[Score] = [held_out(specs[m], [[d] for d in who.drives], 'leave_one_drive_out',
+                                  fit_seed) for m in specs]
+    return fitted.theta, {s.model: s.elpd for s in held}, preferred(held, sizes)
+
+
+def _mapped(function: Callable[[Any], Any], items: list[Any], workers: int) -> list[Any]:
+    """``function`` over ``items`` in order, in ``workers`` forked processes (1: here)."""
+    if workers <= 1:
+        return [function(item) for item in items]
+    import multiprocessing
+    with multiprocessing.get_context('fork').Pool(workers) as pool:
+        return pool.map(function, items, chunksize=1)
+
+
 def recover(config: RunConfig, models: Sequence[str], participants: int, drives: int,
             seed: int = 0, noise: float = RATING_NOISE, values: dict[str, Any] | None = None,
             on_participant: Callable[[str], None] | None = None,
-            steps: int = DRIVE_S) -> Recovery:
+            steps: int = DRIVE_S, workers: int = 1) -> Recovery:
     """For each true model in ``models``: ``participants`` synthetic participants with
     ``drives`` drives each (the first ``drives`` of :data:`CONDITIONS`, cycled), every
     model fitted to each (parameters: full fit; preferred model: leave-one-drive-out elpd
     with :func:`~trust_monitor.trust_fit.preferred`'s parsimony rule), each
-    drive ``steps`` control steps long.
+    drive ``steps`` control steps long; drives and fits in ``workers`` processes (the
+    result does not depend on it).
 
     Raises:
         FitError: fewer than two drives (no held-out drive).
     """
     rng = np.random.Generator(np.random.PCG64(seed))
     specs = {m: model_spec(config.trust, m, values) for m in models}
-    cache: dict[tuple[str, int], tuple[np.ndarray, np.ndarray]] = {}
-
-    def scores_of(condition: str, k: int) -> tuple[np.ndarray, np.ndarray]:
-        key = (condition, k if condition.endswith('_random') else 0)
-        if key not in cache:
-            cache[key] = drive_scores(config, condition, drive_seed(seed, key[1]), steps)
-        return cache[key]
-
+    fit_seed = seed + 1   # not the participants' stream: a start must not be the truth
+    _JOB.update(config=config, seed=seed, steps=steps, specs=specs, fit_seed=fit_seed,
+                sizes={m: len(specs[m].parameters) for m in models})
+    names = conditions(drives)
+    keys = list(dict.fromkeys(
+        (c, DRIVES_PER_SEED * i + j if c.endswith('_random') else 0)
+        for i in range(participants) for j, c in enumerate(names)))
+    cache = dict(zip(keys, _mapped(_scores_of, keys, workers), strict=True))
+    people = []
+    for true in models:   # drawn in order from one stream: the same for any `workers`
+        for i in range(participants):
+            data = [(f'{c}_{j + 1}', *cache[(c, DRIVES_PER_SEED * i + j
+                                             if c.endswith('_random') else 0)])
+                    for j, c in enumerate(names)]
+            people.append(make_participant(specs[true], f'{true}_{i:02d}', data, rng, noise))
     pairs: dict[str, dict[str, list[tuple[float, float]]]] = {
         m: {p.name: [] for p in specs[m].parameters} for m in models}
     elpd: dict[str, list[dict[str, float]]] = {m: [] for m in models}
     chosen: dict[str, list[str]] = {m: [] for m in models}
-    sizes = {m: len(specs[m].parameters) for m in models}
-    fit_seed = seed + 1   # not the participants' stream: a start must not be the truth
-    for true in models:
-        for i in range(participants):
-            data = [(f'{c}_{j + 1}', *scores_of(c, DRIVES_PER_SEED * i + j))
-                    for j, c in enumerate(conditions(drives))]
-            who = make_participant(specs[true], f'{true}_{i:02d}', data, rng, noise)
-            fitted = fit(specs[true], who.drives, fit_seed)
-            for p in specs[true].parameters:
-                pairs[true][p.name].append((who.theta[p.name], fitted.theta[p.name]))
-            held: list[Score] = [held_out(specs[m], [[d] for d in who.drives],
-                                          'leave_one_drive_out', fit_seed) for m in models]
-            elpd[true].append({s.model: s.elpd for s in held})
-            chosen[true].append(preferred(held, sizes))
+    batch = max(workers, 1) * 4
+    for start in range(0, len(people), batch):
+        group = people[start:start + batch]
+        for who, (theta, scores, pick) in zip(group, _mapped(_score_one, group, workers),
+                                              strict=True):
+            for p in specs[who.model].parameters:
+                pairs[who.model][p.name].append((who.theta[p.name], theta[p.name]))
+            elpd[who.model].append(scores)
+            chosen[who.model].append(pick)
             if on_participant is not None:
                 on_participant(who.name)
     return Recovery(participants, drives, pairs, elpd, chosen)
@@ -227,9 +259,11 @@ def main() -> int:
     parser.add_argument('--drives', type=int, default=4)
     parser.add_argument('--models', default='', help='comma-separated (default: all)')
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--workers', type=int, default=1,
+                        help='processes for the drives and fits (the result is the same)')
     args = parser.parse_args()
-    if args.participants < 3 or args.drives < 2:
-        print('need --participants >= 3 and --drives >= 2', file=sys.stderr)
+    if args.participants < 3 or args.drives < 2 or args.workers < 1:
+        print('need --participants >= 3, --drives >= 2 and --workers >= 1', file=sys.stderr)
         return 2
     models = [m for m in args.models.split(',') if m] or list(names(TRUST_MODELS))
     unknown = sorted(set(models) - set(names(TRUST_MODELS)))
@@ -239,7 +273,7 @@ def main() -> int:
     config = load_run_config([])
     start = time.perf_counter()
     result = recover(config, models, args.participants, args.drives, seed=args.seed,
-                     on_participant=lambda who: print(
+                     workers=args.workers, on_participant=lambda who: print(
                          f'{who} {time.perf_counter() - start:.0f} s', flush=True))
     wall = time.perf_counter() - start
     specs = {m: model_spec(config.trust, m) for m in models}
@@ -270,7 +304,8 @@ def main() -> int:
                         for m in models if m in TRUE_RANGES},
         'unidentifiable': {m: {p.name: p.note for p in specs[m].fixed} for m in models},
         'seed': args.seed,
-        'true_and_fitted': result.true_and_fitted}
+        'true_and_fitted': result.true_and_fitted,
+        'preferred_per_participant': result.chosen, 'elpd_per_participant': result.elpd}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / 'trust_recovery.json').write_text(json.dumps(out, indent=1) + '\n')
     figure(args.out / 'trust_recovery.png', result, specs, r)

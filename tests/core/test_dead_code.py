@@ -23,10 +23,6 @@ ALLOWED: dict[str, str] = {
         'the fit tutorial (docs/tutorials/fit-trust-models.md) makes its ratings table with it',
     'trust_av.study.trust_recovery.write_ratings_table':
         'the fit tutorial (docs/tutorials/fit-trust-models.md) writes its ratings table with it',
-    'trust_monitor.trust_fit.preferred':
-        'the rule that chooses a model from held-out scores, documented for users as '
-        '`trust_fit.preferred` (docs/tutorials/fit-trust-models.md); the recovery benchmark '
-        'applies it',
     # metrics and bounds of the project's own tools, which write tables the docs print
     'trust_av.system.metrics.explicability_by_age':
         'the control-rate table (scripts/rate_table.py) reports E by the age of the plan',

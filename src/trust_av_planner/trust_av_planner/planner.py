@@ -22,7 +22,7 @@ from trust_av_common import registry
 from trust_av_common.component_checks import PASSING, call, check_plan, raised
 from trust_av_common.kinematics import VehicleState, gap_m
 from trust_av_planner.nmpc import PlannerConfig, TrustAwareNmpc
-from trust_av_planner.perturbations import Perturbation
+from trust_av_planner.perturbations import Perturbation, stopping_cap_mps2
 from trust_av_planner.plan_result import PlanResult
 from trust_av_planner.predictors import Observation, Predictor
 from trust_av_planner.predictors.sampling import ModelGridPredictor
@@ -238,6 +238,12 @@ class AvPlanner:
         result = self.nmpc.step(planned_gap, av.speed_mps, preview, expected, trust)
         if self.perturbation.active:
             commanded = self.perturbation.apply(result.plan_mps2, since_s, step_s)
+            # ... and never left unable to brake to the lead's stop (perturbations.py)
+            c = self.config
+            lead_next = float(np.interp(self.period_s, step_s * np.arange(steps), preview))
+            cap = stopping_cap_mps2(av.speed_mps, gap, traffic.speed_mps, lead_next,
+                                    self.period_s, -c.accel_min_mps2, c.standstill_gap_m)
+            commanded[0] = max(min(commanded[0], cap), c.accel_min_mps2)
             if not np.array_equal(commanded, result.plan_mps2):
                 result = dataclasses.replace(result, plan_mps2=commanded)
         self.commanded(float(result.plan_mps2[0]), t_s)

@@ -348,9 +348,13 @@ class OptimoModel:
     fit_parameters = (
         FitParameter('optimo_performance_rate_per_s', 0.001, 0.2, math.log(0.01), 1.0,
                      log_scale=True),
-        FitParameter('optimo_bias_rate_per_s', -0.02, 0.02, 0.0, 0.005),
         FitParameter('optimo_change_gain', 0.0, 0.5, 0.0, 0.1),
         FitParameter('optimo_initial_trust', 0.0, 1.0, 0.5, 0.25),
+        FitParameter('optimo_bias_rate_per_s', -0.02, 0.02, 0.0, 0.005, identifiable=False,
+                     note='ratings inform the drift under a good plan, w_b + w_p P, but '
+                          'not w_b and w_p apart (their errors correlate -0.97 in the '
+                          'recovery): w_b is held at its configured value (0, OPTIMo '
+                          'without a bias) and w_p carries the drift'),
     )
 
     def __init__(self, config: TrustConfig, params: OptimoConfig) -> None:

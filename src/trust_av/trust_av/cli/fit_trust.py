@@ -8,7 +8,9 @@ out per participant, leave one participant out pooled). Writes to ``--out``:
   (``fitted``, ``fixed``: declared but not identifiable, ``observation``: a, b, s);
 - ``scores.csv``: scope, model, scheme, ratings, elpd, elpd_se, rmse, rmse_se;
 - ``comparison.csv``: the same per scope and scheme, best first, with elpd_diff (to the
-  best) and elpd_diff_se;
+  best) and elpd_diff_se, and ``preferred`` (1 for the model the scope and scheme prefer by
+  :func:`~trust_monitor.trust_fit.preferred`'s parsimony rule, named in ``rule``: the rule the
+  recovery benchmark's confusion matrix uses; the printed summary names it too);
 - ``partial_pooling.csv`` (two or more participants): scope (a participant, or
   ``population``), model, parameter, value, kind (``fitted``, ``observation``; for the
   population ``center``: the pooled value, ``spread``: the between-participant standard
@@ -45,6 +47,7 @@ from trust_av_common import output_files
 from trust_av_common.registry import TRUST_MODELS, names
 from trust_av_planner.errors import TrustAvPlannerError
 from trust_monitor.trust_fit import (
+    PARSIMONY_SE,
     Fit,
     FitError,
     ModelSpec,
@@ -56,13 +59,19 @@ from trust_monitor.trust_fit import (
     held_out,
     model_spec,
     model_trust,
+    preferred,
 )
 
 __all__: list[str] = []
 
 LODO, LOPO = 'leave_one_drive_out', 'leave_one_participant_out'
 SCORE_FIELDS = ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'elpd_diff',
-                'elpd_diff_se', 'rmse', 'rmse_se')
+                'elpd_diff_se', 'rmse', 'rmse_se', 'preferred', 'rule')
+RULE = f'parsimony_{PARSIMONY_SE:g}se'
+"""The ``rule`` column: :func:`~trust_monitor.trust_fit.preferred` (the simplest model within
+``PARSIMONY_SE`` standard errors of the paired elpd difference to the best)."""
+RULE_TEXT = (f'parsimony rule: the model with the fewest fitted parameters whose held-out elpd '
+             f'is within {PARSIMONY_SE:g} SE of the paired difference to the best')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,8 +135,30 @@ def _models(option: str) -> list[str]:
     return chosen
 
 
-def _rows(scope: str, scores: Sequence[Score]) -> list[dict[str, Any]]:
-    return [{'scope': scope, **row} for row in compare(scores)]
+def _rows(scope: str, scores: Sequence[Score], sizes: dict[str, int]) -> list[dict[str, Any]]:
+    """The comparison rows of one scope and scheme, the preferred model marked."""
+    chosen = preferred(scores, sizes)
+    return [{'scope': scope, **row, 'preferred': int(row['model'] == chosen), 'rule': RULE}
+            for row in compare(scores)]
+
+
+def _print_preferred(rows: Sequence[dict[str, Any]]) -> None:
+    """Per scheme, the preferred model of each scope (the pooled one by name, the
+    participants' as counts), and the rule."""
+    chosen = [r for r in rows if r['preferred']]
+    for scheme in dict.fromkeys(r['scheme'] for r in chosen):
+        picks = [r for r in chosen if r['scheme'] == scheme]
+        pooled = [r['model'] for r in picks if r['scope'] == 'pooled']
+        counts: dict[str, int] = {}
+        for r in picks:
+            if r['scope'] != 'pooled':
+                counts[r['model']] = counts.get(r['model'], 0) + 1
+        said = pooled[0] if pooled else ', '.join(
+            f'{m} ({n} participant{"s" if n > 1 else ""})'
+            for m, n in sorted(counts.items(), key=lambda item: -item[1]))
+        print(f'preferred {scheme}: {said}')
+    if chosen:
+        print(f'  ({RULE_TEXT}; comparison.csv: preferred = 1)')
 
 
 def _fit_rows(scope: str, fitted: Fit) -> list[dict[str, Any]]:
@@ -199,6 +230,7 @@ def run(args: FitTrustOptions) -> int:
         raise TrustAvPlannerError(f'--out {args.out}: exists and is not a directory')
     args.out.mkdir(parents=True, exist_ok=True)
     specs = {m: model_spec(config.trust, m, dict(config.trust_model_params)) for m in models}
+    sizes = {m: len(specs[m].parameters) for m in models}
     people = by_participant(rated)
     fit_rows: list[dict[str, Any]] = []
     score_rows: list[dict[str, Any]] = []
@@ -209,7 +241,7 @@ def run(args: FitTrustOptions) -> int:
             fit_rows += _fit_rows(who, own_fits[m][who])
         if len(own) >= 2:
             score_rows += _rows(who, [held_out(specs[m], [[d] for d in own], LODO)
-                                      for m in models])
+                                      for m in models], sizes)
         else:
             print(f'{who}: one rated drive, no leave-one-drive-out score')
     pooled_fits = {m: fit(specs[m], rated) for m in models}
@@ -233,7 +265,7 @@ def run(args: FitTrustOptions) -> int:
             for who, own in people.items():
                 if len(own) >= 2:
                     score_rows += _rows(who, [held_out_partial(specs[m], people, own_fits[m],
-                                                               who) for m in models])
+                                                               who) for m in models], sizes)
     if not args.no_figures:
         for who, own in people.items():
             safe = re.sub(r'[^A-Za-z0-9_.-]', '_', who)
@@ -241,7 +273,8 @@ def run(args: FitTrustOptions) -> int:
                    {m: (specs[m], own_fits[m][who]) for m in models}, partial[who])
     if len(people) >= 2:
         groups = list(people.values())
-        score_rows += _rows('pooled', [held_out(specs[m], groups, LOPO) for m in models])
+        score_rows += _rows('pooled', [held_out(specs[m], groups, LOPO) for m in models],
+                            sizes)
     else:
         print('one participant: no leave-one-participant-out score')
     output_files.write_text(args.out / 'fits.csv', _csv(
@@ -264,6 +297,7 @@ def run(args: FitTrustOptions) -> int:
     for (scheme, model), values in sorted(totals.items(), key=lambda item: -sum(item[1])):
         print(f"{'all':>10s} {scheme:36s} {model:16s} elpd {sum(values):9.1f} summed over "
               f'{len(values)} participant(s)')
+    _print_preferred(score_rows)
     print(f'{len(people)} participant(s), {len(rated)} rated drive(s); tables and figures in '
           f'{args.out}')
     return 0

@@ -62,7 +62,7 @@ TRUE_RANGES: dict[str, dict[str, tuple[float, float]]] = {
     'paper': {'performance_threshold': (0.7, 0.98)},
     'asymmetric': {'performance_threshold': (0.7, 0.98), 'asymmetric_loss_ratio': (2.0, 10.0)},
     'optimo': {'optimo_performance_rate_per_s': (0.003, 0.02),
-               'optimo_bias_rate_per_s': (-0.005, 0.005), 'optimo_initial_trust': (0.2, 0.8)},
+               'optimo_initial_trust': (0.2, 0.8)},
 }
 """Where synthetic participants' true values are drawn uniformly (log-uniformly for a
 ``log_scale`` parameter) instead of from the declared prior: the ranges in which the
