@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 
 from trust_av.system.config import RunConfig, load_run_config
+from trust_av_common.held_stops import STOP_SIGNALS
 
 
 @pytest.fixture
@@ -58,7 +59,6 @@ context), ``graph`` multi-process node-graph runs and rclpy contexts, ``browser`
 page in Chromium. ``pytest tests/core -m "not slow"`` is the fast lane (docs/contributing.md)."""
 
 
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 LAST_ENDED: list[tuple[str, dict[str, set[str]]]] = []
 """The last test this process ended, and the stop signals' state it left."""
 SIGNALS_BEFORE = pytest.StashKey[tuple[dict[int, Any], dict[str, set[str]], set[int]]]()

@@ -24,6 +24,7 @@ out per participant, leave one participant out pooled). Writes to ``--out``:
 from __future__ import annotations
 
 import argparse
+import collections
 import csv
 import dataclasses
 import io
@@ -149,13 +150,9 @@ def _print_preferred(rows: Sequence[dict[str, Any]]) -> None:
     for scheme in dict.fromkeys(r['scheme'] for r in chosen):
         picks = [r for r in chosen if r['scheme'] == scheme]
         pooled = [r['model'] for r in picks if r['scope'] == 'pooled']
-        counts: dict[str, int] = {}
-        for r in picks:
-            if r['scope'] != 'pooled':
-                counts[r['model']] = counts.get(r['model'], 0) + 1
+        counts = collections.Counter(r['model'] for r in picks if r['scope'] != 'pooled')
         said = pooled[0] if pooled else ', '.join(
-            f'{m} ({n} participant{"s" if n > 1 else ""})'
-            for m, n in sorted(counts.items(), key=lambda item: -item[1]))
+            f'{m} ({n} participant{"s" if n > 1 else ""})' for m, n in counts.most_common())
         print(f'preferred {scheme}: {said}')
     if chosen:
         print(f'  ({RULE_TEXT}; comparison.csv: preferred = 1)')

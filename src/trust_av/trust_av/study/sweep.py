@@ -36,6 +36,7 @@ from trust_av.system.closed_loop import simulate
 from trust_av.system.config import RunConfig, load_run_config
 from trust_av.system.metrics import StepRecord, compute_metrics
 from trust_av_common import output_files
+from trust_av_common.held_stops import STOP_SIGNALS
 from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['ALPHAS', 'METRICS', 'PAPER_PREDICTORS', 'TRACES', 'Case', 'Executor', 'LocalExecutor',
@@ -339,8 +340,7 @@ def _stop_handlers_kept() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    signums = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-    handlers = {signum: signal.getsignal(signum) for signum in signums}
+    handlers = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
     try:
         yield
     finally:
