@@ -12,7 +12,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import pytest
 from support.paths import REPO
@@ -165,6 +165,20 @@ def test_default_inputs_match_vehicle_stack_publishers(reliability: str,
         QoSCompatibility.ERROR
 
 
+def start_planner(tmp_path: Path, params: Path, domain: int) -> tuple[
+        subprocess.Popen[bytes], BinaryIO]:
+    """The planner node alone on ``domain`` (the shipped params, then ``params``), its
+    output in ``tmp_path/planner.log``; the process and the open log."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
+    log = (tmp_path / 'planner.log').open('wb')
+    planner = subprocess.Popen(node_command('trust_av_planner.planner_node', 'planner',
+                                            [DEFAULT_PARAMS_FILE, params], {}),
+                               stdout=log, stderr=subprocess.STDOUT, env=env,
+                               start_new_session=True)
+    return planner, log
+
+
 def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None:
     """The planner in wall mode with the installed defaults, its inputs published at 30 Hz
     with Autoware's kinematic-state QoS (reliable, volatile, keep last 1, no deadline): it
@@ -191,14 +205,7 @@ def test_planner_plans_from_publishers_with_autoware_qos(tmp_path: Path) -> None
                       '    speed_max_from_trace: false\n')
     autoware = QoSProfile(depth=1)     # rclcpp QoS(1): reliable, volatile, no deadline
     with lease_domain() as domain:
-        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
-                   ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-                   RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
-        log = (tmp_path / 'planner.log').open('wb')
-        planner = subprocess.Popen(node_command('trust_av_planner.planner_node', 'planner',
-                                                [DEFAULT_PARAMS_FILE, params], {}),
-                                   stdout=log, stderr=subprocess.STDOUT, env=env,
-                                   start_new_session=True)
+        planner, log = start_planner(tmp_path, params, domain)
         context = Context()
         rclpy.init(context=context, domain_id=domain)
         node = rclpy.create_node('autoware_like', context=context)
@@ -289,14 +296,7 @@ def test_planner_stale_inputs_decelerate_and_recover_and_alpha_is_tunable(
     inputs = 'traffic, ego' if predictor == 'ca' else 'traffic, ego, human'
     clock = WallClockConfig(clock_mode='wall', input_deadline_qos=True)
     with lease_domain() as domain:
-        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
-                   ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-                   RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
-        log = (tmp_path / 'planner.log').open('wb')
-        planner = subprocess.Popen(node_command('trust_av_planner.planner_node', 'planner',
-                                                [DEFAULT_PARAMS_FILE, params], {}),
-                                   stdout=log, stderr=subprocess.STDOUT, env=env,
-                                   start_new_session=True)
+        planner, log = start_planner(tmp_path, params, domain)
         context = Context()
         rclpy.init(context=context, domain_id=domain)
         node = rclpy.create_node('tester', context=context)
