@@ -74,7 +74,10 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
       last=$count
     done ) &
   watcher=$!
-  pip_counted dependencies "$pins" -r "$root/requirements.txt"
+  # --no-compile: pip would byte-compile every module of every distribution (torch's whole
+  # tree included: 20 of its 50 s here); Python compiles the modules a run imports on first
+  # use instead, and keeps them in __pycache__
+  pip_counted dependencies "$pins" --no-compile -r "$root/requirements.txt"
   kill "$watcher" 2>/dev/null || true
   wait "$watcher" 2>/dev/null || true
   say "step 2/4 done in $((SECONDS - setup_began)) s"

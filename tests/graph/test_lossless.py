@@ -300,7 +300,9 @@ def test_the_followers_own_pause_does_not_count_as_a_stall(
     chunk: the run lasts at least 6 s, so the pause comes mid-run); the pause is taken in
     ``on_step`` once the recorder's progress has been reported twice, lasts 24 s, and the
     recorder stays stopped 1 s beyond it, so that without the rule the first turn after the
-    pause would end the run naming the stopped recorder."""
+    pause would end the run naming the stopped recorder. The 25 s pause is within the DDS
+    lease (60 s, config/fastdds_graph.xml); with Fast DDS's default of 20 s the recorder was
+    dropped from the graph during it and its messages of the step under way were lost."""
     from preceding_traffic.sources import load_trace
     from preceding_traffic.traces import truncate
     from trust_av.graph.orchestrator import run_graph

@@ -28,7 +28,12 @@ from trust_av_planner.errors import TrustAvPlannerError
 __all__ = ['DDS_PROFILE', 'PROFILE_VARIABLES', 'RECORDER', 'Graph', 'GraphError', 'NodeSpec',
            'use_run_discovery']
 
-GRACE_S = {'SIGINT': 5.0, 'SIGTERM': 3.0}
+GRACE_S = {'SIGINT': 10.0, 'SIGTERM': 3.0}
+"""How long a group of nodes has to exit after each signal before the next, s. A node's own
+stop takes about 1.5 s on an idle host (what is queued for 0.3 s, its subscribers'
+acknowledgements for at most 1 s, then rclpy's teardown: trust_av_common.ros.spin); on a
+2-core host loaded by a whole test suite a node took longer than 8 s and was killed, so
+SIGINT is given 10 s. A second stop signal to trust-av moves on to the next rung at once."""
 
 
 class GraphError(TrustAvPlannerError):

@@ -58,7 +58,7 @@ from trust_av_common.registry import RegistryError
 from trust_av_common.ros import diagnostics as diag
 from trust_av_common.ros.diagnostics import NodeDiagnostics, Report
 from trust_av_common.ros.parameters import check_overrides
-from trust_av_common.ros.spin import WallLoop
+from trust_av_common.ros.spin import WallLoop, wait_acked
 
 __all__ = ['ManagedNode']
 
@@ -309,7 +309,9 @@ class ManagedNode(LifecycleNode):
             self.destroy_timer(timer)
         for sub in [s for s in self.subscriptions if s not in subscriptions]:
             self.destroy_subscription(sub)
-        for pub in [p for p in self.publishers if p not in publishers]:
+        made = [p for p in self.publishers if p not in publishers]
+        wait_acked(self, made, 'releasing')   # e.g. the hand-over of a shutdown from active
+        for pub in made:
             if isinstance(pub, LifecyclePublisher):
                 self.destroy_lifecycle_publisher(pub)
             else:

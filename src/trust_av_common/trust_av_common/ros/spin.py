@@ -8,7 +8,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any, Protocol
 
 import rclpy
@@ -32,7 +32,8 @@ from trust_av_common.ros.diagnostics import OK, NodeDiagnostics
 from trust_av_common.ros.parameters import check_overrides
 from trust_av_common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
 
-__all__ = ['PARENT_ENV', 'GraphNode', 'WallLoop', 'now_ns', 'spin_node', 'start_node']
+__all__ = ['PARENT_ENV', 'GraphNode', 'WallLoop', 'now_ns', 'spin_node', 'start_node',
+           'wait_acked']
 
 
 class WallLoop:
@@ -302,13 +303,22 @@ def _drain(executor: Executor, node: Node) -> None:
     end = time.monotonic() + DRAIN_S
     while time.monotonic() < end and ok():
         executor.spin_once(timeout_sec=0.02)
+    wait_acked(node, node.publishers, 'stopping')
+
+
+def wait_acked(node: Node, publishers: Iterable[Publisher], when: str) -> None:
+    """Wait until every reliable subscriber has acknowledged what ``publishers`` sent
+    (:data:`ACK_TIMEOUT_S` over all of them; a best-effort publisher returns at once), so
+    that a message published just before the publisher is destroyed (a hand-over command at
+    ``shutdown``, the last step at a stop) is delivered rather than dropped with its
+    writer; a topic not acknowledged in time is named in a warning that starts ``when``."""
     deadline = time.monotonic() + ACK_TIMEOUT_S
     unacknowledged = []
-    for publisher in node.publishers:
+    for publisher in publishers:
         left = max(0.0, deadline - time.monotonic())
         if not publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
             unacknowledged.append(publisher.topic_name)
     if unacknowledged:
         node.get_logger().warning(
-            f'stopping: not acknowledged by every subscriber within {ACK_TIMEOUT_S:g} s: '
+            f'{when}: not acknowledged by every subscriber within {ACK_TIMEOUT_S:g} s: '
             f'{", ".join(unacknowledged)}')
