@@ -40,4 +40,4 @@ docs_site="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$docs_site"
 rm -rf "$docs_site"
 echo '== pytest' >&2
-python -m pytest -n 4 --dist loadgroup --no-loadscope-reorder --durations=15 "$@"
+python -m pytest -n 6 --dist loadgroup --no-loadscope-reorder --durations=15 "$@"

@@ -3,6 +3,7 @@ tiers and its xdist grouping. Helpers shared between test modules are in ``suppo
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 from collections.abc import Iterator
@@ -134,41 +135,66 @@ def tier(path: Path) -> str | None:
     return parts[0] if len(parts) > 1 and parts[0] in TIERS else None
 
 
+WALL_GROUP = 'wall:'
+"""The prefix of the xdist group of a ``wall_clock`` test (one group per test, or per module
+whose tests share a module-scoped fixture): the scheduler runs these units on its wall
+lanes (:func:`pytest_xdist_make_scheduler`)."""
+
+
+def _group_name(text: str) -> str:
+    """``text`` as an xdist group name: xdist reads the group after the last ``@`` of an id
+    unless a ``]`` follows it, so neither may appear in the name."""
+    return re.sub(r'[\[\]@]', '_', text)
+
+
 @pytest.hookimpl(tryfirst=True)   # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Mark each test with its tier (its folder), then order and group the suite for
-    ``pytest -n 4 --dist loadgroup`` (scripts/test.sh).
+    ``pytest -n 6 --dist loadgroup`` (scripts/test.sh).
 
     * Tests that share a module-scoped fixture (a colcon build, one graph run read by many
       tests) form one xdist group per module, and the tests of any module that read a
       shared run (:data:`SHARED_RUNS`) one group per run, so that the fixture is built once.
-    * Every other test is a unit of its own, handed to whichever worker is free. A
-      ``wall_clock`` test (it mostly waits for real time, e.g. a soak at 10 Hz) runs beside
-      the others: its assertions hold on a busy machine (none is a timing threshold that
-      needs an idle CPU), so two of them may wait at the same time.
+    * A ``wall_clock`` test (it mostly waits for real time: a soak at 10 Hz, a browser
+      session) is a unit of its own, or its module's group is one, named
+      :data:`WALL_GROUP` ``...``: the scheduler runs such units on its wall lanes, half of
+      the workers, and every other unit on the others, so that the waiting tests wait side
+      by side while the CPU-bound ones keep both cores busy (when every worker took a
+      waiting test at the start, the CPU idled for the first minutes of the run).
+    * Every other test is a unit of its own, handed to whichever free worker is not a wall
+      lane.
     * The long ones start first, so that none of them ends the run alone: ``wall_clock``
-      tests (the longest: the soak's 2 minutes, the browser sessions), then ``slow`` ones
-      (CPU-bound and long), then groups, then the rest (scripts/test.sh keeps this order:
-      ``--no-loadscope-reorder``).
+      tests, then ``slow`` ones (CPU-bound and long), then groups, then the rest
+      (scripts/test.sh keeps this order: ``--no-loadscope-reorder``).
     Without xdist the groups do nothing and only the order changes.
     """
     del config
+    groups: dict[pytest.Item, str] = {}
     for item in items:
         name = tier(item.path)
         if name is not None:
             item.add_marker(getattr(pytest.mark, name))
         shared = [run for run in SHARED_RUNS if run in getattr(item, 'fixturenames', ())]
         if shared:
-            item.add_marker(pytest.mark.xdist_group(shared[0]))
+            groups[item] = shared[0]
             continue
         fixture_info = getattr(item, '_fixtureinfo', None)
-        if fixture_info is None:
-            continue
         # one group per module, whichever of its module-scoped fixtures a test uses (a
         # group per fixture split a module's tests that share one run over two workers)
-        if any(definitions and definitions[-1].scope == 'module'
-               for definitions in fixture_info.name2fixturedefs.values()):
-            item.add_marker(pytest.mark.xdist_group(f'{item.module.__name__}.module_fixtures'))
+        if fixture_info is not None and any(
+                definitions and definitions[-1].scope == 'module'
+                for definitions in fixture_info.name2fixturedefs.values()):
+            groups[item] = f'{item.module.__name__}.module_fixtures'
+    walls = {groups[item] for item in items
+             if item in groups and item.get_closest_marker('wall_clock') is not None}
+    for item in items:
+        group = groups.get(item)
+        if group in walls:
+            group = _group_name(WALL_GROUP + group)
+        elif group is None and item.get_closest_marker('wall_clock') is not None:
+            group = _group_name(WALL_GROUP + item.nodeid)
+        if group is not None:
+            item.add_marker(pytest.mark.xdist_group(group))
 
     def rank(item: pytest.Item) -> int:
         if item.get_closest_marker('wall_clock') is not None:
@@ -182,9 +208,15 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
-    """``--dist loadgroup`` with two mends for a worker that dies (pytest-timeout's thread
-    method ends a hung test's worker, and xdist starts a new one), so that such a test fails
-    once and alone and the run goes on:
+    """``--dist loadgroup`` with lanes, and two mends for a worker that dies.
+
+    Lanes: the even-numbered workers (``gw0``, ``gw2``, ...) are wall lanes: each takes the
+    next :data:`WALL_GROUP` unit in the queue, the others the next other unit, and a lane
+    whose own kind has run out takes the other kind. So half of the workers wait on the
+    ``wall_clock`` tests while the rest keep the CPU busy.
+
+    The mends, for pytest-timeout's thread method, which ends a hung test's worker (xdist
+    then starts a new one), so that such a test fails once and alone and the run goes on:
 
     * the dead worker's unfinished unit goes back to the queue without the test that killed
       it (xdist 3.8 requeued that test too: it hung again on every new worker until the
@@ -213,6 +245,18 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | 
             for other in self.assigned_work:
                 self._reschedule(other)
             return crashed
+
+        def _assign_work_unit(self, node: Any) -> None:
+            # xdist 3.8's LoadScopeScheduling._assign_work_unit, but the unit is the first
+            # of the node's lane (the first of any kind when its lane's have run out)
+            wall_lane = int(node.gateway.id.removeprefix('gw')) % 2 == 0
+            scope = next((s for s in self.workqueue
+                          if s.startswith(WALL_GROUP) == wall_lane), next(iter(self.workqueue)))
+            work_unit = self.workqueue.pop(scope)
+            self.assigned_work.setdefault(node, {})[scope] = work_unit
+            collection = self.registered_collections[node]
+            node.send_runtest_some([collection.index(nodeid)
+                                    for nodeid, done in work_unit.items() if not done])
 
         def _reschedule(self, node: Any) -> None:
             if node in self.registered_collections:
