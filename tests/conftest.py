@@ -3,6 +3,8 @@ tiers and its xdist grouping. Helpers shared between test modules are in ``suppo
 
 from __future__ import annotations
 
+import json
+import os
 import re
 import signal
 import subprocess
@@ -163,9 +165,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
       waiting test at the start, the CPU idled for the first minutes of the run).
     * Every other test is a unit of its own, handed to whichever free worker is not a wall
       lane.
-    * The long ones start first, so that none of them ends the run alone: ``wall_clock``
-      tests, then ``slow`` ones (CPU-bound and long), then groups, then the rest
-      (scripts/test.sh keeps this order: ``--no-loadscope-reorder``).
+    * The wall-clock tests first, then the others, each kind longest unit first (seconds
+      from :data:`DURATIONS`), so that none of them ends the run alone (scripts/test.sh
+      keeps this order: ``--no-loadscope-reorder``).
     Without xdist the groups do nothing and only the order changes.
     """
     del config
@@ -196,14 +198,63 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if group is not None:
             item.add_marker(pytest.mark.xdist_group(group))
 
-    def rank(item: pytest.Item) -> int:
-        if item.get_closest_marker('wall_clock') is not None:
-            return 0
-        if item.get_closest_marker('slow') is not None:
-            return 1
-        return 2 if item.get_closest_marker('xdist_group') is not None else 3
+    # each unit's expected seconds (a group's: its tests' sum), from the last stored run
+    known = stored_durations()
+    unit_s: dict[str, float] = {}
+    for item in items:
+        unit = _unit(item)
+        unit_s[unit] = unit_s.get(unit, 0.0) + known.get(item.nodeid, DEFAULT_DURATION_S)
+
+    def rank(item: pytest.Item) -> tuple[int, float, str]:
+        unit = _unit(item)
+        return (0 if item.get_closest_marker('wall_clock') is not None else 1,
+                -unit_s[unit], unit)
 
     items.sort(key=rank)
+
+
+def _unit(item: pytest.Item) -> str:
+    """The xdist unit of ``item``: its group, or itself."""
+    mark = item.get_closest_marker('xdist_group')
+    return f'@{mark.args[0]}' if mark is not None else item.nodeid
+
+
+DURATIONS = TESTS / 'durations.json'
+"""Each test's seconds (setup, call and teardown) in a whole run of scripts/test.sh, rounded:
+the order of the queue (the longest units first on each lane, as pytest-split and LPT
+scheduling do). Rewritten by a run with ``TRUST_AV_STORE_DURATIONS=1``; a test missing from
+it counts :data:`DEFAULT_DURATION_S`. It only orders the queue: a stale file makes a run
+slower, never wrong."""
+DEFAULT_DURATION_S = 0.5
+MEASURED: dict[str, float] = {}
+
+
+def stored_durations() -> dict[str, float]:
+    """:data:`DURATIONS` as a dict (empty when there is none)."""
+    if not DURATIONS.is_file():
+        return {}
+    data = json.loads(DURATIONS.read_text(encoding='utf-8'))
+    return {str(k): float(v) for k, v in data.items()}
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    """Sum each test's phases (in the xdist controller: every worker's reports), without the
+    ``@group`` xdist puts into a grouped test's id."""
+    nodeid = report.nodeid
+    if nodeid.rfind('@') > nodeid.rfind(']'):
+        nodeid = nodeid.rsplit('@', 1)[0]
+    MEASURED[nodeid] = MEASURED.get(nodeid, 0.0) + report.duration
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """With ``TRUST_AV_STORE_DURATIONS=1`` (not in a worker): the tests this run ran get their
+    new seconds in :data:`DURATIONS`, the others keep theirs."""
+    if os.environ.get('TRUST_AV_STORE_DURATIONS') != '1' or hasattr(session.config,
+                                                                      'workerinput'):
+        return
+    merged = {**stored_durations(), **MEASURED}
+    stored = {k: round(v, 1) for k, v in sorted(merged.items()) if v >= DEFAULT_DURATION_S}
+    DURATIONS.write_text(json.dumps(stored, indent=0) + '\n', encoding='utf-8')
 
 
 @pytest.hookimpl(optionalhook=True)
