@@ -5,10 +5,12 @@
 // pedal sample is sent at once on a key or pointer press or release, on any other change of
 // the pedal at most once per control period, and at the control rate while nothing changes,
 // all within the server's rate limit (a token bucket of inputBurst samples refilled at the
-// control rate): the page keeps its own, smaller bucket, refilled a
-// little slower, and one sample of it for a press or release, so the server refuses none.
-// The server acknowledges samples in its frames; the page echoes each acknowledgement at
-// once (the server measures the latency, the page reports no time).
+// control rate on the page's own clock: each sample carries its send time, t_ms, the
+// performance.now() the page's bucket used): the page keeps its own, smaller bucket,
+// refilled a little slower, and one sample of it for a press or release, so the server
+// refuses none, however the samples arrive. The server acknowledges samples in its frames;
+// the page echoes each acknowledgement at once: the server measures the latency on its own
+// clock (the page's time serves the rate limit only).
 'use strict';
 
 const RENDER_DELAY_MS = 100;
@@ -182,11 +184,13 @@ function pedalAccel(p) { return p >= 0 ? p * drive.accelMax : -p * drive.accelMi
 // The page's side of the server's rate limit: PAGE_BURST samples at once (fewer than the
 // server's inputBurst), refilled at BUCKET_REFILL_SHARE of the control rate; a periodic or
 // ramp sample leaves one for a press.
+// A time earlier than one already counted (a frame's timestamp is its start, before an
+// input event of that frame) refills nothing, as on the server.
 function tokens(nowMs) {
   const most = Math.min(PAGE_BURST, drive.inputBurst - 1);
   drive.tokens = Math.min(most, drive.tokens
     + Math.max(0, nowMs - drive.tokensAt) / 1000 * BUCKET_REFILL_SHARE * drive.controlRateHz);
-  drive.tokensAt = nowMs;
+  drive.tokensAt = Math.max(drive.tokensAt, nowMs);
   return drive.tokens;
 }
 
@@ -203,7 +207,7 @@ function sendSample(nowMs, press = false) {
   drive.pressWaiting = false;
   drive.lastSentMs = nowMs;
   drive.lastSentPedal = drive.pedal;
-  send({type: 'input', seq: ++drive.seq, accel_mps2: pedalAccel(drive.pedal)});
+  send({type: 'input', seq: ++drive.seq, accel_mps2: pedalAccel(drive.pedal), t_ms: nowMs});
 }
 const periodMs = () => 1000 / drive.controlRateHz;
 
