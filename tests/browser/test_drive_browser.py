@@ -46,17 +46,20 @@ pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),
                                  reason='Debian chromium not installed (scripts/bootstrap.sh)')]
 
-DRIVE_S = 12.0
-"""The closed tab's drives: the tab closed 2 s in, abandoned ABANDON_S later, well before
-the end."""
+DRIVE_S = 10.0
+"""The closed tab's drives: the tab closed 2 s in, abandoned ABANDON_S later, before the
+end."""
 ABANDON_S = 5.0
 """No sample for this long abandons a drive: longer than the page's reconnection (1 s)."""
-RATING_S = 2.5
-SESSION_DRIVE_S = 8.0
-"""The synthetic session's drives: three ratings each."""
-PRACTICE_S = 8.0
-"""The synthetic session's practice drive: rated once, its connection lost 3.5 s in, back
-a second or two later, and driven on."""
+RATING_S = 2.0
+SESSION_DRIVE_S = 7.0
+"""The synthetic session's drives: three rating prompts each (two answers are asked for)."""
+PRACTICE_S = 7.0
+"""The synthetic session's practice drive: rated once, its connection lost 3 s in, back a
+second or two later, and driven on."""
+VIEWPORT = {'width': 800, 'height': 680}
+"""Small enough to draw cheaply (the page redraws its canvas every display frame: Chromium
+takes most of a drive's CPU, less the smaller the canvas), tall enough for the pedal."""
 ANSWERS = [2, 1, 2, 3, 1, 5, 6, 5, 5, 6, 6, 4]
 SETTINGS = """/**/drive:
   ros__parameters:
@@ -108,13 +111,13 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
     drive = Drive(study, 'P01', settings, practice=True)
     who = Participant()
     try:
-        page = browser.new_page(viewport={'width': 1000, 'height': 760})
+        page = browser.new_page(viewport=VIEWPORT)
         page.goto(drive.url)
         page.wait_for_selector('#start:not([hidden])', timeout=120_000)
         assert page.text_content('#title') == 'Practice drive'
         # the practice drive: rated once, then the connection drops; the page reconnects
         # and the drive goes on (the participant lets go of the pedal)
-        drive_once(page, who, rating=70, stop_after_s=3.5)
+        drive_once(page, who, rating=70, stop_after_s=3.0)
         if not who.ratings:                # the prompt came as the participant stopped
             page.wait_for_selector('#rating', state='visible', timeout=30_000)
             page.locator('#rating-slider').fill('70')
@@ -207,7 +210,7 @@ def test_a_closed_tab_and_a_killed_command_leave_a_session_that_resumes(
     drive = Drive(study, 'P02', settings)
     who = Participant()
     try:
-        page = browser.new_page()
+        page = browser.new_page(viewport=VIEWPORT)
         page.goto(drive.url)
         # drive 1: the tab is closed 2 s in
         drive_once(page, who, stop_after_s=2.0)
@@ -243,9 +246,9 @@ def test_a_closed_tab_and_a_killed_command_leave_a_session_that_resumes(
     again = Drive(study, 'P02', settings)
     try:
         assert again.wait_for(r'drive 2 \((\w+)\): waiting').group(1) == record['condition']
-        page = browser.new_page()
+        page = browser.new_page(viewport=VIEWPORT)
         page.goto(again.url)
-        drive_once(page, Participant(), stop_after_s=2.5)
+        drive_once(page, Participant(), stop_after_s=2.0)
         again.process.send_signal(signal.SIGKILL)
         again.process.wait(timeout=30)
         page.wait_for_function("document.getElementById('status').textContent"
@@ -261,7 +264,7 @@ def test_a_closed_tab_and_a_killed_command_leave_a_session_that_resumes(
         # the killed drive's directory is kept beside the new attempt, not overwritten
         kept = study / 'P02' / f'drive_02_{record["condition"]}.attempt1'
         assert kept.is_dir() and any(kept.glob('*.mcap'))
-        page = browser.new_page()
+        page = browser.new_page(viewport=VIEWPORT)
         page.goto(third.url)
         assert drive_once(page, who, answers=ANSWERS) in ('questionnaire', 'ready')
         # the next condition's start screen: a stop signal there ends the command
@@ -283,7 +286,7 @@ for (const query of ['?token=' + location.hash.slice(1), '']) {
 }
 </script>"""
 """Another web page on this machine that knows the drive's port and even its token."""
-ROBUST_DRIVE_S = 20.0
+ROBUST_DRIVE_S = 16.0
 """The misuse drive's length: every step below fits in it with time to spare under load."""
 ROBUST_RATING_S = 3.0
 ROBUST = f"""/**/drive:
