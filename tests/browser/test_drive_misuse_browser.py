@@ -114,7 +114,8 @@ def _events(bag: Path) -> list[tuple[str, dict[str, str]]]:
         connections = [c for c in reader.connections if c.topic == '/driver/events']
         out = []
         for c, _, raw in reader.messages(connections=connections):
-            status = reader.deserialize(raw, c.msgtype).status[0]
+            msg: Any = reader.deserialize(raw, c.msgtype)
+            status = msg.status[0]
             out.append((status.message, {v.key: v.value for v in status.values}))
         return out
 
@@ -180,7 +181,7 @@ def _check_the_collision(study: Path, output: str, protocol: str, shown: list[st
     assert int(row['collisions']) == summary['collisions']
     assert row['ended_by'] == summary['ended_by']
     assert float(row['min_gap_m']) > -0.2
-    bag = study / record['bag']
+    bag: Path = study / record['bag']
     assert check_bag_directory(bag) == []
     meta = custom_data(bag)
     assert meta['trust_av.drive.on_collision'] == protocol

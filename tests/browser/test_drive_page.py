@@ -26,7 +26,8 @@ pytestmark = [pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),
                                  reason='Debian chromium not installed (scripts/bootstrap.sh)')]
 
-HELLO = {'type': 'hello', 'rating_period_s': 1.0, 'control_rate_hz': 20.0,
+RATE_HZ = 20.0
+HELLO = {'type': 'hello', 'rating_period_s': 1.0, 'control_rate_hz': RATE_HZ,
          'accel_max_mps2': 2.5, 'accel_min_mps2': -6.0}
 FAKE_PAD = """
 navigator.getGamepads = () => [window.fakePad || null];
@@ -87,7 +88,7 @@ def _drive(server: DriveServer, page: Any) -> None:
     page.wait_for_function("document.getElementById('gap').dataset.m !== undefined")
 
 
-PERIOD_MS = 1000 / HELLO['control_rate_hz']
+PERIOD_MS = 1000 / RATE_HZ
 
 
 def test_keyboard_pointer_and_gamepad_drive_the_pedal(

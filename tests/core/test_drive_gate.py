@@ -235,7 +235,7 @@ def _open(server: DriveServer, *, origin: str | None = None, token: str | None =
 
 def _received(ws: Any, kind: str) -> dict[str, Any]:
     while True:
-        message = json.loads(ws.recv(timeout=10))
+        message: dict[str, Any] = json.loads(ws.recv(timeout=10))
         if message['type'] == kind:
             return message
 
