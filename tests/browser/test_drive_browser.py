@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -240,7 +241,11 @@ def test_a_closed_tab_and_a_killed_command_leave_a_session_that_resumes(
     assert len(braking) > 5 and np.all(np.diff(braking[:, 2]) <= 1e-9)   # slowing down
     # the AV was not affected: the planner kept commanding and the AV kept driving to the end
     ego = read_drive(closed).odometry['/ego/odom']
-    assert ego[-1, 0] > brake_from + 2.0 and _counts(closed)['/ego/accel_cmd'] > 50
+    driven_s = float(custom_data(closed)['trust_av.drive.driven_s'])
+    commands = _messages(closed, '/ego/accel_cmd')
+    assert ego[-1, 0] > brake_from + 2.0 and len(commands) > 5 * driven_s   # half its rate
+    assert (_stamp_ns(commands[-1]) - int(custom_data(closed)['trust_av.drive.start_ns'])) \
+        / 1e9 > brake_from + 2.0
     # the same command resumes the session with the abandoned condition; killed during
     # that drive (a crash: nothing finished)
     again = Drive(study, 'P02', settings)
@@ -409,15 +414,23 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         # the driving tab is closed and reopened: the true time left, the same schedule
         second.wait_for_function("document.getElementById('time-left').dataset.s",
                                  timeout=10_000)
+        asked = time.monotonic()
         left_before = float(second.locator('#time-left').get_attribute('data-s'))
+        read_before = (asked, time.monotonic())
         prompt_before = second.evaluate('window.drive.prompt')
         second.close()
         reopened = context.new_page()
         reopened.goto(drive.url)
         reopened.wait_for_function("window.drive.controlling && document.getElementById("
                                    "'time-left').dataset.s", timeout=10_000)
+        asked = time.monotonic()
         left_after = float(reopened.locator('#time-left').get_attribute('data-s'))
-        assert 0 < left_before - left_after < 5.0, (left_before, left_after)
+        read_after = (asked, time.monotonic())
+        # the time left went down by the time that passed between the two readings (each
+        # bracketed by this clock; a page shows a frame up to half a second old)
+        passed = (read_after[0] - read_before[1], read_after[1] - read_before[0])
+        assert passed[0] - 0.5 < left_before - left_after < passed[1] + 0.5, \
+            (left_before, left_after, passed)
         reopened.wait_for_selector('#rating', state='visible', timeout=15_000)
         assert prompt_before is None or reopened.evaluate('window.drive.prompt') >= prompt_before
         reopened.locator('#rating-slider').fill('40')
@@ -490,8 +503,9 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
     grid = ROBUST_RATING_S
     assert all(abs(t / grid - round(t / grid)) * grid < 1.0 for t in prompts), prompts
     # every registered trust model's trust, live during the drive
-    trust = _messages(bag, '/driver/model_trust')
-    assert len(trust) > 100 and list(trust[0].name) == list(names(TRUST_MODELS))
+    trust = _messages(bag, '/driver/model_trust')   # a plan pair every 0.1 s: half of them
+    assert len(trust) > 5 * float(meta['trust_av.drive.driven_s'])
+    assert list(trust[0].name) == list(names(TRUST_MODELS))
     assert all(np.isfinite(m.position).all() for m in trust)
     assert all(((np.asarray(m.position) >= 0.0) & (np.asarray(m.position) <= 1.0)).all()
                for m in trust)                  # the common scale
