@@ -386,7 +386,7 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         # after 200 of them (the tab reconnects by itself); the other tab's frames go on
         flood_start = second.evaluate('performance.now()')
         first.evaluate("""() => {
-            const ws = window.drive.ws;
+            const ws = window.flooded = window.drive.ws;
             for (let k = 0; k < 10000; k++) {
                 ws.send(JSON.stringify(k % 2 ? {type: 'input', seq: k, accel_mps2: 1e308}
                                             : {type: 'ack', seq: k}));
@@ -399,7 +399,10 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         print(f'flood: the other tab got {len(frames)} frames in '
               f'{(frames[-1] - flood_start) / 1000:.1f} s, largest gap '
               f'{max(np.diff(frames)):.0f} ms')
-        # a rating prompt is answered in the driving tab
+        # the flooding tab drives again on a new connection (an answer given before would
+        # go nowhere); a rating prompt is answered in it
+        first.wait_for_function('window.drive.ws !== window.flooded && window.drive.ws'
+                                '.readyState === 1 && window.drive.controlling', timeout=30_000)
         first.wait_for_selector('#rating', state='visible', timeout=15_000)
         first.locator('#rating-slider').fill('60')
         first.click('#rating-submit')
