@@ -59,8 +59,9 @@ PRACTICE_S = 7.0
 """The synthetic session's practice drive: rated once, its connection lost 3 s in, back a
 second or two later, and driven on."""
 VIEWPORT = {'width': 800, 'height': 680}
-"""Small enough to draw cheaply (the page redraws its canvas every display frame: Chromium
-takes most of a drive's CPU, less the smaller the canvas), tall enough for the pedal."""
+"""Small enough to draw cheaply (the page redraws its canvas every display frame while
+driving: Chromium takes most of a drive's CPU, less the smaller the canvas), tall enough for
+the pedal and the questionnaire."""
 ANSWERS = [2, 1, 2, 3, 1, 5, 6, 5, 5, 6, 6, 4]
 SETTINGS = """/**/drive:
   ros__parameters:
@@ -345,7 +346,7 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
     study = tmp_path / 'study'
     drive = Drive(study, 'P04', settings)
     port = int(drive.url.rsplit(':', 1)[1].strip('/'))
-    context = browser.new_context(viewport={'width': 1000, 'height': 760})
+    context = browser.new_context(viewport=VIEWPORT)
     foreign = _foreign_server(port)
     try:
         first = context.new_page()
