@@ -5,11 +5,12 @@ page's own displayed state, held on the page's pointer pedal) drives whole sessi
 
 Checked: the bags hold every topic, the ratings and the questionnaire are recorded on the
 drive's clock beside the monitor's trust, the study metadata is in ``custom_data``, the
-comparison and the summary are written; a lost connection mid-drive (the page reconnects)
-and a closed tab (the follower holds, coasts, brakes; the drive is abandoned, its bag
-finished; the same command resumes the session) behave as docs/concepts/driver-in-the-loop.md
-says. No timing assertion: the latency figures are the benchmark's
-(benchmarks/bench_drive.py).
+comparison and the summary are written; a lost connection mid-drive (the practice drive's:
+the page reconnects), a closed tab (the follower holds, coasts, brakes; the drive is
+abandoned, its bag finished; the same command resumes the session) and a killed command
+(the session resumes, the killed attempt kept) behave as docs/concepts/driver-in-the-loop.md
+says. Each drive runs the node graph in wall time, so cases that can share a session do.
+No timing assertion: the latency figures are the benchmark's (benchmarks/bench_drive.py).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 import json
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -45,16 +47,29 @@ pytestmark = [pytest.mark.slow, pytest.mark.wall_clock,
               pytest.mark.skipif(not Path(CHROMIUM).exists(),
                                  reason='Debian chromium not installed (scripts/bootstrap.sh)')]
 
-DRIVE_S = 20.0
-SESSION_DRIVE_S = 12.0   # the whole synthetic session's drives (after a 6 s practice drive)
+DRIVE_S = 10.0
+"""The closed tab's drives: the tab closed 2 s in, abandoned ABANDON_S later, before the
+end."""
+ABANDON_S = 5.0
+"""No sample for this long abandons a drive: longer than the page's reconnection (1 s)."""
+RATING_S = 2.0
+SESSION_DRIVE_S = 7.0
+"""The synthetic session's drives: three rating prompts each (two answers are asked for)."""
+PRACTICE_S = 7.0
+"""The synthetic session's practice drive: rated once, its connection lost 3 s in, back a
+second or two later, and driven on."""
+VIEWPORT = {'width': 800, 'height': 680}
+"""Small enough to draw cheaply (the page redraws its canvas every display frame while
+driving: Chromium takes most of a drive's CPU, less the smaller the canvas), tall enough for
+the pedal and the questionnaire."""
 ANSWERS = [2, 1, 2, 3, 1, 5, 6, 5, 5, 6, 6, 4]
 SETTINGS = """/**/drive:
   ros__parameters:
     drive_duration_s: {drive_s}
     practice: true
     practice_duration_s: {practice_s}
-    rating_period_s: 4.0
-    abandon_after_s: 6.0
+    rating_period_s: {rating_s}
+    abandon_after_s: {abandon_s}
     start_timeout_s: 120.0
     questionnaire_timeout_s: 60.0
     port: 0
@@ -92,16 +107,30 @@ def _phases(bag: Path) -> list[str]:
 def test_a_synthetic_participant_completes_a_session_through_the_page(
         tmp_path: Path, browser: Any) -> None:
     settings = tmp_path / 'drive.yaml'
-    settings.write_text(SETTINGS.format(drive_s=SESSION_DRIVE_S, practice_s=6.0))
+    settings.write_text(SETTINGS.format(drive_s=SESSION_DRIVE_S, practice_s=PRACTICE_S,
+                                        rating_s=RATING_S, abandon_s=ABANDON_S))
     study = tmp_path / 'study'
     drive = Drive(study, 'P01', settings, practice=True)
     who = Participant()
     try:
-        page = browser.new_page(viewport={'width': 1000, 'height': 760})
+        page = browser.new_page(viewport=VIEWPORT)
         page.goto(drive.url)
         page.wait_for_selector('#start:not([hidden])', timeout=120_000)
         assert page.text_content('#title') == 'Practice drive'
-        for _ in range(3):
+        # the practice drive: rated once, then the connection drops; the page reconnects
+        # and the drive goes on (the participant lets go of the pedal)
+        drive_once(page, who, rating=70, stop_after_s=3.0)
+        if not who.ratings:                # the prompt came as the participant stopped
+            page.wait_for_selector('#rating', state='visible', timeout=30_000)
+            page.locator('#rating-slider').fill('70')
+            page.click('#rating-submit')
+            who.ratings.append(70)
+        page.mouse.up()
+        page.evaluate('window.drive.ws.close()')
+        page.wait_for_function("window.drive.phase === 'driving' && window.drive.ws"
+                               '.readyState === 1 && window.drive.inputTimer !== null',
+                               timeout=30_000)
+        for _ in range(2):
             assert drive_once(page, who, rating=70, answers=ANSWERS) in ('ready', 'finished',
                                                                           'questionnaire')
         page.wait_for_function("window.drive.phase === 'finished'", timeout=120_000)
@@ -125,6 +154,11 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
         assert counts['/driver/questionnaire'] == (0 if practice else 1)
         if practice:
             ratings_recorded += counts['/driver/rating']
+            # the lost connection: the follower held, coasted while the page was gone, and
+            # the page drove again after (its samples held the pedal at zero)
+            phases = _phases(bag)
+            assert 'hold' in phases[phases.index('coast'):]
+            assert custom_data(bag)['trust_av.drive.status'] == 'done'
             continue
         meta = custom_data(bag)
         assert meta['trust_av.participant'] == 'P01'
@@ -165,43 +199,31 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
         drive_bag_pairs(study, 1.0, 4.5)
 
 
-def test_a_lost_connection_and_a_closed_tab_behave_as_documented(
+def test_a_closed_tab_and_a_killed_command_leave_a_session_that_resumes(
         tmp_path: Path, browser: Any) -> None:
+    """A closed tab: the drive is abandoned, its bag finished; the same command resumes the
+    session with that condition; killed during that drive (nothing finished), the command
+    again resumes it, the killed attempt kept; a stop signal on a start screen ends it."""
+    import signal
     settings = tmp_path / 'drive.yaml'
-    settings.write_text(SETTINGS.format(drive_s=DRIVE_S, practice_s=10.0))
+    settings.write_text(SETTINGS.format(drive_s=DRIVE_S, practice_s=10.0, rating_s=4.0,
+                                        abandon_s=ABANDON_S))
     study = tmp_path / 'study'
     drive = Drive(study, 'P02', settings)
     who = Participant()
     try:
-        page = browser.new_page()
+        page = browser.new_page(viewport=VIEWPORT)
         page.goto(drive.url)
-        # drive 1: the connection drops 6 s in; the page reconnects and the drive goes on
-        drive_once(page, who, stop_after_s=6.0)
-        page.mouse.up()
-        page.evaluate('window.drive.ws.close()')
-        page.wait_for_function("window.drive.phase === 'driving' && window.drive.ws"
-                               '.readyState === 1 && window.drive.inputTimer !== null',
-                               timeout=30_000)
-        page.wait_for_function("window.drive.phase === 'questionnaire'", timeout=60_000)
-        for i, value in enumerate(ANSWERS):
-            page.check(f'input[name="item{i + 1}"][value="{value}"]')
-        page.click('#questionnaire-submit')
-        # drive 2: the tab is closed 5 s in
-        drive_once(page, who, stop_after_s=5.0)
+        # drive 1: the tab is closed 2 s in
+        drive_once(page, who, stop_after_s=2.0)
         page.close()
         drive.wait_for(r'stops here')
         drive.finish()
     finally:
         drive.kill()
-    session = json.loads((study / 'P02' / 'session.json').read_text())
-    first, second = session['drives']
-    assert (first['status'], second['status']) == ('done', 'abandoned')
-    lost = study / first['bag']
-    phases = _phases(lost)
-    after_loss = phases[phases.index('coast'):]      # held, then coasted while it was gone
-    assert 'hold' in after_loss                      # and the person drove again after
-    assert custom_data(lost)['trust_av.drive.status'] == 'done'
-    closed = study / second['bag']
+    (record,) = json.loads((study / 'P02' / 'session.json').read_text())['drives']
+    assert record['status'] == 'abandoned'
+    closed = study / record['bag']
     assert check_bag_directory(closed) == []         # the abandoned drive's bag is finished
     assert custom_data(closed)['trust_av.drive.status'] == 'abandoned'
     phases = _phases(closed)
@@ -220,52 +242,45 @@ def test_a_lost_connection_and_a_closed_tab_behave_as_documented(
     assert len(braking) > 5 and np.all(np.diff(braking[:, 2]) <= 1e-9)   # slowing down
     # the AV was not affected: the planner kept commanding and the AV kept driving to the end
     ego = read_drive(closed).odometry['/ego/odom']
-    assert ego[-1, 0] > brake_from + 2.0 and _counts(closed)['/ego/accel_cmd'] > 50
-    # the same command resumes the session with the abandoned condition
+    driven_s = float(custom_data(closed)['trust_av.drive.driven_s'])
+    commands = _messages(closed, '/ego/accel_cmd')
+    assert ego[-1, 0] > brake_from + 2.0 and len(commands) > 5 * driven_s   # half its rate
+    assert (_stamp_ns(commands[-1]) - int(custom_data(closed)['trust_av.drive.start_ns'])) \
+        / 1e9 > brake_from + 2.0
+    # the same command resumes the session with the abandoned condition; killed during
+    # that drive (a crash: nothing finished)
     again = Drive(study, 'P02', settings)
     try:
-        drive_ready = again.wait_for(r'drive (\d+) \((\w+)\): waiting')
-        assert drive_ready.group(2) == second['condition']
-        page = browser.new_page()
+        assert again.wait_for(r'drive 2 \((\w+)\): waiting').group(1) == record['condition']
+        page = browser.new_page(viewport=VIEWPORT)
         page.goto(again.url)
-        drive_once(page, who, answers=ANSWERS)
-        page.wait_for_function("window.drive.phase === 'finished'", timeout=120_000)
-        again.finish()
+        drive_once(page, Participant(), stop_after_s=2.0)
+        again.process.send_signal(signal.SIGKILL)
+        again.process.wait(timeout=30)
+        page.wait_for_function("document.getElementById('status').textContent"
+                               ".includes('connection lost')", timeout=10_000)
+        page.close()
     finally:
         again.kill()
     session = json.loads((study / 'P02' / 'session.json').read_text())
-    assert [d['status'] for d in session['drives']] == ['done', 'abandoned', 'done']
-    assert (study / session['drives'][1]['bag']).is_dir()   # nothing recorded is lost
-
-
-def test_a_session_resumes_after_the_command_is_killed(tmp_path: Path, browser: Any) -> None:
-    import signal
-    settings = tmp_path / 'drive.yaml'
-    settings.write_text(SETTINGS.format(drive_s=DRIVE_S, practice_s=10.0))
-    study = tmp_path / 'study'
-    drive = Drive(study, 'P03', settings)
+    assert session['drives'] == [record]                  # the killed drive is not counted
+    third = Drive(study, 'P02', settings)
     try:
-        page = browser.new_page()
-        page.goto(drive.url)
-        first = drive.wait_for(r'drive 1 \((\w+)\): waiting').group(1)
-        drive_once(page, Participant(), stop_after_s=4.0)
-        drive.process.send_signal(signal.SIGKILL)         # a crash: nothing finished
-        drive.process.wait(timeout=30)
-        page.wait_for_function("document.getElementById('status').textContent"
-                               ".includes('connection lost')", timeout=10_000)
-    finally:
-        drive.kill()
-    session = json.loads((study / 'P03' / 'session.json').read_text())
-    assert session['drives'] == []                        # the killed drive is not counted
-    again = Drive(study, 'P03', settings)
-    try:
-        assert again.wait_for(r'drive 1 \((\w+)\): waiting').group(1) == first
+        assert third.wait_for(r'drive 2 \((\w+)\): waiting').group(1) == record['condition']
         # the killed drive's directory is kept beside the new attempt, not overwritten
-        kept = study / 'P03' / f'drive_01_{first}.attempt1'
+        kept = study / 'P02' / f'drive_02_{record["condition"]}.attempt1'
         assert kept.is_dir() and any(kept.glob('*.mcap'))
+        page = browser.new_page(viewport=VIEWPORT)
+        page.goto(third.url)
+        assert drive_once(page, who, answers=ANSWERS) in ('questionnaire', 'ready')
+        # the next condition's start screen: a stop signal there ends the command
+        assert third.wait_for(r'drive 3 \((\w+)\): waiting').group(1) != record['condition']
     finally:
-        again.kill()
-    assert again.process.returncode == 128 + signal.SIGTERM
+        third.kill()
+    assert third.process.returncode == 128 + signal.SIGTERM
+    session = json.loads((study / 'P02' / 'session.json').read_text())
+    assert [d['status'] for d in session['drives']] == ['abandoned', 'done']
+    assert (study / session['drives'][0]['bag']).is_dir()   # nothing recorded is lost
 
 
 FOREIGN_PAGE = """<!doctype html><script>
@@ -277,11 +292,14 @@ for (const query of ['?token=' + location.hash.slice(1), '']) {
 }
 </script>"""
 """Another web page on this machine that knows the drive's port and even its token."""
-ROBUST = """/**/drive:
+ROBUST_DRIVE_S = 16.0
+"""The misuse drive's length: every step below fits in it with time to spare under load."""
+ROBUST_RATING_S = 3.0
+ROBUST = f"""/**/drive:
   ros__parameters:
-    drive_duration_s: 30.0
+    drive_duration_s: {ROBUST_DRIVE_S}
     practice: false
-    rating_period_s: 4.0
+    rating_period_s: {ROBUST_RATING_S}
     abandon_after_s: 8.0
     start_timeout_s: 120.0
     questionnaire_timeout_s: 60.0
@@ -328,7 +346,7 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
     study = tmp_path / 'study'
     drive = Drive(study, 'P04', settings)
     port = int(drive.url.rsplit(':', 1)[1].strip('/'))
-    context = browser.new_context(viewport={'width': 1000, 'height': 760})
+    context = browser.new_context(viewport=VIEWPORT)
     foreign = _foreign_server(port)
     try:
         first = context.new_page()
@@ -369,18 +387,23 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         # after 200 of them (the tab reconnects by itself); the other tab's frames go on
         flood_start = second.evaluate('performance.now()')
         first.evaluate("""() => {
-            const ws = window.drive.ws;
+            const ws = window.flooded = window.drive.ws;
             for (let k = 0; k < 10000; k++) {
                 ws.send(JSON.stringify(k % 2 ? {type: 'input', seq: k, accel_mps2: 1e308}
                                             : {type: 'ack', seq: k}));
             }
         }""")
-        first.wait_for_timeout(3000)
+        second.wait_for_function(
+            f'window.drive.frameTimes.filter(t => t > {flood_start}).length > 20',
+            timeout=30_000)
         frames = second.evaluate(f'window.drive.frameTimes.filter(t => t > {flood_start})')
-        assert len(frames) > 20
-        print(f'flood: the other tab got {len(frames)} frames in 3 s, largest gap '
+        print(f'flood: the other tab got {len(frames)} frames in '
+              f'{(frames[-1] - flood_start) / 1000:.1f} s, largest gap '
               f'{max(np.diff(frames)):.0f} ms')
-        # a rating prompt is answered in the driving tab
+        # the flooding tab drives again on a new connection (an answer given before would
+        # go nowhere); a rating prompt is answered in it
+        first.wait_for_function('window.drive.ws !== window.flooded && window.drive.ws'
+                                '.readyState === 1 && window.drive.controlling', timeout=30_000)
         first.wait_for_selector('#rating', state='visible', timeout=15_000)
         first.locator('#rating-slider').fill('60')
         first.click('#rating-submit')
@@ -395,15 +418,23 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         # the driving tab is closed and reopened: the true time left, the same schedule
         second.wait_for_function("document.getElementById('time-left').dataset.s",
                                  timeout=10_000)
+        asked = time.monotonic()
         left_before = float(second.locator('#time-left').get_attribute('data-s'))
+        read_before = (asked, time.monotonic())
         prompt_before = second.evaluate('window.drive.prompt')
         second.close()
         reopened = context.new_page()
         reopened.goto(drive.url)
         reopened.wait_for_function("window.drive.controlling && document.getElementById("
                                    "'time-left').dataset.s", timeout=10_000)
+        asked = time.monotonic()
         left_after = float(reopened.locator('#time-left').get_attribute('data-s'))
-        assert 0 < left_before - left_after < 5.0, (left_before, left_after)
+        read_after = (asked, time.monotonic())
+        # the time left went down by the time that passed between the two readings (each
+        # bracketed by this clock; a page shows a frame up to half a second old)
+        passed = (read_after[0] - read_before[1], read_after[1] - read_before[0])
+        assert passed[0] - 0.5 < left_before - left_after < passed[1] + 0.5, \
+            (left_before, left_after, passed)
         reopened.wait_for_selector('#rating', state='visible', timeout=15_000)
         assert prompt_before is None or reopened.evaluate('window.drive.prompt') >= prompt_before
         reopened.locator('#rating-slider').fill('40')
@@ -411,6 +442,8 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         box = reopened.locator('#pedal').bounding_box()
         reopened.mouse.move(box['x'] + box['width'] / 2, box['y'] + box['height'] / 2 + 10)
         reopened.mouse.down()                    # a light brake: the participant is there
+        print(f'every step done {reopened.locator("#time-left").get_attribute("data-s")} s '
+              'before the end of the drive')
         reopened.wait_for_function("window.drive.phase === 'questionnaire'", timeout=60_000)
         reopened.mouse.up()
         assert reopened.evaluate('window.innerHeight') >= reopened.locator(
@@ -421,7 +454,8 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         reopened.click('#questionnaire-submit')
         reopened.wait_for_function("window.drive.phase === 'finished'", timeout=60_000)
         output = drive.finish()
-        reopened.wait_for_timeout(1500)
+        reopened.wait_for_function('window.drive.ws.readyState === WebSocket.CLOSED',
+                                   timeout=10_000)
         assert 'connection lost' not in reopened.text_content('#status')   # final
         assert 'session is complete' in reopened.text_content('#message')
     finally:
@@ -451,12 +485,14 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
     # about the control rate, and the recorded answers are the participant's
     commands = [m.accel.linear.x for m in _messages(bag, '/human/accel_cmd')]
     assert all(-6.0 <= a <= 2.5 for a in commands)
-    assert len(commands) < 30.0 * 10 * 1.5
+    assert len(commands) < ROBUST_DRIVE_S * 10 * 1.5
     data = read_drive(bag)
     assert data.questionnaire[:12] == ANSWERS
     np.testing.assert_allclose(sorted(data.ratings), [0.40, 0.60])
     # the car never went through the AV
     you, av = data.odometry['/human/odom'], data.odometry['/ego/odom']
+    # while both are recorded (as the nodes stop, the AV's odometry may end first)
+    you = you[you[:, 0] <= av[-1, 0]]
     gaps = np.interp(you[:, 0], av[:, 0], av[:, 1]) - 4.5 - you[:, 1]
     assert gaps.min() > -0.2
     events = [m.status[0].message for m in _messages(bag, '/driver/events')]
@@ -465,15 +501,17 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         assert kind in events
     lost = events.index('page_lost')
     assert 'page_connected' in events[lost:]          # the interruption and the return
-    # the rating schedule went on through the interruptions: every prompt on the 4 s grid
+    # the rating schedule went on through the interruptions: every prompt on the grid
     start_ns = int(meta['trust_av.drive.start_ns'])
     prompts = [(_stamp_ns(m) - start_ns) / 1e9 for m in _messages(bag, '/driver/events')
                if m.status[0].message == 'rating_prompt']
     assert len(prompts) >= 3
-    assert all(abs(t / 4.0 - round(t / 4.0)) * 4.0 < 1.0 for t in prompts), prompts
+    grid = ROBUST_RATING_S
+    assert all(abs(t / grid - round(t / grid)) * grid < 1.0 for t in prompts), prompts
     # every registered trust model's trust, live during the drive
-    trust = _messages(bag, '/driver/model_trust')
-    assert len(trust) > 100 and list(trust[0].name) == list(names(TRUST_MODELS))
+    trust = _messages(bag, '/driver/model_trust')   # a plan pair every 0.1 s: half of them
+    assert len(trust) > 5 * float(meta['trust_av.drive.driven_s'])
+    assert list(trust[0].name) == list(names(TRUST_MODELS))
     assert all(np.isfinite(m.position).all() for m in trust)
     assert all(((np.asarray(m.position) >= 0.0) & (np.asarray(m.position) <= 1.0)).all()
                for m in trust)                  # the common scale

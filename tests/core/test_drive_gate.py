@@ -18,7 +18,16 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
 from human_driver_sim.follower_plant import COLLISION_CLEAR_M, contact
-from trust_av.drive.gate import DRIVING, INPUT_BURST, QUESTIONNAIRE, READY, WAIT, Gate
+from trust_av.drive.gate import (
+    DRIVING,
+    INPUT_BURST,
+    PAGE_CLOCK_SLACK_S,
+    QUESTIONNAIRE,
+    READY,
+    WAIT,
+    Gate,
+)
+from trust_av.drive.link import DriveLink
 from trust_av.drive.server import FLOOD_MESSAGES_PER_S, DriveServer
 from trust_av_common.kinematics import VehicleState
 from trust_av_planner.planner import observe
@@ -63,6 +72,95 @@ def test_pedal_samples_are_clipped_and_rate_limited() -> None:
     seqs = [s.seq for s in [high, low, *flood, *later] if s is not None]
     assert seqs == list(range(1, len(seqs) + 1))
     assert gate.refused_counts()['input over the control rate'] == 10_000 - INPUT_BURST
+
+
+def _stalled(sent_ms: list[float], stall_from_ms: float, stall_ms: float) -> list[int]:
+    """Arrival times (ns) of samples sent at ``sent_ms``: 2 ms on the way, except that
+    nothing is read while this process stalls (those arrive together at its end)."""
+    out = []
+    for t in sent_ms:
+        arrived = t + 2.0
+        if stall_from_ms <= arrived < stall_from_ms + stall_ms:
+            arrived = stall_from_ms + stall_ms
+        out.append(round(arrived * MS))
+    return out
+
+
+def test_samples_bunched_by_a_stall_of_the_server_pass_on_the_page_s_clock() -> None:
+    # a page sending at the control rate (10 Hz), this process stalled for 2.6 s: 26
+    # samples arrive at once; counted on the page's clock, none is over the rate
+    sent = [5000.0 + 100.0 * k for k in range(60)]
+    arrived = _stalled(sent, 6000.0, 2600.0)
+    gate = _gate()
+    taken = [gate.sample({'accel_mps2': 1.0, 't_ms': t}, ns)
+             for t, ns in zip(sent, arrived, strict=True)]
+    assert all(s is not None for s in taken) and gate.refused_counts() == {}
+    # the same samples without their send time count at their arrival: the stall's
+    # bunch is over the rate (the rule before pages stamped their samples)
+    unstamped = _gate()
+    for ns in arrived:
+        unstamped.sample({'accel_mps2': 1.0}, ns)
+    assert unstamped.refused_counts()['input over the control rate'] >= 26 - INPUT_BURST
+
+
+def test_a_page_s_clock_counts_only_as_far_as_it_keeps_to_the_server_s() -> None:
+    gate = _gate()
+    # t_ms, when sent, is a finite number (a JSON null, a string, a bool is not)
+    for bad in (math.nan, math.inf, -math.inf, '5', True, None, [1]):
+        assert gate.sample({'accel_mps2': 1.0, 't_ms': bad}, 0) is None
+    assert gate.refused_counts() == {'input with a t_ms that is not a finite number': 7}
+    # a send time running backwards refills nothing: 100 ms (one sample's worth) back and
+    # forth, all arriving at once, gives that one sample over the burst and no more
+    taken = [gate.sample({'accel_mps2': 1.0, 't_ms': 100.0 * (k % 2)}, MS)
+             for k in range(100)]
+    assert sum(s is not None for s in taken) == INPUT_BURST + 1
+    # a page stamped more than the slack ahead of this clock (since its first sample)
+    late = _gate()
+    assert late.sample({'accel_mps2': 1.0, 't_ms': 0.0}, 0) is not None
+    ahead_ms = (PAGE_CLOCK_SLACK_S + 0.5) * 1000
+    assert late.sample({'accel_mps2': 1.0, 't_ms': ahead_ms}, 100 * MS) is None
+    assert late.sample({'accel_mps2': 1.0, 't_ms': ahead_ms}, 1000 * MS) is not None
+    assert late.refused_counts() == {"input stamped ahead of the server's clock": 1}
+
+
+@pytest.mark.parametrize('reconnect_every', [0, 1, 10])
+def test_a_page_whose_clock_runs_fast_is_held_to_the_control_rate(
+        reconnect_every: int) -> None:
+    """A hostile page: a sample every 10 ms of the server's time stamped 1 s apart (its
+    clock 100 times fast), for 60 s, never reconnecting (refused as ahead once past the
+    slack), or reconnecting every sample or every 10 (the gate anchors each connection's
+    clock anew). What passes is the control rate over the drive plus the burst and the
+    slack, nothing more (about 610 of 6,000 when reconnecting)."""
+    link = DriveLink(_gate())
+    gate = link.gate
+    taken = 0
+    duration_s = 60.0
+    for k in range(int(duration_s * 100)):
+        if reconnect_every and k % reconnect_every == 0:
+            link.on_event('page_connected', k * 10 * MS)
+        taken += gate.sample({'accel_mps2': 1.0, 't_ms': 1000.0 * k}, k * 10 * MS) is not None
+    assert taken <= INPUT_BURST + gate.rate_hz * (duration_s + PAGE_CLOCK_SLACK_S)
+    refused = gate.refused_counts()
+    assert refused.get("input stamped ahead of the server's clock", 0) \
+        + refused.get('input over the control rate', 0) == duration_s * 100 - taken
+    if not reconnect_every:
+        assert taken <= INPUT_BURST + gate.rate_hz * PAGE_CLOCK_SLACK_S
+        assert refused["input stamped ahead of the server's clock"] > 0
+
+
+def test_a_new_page_brings_its_own_clock() -> None:
+    link = DriveLink(_gate())
+    for k in range(20):                           # a tab open for 100 s, at 10 Hz
+        assert link.gate.sample({'accel_mps2': 0.0, 't_ms': 100_000.0 + 100 * k},
+                                k * 100 * MS) is not None
+    link.on_event('page_lost', 2000 * MS)
+    link.on_event('page_connected', 2500 * MS)   # a new tab: its clock starts near 0
+    for k in range(20):
+        assert link.gate.sample({'accel_mps2': 0.0, 't_ms': 300.0 + 100 * k},
+                                (3000 + k * 100) * MS) is not None
+    link.on_event('take_over', 5000 * MS)         # another tab, open for 1000 s
+    assert link.gate.sample({'accel_mps2': 0.0, 't_ms': 1e6}, 5100 * MS) is not None
+    assert link.gate.refused_counts() == {}
 
 
 def test_ratings_only_answer_open_prompts() -> None:
@@ -137,7 +235,7 @@ def _open(server: DriveServer, *, origin: str | None = None, token: str | None =
 
 def _received(ws: Any, kind: str) -> dict[str, Any]:
     while True:
-        message = json.loads(ws.recv(timeout=10))
+        message: dict[str, Any] = json.loads(ws.recv(timeout=10))
         if message['type'] == kind:
             return message
 

@@ -16,7 +16,7 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ['INPUT_BURST', 'Gate', 'reason_key']
+__all__ = ['INPUT_BURST', 'PAGE_CLOCK_SLACK_S', 'Gate', 'reason_key']
 
 READY, DRIVING, WAIT, QUESTIONNAIRE, IDLE = 'ready', 'driving', 'wait', 'questionnaire', 'idle'
 """The drive's phases as the gate sees them (IDLE: between drives)."""
@@ -29,10 +29,18 @@ ALLOWED = {READY: frozenset({'ready'}),
 ACK_KEEP_NS = 5_000_000_000
 """An acknowledgement not echoed within this long is forgotten (a lost frame)."""
 INPUT_BURST = 10
-"""Pedal samples that may arrive at once above the control rate: the page keeps its own
-bucket of 3 (a press and a release between two periodic samples), the rest absorbs this
-process's own stalls (samples sent a control period apart arrive together after a stall
-of the server's thread, and the newest of them must not be the one refused)."""
+"""Pedal samples that may come at once above the control rate, counted on the page's clock
+(its send times, ``t_ms``): the page keeps its own bucket of 3 (a press and a release
+between two periodic samples) refilled a little slower, so it never meets this one; 10 at
+once (1 s of samples at 10 Hz) does the graph no harm."""
+PAGE_CLOCK_SLACK_S = 3.0
+"""How far a page's clock may run ahead of this server's (s). A sample's send time
+(``t_ms``) is put on the server's clock through the connection's first sample (sent ->
+arrived); a well-behaved page's later samples then land at most that first sample's own
+delay ahead of their arrival (a stall of this process as it arrived; a stall of 2.6 s on
+a loaded 2-core CI machine bunched 26 samples). A page lying about its time gains at most
+this much: ``control_rate_hz`` x 3 s of samples over the whole drive, however often it
+reconnects."""
 
 
 def finite_number(value: Any) -> float | None:
@@ -80,7 +88,8 @@ class Gate:
         self.phase = IDLE
         self.refused: Counter[str] = Counter()
         self._tokens = float(INPUT_BURST)
-        self._tokens_at = 0
+        self._tokens_at: float | None = None     # the latest sample time credited, s
+        self._anchor: tuple[float, int] | None = None   # the page's first t_ms, its arrival
         self._seq = 0
         self._prompts: dict[int, int] = {}           # prompt id -> sent at, ns
         self._next_prompt = 1
@@ -111,18 +120,48 @@ class Gate:
             self.refused[f'{message["type"]} during {self.phase}'] += 1
             return False
 
+    def new_page(self) -> None:
+        """Another page (or a reconnection) drives from now: its clock is anchored anew at
+        its first stamped sample."""
+        with self.lock:
+            self._anchor = None
+
     def sample(self, message: dict[str, Any], now_ns: int) -> Sample | None:
         """An admitted ``input`` as a command, or None (refused and counted): not a finite
-        number, or over the rate (a token bucket of ``INPUT_BURST`` samples refilled at the
-        control rate)."""
+        number, a ``t_ms`` that is not a finite number, stamped more than
+        ``PAGE_CLOCK_SLACK_S`` ahead of this clock, or over the rate.
+
+        The rate is a token bucket of ``INPUT_BURST`` samples refilled at the control rate
+        on the page's clock: each sample's send time (``t_ms``, the page's
+        ``performance.now()``) put on this clock through the connection's first sample, so
+        samples sent a control period apart pass however they arrive (bunched after a stall
+        of this process). A sample without ``t_ms`` counts at its arrival (stricter); a send
+        time earlier than one already credited refills nothing."""
         value = finite_number(message.get('accel_mps2'))
         if value is None:
             self.refuse('input without a finite accel_mps2')
             return None
+        sent_ms = finite_number(message.get('t_ms'))
+        if sent_ms is None and 't_ms' in message:
+            self.refuse('input with a t_ms that is not a finite number')
+            return None
+        now_s = now_ns / 1e9
         with self.lock:
-            elapsed = max(0, now_ns - self._tokens_at) / 1e9
+            at_s = now_s
+            if sent_ms is not None:
+                if self._anchor is None:
+                    self._anchor = (sent_ms, now_ns)
+                first_ms, first_ns = self._anchor
+                lead_s = (sent_ms - first_ms) / 1e3 - (now_ns - first_ns) / 1e9
+                if not lead_s <= PAGE_CLOCK_SLACK_S:
+                    self.refused["input stamped ahead of the server's clock"] += 1
+                    return None
+                at_s = now_s + lead_s
+            if self._tokens_at is None:
+                self._tokens_at = at_s
+            elapsed = max(0.0, at_s - self._tokens_at)
             self._tokens = min(float(INPUT_BURST), self._tokens + elapsed * self.rate_hz)
-            self._tokens_at = now_ns
+            self._tokens_at = max(self._tokens_at, at_s)
             if self._tokens < 1.0:
                 self.refused['input over the control rate'] += 1
                 return None

@@ -15,7 +15,7 @@ bag, on the same clock:
   ``jian_01`` .. ``jian_12`` and ``trust_score``; ``position`` the answers (1-7) and the score
   in [0, 1];
 - ``driver/latency`` (``Vector3Stamped``): per acknowledged pedal sample, measured here on
-  this process's clock (the page reports no time): x the round trip (sample received ->
+  this process's clock (no time of the page's): x the round trip (sample received ->
   the page's echo of the state frame acknowledging it received, s), y received -> applied
   by the follower plant (s), z applied -> echo received (s). Only sequence numbers this
   process issued and sent are accepted, each once;

@@ -84,8 +84,10 @@ class DriveLink:
 
     def on_message(self, message: dict[str, Any], arrived_ns: int) -> None:
         """Server thread: a message of the controlling page. One that does not fit the
-        phase is refused and counted; an admitted pedal sample is rate-limited, clipped to
-        the pedal's range and published at once; everything else goes to the loop."""
+        phase is refused and counted; an admitted pedal sample is rate-limited (on the
+        page's clock, as far as it does not run ahead of this one), clipped to the pedal's
+        range and published at once, stamped with its arrival; everything else goes to the
+        loop."""
         if not self.gate.admit(message):
             return
         if message['type'] != 'input':
@@ -108,7 +110,10 @@ class DriveLink:
                          arrived_ns))
 
     def on_event(self, kind: str, now_ns: int) -> None:
-        """Server thread: the controlling page connected, was lost or was taken over."""
+        """Server thread: the controlling page connected, was lost or was taken over (a
+        page that now drives has a clock of its own: the gate anchors it anew)."""
+        if kind in ('page_connected', 'take_over'):
+            self.gate.new_page()
         self.events.put(({'type': 'event', 'event': kind}, now_ns))
 
 

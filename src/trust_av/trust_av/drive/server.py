@@ -16,7 +16,8 @@ that floods (more than ``FLOOD_MESSAGES_PER_S`` messages in a second) is closed;
 are handled one at a time, every other connection's traffic going first between two.
 
 Messages are JSON objects with a ``type`` (the page's protocol, not ROS: the drive turns
-each into standard ROS messages). In: ``ready``, ``input`` (``seq``, ``accel_mps2``),
+each into standard ROS messages). In: ``ready``, ``input`` (``seq``, ``accel_mps2``,
+``t_ms``: the page's send time, for the rate limit only),
 ``ack`` (``seq``: a state frame's acknowledgement echoed), ``rating`` (``id`` of the prompt,
 ``value`` 0-100), ``questionnaire`` (``answers``: 12 integers 1-7), ``take_over``. Out:
 ``hello``, ``control``, ``phase``, ``state``, ``rate`` (a rating prompt).

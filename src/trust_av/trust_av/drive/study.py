@@ -170,6 +170,10 @@ def drive_summary(bag: Path, condition: Condition | None, outcome: Any,
 
     drive = read_drive(bag)
     you, av = drive.odometry['/human/odom'], drive.odometry['/ego/odom']
+    # the gap only while both are recorded: as the nodes stop, the AV's odometry may end
+    # before the follower's, and the AV held at its last position is not where it was
+    if len(av):
+        you = you[(you[:, 0] >= av[0, 0]) & (you[:, 0] <= av[-1, 0])]
     gaps = (np.interp(you[:, 0], av[:, 0], av[:, 1]) - vehicle_length_m - you[:, 1]) \
         if len(you) and len(av) else np.array([])
     latency = outcome.latency_ms()

@@ -1,14 +1,17 @@
 // trust-av drive: the participant's page. Plain JS, no build step, nothing fetched from
 // elsewhere: the view is drawn by view.js with the vendored Konva (vendor/README.md). State
 // frames arrive over the WebSocket (a few per control period); the view is drawn at the
-// display's frame rate, interpolating the frames RENDER_DELAY_MS behind the newest one. A
+// display's frame rate, interpolating the frames RENDER_DELAY_MS behind the newest one (and
+// not drawn again while that would show the same, as between drives). A
 // pedal sample is sent at once on a key or pointer press or release, on any other change of
 // the pedal at most once per control period, and at the control rate while nothing changes,
 // all within the server's rate limit (a token bucket of inputBurst samples refilled at the
-// control rate): the page keeps its own, smaller bucket, refilled a
-// little slower, and one sample of it for a press or release, so the server refuses none.
-// The server acknowledges samples in its frames; the page echoes each acknowledgement at
-// once (the server measures the latency, the page reports no time).
+// control rate on the page's own clock: each sample carries its send time, t_ms, the
+// performance.now() the page's bucket used): the page keeps its own, smaller bucket,
+// refilled a little slower, and one sample of it for a press or release, so the server
+// refuses none, however the samples arrive. The server acknowledges samples in its frames;
+// the page echoes each acknowledgement at once: the server measures the latency on its own
+// clock (the page's time serves the rate limit only).
 'use strict';
 
 const RENDER_DELAY_MS = 100;
@@ -22,7 +25,7 @@ const drive = {
   phase: 'connecting', controlRateHz: 10, inputBurst: 4, accelMax: 2.5, accelMin: -6.0, onCollision: 'continue',
   frames: [], displayed: null, pedal: 0, seq: 0, durationS: 0, keys: new Set(),
   pointerPedal: null, prompt: null, ws: null, inputTimer: null, source: 'none',
-  controlling: false, final: false, lastSentMs: -1e9, lastSentPedal: null, acks: 0, frameTimes: [], drove: false,
+  controlling: false, final: false, lastSentMs: -1e9, lastSentPedal: null, acks: 0, frameTimes: [], drove: false, drawnKey: null,
   tokens: 3, tokensAt: 0, pressWaiting: false, heldBack: 0,
   token: document.querySelector('meta[name="drive-token"]').content,
 };
@@ -182,11 +185,13 @@ function pedalAccel(p) { return p >= 0 ? p * drive.accelMax : -p * drive.accelMi
 // The page's side of the server's rate limit: PAGE_BURST samples at once (fewer than the
 // server's inputBurst), refilled at BUCKET_REFILL_SHARE of the control rate; a periodic or
 // ramp sample leaves one for a press.
+// A time earlier than one already counted (a frame's timestamp is its start, before an
+// input event of that frame) refills nothing, as on the server.
 function tokens(nowMs) {
   const most = Math.min(PAGE_BURST, drive.inputBurst - 1);
   drive.tokens = Math.min(most, drive.tokens
     + Math.max(0, nowMs - drive.tokensAt) / 1000 * BUCKET_REFILL_SHARE * drive.controlRateHz);
-  drive.tokensAt = nowMs;
+  drive.tokensAt = Math.max(drive.tokensAt, nowMs);
   return drive.tokens;
 }
 
@@ -203,7 +208,7 @@ function sendSample(nowMs, press = false) {
   drive.pressWaiting = false;
   drive.lastSentMs = nowMs;
   drive.lastSentPedal = drive.pedal;
-  send({type: 'input', seq: ++drive.seq, accel_mps2: pedalAccel(drive.pedal)});
+  send({type: 'input', seq: ++drive.seq, accel_mps2: pedalAccel(drive.pedal), t_ms: nowMs});
 }
 const periodMs = () => 1000 / drive.controlRateHz;
 
@@ -313,13 +318,22 @@ function interpolated(nowMs) {
   }
   const span = b.received_ms - a.received_ms;
   const w = span > 0 ? Math.max(0, Math.min(1, (t - a.received_ms) / span)) : 1;
-  const out = {avAccel: b.av_accel_mps2, leftS: b.left_s, frameMs: b.received_ms};
+  const out = {avAccel: b.av_accel_mps2, leftS: b.left_s, frameMs: b.received_ms,
+               key: `${a.received_ms} ${b.received_ms} ${w}`};   // what the view shows
   for (const name of ['lead', 'av', 'you']) {
     const va = a.vehicles[name], vb = b.vehicles[name];
     if (!va || !vb) { out[name] = vb || va || null; continue; }
     out[name] = [va[0] + w * (vb[0] - va[0]), va[1] + w * (vb[1] - va[1])];
   }
   return out;
+}
+
+// A number shown, and its data- value, written only when it changed (writing the same text
+// again still lays out and paints the page).
+function setShown(id, text, key, value) {
+  const el = $(id);
+  if (el.textContent !== text) el.textContent = text;
+  if (key && el.dataset[key] !== value) el.dataset[key] = value;
 }
 
 function draw(nowMs) {
@@ -331,26 +345,27 @@ function draw(nowMs) {
   const s = interpolated(nowMs);
   drive.displayed = s;
   if (s && s.you) {
-    view.draw(s, $('top-down').checked);
-    $('speed').textContent = `${(s.you[1] * 3.6).toFixed(1)} km/h`;
-    $('speed').dataset.mps = s.you[1].toFixed(3);
+    // drawn again only when it changed (between drives the last frame stays as it is)
+    const key = `${s.key} ${$('top-down').checked} ${$('road').clientWidth}`;
+    if (key !== drive.drawnKey) view.draw(s, $('top-down').checked);
+    drive.drawnKey = key;
+    setShown('speed', `${(s.you[1] * 3.6).toFixed(1)} km/h`, 'mps', s.you[1].toFixed(3));
     if (s.av) {
       const gap = s.av[0] - VEHICLE_LENGTH_M - s.you[0];
-      $('gap').textContent = `${gap.toFixed(1)} m`;
-      $('gap').dataset.m = gap.toFixed(3);
-      $('av-speed').textContent = `${(s.av[1] * 3.6).toFixed(1)} km/h`;
-      $('av-speed').dataset.mps = s.av[1].toFixed(3);
+      setShown('gap', `${gap.toFixed(1)} m`, 'm', gap.toFixed(3));
+      setShown('av-speed', `${(s.av[1] * 3.6).toFixed(1)} km/h`, 'mps', s.av[1].toFixed(3));
     }
     if (drive.phase === 'driving' && typeof s.leftS === 'number') {
       const left = Math.max(0, s.leftS - (nowMs - s.frameMs) / 1000);
-      $('time-left').textContent = `${left.toFixed(0)} s`;
-      $('time-left').dataset.s = left.toFixed(2);
+      setShown('time-left', `${left.toFixed(0)} s`, 's', left.toFixed(2));
     }
   } else {
     view.blank();
+    drive.drawnKey = null;
   }
-  $('pedal-value').textContent = drive.pedal.toFixed(2);
-  $('pedal-mark').style.top = `${(1 - drive.pedal) / 2 * 196}px`;
+  setShown('pedal-value', drive.pedal.toFixed(2));
+  const mark = `${(1 - drive.pedal) / 2 * 196}px`;
+  if ($('pedal-mark').style.top !== mark) $('pedal-mark').style.top = mark;
   requestAnimationFrame(draw);
 }
 
