@@ -16,7 +16,7 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ['INPUT_BURST', 'PAGE_CLOCK_SLACK_S', 'Gate', 'reason_key']
+__all__ = ['INPUT_BURST', 'Gate', 'reason_key']
 
 READY, DRIVING, WAIT, QUESTIONNAIRE, IDLE = 'ready', 'driving', 'wait', 'questionnaire', 'idle'
 """The drive's phases as the gate sees them (IDLE: between drives)."""
@@ -32,15 +32,10 @@ INPUT_BURST = 10
 """Pedal samples that may come at once above the control rate, counted on the page's clock
 (its send times, ``t_ms``): the page keeps its own bucket of 3 (a press and a release
 between two periodic samples) refilled a little slower, so it never meets this one; 10 at
-once (1 s of samples at 10 Hz) does the graph no harm."""
-PAGE_CLOCK_SLACK_S = 3.0
-"""How far a page's clock may run ahead of this server's (s). A sample's send time
-(``t_ms``) is put on the server's clock through the connection's first sample (sent ->
-arrived); a well-behaved page's later samples then land at most that first sample's own
-delay ahead of their arrival (a stall of this process as it arrived; a stall of 2.6 s on
-a loaded 2-core CI machine bunched 26 samples). A page lying about its time gains at most
-this much: ``control_rate_hz`` x 3 s of samples over the whole drive, however often it
-reconnects."""
+once (1 s of samples at 10 Hz) does the graph no harm. It also takes up a stall at the very
+start of a connection, before any sample came promptly (the page's clock is then not yet
+known, and a bunch counts at its arrival)."""
+
 
 
 def finite_number(value: Any) -> float | None:
@@ -89,7 +84,7 @@ class Gate:
         self.refused: Counter[str] = Counter()
         self._tokens = float(INPUT_BURST)
         self._tokens_at: float | None = None     # the latest sample time credited, s
-        self._anchor: tuple[float, int] | None = None   # the page's first t_ms, its arrival
+        self._offset_s: float | None = None   # least (arrival - t_ms) of this connection
         self._seq = 0
         self._prompts: dict[int, int] = {}           # prompt id -> sent at, ns
         self._next_prompt = 1
@@ -121,21 +116,23 @@ class Gate:
             return False
 
     def new_page(self) -> None:
-        """Another page (or a reconnection) drives from now: its clock is anchored anew at
-        its first stamped sample."""
+        """Another page (or a reconnection) drives from now: its clock is put on this one
+        anew, from its own samples."""
         with self.lock:
-            self._anchor = None
+            self._offset_s = None
 
     def sample(self, message: dict[str, Any], now_ns: int) -> Sample | None:
         """An admitted ``input`` as a command, or None (refused and counted): not a finite
-        number, a ``t_ms`` that is not a finite number, stamped more than
-        ``PAGE_CLOCK_SLACK_S`` ahead of this clock, or over the rate.
+        number, a ``t_ms`` that is not a finite number, or over the rate.
 
         The rate is a token bucket of ``INPUT_BURST`` samples refilled at the control rate
         on the page's clock: each sample's send time (``t_ms``, the page's
-        ``performance.now()``) put on this clock through the connection's first sample, so
-        samples sent a control period apart pass however they arrive (bunched after a stall
-        of this process). A sample without ``t_ms`` counts at its arrival (stricter); a send
+        ``performance.now()``) put on this clock through the connection's least delayed
+        sample so far (the smallest arrival - t_ms), so samples sent a control period apart
+        pass however they arrive (bunched after a stall of this process). That clock never
+        runs ahead of the arrivals (the sample being counted is one of those the least is
+        taken over), so a page lying about its time gains nothing: its samples count at
+        their arrival at the latest. A sample without ``t_ms`` counts at its arrival; a
         time earlier than one already credited refills nothing."""
         value = finite_number(message.get('accel_mps2'))
         if value is None:
@@ -149,14 +146,10 @@ class Gate:
         with self.lock:
             at_s = now_s
             if sent_ms is not None:
-                if self._anchor is None:
-                    self._anchor = (sent_ms, now_ns)
-                first_ms, first_ns = self._anchor
-                lead_s = (sent_ms - first_ms) / 1e3 - (now_ns - first_ns) / 1e9
-                if not lead_s <= PAGE_CLOCK_SLACK_S:
-                    self.refused["input stamped ahead of the server's clock"] += 1
-                    return None
-                at_s = now_s + lead_s
+                offset_s = now_s - sent_ms / 1e3
+                if self._offset_s is None or offset_s < self._offset_s:
+                    self._offset_s = offset_s
+                at_s = sent_ms / 1e3 + self._offset_s       # <= now_s
             if self._tokens_at is None:
                 self._tokens_at = at_s
             elapsed = max(0.0, at_s - self._tokens_at)
