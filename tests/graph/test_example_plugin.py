@@ -65,17 +65,6 @@ def test_simulate_lists_and_runs_the_plugin(plugin_env: dict[str, str], trace_cs
     assert all(float(row.split(',')[i]) == 0.0 for row in rows[1:] for i in expected)
 
 
-def test_node_graph_runs_the_plugin(plugin_env: dict[str, str], trace_csv: Path,
-                                    tmp_path: Path) -> None:
-    bag = tmp_path / 'run'
-    proc = trust_av(plugin_env, 'run', '--trace', str(trace_csv), '--predictor', 'ses',
-                    '--max-steps', str(STEPS), '--bag', str(bag), '--no-plot',
-                    '--no-progress', cwd=tmp_path)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    planner_log = (tmp_path / 'run.logs' / 'planner.log').read_text()
-    assert 'predictor ses' in planner_log
-
-
 def test_study_runs_the_plugin(plugin_env: dict[str, str], trace_csv: Path,
                               tmp_path: Path) -> None:
     out = tmp_path / 'study'
@@ -124,6 +113,9 @@ def contract(plugin_env: dict[str, str], tmp_path: Path, modules: tuple[str, ...
 
 def test_plugin_passes_the_component_contract(plugin_env: dict[str, str],
                                               tmp_path: Path) -> None:
+    """``ses`` passes every rule of tests/graph/test_component_contract.py. Its graph half is
+    the node graph running the plug-in: the planner's process loads ``ses`` from the
+    installed package, and the graph records what the in-process loop computes with it."""
     proc = contract(plugin_env, tmp_path, ('graph/test_component_contract.py',),
                     'predictors-ses or (needs and ses)', '-q')
     assert '4 passed' in proc.stdout, proc.stdout
