@@ -275,20 +275,17 @@ class Run:
 
 @pytest.fixture(scope='module')
 def parallel_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Run]:
-    """Three graph runs started at once (21 processes on 2 cores, beside the other test
-    workers' runs), each of them a case of its own that the tests below read: ``gru``
-    TAC-GRU on US06 (60 steps, --no-plot); ``commute`` the real commute bag as the lead
-    through ``--bag-in``, with a CPU budget per solve of 1 ns (:func:`tiny_cpu_budget`, 60
-    steps); ``twist`` a TwistStamped bag on a remapped topic (:func:`twist_stamped_bag`,
-    ``--bag-topic``/``--bag-type``, 30 steps). Starting them together is itself the isolation
-    case (test_parallel_runs_are_isolated_and_equal): one graph start per case instead of one
-    per case plus four for the isolation."""
+    """Two graph runs started at once (14 processes on 2 cores, beside the other test
+    workers' runs), each of them a case of its own that the tests below read: ``commute``
+    the real commute bag as the lead through ``--bag-in``, with a CPU budget per solve of
+    1 ns (:func:`tiny_cpu_budget`, 60 steps); ``twist`` a TwistStamped bag on a remapped
+    topic (:func:`twist_stamped_bag`, ``--bag-topic``/``--bag-type``, 30 steps). Starting
+    them together is itself the isolation case (test_parallel_runs_are_isolated_and_equal):
+    one graph start per case instead of one per case plus four for the isolation. (TAC-GRU
+    through the graph == in-process: test_component_contract.py[predictors-gru].)"""
     from preceding_traffic.bags import TWIST_STAMPED
     folder = tmp_path_factory.mktemp('parallel')
-    gru = run_command(folder / 'gru', '--max-steps', '60')
-    gru[gru.index('ca')] = 'gru'
     commands = {
-        'gru': gru,
         'commute': bag_in(run_command(folder / 'commute', '--max-steps', '60', '--params-file',
                                       str(tiny_cpu_budget(folder))), str(REPO / 'bags' / COMMUTE)),
         'twist': bag_in(run_command(folder / 'twist', '--max-steps', '30', '--bag-topic',
@@ -304,8 +301,8 @@ def parallel_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Run]:
 def test_parallel_runs_are_isolated_and_equal(parallel_runs: dict[str, Run]) -> None:
     """Graph runs started at once (:func:`parallel_runs`): each succeeds in a domain of its
     own; no cross-talk: every one equals its own in-process run (asserted by the test of
-    each case below: test_gru_planner..., test_commute_bag..., test_twist_stamped_bag...;
-    a message of another run would break that)."""
+    each case below: test_commute_bag..., test_twist_stamped_bag...; a message of the
+    other run would break that)."""
     runs = list(parallel_runs.values())
     for run in runs:
         run.assert_ok()
@@ -321,16 +318,6 @@ def test_parallel_runs_are_isolated_and_equal(parallel_runs: dict[str, Run]) -> 
     assert len(set(domains)) >= 2
 
 
-def test_gru_planner_in_the_graph_equals_in_process(parallel_runs: dict[str, Run]) -> None:
-    """TAC-GRU through the node graph gives the in-process trajectories."""
-    run = parallel_runs['gru']
-    run.assert_ok()
-    assert 'plot:' not in run.stdout and not run.bag.with_name('gru.png').exists()  # --no-plot
-    config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'gru'}})
-    trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), 60)
-    assert_records_equal(records_from_bag(run.bag), simulate(config, trace).records)
-
-
 def test_commute_bag_replays_through_the_graph_whatever_the_cpu_budget(
         parallel_runs: dict[str, Run]) -> None:
     """A real commute bag (:data:`COMMUTE`) as the preceding vehicle, graph == in-process.
@@ -339,9 +326,10 @@ def test_commute_bag_replays_through_the_graph_whatever_the_cpu_budget(
     in-process reference with the shipped one: in lock-step the budget does not apply
     (results must not depend on timing: ``solver_max_iter`` bounds the work), so the two are
     equal. The budget's fallback in wall mode: test_shadow. (One run for both: each claim is
-    graph == in-process on a run of real solves.)"""
+    graph == in-process on a run of real solves.) With ``--no-plot`` it draws no figure."""
     run = parallel_runs['commute']
     run.assert_ok()
+    assert 'plot:' not in run.stdout and not run.bag.with_name('commute.png').exists()  # --no-plot
     trace_arg = str(REPO / 'bags' / COMMUTE)
     config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'ca'}})
     assert config.planner.solver_cpu_budget_s == 0.02
