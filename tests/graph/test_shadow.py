@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
+from support.cli import trust_av_run
 from support.paths import REPO
 from support.rosbag2_rules import check_bag_directory  # the test-side oracle module
 
@@ -132,10 +133,8 @@ def test_bad_rate_is_one_line_before_anything_starts(tmp_path: Path, rate: str,
     output exists (a 0.5 Hz shadow run used to start, leave its --out directory and stop on
     the node's refusal)."""
     out = tmp_path / 'shadow'
-    result = subprocess.run(
-        [sys.executable, '-m', 'trust_av.cli', 'shadow', '--bag',
-         str(REPO / 'bags' / 'commute_am'), '--duration-s', '1', '--out', str(out),
-         '--rate-hz', rate], capture_output=True, text=True, timeout=60, check=False)
+    result = trust_av_run('shadow', '--bag', str(REPO / 'bags' / 'commute_am'), '--duration-s',
+                          '1', '--out', str(out), '--rate-hz', rate)    # in-process
     assert result.returncode == 2, result.stdout + result.stderr
     assert message in result.stderr.strip().splitlines()[-1]  # argparse's usage, then one line
     assert 'Traceback' not in result.stderr and not out.exists()
