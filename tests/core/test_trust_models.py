@@ -114,6 +114,29 @@ def test_beta_bernoulli_step_across_an_episode_end_is_split() -> None:
     assert (one.alpha, one.beta) == (1.0, 2.0)
 
 
+
+def test_beta_bernoulli_in_the_loop_binds_on_its_beta_mean() -> None:
+    """In the closed loop (US06, 30 steps) with T_min 0.6, above Beta(1, 1)'s 0.5, the
+    reported trust is a Beta mean (2/3 after the first, successful episode, not T units)
+    and the NMPC's trust constraint binds in the first steps, where it depends on the Beta
+    counts, not only on T. That this run is also what the node graph records (the planner
+    mirrors the monitor's model in lock-step) is the graph half of the trust-model contract
+    for ``beta_bernoulli`` (tests/graph/test_trust_model_contract_graph.py, the same T_min:
+    the initial trust + 0.1)."""
+    from preceding_traffic.sources import load_trace
+    from preceding_traffic.traces import truncate
+    from trust_av.system.closed_loop import simulate
+    from trust_av.system.config import load_run_config
+    config = load_run_config((), {'/**': {'trust_model': 'beta_bernoulli'},
+                                  'planner': {'alpha': 0.5, 'predictor': 'ca', 'trust_min': 0.6}})
+    model = config.trust_model()
+    assert model.trust(model.initial_state()) + 0.1 == pytest.approx(0.6)   # the contract's
+    trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), 30)
+    records = simulate(config, trace).records
+    binding = [r.explicability_max for r in records if r.explicability_max < 1.0]
+    assert len(binding) >= 3, 'the trust constraint must bind for this test to mean anything'
+    assert records[0].trust == pytest.approx(2 / 3, rel=0.01)
+
 def test_every_shipped_model_maps_to_the_common_scale() -> None:
     """paper/asymmetric: T(0) -> 0.5, T(0) +- delta 600 s -> 1 / 0; the others are on
     [0, 1] already."""

@@ -4,12 +4,11 @@ input with one line and exit 2."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from support.cli import Ran, trust_av_run
 from support.graph import STEPS
 from support.paths import REPO
 
@@ -20,11 +19,9 @@ from trust_monitor.model_interface import COMMON_SCALE
 PNG = b'\x89PNG\r\n\x1a\n'
 
 
-def trust_av(*args: str, cwd: Path | None = None,
-             env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, '-m', 'trust_av.cli', *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=600, env=env,
-                          stdin=subprocess.DEVNULL)
+def trust_av(*args: str) -> Ran:
+    """``trust-av ARGS`` in-process (support.cli): no interpreter start per command."""
+    return trust_av_run(*args)
 
 
 @pytest.fixture(scope='module')
@@ -90,10 +87,12 @@ def test_cli_prints_each_runs_final_trust(runs: tuple[Path, Path, Path],
     (('A', 'B', '--out', 'x.png', '--labels', 'one'), "'one': give two names"),
 ])
 def test_bad_input_is_one_line_and_exit_2(runs: tuple[Path, Path, Path], tmp_path: Path,
-                                          args: tuple[str, ...], message: str) -> None:
+                                          args: tuple[str, ...], message: str,
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
     trace, a, b = runs
     paths = {'A': str(a), 'B': str(b), 'TRACE': str(trace)}
-    proc = trust_av('compare', *(paths.get(x, x) for x in args), cwd=tmp_path)
+    monkeypatch.chdir(tmp_path)
+    proc = trust_av('compare', *(paths.get(x, x) for x in args))
     assert proc.returncode == 2
     assert message in proc.stderr and len(proc.stderr.strip().splitlines()) <= 2
     assert not (tmp_path / 'x.png').exists()

@@ -3,6 +3,7 @@ and failing loudly (naming the node, leaving no process behind) when a node dies
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import os
@@ -199,19 +200,6 @@ def test_sigint_stops_cleanly_with_a_finished_bag(tmp_path: Path, moment: str) -
     assert_records_equal(records, in_process(len(records), trace))
 
 
-def test_gru_planner_in_the_graph_equals_in_process(tmp_path: Path) -> None:
-    """TAC-GRU through the node graph gives the in-process trajectories."""
-    bag = tmp_path / 'gru'
-    command = run_command(bag, '--max-steps', '60')
-    command[command.index('ca')] = 'gru'
-    proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert 'plot:' not in proc.stdout and not bag.with_name('gru.png').exists()  # --no-plot
-    config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'gru'}})
-    trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), 60)
-    assert_records_equal(records_from_bag(bag), simulate(config, trace).records)
-
-
 def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path) -> None:
     """The recorder killed mid-run: exit 2 naming it, and the truncated MCAP is repaired."""
     bag = tmp_path / 'cut'
@@ -237,66 +225,15 @@ def tiny_cpu_budget(directory: Path) -> Path:
     return params
 
 
-def test_commute_bag_replays_through_the_graph_whatever_the_cpu_budget(tmp_path: Path) -> None:
-    """A real commute bag as the preceding vehicle, graph == in-process (one bag: the graph
-    path is the same for any; tests/core/test_bags.py reads every shipped commute bag).
-
-    The graph runs with a tiny CPU budget per solve (:func:`tiny_cpu_budget`), the
-    in-process reference with the shipped one: in lock-step the budget does not apply
-    (results must not depend on timing: ``solver_max_iter`` bounds the work), so the two are
-    equal. The budget's fallback in wall mode: test_shadow. (One run for both: each claim is
-    graph == in-process on a run of real solves.)"""
-    bag_name = 'commute_am'
-    trace_arg = str(REPO / 'bags' / bag_name)
-    bag = tmp_path / 'replay'
-    command = run_command(bag, '--max-steps', '60', '--params-file',
-                          str(tiny_cpu_budget(tmp_path)))
-    at = command.index('--trace')
-    command[at:at + 2] = ['--bag-in', trace_arg]   # as documented; --trace BAG is alike
-    proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'ca'}})
-    assert config.planner.solver_cpu_budget_s == 0.02
-    trace = truncate(load_trace(trace_arg, config.planner.dt_s, config.trace), 60)
-    assert trace.name == bag_name
-    assert_records_equal(records_from_bag(bag), simulate(config, trace).records)
-
-
-def test_parallel_runs_are_isolated_and_equal(tmp_path: Path) -> None:
-    """4 graph runs at once (28 processes on 2 cores, beside the other test workers' runs):
-    own domains, no cross-talk, every one equal to the in-process run."""
-    bags = [tmp_path / f'run{k}' for k in range(4)]
-    procs = [subprocess.Popen(run_command(b, '--max-steps', '20', '--startup-timeout-s', '120'),
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for b in bags]
-    outputs = [p.communicate(timeout=600) for p in procs]
-    for proc, (out, err) in zip(procs, outputs, strict=True):
-        assert proc.returncode == 0, out + err
-    # A run that ends before another starts may hand its domain on (seen under load in a
-    # fresh-clone CI run with 8 runs: 7 domains); runs that overlap in time must not share one.
-    # Each run's [params written, bag finished] lies inside the time it held its lease.
-    domains = [out.split('domain ')[1].split(')')[0] for out, _ in outputs]
-    spans = [((bag.with_name(bag.name + '.logs') / 'run_params.yaml').stat().st_mtime,
-              (bag / 'metadata.yaml').stat().st_mtime) for bag in bags]
-    for i, j in itertools.combinations(range(len(bags)), 2):
-        overlap = spans[i][0] < spans[j][1] and spans[j][0] < spans[i][1]
-        assert not (overlap and domains[i] == domains[j]), (domains, spans)
-    assert len(set(domains)) >= 2
-    reference = in_process(20)
-    for bag in bags:
-        assert_records_equal(records_from_bag(bag), reference)
-
-
-def test_twist_stamped_bag_on_a_remapped_topic_replays_through_the_graph(tmp_path: Path) -> None:
-    """``--bag-in`` with ``--bag-topic``/``--bag-type``: the traffic node replays the bag's own
-    topic and type (the orchestrator hands both to the node), equal to the in-process run."""
+def twist_stamped_bag(path: Path) -> Path:
+    """A rosbag2 bag at ``path`` of a lead's TwistStamped on /vehicle/lead/twist, stamped
+    from 100 s: 41 messages, a ramp from 0 to 15 m/s."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     from preceding_traffic.bags import TWIST_STAMPED, TYPESTORE
-    source = tmp_path / 'lead_twist'
     types = TYPESTORE.types
     speeds = [min(1.5 * t, 15.0) for t in range(41)]
-    with Writer(source, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conn = writer.add_connection('/vehicle/lead/twist', TWIST_STAMPED, typestore=TYPESTORE)
         for i, v in enumerate(speeds):
             msg = types[TWIST_STAMPED](
@@ -307,19 +244,114 @@ def test_twist_stamped_bag_on_a_remapped_topic_replays_through_the_graph(tmp_pat
                     linear=types['geometry_msgs/msg/Vector3'](x=v, y=0.0, z=0.0),
                     angular=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0)))
             writer.write(conn, (100 + i) * 10**9, TYPESTORE.serialize_cdr(msg, TWIST_STAMPED))
-    bag = tmp_path / 'replay'
-    command = run_command(bag, '--max-steps', '30', '--bag-topic', '/vehicle/lead/twist',
-                          '--bag-type', TWIST_STAMPED)
+    return path
+
+
+COMMUTE = 'commute_am'
+"""The real commute bag replayed as the preceding vehicle (one bag: the graph path is the
+same for any; tests/core/test_bags.py reads every shipped commute bag)."""
+
+
+def bag_in(command: list[str], source: str) -> list[str]:
+    """``command`` with ``--bag-in SOURCE`` for its ``--trace us06`` (as documented; --trace
+    BAG is alike)."""
     at = command.index('--trace')
-    command[at:at + 2] = ['--bag-in', str(source)]
-    proc = subprocess.run(command, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    command[at:at + 2] = ['--bag-in', source]
+    return command
+
+
+@dataclasses.dataclass(frozen=True)
+class Run:
+    """One of :func:`parallel_runs`: its bag, exit status and output."""
+
+    bag: Path
+    returncode: int
+    stdout: str
+    stderr: str
+
+    def assert_ok(self) -> None:
+        assert self.returncode == 0, self.stdout + self.stderr
+
+
+@pytest.fixture(scope='module')
+def parallel_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Run]:
+    """Two graph runs started at once (14 processes on 2 cores, beside the other test
+    workers' runs), each of them a case of its own that the tests below read: ``commute``
+    the real commute bag as the lead through ``--bag-in``, with a CPU budget per solve of
+    1 ns (:func:`tiny_cpu_budget`, 60 steps); ``twist`` a TwistStamped bag on a remapped
+    topic (:func:`twist_stamped_bag`, ``--bag-topic``/``--bag-type``, 30 steps). Starting
+    them together is itself the isolation case (test_parallel_runs_are_isolated_and_equal):
+    one graph start per case instead of one per case plus four for the isolation. (TAC-GRU
+    through the graph == in-process: test_component_contract.py[predictors-gru].)"""
+    from preceding_traffic.bags import TWIST_STAMPED
+    folder = tmp_path_factory.mktemp('parallel')
+    commands = {
+        'commute': bag_in(run_command(folder / 'commute', '--max-steps', '60', '--params-file',
+                                      str(tiny_cpu_budget(folder))), str(REPO / 'bags' / COMMUTE)),
+        'twist': bag_in(run_command(folder / 'twist', '--max-steps', '30', '--bag-topic',
+                                    '/vehicle/lead/twist', '--bag-type', TWIST_STAMPED),
+                        str(twist_stamped_bag(folder / 'lead_twist')))}
+    procs = {name: subprocess.Popen([*command, '--startup-timeout-s', '120'],
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for name, command in commands.items()}
+    outputs = {name: proc.communicate(timeout=600) for name, proc in procs.items()}
+    return {name: Run(folder / name, procs[name].returncode, *outputs[name]) for name in procs}
+
+
+def test_parallel_runs_are_isolated_and_equal(parallel_runs: dict[str, Run]) -> None:
+    """Graph runs started at once (:func:`parallel_runs`): each succeeds in a domain of its
+    own; no cross-talk: every one equals its own in-process run (asserted by the test of
+    each case below: test_commute_bag..., test_twist_stamped_bag...; a message of the
+    other run would break that)."""
+    runs = list(parallel_runs.values())
+    for run in runs:
+        run.assert_ok()
+    # A run that ends before another starts may hand its domain on (seen under load in a
+    # fresh-clone CI run with 8 runs: 7 domains); runs that overlap in time must not share one.
+    # Each run's [params written, bag finished] lies inside the time it held its lease.
+    domains = [run.stdout.split('domain ')[1].split(')')[0] for run in runs]
+    spans = [((run.bag.with_name(run.bag.name + '.logs') / 'run_params.yaml').stat().st_mtime,
+              (run.bag / 'metadata.yaml').stat().st_mtime) for run in runs]
+    for i, j in itertools.combinations(range(len(runs)), 2):
+        overlap = spans[i][0] < spans[j][1] and spans[j][0] < spans[i][1]
+        assert not (overlap and domains[i] == domains[j]), (domains, spans)
+    assert len(set(domains)) >= 2
+
+
+def test_commute_bag_replays_through_the_graph_whatever_the_cpu_budget(
+        parallel_runs: dict[str, Run]) -> None:
+    """A real commute bag (:data:`COMMUTE`) as the preceding vehicle, graph == in-process.
+
+    The graph runs with a tiny CPU budget per solve (:func:`tiny_cpu_budget`), the
+    in-process reference with the shipped one: in lock-step the budget does not apply
+    (results must not depend on timing: ``solver_max_iter`` bounds the work), so the two are
+    equal. The budget's fallback in wall mode: test_shadow. (One run for both: each claim is
+    graph == in-process on a run of real solves.) With ``--no-plot`` it draws no figure."""
+    run = parallel_runs['commute']
+    run.assert_ok()
+    assert 'plot:' not in run.stdout and not run.bag.with_name('commute.png').exists()  # --no-plot
+    trace_arg = str(REPO / 'bags' / COMMUTE)
+    config = load_run_config(overrides={'planner': {'alpha': 0.5, 'predictor': 'ca'}})
+    assert config.planner.solver_cpu_budget_s == 0.02
+    trace = truncate(load_trace(trace_arg, config.planner.dt_s, config.trace), 60)
+    assert trace.name == COMMUTE
+    assert_records_equal(records_from_bag(run.bag), simulate(config, trace).records)
+
+
+def test_twist_stamped_bag_on_a_remapped_topic_replays_through_the_graph(
+        parallel_runs: dict[str, Run]) -> None:
+    """``--bag-in`` with ``--bag-topic``/``--bag-type``: the traffic node replays the bag's own
+    topic and type (the orchestrator hands both to the node), equal to the in-process run."""
+    from preceding_traffic.bags import TWIST_STAMPED
+    run = parallel_runs['twist']
+    run.assert_ok()
     config = load_run_config(overrides={
         'planner': {'alpha': 0.5, 'predictor': 'ca'},
         'preceding_traffic': {'bag_topic': '/vehicle/lead/twist',
                               'bag_message_type': TWIST_STAMPED}})
+    source = run.bag.with_name('lead_twist')
     trace = truncate(load_trace(str(source), config.planner.dt_s, config.trace), 30)
     assert trace.t0_s == 100.0
-    records = records_from_bag(bag)
+    records = records_from_bag(run.bag)
     assert records[0].traffic_speed_mps == 0.0 and records[-1].t_s == pytest.approx(129.0)
     assert_records_equal(records, simulate(config, trace).records)

@@ -167,7 +167,9 @@ def _until(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
 def test_a_killed_orchestrator_leaves_no_node_even_a_stopped_one(tmp_path: Path) -> None:
     """The planner stopped with SIGSTOP, then ``trust-av run`` killed with SIGKILL: the
     stopped planner stayed (its parent-death SIGTERM waited for a SIGCONT that never came),
-    with another node. Now every node is gone and the recorder finished the bag."""
+    with another node. Now every node is gone, the stopped one and the five running ones
+    (the plain kill of the orchestrator), and the recorder finished the bag itself with
+    every complete step on every topic."""
     bag = tmp_path / 'orphan'
     proc = stoppable_run(bag)
     wait_for_steps(bag, 8, proc=proc)
@@ -183,6 +185,7 @@ def test_a_killed_orchestrator_leaves_no_node_even_a_stopped_one(tmp_path: Path)
            f'nodes left: {[pid for pid in nodes if _state(pid)]}')
     assert (bag / 'metadata.yaml').exists()               # finished by the recorder itself
     assert check_bag_directory(bag) == []
+    assert 0 < assert_every_topic_complete(bag) < INTERRUPTED_RUN_STEPS
 
 
 def test_the_node_a_stalled_chain_waits_for() -> None:

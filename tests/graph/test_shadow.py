@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
+from support.cli import trust_av_run
 from support.paths import REPO
 from support.rosbag2_rules import check_bag_directory  # the test-side oracle module
 
@@ -78,31 +79,41 @@ def test_shadow_run_records_bounded_outputs_and_jitter(tmp_path: Path) -> None:
         assert f'{name}:' in result.stdout
 
 
-@pytest.mark.wall_clock
-def test_remapped_input_topics_are_honoured(tmp_path: Path) -> None:
-    params = tmp_path / 'remapped.yaml'
+@pytest.fixture(scope='module')
+def remapped_overrun(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[object]]:
+    """One shadow run read by the two tests below: its input odometry remapped to
+    /vehicle/lead/odom and /vehicle/ego/odom, and a CPU budget per NMPC solve of 1 ns (the
+    two settings are independent: the budget acts on the solve, the topics on its inputs);
+    the messages it recorded."""
+    folder = tmp_path_factory.mktemp('remapped_overrun')
+    params = folder / 'remapped_overrun.yaml'
     text = PARAMS.read_text().replace('lead_odom_topic: preceding_vehicle/odom',
                                       'lead_odom_topic: /vehicle/lead/odom')
     text = text.replace('ego_odom_topic: ego/odom', 'ego_odom_topic: /vehicle/ego/odom')
+    text = text.replace('solver_cpu_budget_s: 0.02', 'solver_cpu_budget_s: 0.000000001')
     assert '/vehicle/lead/odom' in text and '/vehicle/ego/odom' in text
+    assert 'solver_cpu_budget_s: 0.000000001' in text
     params.write_text(text)
-    _result, out, _stats = shadow(tmp_path, '--params-file', str(params))
-    messages = read(out)
+    _result, out, _stats = shadow(folder, '--params-file', str(params))
+    return read(out)
+
+
+@pytest.mark.wall_clock
+def test_remapped_input_topics_are_honoured(remapped_overrun: dict[str, list[object]]) -> None:
+    """The player publishes, and the planner plans from, the remapped input topics (a
+    solved status, not a stale one, needs both inputs: the test below)."""
+    messages = remapped_overrun
     assert messages.get('/vehicle/lead/odom') and messages.get('/vehicle/ego/odom')
     assert '/preceding_vehicle/odom' not in messages
     assert messages.get('/ego/plan'), 'the planner did not plan from the remapped topics'
 
 
 @pytest.mark.wall_clock
-def test_cpu_budget_overrun_publishes_the_fallback_and_goes_on(tmp_path: Path) -> None:
+def test_cpu_budget_overrun_publishes_the_fallback_and_goes_on(
+        remapped_overrun: dict[str, list[object]]) -> None:
     """Against the wall clock a tiny CPU budget makes every NMPC solve overrun: the planner
     publishes the fallback plan with the reason in its status and keeps commanding."""
-    params = tmp_path / 'tiny_budget.yaml'
-    params.write_text(PARAMS.read_text().replace('solver_cpu_budget_s: 0.02',
-                                                 'solver_cpu_budget_s: 0.000000001'))
-    assert 'solver_cpu_budget_s: 0.000000001' in params.read_text()
-    _result, out, _stats = shadow(tmp_path, '--params-file', str(params))
-    messages = read(out)
+    messages = remapped_overrun
     statuses = [m.status[0].message for m in messages['/ego/planner_status']]  # type: ignore[attr-defined]
     solved = [s for s in statuses if not s.startswith('stale')]
     assert solved and all(s.startswith('fallback: CPU budget exceeded') for s in solved), (
@@ -122,10 +133,8 @@ def test_bad_rate_is_one_line_before_anything_starts(tmp_path: Path, rate: str,
     output exists (a 0.5 Hz shadow run used to start, leave its --out directory and stop on
     the node's refusal)."""
     out = tmp_path / 'shadow'
-    result = subprocess.run(
-        [sys.executable, '-m', 'trust_av.cli', 'shadow', '--bag',
-         str(REPO / 'bags' / 'commute_am'), '--duration-s', '1', '--out', str(out),
-         '--rate-hz', rate], capture_output=True, text=True, timeout=60, check=False)
+    result = trust_av_run('shadow', '--bag', str(REPO / 'bags' / 'commute_am'), '--duration-s',
+                          '1', '--out', str(out), '--rate-hz', rate)    # in-process
     assert result.returncode == 2, result.stdout + result.stderr
     assert message in result.stderr.strip().splitlines()[-1]  # argparse's usage, then one line
     assert 'Traceback' not in result.stderr and not out.exists()

@@ -29,7 +29,7 @@ RECORD_TOLERANCE = 1e-7
 step (the graph's numbers differ in the last bits; the source is not found), and each
 iterative solve returns a point within its termination tolerance, so such a difference can
 come out of the NMPC's SQP as ~1e-8 (measured: 1.7e-8 in the AV's plan at t = 39 s of the
-60 s TAC-GRU test, from inputs 1e-14 apart). 1e-7 is ten times that and far below any
+60 s TAC-GRU graph run, from inputs 1e-14 apart). 1e-7 is ten times that and far below any
 physical difference."""
 SOLVER_DETAILS = {'solver_status': 'solver_success', 'solver_iterations': 'solver_success'}
 """How the AV's successful SQP solve got there: the graph's numbers differ from the in-process
