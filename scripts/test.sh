@@ -2,11 +2,12 @@
 # The project's test command (README): set up .venv if needed, then lint (ruff), type-check
 # every module (mypy --strict), build the documentation site in strict mode (mkdocs: a
 # broken link or anchor, or a generated table that cannot be built, fails), and run the whole
-# test suite (pytest) on four workers for two cores (pytest-xdist, --dist loadgroup, the
-# queue in the suite's own order, --no-loadscope-reorder: tests/conftest.py starts the long
-# tests first, keeps the tests that share a module's fixture on one worker, and hands out
-# every other test on its own, so that the wall-clock tests, which mostly wait, wait side
-# by side while the CPU-bound ones compute), and shows the 15 slowest tests of every run
+# test suite (pytest) on six workers for two cores (pytest-xdist, --dist loadgroup, the
+# queue in the suite's own order, --no-loadscope-reorder: tests/conftest.py keeps the tests
+# that share a module's fixture on one worker, runs the wall-clock tests, which mostly wait,
+# on the even-numbered workers and every other test on the odd ones, each lane its longest
+# units first by tests/durations.json, so that the waiting tests wait side by side while
+# the rest keep both cores busy), and shows the 15 slowest tests of every run
 # (--durations). Extra arguments go to pytest, e.g. `bash scripts/test.sh -k nmpc`, or
 # `bash scripts/test.sh -n 0` for one process.
 #
