@@ -453,10 +453,12 @@ def test_a_foreign_publisher_stops_the_run_and_a_foreign_domain_is_skipped(
     """Domain 230 has someone on it: a run limited to 230-231 takes 231. Then the intruder
     moves onto 231 while the run records: the run stops with one line naming the topic and
     the node, exit 2, and the bag is finished."""
-    env = dict(os.environ, TRUST_AV_DOMAIN_RANGE='230-231')
-    # A trace long enough to outlast discovery (the run stops when it names the intruder:
-    # up to one periodic participant announcement, 3 s, plus the watch period; US06 ends
-    # about 3 s after step 8 on an idle machine).
+    # The run must outlast the intruder's start and its discovery (a Python process, then
+    # up to one periodic participant announcement plus the watch period): a long trace,
+    # recorded at least 20 ms a step (the test-only slow disk; the graph waits for it), so
+    # 3000 steps take at least 60 s. Unpaced, they took 10.7 s, and on a loaded host the
+    # run finished before the intruder was heard.
+    env = dict(os.environ, TRUST_AV_DOMAIN_RANGE='230-231', TRUST_AV_TEST_WRITE_DELAY_S='0.02')
     trace = long_trace(tmp_path)
     first = intruder(230)
     second = None
