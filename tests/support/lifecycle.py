@@ -74,26 +74,24 @@ class Manager:
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.05)
 
-    def call(self, client: Any, request: Any, again_s: float | None = None) -> Any:
-        """``request``'s answer; with ``again_s``, asked again after that long without one
-        (for a request that may be repeated: a service is ready once its request topic is
-        matched, and an answer sent before the client's answer topic is matched is lost, as
-        the orchestrator's lifecycle client knows too)."""
+    def call(self, client: Any, request: Any) -> Any:
         assert self.spin_until(client.service_is_ready), client.srv_name
-        end = time.monotonic() + 60.0
-        while True:
-            future = client.call_async(request)
-            wait_s = min(again_s or 60.0, max(0.0, end - time.monotonic()))
-            if self.spin_until(future.done, wait_s) or time.monotonic() >= end:
-                break
-            client.remove_pending_request(future)
-        assert future.done(), client.srv_name
+        future = client.call_async(request)
+        assert self.spin_until(future.done), client.srv_name
         return future.result()
 
     def state(self) -> int:
+        """The node's state, asked again while no answer comes, as the orchestrator asks (a
+        service is ready once its request topic is matched, and an answer sent before the
+        client's answer topic is matched is lost)."""
         from lifecycle_msgs.srv import GetState
 
-        return int(self.call(self.get, GetState.Request(), again_s=5.0).current_state.id)
+        from trust_av.graph.lifecycle_client import _ask
+
+        assert self.spin_until(self.get.service_is_ready), self.get.srv_name
+        answer = _ask(self.executor, self.get, GetState.Request(), time.monotonic() + 60.0,
+                      self.get.srv_name, lambda: None)
+        return int(answer.current_state.id)
 
     def transition(self, transition_id: int) -> bool:
         from lifecycle_msgs.msg import Transition

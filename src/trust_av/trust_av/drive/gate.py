@@ -37,7 +37,6 @@ start of a connection, before any sample came promptly (the page's clock is then
 known, and a bunch counts at its arrival)."""
 
 
-
 def finite_number(value: Any) -> float | None:
     """``value`` as a finite float, or None: not a number (a bool is not), NaN, infinite, or
     an integer too large for a float (JSON allows any number of digits)."""
@@ -83,7 +82,7 @@ class Gate:
         self.phase = IDLE
         self.refused: Counter[str] = Counter()
         self._tokens = float(INPUT_BURST)
-        self._tokens_at: float | None = None     # the latest sample time credited, s
+        self._tokens_at = -math.inf     # the latest sample time credited, s
         self._offset_s: float | None = None   # least (arrival - t_ms) of this connection
         self._seq = 0
         self._prompts: dict[int, int] = {}           # prompt id -> sent at, ns
@@ -150,8 +149,6 @@ class Gate:
                 if self._offset_s is None or offset_s < self._offset_s:
                     self._offset_s = offset_s
                 at_s = sent_ms / 1e3 + self._offset_s       # <= now_s
-            if self._tokens_at is None:
-                self._tokens_at = at_s
             elapsed = max(0.0, at_s - self._tokens_at)
             self._tokens = min(float(INPUT_BURST), self._tokens + elapsed * self.rate_hz)
             self._tokens_at = max(self._tokens_at, at_s)
