@@ -74,11 +74,14 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
       last=$count
     done ) &
   watcher=$!
-  # pip byte-compiles what it installs (about 20 of the step's 50 s here, torch's tree
-  # included), and that is kept: --no-compile left every process of a test run compiling
-  # what it imports again where PYTHONDONTWRITEBYTECODE is set (a fresh-clone suite took
-  # 560 s instead of 375), and compileall on both cores saves nothing (20 s)
-  pip_counted dependencies "$pins" -r "$root/requirements.txt"
+  # pip byte-compiles what it installs (about 25 CPU-s, torch's tree included), and that is
+  # kept: --no-compile left every process compiling what it imports again where
+  # PYTHONDONTWRITEBYTECODE is set (a fresh-clone suite took 560 s instead of 375), and
+  # importing the project's modules once with writing on misses what torch and matplotlib
+  # import lazily (sympy, backends: 1,000 modules in a short run of the suite).
+  # requirements.txt pins the whole closure (pip check below proves it), so pip resolves
+  # nothing (--no-deps)
+  pip_counted dependencies "$pins" --no-deps -r "$root/requirements.txt"
   kill "$watcher" 2>/dev/null || true
   wait "$watcher" 2>/dev/null || true
   say "step 2/4 done in $((SECONDS - setup_began)) s"
@@ -87,6 +90,10 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   args=()
   for p in "${packages[@]}"; do args+=(-e "$root/src/$p"); done
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation "${args[@]}" 2> >(grep -v "^WARNING: Location" >&2)
+  if ! broken="$("$venv/bin/python" -m pip check 2>&1)"; then
+    say "error: requirements.txt is not a complete set of pins (pip check: $(tr '\n' ';' <<<"$broken"))"
+    exit 1
+  fi
   say "step 3/4 done in $((SECONDS - step_began)) s"
   # tf2_msgs has no wheel: built from vendor/tf2_msgs (about a minute, once per environment)
   if "$venv/bin/python" -c 'import tf2_msgs.msg' 2>/dev/null; then
