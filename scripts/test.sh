@@ -19,6 +19,13 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 source scripts/bootstrap.sh
 
+# The suite's processes keep the byte code they compile (in the project's own .venv and in
+# the ignored __pycache__ folders of src/ and tests/), also where PYTHONDONTWRITEBYTECODE is
+# set: there pytest rewrote and compiled every test module again in every worker and every
+# pytest a test starts (about 2.5 CPU-s each), and every process compiled again what pip had
+# left uncompiled (hypothesis's modules, the editable finders).
+unset PYTHONDONTWRITEBYTECODE
+
 if [[ "${1:-}" == --fast ]]; then
   shift
   echo '== pytest (fast lane: tests/core, not slow)' >&2
@@ -41,9 +48,9 @@ docs_site="$(mktemp -d)"
 NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$docs_site"
 rm -rf "$docs_site"
 echo '== pytest' >&2
-# Every Python process of the suite (about 500: node graphs, CLIs, workers) imports the
-# project's modules; where PYTHONDONTWRITEBYTECODE is set Python never caches their byte
-# code and each process compiled them again (about 0.05 CPU-s a process). Compiled once
-# here (into the ignored __pycache__ folders; a module edited later is compiled as before).
+# Every Python process of the suite (about 800: node graphs, CLIs, workers) imports the
+# project's modules: compiled once here, and the test modules rewritten by pytest once
+# (--collect-only), rather than by the six workers at once, each for itself.
 python -m compileall -q -j 0 src tests benchmarks scripts > /dev/null
+python -m pytest --collect-only -q > /dev/null || true   # an error is the run's to report
 python -m pytest -n 6 --dist loadgroup --no-loadscope-reorder --durations=15 "$@"
