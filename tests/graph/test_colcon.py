@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 from support.paths import REPO
+from support.processes import hangup_by_default
 from support.rosbag2_rules import check_bag_directory
 
 PARAMS = REPO / 'config' / 'trust_av.yaml'
@@ -155,7 +156,7 @@ def test_installed_executable_comes_up(install: Path, package: str, executable: 
                ROS_LOG_DIR=str(tmp_path / 'ros_log'), PYTHONUNBUFFERED='1')
     proc = subprocess.Popen(['bash', '-c', script], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, env=env,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=hangup_by_default)
     words = ('recording ',) if executable == 'recorder' else ('ready', 'waiting for /sim/start')
     lines: queue.Queue[str] = queue.Queue()
     assert proc.stdout is not None

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from support.processes import children_of
+from support.processes import children_of, hangup_by_default
 
 from trust_av.graph import stop_signals
 from trust_av_common import output_files
@@ -135,7 +135,8 @@ def test_a_closed_terminal_stops_a_command_unless_started_under_nohup(nohup: boo
     """
     done = subprocess.run([sys.executable, '-c', textwrap.dedent(program),
                            *(['nohup'] if nohup else [])],
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=300,
+                          preexec_fn=hangup_by_default)
     assert done.stderr == ''
     assert done.stdout.splitlines() == ['SIGINT taken: True',
                                         'went on' if nohup else 'stopped by SIGHUP',
@@ -197,7 +198,7 @@ def trust_av(*args: str) -> subprocess.Popen[str]:
     """``trust-av ARGS`` as the leader of its own process group (as a terminal starts it)."""
     return subprocess.Popen([sys.executable, '-m', 'trust_av.cli', *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=hangup_by_default)
 
 
 def stored_cases(cache: Path) -> list[Path]:

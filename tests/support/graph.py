@@ -11,7 +11,7 @@ import pytest
 
 from trust_av.system.metrics import StepRecord
 
-from .processes import INTERRUPTED_RUN_STEPS, long_trace
+from .processes import INTERRUPTED_RUN_STEPS, hangup_by_default, long_trace
 
 STEPS = 120
 """Steps of :func:`run_command`'s run."""
@@ -57,9 +57,10 @@ def assert_records_equal(graph: list[StepRecord], ref: list[StepRecord]) -> None
 
 def stoppable_run(bag: Path) -> subprocess.Popen[str]:
     """A run of :func:`support.processes.long_trace` (written beside ``bag``) that a test
-    stops, in its own process group as in a terminal."""
+    stops, in its own process group and with SIGHUP at its default action, as a terminal's
+    shell starts it."""
     command = [sys.executable, '-m', 'trust_av.cli', 'run', '--trace',
                str(long_trace(bag.parent)), '--max-steps', str(INTERRUPTED_RUN_STEPS),
                '--bag', str(bag), '--no-progress', '--no-plot']
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=hangup_by_default)

@@ -3,10 +3,19 @@ a test stops midway."""
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import time
 from pathlib import Path
 
+
+
+def hangup_by_default() -> None:
+    """``preexec_fn`` for a command a test starts as a terminal's shell would: SIGHUP at its
+    default action. A suite started under ``nohup`` passes SIGHUP on as ignored, and trust-av
+    and its nodes honour that (they outlive a closed terminal as asked), so a test of a
+    closed terminal would see nothing happen."""
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
 def assert_every_topic_complete(bag: Path) -> int:
     """Every recorded topic of the table holds every complete step, the topics within one
