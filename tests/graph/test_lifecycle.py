@@ -346,6 +346,7 @@ class _LossyNode:
 
     def __init__(self, lose: list[tuple[str, int]]) -> None:
         self.state, self.lose, self.applied = 1, list(lose), []
+        self.pending: list[_Future] = []     # unanswered requests not yet withdrawn
 
     def create_client(self, srv: Any, name: str) -> Any:
         from lifecycle_msgs.srv import ChangeState, GetState
@@ -363,16 +364,24 @@ class _LossyNode:
                 transition = request.transition.id
                 if ('request', transition) in lossy.lose:
                     lossy.lose.remove(('request', transition))
-                    return _Future(done=False)
+                    return lossy.unanswered()
                 lossy.state = {1: 2, 3: 3, 4: 2}[transition]
                 lossy.applied.append(transition)
                 if ('answer', transition) in lossy.lose:
                     lossy.lose.remove(('answer', transition))
-                    return _Future(done=False)
+                    return lossy.unanswered()
                 return _Future(ChangeState.Response(success=True))
+
+            def remove_pending_request(self, future: _Future) -> None:
+                lossy.pending.remove(future)
 
         assert srv in (GetState, ChangeState) and name.startswith('/planner/')
         return Client()
+
+    def unanswered(self) -> _Future:
+        future = _Future(done=False)
+        self.pending.append(future)
+        return future
 
     def destroy_client(self, client: Any) -> None:
         pass
@@ -397,6 +406,7 @@ def test_a_lost_answer_or_request_is_asked_again_and_nothing_is_sent_twice(
     node = _LossyNode(lose)
     lifecycle_client.set_states(node, _Idle(), ['planner'], 'active', 5.0)
     assert node.state == 3 and node.applied == [1, 3]
+    assert node.pending == []          # every unanswered request withdrawn from its client
 
 
 CLEANUP, SHUTDOWN_UNCONFIGURED, SHUTDOWN_INACTIVE, SHUTDOWN_ACTIVE = 2, 5, 6, 7

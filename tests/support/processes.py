@@ -9,7 +9,6 @@ import time
 from pathlib import Path
 
 
-
 def hangup_by_default() -> None:
     """``preexec_fn`` for a command a test starts as a terminal's shell would: SIGHUP at its
     default action. A suite started under ``nohup`` passes SIGHUP on as ignored, and trust-av

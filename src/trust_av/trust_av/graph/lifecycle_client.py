@@ -104,8 +104,10 @@ def set_states(node: Any, executor: Any, names: Sequence[str], goal: str,
                     raise GraphError(f'node {name}: transition {label} failed{_why(graph, name)}')
                 future = change.call_async(
                     ChangeState.Request(transition=Transition(id=transition)))
-                if _answered(executor, future, min(deadline, time.monotonic() + ANSWER_S),
-                             alive) and not future.result().success:
+                if not _answered(executor, future, min(deadline, time.monotonic() + ANSWER_S),
+                                 alive):
+                    change.remove_pending_request(future)   # the state, asked next, tells
+                elif not future.result().success:
                     raise GraphError(f'node {name}: transition {label} failed{_why(graph, name)}')
         finally:
             node.destroy_client(get)
@@ -128,11 +130,15 @@ def _why(graph: Any, name: str) -> str:
 
 def _ask(executor: Any, client: Any, request: Any, deadline: float, what: str,
          alive: Callable[[], None]) -> Any:
-    """``request``'s answer, asked again every :data:`ANSWER_S` until ``deadline``."""
+    """``request``'s answer, asked again every :data:`ANSWER_S` until ``deadline`` (for a
+    request that may be asked twice, such as GetState); an unanswered request is withdrawn
+    from the client before the next, so that a late answer completes nothing and no
+    request is left pending."""
     while True:
         future = client.call_async(request)
         if _answered(executor, future, min(deadline, time.monotonic() + ANSWER_S), alive):
             return future.result()
+        client.remove_pending_request(future)
         if time.monotonic() >= deadline:
             raise GraphError(f'{what}: no answer in time')
 
