@@ -17,7 +17,7 @@ import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
-from human_driver_sim.follower_plant import COLLISION_CLEAR_M, contact
+from human_driver_sim.follower_plant import COLLISION_CLEAR_M, AvTrack, contact
 from trust_av.drive.gate import (
     DRIVING,
     INPUT_BURST,
@@ -211,6 +211,25 @@ def test_the_follower_stops_behind_the_av_and_never_drives_through() -> None:
     assert not clear.touching
     assert contact(11.0, 1.0, 10.6, 3.0, clear.touching).new_collision
 
+
+
+def test_the_av_is_placed_where_its_braking_has_brought_it() -> None:
+    """The AV's rear bumper from odometry that is a second old (a stalled host): at its speed
+    and its acceleration between its last two messages, x + v·t + a·t²/2, stopping at 0 m/s;
+    a constant-speed guess would put it a·t²/2 = 2.5 m further on."""
+    s, length = 1_000_000_000, 4.5
+    track = AvTrack.first(100.0, 10.5, 0, 0)
+    assert track.accel_mps2 == 0.0
+    track = track.update(101.0, 10.0, s // 10, 7 * s)        # -0.5 m/s in 0.1 s: -5 m/s^2
+    assert track.accel_mps2 == pytest.approx(-5.0)
+    assert track.rear_m(7 * s, length) == pytest.approx(101.0 - length)
+    assert track.rear_m(8 * s, length) == pytest.approx(101.0 + 10.0 - 2.5 - length)
+    assert track.update(99.0, 11.0, s // 20, 8 * s) is track  # an older message: not newer
+    slow = AvTrack.first(50.0, 2.5, 0, 0).update(50.2, 2.0, s // 10, 0)
+    stopped = 50.2 + 2.0 * 0.4 - 0.5 * 5.0 * 0.4 ** 2 - length    # at rest after 0.4 s
+    assert slow.rear_m(s, length) == pytest.approx(stopped)
+    assert slow.rear_m(60 * s, length) == pytest.approx(stopped)  # and never backwards
+    assert AvTrack.first(0.0, 0.0, 0, 5 * s).rear_m(0, length) == -length   # a clock behind
 
 @pytest.mark.parametrize(('gap', 'speed'), [(-51.0, 0.0), (0.0, 0.0), (-1.0, 3.0)])
 def test_planner_observes_a_crash_without_dividing(gap: float, speed: float) -> None:

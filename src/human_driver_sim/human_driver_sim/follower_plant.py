@@ -15,7 +15,11 @@ behind it and the planner only observes the follower.
 A gap at or below zero is a collision (:func:`contact`): the car is put at the AV's rear
 bumper and stops there; it never drives through the AV (while the pedal pushes it on, it
 stays at the rear bumper, no faster than the AV). A new collision is counted only after the
-gap opened to ``COLLISION_CLEAR_M`` again. No rclpy here; times are passed in.
+gap opened to ``COLLISION_CLEAR_M`` again. The AV's rear bumper is known from its odometry,
+which is up to a tick old (seconds on a stalled host): :class:`AvTrack` extrapolates it to
+now at the AV's speed and its acceleration between its last two messages, so a braking AV is
+not placed ahead of where it is (a constant-speed guess was ½·a·age² ahead: 2.5 m for a
+second-old message at -5 m/s^2). No rclpy here; times are passed in.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from dataclasses import dataclass
 
 from trust_av_common.params import check_fields, param
 
-__all__ = ['APPLIED_TOPIC', 'COLLISION_CLEAR_M', 'COMMAND_TOPIC', 'FollowerConfig',
+__all__ = ['APPLIED_TOPIC', 'COLLISION_CLEAR_M', 'COMMAND_TOPIC', 'AvTrack', 'FollowerConfig',
            'applied_accel', 'contact']
 
 COMMAND_TOPIC = 'human/accel_cmd'
@@ -70,6 +74,52 @@ def clip_accel(config: FollowerConfig, accel_mps2: float) -> float:
 
 COLLISION_CLEAR_M = 0.5
 """A contact after the gap opened to this much again is a new collision, m."""
+
+
+@dataclass(frozen=True)
+class AvTrack:
+    """The AV as its odometry last showed it, and where its rear bumper is now.
+
+    Attributes:
+        position_m: its position in the newest message, m.
+        speed_mps: its speed there, m/s.
+        accel_mps2: its speed change between its last two messages over their stamps'
+            interval, m/s^2 (0 until two have arrived).
+        stamp_ns: the newest message's header stamp, ns.
+        received_ns: when that message arrived (monotonic), ns.
+    """
+
+    position_m: float
+    speed_mps: float
+    accel_mps2: float
+    stamp_ns: int
+    received_ns: int
+
+    @classmethod
+    def first(cls, position_m: float, speed_mps: float, stamp_ns: int,
+              received_ns: int) -> AvTrack:
+        """The track from the AV's first message (no acceleration known yet)."""
+        return cls(position_m, speed_mps, 0.0, stamp_ns, received_ns)
+
+    def update(self, position_m: float, speed_mps: float, stamp_ns: int,
+               received_ns: int) -> AvTrack:
+        """The track after the next message; one stamped no later than the newest is not
+        newer and changes nothing."""
+        interval_s = (stamp_ns - self.stamp_ns) / 1e9
+        if interval_s <= 0.0:
+            return self
+        return AvTrack(position_m, speed_mps, (speed_mps - self.speed_mps) / interval_s,
+                       stamp_ns, received_ns)
+
+    def rear_m(self, now_ns: int, length_m: float) -> float:
+        """The rear bumper at ``now_ns`` (monotonic): the position advanced over the
+        message's age at its speed and acceleration, the AV stopping at 0 m/s (never
+        backwards), minus the AV's ``length_m``."""
+        age_s = max(0.0, (now_ns - self.received_ns) / 1e9)
+        speed, accel = max(0.0, self.speed_mps), self.accel_mps2
+        if accel < 0.0:
+            age_s = min(age_s, speed / -accel)           # stopped by then
+        return self.position_m + speed * age_s + 0.5 * accel * age_s * age_s - length_m
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,9 @@ see the person exactly as they see the simulated driver:
   touches the AV (``touching``); WARN while the participant is gone or the car touches.
 
 It subscribes ``ego/odom`` for the collision check
-(:func:`human_driver_sim.follower_plant.contact`, the AV's position extrapolated to now at
-its speed): the car never drives through the AV.
+(:func:`human_driver_sim.follower_plant.contact`, the AV's rear bumper extrapolated to now at
+its speed and acceleration: :class:`human_driver_sim.follower_plant.AvTrack`): the car never
+drives through the AV.
 
 Until ``sim/start`` the car holds its initial state. Parameters: :class:`FollowerConfig`,
 the initial state and the wall-clock settings.
@@ -45,6 +46,7 @@ from human_driver_sim.follower_plant import (
     COMMAND_TOPIC,
     HOLD,
     WAITING,
+    AvTrack,
     FollowerConfig,
     applied_accel,
     contact,
@@ -91,7 +93,7 @@ class FollowerPlantNode(Node):
             raise ValueError('follower_plant runs in wall mode only (clock_mode: wall)')
         self.state = VehicleState(start.initial_position_m, start.initial_speed_mps)
         self.length_m = start.vehicle_length_m
-        self.av: tuple[float, float, int] | None = None   # position, speed, at (monotonic ns)
+        self.av: AvTrack | None = None
         self.touching = False
         self.collisions = 0
         self.vehicle = VehicleOdometry(VEHICLE_FRAMES['human_driver'])
@@ -126,8 +128,11 @@ class FollowerPlantNode(Node):
 
     def on_av(self, msg: Odometry) -> None:
         """The AV's newest state (for the collision check)."""
-        self.av = (float(msg.pose.pose.position.x), float(msg.twist.twist.linear.x),
-                   time.monotonic_ns())
+        stamp_ns = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
+        position, speed = float(msg.pose.pose.position.x), float(msg.twist.twist.linear.x)
+        received = time.monotonic_ns()
+        self.av = (AvTrack.first(position, speed, stamp_ns, received) if self.av is None
+                   else self.av.update(position, speed, stamp_ns, received))
 
     def advance_to(self, mono_ns: int) -> None:
         """Integrate the applied acceleration up to ``mono_ns`` (monotonic), stop behind the
@@ -136,9 +141,8 @@ class FollowerPlantNode(Node):
             position, speed = advance(self.state.position_m, self.state.speed_mps, self.accel,
                                       (mono_ns - self.last_ns) / NS_PER_S)
             if self.av is not None:
-                av_at, av_speed, av_ns = self.av
-                rear = av_at + av_speed * max(0, mono_ns - av_ns) / NS_PER_S - self.length_m
-                hit = contact(position, speed, rear, av_speed, self.touching)
+                rear = self.av.rear_m(mono_ns, self.length_m)
+                hit = contact(position, speed, rear, self.av.speed_mps, self.touching)
                 position, speed, self.touching = hit.position_m, hit.speed_mps, hit.touching
                 if hit.new_collision:
                     self.collisions += 1
