@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from trust_av.drive.gate import INPUT_BURST
 from trust_av.drive.server import DriveServer
 from trust_av.drive.trust_rating import JIAN_ITEMS
 
@@ -23,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / 'benchmarks'))
 from synthetic_participant import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 
-HELLO = {'type': 'hello', 'control_rate_hz': 10.0, 'input_burst': 4,
+HELLO = {'type': 'hello', 'control_rate_hz': 10.0, 'input_burst': INPUT_BURST,
          'accel_max_mps2': 2.5, 'accel_min_mps2': -6.0, 'on_collision': 'continue'}
 READY = {'type': 'phase', 'phase': 'ready', 'duration_s': 120.0, 'practice': False,
          'number': 1, 'of': 2}
