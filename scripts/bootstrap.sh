@@ -80,7 +80,8 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   # other pin: each waits on the index and unpacks and compiles on its own core (43-47 s
   # instead of 57-96 s for one process on 2 cores here). Disjoint sets of wheels, none built
   # from source, none that pip itself runs on (setuptools is replaced by one of them and
-  # imported by neither).
+  # imported by neither), and no file installed by two of them
+  # (tests/core/test_setup_pins.py).
   halves="$(mktemp -d)"
   grep '^[A-Za-z0-9].*==' "$root/requirements.txt" | awk 'NR % 2 == 1' > "$halves/1.txt"
   grep '^[A-Za-z0-9].*==' "$root/requirements.txt" | awk 'NR % 2 == 0' > "$halves/2.txt"

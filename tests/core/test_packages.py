@@ -139,7 +139,7 @@ REPOSITORY_TESTS = {'test_colcon', 'test_suite_groups', 'test_layout', 'test_ben
                     'test_compare_trust_models', 'test_cli_fuzz', 'test_limits', 'test_code_map',
                     'test_first_result', 'test_typing_report', 'test_docs_examples',
                     'test_moved_imports', 'test_public_api', 'test_suite_layout',
-                    'test_dead_code'}
+                    'test_dead_code', 'test_setup_pins'}
 """Test modules about the repository as a whole (the packages together, the suite, the
 benchmarks), which no single package's ``colcon test`` runs."""
 
