@@ -19,6 +19,7 @@ from support.processes import (
     INTERRUPTED_RUN_STEPS,
     assert_every_topic_complete,
     children_of,
+    recorded_chunks,
     wait_for_steps,
 )
 from support.rosbag2_rules import check_bag_directory
@@ -381,8 +382,10 @@ def test_sigterm_and_another_end_shadow_with_a_finished_bag(tmp_path: Path) -> N
     proc = subprocess.Popen([sys.executable, '-m', 'trust_av.cli', 'shadow', '--bag',
                              str(source), '--out', str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    _until(lambda: (out / f'{out.name}.mcap').exists() or proc.poll() is not None, 120,
-           'no recording')
+    # it records once its first chunk is written (its nodes are up and the replay runs);
+    # a stop before that, while the bag is made, leaves none (test_recording.py)
+    _until(lambda: recorded_chunks(out / f'{out.name}.mcap') > 0 or proc.poll() is not None,
+           120, 'no recording')
     nodes = children_of(proc.pid)
     assert proc.poll() is None and nodes, proc.communicate()
     proc.send_signal(signal.SIGTERM)

@@ -54,6 +54,25 @@ def test_bag_writer_writes_a_rosbag2_bag_directory(tmp_path: Path) -> None:
         BagWriter(bag)
 
 
+
+@pytest.mark.parametrize('where', ['new_writer', '_grow_reserve'])
+def test_a_stop_while_the_bag_is_created_leaves_no_directory(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, where: str) -> None:
+    """A stop signal (raised as KeyboardInterrupt, like trust_av.graph.stop_signals.Stopped)
+    while the bag is being created, after its directory and MCAP file exist, before or after
+    the MCAP header: no half-made bag is left (a stopped ``trust-av shadow`` left an empty
+    .mcap and no metadata.yaml, and said its recordings were finished)."""
+    def stop(*_args: object) -> None:
+        raise KeyboardInterrupt
+    target = bag_writer if where == 'new_writer' else BagWriter
+    monkeypatch.setattr(target, where, stop)
+    with pytest.raises(KeyboardInterrupt):
+        BagWriter(tmp_path / 'run')
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.undo()
+    record(BagWriter(tmp_path / 'run'), 2)        # the name is free again
+    assert check_bag_directory(tmp_path / 'run') == []
+
 def test_wall_mode_log_time_is_the_receive_time_and_publish_time_the_stamp(
         tmp_path: Path) -> None:
     """``receive_time_ns`` (wall mode, as ``ros2 bag record``): log time = receive time,

@@ -159,22 +159,6 @@ class BagWriter:
         else:
             self._info.custom_data['trust_av.repaired_copy_of'] = copy_of or 'unknown'
         self._info.custom_data.update(custom_data or {})   # the run's record (run_record)
-        if os.path.lexists(self.path):
-            raise BagWriteError(f'{self.path}: cannot create the bag directory ({self.path} '
-                                'exists already, not overwriting)')
-        try:
-            self.path.mkdir(mode=0o755, parents=True)
-        except OSError as err:
-            raise self._start_error(err, created=False) from err
-        try:
-            self._stream = WholeWrites(self._mcap_path)
-        except OSError as err:
-            raise self._start_error(err, created=True) from err
-        try:
-            self._mcap = new_writer(self._stream, self._library)
-        except OSError as err:
-            self._stream.close()
-            raise self._start_error(err, created=True) from err
         self._topics: dict[str, TopicInfo] = {}
         self._channels: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
@@ -191,19 +175,34 @@ class BagWriter:
         self.finished = False
         self.disk_full: str = ''
         self.steps = 0
+        if os.path.lexists(self.path):
+            raise BagWriteError(f'{self.path}: cannot create the bag directory ({self.path} '
+                                'exists already, not overwriting)')
+        stream: WholeWrites | None = None
         try:
-            self._grow_reserve()
+            self.path.mkdir(mode=0o755, parents=True)
         except OSError as err:
-            self._stream.close()
+            raise self._start_error(err) from err
+        try:       # all or nothing: an error or a stop signal part-way leaves no directory
+            try:
+                stream = WholeWrites(self._mcap_path)
+                self._mcap = new_writer(stream, self._library)
+            except OSError as err:
+                raise self._start_error(err) from err
+            self._stream = stream
+            try:
+                self._grow_reserve()
+            except OSError as err:
+                raise DiskFullError(f'{self.path}: no room to start a recording '
+                                    f'({os.strerror(err.errno or errno.ENOSPC)})') from err
+        except BaseException:
+            if stream is not None:
+                stream.close()
             shutil.rmtree(self.path, ignore_errors=True)
-            raise DiskFullError(f'{self.path}: no room to start a recording '
-                                f'({os.strerror(err.errno or errno.ENOSPC)})') from err
+            raise
 
-    def _start_error(self, err: OSError, *, created: bool) -> BagWriteError:
-        """The error of a start that failed; what it created (an empty .mcap at most) is
-        removed."""
-        if created:
-            shutil.rmtree(self.path, ignore_errors=True)
+    def _start_error(self, err: OSError) -> BagWriteError:
+        """The error of a start that failed."""
         if err.errno in (errno.ENOSPC, errno.EDQUOT):
             return DiskFullError(f'{self.path}: no room to start a recording '
                                  f'({os.strerror(err.errno)})')
