@@ -83,8 +83,8 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   # imported by neither), and no file installed by two of them
   # (tests/core/test_setup_pins.py).
   halves="$(mktemp -d)"
-  grep '^[A-Za-z0-9].*==' "$root/requirements.txt" | awk 'NR % 2 == 1' > "$halves/1.txt"
-  grep '^[A-Za-z0-9].*==' "$root/requirements.txt" | awk 'NR % 2 == 0' > "$halves/2.txt"
+  grep '^[A-Za-z0-9].*==' "$root/requirements.txt" \
+    | awk -v dir="$halves" '{ print > (dir "/" (NR % 2 ? 1 : 2) ".txt") }'
   pip_counted "dependencies (1 of 2)" "$(wc -l < "$halves/1.txt")" "$venv/pip-install-1.log" \
     --no-deps -r "$halves/1.txt" &
   first=$!

@@ -10,15 +10,11 @@ import importlib.metadata
 import re
 
 from packaging.specifiers import SpecifierSet
+from packaging.utils import canonicalize_name
 from packaging.version import Version
 from support.paths import REPO
 
 PIN = re.compile(r'^([A-Za-z0-9][A-Za-z0-9._-]*)==(\S+)$')
-
-
-def canonical(name: str) -> str:
-    """A distribution name as pip compares them (PEP 503)."""
-    return re.sub(r'[-_.]+', '-', name).lower()
 
 
 def pins() -> dict[str, str]:
@@ -26,14 +22,14 @@ def pins() -> dict[str, str]:
     for line in (REPO / 'requirements.txt').read_text().splitlines():
         match = PIN.match(line.strip())
         if match:
-            found[canonical(match[1])] = match[2]
+            found[canonicalize_name(match[1])] = match[2]
     return found
 
 
 def test_every_pin_is_installed_at_its_version() -> None:
     wanted = pins()
     assert len(wanted) > 150
-    installed = {canonical(d.metadata['Name']): d.version
+    installed = {canonicalize_name(d.metadata['Name']): d.version
                  for d in importlib.metadata.distributions()}
     wrong = {name: (version, installed.get(name)) for name, version in wanted.items()
              if name not in installed        # PEP 440: ==2.13.0 takes 2.13.0+cpu
@@ -46,7 +42,7 @@ def test_no_two_pinned_wheels_install_the_same_file() -> None:
     owners: dict[str, set[str]] = collections.defaultdict(set)
     seen = set()
     for dist in importlib.metadata.distributions():
-        name = canonical(dist.metadata['Name'])
+        name = canonicalize_name(dist.metadata['Name'])
         # the wheel's own record; an .egg-info a ROS wheel carries lists its sources
         if name not in wanted or not dist.read_text('RECORD'):
             continue
