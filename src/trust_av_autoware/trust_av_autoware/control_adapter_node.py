@@ -5,8 +5,9 @@ Inputs: the planner's command (``ego/accel_cmd``, ``geometry_msgs/AccelStamped``
 body frame), the AV's kinematic state (``/localization/kinematic_state``: its current speed,
 ``twist.twist.linear.x`` in base_link) and, optionally, the stack's own controller's command
 (``/control/trajectory_follower/control_cmd``), whose lateral part is kept. Output: one
-``autoware_control_msgs/Control`` on ``/control/trust_av/control_cmd`` per planner command,
-so at the planner's rate: ``longitudinal.acceleration`` = the command,
+``autoware_control_msgs/Control`` on ``/control/trust_av/control_cmd`` per planner command
+it takes (keep last 1: a command overtaken by a newer one is not sent on), so at the
+planner's rate: ``longitudinal.acceleration`` = the command,
 ``longitudinal.velocity`` = current speed + command x ``velocity_horizon_s`` (at least 0),
 ``is_defined_acceleration`` true, stamps = now, ``control_time`` = now +
 ``velocity_horizon_s``; ``lateral`` = the controller's if at most ``lateral_timeout_s`` old,
