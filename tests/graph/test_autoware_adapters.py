@@ -256,7 +256,7 @@ def test_autoware_in_autoware_out(tmp_path: Path) -> None:
         trace: list[dict[str, Any]] = []
 
         def phase(name: str, seconds: float, gap_m: float, lead_speed_mps: float,
-                  bad: bool = False) -> tuple[list[Control], list[float]]:
+                  bad: bool = False) -> list[Control]:
             first = len(controls)
             drive(seconds, gap_m, lead_speed_mps, bad)
             received = controls[first:]
@@ -283,6 +283,7 @@ def test_autoware_in_autoware_out(tmp_path: Path) -> None:
                     node.count_publishers('/ego/accel_cmd') >= 1
                     and node.count_subscribers('/ego/accel_cmd') >= 2):
                 executor.spin_once(timeout_sec=0.1)
+            assert node.count_subscribers('/ego/accel_cmd') >= 2, 'command not subscribed'
             set_states(node, executor, ['planner'], 'active', 60.0)
             drive(2.0, 40.0, 10.0)                                   # settle
             far = phase('far', 3.0, 40.0, 10.0)
