@@ -212,7 +212,6 @@ def test_the_follower_stops_behind_the_av_and_never_drives_through() -> None:
     assert contact(11.0, 1.0, 10.6, 3.0, clear.touching).new_collision
 
 
-
 def test_the_av_is_placed_where_its_braking_has_brought_it() -> None:
     """The AV's rear bumper from odometry that is a second old (a stalled host): at its speed
     and its acceleration between its last two messages, x + v·t + a·t²/2, stopping at 0 m/s;
@@ -230,6 +229,7 @@ def test_the_av_is_placed_where_its_braking_has_brought_it() -> None:
     assert slow.rear_m(s, length) == pytest.approx(stopped)
     assert slow.rear_m(60 * s, length) == pytest.approx(stopped)  # and never backwards
     assert AvTrack.first(0.0, 0.0, 0, 5 * s).rear_m(0, length) == -length   # a clock behind
+
 
 @pytest.mark.parametrize(('gap', 'speed'), [(-51.0, 0.0), (0.0, 0.0), (-1.0, 3.0)])
 def test_planner_observes_a_crash_without_dividing(gap: float, speed: float) -> None:

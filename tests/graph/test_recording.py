@@ -54,7 +54,6 @@ def test_bag_writer_writes_a_rosbag2_bag_directory(tmp_path: Path) -> None:
         BagWriter(bag)
 
 
-
 @pytest.mark.parametrize('where', ['new_writer', '_grow_reserve'])
 def test_a_stop_while_the_bag_is_created_leaves_no_directory(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, where: str) -> None:
@@ -72,6 +71,7 @@ def test_a_stop_while_the_bag_is_created_leaves_no_directory(
     monkeypatch.undo()
     record(BagWriter(tmp_path / 'run'), 2)        # the name is free again
     assert check_bag_directory(tmp_path / 'run') == []
+
 
 def test_wall_mode_log_time_is_the_receive_time_and_publish_time_the_stamp(
         tmp_path: Path) -> None:

@@ -16,6 +16,7 @@ def hangup_by_default() -> None:
     closed terminal would see nothing happen."""
     signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
+
 def assert_every_topic_complete(bag: Path) -> int:
     """Every recorded topic of the table holds every complete step, the topics within one
     step of each other (a topic absent from the bag holds none); returns the number of
