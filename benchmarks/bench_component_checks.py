@@ -3,8 +3,8 @@
 Every step the loop checks what its components give it
 (:mod:`trust_av_common.component_checks`): the plan estimator's prediction
 (``planner.CheckedPredictor``), the follower's result (``followers.CheckedFollower``), the
-trust model's trust and variance (``trust_model.TrustEstimator``) and the NMPC's E_max with
-the trust it starts from (``trust_interface.CheckedBound``); each call into a component goes
+trust model's trust and variance (``paper_trust.TrustEstimator``) and the NMPC's E_max with
+the trust it starts from (``model_interface.CheckedBound``); each call into a component goes
 through ``call``. This runs the in-process loop over a shipped trace and times its steps;
 then it times, per step, those checked wrappers around stand-in components that hand back
 what the real ones gave in that step, against the same stand-ins called directly: the

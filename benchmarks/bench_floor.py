@@ -3,9 +3,9 @@
 The replica has the graph's nodes as separate processes on a leased ROS domain, started,
 connected, observed and stopped by the orchestrator's own machinery (its ``Graph`` and
 ``graph_session``, :mod:`trust_av.graph.session`), each node spun by
-:func:`trust_monitor.ros_support.spin_node` (the same executor). Built from the topic table
-(:data:`trust_monitor.graph_interface.TOPICS`): the same topics, message types and QoS
-profiles (:data:`trust_monitor.ros_support.QOS`), one message per topic and step plus the
+:func:`trust_av_common.ros.spin.spin_node` (the same executor). Built from the topic table
+(:data:`trust_av_common.topics.TOPICS`): the same topics, message types and QoS
+profiles (:data:`trust_av_common.ros.qos.QOS`), one message per topic and step plus the
 initial states, and the same lock-step chain (who waits for which stamps,
 :func:`trust_av_common.step_chain.step_chain`). A node publishes constant messages of the
 graph's shapes (N-point trajectories, diagnostics with as many key/values as the graph's)

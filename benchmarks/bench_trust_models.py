@@ -1,7 +1,7 @@
 """Benchmark of the trust models' NMPC bound: the cost of the numeric derivation.
 
 For every registered trust model, times per call of (a) the numeric bound (bisection on the
-model's propagated update, ``trust_interface.numeric_bound``) and (b) what the NMPC uses
+model's propagated update, ``model_interface.numeric_bound``) and (b) what the NMPC uses
 (the closed form when the model gives one, else the numeric bound), on the 1 Hz grid (3
 steps of 1 s) and the 10 Hz grid (30 steps of 0.1 s), from a state just above T_min so
 that the bound binds. The bound is computed once per control step, before the solve.

@@ -4,7 +4,7 @@ Not used in the loop (so not in the packages). It is the baseline ``bench_core.p
 our solver against, and an independent statement of the problem that
 ``tests/core/test_nmpc.py`` compares our plans with: it re-derives the
 dynamics, the cost and the Tanimoto distance from the paper instead of calling the
-project's helpers. Same inputs as :meth:`trust_av_planner.nmpc.TrustAwareNmpc.solve`, with
+project's helpers. Same inputs as :meth:`trust_av_planner.nmpc.TrustAwareNmpc.step`, with
 the trust bound E_max given explicitly.
 """
 

@@ -3,7 +3,7 @@
 Usage: python scripts/paper_bound_table.py
 The numbers of docs/RESULTS.md, "What the paper's equations allow", come from this script.
 The bound and its readings are in ``trust_monitor.final_trust_bound``; the paper's rows in
-``trust_av_planner.paper_results``.
+``trust_av.study.paper_results``.
 """
 
 from __future__ import annotations

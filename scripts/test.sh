@@ -45,7 +45,7 @@ mypy \
   src/trust_av_autoware/trust_av_autoware
 echo '== docs (mkdocs build --strict)' >&2
 docs_site="$(mktemp -d)"
-NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet --site-dir "$docs_site"
+bash scripts/build_docs.sh --site-dir "$docs_site"
 rm -rf "$docs_site"
 echo '== pytest' >&2
 # Every Python process of the suite (about 800: node graphs, CLIs, workers) imports the

@@ -40,7 +40,7 @@ from support.rosbag2_rules import (
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 INFINITE = QosTime(2147483647, 4294967295)
-# The project's profile for lock-step topics (trust_monitor.ros_support QOS['STEP']).
+# The project's profile for lock-step topics (trust_av_common.ros.qos.QOS['STEP']).
 STEP_QOS = Qos(QosHistory.KEEP_LAST, 1000, QosReliability.RELIABLE,
                QosDurability.TRANSIENT_LOCAL, INFINITE, INFINITE, QosLiveliness.AUTOMATIC,
                INFINITE, False)

@@ -1,6 +1,8 @@
 """The documentation cannot rot: every code block of the tutorials runs, and the generated
-reference tables hold what the code holds (the site itself is built in strict mode by
-scripts/test.sh).
+reference tables hold what the code holds, every dotted module name written in the tree names
+a module (scripts/doc_names.py), and a dead link or anchor fails the site's build however
+it is started (scripts/build_docs.sh, which scripts/test.sh runs, and a plain
+``mkdocs build --strict``).
 
 Tutorial blocks (and README.md's) run in order, one page per test, in an empty scratch
 directory that has only the repository's inputs the page names (``config/``, the shipped bags
@@ -14,12 +16,14 @@ A block titled with a file name (```` ```yaml title="my.yaml" ````) is written t
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 import yaml
@@ -164,13 +168,17 @@ def test_a_failing_block_fails_the_test(tmp_path: Path) -> None:
         run_block(Block('bash', 'exit 3\n', 3), page, tmp_path, dict(os.environ))
 
 
-def test_every_tutorial_in_the_nav_and_the_readme_exists() -> None:
+def test_every_tutorial_is_in_the_nav_the_readme_and_on_the_home_page() -> None:
+    """Every page of docs/tutorials/ (the folder decides, not a list here)."""
     nav = (REPO / 'mkdocs.yml').read_text()
     readme = (REPO / 'README.md').read_text()
-    for name in ('reproduce-the-paper', 'own-trace-or-bag', 'connect-a-vehicle',
-                 'write-a-plugin', 'driver-in-the-loop'):
-        assert f'tutorials/{name}.md' in nav and f'docs/tutorials/{name}.md' in readme
-        assert (DOCS / 'tutorials' / f'{name}.md').is_file()
+    home = (DOCS / 'index.md').read_text()
+    names = sorted(page.stem for page in (DOCS / 'tutorials').glob('*.md'))
+    assert len(names) >= 6
+    missing = [name for name in names if f'tutorials/{name}.md' not in nav
+               or f'docs/tutorials/{name}.md' not in readme
+               or f'](tutorials/{name}.md)' not in home]
+    assert not missing, f'tutorials missing from the nav, the README or docs/index.md: {missing}'
 
 
 def test_python_example_is_the_documented_entry_points() -> None:
@@ -308,3 +316,104 @@ def test_every_generated_table_says_where_to_find_it() -> None:
             page.name
         filled = reference.fill(text)
         assert '<!-- generated' not in filled and '> Generated table:' not in filled
+
+
+def doc_names() -> ModuleType:
+    """scripts/doc_names.py, imported from its file."""
+    name = 'scripts_doc_names'
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, REPO / 'scripts' / 'doc_names.py')
+        assert spec is not None and spec.loader is not None
+        sys.modules[name] = importlib.util.module_from_spec(spec)   # for its dataclass
+        spec.loader.exec_module(sys.modules[name])
+    module = sys.modules[name]
+    return module
+
+
+def test_every_dotted_module_name_in_the_tree_names_a_module() -> None:
+    names = doc_names()
+    found = names.check()
+    assert not found, 'names of no module (rename them, or mark a planted one with ' \
+        '"doc-names: off"):\n' + '\n'.join(map(str, found))
+
+
+def test_a_stale_module_name_is_found(tmp_path: Path) -> None:
+    """Planted in a page and in a docstring: a module that does not exist, an object its
+    module lacks, an old path of a MOVED table, a module's short name gone from the tree,
+    a current short name with a missing object; a parameter, an entry-point group, a file
+    name and a marked line pass."""
+    names = doc_names()
+    page = tmp_path / 'page.md'
+    # doc-names: off (the stale names planted here are the test's input)
+    page.write_text('See `trust_monitor.ros_support.QOS` and `trust_av_common.kinematics.nope`.\n'
+                    'Old: `trust_monitor.trust_interface`; gone: `trust_interface.numeric_bound`;'
+                    ' `paper_trust.NoSuchThing`.\n'
+                    'Fine: `trust_av_common.kinematics.hold_gap_plan`,'
+                    ' `paper_trust.TrustEstimator`, `preceding_traffic.trace`,'
+                    ' `trust_av.predictors`, `config/trust_av.yaml`.\n'
+                    '<!-- doc-names: off -->\n`trust_av.made_up`\n<!-- doc-names: on -->\n')
+    module = tmp_path / 'module.py'
+    module.write_text('"""Uses :func:`trust_monitor.graph_interface.topics`."""\n')
+    found = {(Path(item.path).name, item.line, item.name)
+             for item in names.check(scanned=[page, module])}
+    assert found == {('page.md', 1, 'trust_monitor.ros_support.QOS'),
+                     ('page.md', 1, 'trust_av_common.kinematics.nope'),
+                     ('page.md', 2, 'trust_monitor.trust_interface'),
+                     ('page.md', 2, 'trust_interface.numeric_bound'),
+                     ('page.md', 2, 'paper_trust.NoSuchThing'),
+                     ('module.py', 1, 'trust_monitor.graph_interface.topics')}
+    # doc-names: on
+
+
+def planted_site(root: Path, anchor: str) -> Path:
+    """A two-page site with the project's validation rules, its index linking
+    ``other.md#anchor``; returns its mkdocs.yml."""
+    validation = yaml.safe_load((REPO / 'mkdocs.yml').read_text())['validation']
+    (root / 'docs').mkdir()
+    (root / 'docs' / 'index.md').write_text(f'# Home\n\n[there](other.md#{anchor})\n')
+    (root / 'docs' / 'other.md').write_text('# Other\n\n## A heading {#stable}\n')
+    config = root / 'mkdocs.yml'
+    config.write_text(yaml.safe_dump({
+        'site_name': 'planted', 'docs_dir': 'docs', 'strict': True,
+        'markdown_extensions': ['attr_list', 'toc'], 'validation': validation}))
+    return config
+
+
+@pytest.mark.parametrize('anchor', ['stable', 'gone'])
+def test_a_dead_anchor_fails_the_build_however_it_is_started(anchor: str,
+                                                             tmp_path: Path) -> None:
+    """The test command's build (scripts/build_docs.sh) and a plain ``mkdocs build --strict``
+    agree: both pass with the explicit ``{#stable}`` anchor, both fail on a dead one."""
+    config = planted_site(tmp_path, anchor)
+    env = dict(os.environ, PATH=f'{Path(sys.executable).parent}:{os.environ["PATH"]}')
+    ours = subprocess.run(['bash', str(REPO / 'scripts' / 'build_docs.sh'), '-f', str(config),
+                           '--site-dir', str(tmp_path / 'a')], capture_output=True, text=True,
+                          env=env, check=False)
+    plain = subprocess.run([sys.executable, '-m', 'mkdocs', 'build', '--strict', '-f',
+                            str(config), '--site-dir', str(tmp_path / 'b')],
+                           capture_output=True, text=True, env=env, check=False)
+    dead = anchor == 'gone'
+    assert (ours.returncode != 0, plain.returncode != 0) == (dead, dead), (ours, plain)
+    assert ("does not contain an anchor '#gone'" in ours.stdout) == dead, ours.stdout
+    assert 'INFO' not in ours.stdout
+
+
+def test_the_test_command_builds_the_site_with_the_shared_script() -> None:
+    test_sh = (REPO / 'scripts' / 'test.sh').read_text()
+    assert 'bash scripts/build_docs.sh' in test_sh
+    commands = [line for line in test_sh.splitlines()
+                if not line.lstrip().startswith(('#', 'echo'))]
+    assert not [line for line in commands if 'mkdocs build' in line]
+
+
+def test_a_heading_that_names_a_module_has_a_stable_anchor() -> None:
+    """A heading that carries a dotted module name is linked through an explicit ``{#id}``:
+    a module's rename changes the heading's text, never its anchor."""
+    names = '|'.join(doc_names().packages())
+    module = re.compile(rf'`(?:{names})\.[\w.]+`')
+    missing = [f'{page.relative_to(REPO)}:{number}' for page in DOCS.rglob('*.md')
+               if page.name != 'CHANGELOG.md'
+               for number, line in enumerate(page.read_text().splitlines(), start=1)
+               if line.startswith('#') and module.search(line)
+               and not re.search(r'\{#[\w-]+\}\s*$', line)]
+    assert not missing, f'headings naming a module without an explicit {{#id}}: {missing}'

@@ -7,7 +7,7 @@ odometry ``preceding_vehicle/odom`` with its transform on ``tf`` (``odom`` ->
 namespace). It starts after ``sim/start`` and
 advances to t + 1 only when the step's outputs are in: ego and human odometry stamped
 t + dt, the trust, the planner and the driver status stamped t (lock-step, see
-:mod:`trust_monitor.graph_interface`), and, with ``recorder_window_steps`` > 0 (a recorded
+:mod:`trust_av_common.step_chain`), and, with ``recorder_window_steps`` > 0 (a recorded
 run), only while the recorder has acknowledged (``recorder/ack``) every step but the last
 ``recorder_window_steps``: back-pressure, so that a suspended or slow recorder holds the
 graph back instead of losing messages (:mod:`trust_av_common.record_window`). Once

@@ -1,10 +1,10 @@
 """The lock-step dependency chain, derived from the topic table (pure Python, no rclpy).
 
-:mod:`trust_monitor.graph_interface` states the protocol in words and lists the topics in
-:data:`~trust_monitor.graph_interface.TOPICS`; this module turns the table into the chain a
-node follows: for every node, which messages (topic, stamp) it must hold before it acts on
-step t, and the stamps of what it then publishes. A stalled graph run names the node it
-waits for by the chain's order (:mod:`trust_av.graph.stalls`); the floor benchmark
+The topic table :data:`trust_av_common.topics.TOPICS` lists the topics and their stamps (the
+protocol in words: the documentation's node-graph page); this module turns the table into
+the chain a node follows: for every node, which messages (topic, stamp) it must hold before
+it acts on step t, and the stamps of what it then publishes. A stalled graph run names the
+node it waits for by the chain's order (:mod:`trust_av.graph.stalls`); the floor benchmark
 (``benchmarks/bench_floor.py``, with its ``step_gate``) replays the graph from it, so the
 replica follows the table.
 

@@ -286,7 +286,7 @@ def run(args: ReproduceOptions) -> int:
             if predictor in args.predictors:
                 us06_steps = load_trace('us06', config.planner.dt_s, config.trace).steps
                 # The bound column is derived from the paper's update: only for a model
-                # that declares it runs that update (trust_interface.paper_bound_holds).
+                # that declares it runs that update (model_interface.paper_bound_holds).
                 bound = ((us06_steps, config.trust)
                          if paper_bound_holds(config.trust_model()) else None)
                 tables.write_rows(out / name, *alpha_table(results, 'us06', predictor, paper,

@@ -54,7 +54,13 @@ from rosbags.interfaces import (
 from rosbags.typesys import Stores, get_typestore
 
 from trust_av.graph.bag_metadata import BagInfo, TopicInfo, qos_text
-from trust_av.graph.mcap_steps import RECORDER_LIBRARY, WholeWrites, new_writer, replay
+from trust_av.graph.mcap_steps import (
+    RECORDER_LIBRARY,
+    REPAIR_LIBRARY,
+    WholeWrites,
+    new_writer,
+    replay,
+)
 from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['EXIT_DISK_FULL', 'RESERVE_BASE_BYTES', 'RESERVE_NAME', 'RESERVE_PER_CHUNK_BYTES',
@@ -151,7 +157,7 @@ class BagWriter:
             # past a file-size limit a write fails with EFBIG instead of killing the process
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         self._library = (RECORDER_LIBRARY if copy_of is None
-                         else f'trust_av.bag_repair of {copy_of or "unknown"}')
+                         else f'{REPAIR_LIBRARY} of {copy_of or "unknown"}')
         self._mcap_path = self.path / f'{self.path.name}.mcap'
         self._info = BagInfo(self._mcap_path.name)
         if copy_of is None:

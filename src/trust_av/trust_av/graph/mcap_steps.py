@@ -22,12 +22,14 @@ from mcap.records import Channel, Header, Message, MessageIndex, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
-__all__ = ['RECORDER_LIBRARY', 'WholeWrites', 'new_writer', 'replay']
+__all__ = ['RECORDER_LIBRARY', 'REPAIR_LIBRARY', 'WholeWrites', 'new_writer', 'replay']
 
 RECORDER_LIBRARY = 'trust_av.bag_writer'
 """What the MCAP header's ``library`` field of a bag this project wrote starts with (followed
 by `` (mcap-python/VERSION)``): how :mod:`~trust_av.graph.bag_repair` tells its own
 recordings, whose log time is the header stamp, from another tool's."""
+REPAIR_LIBRARY = 'trust_av.bag_repair'
+"""The ``library`` field of a repaired copy: ``trust_av.bag_repair of`` the original's."""
 PROFILE = 'ros2'
 """The MCAP header's ``profile`` (rosbag2's MCAP plugin writes and expects ``ros2``)."""
 NO_AUTOMATIC_CHUNKS = 2**62

@@ -38,7 +38,7 @@ __all__ = ['PARENT_ENV', 'GraphNode', 'WallLoop', 'now_ns', 'spin_node', 'start_
 
 class WallLoop:
     """A node's wall-clock control loop: a timer at ``control_rate_hz`` whose every tick is
-    timed (:class:`trust_monitor.wall_clock.LoopStats`); p50/p99 are logged every
+    timed (:class:`trust_av_common.wall_clock.LoopStats`); p50/p99 are logged every
     ``jitter_log_period_s`` and written to ``jitter_report_path`` by :meth:`close`, with the
     number of messages the node published per topic from then on (every publisher the node
     has when the loop is made is counted: its ``publish`` is wrapped)."""
