@@ -242,6 +242,20 @@ def test_node_rejects_bad_parameters_at_start_up(tmp_path: Path, args: list[str]
                           text=True, timeout=60, env=env)
     assert proc.returncode == 2
     assert message in proc.stderr and 'Traceback' not in proc.stderr
+    assert ']: ready' not in proc.stderr, proc.stderr     # refused: never said it was ready
+
+
+def test_a_refused_adapter_never_says_it_is_ready(tmp_path: Path, ros_domain: str) -> None:
+    """A node that is not managed (``autoware_lane``) refused for an unknown ``-p``: one
+    line, exit 2, and no ``ready`` line before it (before, it said ready, then refused)."""
+    env = dict(os.environ, ROS_DOMAIN_ID=ros_domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_LOG_DIR=str(tmp_path / 'ros_log'))
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_autoware.lane_adapter_node',
+                           '--ros-args', '-p', 'lane_widht_m:=3.0'], capture_output=True,
+                          text=True, timeout=60, env=env)
+    assert proc.returncode == 2, proc.stderr
+    assert 'unknown parameter(s) lane_widht_m' in proc.stderr, proc.stderr
+    assert ']: ready' not in proc.stderr, proc.stderr
 
 
 def test_colcon_test_runs_each_package_s_tests(install: Path) -> None:

@@ -103,6 +103,7 @@ class ManagedNode(LifecycleNode):
         self.wall = False
         self.loop: WallLoop | None = None
         self.configure_error: BaseException | None = None
+        self.ready_line = ''  # set by build(), logged once configure has accepted everything
         self.command_line: list[str] = []
         self._quiet = False   # start(): the caller reports a failed configure itself
         self.blocked = ''     # why it cannot run as configured (clock_problem), '' if it can
@@ -248,6 +249,8 @@ class ManagedNode(LifecycleNode):
         if self.loop is not None:
             self.loop.timer.cancel()
         self.configured = True
+        if self.ready_line:   # not before: a refused configure says nothing about being ready
+            self.get_logger().info(self.ready_line)
         return super().on_configure(state)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:

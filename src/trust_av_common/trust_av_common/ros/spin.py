@@ -164,6 +164,8 @@ def start_node(factory: Callable[[], Node], args: list[str] | None = None) -> No
             start(command_line)
         else:
             check_overrides(node, command_line)
+            if getattr(node, 'ready_line', ''):   # only once accepted (ManagedNode: configure)
+                node.get_logger().info(node.ready_line)  # type: ignore[attr-defined]
     except BaseException:
         node.close()  # type: ignore[attr-defined]
         node.destroy_node()
