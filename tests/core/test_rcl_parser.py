@@ -19,6 +19,7 @@ from trust_av_common.rcl_parser import (
     PARSER_LIBRARY,
     RclParseError,
     parse_files,
+    parse_value,
     rcl_error_line,
 )
 
@@ -107,3 +108,32 @@ def test_refusal_names_the_file_and_rcls_line() -> None:
 def test_rcl_messages_become_one_line(message: str, line: int | None, text: str) -> None:
     """parse.c's texts: the line is taken out, the C location and any value dropped."""
     assert rcl_error_line(message) == (line, text)
+
+
+def test_a_command_line_value_is_typed_as_rcl_types_it() -> None:
+    """``-p name:=text`` as rcl reads it (``rcl_parse_yaml_value``): the quoted empty string
+    a shell passes for ``"name:=''"``, numbers, booleans, lists; the empty text (what
+    ``-p name:=''`` reaches rcl as) refused, in one line."""
+    assert parse_value('human_odom_topic', "''") == ''
+    assert parse_value('alpha', '0.25') == 0.25 and parse_value('horizon_steps', '3') == 3
+    assert parse_value('autostart', 'false') is False
+    assert parse_value('lead_preview', 'constant_speed') == 'constant_speed'
+    assert parse_value('gains', '[1.0, 2.5]') == [1.0, 2.5]
+    with pytest.raises(ParamsError, match=r'^-p human_odom_topic: .*\(rcl_parse_yaml_value\)$'):
+        parse_value('human_odom_topic', '')
+
+
+def test_the_command_line_s_p_rules_for_a_node_last_one_wins() -> None:
+    from trust_av_common.ros.parameters import command_line_values, param_rules
+
+    args = ['planner', '--ros-args', '--params-file', 'f.yaml', '-p', 'alpha:=0.3',
+            '-p', "human_odom_topic:=''", '--param', 'planner:alpha:=0.25', '-p',
+            'trust_monitor:alpha:=0.9', '--', '-p', 'not_ros:=1', '--ros-args', '-p',
+            'autostart:=false']
+    assert param_rules(args) == [('/**', 'alpha', '0.3'), ('/**', 'human_odom_topic', "''"),
+                                 ('planner', 'alpha', '0.25'), ('trust_monitor', 'alpha', '0.9'),
+                                 ('/**', 'autostart', 'false')]
+    assert command_line_values(args, '/planner') == {'alpha': 0.25, 'human_odom_topic': '',
+                                                     'autostart': False}
+    assert command_line_values(args, '/car1/planner') == {'alpha': 0.3, 'human_odom_topic': '',
+                                                          'autostart': False}

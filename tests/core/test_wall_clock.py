@@ -13,6 +13,7 @@ from trust_av_common.wall_clock import (
     LoopStats,
     WallClockConfig,
     format_summary,
+    without_ages,
 )
 
 
@@ -81,3 +82,23 @@ def test_planner_core_without_follower_observes_the_av_only(run_config) -> None:
                     run_config.trust, 4.5)
     with pytest.raises(ValueError, match='predictor gru needs the human follower state'):
         gru.step(lead, [10.0, 10.0, 10.0], av, None, 0.0)
+
+
+def test_diagnostics_message_of_stale_inputs_keeps_still_while_they_age() -> None:
+    """The planner's ``/diagnostics`` message while its inputs are stale names them without
+    their ages (in ``values``): a message that changed on every tick was published on every
+    tick (``/diagnostics`` at 10 Hz instead of 1 Hz)."""
+    from trust_av_common.health import ERROR, SolveRecord
+
+    inputs = LatestInputs(['lead', 'ego'])
+    inputs.put('lead', 0, object())
+    inputs.put('ego', 0, object())
+    reports = [SolveRecord(0.5).report(f'deadline missed (QoS event): ego; '
+                                       f'{inputs.problems(now, 0.5)}', -2.0,
+                                       {'ego': f'{now / NS_PER_S:.3f}'})
+               for now in (NS_PER_S, 2 * NS_PER_S)]
+    assert [level for level, _, _ in reports] == [ERROR, ERROR]
+    assert reports[0][1] == reports[1][1] == ('commanding -2 m/s^2 (stale-input policy): '
+                                              'deadline missed (QoS event): ego; stale: lead, ego')
+    assert [values['input_age_ego_s'] for _, _, values in reports] == ['1.000', '2.000']
+    assert without_ages('stale: lead (0.523 s old), ego (12.000 s old)') == 'stale: lead, ego'

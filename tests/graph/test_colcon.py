@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+from support import bring_up
 from support.paths import REPO
 from support.processes import hangup_by_default
 from support.rosbag2_rules import check_bag_directory
@@ -242,6 +243,20 @@ def test_node_rejects_bad_parameters_at_start_up(tmp_path: Path, args: list[str]
                           text=True, timeout=60, env=env)
     assert proc.returncode == 2
     assert message in proc.stderr and 'Traceback' not in proc.stderr
+    assert ']: ready' not in proc.stderr, proc.stderr     # refused: never said it was ready
+
+
+def test_a_refused_adapter_never_says_it_is_ready(tmp_path: Path, ros_domain: str) -> None:
+    """A node that is not managed (``autoware_lane``) refused for an unknown ``-p``: one
+    line, exit 2, and no ``ready`` line before it (before, it said ready, then refused)."""
+    env = dict(os.environ, ROS_DOMAIN_ID=ros_domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_LOG_DIR=str(tmp_path / 'ros_log'))
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_autoware.lane_adapter_node',
+                           '--ros-args', '-p', 'lane_widht_m:=3.0'], capture_output=True,
+                          text=True, timeout=60, env=env)
+    assert proc.returncode == 2, proc.stderr
+    assert 'unknown parameter(s) lane_widht_m' in proc.stderr, proc.stderr
+    assert ']: ready' not in proc.stderr, proc.stderr
 
 
 def test_colcon_test_runs_each_package_s_tests(install: Path) -> None:
@@ -261,3 +276,87 @@ def test_colcon_test_runs_each_package_s_tests(install: Path) -> None:
                                                                        '0 skipped')]
     assert len(lines) == 7, result.stdout
     assert result.stdout.splitlines()[-1] == 'Summary: 7 tests, 0 errors, 0 failures, 0 skipped'
+
+
+BRING_UP = {
+    # page: what each of its `ros2 run` lines reaches, in order (a line seen in its output)
+    'colcon.md': ['active'],
+    'real-vehicle.md': ['inactive: waiting for activate (clock_mode wall)',
+                        "ready: lane in 'map' from /your/centreline",
+                        'ready: /ego/accel_cmd -> /control/trust_av/control_cmd'],
+    'connect-a-vehicle.md': ['inactive: waiting for activate (clock_mode wall)',
+                             'inactive: waiting for activate (clock_mode wall)'],
+}
+"""Every page of docs/operations and docs/tutorials with a ``ros2 run`` line in a bash block,
+and the state each line is documented to reach."""
+COMMANDED_ON = {'real-vehicle.md': '/ego/accel_cmd', 'connect-a-vehicle.md': '/control/accel_cmd'}
+"""Where the planner's commands go once a page's ``ros2 lifecycle set /planner activate`` ran."""
+
+
+def test_every_documented_bring_up_line_is_run() -> None:
+    """The pages' ``ros2`` lines are those the test below runs: a new one needs its state."""
+    found = {page.name: [c.words[:4] for c in bring_up.commands(page)[0]
+                         if c.words[:2] == ['ros2', 'run']] for page in bring_up.PAGES}
+    assert {name: len(lines) for name, lines in found.items() if lines} == \
+        {name: len(states) for name, states in BRING_UP.items()}
+    every = [c for page in bring_up.PAGES for c in bring_up.commands(page)[0]]
+    assert {' '.join(c.words[:3]) for c in every} == {'ros2 run trust_av_planner',
+                                                      'ros2 run trust_av_autoware',
+                                                      'ros2 run trust_monitor',
+                                                      'ros2 lifecycle set'}
+
+
+@pytest.mark.parametrize('page', sorted(BRING_UP))
+def test_documented_bring_up_runs_as_printed(install: Path, page: str, tmp_path: Path,
+                                             ros_domain: str) -> None:
+    """Each ``ros2 run`` line of the page as printed (bash reads it: quoting, comments,
+    continuations), from a clone's root (``config/``) with the page's files written, each in
+    its own process on the colcon install, until it says the state the page gives; then the
+    page's ``ros2 lifecycle set`` lines (``change_state``): each succeeds, after the planner's
+    ``activate`` its first command is on the wire (the stale-input deceleration: no vehicle
+    here), after ``deactivate`` it has handed over. A ``-p`` wins over the params file's
+    ``/**/planner`` (``lead_preview``, ``human_odom_topic``): the planner's ready line says
+    so."""
+    from geometry_msgs.msg import AccelStamped
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+    from support.lifecycle import Manager
+
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
+
+    cmds, files = bring_up.commands(next(p for p in bring_up.PAGES if p.name == page))
+    (tmp_path / 'config').symlink_to(REPO / 'config')
+    for name, content in files.items():
+        (tmp_path / name).write_text(content, encoding='utf-8')
+    env = dict(os.environ, ROS_DOMAIN_ID=ros_domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               ROS_LOG_DIR=str(tmp_path / 'ros_log'), PYTHONUNBUFFERED='1')
+    runs = [c for c in cmds if c.words[:2] == ['ros2', 'run']]
+    sets = [c.words[3:5] for c in cmds if c.words[:3] == ['ros2', 'lifecycle', 'set']]
+    with bring_up.started(install, runs, tmp_path, env) as processes:
+        for process, state in zip(processes, BRING_UP[page], strict=True):
+            process.wait_for(lambda line, state=state: f']: {state}' in line)
+        planner = processes[0]
+        ready = planner.wait_for(lambda line: ']: ready (' in line)
+        if page != 'colcon.md':   # the vehicle pages: constant-speed lead, no follower
+            assert 'lead preview constant_speed' in ready and 'human' not in ready, ready
+        if not sets:
+            return
+        manager = Manager(int(ros_domain), 'planner')
+        try:
+            sent: list[AccelStamped] = []
+            manager.node.create_subscription(
+                AccelStamped, COMMANDED_ON[page], sent.append,
+                topic_qos('ego/accel_cmd', WallClockConfig(clock_mode='wall')))
+            for node, transition in sets:
+                client = manager.node.create_client(ChangeState, f'{node}/change_state')
+                request = ChangeState.Request(
+                    transition=Transition(id=bring_up.TRANSITIONS[transition]))
+                assert manager.call(client, request).success, (node, transition)
+                if node == '/planner' and transition == 'activate':
+                    assert manager.spin_until(lambda: len(sent) >= 1), 'no command'
+                    assert sent[0].accel.linear.x == -2.0, sent[0]
+                elif node == '/planner':
+                    planner.wait_for(lambda line: 'handed over with -2 m/s^2' in line)
+        finally:
+            manager.close()

@@ -46,8 +46,9 @@ def listen(manager: Manager) -> None:
     manager.record(DiagnosticArray, 'ego/planner_status', topic_qos('ego/planner_status', wall))
 
 
-def odometry_inputs(manager: Manager, frames: dict[str, str]) -> None:
-    """Lead and ego odometry at 100 Hz, stamped now, in ``frames[...]`` (changeable)."""
+def odometry_inputs(manager: Manager, frames: dict[str, str]) -> Any:
+    """Lead and ego odometry at 100 Hz, stamped now, in ``frames[...]`` (changeable); the
+    timer that publishes them."""
     from nav_msgs.msg import Odometry
 
     from trust_av_common.ros.messages import odometry
@@ -66,7 +67,7 @@ def odometry_inputs(manager: Manager, frames: dict[str, str]) -> None:
             msg.header.frame_id = frames[topic]
             pubs[topic].publish(msg)
 
-    manager.node.create_timer(0.01, publish)
+    return manager.node.create_timer(0.01, publish)
 
 
 def test_wall_mode_on_sim_time_says_why_it_does_not_command(tmp_path: Path) -> None:
@@ -108,6 +109,53 @@ def test_wall_mode_on_sim_time_says_why_it_does_not_command(tmp_path: Path) -> N
     assert log.count('not running: use_sim_time is true and a simulated clock') == 1, log
 
 
+def stale_inputs_keep_one_status_a_second(manager: Manager, feeding: Any) -> Any:
+    """The inputs stop: ``/diagnostics`` says so (ERROR, the stale inputs named) and keeps its
+    period while they age (their ages in ``values``, the message unchanged: before, it
+    carried the ages and was published on every 0.1 s tick); the last such status."""
+    feeding.cancel()
+
+    def stale() -> list[Any]:
+        return [s for s in statuses(manager, 'planner') if level(s) == 2 and 'stale:' in s.message]
+
+    assert manager.spin_until(lambda: len(stale()) >= 5), [s.message for s in stale()]
+    last = stale()[2:5]    # after the (at most two) changes: the timer's
+    assert len({s.message for s in last}) == 1 and ' s old' not in last[0].message, \
+        [s.message for s in last]
+    ages = [float(values(s)['input_age_ego_s']) for s in last]
+    assert ages[-1] - ages[0] >= 1.0, ages     # 2 s (0.2 s before), a late timer tick or not
+    return last[-1]
+
+
+def publishers_of_another_type_are_named(manager: Manager, domain: int) -> Any:
+    """A ``std_msgs/String`` publisher on ``/ego/odom`` and a ``TwistStamped`` one on
+    ``/preceding_vehicle/odom`` (a node of another participant: DDS never connects them): on
+    ``/diagnostics`` (WARN at least, the message and ``wrong_type_on_<topic>``); the status."""
+    import rclpy
+    from geometry_msgs.msg import TwistStamped
+    from std_msgs.msg import String
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node('wrong_types', context=context, start_parameter_services=False)
+    try:
+        node.create_publisher(String, '/ego/odom', 1)
+        node.create_publisher(TwistStamped, '/preceding_vehicle/odom', 1)
+
+        def named() -> list[Any]:
+            return [s for s in statuses(manager, 'planner') if 'another type' in s.message and
+                    'TwistStamped' in s.message and 'std_msgs/msg/String' in s.message]
+
+        assert manager.spin_until(lambda: bool(named())), \
+            [s.message for s in statuses(manager, 'planner')][-3:]
+        assert level(named()[0]) == 2   # still the stale-input policy's ERROR
+        manager.spin_for(1.5)           # more discovery traffic: no second log line
+        return named()[-1]
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+
+
 def time_msg(seconds: int) -> Any:
     from builtin_interfaces.msg import Time
     return Time(sec=seconds)
@@ -136,7 +184,7 @@ def test_diagnostics_once_a_second_with_solve_times_input_ages_and_frames(
             assert manager.spin_until(lambda: any(
                 s.message == 'unconfigured: waiting for configure'
                 for s in statuses(manager, 'planner')))
-            odometry_inputs(manager, frames)
+            feeding = odometry_inputs(manager, frames)
             assert manager.transition(1) and manager.transition(ACTIVATE)
             assert manager.spin_until(lambda: sum(
                 s.message == 'commanding' for s in statuses(manager, 'planner')) >= 4), \
@@ -157,10 +205,19 @@ def test_diagnostics_once_a_second_with_solve_times_input_ages_and_frames(
             assert manager.spin_until(lambda: any(
                 int(values(s).get('dropped_messages', 0)) >= 2
                 for s in statuses(manager, 'planner')))
+            stale = stale_inputs_keep_one_status_a_second(manager, feeding)
+            wrong = publishers_of_another_type_are_named(manager, domain)
             assert proc.poll() is None
         finally:
             manager.close()
-            stop(proc)
+            log = stop(proc)
+    # named once in the log, whatever the publisher sends and for however long
+    assert log.count('input /ego/odom takes nav_msgs/msg/Odometry; not connected (another '
+                     'type): std_msgs/msg/String (/wrong_types)') == 1, log
+    assert 'input /preceding_vehicle/odom takes' in log and \
+        'geometry_msgs/msg/TwistStamped (/wrong_types)' in log, log
+    assert values(wrong)['wrong_type_on_/ego/odom'] == 'std_msgs/msg/String (/wrong_types)'
+    assert stale.hardware_id == 'none' and values(stale)['node'] == '/planner'
     commanding = [s for s in statuses(manager, 'planner') if s.message == 'commanding']
     kv = values(commanding[-1])
     assert kv['lifecycle_state'] == 'active'

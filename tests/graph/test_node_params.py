@@ -286,8 +286,8 @@ def test_hand_started_nodes(tmp_path: Path) -> None:
     alone = procs.pop('alone')
     assert alone.stdout is not None
     seen = []
-    # until it is up and has checked its overrides (the check follows the node's 'ready'
-    # line), or ends; a node that never warns is stopped after 60 s
+    # until it has checked its overrides (its 'ready' line follows the check), or ends; a
+    # node that never warns is stopped after 60 s
     watchdog = threading.Timer(60.0, os.killpg, (alone.pid, signal.SIGINT))
     watchdog.start()
     try:
@@ -300,7 +300,8 @@ def test_hand_started_nodes(tmp_path: Path) -> None:
     with contextlib.suppress(ProcessLookupError):
         os.killpg(alone.pid, signal.SIGINT)
     rest, _ = alone.communicate(timeout=60)
-    assert alone.returncode == 0 and 'ready (lock-step)' in ''.join(seen), ''.join(seen) + rest
+    assert alone.returncode == 0 and 'ready (lock-step)' in ''.join(seen) + rest, \
+        ''.join(seen) + rest
     assert ('ignoring parameter(s) wheel_base of a wildcard section: not parameters of any '
             'node of the graph') in ''.join(seen) + rest
     for name, proc in procs.items():

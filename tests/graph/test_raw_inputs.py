@@ -178,7 +178,9 @@ def test_subscribe_takes_bytes_and_drops_a_broken_message() -> None:
     got: list[Any] = []
     subscribe(node, Odometry, 'ego/odom', got.append, 10)  # type: ignore[arg-type]
     cls, topic, on_bytes, qos, options = node.calls[0]
+    events = options.pop('event_callbacks')   # publishers of another type are named
     assert (cls, topic, qos, options) == (Odometry, 'ego/odom', 10, {'raw': True})
+    assert events.incompatible_type is not None
     msg = random_odometry(random.Random(1))
     data = serialize_message(msg)
     on_bytes(data)
@@ -203,7 +205,7 @@ def test_without_readers_rclpy_decodes() -> None:
                      (DiagnosticArray, DiagnosticArray())):
         node, got = FakeNode(), []
         subscribe(node, cls, 'topic', got.append, 10, readers=False)  # type: ignore[arg-type]
-        assert node.calls[0][4] == {'raw': True}
+        assert sorted(node.calls[0][4]) == ['event_callbacks', 'raw'] and node.calls[0][4]['raw']
         node.calls[0][2](serialize_message(msg))
         assert got == [msg] and isinstance(got[0], cls)
 

@@ -590,3 +590,36 @@ def test_messages_name_the_key_not_the_content(tmp_path: Path) -> None:
         parse_params_text(text, 'f.yaml')
     message = str(caught.value)
     assert secret not in message and "'alpha'" in message and 'line 3' in message
+
+
+def test_command_line_p_wins_over_a_section_written_for_the_node(ros_domain: str) -> None:
+    """rcl keeps an unprefixed ``-p`` in the ``/**`` section of the structure the params files
+    are read into (``ros2/rcl``, ``rcl/src/rcl/arguments.c: _rcl_parse_param_rule``:
+    ``rcl_parse_yaml_value("/**", ...)``) and rclpy applies sections in order of first
+    appearance, so the shipped file's ``/**/planner`` beats ``-p``, before it or after it:
+    the overrides rclpy gives the node keep the file's values. The nodes' overrides
+    (``node_overrides``: what ``declare_config`` reads) put the command line's ``-p`` last."""
+    import rclpy
+
+    from trust_av_common.param_layers import shipped_params_file
+    from trust_av_common.ros.parameters import node_overrides, use_command_line
+
+    shipped = str(shipped_params_file())
+    for args in (['planner', '--ros-args', '--params-file', shipped, '-p',
+                  'lead_preview:=constant_speed', '-p', 'autostart:=false'],
+                 ['planner', '--ros-args', '-p', 'lead_preview:=constant_speed', '-p',
+                  'autostart:=false', '--params-file', shipped]):
+        context = rclpy.Context()
+        rclpy.init(args=args, context=context, domain_id=int(ros_domain))
+        node = rclpy.create_node('planner', context=context, start_parameter_services=False)
+        try:
+            rcl = {name: p.value for name, p in node._parameter_overrides.items()}
+            assert (rcl['lead_preview'], rcl['autostart']) == ('recorded', True)
+            use_command_line(args)
+            ours = node_overrides(node)
+            assert (ours['lead_preview'], ours['autostart']) == ('constant_speed', False)
+            assert ours['dt_s'] == rcl['dt_s']          # the rest as rcl gave it
+        finally:
+            use_command_line([])
+            node.destroy_node()
+            rclpy.shutdown(context=context)

@@ -72,8 +72,7 @@ class ControlAdapterNode(Node):
                                  INPUT_QOS)
         self.create_subscription(Control, LATERAL_TOPIC, self.on_lateral, LATERAL_QOS)
         self.diagnostics = NodeDiagnostics(self, 'autoware_control', self.report)
-        self.get_logger().info(f'ready: {self.resolve_topic_name(COMMAND_TOPIC)} -> '
-                               f'{CONTROL_TOPIC}')
+        self.ready_line = f'ready: {self.resolve_topic_name(COMMAND_TOPIC)} -> {CONTROL_TOPIC}'
 
     def lateral_fresh(self, now_ns: int) -> bool:
         return self.lateral_ns is not None and \

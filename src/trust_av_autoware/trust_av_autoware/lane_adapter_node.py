@@ -82,9 +82,9 @@ class LaneAdapterNode(Node):
                                  INPUT_QOS)
         self.create_subscription(PredictedObjects, OBJECTS_TOPIC, self.on_objects, INPUT_QOS)
         self.diagnostics = NodeDiagnostics(self, 'autoware_lane', self.report)
-        self.get_logger().info(f"ready: lane in '{self.config.frame_id}' from "
-                               f'{self.resolve_topic_name(CENTRELINE_TOPIC)}, half width '
-                               f'{0.5 * self.config.lane_width_m:g} m')
+        self.ready_line = (f"ready: lane in '{self.config.frame_id}' from "
+                           f'{self.resolve_topic_name(CENTRELINE_TOPIC)}, half width '
+                           f'{0.5 * self.config.lane_width_m:g} m')
 
     def report(self) -> tuple[int, str, dict[str, str]]:
         """The ``/diagnostics`` status."""

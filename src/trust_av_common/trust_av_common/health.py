@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from collections import deque
 
+from trust_av_common.wall_clock import without_ages
+
 __all__ = ['Report', 'SolveRecord', 'age']
 
 OK, WARN, ERROR = 0, 1, 2
@@ -48,10 +50,12 @@ class SolveRecord:
 
     def report(self, stale_reason: str, stale_decel_mps2: float,
                ages: dict[str, str]) -> Report:
-        """ERROR while the stale-input policy commands (``stale_reason``), WARN while one of
-        the last :data:`RECENT_SOLVES` solves fell back, else OK ``commanding``; values:
-        the counts, the last and the longest recent solve time, the solver status, trust,
-        command and ``input_age_<name>_s`` of ``ages``."""
+        """ERROR while the stale-input policy commands (``stale_reason``, in the message
+        without the inputs' ages: a message that changed on every tick made the node publish
+        ``/diagnostics`` on every tick, ``NodeDiagnostics.changed``), WARN while one of the
+        last :data:`RECENT_SOLVES` solves fell back, else OK ``commanding``; values: the
+        counts, the last and the longest recent solve time, the solver status, trust, command
+        and ``input_age_<name>_s`` of ``ages``."""
         times = [t for t, _ in self.recent]
         values = {**{k: str(v) for k, v in self.counts.items()},
                   'solve_time_last_s': repr(times[-1]) if times else 'none',
@@ -61,7 +65,7 @@ class SolveRecord:
                   **{f'input_age_{name}_s': value for name, value in ages.items()}}
         if stale_reason:
             return (ERROR, f'commanding {stale_decel_mps2:g} m/s^2 (stale-input policy): '
-                    f'{stale_reason}', values)
+                    f'{without_ages(stale_reason)}', values)
         fell = sum(fallback for _, fallback in self.recent)
         if fell:
             return (WARN, f'commanding; NMPC fell back in {fell} of the last '

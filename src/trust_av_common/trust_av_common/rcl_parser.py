@@ -42,7 +42,7 @@ from typing import Any
 
 from trust_av_common.params import ParamsError
 
-__all__ = ['PARSER_LIBRARY', 'RclParseError', 'parse_files', 'rcl_error_line']
+__all__ = ['PARSER_LIBRARY', 'RclParseError', 'parse_files', 'parse_value', 'rcl_error_line']
 
 PARSER_LIBRARY = 'librcl_yaml_param_parser.so'
 """The shared library of rcl's params-file parser."""
@@ -180,6 +180,9 @@ def load_library(dirs: Sequence[Path] | None = None) -> ctypes.CDLL:
     library.rcl_yaml_node_struct_fini.restype = None
     library.rcl_parse_yaml_file.argtypes = [ctypes.c_char_p, ctypes.POINTER(_Params)]
     library.rcl_parse_yaml_file.restype = ctypes.c_bool
+    library.rcl_parse_yaml_value.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p,
+                                             ctypes.POINTER(_Params)]
+    library.rcl_parse_yaml_value.restype = ctypes.c_bool
     # rcutils is loaded as the parser's dependency; its symbols resolve through it.
     library.rcutils_get_default_allocator.argtypes = []
     library.rcutils_get_default_allocator.restype = _Allocator
@@ -341,5 +344,27 @@ def parse_files(files: Sequence[tuple[bytes, str]]) -> dict[str, dict[str, Any]]
                 raise RclParseError(f'{where}: {at}{text} (rcl_parse_yaml_file)', where, line,
                                  text, stored)
         return _walk(params.contents)
+    finally:
+        library.rcl_yaml_node_struct_fini(params)
+
+
+def parse_value(name: str, text: str) -> Any:
+    """The value rcl makes of ``-p name:=text`` (``rcl/src/rcl/arguments.c:
+    _rcl_parse_param_rule`` hands ``text`` to ``rcl_parse_yaml_value``), as rclpy reads it.
+
+    Raises:
+        ParamsError: rcl refuses the value (one line), or the library cannot be loaded.
+    """
+    library = _parser()
+    params = library.rcl_yaml_node_struct_init(library.rcutils_get_default_allocator())
+    if not params:
+        raise ParamsError('rcl_yaml_node_struct_init failed (out of memory)')
+    try:
+        library.rcutils_reset_error()
+        if not library.rcl_parse_yaml_value(b'/**', name.encode(), text.encode(), params):
+            reason = library.rcutils_get_error_string().str.decode('utf-8', 'replace')
+            library.rcutils_reset_error()
+            raise ParamsError(f'-p {name}: {rcl_error_line(reason)[1]} (rcl_parse_yaml_value)')
+        return _walk(params.contents)['/**'][name]
     finally:
         library.rcl_yaml_node_struct_fini(params)

@@ -6,6 +6,7 @@ clock they read), so everything here is testable without ROS.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,12 +15,21 @@ import numpy as np
 
 from trust_av_common.params import check_fields, param
 
-__all__ = ['NS_PER_S', 'LatestInputs', 'LoopStats', 'WallClockConfig', 'format_summary']
+__all__ = ['NS_PER_S', 'LatestInputs', 'LoopStats', 'WallClockConfig', 'format_summary',
+           'without_ages']
 
 CLOCK_MODES = ('lockstep', 'wall')
 STARTUP = 'the timer, the QoS profiles and the subscriptions are made at start-up'
 NS_PER_S = 1_000_000_000
 PERCENTILES = (50.0, 99.0)
+_AGE = re.compile(r' \(\d+\.\d{3} s old\)')
+"""The age :meth:`LatestInputs.problems` gives a stale input (`` (0.523 s old)``)."""
+
+
+def without_ages(reason: str) -> str:
+    """A :meth:`LatestInputs.problems` reason without the inputs' ages (``stale: traffic``),
+    which change on every tick: what a status message that must not change with them says."""
+    return _AGE.sub('', reason)
 
 
 @dataclass(frozen=True)

@@ -205,10 +205,10 @@ class PlannerNode(ManagedNode):
 
         mode = f'wall clock at {self.clock.control_rate_hz:g} Hz' if wall else 'lock-step'
         step_s, steps = self.planner.grid
-        self.get_logger().info(f'ready ({mode}): predictor {self.config.predictor}, alpha '
-                               f'{self.config.alpha:g}, prediction grid {steps} x {step_s:g} s, '
-                               f'lead preview {self.config.lead_preview}, inputs '
-                               f'{", ".join(t for _, _, t in inputs if t)}{warm}')
+        self.ready_line = (f'ready ({mode}): predictor {self.config.predictor}, alpha '
+                           f'{self.config.alpha:g}, prediction grid {steps} x {step_s:g} s, '
+                           f'lead preview {self.config.lead_preview}, inputs '
+                           f'{", ".join(t for _, _, t in inputs if t)}{warm}')
 
     def warm_up(self) -> str:
         """Take the first-use costs off the first active tick: the output templates of the

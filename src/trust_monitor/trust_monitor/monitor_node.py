@@ -90,7 +90,7 @@ class MonitorNode(ManagedNode):
             subscribe(self, JointTrajectory, topic, functools.partial(callback, name),
                       topic_qos(topic, self.clock), readers=not self.wall)
         self.loop = WallLoop(self, self.clock, self.wall_step) if self.clock.wall else None
-        self.get_logger().info(f'ready ({self.clock.clock_mode})')
+        self.ready_line = f'ready ({self.clock.clock_mode})'
 
     def on_latest(self, name: str, msg: JointTrajectory) -> None:
         """Wall mode: keep the latest plan of each kind and score a new pair as soon as it

@@ -14,7 +14,15 @@ node's clock reads zero (sim time before the first ``/clock``).
 
 The status of a node: ``level`` OK, WARN or ERROR (``DiagnosticStatus``), ``message`` one line
 saying what it does or why it does not (``not commanding: ...``), ``values`` key/value pairs
-(numbers with units in the key: ``solve_time_last_s``).
+(numbers with units in the key: ``solve_time_last_s``). What changes on every tick (an input's
+age) goes in ``values``, never in ``message``: a changed message is published at once.
+
+Named as ``diagnostic_updater`` names a status (``Updater``: ``node_name_ + ": " + name``,
+``node_name_`` = the node's ``get_name()``, its fully qualified name only with its parameter
+``diagnostic_updater.use_fqn``, default false): ``planner: trust_aware_nmpc`` in any namespace;
+the node's fully qualified name is the value ``node``. ``hardware_id`` is ``none``, the value
+the updater asks for when there is no device (an empty one makes it warn: "For devices that do
+not have a HW_ID, set this value to 'none'").
 """
 
 from __future__ import annotations
@@ -29,7 +37,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from trust_av_common.health import ERROR, OK, WARN, Report, age
-from trust_av_common.ros.messages import header
+from trust_av_common.ros.messages import HARDWARE_ID, header
 from trust_av_common.topics import NO_FRAME
 
 __all__ = ['ERROR', 'OK', 'WARN', 'NodeDiagnostics', 'Report', 'age']
@@ -54,7 +62,8 @@ class NodeDiagnostics:
     def __init__(self, node: Node, task: str, report: Callable[[], Report]) -> None:
         self.node = node
         self.report = report
-        self.name = f'{node.get_fully_qualified_name().lstrip("/")}: {task}'
+        self.name = f'{node.get_name()}: {task}'
+        self.fqn = node.get_fully_qualified_name()
         self.publisher = node.create_publisher(DiagnosticArray, TOPIC, QOS)
         self.last: tuple[int, str] | None = None
         self.published = 0
@@ -70,8 +79,9 @@ class NodeDiagnostics:
         """Publish the node's status now."""
         level, message, values = self.report()
         status = DiagnosticStatus(level=level.to_bytes(1, 'little'), name=self.name,
-                                  message=message, hardware_id='')
-        status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+                                  message=message, hardware_id=HARDWARE_ID)
+        status.values = [KeyValue(key=k, value=v)
+                         for k, v in {'node': self.fqn, **values}.items()]
         self.publisher.publish(DiagnosticArray(header=header(self.stamp_ns(), NO_FRAME),
                                                status=[status]))
         self.last = (level, message)

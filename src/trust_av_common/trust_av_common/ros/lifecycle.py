@@ -58,6 +58,7 @@ from trust_av_common.registry import RegistryError
 from trust_av_common.ros import diagnostics as diag
 from trust_av_common.ros.diagnostics import NodeDiagnostics, Report
 from trust_av_common.ros.parameters import check_overrides
+from trust_av_common.ros.raw_inputs import check_input_types
 from trust_av_common.ros.spin import WallLoop, wait_acked
 
 __all__ = ['ManagedNode']
@@ -103,10 +104,13 @@ class ManagedNode(LifecycleNode):
         self.wall = False
         self.loop: WallLoop | None = None
         self.configure_error: BaseException | None = None
+        self.ready_line = ''  # set by build(), logged once configure has accepted everything
         self.command_line: list[str] = []
         self._quiet = False   # start(): the caller reports a failed configure itself
         self.blocked = ''     # why it cannot run as configured (clock_problem), '' if it can
         self.dropped = 0      # malformed input messages dropped (trust_av_common.ros.raw_inputs)
+        self.wrong_types: dict[str, str] = {}   # input topic -> its publishers of another type
+        self.typed_inputs: list[tuple[Any, str]] = []   # (subscription, type): raw_inputs
         # in every state, from construction (a regular publisher: kept across cleanup)
         self.diagnostics = NodeDiagnostics(self, self.task, self.diagnose)
         self._base = (set(self.publishers), set(self.subscriptions), set(self.timers))
@@ -153,7 +157,21 @@ class ManagedNode(LifecycleNode):
     def diagnose(self) -> Report:
         """The ``/diagnostics`` status (:mod:`trust_av_common.ros.diagnostics`): the lifecycle
         state, why it does not run if it cannot (:meth:`clock_problem`, a failed
-        ``configure``), else :meth:`health` while active."""
+        ``configure``), else :meth:`health` while active; while configured, a publisher of
+        another type on an input at least
+        WARN, named in the message and in ``wrong_type_on_<topic>``
+        (:func:`~trust_av_common.ros.raw_inputs.check_input_types`, asked here)."""
+        level, message, values = self._state_report()
+        if not self.configured:
+            return level, message, values
+        check_input_types(self)
+        for topic, publishers in sorted(self.wrong_types.items()):
+            level = max(level, diag.WARN)
+            message += f'; {topic}: not connected to {publishers} (another type)'
+            values[f'wrong_type_on_{topic}'] = publishers
+        return level, message, values
+
+    def _state_report(self) -> Report:
         state = str(self._state_machine.current_state[1])
         values = {'lifecycle_state': state, 'dropped_messages': str(self.dropped)}
         if not self.configured:
@@ -248,6 +266,8 @@ class ManagedNode(LifecycleNode):
         if self.loop is not None:
             self.loop.timer.cancel()
         self.configured = True
+        if self.ready_line:   # not before: a refused configure says nothing about being ready
+            self.get_logger().info(self.ready_line)
         return super().on_configure(state)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -305,6 +325,8 @@ class ManagedNode(LifecycleNode):
         self.configured = False
         self.close()
         publishers, subscriptions, timers = self._base
+        self.wrong_types.clear()
+        self.typed_inputs.clear()
         for timer in [t for t in self.timers if t not in timers]:
             self.destroy_timer(timer)
         for sub in [s for s in self.subscriptions if s not in subscriptions]:

@@ -305,14 +305,19 @@ def trajectory_times(msg: JointTrajectory) -> list[float]:
     return [p.time_from_start.sec + p.time_from_start.nanosec / 1e9 for p in msg.points]
 
 
+HARDWARE_ID = 'none'
+"""``DiagnosticStatus.hardware_id`` of every status here: no device (diagnostic_updater's
+``none``; it warns about an empty one)."""
+
+
 def diagnostics(ns: int, name: str, level_ok: bool, message: str,
                 values: dict[str, str], error: bool = False) -> DiagnosticArray:
     """One DiagnosticStatus with key/values (floats as repr: exact round trip), level OK,
     WARN if not ``level_ok``, ERROR if ``error``; no frame (``frame_id`` empty: nothing
-    spatial)."""
+    spatial); ``hardware_id`` ``none``, diagnostic_updater's word for a status of no device."""
     level = (DiagnosticStatus.ERROR if error else DiagnosticStatus.OK if level_ok
              else DiagnosticStatus.WARN)
-    status = DiagnosticStatus(level=level, name=name, message=message, hardware_id='sim')
+    status = DiagnosticStatus(level=level, name=name, message=message, hardware_id=HARDWARE_ID)
     status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
     return DiagnosticArray(header=header(ns, NO_FRAME), status=[status])
 

@@ -3,8 +3,9 @@ validator as ``trust-av`` (:func:`trust_av_common.params.build_config`).
 
 Where a node's values come from, first wins:
 
-1. its parameter overrides (``--ros-args --params-file F ... -p name:=value``, merged by rcl
-   and rclpy);
+1. its command line's ``-p name:=value`` (the last one of a name; a prefixed
+   ``-p planner:name:=value`` only for the nodes its prefix names), over every params file;
+2. its parameter overrides from ``--ros-args --params-file F ...`` (merged by rcl and rclpy);
 2. the shipped params file (``share/trust_av_common/config/trust_av.yaml`` of a colcon
    install, else the source tree's ``config/``), matched against the node's fully qualified
    name: so a node started alone, without a params file, runs on the shipped values, and a
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import sys
 import typing
 from collections.abc import Sequence
 from typing import Any, TypeVar
@@ -54,10 +56,12 @@ from trust_av_common.params import (
     build_config,
     check_type,
 )
+from trust_av_common.rcl_parser import parse_value
 from trust_av_common.rcl_yaml import node_matches
 
-__all__ = ['check_overrides', 'declare_component_params', 'declare_config', 'predeclare',
-           'predeclare_component']
+__all__ = ['check_overrides', 'command_line_values', 'declare_component_params',
+           'declare_config', 'param_rules', 'predeclare', 'predeclare_component',
+           'use_command_line']
 
 T = TypeVar('T')
 
@@ -85,15 +89,64 @@ def descriptor(field: dataclasses.Field[Any], hint: Any) -> ParameterDescriptor:
     return result
 
 
-def node_overrides(node: Node) -> dict[str, Any]:
-    """The parameter overrides rclpy gave ``node`` (params files and ``-p``), name to value.
+_COMMAND_LINE: list[str] = []
 
-    rclpy keeps them in ``Node._parameter_overrides`` (``rclpy/node.py``, filled in
+
+def use_command_line(args: Sequence[str]) -> None:
+    """The command line rclpy was initialised with (:func:`trust_av_common.ros.spin.init_rclpy`
+    gives it): its ``-p`` rules win over the params files (module docstring). Not called:
+    ``sys.argv``, as ``rclpy.init`` takes by default."""
+    _COMMAND_LINE[:] = list(args)
+
+
+def param_rules(args: Sequence[str]) -> list[tuple[str, str, str]]:
+    """The ``-p``/``--param`` rules of a command line's ``--ros-args`` parts, in order.
+
+    Returns:
+        (section, name, value text) per rule: the section as rcl stores it (``/**``, or the
+        node-name prefix of ``-p planner:alpha:=0.5``; rcl ``arguments.c``:
+        ``_rcl_parse_nodename_prefix`` takes one token before ``:``).
+    """
+    rules: list[tuple[str, str, str]] = []
+    for flag, rule in _ros_args(args):
+        if flag not in ('-p', '--param') or ':=' not in rule:
+            continue
+        target, text = rule.split(':=', 1)
+        section, _, name = target.rpartition(':')
+        rules.append((section or '/**', name, text))
+    return rules
+
+
+@functools.cache
+def _rule_value(name: str, text: str) -> Any:
+    return parse_value(name, text)
+
+
+def command_line_values(args: Sequence[str], fqn: str) -> dict[str, Any]:
+    """The values the ``-p`` rules of ``args`` give node ``fqn`` (the last rule of a name
+    wins), typed as rcl types them.
+
+    Raises:
+        ParamsError: rcl refuses a value (it did not: the node would not have started).
+    """
+    return {name: _rule_value(name, text) for section, name, text in param_rules(args)
+            if node_matches(section, fqn)}
+
+
+def node_overrides(node: Node) -> dict[str, Any]:
+    """The parameter overrides of ``node``, name to value: rclpy's (params files and
+    ``-p``, merged by rcl's rules), then its command line's ``-p`` values over them (module
+    docstring).
+
+    rclpy keeps its own in ``Node._parameter_overrides`` (``rclpy/node.py``, filled in
     ``Node.__init__`` from rcl's merged ``--params-file``/``-p`` values for this node); it
     has no public accessor, and both the coercion and the unknown-name check need them.
     """
     overrides: dict[str, Parameter] = node._parameter_overrides
-    return {name: param.value for name, param in overrides.items()}
+    values = {name: param.value for name, param in overrides.items()}
+    values.update(command_line_values(_COMMAND_LINE or sys.argv,
+                                      node.get_fully_qualified_name()))
+    return values
 
 
 @functools.cache
@@ -223,8 +276,14 @@ def ros_args_sources(args: Sequence[str]) -> tuple[list[str], list[str]]:
     Returns:
         (params files in order, parameter names set with ``-p``).
     """
-    files: list[str] = []
-    names: list[str] = []
+    files = [value for flag, value in _ros_args(args) if flag == '--params-file']
+    return files, [name for _, name, _ in param_rules(args)]
+
+
+def _ros_args(args: Sequence[str]) -> list[tuple[str, str]]:
+    """(flag, its argument) of ``--params-file``, ``-p`` and ``--param`` between
+    ``--ros-args`` and ``--`` (or the end), any number of such parts (rcl ``arguments.c``)."""
+    found: list[tuple[str, str]] = []
     inside = False
     items = iter(args)
     for item in items:
@@ -232,11 +291,9 @@ def ros_args_sources(args: Sequence[str]) -> tuple[list[str], list[str]]:
             inside = True
         elif item == '--':
             inside = False
-        elif inside and item == '--params-file':
-            files.append(next(items, ''))
-        elif inside and item in ('-p', '--param'):
-            names.append(next(items, '').split(':=', 1)[0])
-    return files, names
+        elif inside and item in ('--params-file', '-p', '--param'):
+            found.append((item, next(items, '')))
+    return found
 
 
 def override_origins(args: Sequence[str], fqn: str) -> tuple[dict[str, str], set[str]]:

@@ -30,13 +30,15 @@ import struct
 from collections.abc import Callable
 from typing import Any
 
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
 from trust_av_common.errors import TrustAvError
 
-__all__ = ['INPUTS_ENV', 'READERS', 'subscribe', 'type_name']
+__all__ = ['INPUTS_ENV', 'READERS', 'check_input_types', 'subscribe', 'type_name',
+           'wrong_type_publishers']
 
 INPUTS_ENV = 'TRUST_AV_INPUTS'
 """Set to ``rclpy`` to take every input as an rclpy message instead (how
@@ -255,6 +257,11 @@ def subscribe(node: Node, msg_class: Any, topic: str, callback: Callable[[Any], 
     vehicle path uses, ``readers=False``). ``options`` go to ``create_subscription`` (e.g.
     event callbacks).
 
+    A publisher of another type on the topic never matches (DDS matches endpoints by topic
+    and type name), so none of its messages arrives to be dropped: :func:`check_input_types`
+    names it (rclpy's incompatible-type event, ``SubscriptionEventCallbacks(incompatible_type
+    =...)``, where the rmw raises it, and the graph).
+
     A message that does not decode (:data:`DECODE_ERRORS`) is dropped, counted in the node's
     ``dropped`` attribute (reported on ``/diagnostics``) and logged as a warning naming the
     type, the topic and the error (at most one line a second); it never reaches
@@ -278,7 +285,60 @@ def subscribe(node: Node, msg_class: Any, topic: str, callback: Callable[[Any], 
             return
         callback(msg)
 
-    return node.create_subscription(msg_class, topic, on_bytes, qos, raw=True, **options)
+    events = options.pop('event_callbacks', None) or SubscriptionEventCallbacks()
+    if events.incompatible_type is None:
+        events.incompatible_type = lambda _info: _incompatible_type(node)
+    subscription = node.create_subscription(msg_class, topic, on_bytes, qos, raw=True,
+                                            event_callbacks=events, **options)
+    node.__dict__.setdefault('typed_inputs', []).append((subscription, name))
+    return subscription
+
+
+def wrong_type_publishers(node: Node, topic: str, name: str) -> str:
+    """The publishers on ``topic`` (resolved) whose type is not ``name``, from the graph:
+    ``std_msgs/msg/String (/talker)``, several joined by ``, ``; '' when there is none."""
+    found = sorted({f'{info.topic_type} ({info.node_namespace.rstrip("/")}/{info.node_name})'
+                    for info in node.get_publishers_info_by_topic(topic)
+                    if info.topic_type != name})
+    return ', '.join(found)
+
+
+def check_input_types(node: Node) -> bool:
+    """Name the publishers of another type on the inputs :func:`subscribe` made: one error
+    line when they appear or change, one line when they are gone; kept in the node's
+    ``wrong_types`` (topic -> :func:`wrong_type_publishers`) for ``/diagnostics``.
+
+    Called by the incompatible-type event, and by a managed node's ``/diagnostics`` report
+    (once a second, ``ManagedNode.diagnose``): rmw_fastrtps_cpp 8.4.3 with Fast DDS 2.14
+    (the Jazzy wheels) does not raise that event (its ``on_inconsistent_topic`` never
+    comes), so the graph is what finds them here.
+
+    Returns:
+        Whether ``wrong_types`` changed (``/diagnostics`` is then due at once).
+    """
+    known: dict[str, str] = node.__dict__.setdefault('wrong_types', {})
+    changed = False
+    for subscription, name in node.__dict__.get('typed_inputs', []):
+        topic = subscription.topic_name
+        wrong = wrong_type_publishers(node, topic, name)
+        if wrong == known.get(topic, ''):
+            continue
+        changed = True
+        if wrong:
+            known[topic] = wrong
+            node.get_logger().error(f'input {topic} takes {name}; not connected (another '
+                                    f'type): {wrong}')
+        else:
+            del known[topic]
+            node.get_logger().info(f'input {topic}: no publisher of another type any more')
+    return changed
+
+
+def _incompatible_type(node: Node) -> None:
+    """The incompatible-type event: :func:`check_input_types`, ``/diagnostics`` at once."""
+    diagnostics = getattr(node, 'diagnostics', None)
+    if check_input_types(node) and diagnostics is not None:
+        diagnostics.changed()
 
 
 def dropped(node: Node, what: str) -> None:

@@ -29,7 +29,7 @@ from trust_av_common.errors import one_line
 from trust_av_common.params import ParamsError
 from trust_av_common.registry import RegistryError
 from trust_av_common.ros.diagnostics import OK, NodeDiagnostics
-from trust_av_common.ros.parameters import check_overrides
+from trust_av_common.ros.parameters import check_overrides, use_command_line
 from trust_av_common.wall_clock import NS_PER_S, LoopStats, WallClockConfig, format_summary
 
 __all__ = ['PARENT_ENV', 'GraphNode', 'WallLoop', 'now_ns', 'spin_node', 'start_node',
@@ -131,6 +131,7 @@ def init_rclpy(args: list[str]) -> None:
     Raises:
         ParamsError: rcl refused the arguments; the message is rcl's first line.
     """
+    use_command_line(args)   # its -p rules win over the params files (ros/parameters.py)
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except _rclpy.RCLError as err:
@@ -163,6 +164,8 @@ def start_node(factory: Callable[[], Node], args: list[str] | None = None) -> No
             start(command_line)
         else:
             check_overrides(node, command_line)
+            if getattr(node, 'ready_line', ''):   # only once accepted (ManagedNode: configure)
+                node.get_logger().info(node.ready_line)  # type: ignore[attr-defined]
     except BaseException:
         node.close()  # type: ignore[attr-defined]
         node.destroy_node()
