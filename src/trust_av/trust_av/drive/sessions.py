@@ -16,18 +16,27 @@ position in n rows, and each ordered pair of neighbours once; for odd n, 2n rows
 second n reversed). Withdrawal deletes the participant's directory; the enrolment counter
 keeps counting, so the next participant still gets the next row.
 
-Only a folder trust-av made is ever deleted. A participant folder is created whole with its
+Only what trust-av wrote is ever deleted. A participant folder is created whole with its
 marker (:data:`MARKER`, made in a hidden folder beside it and renamed into place), and a
-participant id whose folder exists without one is refused at enrolment. Withdrawal deletes a
-folder only when it carries the marker naming this study and this participant, or, for a
-folder made before markers existed, when its ``session.json`` is a session of this
-participant and the study has its ``study.json`` (such a folder gets its marker when the
-session is next resumed). A symbolic link (the study directory, the participant folder or
-anything in it) is refused: trust-av never makes one.
+participant id whose folder exists without one is refused at enrolment. The marker names the
+study's id (a random one, in ``study.json``): withdrawal takes a folder only when its marker
+names this study's id (both present: a marker or a study without an id proves nothing) and
+this participant, or, for a folder made before markers existed, when its ``session.json`` is
+a session of this participant and the study has its ``study.json`` (such a folder gets its
+marker when the session is next resumed). Of that folder it deletes the entries trust-av
+writes there (:func:`written_by_trust_av`: the marker, the session, the tables, the drives'
+bags and logs) and leaves anything else, named. A symbolic link (the study directory, the
+participant folder or anything in it) is refused: trust-av never makes one.
+
+One live session per participant: a drive session and a withdrawal hold the participant's
+lock (:func:`participant_lock`, ``<study>/<participant>.lock`` beside the folder; ``trust-av
+repair-bag`` of one of their bags holds it too), and a second one is refused in one line
+naming the holder's pid.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -35,18 +44,25 @@ import shutil
 import tempfile
 import time
 import uuid
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from trust_av_common.errors import TrustAvError
+from trust_av_common.output_lock import hold_output_lock
 
-__all__ = ['MARKER', 'PRACTICE', 'Condition', 'DriveRecord', 'Session', 'SessionError',
-           'balanced_latin_square_row', 'check_participant', 'drive_dir', 'enrol', 'load_session',
-           'save_session', 'withdraw', 'withdrawal_folder']
+__all__ = ['MARKER', 'PARTICIPANT_ID', 'PRACTICE', 'Condition', 'DriveRecord', 'Session',
+           'SessionError', 'Withdrawal', 'balanced_latin_square_row', 'check_condition_name',
+           'check_participant', 'drive_dir', 'enrol', 'load_session', 'participant_lock',
+           'save_session', 'withdraw', 'withdrawal_folder', 'withdrawal_plan',
+           'written_by_trust_av']
 
 PARTICIPANT_ID = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,31}')
 """A pseudonymous participant id: letters, digits, '_' and '-', at most 32 characters."""
+CONDITION_NAME = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,47}')
+"""A condition name (part of its drives' folder names): letters, digits, '_' and '-', at
+most 48 characters."""
 PRACTICE = 'practice'
 """The name of the practice drive (never in the comparison or the order)."""
 DONE, ABANDONED = 'done', 'abandoned'
@@ -110,6 +126,36 @@ def check_participant(participant: str) -> str:
         raise SessionError(f'participant id {participant!r}: use 1-32 letters, digits, _ or - '
                            '(a pseudonym, never a name)')
     return participant
+
+
+def check_condition_name(name: object) -> str:
+    """The name, if it is a valid condition name (:data:`CONDITION_NAME`; not the
+    practice's).
+
+    Raises:
+        SessionError: it is not (the rule is named).
+    """
+    if not isinstance(name, str) or not CONDITION_NAME.fullmatch(name) or name == PRACTICE:
+        raise SessionError(f'condition name {name!r}: use 1-48 letters, digits, _ or - (it '
+                           f"names the drive's folder), and not {PRACTICE!r}")
+    return name
+
+
+@contextlib.contextmanager
+def participant_lock(study: Path, participant: str) -> Iterator[None]:
+    """Hold the participant's lock for the block (``<study>/<participant>.lock``, an
+    :func:`~trust_av_common.output_lock.hold_output_lock` on the participant folder): one
+    live session, withdrawal or repair of their bags at a time.
+
+    Raises:
+        SessionError: a bad id.
+        OutputLockedError: another process holds it (the line names it and its pid).
+    """
+    directory = study / check_participant(participant)
+    with hold_output_lock(directory, in_use=f'participant {participant} already has a live '
+                          'session, withdrawal or bag repair running, one at a time per '
+                          'participant'):
+        yield
 
 
 @dataclass
@@ -212,10 +258,9 @@ def enrol(study: Path, participant: str, conditions: list[Condition], *,
         SessionError: a bad id, an empty or duplicated condition list, or a resumed session
             whose conditions are not this study's.
     """
-    names = [c.name for c in conditions]
-    if not names or len(set(names)) != len(names) or PRACTICE in names:
-        raise SessionError(f'conditions must be distinct, non-empty and not {PRACTICE!r}: '
-                           f'{names}')
+    names = [check_condition_name(c.name) for c in conditions]
+    if not names or len(set(names)) != len(names):
+        raise SessionError(f'conditions must be distinct and non-empty: {names}')
     existing = load_session(study, participant)
     if existing is not None:
         if sorted(existing.order) != sorted(names):
@@ -290,6 +335,13 @@ def _marker(directory: Path) -> dict[str, Any] | None:
     return data
 
 
+def _same_study(marker: dict[str, Any], study: Path) -> bool:
+    """Whether the marker names the study's id: both present (a marker or a study without
+    an id proves nothing), non-empty and equal."""
+    study_id, named = _existing_study_id(study), marker.get('study')
+    return bool(study_id) and isinstance(named, str) and named == study_id
+
+
 def _participant_folder(study: Path, participant: str) -> Path:
     """The participant's folder, created with its marker if missing (made in a hidden
     folder and renamed into place: it never exists without its marker). A folder of a
@@ -308,8 +360,8 @@ def _participant_folder(study: Path, participant: str) -> Path:
             raise SessionError(f'{directory}: exists and was not made by trust-av for '
                                f'participant {participant} (no {MARKER}); choose another '
                                'participant id or move it away')
-        elif marker.get('study') != _existing_study_id(study):
-            raise SessionError(f'{directory}: made by trust-av for another study (its '
+        elif not _same_study(marker, study):
+            raise SessionError(f'{directory}: not made by trust-av for this study (its '
                                f'{MARKER} names study {marker.get("study")!r}); choose another '
                                'participant id or move it away')
         return directory
@@ -328,8 +380,8 @@ def _participant_folder(study: Path, participant: str) -> Path:
 
 
 def withdrawal_folder(study: Path, participant: str) -> Path | None:
-    """The participant folder withdrawal would delete, proven this study's (see the module
-    notes), or None if the participant has no folder in the study.
+    """The participant folder withdrawal would delete from, proven this study's (see the
+    module notes), or None if the participant has no folder in the study.
 
     Raises:
         SessionError: a bad id; the study directory, the participant folder or anything in
@@ -354,13 +406,13 @@ def withdrawal_folder(study: Path, participant: str) -> Path | None:
                                    'nothing is deleted')
     marker = _marker(directory)
     if marker is not None:
-        if (marker.get('participant') != participant
-                or marker.get('study') != _existing_study_id(study)):
+        if marker.get('participant') != participant or not _same_study(marker, study):
             raise SessionError(f'{directory / MARKER}: names participant '
                                f'{marker.get("participant")!r} of study '
                                f'{marker.get("study")!r}, not {participant!r} of the study in '
-                               f'{study} (copied from another study? withdraw it there); '
-                               'nothing is deleted')
+                               f'{study} (study id {_existing_study_id(study)!r}; copied from '
+                               'another study, or not written by trust-av?); nothing is '
+                               'deleted')
         return directory
     try:
         session = load_session(study, participant)
@@ -374,26 +426,112 @@ def withdrawal_folder(study: Path, participant: str) -> Path | None:
     return directory            # made before markers existed: its session proves it
 
 
-def withdraw(study: Path, participant: str) -> bool:
-    """Delete every file of the participant (bags, session, summaries), only if the folder
-    is proven this study's (:func:`withdrawal_folder`).
+WRITTEN = re.compile(
+    r'(?:\.trust_av_participant|session\.json)(?:\w+\.tmp)?'   # (and _write_json's temporary)
+    r'|\.?(?:summary|comparison)\.csv(?:\.\w+\.tmp\.csv)?'       # (and write_text's)
+    r'|\.?drive_\d{2,}_' + CONDITION_NAME.pattern + r'(?:\.attempt\d+|\.logs|\.repairing|\.lock)*')
+"""The names of the entries trust-av writes in a participant folder: the marker, the session
+file, the summary and comparison tables (with the temporary files they are written through),
+and each drive's bag directory, its logs, an earlier attempt moved aside and the work folder
+and lock of a ``repair-bag`` of it."""
+
+
+def written_by_trust_av(name: str) -> bool:
+    """Whether an entry of a participant folder has a name trust-av writes there
+    (:data:`WRITTEN`)."""
+    return WRITTEN.fullmatch(name) is not None
+
+
+@dataclass(frozen=True)
+class Withdrawal:
+    """What withdrawal deletes of a participant (and what it leaves)."""
+
+    directory: Path
+    """the participant folder"""
+    ours: tuple[Path, ...]
+    """its entries trust-av wrote: deleted"""
+    files: int
+    """the files among (or in) them"""
+    foreign: tuple[Path, ...]
+    """its entries trust-av did not write: left, with the folder"""
+    outside: tuple[Path, ...]
+    """bags the session names outside the folder (written by an old version through a
+    condition name that was a path): left"""
+
+    def __str__(self) -> str:
+        words = [f'every file trust-av wrote deleted ({self.files} file'
+                 f'{"s" if self.files != 1 else ""}, {self.directory})']
+        if self.foreign:
+            shown = ', '.join(p.name for p in self.foreign[:5])
+            words.append(f'left the folder with {len(self.foreign)} '
+                         f'entr{"y" if len(self.foreign) == 1 else "ies"} trust-av did not '
+                         f'write: {shown}{", ..." if len(self.foreign) > 5 else ""}')
+        if self.outside:
+            words.append('left outside the participant folder, though their session names '
+                         'it: ' + ', '.join(str(p) for p in self.outside))
+        return '; '.join(words)
+
+
+def withdrawal_plan(study: Path, participant: str) -> Withdrawal | None:
+    """What :func:`withdraw` would delete (None: the participant has no folder); nothing is
+    deleted.
+
+    Raises:
+        SessionError: as :func:`withdrawal_folder`.
+    """
+    directory = withdrawal_folder(study, participant)
+    if directory is None:
+        return None
+    entries = sorted(directory.iterdir())
+    ours = tuple(p for p in entries if written_by_trust_av(p.name))
+    files = sum(len(names) for p in ours if p.is_dir() for _, _, names in os.walk(p)) \
+        + sum(1 for p in ours if not p.is_dir())
+    outside: list[Path] = []
+    try:
+        session = load_session(study, participant)
+    except SessionError:
+        session = None
+    inside = directory.resolve()
+    for record in session.drives if session is not None else []:
+        bag = (study / record.bag).resolve()
+        if inside not in bag.parents and os.path.lexists(bag):
+            outside.append(bag)
+    return Withdrawal(directory, ours, files,
+                      tuple(p for p in entries if not written_by_trust_av(p.name)),
+                      tuple(outside))
+
+
+def withdraw(study: Path, participant: str) -> Withdrawal | None:
+    """Delete every file trust-av wrote for the participant (bags, session, summaries), only
+    if the folder is proven this study's (:func:`withdrawal_folder`); the folder goes too
+    unless it holds entries trust-av did not write. The caller holds
+    :func:`participant_lock`.
 
     Returns:
-        Whether there was anything to delete.
+        What was deleted and left (None: nothing to delete).
 
     Raises:
         SessionError: as :func:`withdrawal_folder` (nothing is deleted).
     """
-    directory = withdrawal_folder(study, participant)
-    if directory is None:
-        return False
-    shutil.rmtree(directory)
-    return True
+    plan = withdrawal_plan(study, participant)
+    if plan is None:
+        return None
+    # the marker last: a stop halfway leaves a folder withdrawal still recognises
+    for path in sorted(plan.ours, key=lambda p: p.name == MARKER):
+        if path.is_dir():
+            shutil.rmtree(path)
+        else:
+            path.unlink()
+    if not plan.foreign:
+        plan.directory.rmdir()
+    return plan
 
 
 def drive_dir(study: Path, participant: str, index: int, condition: str) -> Path:
     """The bag directory of a drive; an earlier incomplete attempt is moved aside
     (``.attempt<k>``), never overwritten."""
+    if condition != PRACTICE:
+        check_condition_name(condition)
     path = study / check_participant(participant) / f'drive_{index:02d}_{condition}'
     if path.exists():
         k = 1
