@@ -406,13 +406,20 @@ def withdrawal_folder(study: Path, participant: str) -> Path | None:
                                    'nothing is deleted')
     marker = _marker(directory)
     if marker is not None:
-        if marker.get('participant') != participant or not _same_study(marker, study):
+        if marker.get('participant') != participant:
             raise SessionError(f'{directory / MARKER}: names participant '
-                               f'{marker.get("participant")!r} of study '
-                               f'{marker.get("study")!r}, not {participant!r} of the study in '
-                               f'{study} (study id {_existing_study_id(study)!r}; copied from '
-                               'another study, or not written by trust-av?); nothing is '
-                               'deleted')
+                               f'{marker.get("participant")!r}, not {participant!r}; nothing '
+                               'is deleted')
+        if not _same_study(marker, study):
+            study_id = _existing_study_id(study)
+            raise SessionError(
+                f'{directory / MARKER}: names '
+                + (f'study {marker["study"]!r}' if marker.get('study') else 'no study')
+                + ', not this one ('
+                + (f'{study_id!r} in {study / STUDY_FILE}' if study_id else
+                   f'{study} has no {STUDY_FILE} with an id')
+                + "): only a marker naming the study's id proves trust-av made the folder "
+                'for it (copied from another study, or made by hand?); nothing is deleted')
         return directory
     try:
         session = load_session(study, participant)
