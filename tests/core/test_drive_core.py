@@ -33,7 +33,6 @@ from trust_av.drive.sessions import (
     enrol,
     load_session,
     save_session,
-    withdraw,
 )
 from trust_av.drive.study import (
     DriveConfig,
@@ -47,6 +46,7 @@ from trust_av.drive.trust_rating import (
     questionnaire_score,
     registered_models,
 )
+from trust_av.drive.withdrawal import withdraw
 from trust_av.system.config import DEFAULT_PARAMS_FILE
 from trust_av_common.params import ParamsError
 from trust_av_common.registry import TRUST_MODELS, names

@@ -286,7 +286,8 @@ def test_a_folder_from_before_markers_is_recognised_by_its_session(tmp_path: Pat
     """A study made by an earlier version: its participant folders have a session.json of
     the participant and the study a study.json, but no marker. Resuming adds the marker;
     withdrawal deletes such a folder."""
-    from trust_av.drive.sessions import MARKER, enrol, withdraw
+    from trust_av.drive.sessions import MARKER, enrol
+    from trust_av.drive.withdrawal import withdraw
 
     for participant in ('P01', 'P02'):
         enrol(tmp_path, participant, _conditions())

@@ -52,7 +52,7 @@ def run(args: DriveOptions) -> int:
 def _withdraw(args: DriveOptions) -> int:
     """Delete what trust-av wrote for the participant, only if their folder is proven this
     study's, after a confirmation on the terminal (or ``--yes``)."""
-    from trust_av.drive.sessions import withdraw, withdrawal_plan
+    from trust_av.drive.withdrawal import withdraw, withdrawal_plan
 
     plan = withdrawal_plan(args.study, args.participant)
     if plan is None:

@@ -1,5 +1,6 @@
 """A participant's study session, pure part: pseudonymous ids, the counterbalanced order of
-the conditions, the session's progress on disk (resume after a crash) and withdrawal.
+the conditions, the session's progress on disk (resume after a crash) and the participant's
+lock.
 
 Layout of a study directory::
 
@@ -13,20 +14,15 @@ Layout of a study directory::
 Counterbalancing: the k-th participant enrolled gets row k of a balanced Latin square over
 the conditions (Williams design: with n conditions every condition appears once in each
 position in n rows, and each ordered pair of neighbours once; for odd n, 2n rows, the
-second n reversed). Withdrawal deletes the participant's directory; the enrolment counter
-keeps counting, so the next participant still gets the next row.
+second n reversed). After a withdrawal the enrolment counter keeps counting, so the next
+participant still gets the next row.
 
-Only what trust-av wrote is ever deleted. A participant folder is created whole with its
-marker (:data:`MARKER`, made in a hidden folder beside it and renamed into place), and a
-participant id whose folder exists without one is refused at enrolment. The marker names the
-study's id (a random one, in ``study.json``): withdrawal takes a folder only when its marker
-names this study's id (both present: a marker or a study without an id proves nothing) and
-this participant, or, for a folder made before markers existed, when its ``session.json`` is
-a session of this participant and the study has its ``study.json`` (such a folder gets its
-marker when the session is next resumed). Of that folder it deletes the entries trust-av
-writes there (:func:`written_by_trust_av`: the marker, the session, the tables, the drives'
-bags and logs) and leaves anything else, named. A symbolic link (the study directory, the
-participant folder or anything in it) is refused: trust-av never makes one.
+A participant folder is created whole with its marker (:data:`MARKER`, made in a hidden
+folder beside it and renamed into place), and a participant id whose folder exists without
+one is refused at enrolment. The marker names the study's id (a random one, in
+``study.json``); a marker proves a folder this study's only when both name the same id
+(:func:`same_study`). Withdrawal, which deletes only what trust-av wrote:
+:mod:`trust_av.drive.withdrawal`.
 
 One live session per participant: a drive session and a withdrawal hold the participant's
 lock (:func:`participant_lock`, ``<study>/<participant>.lock`` beside the folder; ``trust-av
@@ -53,10 +49,9 @@ from trust_av_common.errors import TrustAvError
 from trust_av_common.output_lock import hold_output_lock
 
 __all__ = ['MARKER', 'PARTICIPANT_ID', 'PRACTICE', 'Condition', 'DriveRecord', 'Session',
-           'SessionError', 'Withdrawal', 'balanced_latin_square_row', 'check_condition_name',
-           'check_participant', 'drive_dir', 'enrol', 'load_session', 'participant_lock',
-           'save_session', 'withdraw', 'withdrawal_folder', 'withdrawal_plan',
-           'written_by_trust_av']
+           'SessionError', 'balanced_latin_square_row', 'check_condition_name',
+           'check_participant', 'drive_dir', 'enrol', 'load_session', 'marker_of',
+           'participant_lock', 'same_study', 'save_session', 'study_id_of']
 
 PARTICIPANT_ID = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,31}')
 """A pseudonymous participant id: letters, digits, '_' and '-', at most 32 characters."""
@@ -303,7 +298,7 @@ def _study_record(study: Path) -> tuple[int, str]:
     return enrolled, study_id
 
 
-def _existing_study_id(study: Path) -> str | None:
+def study_id_of(study: Path) -> str | None:
     """The study's id in its ``study.json``, or None (no file, no id, not ours); nothing
     is written."""
     try:
@@ -321,7 +316,7 @@ def _marker_text(study_id: str, participant: str) -> str:
                       indent=1) + '\n'
 
 
-def _marker(directory: Path) -> dict[str, Any] | None:
+def marker_of(directory: Path) -> dict[str, Any] | None:
     """The marker in ``directory``, or None (none, not a regular file, not ours)."""
     path = directory / MARKER
     try:
@@ -335,10 +330,10 @@ def _marker(directory: Path) -> dict[str, Any] | None:
     return data
 
 
-def _same_study(marker: dict[str, Any], study: Path) -> bool:
+def same_study(marker: dict[str, Any], study: Path) -> bool:
     """Whether the marker names the study's id: both present (a marker or a study without
     an id proves nothing), non-empty and equal."""
-    study_id, named = _existing_study_id(study), marker.get('study')
+    study_id, named = study_id_of(study), marker.get('study')
     return bool(study_id) and isinstance(named, str) and named == study_id
 
 
@@ -352,7 +347,7 @@ def _participant_folder(study: Path, participant: str) -> Path:
     """
     directory = session_path(study, participant).parent
     if os.path.lexists(directory):
-        marker = _marker(directory)
+        marker = marker_of(directory)
         session = load_session(study, participant) if marker is None else None
         if session is not None and session.participant == participant:
             _write_json(directory / MARKER, _marker_text(_study_record(study)[1], participant))
@@ -360,7 +355,7 @@ def _participant_folder(study: Path, participant: str) -> Path:
             raise SessionError(f'{directory}: exists and was not made by trust-av for '
                                f'participant {participant} (no {MARKER}); choose another '
                                'participant id or move it away')
-        elif not _same_study(marker, study):
+        elif not same_study(marker, study):
             raise SessionError(f'{directory}: not made by trust-av for this study (its '
                                f'{MARKER} names study {marker.get("study")!r}); choose another '
                                'participant id or move it away')
@@ -377,161 +372,6 @@ def _participant_folder(study: Path, participant: str) -> Path:
         shutil.rmtree(staging, ignore_errors=True)
         raise
     return directory
-
-
-def withdrawal_folder(study: Path, participant: str) -> Path | None:
-    """The participant folder withdrawal would delete from, proven this study's (see the
-    module notes), or None if the participant has no folder in the study.
-
-    Raises:
-        SessionError: a bad id; the study directory, the participant folder or anything in
-            it is a symbolic link; the folder is not one trust-av made for this participant
-            of this study. Nothing is deleted then.
-    """
-    directory = study / check_participant(participant)
-    for path in (study, directory):
-        if path.is_symlink():
-            raise SessionError(f'{path}: a symbolic link; trust-av never makes one, so '
-                               'nothing is deleted (remove the link yourself)')
-    if not os.path.lexists(directory):
-        return None
-    if not directory.is_dir():
-        raise SessionError(f'{directory}: not a folder; trust-av made no such participant '
-                           'folder, so nothing is deleted')
-    for root, dirs, files in os.walk(directory):
-        for name in dirs + files:
-            if os.path.islink(os.path.join(root, name)):
-                raise SessionError(f'{os.path.join(root, name)}: a symbolic link in the '
-                                   'participant folder; trust-av never makes one, so '
-                                   'nothing is deleted')
-    marker = _marker(directory)
-    if marker is not None:
-        if marker.get('participant') != participant:
-            raise SessionError(f'{directory / MARKER}: names participant '
-                               f'{marker.get("participant")!r}, not {participant!r}; nothing '
-                               'is deleted')
-        if not _same_study(marker, study):
-            study_id = _existing_study_id(study)
-            raise SessionError(
-                f'{directory / MARKER}: names '
-                + (f'study {marker["study"]!r}' if marker.get('study') else 'no study')
-                + ', not this one ('
-                + (f'{study_id!r} in {study / STUDY_FILE}' if study_id else
-                   f'{study} has no {STUDY_FILE} with an id')
-                + "): only a marker naming the study's id proves trust-av made the folder "
-                'for it (copied from another study, or made by hand?); nothing is deleted')
-        return directory
-    try:
-        session = load_session(study, participant)
-    except SessionError:
-        session = None
-    if session is None or session.participant != participant or not (
-            study / STUDY_FILE).is_file():
-        raise SessionError(f'{directory}: not a participant folder of this study (no {MARKER} '
-                           f'written by trust-av, no session.json of {participant}); nothing '
-                           'is deleted')
-    return directory            # made before markers existed: its session proves it
-
-
-WRITTEN = re.compile(
-    r'(?:\.trust_av_participant|session\.json)(?:\w+\.tmp)?'   # (and _write_json's temporary)
-    r'|\.?(?:summary|comparison)\.csv(?:\.\w+\.tmp\.csv)?'       # (and write_text's)
-    r'|\.?drive_\d{2,}_' + CONDITION_NAME.pattern + r'(?:\.attempt\d+|\.logs|\.repairing|\.lock)*')
-"""The names of the entries trust-av writes in a participant folder: the marker, the session
-file, the summary and comparison tables (with the temporary files they are written through),
-and each drive's bag directory, its logs, an earlier attempt moved aside and the work folder
-and lock of a ``repair-bag`` of it."""
-
-
-def written_by_trust_av(name: str) -> bool:
-    """Whether an entry of a participant folder has a name trust-av writes there
-    (:data:`WRITTEN`)."""
-    return WRITTEN.fullmatch(name) is not None
-
-
-@dataclass(frozen=True)
-class Withdrawal:
-    """What withdrawal deletes of a participant (and what it leaves)."""
-
-    directory: Path
-    """the participant folder"""
-    ours: tuple[Path, ...]
-    """its entries trust-av wrote: deleted"""
-    files: int
-    """the files among (or in) them"""
-    foreign: tuple[Path, ...]
-    """its entries trust-av did not write: left, with the folder"""
-    outside: tuple[Path, ...]
-    """bags the session names outside the folder (written by an old version through a
-    condition name that was a path): left"""
-
-    def __str__(self) -> str:
-        words = [f'every file trust-av wrote deleted ({self.files} file'
-                 f'{"s" if self.files != 1 else ""}, {self.directory})']
-        if self.foreign:
-            shown = ', '.join(p.name for p in self.foreign[:5])
-            words.append(f'left the folder with {len(self.foreign)} '
-                         f'entr{"y" if len(self.foreign) == 1 else "ies"} trust-av did not '
-                         f'write: {shown}{", ..." if len(self.foreign) > 5 else ""}')
-        if self.outside:
-            words.append('left outside the participant folder, though their session names '
-                         'it: ' + ', '.join(str(p) for p in self.outside))
-        return '; '.join(words)
-
-
-def withdrawal_plan(study: Path, participant: str) -> Withdrawal | None:
-    """What :func:`withdraw` would delete (None: the participant has no folder); nothing is
-    deleted.
-
-    Raises:
-        SessionError: as :func:`withdrawal_folder`.
-    """
-    directory = withdrawal_folder(study, participant)
-    if directory is None:
-        return None
-    entries = sorted(directory.iterdir())
-    ours = tuple(p for p in entries if written_by_trust_av(p.name))
-    files = sum(len(names) for p in ours if p.is_dir() for _, _, names in os.walk(p)) \
-        + sum(1 for p in ours if not p.is_dir())
-    outside: list[Path] = []
-    try:
-        session = load_session(study, participant)
-    except SessionError:
-        session = None
-    inside = directory.resolve()
-    for record in session.drives if session is not None else []:
-        bag = (study / record.bag).resolve()
-        if inside not in bag.parents and os.path.lexists(bag):
-            outside.append(bag)
-    return Withdrawal(directory, ours, files,
-                      tuple(p for p in entries if not written_by_trust_av(p.name)),
-                      tuple(outside))
-
-
-def withdraw(study: Path, participant: str) -> Withdrawal | None:
-    """Delete every file trust-av wrote for the participant (bags, session, summaries), only
-    if the folder is proven this study's (:func:`withdrawal_folder`); the folder goes too
-    unless it holds entries trust-av did not write. The caller holds
-    :func:`participant_lock`.
-
-    Returns:
-        What was deleted and left (None: nothing to delete).
-
-    Raises:
-        SessionError: as :func:`withdrawal_folder` (nothing is deleted).
-    """
-    plan = withdrawal_plan(study, participant)
-    if plan is None:
-        return None
-    # the marker last: a stop halfway leaves a folder withdrawal still recognises
-    for path in sorted(plan.ours, key=lambda p: p.name == MARKER):
-        if path.is_dir():
-            shutil.rmtree(path)
-        else:
-            path.unlink()
-    if not plan.foreign:
-        plan.directory.rmdir()
-    return plan
 
 
 def drive_dir(study: Path, participant: str, index: int, condition: str) -> Path:
