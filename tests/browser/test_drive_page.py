@@ -156,6 +156,14 @@ def test_rating_prompt_does_not_stop_the_input_and_reconnection_resumes(
     server.send({'type': 'rate', 'id': 7})
     page.wait_for_selector('#rating:not([hidden])', timeout=5000)
     assert page.locator('#rating-submit').is_disabled()   # no default answer
+    # nor a bias toward one: no thumb until the scale is touched, and a click on the very
+    # spot where it would stand (50, the middle: no value changes, no 'input' event) answers
+    assert 'unset' in page.locator('#rating-slider').get_attribute('class')   # no thumb
+    page.locator('#rating-slider').click()                # the middle of the scale
+    assert page.locator('#rating-slider').input_value() == '50'
+    assert page.locator('#rating-submit').is_enabled()
+    assert page.locator('#rating-value').text_content() == '50'
+    assert 'unset' not in page.locator('#rating-slider').get_attribute('class')
     # samples go on under the prompt: five more reach the server while it is open
     shown = page.evaluate('window.drive.seq')
     page.wait_for_function(f'window.drive.seq >= {shown} + 5')

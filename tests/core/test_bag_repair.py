@@ -167,3 +167,47 @@ def test_the_original_stays_until_the_copy_reads_back(tmp_path: Path,
     assert snapshot(tmp_path) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ['rec']
     shutil.rmtree(bag)
+
+
+def _refused_in_use(capsys: pytest.CaptureFixture[str], *words: str) -> None:
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('trust-av repair-bag: error: '), err
+    assert 'Traceback' not in err and all(word in err for word in words), err
+
+
+def test_a_bag_being_written_or_repaired_is_refused_unchanged(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A run holds its bag's lock while it records (and a repair-bag while it repairs):
+    repair-bag takes the same lock, so it never rewrites a recording under its writer (a
+    live run once finished with half its messages in the MCAP) nor races another repair
+    on one work folder. A lone .mcap in a bag directory being written is refused too."""
+    from trust_av_common.output_lock import hold_output_lock
+
+    bag = tmp_path / 'live'
+    foreign_unfinished(bag, CompressionType.ZSTD)
+    before = snapshot(tmp_path)
+    with hold_output_lock(bag):                     # as `trust-av run --bag live` holds it
+        assert main(['repair-bag', str(bag)]) == 2
+        _refused_in_use(capsys, str(bag), 'a run is writing it or another repair-bag',
+                        'pid ', f'{bag}.lock')
+        assert main(['repair-bag', str(bag / 'live_0.mcap')]) == 2
+        _refused_in_use(capsys, str(bag), 'a run is writing it')
+    assert snapshot(tmp_path) == before and sorted(tmp_path.iterdir()) == [bag]
+    assert main(['repair-bag', str(bag)]) == 0      # free again
+
+
+def test_a_drive_bag_is_not_repaired_while_its_participant_s_session_lives(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A drive records into its bag without a lock of its own: the participant's lock
+    (held by their live session) covers it."""
+    from trust_av.drive.sessions import Condition, enrol, participant_lock
+
+    enrol(tmp_path, 'P01', [Condition('a', 0.0, 'ca', 'us06')])
+    bag = tmp_path / 'P01' / 'drive_01_practice'
+    foreign_unfinished(bag, CompressionType.ZSTD)
+    before = snapshot(tmp_path)
+    with participant_lock(tmp_path, 'P01'):
+        assert main(['repair-bag', str(bag)]) == 2
+        _refused_in_use(capsys, 'participant P01 already has a live session', 'pid ')
+    assert snapshot(tmp_path) == before
+    assert main(['repair-bag', str(bag)]) == 0

@@ -33,7 +33,6 @@ from trust_av.drive.sessions import (
     enrol,
     load_session,
     save_session,
-    withdraw,
 )
 from trust_av.drive.study import (
     DriveConfig,
@@ -47,6 +46,7 @@ from trust_av.drive.trust_rating import (
     questionnaire_score,
     registered_models,
 )
+from trust_av.drive.withdrawal import withdraw
 from trust_av.system.config import DEFAULT_PARAMS_FILE
 from trust_av_common.params import ParamsError
 from trust_av_common.registry import TRUST_MODELS, names
@@ -203,6 +203,13 @@ def test_shipped_drive_settings_load() -> None:
     ('colour: red', 'unknown parameter'),
     ('condition_alphas: [0.0]', 'arrays of one length'),
     ('condition_alphas: [0.0, 2.0]', 'alpha must be in'),
+    # a condition name is part of its drives' folder names: never a path, never empty
+    ("condition_names: ['../../outside', high_alpha]", "condition name '../../outside'"),
+    ("condition_names: ['', high_alpha]", "condition name ''"),
+    ('condition_names: [low_alpha, low_alpha]', "'low_alpha' is listed twice"),
+    ('condition_names: [practice, high_alpha]', "condition name 'practice'"),
+    ('condition_names: [1, 2]', 'condition name 1'),
+    ('condition_traces: [7, 8]', 'condition_traces holds 7'),
 ])
 def test_bad_drive_settings_are_named(tmp_path: Path, text: str, message: str) -> None:
     lines = DEFAULT_PARAMS_FILE.with_name('drive.yaml').read_text().splitlines()
@@ -212,6 +219,46 @@ def test_bad_drive_settings_are_named(tmp_path: Path, text: str, message: str) -
     path.write_text('\n'.join([*kept, f'    {text}']) + '\n')
     with pytest.raises(ParamsError, match=message):
         load_drive_settings(path)
+
+
+def test_every_seed_the_settings_accept_gives_every_drive_a_valid_seed(tmp_path: Path) -> None:
+    """Drive k's seed is the study's + k modulo 2**32 (the perturbation seed's range): the
+    largest seed the settings accept once failed at drive 1, after enrolment, using up
+    the participant's counterbalancing row at every retry."""
+    import dataclasses
+
+    from trust_av.drive.study import next_drive
+    from trust_av.system.config import load_run_config
+
+    session = enrol(tmp_path, 'P01', CONDITIONS, practice=False)
+    top = DriveConfig(seed=2**32 - 1).seed
+    seed = next_drive(tmp_path, session, {c.name: c for c in CONDITIONS}, top)[4]
+    planner = load_run_config(()).planner        # as the session loop sets it per drive
+    assert seed == 0 and dataclasses.replace(planner, perturbation_seed=seed)
+    assert next_drive(tmp_path, session, {}, 41)[4] == 42
+    with pytest.raises(ParamsError, match='seed must be in'):
+        DriveConfig(seed=2**32)
+
+
+def test_one_live_session_per_participant(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """A second `trust-av drive` (or a withdrawal) for a participant whose session is live
+    is refused in one line naming the first's pid, before anything is served or written."""
+    import os
+
+    from trust_av.cli.main import main
+    from trust_av.drive.sessions import participant_lock
+
+    enrol(tmp_path, 'P01', CONDITIONS)
+    before = sorted(p.name for p in tmp_path.rglob('*'))
+    with participant_lock(tmp_path, 'P01'):           # the first session
+        for extra in ([], ['--withdraw', '--yes']):
+            assert main(['drive', '--study', str(tmp_path), '--participant', 'P01',
+                         '--port', '0', *extra]) == 2
+            err = capsys.readouterr().err
+            assert err.count('\n') == 1 and 'participant P01 already has a live session' in err
+            assert f'pid {os.getpid()}' in err and str(tmp_path / 'P01.lock') in err
+    assert sorted(p.name for p in tmp_path.rglob('*')) == before
 
 
 def test_summary_table_has_one_row_per_drive(tmp_path: Path) -> None:
@@ -296,7 +343,8 @@ def test_withdrawal_from_the_command_line(tmp_path: Path,
     enrol(tmp_path, 'P07', CONDITIONS)
     assert main(['drive', '--study', str(tmp_path), '--participant', 'P07', '--withdraw',
                  '--yes']) == 0
-    assert not (tmp_path / 'P07').exists() and 'every file deleted' in capsys.readouterr().out
+    assert not (tmp_path / 'P07').exists()
+    assert 'every file trust-av wrote deleted' in capsys.readouterr().out
 
 
 def test_every_model_s_live_trust_is_on_the_common_scale() -> None:

@@ -1,7 +1,8 @@
 """The import paths from before the packages were cut by role keep working for one release:
-an old name warns (DeprecationWarning naming the new one) and gives the new module itself,
-and a plug-in written against the old documented imports still loads and keeps the
-contract.
+an old name warns (a FutureWarning naming the new one, shown by default: a DeprecationWarning
+in a plug-in's module would be hidden) and gives the new module itself, and a plug-in written
+against the old documented imports still loads, keeps the contract and shows its author the
+warnings in a command's output.
 
 import-rewrite: keep (this module names the old paths on purpose)
 """
@@ -20,6 +21,7 @@ from support.example_plugin import PLUGIN
 
 import trust_av_planner
 import trust_monitor
+from trust_av_common.moved import MovedPathWarning
 
 OLD_AND_NEW = {
     'trust_monitor.common.params': 'trust_av_common.params',
@@ -55,14 +57,15 @@ def run(code: str, env: dict[str, str] | None = None) -> dict[str, object]:
 def test_an_old_module_path_warns_and_is_the_new_module() -> None:
     code = f"""
 import importlib, json, sys, warnings
+from trust_av_common.moved import MovedPathWarning
 out = {{}}
 for old, new in {OLD_AND_NEW!r}.items():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter('always')
         module = importlib.import_module(old)
-    named = [str(w.message) for w in caught if w.category is DeprecationWarning
+    named = [str(w.message) for w in caught if w.category is MovedPathWarning
              and f'{{old}} moved to {{new}}' in str(w.message)]
-    here = [w.filename for w in caught if w.category is DeprecationWarning]
+    here = [w.filename for w in caught if w.category is MovedPathWarning]
     out[old] = [module is importlib.import_module(new), module.__name__, len(named),
                 sys.modules[old] is module, all(f == '<string>' for f in here)]
 print(json.dumps(out))
@@ -90,9 +93,9 @@ print(json.dumps([drive is trust_av.drive.graph_run,
 
 
 def test_names_that_moved_out_of_a_module_warn() -> None:
-    with pytest.warns(DeprecationWarning, match=r'trust_av_common\.errors\.one_line'):
+    with pytest.warns(MovedPathWarning, match=r'trust_av_common\.errors\.one_line'):
         from trust_monitor.errors import one_line
-    with pytest.warns(DeprecationWarning, match='paper_explicability_bound'):
+    with pytest.warns(MovedPathWarning, match='paper_explicability_bound'):
         from trust_monitor.paper_trust import explicability_bound
     from trust_av_common.errors import one_line as new_one_line
     from trust_monitor.paper_trust import paper_explicability_bound
@@ -107,7 +110,7 @@ def test_every_old_path_names_an_existing_module() -> None:
 
 
 def test_python_m_with_an_old_name_runs_the_new_module() -> None:
-    proc = subprocess.run([sys.executable, '-W', 'always::DeprecationWarning', '-m',
+    proc = subprocess.run([sys.executable, '-m',       # the default warning filters
                            'trust_av_planner.cli', '--help'], capture_output=True, text=True,
                           timeout=120, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0 and proc.stdout.startswith('usage: trust-av')
@@ -138,6 +141,7 @@ def test_a_plugin_written_with_the_old_imports_keeps_the_contract(tmp_path: Path
     env = {**__import__('os').environ, 'PYTHONPATH': str(target)}
     code = """
 import json, warnings
+from trust_av_common.moved import MovedPathWarning
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter('always')
     from trust_monitor.common.contract import check_component
@@ -145,10 +149,22 @@ with warnings.catch_warnings(record=True) as caught:
               for group, name in (('trust_av.predictors', 'ses'),
                                   ('trust_av.trust_models', 'leaky'))]
 moved = sorted({str(w.message).split(' moved')[0] for w in caught
-                if w.category is DeprecationWarning and ' moved to ' in str(w.message)})
+                if w.category is MovedPathWarning and ' moved to ' in str(w.message)})
 print(json.dumps([all(passed), moved]))
 """
     ok, moved = run(code, env)
     assert ok is True
     assert {'trust_monitor.common.contract', 'trust_monitor.common.params',
             'trust_monitor.common.registry', 'trust_monitor.trust_model'} <= set(moved)
+    # the author sees them in a command's output, with Python's default warning filters
+    # (a DeprecationWarning raised in a plug-in's module, not __main__, would be hidden)
+    trace = tmp_path / 'ramp.csv'
+    trace.write_text('time_s,speed_mps\n' + ''.join(f'{t},{8 + 0.5 * t}\n' for t in range(9)))
+    env.pop('PYTHONWARNINGS', None)
+    proc = subprocess.run([sys.executable, '-m', 'trust_av.cli', 'simulate', '--trace',
+                           str(trace), '--predictor', 'ses', '--no-progress'], env=env,
+                          capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 0, proc.stderr
+    shown = [line for line in proc.stderr.splitlines() if 'MovedPathWarning' in line]
+    assert any(line.startswith(str(target)) and 'trust_monitor.common.params moved to '
+               'trust_av_common.params' in line for line in shown), proc.stderr

@@ -159,6 +159,12 @@ def _foreign_folders(root: Path) -> dict[str, Path]:
     (copied / '.trust_av_participant').write_text(json.dumps(
         {'trust_av': 'participant folder', 'study': 'another-study', 'participant': 'Copied'}))
     made['a folder of another study'] = copied
+    handmade = root / 'Handmade'                      # a marker naming no study
+    handmade.mkdir()
+    (handmade / 'notes.txt').write_text('not ours')
+    (handmade / '.trust_av_participant').write_text(json.dumps(
+        {'trust_av': 'participant folder', 'participant': 'Handmade'}))
+    made['a hand-made marker naming no study'] = handmade
     (root / 'AFile').write_text('not a folder')
     made['a file'] = root / 'AFile'
     return made
@@ -242,16 +248,46 @@ def test_withdrawal_deletes_our_folder_after_confirmation(
         assert _withdraw(tmp_path, 'P01') == 0
         out = capsys.readouterr().out
         assert (tmp_path / 'P01').exists() != deleted
-        assert ('every file deleted' if deleted else 'nothing deleted') in out
+        assert ('every file trust-av wrote deleted' if deleted else 'nothing deleted') in out
     assert _withdraw(tmp_path, 'P01', '--yes') == 0
     assert 'no data in this study' in capsys.readouterr().out
+
+
+def test_withdrawal_deletes_only_what_trust_av_wrote(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """Of a participant folder proven this study's, withdrawal deletes the entries trust-av
+    writes there and leaves (and names) a file it did not write, with the folder, and a bag
+    the session names outside the folder (an earlier version took condition names as
+    paths): it never reports "every file deleted" over what it left."""
+    from trust_av.drive.sessions import DriveRecord, enrol, save_session
+
+    session = enrol(tmp_path, 'P01', _conditions())
+    folder = tmp_path / 'P01'
+    for name in ('drive_01_practice', 'drive_02_a', 'drive_02_a.attempt1', 'drive_02_a.logs'):
+        (folder / name).mkdir()
+        (folder / name / 'x.mcap').write_bytes(b'x')
+    for name in ('summary.csv', 'comparison.csv'):
+        (folder / name).write_text('drive\n')
+    (folder / 'notes.txt').write_text("the researcher's")
+    outside = tmp_path / 'elsewhere'
+    outside.mkdir()
+    (outside / 'x.mcap').write_bytes(b'x')
+    session.drives.append(DriveRecord(3, '../elsewhere', 'P01/../elsewhere', 'done', 3))
+    save_session(tmp_path, session)
+    assert _withdraw(tmp_path, 'P01', '--yes') == 0
+    out = capsys.readouterr().out
+    assert sorted(p.name for p in folder.iterdir()) == ['notes.txt']
+    assert (outside / 'x.mcap').is_file()
+    assert 'every file trust-av wrote deleted (8 files' in out       # 4 bags, 4 files
+    assert 'did not write: notes.txt' in out and str(outside.resolve()) in out
 
 
 def test_a_folder_from_before_markers_is_recognised_by_its_session(tmp_path: Path) -> None:
     """A study made by an earlier version: its participant folders have a session.json of
     the participant and the study a study.json, but no marker. Resuming adds the marker;
     withdrawal deletes such a folder."""
-    from trust_av.drive.sessions import MARKER, enrol, withdraw
+    from trust_av.drive.sessions import MARKER, enrol
+    from trust_av.drive.withdrawal import withdraw
 
     for participant in ('P01', 'P02'):
         enrol(tmp_path, participant, _conditions())

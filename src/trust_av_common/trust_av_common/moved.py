@@ -2,10 +2,16 @@
 
 A package whose modules moved installs a :class:`MovedModules` finder from its
 ``__init__``: importing an old name (``trust_monitor.common.params``) then warns with a
-:class:`DeprecationWarning` naming the new one and gives the new module itself
+:class:`MovedPathWarning` naming the new one and gives the new module itself
 (``trust_av_common.params``: the same module object, so classes, registries and module
 state are shared, never copied). A moved package's old name covers its submodules, also
 one added after the move. ``python -m`` with an old name runs the new module.
+
+The warning is a :class:`FutureWarning`, not a :class:`DeprecationWarning`: Python's default
+filters hide a DeprecationWarning unless the code that triggers it is ``__main__`` (PEP 565),
+and an old import is in a plug-in's module, imported by ``trust-av``, so its author would
+never see it. A FutureWarning is shown by default, once per importing line, in every
+command's output (stderr), pointed at the plug-in's file and line.
 """
 
 # import-rewrite: keep (the docstring's example names an old path on purpose)
@@ -21,9 +27,14 @@ from collections.abc import Mapping
 from importlib.machinery import ModuleSpec
 from types import CodeType, ModuleType
 
-__all__ = ['MovedModules', 'install']
+__all__ = ['MovedModules', 'MovedPathWarning', 'install']
 
 RELEASE_NOTE = 'the old path goes in the next release'
+
+
+class MovedPathWarning(FutureWarning):
+    """An old import path or name was used (the message names the new one); shown by
+    default wherever the import is, a plug-in's module included (see the module notes)."""
 
 
 class MovedModules(importlib.abc.MetaPathFinder, importlib.abc.InspectLoader):
@@ -96,7 +107,7 @@ class MovedModules(importlib.abc.MetaPathFinder, importlib.abc.InspectLoader):
     def _warned(self, fullname: str) -> str:
         new = self._new(fullname)
         warnings.warn(f'{fullname} moved to {new}: import {new}; {RELEASE_NOTE}',
-                      DeprecationWarning, stacklevel=_importer_level())
+                      MovedPathWarning, stacklevel=_importer_level())
         return new
 
 

@@ -42,7 +42,8 @@ def lock_path(output: Path) -> Path:
 
 
 @contextlib.contextmanager
-def hold_output_lock(output: Path) -> Iterator[Path | None]:
+def hold_output_lock(output: Path, *,
+                     in_use: str = 'another run is writing it') -> Iterator[Path | None]:
     """Hold the lock on ``output`` for the block; yields the lock file.
 
     Missing parent directories of ``output`` are created (and removed again on exit if they
@@ -54,6 +55,7 @@ def hold_output_lock(output: Path) -> Iterator[Path | None]:
 
     Args:
         output: the path a command is about to write (a bag directory, an output file).
+        in_use: what the refusal says the holder does with ``output``.
 
     Raises:
         OutputLockedError: another process holds the lock (the line names the path and
@@ -67,7 +69,7 @@ def hold_output_lock(output: Path) -> Iterator[Path | None]:
     path = lock_path(Path(output))
     created: list[Path] = []
     try:
-        fd = _take(path, created)
+        fd = _take(path, created, in_use)
         if fd is None:
             yield None
             return
@@ -111,7 +113,7 @@ def _make_parents(directory: Path, created: list[Path]) -> bool:
     return True
 
 
-def _take(path: Path, created: list[Path]) -> int | None:
+def _take(path: Path, created: list[Path], in_use: str) -> int | None:
     """Create the missing parents of ``path`` (into ``created``), open and lock ``path``
     (not through a symbolic link); the open descriptor, None where the file system refuses
     them (:data:`REFUSING`).
@@ -138,7 +140,7 @@ def _take(path: Path, created: list[Path]) -> int | None:
             os.close(fd)
             output = path.with_name(path.name[:-len('.lock')])
             raise OutputLockedError(
-                f'{output}: another run is writing it ({holder}; lock {path})') from None
+                f'{output}: {in_use} ({holder}; lock {path})') from None
         except OSError as err:
             os.close(fd)
             raise TrustAvError(f'{path}: cannot lock it ({err.strerror})') from err

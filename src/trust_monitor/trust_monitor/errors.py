@@ -12,6 +12,7 @@ from typing import Any
 
 from trust_av_common import errors as _common
 from trust_av_common.errors import TrustAvError
+from trust_av_common.moved import MovedPathWarning
 
 __all__ = ['TrustMonitorError']
 
@@ -27,6 +28,6 @@ class TrustMonitorError(TrustAvError):
 def __getattr__(name: str) -> Any:
     if name in _MOVED:
         warnings.warn(f'trust_monitor.errors.{name} moved to trust_av_common.errors.{name}; '
-                      'the old name goes in the next release', DeprecationWarning, stacklevel=2)
+                      'the old name goes in the next release', MovedPathWarning, stacklevel=2)
         return getattr(_common, name)
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from trust_av_common.component_checks import PASSING, call, check_number, raised
+from trust_av_common.moved import MovedPathWarning
 from trust_av_common.params import ParamsError, check_fields, param
 from trust_av_common.registry import TRUST_MODELS
 
@@ -283,7 +284,7 @@ def __getattr__(name: str) -> Any:
     if name == 'explicability_bound':
         warnings.warn('trust_monitor.trust_model.explicability_bound is now '
                       'trust_monitor.paper_trust.paper_explicability_bound; the old name goes '
-                      'in the next release', DeprecationWarning, stacklevel=2)
+                      'in the next release', MovedPathWarning, stacklevel=2)
         return paper_explicability_bound
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
 # import-rewrite: on

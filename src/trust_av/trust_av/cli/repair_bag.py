@@ -4,10 +4,15 @@ recorder): every message of every complete chunk is kept, metadata.yaml is writt
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import fcntl
+import os
 from pathlib import Path
 
 from trust_av.cli.typed_options import command
+from trust_av.drive.sessions import MARKER, PARTICIPANT_ID, participant_lock
+from trust_av_common.output_lock import hold_output_lock, lock_path
 from trust_av_planner.errors import TrustAvPlannerError
 
 __all__: list[str] = []
@@ -36,11 +41,45 @@ def run(args: RepairBagOptions) -> int:
         raise TrustAvPlannerError(f'{path}: no such bag directory or .mcap file')
     if not (path.is_dir() or path.is_file()):       # a FIFO or a device: reading would block
         raise TrustAvPlannerError(f'{path}: not a bag directory or a regular .mcap file')
-    kept = repair(path)
     target = path if path.is_dir() else path.with_suffix('')
+    if not path.is_dir():                # a lone .mcap: in a bag directory a run writes?
+        _refuse_if_written(path.parent)
+    with contextlib.ExitStack() as held:     # the locks of the run that writes the bag
+        held.enter_context(hold_output_lock(target, in_use=IN_USE))
+        for folder in (target.parent, target.parent.parent):
+            if (folder / MARKER).is_file() and PARTICIPANT_ID.fullmatch(folder.name):
+                # a drive's bag: its participant's live session records into it
+                held.enter_context(participant_lock(folder.parent, folder.name))
+                break
+        kept = repair(path)
     print(f'{target}: repaired, {kept}; the unfinished recording was replaced once the '
           'repaired bag read back whole (mcap reader and rosbags)')
     return 0
+
+
+IN_USE = ('a run is writing it or another repair-bag is repairing it; repair it once that '
+          'has ended')
+"""Why a recording whose lock is held is not repaired (:func:`run`)."""
+
+
+def _refuse_if_written(directory: Path) -> None:
+    """Refuse when a command holds the lock of ``directory`` (a bag directory a run writes;
+    looked at, never created).
+
+    Raises:
+        TrustAvPlannerError: it does.
+    """
+    lock = lock_path(directory)
+    try:
+        fd = os.open(lock, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except OSError:          # no lock file: nobody holds it
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        raise TrustAvPlannerError(f'{directory}: {IN_USE} (lock {lock})') from None
+    finally:
+        os.close(fd)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -61,8 +100,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     "every CRC valid: MCAP's own rule) is never rewritten, whoever wrote it. "
                     'The recording is replaced only once the repaired bag reads back whole '
                     'with the mcap reader and rosbags (the same messages); what was kept is '
-                    "printed. Exit codes: 0 repaired, 2 nothing readable, no complete "
-                    "message, a complete recording, or the copy failed (nothing is changed "
-                    "then).")
+                    'printed. A recording a run is writing, or another repair-bag is '
+                    "repairing (its lock, PATH.lock, is held), or a drive's bag whose "
+                    "participant has a live session, is refused. Exit codes: 0 repaired, 2 "
+                    'nothing readable, no complete message, a complete recording, a recording '
+                    'in use, or the copy failed (nothing is changed then).')
     parser.add_argument('path', metavar='PATH', help='bag directory or .mcap file')
     parser.set_defaults(func=command(RepairBagOptions, run))

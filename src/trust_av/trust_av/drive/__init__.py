@@ -2,7 +2,8 @@
 follower behind the trust-aware AV from a browser page.
 
 :mod:`.trust_rating` (questionnaire scoring, ratings vs trust models), :mod:`.sessions`
-(participants, counterbalancing, resume, withdrawal), :mod:`.study` (settings, summaries),
+(participants, counterbalancing, resume, the participant's lock), :mod:`.withdrawal`
+(deleting what trust-av wrote for a participant), :mod:`.study` (settings, summaries),
 :mod:`.bag_data` (a drive's bag read back), :mod:`.server` (the page and its WebSocket:
 who may connect and drive), :mod:`.gate` (what the driving page may send, when),
 :mod:`.synthetic` (a synthetic participant for tests and benchmarks); the page itself is in

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import sys
 from pathlib import Path
 
@@ -35,45 +34,45 @@ class DriveOptions(ParamsFileOptions):
 
 
 def run(args: DriveOptions) -> int:
-    """Run ``trust-av drive``."""
-    from trust_av.drive.sessions import SessionError, check_participant
+    """Run ``trust-av drive``: the participant's session or withdrawal, holding their lock
+    (:func:`~trust_av.drive.sessions.participant_lock`: one at a time per participant)."""
+    from trust_av.drive.sessions import SessionError, check_participant, participant_lock
 
     try:
         check_participant(args.participant)
-        if args.withdraw:
-            return _withdraw(args)
-    except SessionError as err:
-        raise TrustAvPlannerError(str(err)) from err
-    from trust_av.drive.run_session import run_session
-    try:
-        return run_session(args)
+        with participant_lock(args.study, args.participant):
+            if args.withdraw:
+                return _withdraw(args)
+            from trust_av.drive.run_session import run_session
+            return run_session(args)
     except SessionError as err:
         raise TrustAvPlannerError(str(err)) from err
 
 
 def _withdraw(args: DriveOptions) -> int:
-    """Delete the participant's folder, only if it is proven this study's, after a
-    confirmation on the terminal (or ``--yes``)."""
-    from trust_av.drive.sessions import withdraw, withdrawal_folder
+    """Delete what trust-av wrote for the participant, only if their folder is proven this
+    study's, after a confirmation on the terminal (or ``--yes``)."""
+    from trust_av.drive.withdrawal import withdraw, withdrawal_plan
 
-    directory = withdrawal_folder(args.study, args.participant)
-    if directory is None:
+    plan = withdrawal_plan(args.study, args.participant)
+    if plan is None:
         print(f'participant {args.participant}: no data in this study')
         return 0
-    files = sum(len(names) for _, _, names in os.walk(directory))
     if not args.yes:
         if sys.stdin is None or not sys.stdin.isatty():
-            raise TrustAvPlannerError(f'--withdraw would delete {directory} ({files} files); '
-                                      'no terminal to confirm on, pass --yes')
+            raise TrustAvPlannerError(f'--withdraw would delete {plan.files} files in '
+                                      f'{plan.directory}; no terminal to confirm on, pass '
+                                      '--yes')
         try:
-            answer = input(f'delete {directory} and its {files} files for good? [y/N] ')
+            answer = input(f'delete the {plan.files} files trust-av wrote in '
+                           f'{plan.directory} for good? [y/N] ')
         except EOFError:
             answer = ''
         if answer.strip().lower() not in ('y', 'yes'):
             print(f'participant {args.participant}: nothing deleted')
             return 0
-    withdraw(args.study, args.participant)      # checked again just before deleting
-    print(f'participant {args.participant}: every file deleted ({directory}, {files} files)')
+    done = withdraw(args.study, args.participant)      # checked again just before deleting
+    print(f'participant {args.participant}: {done or "nothing left to delete"}')
     return 0
 
 
@@ -106,11 +105,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument('--port', type=int, default=None,
                         help="TCP port of the page (0: any free; default: the drive file's)")
     parser.add_argument('--withdraw', action='store_true',
-                        help='delete every file of the participant in this study and exit: '
-                             'only a folder trust-av made for them (its '
-                             '.trust_av_participant marker, or a session.json of theirs '
-                             'from before markers), never through a symbolic link; asks '
-                             'for confirmation on the terminal')
+                        help='delete every file trust-av wrote for the participant in this '
+                             'study and exit: only in a folder trust-av made for them (its '
+                             '.trust_av_participant marker naming this study, or a '
+                             'session.json of theirs from before markers), never through a '
+                             'symbolic link, never a file it did not write (named, left with '
+                             'the folder); asks for confirmation on the terminal')
     parser.add_argument('--yes', action='store_true',
                         help='--withdraw without asking (needed when stdin is not a terminal)')
     parser.add_argument('--startup-timeout-s', type=positive_seconds, default=60.0,

@@ -1,5 +1,6 @@
 """A participant's study session, pure part: pseudonymous ids, the counterbalanced order of
-the conditions, the session's progress on disk (resume after a crash) and withdrawal.
+the conditions, the session's progress on disk (resume after a crash) and the participant's
+lock.
 
 Layout of a study directory::
 
@@ -13,21 +14,25 @@ Layout of a study directory::
 Counterbalancing: the k-th participant enrolled gets row k of a balanced Latin square over
 the conditions (Williams design: with n conditions every condition appears once in each
 position in n rows, and each ordered pair of neighbours once; for odd n, 2n rows, the
-second n reversed). Withdrawal deletes the participant's directory; the enrolment counter
-keeps counting, so the next participant still gets the next row.
+second n reversed). After a withdrawal the enrolment counter keeps counting, so the next
+participant still gets the next row.
 
-Only a folder trust-av made is ever deleted. A participant folder is created whole with its
-marker (:data:`MARKER`, made in a hidden folder beside it and renamed into place), and a
-participant id whose folder exists without one is refused at enrolment. Withdrawal deletes a
-folder only when it carries the marker naming this study and this participant, or, for a
-folder made before markers existed, when its ``session.json`` is a session of this
-participant and the study has its ``study.json`` (such a folder gets its marker when the
-session is next resumed). A symbolic link (the study directory, the participant folder or
-anything in it) is refused: trust-av never makes one.
+A participant folder is created whole with its marker (:data:`MARKER`, made in a hidden
+folder beside it and renamed into place), and a participant id whose folder exists without
+one is refused at enrolment. The marker names the study's id (a random one, in
+``study.json``); a marker proves a folder this study's only when both name the same id
+(:func:`same_study`). Withdrawal, which deletes only what trust-av wrote:
+:mod:`trust_av.drive.withdrawal`.
+
+One live session per participant: a drive session and a withdrawal hold the participant's
+lock (:func:`participant_lock`, ``<study>/<participant>.lock`` beside the folder; ``trust-av
+repair-bag`` of one of their bags holds it too), and a second one is refused in one line
+naming the holder's pid.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -35,18 +40,24 @@ import shutil
 import tempfile
 import time
 import uuid
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from trust_av_common.errors import TrustAvError
+from trust_av_common.output_lock import hold_output_lock
 
-__all__ = ['MARKER', 'PRACTICE', 'Condition', 'DriveRecord', 'Session', 'SessionError',
-           'balanced_latin_square_row', 'check_participant', 'drive_dir', 'enrol', 'load_session',
-           'save_session', 'withdraw', 'withdrawal_folder']
+__all__ = ['MARKER', 'PARTICIPANT_ID', 'PRACTICE', 'Condition', 'DriveRecord', 'Session',
+           'SessionError', 'balanced_latin_square_row', 'check_condition_name',
+           'check_participant', 'drive_dir', 'enrol', 'load_session', 'marker_of',
+           'participant_lock', 'same_study', 'save_session', 'study_id_of']
 
 PARTICIPANT_ID = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,31}')
 """A pseudonymous participant id: letters, digits, '_' and '-', at most 32 characters."""
+CONDITION_NAME = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,47}')
+"""A condition name (part of its drives' folder names): letters, digits, '_' and '-', at
+most 48 characters."""
 PRACTICE = 'practice'
 """The name of the practice drive (never in the comparison or the order)."""
 DONE, ABANDONED = 'done', 'abandoned'
@@ -110,6 +121,36 @@ def check_participant(participant: str) -> str:
         raise SessionError(f'participant id {participant!r}: use 1-32 letters, digits, _ or - '
                            '(a pseudonym, never a name)')
     return participant
+
+
+def check_condition_name(name: object) -> str:
+    """The name, if it is a valid condition name (:data:`CONDITION_NAME`; not the
+    practice's).
+
+    Raises:
+        SessionError: it is not (the rule is named).
+    """
+    if not isinstance(name, str) or not CONDITION_NAME.fullmatch(name) or name == PRACTICE:
+        raise SessionError(f'condition name {name!r}: use 1-48 letters, digits, _ or - (it '
+                           f"names the drive's folder), and not {PRACTICE!r}")
+    return name
+
+
+@contextlib.contextmanager
+def participant_lock(study: Path, participant: str) -> Iterator[None]:
+    """Hold the participant's lock for the block (``<study>/<participant>.lock``, an
+    :func:`~trust_av_common.output_lock.hold_output_lock` on the participant folder): one
+    live session, withdrawal or repair of their bags at a time.
+
+    Raises:
+        SessionError: a bad id.
+        OutputLockedError: another process holds it (the line names it and its pid).
+    """
+    directory = study / check_participant(participant)
+    with hold_output_lock(directory, in_use=f'participant {participant} already has a live '
+                          'session, withdrawal or bag repair running, one at a time per '
+                          'participant'):
+        yield
 
 
 @dataclass
@@ -212,10 +253,9 @@ def enrol(study: Path, participant: str, conditions: list[Condition], *,
         SessionError: a bad id, an empty or duplicated condition list, or a resumed session
             whose conditions are not this study's.
     """
-    names = [c.name for c in conditions]
-    if not names or len(set(names)) != len(names) or PRACTICE in names:
-        raise SessionError(f'conditions must be distinct, non-empty and not {PRACTICE!r}: '
-                           f'{names}')
+    names = [check_condition_name(c.name) for c in conditions]
+    if not names or len(set(names)) != len(names):
+        raise SessionError(f'conditions must be distinct and non-empty: {names}')
     existing = load_session(study, participant)
     if existing is not None:
         if sorted(existing.order) != sorted(names):
@@ -258,7 +298,7 @@ def _study_record(study: Path) -> tuple[int, str]:
     return enrolled, study_id
 
 
-def _existing_study_id(study: Path) -> str | None:
+def study_id_of(study: Path) -> str | None:
     """The study's id in its ``study.json``, or None (no file, no id, not ours); nothing
     is written."""
     try:
@@ -276,7 +316,7 @@ def _marker_text(study_id: str, participant: str) -> str:
                       indent=1) + '\n'
 
 
-def _marker(directory: Path) -> dict[str, Any] | None:
+def marker_of(directory: Path) -> dict[str, Any] | None:
     """The marker in ``directory``, or None (none, not a regular file, not ours)."""
     path = directory / MARKER
     try:
@@ -290,6 +330,13 @@ def _marker(directory: Path) -> dict[str, Any] | None:
     return data
 
 
+def same_study(marker: dict[str, Any], study: Path) -> bool:
+    """Whether the marker names the study's id: both present (a marker or a study without
+    an id proves nothing), non-empty and equal."""
+    study_id, named = study_id_of(study), marker.get('study')
+    return bool(study_id) and isinstance(named, str) and named == study_id
+
+
 def _participant_folder(study: Path, participant: str) -> Path:
     """The participant's folder, created with its marker if missing (made in a hidden
     folder and renamed into place: it never exists without its marker). A folder of a
@@ -300,7 +347,7 @@ def _participant_folder(study: Path, participant: str) -> Path:
     """
     directory = session_path(study, participant).parent
     if os.path.lexists(directory):
-        marker = _marker(directory)
+        marker = marker_of(directory)
         session = load_session(study, participant) if marker is None else None
         if session is not None and session.participant == participant:
             _write_json(directory / MARKER, _marker_text(_study_record(study)[1], participant))
@@ -308,8 +355,8 @@ def _participant_folder(study: Path, participant: str) -> Path:
             raise SessionError(f'{directory}: exists and was not made by trust-av for '
                                f'participant {participant} (no {MARKER}); choose another '
                                'participant id or move it away')
-        elif marker.get('study') != _existing_study_id(study):
-            raise SessionError(f'{directory}: made by trust-av for another study (its '
+        elif not same_study(marker, study):
+            raise SessionError(f'{directory}: not made by trust-av for this study (its '
                                f'{MARKER} names study {marker.get("study")!r}); choose another '
                                'participant id or move it away')
         return directory
@@ -327,73 +374,11 @@ def _participant_folder(study: Path, participant: str) -> Path:
     return directory
 
 
-def withdrawal_folder(study: Path, participant: str) -> Path | None:
-    """The participant folder withdrawal would delete, proven this study's (see the module
-    notes), or None if the participant has no folder in the study.
-
-    Raises:
-        SessionError: a bad id; the study directory, the participant folder or anything in
-            it is a symbolic link; the folder is not one trust-av made for this participant
-            of this study. Nothing is deleted then.
-    """
-    directory = study / check_participant(participant)
-    for path in (study, directory):
-        if path.is_symlink():
-            raise SessionError(f'{path}: a symbolic link; trust-av never makes one, so '
-                               'nothing is deleted (remove the link yourself)')
-    if not os.path.lexists(directory):
-        return None
-    if not directory.is_dir():
-        raise SessionError(f'{directory}: not a folder; trust-av made no such participant '
-                           'folder, so nothing is deleted')
-    for root, dirs, files in os.walk(directory):
-        for name in dirs + files:
-            if os.path.islink(os.path.join(root, name)):
-                raise SessionError(f'{os.path.join(root, name)}: a symbolic link in the '
-                                   'participant folder; trust-av never makes one, so '
-                                   'nothing is deleted')
-    marker = _marker(directory)
-    if marker is not None:
-        if (marker.get('participant') != participant
-                or marker.get('study') != _existing_study_id(study)):
-            raise SessionError(f'{directory / MARKER}: names participant '
-                               f'{marker.get("participant")!r} of study '
-                               f'{marker.get("study")!r}, not {participant!r} of the study in '
-                               f'{study} (copied from another study? withdraw it there); '
-                               'nothing is deleted')
-        return directory
-    try:
-        session = load_session(study, participant)
-    except SessionError:
-        session = None
-    if session is None or session.participant != participant or not (
-            study / STUDY_FILE).is_file():
-        raise SessionError(f'{directory}: not a participant folder of this study (no {MARKER} '
-                           f'written by trust-av, no session.json of {participant}); nothing '
-                           'is deleted')
-    return directory            # made before markers existed: its session proves it
-
-
-def withdraw(study: Path, participant: str) -> bool:
-    """Delete every file of the participant (bags, session, summaries), only if the folder
-    is proven this study's (:func:`withdrawal_folder`).
-
-    Returns:
-        Whether there was anything to delete.
-
-    Raises:
-        SessionError: as :func:`withdrawal_folder` (nothing is deleted).
-    """
-    directory = withdrawal_folder(study, participant)
-    if directory is None:
-        return False
-    shutil.rmtree(directory)
-    return True
-
-
 def drive_dir(study: Path, participant: str, index: int, condition: str) -> Path:
     """The bag directory of a drive; an earlier incomplete attempt is moved aside
     (``.attempt<k>``), never overwritten."""
+    if condition != PRACTICE:
+        check_condition_name(condition)
     path = study / check_participant(participant) / f'drive_{index:02d}_{condition}'
     if path.exists():
         k = 1

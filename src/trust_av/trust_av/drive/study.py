@@ -28,6 +28,7 @@ from trust_av.drive.sessions import (
     DriveRecord,
     Session,
     SessionError,
+    check_condition_name,
     drive_dir,
     enrol,
     save_session,
@@ -45,6 +46,8 @@ __all__ = ['DriveConfig', 'comparison_csv', 'comparison_text', 'conditions_from'
            'load_drive_settings', 'next_drive', 'plan_session', 'record_drive', 'summary_csv']
 
 SECTION = '/drive'
+SEED_MODULUS = 2**32
+"""Drive k's seed is the study's seed + k modulo this (a planner ``perturbation_seed``)."""
 """The node name the drive's settings are read for (``/**/drive`` or ``/drive``)."""
 CONDITION_KEYS = ('condition_names', 'condition_alphas', 'condition_predictors',
                   'condition_traces')
@@ -73,8 +76,9 @@ class DriveConfig:
                       default='127.0.0.1')
     port: int = param('TCP port of the page (0: any free port)', low=0, high=65535,
                       default=8765)
-    seed: int = param("the study's seed, recorded with every drive (drive k: seed + k)",
-                      low=0, default=0, high=4294967295)
+    seed: int = param("the study's seed, recorded with every drive (drive k: seed + k, modulo "
+                      "2**32: the perturbation seed's range)", low=0, default=0,
+                      high=SEED_MODULUS - 1)
     max_lag_s: float = param('largest lag tried when comparing ratings with a model',
                              unit='s', low=0.0, default=10.0, high=600.0)
     on_collision: str = param("the protocol at a collision (the participant's car stops at "
@@ -106,6 +110,12 @@ def conditions_from(values: dict[str, Any], where: str) -> list[Condition]:
     out = []
     for name, alpha, predictor, trace, perturbation in zip(
             names, alphas, predictors, traces, perturbations, strict=True):
+        try:
+            check_condition_name(name)
+        except SessionError as err:
+            raise ParamsError(f'{where}: condition_names: {err}') from err
+        if names.count(name) > 1:
+            raise ParamsError(f'{where}: condition_names: {name!r} is listed twice')
         if not isinstance(alpha, (int, float)) or isinstance(alpha, bool) \
                 or not 0.0 <= alpha <= 1.0:
             raise ParamsError(f'{where}: condition {name!r}: alpha must be in [0, 1], got '
@@ -113,7 +123,11 @@ def conditions_from(values: dict[str, Any], where: str) -> list[Condition]:
         if perturbation not in LIBRARY:
             raise ParamsError(f'{where}: condition {name!r}: perturbation must be one of '
                               f'{list(LIBRARY)}, got {perturbation!r}')
-        out.append(Condition(str(name), float(alpha), str(predictor), str(trace),
+        for key, value in (('condition_predictors', predictor), ('condition_traces', trace)):
+            if not isinstance(value, str) or not value:
+                raise ParamsError(f'{where}: condition {name!r}: {key} holds {value!r}, not a '
+                                  'name')
+        out.append(Condition(name, float(alpha), predictor, trace,
                              str(perturbation)))
     return out
 
@@ -249,12 +263,13 @@ def plan_session(study: Path, participant: str, conditions: list[Condition],
 def next_drive(study: Path, session: Session, by_name: dict[str, Condition],
                seed: int) -> tuple[int, str, Condition | None, Path, int]:
     """(index, condition name, condition or None for the practice, bag path, seed) of the
-    session's next drive."""
+    session's next drive (its seed: ``seed`` + index modulo :data:`SEED_MODULUS`, so any seed
+    the settings accept gives every drive a valid one)."""
     name = session.next_condition()
     assert name is not None
     index = len(session.drives) + 1
     return (index, name, by_name.get(name), drive_dir(study, session.participant, index, name),
-            seed + index)
+            (seed + index) % SEED_MODULUS)
 
 
 def record_drive(study: Path, session: Session, record: DriveRecord,

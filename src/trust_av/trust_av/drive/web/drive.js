@@ -259,16 +259,21 @@ function showRating(id) {
   drive.prompt = id;
   $('rating-slider').value = 50;
   $('rating-slider').classList.add('unset');
-  $('rating-value').textContent = 'move the slider';
+  $('rating-value').textContent = 'click the scale';
   $('rating-submit').disabled = true;
   $('rating').hidden = false;
 }
 function hideRating() { $('rating').hidden = true; drive.prompt = null; }
-$('rating-slider').addEventListener('input', () => {
+// The scale shows no thumb until it is touched (a visual-analogue scale: no default answer to
+// lean on), and any touch of it is an answer, wherever it lands: a click on the very spot where
+// the hidden thumb stands changes no value and so fires no 'input' event, hence 'click' too.
+function rated() {
   $('rating-slider').classList.remove('unset');
   $('rating-value').textContent = $('rating-slider').value;
   $('rating-submit').disabled = false;
-});
+}
+$('rating-slider').addEventListener('input', rated);
+$('rating-slider').addEventListener('click', rated);
 $('rating-submit').addEventListener('click', () => {
   if (drive.prompt === null || $('rating-slider').classList.contains('unset')) return;
   send({type: 'rating', id: drive.prompt, value: Number($('rating-slider').value)});
