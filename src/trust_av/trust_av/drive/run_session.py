@@ -146,6 +146,9 @@ def run_session(args: SessionOptions) -> int:
             else:                          # never started: nothing to summarise
                 summary, rows = {'driven_s': 0.0}, []
             summary['comparison'] = rows
+            lost = sum(loss.count for loss in outcome.losses)
+            summary['recording_lost'] = lost
+            summary['recording_losses'] = [loss.describe() for loss in outcome.losses]
             record_drive(args.study, session, DriveRecord(
                 index, name, str(bag.relative_to(args.study)), outcome.status, seed, summary),
                 output_files.write_text)
@@ -153,6 +156,10 @@ def run_session(args: SessionOptions) -> int:
                   f'{outcome.collisions} collisions, {len(outcome.ratings)} ratings, '
                   f'{sum(outcome.refused.values())} messages refused, latency p99 '
                   f'{summary.get("latency_p99_ms", "-")} ms; {bag}', flush=True)
+            if lost:
+                print(f'drive {index} ({name}): the recording lost {lost} messages ('
+                      + '; '.join(summary['recording_losses']) + '); the bag holds the rest '
+                      'and names them in its metadata (trust_av.recording.lost)', flush=True)
             if outcome.status != 'done':
                 status = 'abandoned'
                 print(f'drive {index} ({name}): the participant stopped sending; the session '
