@@ -281,6 +281,7 @@ class DrivePage(WallHooks):
             if time.monotonic() > deadline:
                 return False
             run.spin(0.02)
+            run.take_queued()
             self.drain()
             run.graph.check_alive(set())
         with self.link.lock:

@@ -68,7 +68,12 @@ __all__ = ['DRAIN_S', 'RecordedTopic', 'WallHooks', 'WallPlan', 'WallResult', 'W
            'initial_messages', 'loss_entries', 'node_loops', 'run_wall', 'tf_frames']
 
 DRAIN_S = 0.5
-"""After the nodes stopped, what is still on its way is taken for this long."""
+"""After the nodes stopped, what is still on its way is taken until nothing has come for
+this long (at most :data:`DRAIN_MAX_S`)."""
+DRAIN_MAX_S = 30.0
+QUEUED_PER_TURN = 64
+"""A turn takes at most this many queued messages besides its own spin: a busy host that
+let a backlog build up is caught up with, and the turn's own work still comes round."""
 
 
 @dataclass(frozen=True)
@@ -140,10 +145,21 @@ class WallRun:
         self.ledger = PublicationLedger()
         self.subscriptions: list[Any] = []
         self.started = False
+        self.taken = 0
+        """Messages recorded from the wire so far."""
 
     def spin(self, timeout_s: float) -> None:
         """Take this process's events for at most ``timeout_s`` (a stop signal raises)."""
         stop_signals.spin_once(self.executor, timeout_s)
+
+    def take_queued(self) -> None:
+        """Take what is queued already (at most :data:`QUEUED_PER_TURN` messages): one spin
+        takes one message, and a turn that took one while more came fell behind."""
+        for _ in range(QUEUED_PER_TURN):
+            before = self.taken
+            self.spin(0.0)
+            if self.taken == before:
+                return
 
     def write(self, topic: str, data: bytes) -> None:
         """Write a message of this process's own (unless a full disk finished the bag)."""
@@ -226,7 +242,8 @@ def run_wall(plan: WallPlan, hooks: WallHooks) -> WallResult:
                 _turns(run, hooks)
             hooks.stopping(run)
             stop_and_drain(graph, run.executor, plan.nodes,
-                           node=run.node if plan.deactivate_on_stop else None)
+                           node=run.node if plan.deactivate_on_stop else None,
+                           taken=lambda: run.taken)
             hooks.after_stop(run)
             result, error = _account(run, hooks)
             hooks.finish(run, result)
@@ -251,6 +268,7 @@ def _record(run: WallRun, hooks: WallHooks) -> None:
             return
         recording.write(topic, data, receive_time_ns=int(info['received_timestamp'])
                         if receive_time else None)
+        run.taken += 1
         sequence = int(info['publication_sequence_number'])
         for name in hooks.publishers(topic, data):
             ledger.received(topic, name, sequence)
@@ -273,6 +291,7 @@ def _wait_topics(run: WallRun, pending: Callable[[], list[str]]) -> None:
     missing: list[str] = []
     while time.monotonic() < deadline:
         run.spin(0.05)
+        run.take_queued()
         run.graph.check_alive(set())
         missing = [f'{topic} ({node.count_publishers(topic)}/{pubs} publishers, '
                    f'{node.count_subscribers(topic)}/{subs} subscribers)'
@@ -307,6 +326,7 @@ def _turns(run: WallRun, hooks: WallHooks) -> None:
             hooks.every_second(run, now)
         if not period_ns:
             run.spin(run.plan.spin_s)
+            run.take_queued()
 
 
 def _account(run: WallRun, hooks: WallHooks) -> tuple[WallResult, GraphError | None]:
@@ -368,9 +388,13 @@ def tf_frames(data: bytes) -> list[str]:
 
 
 def stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
-                   drain_s: float = DRAIN_S, node: Any = None) -> None:
+                   drain_s: float = DRAIN_S, node: Any = None,
+                   taken: Callable[[], int] | None = None) -> None:
     """Deactivate the managed nodes through ``node`` if given (the planner hands over), stop
-    the nodes (they write their loop statistics) while taking what they publish, then the last.
+    the nodes (they write their loop statistics) while taking what they publish, then the
+    last: until ``taken`` (the messages taken so far) has not changed for ``drain_s`` (a
+    recording behind a backlog takes it all, up to :data:`DRAIN_MAX_S`); without it, for
+    ``drain_s``.
 
     The stop runs in a thread so that the executor keeps spinning: the command topics keep
     only the last message (keep-last 1), so a node that ticks twice while being stopped
@@ -393,9 +417,14 @@ def stop_and_drain(graph: Graph, executor: Any, names: tuple[str, ...],
     stopper.join()
     if errors:
         raise errors[0]
-    drain_until = time.monotonic() + drain_s
-    while time.monotonic() < drain_until:
+    now = time.monotonic()
+    quiet_until, give_up = now + drain_s, now + DRAIN_MAX_S
+    while now < min(quiet_until, give_up):
+        before = taken() if taken is not None else 0
         stop_signals.spin_once(executor, 0.05)
+        now = time.monotonic()
+        if taken is not None and taken() != before:
+            quiet_until = now + drain_s
 
 
 def node_loops(graph: Graph, log_dir: Path, names: tuple[str, ...]) -> dict[str, Any]:
