@@ -69,8 +69,7 @@ def run_session(args: SessionOptions) -> int:
             raise ParamsError(f'--port must be in [0, 65535], got {args.port}')
         drive = dataclasses.replace(drive, port=args.port)
     base = load_run_config(args.params_files)
-    rate_hz = base.clock.control_rate_hz
-    configs = {}
+    rate_hz, configs = base.clock.control_rate_hz, {}
     for listed in conditions:      # every condition is checked before anything starts
         configs[listed.name] = load_run_config(args.params_files, {'planner': {
             'alpha': listed.alpha, 'predictor': listed.predictor,
