@@ -15,6 +15,14 @@ benchmarks/results_graph.json (or --out) with the core count, date and load aver
 
 ``--rclpy-inputs``: the graph's nodes take every input as an rclpy message (rclpy's own
 deserialisation) instead of reading the bytes (``trust_av_common.ros.raw_inputs``).
+
+The floor is the lowest one: its nodes read their inputs as raw bytes, as the graph's do,
+and its recorder writes uncompressed chunks, as the graph's does
+(``run_floor(raw_inputs=True, compression='none')``), so that the ratio charges the graph
+only with its own work. ``--floor rclpy`` compares with the floor whose nodes pay rclpy's
+deserialisation (the graph's do not) and whose recorder compresses (zstd): a higher floor,
+a lower ratio. The graph's extra CPU per step over the floor is printed per process, the
+largest first: where the graph's own work goes.
 """
 
 from __future__ import annotations
@@ -63,6 +71,23 @@ def max_difference(recorded: list[StepRecord], reference: list[StepRecord]) -> f
     return worst
 
 
+FLOORS: dict[str, dict[str, Any]] = {
+    'raw': {'raw_inputs': True, 'compression': 'none'},
+    'rclpy': {'raw_inputs': False, 'compression': 'zstd'},
+}
+"""The floors ``--floor`` chooses from (:func:`bench_floor.run_floor`'s options)."""
+
+
+def extra_cpu(graph: dict[str, float], floor: dict[str, float]) -> dict[str, float]:
+    """CPU ms per step the graph's processes use over the floor's, per process (the total
+    last), the largest first."""
+    extra = {k: graph[k] - floor.get(k, 0.0) for k in graph if k != 'total'}
+    ordered = dict(sorted(extra.items(), key=lambda item: -item[1]))
+    if 'total' in graph:
+        ordered['total'] = graph['total'] - floor.get('total', 0.0)
+    return ordered
+
+
 def time_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, work: Path,
                max_steps: int) -> tuple[dict[str, Any], GraphRun]:
     """One graph run, timed as :func:`bench_floor.run_floor` times the floor."""
@@ -98,6 +123,9 @@ def main(argv: list[str] | None = None) -> int:
                         default=Path(__file__).parent / 'results_graph.json')
     parser.add_argument('--rclpy-inputs', action='store_true',
                         help="the nodes read their inputs with rclpy's deserialisation")
+    parser.add_argument('--floor', choices=('raw', 'rclpy'), default='raw',
+                        help='raw (default): the lowest floor (raw bytes in, uncompressed '
+                             'chunks); rclpy: its nodes deserialise with rclpy, zstd chunks')
     args = parser.parse_args(argv)
     if args.rclpy_inputs:
         from trust_av_common.ros.raw_inputs import INPUTS_ENV
@@ -122,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
             with tempfile.TemporaryDirectory() as tmp:
                 before = load()
                 if name == 'floor':
-                    figures = run_floor(trace.steps, Path(tmp))
+                    figures = run_floor(trace.steps, Path(tmp), **FLOORS[args.floor])
                     floor_runs.append(figures)
                 else:
                     figures, run = time_graph(config, args.trace, trace, Path(tmp), max_steps)
@@ -142,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     cpu_ratio = (graph['cpu_ms_per_step']['total'] / floor['cpu_ms_per_step']['total']
                  if graph['cpu_ms_per_step'] and floor['cpu_ms_per_step'] else math.nan)
     steady_ms = graph['steady_ms_per_step']['median']
+    extra = extra_cpu(graph['cpu_ms_per_step'], floor['cpu_ms_per_step'])
     stepping_s = first.wall_s - first.startup_s
     sim_s = trace.steps * trace.dt_s
     figures = {
@@ -149,6 +178,8 @@ def main(argv: list[str] | None = None) -> int:
         'cpu_count': os.cpu_count(), 'trace': trace.name, 'steps': trace.steps,
         'repeats': repeats, 'load_average': load(),
         'inputs': 'rclpy' if args.rclpy_inputs else 'raw_inputs',
+        'floor_kind': {'name': args.floor, **FLOORS[args.floor]},
+        'extra_cpu_ms_per_step': extra,
         'ratio_graph_to_floor': ratio, 'ratio_per_pair': summary(pairs),
         'cpu_ratio_graph_to_floor': cpu_ratio,
         'graph': graph, 'floor': floor,
@@ -170,6 +201,8 @@ def main(argv: list[str] | None = None) -> int:
     print('CPU ms per step (median), graph / floor: ' + ', '.join(
         f"{k} {graph['cpu_ms_per_step'][k]:.2f} / {floor['cpu_ms_per_step'].get(k, math.nan):.2f}"
         for k in graph['cpu_ms_per_step']))
+    print(f'extra CPU ms per step over the {args.floor} floor (graph - floor, median): '
+          + ', '.join(f'{k} {v:+.2f}' for k, v in extra.items()))
     print(f"graph / floor: {ratio:.2f}x (per pair {figures['ratio_per_pair']['min']:.2f}-"
           f"{figures['ratio_per_pair']['max']:.2f}), CPU {cpu_ratio:.2f}x; "
           f"{os.cpu_count()} cores, load {figures['load_average']}")

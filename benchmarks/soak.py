@@ -6,8 +6,10 @@ runs the whole graph over it, samples the resident memory (VmRSS) of every node 
 (the recorder included) at each progress report (at most twice a second of wall time), keeps
 one sample per simulated minute, and reports each node's RSS at the first sample at or after
 minute 5 (``--baseline-s``) and at its last sample while it ran (the recorder exits when it
-holds every step: its last sample is its last progress report). Writes
-benchmarks/results_soak.json (or --out). The target is growth < 20 MB per node.
+holds every step: its last sample is its last progress report), and the slope of each
+node's RSS over the samples from the baseline on (least squares, KB per step: a node whose
+memory levels off has a slope near 0; one that grows by a fixed amount per step does not).
+Writes benchmarks/results_soak.json (or --out). The target is growth < 20 MB per node.
 
     python benchmarks/soak.py [--duration-s 3600]
 """
@@ -68,6 +70,22 @@ def node_rss_mb() -> dict[str, float]:
     return out
 
 
+def slope_kb_per_step(samples: dict[int, dict[str, float]], base: int, node: str) -> float:
+    """Least-squares slope of ``node``'s RSS over the samples from step ``base`` on, KB per
+    step (NaN with fewer than two samples)."""
+    points = [(step, rss[node]) for step, rss in sorted(samples.items())
+              if step >= base and node in rss]
+    if len(points) < 2:
+        return float('nan')
+    steps = [p[0] for p in points]
+    mean_step = sum(steps) / len(steps)
+    mean_mb = sum(p[1] for p in points) / len(points)
+    spread = sum((x - mean_step) ** 2 for x in steps)
+    if spread == 0:
+        return float('nan')
+    return 1024.0 * sum((x - mean_step) * (y - mean_mb) for x, y in points) / spread
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -106,18 +124,21 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     last = steps[-1]
     growth = {node: last_alive[node][1] - samples[base][node] for node in samples[base]}
+    slopes = {node: slope_kb_per_step(samples, base, node) for node in samples[base]}
     figures = {'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
                'cpu_count': os.cpu_count(), 'sim_s': end, 'steps': trace.steps,
                'wall_s': run.wall_s, 'baseline_step': base, 'last_step': last,
                'rss_mb_at_baseline': samples[base],
                'rss_mb_at_end': {node: mb for node, (_, mb) in last_alive.items()},
                'last_step_sampled': {node: step for node, (step, _) in last_alive.items()},
-               'growth_mb': growth, 'samples': {str(k): v for k, v in samples.items()}}
+               'growth_mb': growth, 'slope_kb_per_step': slopes,
+               'samples': {str(k): v for k, v in samples.items()}}
     print(f'soak: {trace.steps} steps ({end / 60:.0f} min of sim time) in {run.wall_s:.0f} s '
           'wall')
     for node, mb in sorted(growth.items()):
         print(f'  {node:18s} RSS {samples[base][node]:7.1f} MB at step {base} -> '
-              f'{last_alive[node][1]:7.1f} MB at step {last_alive[node][0]}: {mb:+.1f} MB')
+              f'{last_alive[node][1]:7.1f} MB at step {last_alive[node][0]}: {mb:+.1f} MB, '
+              f'slope {slopes[node]:+.3f} KB per step')
     args.out.write_text(json.dumps(figures, indent=2) + '\n')
     print(f'wrote {args.out}')
     return 0

@@ -149,6 +149,10 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
         assert check_bag_directory(bag) == []
         counts = _counts(bag)
         practice = record['condition'] == 'practice'
+        # the recording's loss account, in the bag and in the session (0 on a clean drive)
+        assert int(custom_data(bag)['trust_av.recording.lost']) == \
+            record['summary']['recording_lost'] == \
+            sum(int(n.split()[-3]) for n in record['summary']['recording_losses'])
         # every topic holds messages (the practice drive has no questionnaire)
         assert all(n for t, n in counts.items() if t != '/driver/questionnaire'), counts
         assert counts['/driver/questionnaire'] == (0 if practice else 1)

@@ -11,8 +11,11 @@ plan is read on the plan's times (both carry ``time_from_start``).
 ``clock_mode: wall``: the latest plan and expected plan are scored once, as soon as both
 carry the same, new stamp (checked on every arrival and on a wall-clock timer at
 ``control_rate_hz``), and the trust is stamped with the current time; the update is scaled
-by the time since the previously scored plan (at most ``input_timeout_s``; one control
-period for the first). Loop jitter as in the planner.
+by the time since the previously scored plan (at most ``input_timeout_s``; for the first
+after an activation, the time since the activation, at most one control period). Trust
+counts from the activation: plans stamped before it (kept while inactive) are not scored,
+so a drive that activates the monitor at its start (``trust-av drive``) gets trust for
+the drive's time only. Loop jitter as in the planner.
 """
 
 from __future__ import annotations
@@ -80,6 +83,7 @@ class MonitorNode(ManagedNode):
         self.buffer = StepBuffer(['plan', 'expected'])
         self.latest = LatestInputs(['plan', 'expected'])
         self.scored_ns: int | None = None
+        self.active_ns = 0      # wall mode: when the monitor was last activated
         self.scored = 0
         self.estimate: tuple[float, float, float] | None = None   # E, P, trust of the last
         self.pub = self.create_lifecycle_publisher(Vector3Stamped, 'trust_monitor/trust',
@@ -109,10 +113,10 @@ class MonitorNode(ManagedNode):
         if plan is None or expected is None:
             return
         ns = msg_ns(plan.header.stamp)
-        if ns != msg_ns(expected.header.stamp) or ns == self.scored_ns:
+        if ns != msg_ns(expected.header.stamp) or ns == self.scored_ns or ns < self.active_ns:
             return
-        if self.scored_ns is None:
-            dt_s = 1.0 / self.clock.control_rate_hz
+        if self.scored_ns is None or self.scored_ns < self.active_ns:
+            dt_s = min(1.0 / self.clock.control_rate_hz, (ns - self.active_ns) / NS_PER_S)
         else:
             dt_s = min(max(ns - self.scored_ns, 0) / NS_PER_S, self.clock.input_timeout_s)
         self.scored_ns = ns
@@ -152,8 +156,11 @@ class MonitorNode(ManagedNode):
         self.publish(ns, items['plan'], items['expected'], self.step_s)
 
     def resume(self) -> None:
-        """``activate`` in lock-step: score the plan pairs that came while inactive."""
-        if not self.wall:
+        """``activate``: in wall mode, trust counts from now; in lock-step, score the plan
+        pairs that came while inactive."""
+        if self.wall:
+            self.active_ns = now_ns(self)
+        else:
             for ns in list(self.buffer.ready_stamps(['plan', 'expected'])):
                 self.score(ns)
 

@@ -2,7 +2,10 @@
 
 Reads with rosbags (typestore ``ROS2_JAZZY``); no rclpy. Times are seconds since the
 drive's ``/sim/start`` (the bag's ``custom_data`` ``trust_av.drive.start_ns``), on the one
-wall clock every message of the drive is stamped with.
+wall clock every message of the drive is stamped with. The plans, the monitor's trust and
+the odometry are the drive's: from its start to its end (``trust_av.drive.end_ns``; a bag
+without it, to its last message), not what the nodes published before the start or while
+they were being stopped.
 """
 
 from __future__ import annotations
@@ -74,6 +77,7 @@ def read_drive(bag: Path) -> DriveBag:
         raise DriveBagError(f'{bag}: not a drive recording (no trust_av.drive.start_ns in '
                             'custom_data)')
     start = int(meta['trust_av.drive.start_ns'])
+    end = int(meta.get('trust_av.drive.end_ns', 2**63 - 1))
     plans: dict[int, list[float]] = {}
     expected: dict[int, list[float]] = {}
     trust: list[tuple[int, float]] = []
@@ -94,19 +98,20 @@ def read_drive(bag: Path) -> DriveBag:
                 elif topic == '/ego/expected_plan':
                     expected[ns] = [float(p.accelerations[0]) for p in msg.points]
                 elif topic == '/trust_monitor/trust':
-                    trust.append((ns, float(msg.vector.z)))
+                    if ns <= end:
+                        trust.append((ns, float(msg.vector.z)))
                 elif topic == '/driver/rating':
                     ratings.append((ns, float(msg.vector.x)))
                 elif topic == '/driver/questionnaire':
                     questionnaire = [float(v) for v in msg.position]
-                elif ns >= start:
+                elif start <= ns <= end:
                     odometry[topic].append(((ns - start) * NS,
                                             float(msg.pose.pose.position.x),
                                             float(msg.twist.twist.linear.x)))
     except Exception as err:  # rosbags raises several unrelated classes; named below
         raise DriveBagError(f'{bag}: cannot read the drive ({type(err).__name__}: '
                             f'{err})') from err
-    stamps = sorted(s for s in set(plans) & set(expected) if s >= start)
+    stamps = sorted(s for s in set(plans) & set(expected) if start <= s <= end)
     trust_t = np.array([(s - start) * NS for s, _ in trust])
     trust_v = np.array([v for _, v in trust])
     times = np.array([(s - start) * NS for s in stamps])

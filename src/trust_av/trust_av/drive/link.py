@@ -39,6 +39,9 @@ class DriveOutcome:
     ended_by: str = ''
     refused: dict[str, int] = field(default_factory=dict)
     events: list[tuple[float, str]] = field(default_factory=list)
+    losses: tuple[Any, ...] = ()
+    """What the recording lost (:class:`~trust_av.graph.publication_ledger.Lost`; none on a
+    clean drive)."""
 
     def latency_ms(self) -> dict[str, float]:
         """p50/p99/max of the round trip (pedal sample received here -> the page's echo of

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -68,8 +69,7 @@ def run_session(args: SessionOptions) -> int:
             raise ParamsError(f'--port must be in [0, 65535], got {args.port}')
         drive = dataclasses.replace(drive, port=args.port)
     base = load_run_config(args.params_files)
-    rate_hz = base.clock.control_rate_hz
-    configs = {}
+    rate_hz, configs = base.clock.control_rate_hz, {}
     for listed in conditions:      # every condition is checked before anything starts
         configs[listed.name] = load_run_config(args.params_files, {'planner': {
             'alpha': listed.alpha, 'predictor': listed.predictor,
@@ -118,17 +118,8 @@ def run_session(args: SessionOptions) -> int:
             duration = args.duration_s or (drive.practice_duration_s if condition is None
                                            else drive.drive_duration_s)
             duration = min(duration, trace.steps * trace.dt_s)
-            metadata = {'trust_av.participant': args.participant,
-                        'trust_av.condition': name, 'trust_av.drive': str(index),
-                        'trust_av.alpha': f'{config.planner.alpha:g}',
-                        'trust_av.predictor': config.planner.predictor,
-                        'trust_av.perturbation': config.planner.perturbation,
-                        'trust_av.perturbation_seed': str(config.planner.perturbation_seed),
-                        'trust_av.trace': trace_name, 'trust_av.code_version': version,
-                        'trust_av.seed': str(seed)}
-            done = sum(1 for d in session.drives if d.status == 'done' and d.condition != PRACTICE)
-            page_info = {'practice': condition is None, 'number': done + 1,
-                         'of': len(session.order)}
+            metadata = _metadata(args.participant, name, index, config, trace_name, version,
+                                 seed)
             print(f'drive {index} ({name}): waiting for the participant to start', flush=True)
             outcome = run_drive(config, trace_name, trace, bag, server=server, link=link,
                                 follower=follower, metadata=metadata, duration_s=duration,
@@ -137,22 +128,16 @@ def run_session(args: SessionOptions) -> int:
                                 questionnaire=condition is not None,
                                 questionnaire_timeout_s=drive.questionnaire_timeout_s,
                                 rating_period_s=drive.rating_period_s,
-                                on_collision=drive.on_collision, page_info=page_info,
+                                on_collision=drive.on_collision,
+                                page_info=_page_info(session, condition is None),
                                 startup_timeout_s=args.startup_timeout_s)
-            if outcome.driven_s > 0:
-                summary, rows = drive_summary(bag, condition, outcome,
-                                              models if condition is not None else [],
-                                              config.shared.vehicle_length_m, drive.max_lag_s)
-            else:                          # never started: nothing to summarise
-                summary, rows = {'driven_s': 0.0}, []
-            summary['comparison'] = rows
+            summary = _summary(bag, condition, outcome, models if condition is not None
+                               else [], config.shared.vehicle_length_m, drive.max_lag_s)
             record_drive(args.study, session, DriveRecord(
                 index, name, str(bag.relative_to(args.study)), outcome.status, seed, summary),
                 output_files.write_text)
-            print(f'drive {index} ({name}): {outcome.status} after {outcome.driven_s:.1f} s, '
-                  f'{outcome.collisions} collisions, {len(outcome.ratings)} ratings, '
-                  f'{sum(outcome.refused.values())} messages refused, latency p99 '
-                  f'{summary.get("latency_p99_ms", "-")} ms; {bag}', flush=True)
+            print('\n'.join(_drive_lines(f'drive {index} ({name})', outcome, summary, bag)),
+                  flush=True)
             if outcome.status != 'done':
                 status = 'abandoned'
                 print(f'drive {index} ({name}): the participant stopped sending; the session '
@@ -170,3 +155,58 @@ def run_session(args: SessionOptions) -> int:
     print('\n'.join(comparison_text(all_rows) or ['no ratings to compare yet']))
     print(f'summary: {directory / "summary.csv"}; comparison: {directory / "comparison.csv"}')
     return 0
+
+
+def _metadata(participant: str, name: str, index: int, config: Any, trace_name: str,
+              version: str, seed: int) -> dict[str, str]:
+    """The study metadata of one drive (its bag's ``custom_data``)."""
+    return {'trust_av.participant': participant,
+            'trust_av.condition': name, 'trust_av.drive': str(index),
+            'trust_av.alpha': f'{config.planner.alpha:g}',
+            'trust_av.predictor': config.planner.predictor,
+            'trust_av.perturbation': config.planner.perturbation,
+            'trust_av.perturbation_seed': str(config.planner.perturbation_seed),
+            'trust_av.trace': trace_name, 'trust_av.code_version': version,
+            'trust_av.seed': str(seed)}
+
+
+def _page_info(session: Any, practice: bool) -> dict[str, Any]:
+    """What the start screen says: a practice drive, or drive ``number`` ``of``."""
+    done = sum(1 for d in session.drives if d.status == 'done' and d.condition != PRACTICE)
+    return {'practice': practice, 'number': done + 1, 'of': len(session.order)}
+
+
+def _summary(bag: Path, condition: Any, outcome: Any, models: Any, vehicle_length_m: float,
+             max_lag_s: float) -> dict[str, Any]:
+    """The drive's summary (:func:`~trust_av.drive.study.drive_summary`; a drive never
+    started has nothing to summarise), its comparison rows and its recording's losses."""
+    if outcome.driven_s > 0:
+        summary, rows = drive_summary(bag, condition, outcome, models, vehicle_length_m,
+                                      max_lag_s)
+    else:
+        summary, rows = {'driven_s': 0.0}, []
+    summary['comparison'] = rows
+    summary.update(_recording_losses(outcome.losses))
+    return summary
+
+
+def _drive_lines(drive: str, outcome: Any, summary: dict[str, Any], bag: Path) -> list[str]:
+    """What the experimenter is told after a drive (a second line only if the recording
+    lost messages)."""
+    lines = [f'{drive}: {outcome.status} after {outcome.driven_s:.1f} s, '
+             f'{outcome.collisions} collisions, {len(outcome.ratings)} ratings, '
+             f'{sum(outcome.refused.values())} messages refused, latency p99 '
+             f'{summary.get("latency_p99_ms", "-")} ms; {bag}']
+    if summary['recording_lost']:
+        lines.append(f'{drive}: the recording lost {summary["recording_lost"]} messages '
+                     f'({"; ".join(summary["recording_losses"])}); the bag holds the rest and '
+                     'names them in its metadata (trust_av.recording.lost)')
+    return lines
+
+
+def _recording_losses(losses: Sequence[Any]) -> dict[str, Any]:
+    """The drive summary's account of what the recording lost: ``recording_lost`` the
+    messages (0 on a clean drive), ``recording_losses`` which, per publisher
+    (:meth:`~trust_av.graph.publication_ledger.Lost.describe`)."""
+    return {'recording_lost': sum(loss.count for loss in losses),
+            'recording_losses': [loss.describe() for loss in losses]}

@@ -181,23 +181,9 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
         except TrustAvPlannerError as err:
             # The run failed: finish the recording, but a failure to do so must not hide
             # why the run failed (an exception raised in a `finally` would replace it).
-            try:
-                _finish_recording(graph, bag)
-                lost = (missing_messages(bag, trace.steps, namespace)
-                        if isinstance(err, IncompleteRecordingError) else '')
-            except DiskFullError:
-                raise                       # the recorder ran out of disk: that is the cause
-            except TrustAvPlannerError as finishing:
-                raise GraphError(f'{err}; {finishing}{_low_disk(bag)}') from err
-            if lost:
-                raise GraphError(f'{err}; the bag lacks {lost} messages') from err
-            if isinstance(err, StallError):
-                raise GraphError(f'{err}{waited_for(bag, namespace)}') from err
-            if _drop_if_no_step(bag, namespace):
-                raise GraphError(f'{err}; no step was recorded, so no bag was kept') from err
-            low_disk = '' if isinstance(err, DiskFullError) else _low_disk(bag)
-            if low_disk:
-                raise GraphError(f'{err}{low_disk}') from err
+            told = _failure(err, graph, bag, namespace, trace.steps)
+            if told is not None:
+                raise told from err
             raise
         except BaseException:
             _finish_recording(graph, bag)   # a stop: finish the bag, then go on stopping
@@ -206,6 +192,33 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
         _finish_recording(graph, bag)
     return GraphRun(bag=bag, domain_id=domain, steps=trace.steps,
                     wall_s=time.monotonic() - started, startup_s=startup, steps_s=stepped)
+
+
+def _failure(err: TrustAvPlannerError, graph: Graph, bag: Path, namespace: str,
+             steps: int) -> GraphError | None:
+    """After a failed run: the recording finished, and the error that tells why with what
+    the bag lacks, which node a stall waited for, that no step was kept or that the disk is
+    nearly full (None: ``err`` says it all).
+
+    Raises:
+        DiskFullError: the recorder ran out of disk (that is the cause).
+    """
+    try:
+        _finish_recording(graph, bag)
+        lost = (missing_messages(bag, steps, namespace)
+                if isinstance(err, IncompleteRecordingError) else '')
+    except DiskFullError:
+        raise                       # the recorder ran out of disk: that is the cause
+    except TrustAvPlannerError as finishing:
+        return GraphError(f'{err}; {finishing}{_low_disk(bag)}')
+    if lost:
+        return GraphError(f'{err}; the bag lacks {lost} messages')
+    if isinstance(err, StallError):
+        return GraphError(f'{err}{waited_for(bag, namespace)}')
+    if _drop_if_no_step(bag, namespace):
+        return GraphError(f'{err}; no step was recorded, so no bag was kept')
+    low_disk = '' if isinstance(err, DiskFullError) else _low_disk(bag)
+    return GraphError(f'{err}{low_disk}') if low_disk else None
 
 
 def write_record(config: RunConfig, trace: SpeedTrace, graph: Graph) -> dict[str, str]:

@@ -1,0 +1,150 @@
+"""One drive through the node graph with a scripted page (no browser): its clock is the
+participant's, and its recording accounts for every message.
+
+The page is played in this process: the drive's server is a stand-in that keeps the frames
+it is given, and the participant presses Start through the drive's own link
+(:class:`~trust_av.drive.link.DriveLink`) after reading the start screen for
+:data:`READING_S`, far longer than the drive. The drive's recording loop is stalled once for
+:data:`STALL_S` with room for 3 samples per topic (its subscriptions' depth, patched in this
+process; the nodes keep theirs), so it falls behind and loses messages. One drive serves
+every test here (a node-graph run is the expensive part)."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, cast
+
+import pytest
+from support.rosbag2_rules import check_bag_directory
+
+pytestmark = pytest.mark.wall_clock
+
+READING_S = 4.0
+"""How long the participant reads the start screen before pressing Start."""
+DRIVE_S = 3.0
+STALL_S = 2.0
+"""The recording loop's one stall, once the drive runs (3 samples at 10 Hz are 0.3 s)."""
+
+
+class _Page:
+    """The drive's server as the drive sees it: the frames sent to the page."""
+
+    def __init__(self) -> None:
+        self.frames: list[dict[str, Any]] = []
+
+    def send(self, frame: dict[str, Any]) -> None:
+        self.frames.append(frame)
+
+
+@dataclass
+class Driven:
+    bag: Path
+    outcome: Any
+    config: Any
+    started_after_s: float
+
+
+@pytest.fixture(scope='module')
+def driven(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Driven]:
+    import trust_av_common.ros.qos as qos
+    from human_driver_sim.follower_plant import FollowerConfig
+    from preceding_traffic.sources import load_trace
+    from trust_av.drive import page_hooks
+    from trust_av.drive.gate import READY, Gate
+    from trust_av.drive.graph_run import run_drive
+    from trust_av.drive.link import DriveLink
+    from trust_av.drive.server import DriveServer
+    from trust_av.system.config import load_run_config
+
+    work = tmp_path_factory.mktemp('drive')
+    patch = pytest.MonkeyPatch()
+    patch.setattr(qos, 'HISTORY_DEPTH', 3)
+    stalls: list[float] = []
+
+    def stall(_self: Any, _run: Any, _now_ns: int) -> None:
+        if not stalls:
+            stalls.append(time.monotonic())
+            time.sleep(STALL_S)          # the recording loop takes nothing meanwhile
+
+    patch.setattr(page_hooks.DrivePage, 'every_second', stall, raising=False)
+    config = load_run_config()
+    trace = load_trace('us06', config.planner.dt_s, config.trace)
+    follower = FollowerConfig()
+    rate_hz = config.clock.control_rate_hz
+    link = DriveLink(Gate(rate_hz, follower.accel_min_mps2, follower.accel_max_mps2))
+    shown: list[float] = []
+
+    def participant() -> None:
+        while link.greet.get('phase') != READY:     # the start screen is shown
+            time.sleep(0.01)
+        shown.append(time.monotonic())
+        time.sleep(READING_S)
+        link.on_message({'type': 'ready'}, time.time_ns())
+
+    reader = threading.Thread(target=participant, daemon=True)
+    reader.start()
+    bag = work / 'drive_01'
+    try:
+        outcome = run_drive(config, 'us06', trace, bag, server=cast(DriveServer, _Page()),
+                            link=link, follower=follower, metadata={'trust_av.drive': '1'},
+                            duration_s=DRIVE_S, rate_hz=rate_hz, abandon_after_s=60.0,
+                            start_timeout_s=60.0, questionnaire=False,
+                            questionnaire_timeout_s=1.0)
+    finally:
+        patch.undo()
+    assert stalls, 'the recording loop was never stalled'
+    yield Driven(bag, outcome, config, READING_S)
+
+
+def test_a_slow_start_counts_trust_from_the_start_only(driven: Driven) -> None:
+    """The monitor's trust at the drive's end is within its ceiling for the drive's time,
+    delta * t_drive, although the participant read the start screen for longer than the
+    drive (it used to grow from the nodes' start: 8.28 after a 30 s drive whose ceiling
+    is 3.0)."""
+    from trust_av.drive.bag_data import read_drive
+
+    drive = read_drive(driven.bag)
+    outcome = driven.outcome
+    assert outcome.status == 'done' and outcome.driven_s >= DRIVE_S
+    trust = drive.series.monitor_trust
+    finite = trust[trust == trust]
+    assert len(finite) > 0
+    ceiling = driven.config.trust.trust_growth_rate * outcome.driven_s
+    assert float(finite[-1]) <= ceiling + 1e-9, (float(finite[-1]), ceiling)
+    assert float(finite.max()) <= ceiling + 1e-9
+    meta = drive.metadata
+    start, end = int(meta['trust_av.drive.start_ns']), int(meta['trust_av.drive.end_ns'])
+    assert (end - start) / 1e9 == pytest.approx(outcome.driven_s, abs=0.1)
+    assert drive.series.times_s[0] >= 0.0 and drive.series.times_s[-1] <= outcome.driven_s
+
+
+def test_a_drive_whose_recorder_fell_behind_names_what_it_lost(driven: Driven) -> None:
+    """The drive keeps its bag and names every publisher that lost messages, in its outcome
+    and in the bag's metadata; for the traffic node (it publishes only after the start),
+    recorded + lost = what it reports publishing."""
+    from rosbags.highlevel import AnyReader
+
+    from trust_av.drive.bag_data import custom_data
+
+    outcome, bag = driven.outcome, driven.bag
+    assert check_bag_directory(bag) == []
+    losses = {(loss.topic, loss.node): loss.count for loss in outcome.losses}
+    assert losses, 'a stalled recording lost nothing?'
+    meta = custom_data(bag)
+    assert int(meta['trust_av.recording.lost']) == sum(losses.values())
+    for loss in outcome.losses:
+        key = f'trust_av.recording.lost.{loss.topic.strip("/").replace("/", ".")}.{loss.node}'
+        assert meta[key].startswith(f'{loss.count} (publications {loss.first}'), key
+    with AnyReader([bag]) as reader:
+        recorded = {c.topic: c.msgcount for c in reader.connections}
+    reports = {path.name.split('.')[0]: json.loads(path.read_text())['published']
+               for path in bag.with_name(bag.name + '.logs').glob('*.jitter.json')}
+    topic = '/preceding_vehicle/odom'
+    assert losses.get((topic, 'preceding_traffic'), 0) > 0, losses   # 2 s at 10 Hz > 3
+    assert recorded[topic] + losses[(topic, 'preceding_traffic')] == \
+        reports['preceding_traffic'][topic]
