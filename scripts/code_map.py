@@ -89,7 +89,10 @@ LAYERS: dict[str, dict[str, Layer]] = {
 }
 
 
-MODULE_LAYERS: dict[str, Layer] = {}
+MODULE_LAYERS: dict[str, Layer] = {
+    'trust_av.errors': Layer(0, True, "the application's exception class, which every "
+                                      'folder of trust_av raises'),
+}
 """Single modules declared apart from their folder's layer."""
 
 
@@ -135,19 +138,26 @@ def render(src: Path = SRC) -> str:
     for package in PACKAGES:
         lines.append(f'### `{package}`')
         lines.append('')
-        folders = sorted(LAYERS[package].items(), key=lambda item: (item[1].rank, item[0]))
-        for folder, layer in folders:
-            where = f'{package}/{folder}/' if folder else f'{package}/ (top level)'
-            kind = 'pure' if layer.pure else 'rclpy'
-            lines.append(f'**`{where}`**: {layer.what}. Layer {layer.rank}, {kind}.')
+        places: list[tuple[str, Layer, list[str]]] = []
+        for folder, declared in LAYERS[package].items():
+            where = f'`{package}/{folder}/`' if folder else f'`{package}/ (top level)`'
+            names = [name for name, path in files.items()
+                     if name.split('.')[0] == package and name not in MODULE_LAYERS
+                     and folder_of(name, path) == folder
+                     and not (path.name == '__init__.py' and not folder)]
+            places.append((where, declared, names))
+        for name, declared in MODULE_LAYERS.items():
+            if name.split('.')[0] == package and name in files:
+                where = files[name].relative_to(src / package).as_posix()
+                places.append((f'`{where}` (one module, declared apart)', declared, [name]))
+        for where, declared, names in sorted(places, key=lambda p: (p[1].rank, p[0])):
+            kind = 'pure' if declared.pure else 'rclpy'
+            lines.append(f'**{where}**: {declared.what}. Layer {declared.rank}, {kind}.')
             lines.append('')
             lines.append('| module | what it holds |')
             lines.append('| --- | --- |')
-            for name, path in files.items():
-                if not name.startswith(f'{package}.') and name != package:
-                    continue
-                if folder_of(name, path) != folder or (path.name == '__init__.py' and not folder):
-                    continue
+            for name in names:
+                path = files[name]
                 shown = path.relative_to(src / package).as_posix()
                 lines.append(f'| `{shown}` | {summary(path).replace("|", "/")} |')
             lines.append('')
