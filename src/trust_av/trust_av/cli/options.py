@@ -17,6 +17,7 @@ from types import TracebackType
 from tqdm import tqdm
 
 from preceding_traffic.traces import SHIPPED_TRACES, SpeedTrace
+from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av.system.config import DEFAULT_PARAMS_FILE, RunConfig
 from trust_av.system.metrics import Metrics
@@ -24,7 +25,6 @@ from trust_av_common import registry
 from trust_av_common.output_files import cannot_write, link_refused, odd_path
 from trust_av_common.params import field_spec
 from trust_av_common.wall_clock import WallClockConfig
-from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
 from trust_monitor.model_interface import trust_ceiling
 
@@ -118,26 +118,26 @@ def output_file(path: Path, option: str = '--out') -> Path:
     """Check, before any work, that ``path`` can be written as a file.
 
     Raises:
-        TrustAvPlannerError: ``path`` is odd (a NUL or newline in it, ``.``), a symbolic
+        TrustAvAppError: ``path`` is odd (a NUL or newline in it, ``.``), a symbolic
             link (:func:`~trust_av_common.output_files.link_refused`), a directory, or
             its nearest existing ancestor is not a writable directory.
     """
     odd = odd_path(path)
     if odd is not None:
-        raise TrustAvPlannerError(f'{option} {str(path)!r}: {odd}')
+        raise TrustAvAppError(f'{option} {str(path)!r}: {odd}')
     refused = link_refused(path)
     if refused is not None:
-        raise TrustAvPlannerError(f'{option} {path}: {refused}')
+        raise TrustAvAppError(f'{option} {path}: {refused}')
     if path.is_dir():
-        raise TrustAvPlannerError(f'{path}: is a directory; {option} needs a file name')
+        raise TrustAvAppError(f'{path}: is a directory; {option} needs a file name')
     ancestor = path.parent
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
-        raise TrustAvPlannerError(f'{path}: {ancestor} is not a directory')
+        raise TrustAvAppError(f'{path}: {ancestor} is not a directory')
     problem = cannot_write(path, ancestor)
     if problem is not None:
-        raise TrustAvPlannerError(f'{path}: {problem}')
+        raise TrustAvAppError(f'{path}: {problem}')
     return path
 
 

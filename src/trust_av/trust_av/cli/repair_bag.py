@@ -8,7 +8,7 @@ import dataclasses
 from pathlib import Path
 
 from trust_av.cli.typed_options import command
-from trust_av_planner.errors import TrustAvPlannerError
+from trust_av.errors import TrustAvAppError
 
 __all__: list[str] = []
 
@@ -26,16 +26,16 @@ def run(args: RepairBagOptions) -> int:
 
     raw = args.path
     if raw == '' or '\x00' in raw:
-        raise TrustAvPlannerError(f'{raw!r}: names no bag directory or .mcap file')
+        raise TrustAvAppError(f'{raw!r}: names no bag directory or .mcap file')
     path = Path(raw)
     if path.name in ('', '.', '..'):    # `repair-bag .` inside the bag directory
         path = path.resolve()
         if path.name == '':
-            raise TrustAvPlannerError(f'{raw}: the root directory is not a bag directory')
+            raise TrustAvAppError(f'{raw}: the root directory is not a bag directory')
     if not path.exists():
-        raise TrustAvPlannerError(f'{path}: no such bag directory or .mcap file')
+        raise TrustAvAppError(f'{path}: no such bag directory or .mcap file')
     if not (path.is_dir() or path.is_file()):       # a FIFO or a device: reading would block
-        raise TrustAvPlannerError(f'{path}: not a bag directory or a regular .mcap file')
+        raise TrustAvAppError(f'{path}: not a bag directory or a regular .mcap file')
     kept = repair(path)
     target = path if path.is_dir() else path.with_suffix('')
     print(f'{target}: repaired, {kept}; the unfinished recording was replaced once the '

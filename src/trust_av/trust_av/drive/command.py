@@ -11,8 +11,8 @@ from pathlib import Path
 
 from trust_av.cli.options import add_params_file_option, positive_seconds
 from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.errors import TrustAvAppError
 from trust_av.system.config import DEFAULT_PARAMS_FILE
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__: list[str] = []
 
@@ -43,12 +43,12 @@ def run(args: DriveOptions) -> int:
         if args.withdraw:
             return _withdraw(args)
     except SessionError as err:
-        raise TrustAvPlannerError(str(err)) from err
+        raise TrustAvAppError(str(err)) from err
     from trust_av.drive.run_session import run_session
     try:
         return run_session(args)
     except SessionError as err:
-        raise TrustAvPlannerError(str(err)) from err
+        raise TrustAvAppError(str(err)) from err
 
 
 def _withdraw(args: DriveOptions) -> int:
@@ -63,8 +63,8 @@ def _withdraw(args: DriveOptions) -> int:
     files = sum(len(names) for _, _, names in os.walk(directory))
     if not args.yes:
         if sys.stdin is None or not sys.stdin.isatty():
-            raise TrustAvPlannerError(f'--withdraw would delete {directory} ({files} files); '
-                                      'no terminal to confirm on, pass --yes')
+            raise TrustAvAppError(f'--withdraw would delete {directory} ({files} files); '
+                                  'no terminal to confirm on, pass --yes')
         try:
             answer = input(f'delete {directory} and its {files} files for good? [y/N] ')
         except EOFError:
