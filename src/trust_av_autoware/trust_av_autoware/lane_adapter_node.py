@@ -25,6 +25,7 @@ from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
 
 from trust_av_autoware.adapter_status import AdapterStatus
+from trust_av_autoware.lane import Centreline
 from trust_av_autoware.lane_inputs import (
     InputError,
     LaneAdapterConfig,
@@ -48,7 +49,6 @@ from trust_av_autoware.ros.qos import (
     LEAD_TOPIC,
     OBJECTS_TOPIC,
 )
-from trust_av_common.lane import Centreline
 from trust_av_common.ros.diagnostics import NodeDiagnostics
 from trust_av_common.ros.parameters import declare_config
 from trust_av_common.ros.qos import wall_qos
