@@ -55,6 +55,8 @@ from trust_av_common.ros.qos import wall_qos
 from trust_av_common.ros.spin import spin_node
 from trust_av_common.wall_clock import WallClockConfig
 
+__all__ = ['main']
+
 LEAD_CHILD_FRAME = 'preceding_vehicle'
 
 

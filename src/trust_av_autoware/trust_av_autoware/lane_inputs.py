@@ -23,13 +23,18 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from trust_av_autoware.lane import Centreline, LaneError, OnLane, lead_on_lane
+from trust_av_common.errors import TrustAvError
 from trust_av_common.params import MAX_VEHICLE_LENGTH_M, check_fields, param
+
+__all__ = ['BOUNDING_BOX', 'CYLINDER', 'POLYGON', 'InputError', 'LaneAdapterConfig', 'LaneState',
+           'Lead', 'Planar', 'Seen', 'centreline_from_points', 'check_frame', 'ego_on_lane',
+           'finite', 'half_length_m', 'lead_from_objects', 'seen', 'yaw']
 
 BOUNDING_BOX, CYLINDER, POLYGON = 0, 1, 2
 """``autoware_perception_msgs/msg/Shape`` types (its constants)."""
 
 
-class InputError(ValueError):
+class InputError(TrustAvError):
     """A message that cannot be used: one line naming the bad thing; ``kind`` is the counter
     it is dropped under (``frame``, ``not_finite``, ``off_lane``, ...)."""
 
