@@ -19,13 +19,13 @@ is **deterministic**; a **bad parameter** is refused in one line naming it; a tr
 docs/reference/components.md says each in full.
 
 It drives the system a component plugs into (the configuration, the planner, the loop, the
-CLI), imported when called: importing the contract loads none of them.
+CLI), imported inside the functions that use them (so the type checker and the layer test see
+every one): importing the contract loads none of them.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import itertools
 import math
 import subprocess
@@ -83,10 +83,6 @@ class ContractReport:
 
 class _DoesNotApplyError(Exception):
     """A rule that does not apply to this component (the message says why)."""
-
-
-def _module(name: str) -> Any:
-    return importlib.import_module(name)
 
 
 def check_component(group: str, name: str, *, graph: bool = False, steps: int = 15,
@@ -182,7 +178,7 @@ def _declaration(group: str, name: str) -> None:
             _require(field.name.startswith(f'{name}_'),
                      f'{field.name} does not start with {name}_ (one flat namespace)')
     cls()  # the defaults are valid
-    config = _module('trust_av.system.config')
+    from trust_av.system import config
     node = NODE_OF.get(group)
     own = (config.node_components(node) if node is not None else config.all_components())
     taken = {f.name for c in own if c is not cls for f in dataclasses.fields(c)}
@@ -196,8 +192,8 @@ def _run_config(group: str, name: str) -> Any:
     chooser = {registry.PREDICTORS: ('planner', 'predictor'),
                registry.DRIVERS: ('human_driver', 'driver_model')}.get(
                    group, ('/**', 'trust_model'))
-    return _module('trust_av.system.config').load_run_config(
-        (), {chooser[0]: {chooser[1]: name}})
+    from trust_av.system.config import load_run_config
+    return load_run_config((), {chooser[0]: {chooser[1]: name}})
 
 
 def _outputs(group: str, name: str, steps: int, seed: int) -> list[Any]:
@@ -208,15 +204,15 @@ def _outputs(group: str, name: str, steps: int, seed: int) -> list[Any]:
 
 
 def _predictions(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
-    planner = _module('trust_av_planner.planner')
-    observation = _module('trust_av_planner.predictors').Observation
+    from trust_av_planner import planner
+    from trust_av_planner.predictors import Observation
     config = _run_config(registry.PREDICTORS, name)
     predictor = planner.CheckedPredictor(planner.make_predictor(
         config.planner, config.predictor_params), config.planner)
     out = [predictor.predict()]
     for _ in range(steps):
         gap, speed = rng.uniform(8.0, 40.0), rng.uniform(2.0, 25.0)
-        predictor.observe(observation(
+        predictor.observe(Observation(
             gap_m=gap, relative_speed_mps=rng.uniform(-3.0, 3.0),
             time_headway_s=min(gap / speed, 10.0), av_accel_mps2=rng.uniform(-3.0, 3.0)))
         out.append(predictor.predict())
@@ -224,7 +220,7 @@ def _predictions(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
 
 
 def _follower_plans(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
-    followers = _module('human_driver_sim.followers')
+    from human_driver_sim import followers
     config = _run_config(registry.DRIVERS, name)
     follower = followers.make_follower(config.driver, followers.FollowerConfig(name),
                                        config.driver_params)   # checks every step
@@ -238,19 +234,21 @@ def _follower_plans(name: str, steps: int, rng: np.random.Generator) -> list[Any
 
 
 def _trust_config(name: str) -> Any:
-    return _module('trust_monitor.paper_trust').TrustConfig(**TRUST_BASE, trust_model=name)
+    from trust_monitor.paper_trust import TrustConfig
+    return TrustConfig(**TRUST_BASE, trust_model=name)
 
 
 def _model(name: str) -> Any:
-    return _module('trust_monitor.model_interface').make_trust_model(_trust_config(name))
+    from trust_monitor.model_interface import make_trust_model
+    return make_trust_model(_trust_config(name))
 
 
 def _trust_readings(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
-    interface = _module('trust_monitor.model_interface')
-    estimator_type = _module('trust_monitor.paper_trust').TrustEstimator
+    from trust_monitor import model_interface as interface
+    from trust_monitor.paper_trust import TrustEstimator
     config = _trust_config(name)
     model = interface.make_trust_model(config)
-    estimator = estimator_type(config, model)   # checks trust and variance every step
+    estimator = TrustEstimator(config, model)   # checks trust and variance every step
     bound = interface.CheckedBound(model, name)
     out = []
     for _ in range(steps):
@@ -346,7 +344,7 @@ def _states(m: Any) -> list[Any]:
 
 
 def _monotone(name: str) -> None:
-    propagate = _module('trust_monitor.model_interface').propagate
+    from trust_monitor.model_interface import propagate
     m = _model(name)
     state = m.step(m.initial_state(), 0.05, 1.0)
     grid = [i / 200 for i in range(201)]
@@ -357,7 +355,7 @@ def _monotone(name: str) -> None:
 
 
 def _bound(name: str) -> None:
-    interface = _module('trust_monitor.model_interface')
+    from trust_monitor import model_interface as interface
     m = _model(name)
     binding = 0
     for (steps, dt_s), state in itertools.product(((3, 1.0), (30, 0.1), (1, 1.0)), _states(m)):
@@ -380,7 +378,7 @@ def _bound(name: str) -> None:
 
 
 def _closed_form(name: str) -> None:
-    interface = _module('trust_monitor.model_interface')
+    from trust_monitor import model_interface as interface
     m = _model(name)
     if m.closed_form_bound is None:
         raise _DoesNotApplyError('none given')
@@ -417,11 +415,15 @@ def _compare_graph(group: str, name: str, folder: Path) -> None:
         chooser = 'predictor' if group == registry.PREDICTORS else 'driver_model'
         params.write_text(f'/**/{NODE_OF[group]}:\n  ros__parameters:\n'
                           f'    {chooser}: {name}\n')
-    config = _module('trust_av.system.config').load_run_config([params])
-    sources = _module('preceding_traffic.sources')
-    trace = _module('preceding_traffic.traces').truncate(
-        sources.load_trace(str(trace_csv), config.planner.dt_s, config.trace), GRAPH_STEPS)
-    reference = _module('trust_av.system.closed_loop').simulate(config, trace).records
+    from preceding_traffic.sources import load_trace
+    from preceding_traffic.traces import truncate
+    from trust_av.graph.bag_records import records_from_bag
+    from trust_av.system.closed_loop import simulate
+    from trust_av.system.config import load_run_config
+
+    config = load_run_config([params])
+    trace = truncate(load_trace(str(trace_csv), config.planner.dt_s, config.trace), GRAPH_STEPS)
+    reference = simulate(config, trace).records
     if group == registry.TRUST_MODELS:
         binding = sum(1 for r in reference if 0.0 < r.explicability_max < 1.0)
         _require(binding >= 2, f'the trust constraint bound at {binding} step(s) of '
@@ -434,7 +436,7 @@ def _compare_graph(group: str, name: str, folder: Path) -> None:
                           stdin=subprocess.DEVNULL, check=False)
     _require(proc.returncode == 0, f'trust-av run exited with {proc.returncode}: '
                                    f'{" ".join(proc.stderr.split()[-40:])}')
-    recorded = _module('trust_av.graph.bag_records').records_from_bag(bag)
+    recorded = records_from_bag(bag)
     _require(len(recorded) == len(reference),
              f'the graph recorded {len(recorded)} steps, the loop made {len(reference)}')
     for g, r in zip(recorded, reference, strict=True):
