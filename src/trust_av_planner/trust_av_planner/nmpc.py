@@ -382,18 +382,6 @@ class TrustAwareNmpc:
         return lower, upper, (f' (gap bounds relaxed to what the vehicle can reach: '
                               f'{min(low):.3f} to {max(high):.3f} m)')
 
-    def bound_violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
-                        lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray,
-                        explicability_max: float, reachable: bool = False) -> float:
-        """Largest violation of any bound of eq. (12) by ``plan`` (0 when all hold); with
-        ``reachable``, of the gap bounds the vehicle can reach instead of d_min and d_max."""
-        lower, upper = self.bounds(explicability_max)
-        if reachable:
-            lower, upper, _ = self._reachable_gap_bounds(lower, upper, gap_m, speed_mps,
-                                                         lead_speeds_mps)
-        return self._violation(plan, gap_m, speed_mps, lead_speeds_mps, expected_mps2, lower,
-                               upper)
-
     def _violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
                    lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray, lower: np.ndarray,
                    upper: np.ndarray) -> float:

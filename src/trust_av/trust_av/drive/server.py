@@ -316,13 +316,6 @@ class DriveServer:
         except ConnectionClosed:
             self.clients.discard(client)
 
-    def close_clients(self) -> None:
-        """Drop every page connection (what a lost network does; tests)."""
-        loop = self._loop
-        if loop is not None:
-            for client in list(self.clients):
-                asyncio.run_coroutine_threadsafe(client.close(), loop)
-
     def stop(self) -> None:
         """Stop serving and join the thread."""
         loop, server = self._loop, self._server
