@@ -20,7 +20,7 @@ docs/reference/components.md says each in full.
 
 It drives the system a component plugs into (the configuration, the planner, the loop, the
 CLI), imported inside the functions that use them (so the type checker and the layer test see
-every one): importing the contract loads none of them.
+every one): importing the contract loads only the modules that declare the three groups.
 """
 
 from __future__ import annotations
@@ -39,9 +39,12 @@ from typing import Any
 
 import numpy as np
 
+from human_driver_sim.followers import DRIVERS
 from trust_av_common import registry
 from trust_av_common.errors import TrustAvError, one_line
 from trust_av_common.params import PARAM_METADATA_KEY, ParamsError, ParamSpec, build_config
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import TRUST_MODELS
 
 __all__ = ['ContractError', 'ContractReport', 'check_component']
 
@@ -50,7 +53,7 @@ GRAPH_STEPS = 30
 RECORD_TOLERANCE = 1e-7
 """How far a value the graph recorded may be from the in-process one (the two paths agree
 to ~1e-16 per step; an iterative solve turns that into up to ~1e-8)."""
-NODE_OF = {registry.PREDICTORS: 'planner', registry.DRIVERS: 'human_driver'}
+NODE_OF = {PREDICTORS: 'planner', DRIVERS: 'human_driver'}
 """The node section that runs a group (a trust model's parameters are shared: ``/**``)."""
 TRUST_BASE = {'epsilon_mps2': 6.0, 'trust_growth_rate': 0.1, 'performance_threshold': 0.8,
               'trust_initial': 0.0}
@@ -115,7 +118,7 @@ def check_component(group: str, name: str, *, graph: bool = False, steps: int = 
         ('deterministic', lambda: _deterministic(group, name, steps, seed)),
         ('bad parameters', lambda: _bad_parameters(group, name)),
     ]
-    if group == registry.TRUST_MODELS:
+    if group == TRUST_MODELS:
         rules += [('time consistency', lambda: _time_consistent(name)),
                   ('pure step', lambda: _pure_step(name)),
                   ('monotone', lambda: _monotone(name)),
@@ -174,7 +177,7 @@ def _declaration(group: str, name: str) -> None:
         _require(isinstance(field.metadata.get(PARAM_METADATA_KEY), ParamSpec),
                  f'{field.name} is not declared with param()')
         _require(field.default is not dataclasses.MISSING, f'{field.name} has no default')
-        if group == registry.TRUST_MODELS:
+        if group == TRUST_MODELS:
             _require(field.name.startswith(f'{name}_'),
                      f'{field.name} does not start with {name}_ (one flat namespace)')
     cls()  # the defaults are valid
@@ -189,8 +192,8 @@ def _declaration(group: str, name: str) -> None:
 
 def _run_config(group: str, name: str) -> Any:
     """The shipped run configuration with ``name`` chosen."""
-    chooser = {registry.PREDICTORS: ('planner', 'predictor'),
-               registry.DRIVERS: ('human_driver', 'driver_model')}.get(
+    chooser = {PREDICTORS: ('planner', 'predictor'),
+               DRIVERS: ('human_driver', 'driver_model')}.get(
                    group, ('/**', 'trust_model'))
     from trust_av.system.config import load_run_config
     return load_run_config((), {chooser[0]: {chooser[1]: name}})
@@ -199,14 +202,14 @@ def _run_config(group: str, name: str) -> Any:
 def _outputs(group: str, name: str, steps: int, seed: int) -> list[Any]:
     """A fresh instance's outputs over ``steps`` seeded inputs, each through the loop's own
     checks (a bad one raises :class:`~trust_av_common.component_checks.ComponentError`)."""
-    feed = {registry.PREDICTORS: _predictions, registry.DRIVERS: _follower_plans}
+    feed = {PREDICTORS: _predictions, DRIVERS: _follower_plans}
     return feed.get(group, _trust_readings)(name, steps, np.random.default_rng(seed))
 
 
 def _predictions(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
     from trust_av_planner import planner
     from trust_av_planner.predictors import Observation
-    config = _run_config(registry.PREDICTORS, name)
+    config = _run_config(PREDICTORS, name)
     predictor = planner.CheckedPredictor(planner.make_predictor(
         config.planner, config.predictor_params), config.planner)
     out = [predictor.predict()]
@@ -221,7 +224,7 @@ def _predictions(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
 
 def _follower_plans(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
     from human_driver_sim import followers
-    config = _run_config(registry.DRIVERS, name)
+    config = _run_config(DRIVERS, name)
     follower = followers.make_follower(config.driver, followers.FollowerConfig(name),
                                        config.driver_params)   # checks every step
     out = []
@@ -406,13 +409,13 @@ def _compare_graph(group: str, name: str, folder: Path) -> None:
     trace_csv.write_text('time_s,speed_mps\n' + ''.join(
         f'{t},{12.0 + 6.0 * math.sin(t / 5.0):.3f}\n' for t in range(GRAPH_STEPS + 1)))
     params = folder / 'component.yaml'
-    if group == registry.TRUST_MODELS:   # T_min above its initial trust: the bound binds
+    if group == TRUST_MODELS:   # T_min above its initial trust: the bound binds
         model = _run_config(group, name).trust_model()
         trust_min = model.trust(model.initial_state()) + 0.1
         params.write_text(f'/**:\n  ros__parameters:\n    trust_model: {name}\n'
                           f'/**/planner:\n  ros__parameters:\n    trust_min: {trust_min!r}\n')
     else:
-        chooser = 'predictor' if group == registry.PREDICTORS else 'driver_model'
+        chooser = 'predictor' if group == PREDICTORS else 'driver_model'
         params.write_text(f'/**/{NODE_OF[group]}:\n  ros__parameters:\n'
                           f'    {chooser}: {name}\n')
     from preceding_traffic.sources import load_trace
@@ -424,7 +427,7 @@ def _compare_graph(group: str, name: str, folder: Path) -> None:
     config = load_run_config([params])
     trace = truncate(load_trace(str(trace_csv), config.planner.dt_s, config.trace), GRAPH_STEPS)
     reference = simulate(config, trace).records
-    if group == registry.TRUST_MODELS:
+    if group == TRUST_MODELS:
         binding = sum(1 for r in reference if 0.0 < r.explicability_max < 1.0)
         _require(binding >= 2, f'the trust constraint bound at {binding} step(s) of '
                                f'{GRAPH_STEPS}: the comparison would check little')

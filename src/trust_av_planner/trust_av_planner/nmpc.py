@@ -44,6 +44,7 @@ from trust_av_common.params import (
 from trust_av_common.solver import nmpc_solver_options, solve
 from trust_av_planner import perturbations
 from trust_av_planner.plan_result import PlanResult
+from trust_av_planner.predictors import PREDICTORS
 from trust_monitor.model_interface import CheckedBound, TrustModel, make_trust_model
 from trust_monitor.paper_trust import TrustConfig, explicability
 
@@ -153,7 +154,7 @@ class PlannerConfig:
         require(self.speed_min_mps < self.speed_max_mps,
                 f'need 0 <= speed_min_mps < speed_max_mps, got {self.speed_min_mps}, '
                 f'{self.speed_max_mps}')
-        predictors = registry.names(registry.PREDICTORS)
+        predictors = registry.names(PREDICTORS)
         require(self.predictor in predictors,
                 registry.not_one_of('predictor', self.predictor, predictors))
         require(self.stale_decel_mps2 >= self.accel_min_mps2, 'stale_decel_mps2 must be >= '

@@ -36,10 +36,11 @@ from trust_av_common.output_files import cannot_write, link_refused, odd_path, r
 from trust_av_common.param_layers import layer_files, layered_params, read_layers
 from trust_av_common.params import build_config, check_known
 from trust_av_common.rcl_values import ParsedParams
-from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.registry import names
 from trust_av_common.wall_clock import WallClockConfig
 from trust_monitor.errors import TrustMonitorError
 from trust_monitor.model_interface import (
+    TRUST_MODELS,
     TrustModel,
     make_trust_model,
     trust_model_config_types,

@@ -46,7 +46,8 @@ from trust_av.drive.trust_fit_pooling import (
 from trust_av.errors import TrustAvAppError
 from trust_av.system.config import load_run_config
 from trust_av_common import output_files
-from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS
 from trust_monitor.trust_fit import (
     PARSIMONY_SE,
     Fit,

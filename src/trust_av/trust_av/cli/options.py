@@ -16,6 +16,7 @@ from types import TracebackType
 
 from tqdm import tqdm
 
+from human_driver_sim.followers import DRIVERS
 from preceding_traffic.traces import SHIPPED_TRACES, SpeedTrace
 from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
@@ -26,6 +27,7 @@ from trust_av_common.output_files import cannot_write, link_refused, odd_path
 from trust_av_common.params import field_spec
 from trust_av_common.wall_clock import WallClockConfig
 from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
+from trust_av_planner.predictors import PREDICTORS
 from trust_monitor.model_interface import trust_ceiling
 
 __all__ = ['EXIT_COLLISION', 'MAX_DRIVERS', 'MAX_ITERATIONS', 'MAX_SEED', 'MAX_WORKERS',
@@ -159,11 +161,11 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help='its message type (default: preceding_traffic.bag_message_type)')
     parser.add_argument('--alpha', type=alpha_value, default=None,
                         help="explicability weight in [0, 1] (default: the params file's)")
-    parser.add_argument('--predictor', choices=registry.names(registry.PREDICTORS),
+    parser.add_argument('--predictor', choices=registry.names(PREDICTORS),
                         default=None,
                         help='registered estimator of the plan the human expects (default: '
                              "the params file's predictor)")
-    parser.add_argument('--driver-model', choices=registry.names(registry.DRIVERS),
+    parser.add_argument('--driver-model', choices=registry.names(DRIVERS),
                         default=None,
                         help="registered human follower model (default: the params file's "
                              'human_driver.driver_model)')

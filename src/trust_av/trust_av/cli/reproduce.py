@@ -14,6 +14,7 @@ from typing import Any
 
 import yaml
 
+from human_driver_sim.followers import DRIVERS
 from human_driver_sim.population import CAUTIOUS_FIT_FILE, DRIVER_FIT_FILE
 from preceding_traffic.sources import load_trace
 from trust_av.cli.options import (
@@ -46,7 +47,8 @@ from trust_av.system.config import (
     load_run_config,
 )
 from trust_av_common import output_files, registry
-from trust_monitor.model_interface import paper_bound_holds, trust_ceiling
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import TRUST_MODELS, paper_bound_holds, trust_ceiling
 
 __all__ = ['lead_preview_layer', 'truncation_note', 'unsafe_cases']
 
@@ -336,9 +338,9 @@ def run(args: ReproduceOptions) -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``reproduce`` to ``trust-av``."""
-    predictors = ', '.join(registry.names(registry.PREDICTORS))
-    drivers = ', '.join(registry.names(registry.DRIVERS))
-    trust_models = ', '.join(registry.names(registry.TRUST_MODELS)) or 'none yet'
+    predictors = ', '.join(registry.names(PREDICTORS))
+    drivers = ', '.join(registry.names(DRIVERS))
+    trust_models = ', '.join(registry.names(TRUST_MODELS)) or 'none yet'
     parser = subparsers.add_parser(
         'reproduce', help="a study of any registered parts; the paper's Tables II-IV and "
                           'Figures 2-3',

@@ -27,6 +27,7 @@ from trust_av_common import output_files, registry
 from trust_av_common.wall_clock import format_summary
 from trust_av_planner.planner import needs_follower_state
 from trust_av_planner.planner_params import PlannerTopics, check_control_rate
+from trust_av_planner.predictors import PREDICTORS
 
 if TYPE_CHECKING:
     from trust_av.graph.shadow import ShadowRun
@@ -149,7 +150,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="control rate, Hz (default: the params file's control_rate_hz)")
     parser.add_argument('--alpha', type=alpha_value, default=None,
                         help="explicability weight in [0, 1] (default: the params file's)")
-    parser.add_argument('--predictor', choices=registry.names(registry.PREDICTORS),
+    parser.add_argument('--predictor', choices=registry.names(PREDICTORS),
                         default=None,
                         help="registered plan estimator (default: the params file's)")
     parser.add_argument('--whole-graph', action='store_true',

@@ -34,8 +34,8 @@ from trust_av.study.plots import pyplot, save_figure
 from trust_av.system.config import load_run_config
 from trust_av.system.metrics import StepRecord
 from trust_av_common.errors import with_suggestions
-from trust_av_common.registry import TRUST_MODELS, names
-from trust_monitor.model_interface import common_trust, make_trust_model
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS, common_trust, make_trust_model
 from trust_monitor.paper_trust import explicability
 
 __all__ = ['compare_runs', 'read_run', 'trust_per_model']

@@ -23,6 +23,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from human_driver_sim.followers import DRIVERS
 from trust_av.errors import TrustAvAppError
 from trust_av.study import sweep
 from trust_av.study.sweep import Case
@@ -30,6 +31,8 @@ from trust_av.study.trace_reports import write_trace_reports
 from trust_av.system.config import DEFAULT_PARAMS_FILE, all_components
 from trust_av_common import output_files, registry
 from trust_av_common.errors import with_suggestions
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import TRUST_MODELS
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -48,9 +51,9 @@ def check_axes(predictors: Iterable[str], driver_models: Iterable[str],
     Raises:
         TrustAvAppError: one line naming the bad value and what is registered.
     """
-    for what, group, values in (('predictor', registry.PREDICTORS, predictors),
-                                ('driver model', registry.DRIVERS, driver_models),
-                                ('trust model', registry.TRUST_MODELS, trust_models)):
+    for what, group, values in (('predictor', PREDICTORS, predictors),
+                                ('driver model', DRIVERS, driver_models),
+                                ('trust model', TRUST_MODELS, trust_models)):
         known = registry.names(group)
         unknown = [v for v in values if v and v not in known]
         if unknown:
