@@ -159,9 +159,10 @@ def test_a_new_test_module_is_named_with_the_line_to_add(tmp_path: Path) -> None
     (tmp_path / 'tests' / 'core' / 'test_brand_new.py').write_text(
         'from trust_monitor.paper_trust import TrustConfig\nimport trust_av_common.params\n'
         'from trust_monitor.estimate import main\n')
+    planted = 'tests/core/' + 'test_brand_new.py'   # (split: not a cited test file)
     assert ownership_problems(tmp_path / 'tests')[0] == (
-        "tests/core/test_brand_new.py is in no package's setup.cfg testpaths: add the line "
-        '"    ../../tests/core/test_brand_new.py" to src/trust_monitor/setup.cfg (the package '
+        f"{planted} is in no package's setup.cfg testpaths: add the line "
+        f'"    ../../{planted}" to src/trust_monitor/setup.cfg (the package '
         'it imports most), or name test_brand_new in REPOSITORY_TESTS '
         '(tests/core/test_packages.py) if it tests the repository as a whole')
 
