@@ -22,8 +22,13 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from trust_av_common.registry import TRUST_MODELS, names
-from trust_monitor.model_interface import explicability_bound, make_trust_model, numeric_bound
+from trust_av_common.registry import names
+from trust_monitor.model_interface import (
+    TRUST_MODELS,
+    explicability_bound,
+    make_trust_model,
+    numeric_bound,
+)
 from trust_monitor.paper_trust import TrustConfig
 
 GRIDS = {'1 Hz': (3, 1.0), '10 Hz': (30, 0.1)}

@@ -55,7 +55,8 @@ from trust_av.study.trust_recovery import (
     make_participant,
 )
 from trust_av.system.config import RunConfig, load_run_config
-from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS
 from trust_monitor.trust_fit import (
     PARSIMONY_SE,
     ModelSpec,

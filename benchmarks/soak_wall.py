@@ -68,6 +68,7 @@ import numpy as np
 from soak_wall_checks import STOP_EDGE, Sequences, growth_checks, read_bag, topic_checks
 
 from trust_av_common import registry
+from trust_av_planner.predictors import PREDICTORS
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -284,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--max-gap-s', type=float, default=1.0)
     parser.add_argument('--rate-hz', type=float, default=10.0)
     parser.add_argument('--predictor', default='ca',
-                        choices=registry.names(registry.PREDICTORS),
+                        choices=registry.names(PREDICTORS),
                         help='registered plan estimator (default: %(default)s, the shipped '
                              'default)')
     parser.add_argument('--out', type=Path, default=HERE / 'soak_wall_results.json')

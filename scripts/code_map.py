@@ -1,9 +1,11 @@
 """The code map (docs/reference/code-map.md), generated from the tree: every package, every
 folder with its declared layer, every module with the first sentence of its docstring.
 
-``LAYERS`` is the one declaration of the layers: tests/core/test_layout.py checks every module's
-imports against it and fails on a folder it does not list, and tests/core/test_code_map.py checks
-that the page is what this script writes.
+The packages are found in the tree (every ``src/NAME/NAME/``, :func:`tree_packages`), never
+listed. ``LAYERS`` and ``ALLOWED_PACKAGES`` are the one declaration of the layers:
+tests/core/test_layout.py checks every module's imports against them and fails on a package or
+folder they do not declare, and tests/core/test_code_map.py checks that the page is what this
+script writes.
 
 Usage: python scripts/code_map.py [--check]   (writes the page; --check only compares)
 """
@@ -34,9 +36,6 @@ class Layer(NamedTuple):
     what: str
 
 
-PACKAGES = ('trust_av_common', 'trust_monitor', 'preceding_traffic', 'human_driver_sim',
-            'trust_av_planner', 'trust_av', 'trust_av_autoware')
-"""The packages, each importing only those before it that ALLOWED_PACKAGES names."""
 ALLOWED_PACKAGES = {
     'trust_av_common': {'trust_av_common'},
     'trust_monitor': {'trust_av_common', 'trust_monitor'},
@@ -44,9 +43,11 @@ ALLOWED_PACKAGES = {
     'human_driver_sim': {'trust_av_common', 'human_driver_sim'},
     'trust_av_planner': {'trust_av_common', 'trust_monitor', 'preceding_traffic',
                          'trust_av_planner'},
-    'trust_av': set(PACKAGES) - {'trust_av_autoware'},
+    'trust_av': {'trust_av_common', 'trust_monitor', 'preceding_traffic', 'human_driver_sim',
+                 'trust_av_planner', 'trust_av'},
     'trust_av_autoware': {'trust_av_common', 'trust_av_autoware'},
 }
+"""Each package and the packages it may import (itself included)."""
 LAYERS: dict[str, dict[str, Layer]] = {
     # '' is the package's own top-level modules; every other key is a folder of the package
     'trust_av_common': {
@@ -76,10 +77,11 @@ LAYERS: dict[str, dict[str, Layer]] = {
         'graph': Layer(2, False, 'the node graph: orchestrator, recorder, bags, shadow runs'),
         'study': Layer(4, False, 'studies, tables, figures, GRU training, two runs side by '
                                  'side (graph and drive recordings: beside drive)'),
-        'cli': Layer(4, False, 'the trust-av command line'),
+        'cli': Layer(5, False, 'the trust-av command line: one module per command, above '
+                               'the features it wires'),
         'drive': Layer(4, False, 'the driver-in-the-loop drive: web server and page, study '
-                                 'design and sessions, ratings, its graph run and command'),
-        '': Layer(5, True, 'the plug-in contract'),
+                                 'design and sessions, ratings, its graph run'),
+        '': Layer(6, True, 'the plug-in contract'),
     },
     'trust_av_autoware': {
         '': Layer(0, True, 'Autoware adapters: lane geometry, lead choice, control command '
@@ -89,7 +91,13 @@ LAYERS: dict[str, dict[str, Layer]] = {
 }
 
 
-MODULE_LAYERS: dict[str, Layer] = {}
+MODULE_LAYERS: dict[str, Layer] = {
+    'trust_av.errors': Layer(0, True, "the application's exception class, which every "
+                                      'folder of trust_av raises'),
+    'trust_av.graph.bag_records': Layer(2, True, 'a recorded run read back as step records '
+                                                 '(rosbags, no rclpy), which the contract '
+                                                 'compares'),
+}
 """Single modules declared apart from their folder's layer."""
 
 
@@ -100,10 +108,19 @@ def layer(name: str, path: Path) -> Layer | None:
     return LAYERS.get(name.split('.')[0], {}).get(folder_of(name, path))
 
 
+def tree_packages(src: Path = SRC) -> tuple[str, ...]:
+    """Every package of the tree, found, never listed: each folder ``src/NAME/`` that holds
+    the Python package ``NAME/`` (a ROS 2 package, one setup.py each), in the order
+    :data:`LAYERS` declares them, an undeclared one last (the layer test fails on it)."""
+    found = {p.name for p in src.iterdir() if (p / p.name / '__init__.py').is_file()}
+    order = list(LAYERS)
+    return tuple(sorted(found, key=lambda n: (order.index(n) if n in order else len(order), n)))
+
+
 def module_files(src: Path = SRC) -> dict[str, Path]:
-    """Every module of the packages by dotted name."""
+    """Every module of the tree's packages by dotted name."""
     files = {}
-    for package in PACKAGES:
+    for package in tree_packages(src):
         root = src / package
         for path in sorted((root / package).rglob('*.py')):
             parts = list(path.relative_to(root).with_suffix('').parts)
@@ -132,22 +149,29 @@ def render(src: Path = SRC) -> str:
     """The generated part of the page."""
     files = module_files(src)
     lines = [BEGIN, '']
-    for package in PACKAGES:
+    for package in tree_packages(src):
         lines.append(f'### `{package}`')
         lines.append('')
-        folders = sorted(LAYERS[package].items(), key=lambda item: (item[1].rank, item[0]))
-        for folder, layer in folders:
-            where = f'{package}/{folder}/' if folder else f'{package}/ (top level)'
-            kind = 'pure' if layer.pure else 'rclpy'
-            lines.append(f'**`{where}`**: {layer.what}. Layer {layer.rank}, {kind}.')
+        places: list[tuple[str, Layer, list[str]]] = []
+        for folder, declared in LAYERS.get(package, {}).items():
+            where = f'`{package}/{folder}/`' if folder else f'`{package}/ (top level)`'
+            names = [name for name, path in files.items()
+                     if name.split('.')[0] == package and name not in MODULE_LAYERS
+                     and folder_of(name, path) == folder
+                     and not (path.name == '__init__.py' and not folder)]
+            places.append((where, declared, names))
+        for name, declared in MODULE_LAYERS.items():
+            if name.split('.')[0] == package and name in files:
+                where = files[name].relative_to(src / package).as_posix()
+                places.append((f'`{where}` (one module, declared apart)', declared, [name]))
+        for where, declared, names in sorted(places, key=lambda p: (p[1].rank, p[0])):
+            kind = 'pure' if declared.pure else 'rclpy'
+            lines.append(f'**{where}**: {declared.what}. Layer {declared.rank}, {kind}.')
             lines.append('')
             lines.append('| module | what it holds |')
             lines.append('| --- | --- |')
-            for name, path in files.items():
-                if not name.startswith(f'{package}.') and name != package:
-                    continue
-                if folder_of(name, path) != folder or (path.name == '__init__.py' and not folder):
-                    continue
+            for name in names:
+                path = files[name]
                 shown = path.relative_to(src / package).as_posix()
                 lines.append(f'| `{shown}` | {summary(path).replace("|", "/")} |')
             lines.append('')

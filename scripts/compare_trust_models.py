@@ -28,7 +28,8 @@ from typing import Any
 from preceding_traffic.traces import truncate
 from trust_av.system.closed_loop import control_trace, simulate
 from trust_av.system.config import load_run_config
-from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS
 
 
 def run(files: list[Path], trace: str, predictor: str, alpha: float, model: str | None,

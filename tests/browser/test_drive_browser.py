@@ -38,7 +38,8 @@ from trust_av.drive.bag_data import (
 from trust_av.drive.gate import reason_key
 from trust_av.drive.sessions import balanced_latin_square_row
 from trust_av.drive.trust_rating import questionnaire_score
-from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS
 
 sys.path.insert(0, str(REPO / 'benchmarks'))
 from synthetic_participant import CHROMIUM, Participant, drive_once

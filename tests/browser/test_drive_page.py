@@ -175,7 +175,7 @@ def test_rating_prompt_does_not_stop_the_input_and_reconnection_resumes(
     while message['type'] != 'rating':
         message = inbox.get(timeout=10)
     assert message['value'] == 83 and message['id'] == 7
-    server.close_clients()                                # the connection is lost
+    close_clients(server)                                 # the connection is lost
     page.wait_for_function("document.getElementById('status').textContent"
                            ".includes('connection lost')", timeout=5000)
     lost = page.evaluate('window.drive.seq')
@@ -256,3 +256,13 @@ def test_the_drivers_eye_view_is_drawn_by_the_vendored_library_from_the_page_s_o
     assert f'{server.url}vendor/konva/konva.min.js' in requests
     assert requests and all(url.split('/')[2] == origin for url in requests), requests
     tab.close()
+
+
+def close_clients(server: DriveServer) -> None:
+    """Drop every page connection, as a lost network does."""
+    import asyncio
+
+    loop = server._loop
+    assert loop is not None
+    for client in list(server.clients):
+        asyncio.run_coroutine_threadsafe(client.close(), loop)

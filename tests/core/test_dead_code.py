@@ -1,11 +1,14 @@
 """No production function only tests use: every public top-level function of the packages
-in src/ is referenced from src/ itself, from an entry point (setup.py: a console script, a
-plug-in factory) or from the docs' API reference (docs/reference/api.md), or is in
+in src/, and every public method of a class that derives only from the project's classes (a
+method of a library's subclass may be a hook the library calls: an importlib finder's, a
+lifecycle node's), is referenced from src/ itself, from an entry point (setup.py: a console
+script, a plug-in factory) or from the docs' API reference (docs/reference/api.md), or is in
 :data:`ALLOWED` with the reason it stays. A function only tests or benchmarks call belongs
 in tests/support/ or benchmarks/; one nothing calls is deleted.
 
 A small AST scan (vulture's idea, without the dependency): a function counts as referenced
-when its name appears as a name or an attribute anywhere in src/ outside its own ``def``
+when its name appears as a name, an attribute or a ``getattr`` string anywhere in src/
+outside its own ``def``
 (so a name shared with a method used elsewhere counts, and nothing is reported wrongly)."""
 
 from __future__ import annotations
@@ -77,6 +80,10 @@ def unreferenced(src: Path, api_page: Path | None = None) -> list[str]:
                 used.add(node.attr)
             elif isinstance(node, ast.alias):
                 used.add((node.asname or node.name).rpartition('.')[2])
+            elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                    and node.func.id in ('getattr', 'hasattr') and len(node.args) >= 2
+                    and isinstance(node.args[1], ast.Constant)):
+                used.add(str(node.args[1].value))  # getattr(model, 'trust_range', ...)
     for setup in sorted(src.glob('*/setup.py')):
         used |= set(ENTRY_POINT.findall(setup.read_text()))
     documented: set[str] = set()
@@ -85,14 +92,29 @@ def unreferenced(src: Path, api_page: Path | None = None) -> list[str]:
             if target in trees:
                 documented |= {f'{target}.{name}' for name in declared(trees[target])}
             documented.add(target)
+    ours = {node.name for tree in trees.values() for node in ast.walk(tree)
+            if isinstance(node, ast.ClassDef)}
     found = []
     for name, tree in trees.items():
-        for node in tree.body:
-            if (isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
-                    and not node.name.startswith('_') and node.name not in used
+        for node, where in _functions(tree, ours):
+            if (not node.name.startswith('_') and node.name not in used
                     and f'{name}.{node.name}' not in documented):
-                found.append(f'{name}.{node.name}')
+                found.append(f'{name}.{where}{node.name}')
     return sorted(found)
+
+
+def _functions(tree: ast.Module, ours: set[str]) -> list[tuple[ast.AST, str]]:
+    """The top-level functions of a module, and the methods of its top-level classes that
+    derive only from classes defined in src/ (or from none), each with its class's prefix."""
+    found: list[tuple[ast.AST, str]] = []
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            found.append((node, ''))
+        elif isinstance(node, ast.ClassDef) and all(
+                isinstance(base, ast.Name) and base.id in ours for base in node.bases):
+            found += [(item, f'{node.name}.') for item in node.body
+                      if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    return found
 
 
 def test_every_public_function_in_src_has_a_caller_in_src_or_is_allowed() -> None:
@@ -121,14 +143,21 @@ def test_the_scan_finds_a_planted_unused_function(tmp_path: Path) -> None:
                     'def main() -> None:\n    pass\n\n\n'
                     'def shown() -> None:\n    pass\n'),
         'user.py': 'from pkg.core import used\n\nVALUE = used()\n',
+        'shapes.py': ('class Base:\n    def area(self) -> float:\n        return 0.0\n\n\n'
+                      'class Square(Base):\n    def only_tests_measure_me(self) -> float:\n'
+                      '        return 1.0\n\n    def __len__(self) -> int:\n        return 4\n'
+                      '\n\nclass Hook(dict):\n    def a_library_calls_me(self) -> None:\n'
+                      '        pass\n\n\nAREA = Square().area()\n'),
         'other.py': ("__all__ = ['whole']\n\n\ndef whole() -> None:\n    pass\n\n\n"
                      'def hidden() -> None:\n    pass\n'),
     }, setup="entry_points={'console_scripts': ['tool = pkg.core:main']}\n")
     page = tmp_path / 'api.md'
     page.write_text('::: pkg.core.shown\n\n::: pkg.other\n')
-    assert unreferenced(src, page) == ['pkg.core.only_tests_call_me', 'pkg.other.hidden']
+    assert unreferenced(src, page) == ['pkg.core.only_tests_call_me', 'pkg.other.hidden',
+                                       'pkg.shapes.Square.only_tests_measure_me']
     assert unreferenced(src) == ['pkg.core.only_tests_call_me', 'pkg.core.shown',
-                                 'pkg.other.hidden', 'pkg.other.whole']
+                                 'pkg.other.hidden', 'pkg.other.whole',
+                                 'pkg.shapes.Square.only_tests_measure_me']
 
 
 @pytest.mark.parametrize('name', sorted(ALLOWED))

@@ -49,7 +49,8 @@ from trust_av.drive.trust_rating import (
 from trust_av.drive.withdrawal import withdraw
 from trust_av.system.config import DEFAULT_PARAMS_FILE
 from trust_av_common.params import ParamsError
-from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS
 from trust_monitor.paper_trust import TrustConfig, TrustEstimator
 
 CONFIG = FollowerConfig(input_timeout_s=0.5, coast_s=1.0, fallback_brake_mps2=-2.0)

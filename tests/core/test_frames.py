@@ -195,7 +195,7 @@ def test_centreline_projection_gives_distance_along_and_signed_offset() -> None:
     the velocity along the lane is the component along the leg."""
     import math
 
-    from trust_av_common.lane import Centreline, LaneError
+    from trust_av_autoware.lane import Centreline, LaneError
 
     lane = Centreline([(1000.0, 2000.0), (1100.0, 2000.0), (1100.0, 2050.0)])
     assert lane.length_m == 150.0
@@ -221,7 +221,7 @@ def test_centreline_projection_gives_distance_along_and_signed_offset() -> None:
 def test_lead_is_the_nearest_object_ahead_on_the_lane() -> None:
     """Behind the AV, beside the lane (more than half a lane width off) or farther ahead:
     not the lead; none qualifying: None."""
-    from trust_av_common.lane import LaneError, OnLane, lead_on_lane
+    from trust_av_autoware.lane import LaneError, OnLane, lead_on_lane
 
     objects = [OnLane(40.0, 0.2, 0.0),    # behind the AV at 50 m
                OnLane(70.0, 3.5, 0.0),    # next lane

@@ -15,9 +15,9 @@ from human_driver_sim.population import (
     sample_population,
 )
 from trust_av.cli.main import main
+from trust_av.errors import TrustAvAppError
 from trust_av.study.population import population_cases
 from trust_av.study.sweep import Case
-from trust_av_planner.errors import TrustAvPlannerError
 
 PER_PAIR = np.array([[1.0, 0.01, 0.05, 0.001], [1.0, 0.02, 0.06, 0.002]])
 
@@ -68,5 +68,5 @@ def test_population_cases_use_per_driver_fits(tmp_path: Path) -> None:
     assert set(first) == set(PER_DRIVER[0])
     assert first == sample_driver_params(PER_DRIVER, 3, seed=1)[0]
     fit.write_text(yaml.safe_dump({'per_driver': {'d0': {'weight_acceleration': 1.0}}}))
-    with pytest.raises(TrustAvPlannerError, match=r"per_driver\['d0'\] must hold"):
+    with pytest.raises(TrustAvAppError, match=r"per_driver\['d0'\] must hold"):
         population_cases([Case('us06', 'ca', 0.5)], 3, 1, fit)

@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 from support.closed_loop import closed_loop, shipped_trace, with_alpha
+from support.nmpc_bounds import bound_violation
 from support.paths import REPO
 
 from trust_av_planner.nmpc import TrustAwareNmpc
@@ -35,8 +36,8 @@ def test_matches_independent_ipopt_and_respects_bounds(run_config, alpha) -> Non
         if not result.success:
             continue
         solved += 1
-        assert nmpc.bound_violation(result.plan_mps2, gap, speed, lead, expected,
-                                    result.explicability_max) <= 1e-6
+        assert bound_violation(nmpc, result.plan_mps2, gap, speed, lead, expected,
+                               result.explicability_max) <= 1e-6
         ref = reference.step(gap, speed, lead, expected, result.explicability_max)
         np.testing.assert_allclose(result.plan_mps2, ref, atol=1e-4)
     assert solved >= 30

@@ -25,13 +25,12 @@ from pathlib import Path
 
 import pytest
 from catkin_pkg.package import parse_package
-from support.paths import REPO
+from support.paths import REPO, tree_packages
 
 from trust_av_common.topics import TOPICS
 
 SRC = REPO / 'src'
-PACKAGES = ('trust_av_common', 'trust_monitor', 'preceding_traffic', 'human_driver_sim',
-            'trust_av_planner', 'trust_av', 'trust_av_autoware')
+PACKAGES = tree_packages()
 ROSDEP_KEYS = {
     'numpy': 'python3-numpy',
     'yaml': 'python3-yaml',
@@ -147,21 +146,64 @@ benchmarks), which no single package's ``colcon test`` runs."""
 def test_each_test_module_is_one_package_s_or_the_repository_s() -> None:
     """``colcon test`` runs pytest in each package's directory; its setup.cfg points pytest at
     that package's modules of tests/ (``testpaths``). Every module is in exactly one list,
-    or is one of the repository's own (:data:`REPOSITORY_TESTS`)."""
+    or is one of the repository's own (:data:`REPOSITORY_TESTS`); a new test module missing
+    from both is named with the line to add and the package it imports most."""
+    problems = ownership_problems(SRC.parent / 'tests')
+    assert problems == [], '\n'.join(problems)
+
+
+def test_a_new_test_module_is_named_with_the_line_to_add(tmp_path: Path) -> None:
+    """Not vacuous: a test module in a tier folder and in no list is named, with the
+    setup.cfg line and the package it imports most."""
+    (tmp_path / 'tests' / 'core').mkdir(parents=True)
+    (tmp_path / 'tests' / 'core' / 'test_brand_new.py').write_text(
+        'from trust_monitor.paper_trust import TrustConfig\nimport trust_av_common.params\n'
+        'from trust_monitor.estimate import main\n')
+    planted = 'tests/core/' + 'test_brand_new.py'   # (split: not a cited test file)
+    assert ownership_problems(tmp_path / 'tests')[0] == (
+        f"{planted} is in no package's setup.cfg testpaths: add the line "
+        f'"    ../../{planted}" to src/trust_monitor/setup.cfg (the package '
+        'it imports most), or name test_brand_new in REPOSITORY_TESTS '
+        '(tests/core/test_packages.py) if it tests the repository as a whole')
+
+
+def ownership_problems(tests: Path) -> list[str]:
+    """Each test module under ``tests`` that no package's ``testpaths`` or
+    :data:`REPOSITORY_TESTS` names (or two name), one line each saying what to do."""
     import configparser
+    from collections import Counter
 
     owners: dict[str, list[str]] = {}
+    problems = []
     for package in PACKAGES:
         config = configparser.ConfigParser()
         config.read(SRC / package / 'setup.cfg')
-        paths = config['tool:pytest']['testpaths'].split()
-        for path in paths:
+        for path in config['tool:pytest']['testpaths'].split():
             module = (SRC / package / path).resolve()
-            assert module.is_file(), f'{package}/setup.cfg: {path} does not exist'
+            if not module.is_file():
+                problems.append(f'src/{package}/setup.cfg: testpaths names {path}, which does '
+                                'not exist: remove the line')
             owners.setdefault(module.stem, []).append(package)
-    modules = {path.stem for path in (SRC.parent / 'tests').rglob('test_*.py')}
-    assert {m: o for m, o in owners.items() if len(o) > 1} == {}
-    assert modules - set(owners) == REPOSITORY_TESTS
+    for path in sorted(tests.rglob('test_*.py')):
+        module, where = path.stem, path.relative_to(tests.parent)
+        if len(owners.get(module, [])) > 1:
+            problems.append(f'{where} is in the testpaths of {" and ".join(owners[module])}: '
+                            'keep it in one')
+        elif module not in owners and module not in REPOSITORY_TESTS:
+            imported = Counter(name.split('.')[0] for node in ast.walk(ast.parse(
+                path.read_text(), str(path))) for name in (
+                [a.name for a in node.names] if isinstance(node, ast.Import) else
+                [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+                if name.split('.')[0] in PACKAGES)
+            most = imported.most_common(1)[0][0] if imported else 'PACKAGE'
+            problems.append(f"{where} is in no package's setup.cfg testpaths: add the line "
+                            f'"    ../../{where}" to src/{most}/setup.cfg (the package it '
+                            f'imports most), or name {module} in REPOSITORY_TESTS '
+                            '(tests/core/test_packages.py) if it tests the repository as a whole')
+    known = {path.stem for path in tests.rglob('test_*.py')}
+    problems += [f'REPOSITORY_TESTS names {m}, which is no test module: remove it'
+                 for m in sorted(REPOSITORY_TESTS - known)]
+    return problems
 
 
 @pytest.mark.parametrize('package', PACKAGES)

@@ -1,6 +1,7 @@
-"""Each module of the six packages declares its public API (``__all__``), every declared
-name exists, and the docs' API reference (docs/reference/api.md, rendered with
-mkdocstrings' ``public`` filter, which follows ``__all__``) shows only declared names."""
+"""Each module of every package of the tree (``src/NAME/NAME/``, found, never listed) declares
+its public API (``__all__``), every declared name exists, the docs' API reference
+(docs/reference/api.md, rendered with mkdocstrings' ``public`` filter, which follows
+``__all__``) shows only declared names, and every exception class derives from the one base."""
 
 from __future__ import annotations
 
@@ -10,10 +11,9 @@ import re
 from pathlib import Path
 
 import pytest
-from support.paths import REPO
+from support.paths import REPO, tree_packages
 
-PACKAGES = ('trust_av_common', 'trust_monitor', 'preceding_traffic', 'human_driver_sim',
-            'trust_av_planner', 'trust_av')
+PACKAGES = tree_packages()
 
 
 def declared(path: Path) -> list[str] | None:
@@ -27,10 +27,11 @@ def declared(path: Path) -> list[str] | None:
     return None
 
 
-def modules() -> dict[str, Path]:
+def modules(src: Path = REPO / 'src') -> dict[str, Path]:
+    """Every module of every package of the tree under ``src``, by dotted name."""
     found = {}
-    for package in PACKAGES:
-        root = REPO / 'src' / package
+    for package in tree_packages(src):
+        root = src / package
         for path in sorted((root / package).rglob('*.py')):
             parts = list(path.relative_to(root).with_suffix('').parts)
             if parts[-1] == '__init__':
@@ -39,23 +40,27 @@ def modules() -> dict[str, Path]:
     return found
 
 
+def undeclared(found: dict[str, Path]) -> list[str]:
+    """The modules that declare no ``__all__`` (``__main__`` needs none)."""
+    return sorted(name for name, path in found.items()
+                  if declared(path) is None and not name.endswith('__main__'))
+
+
 def test_every_module_declares_its_public_api() -> None:
-    missing = sorted(name for name, path in modules().items()
-                     if declared(path) is None and not name.endswith('__main__'))
-    assert missing == []
+    assert undeclared(modules()) == []
 
 
 @pytest.mark.parametrize('package', PACKAGES)
 def test_every_declared_name_exists(package: str) -> None:
     for name, path in modules().items():
-        if not name.startswith(package) or name.endswith('__main__'):
+        if name.split('.')[0] != package or name.endswith('__main__'):
             continue
         public = declared(path) or []
         assert public == sorted(set(public), key=public.index), f'{name}: a name twice'
         tree = ast.parse(path.read_text())
         defined = {t.id for node in ast.walk(tree) if isinstance(node, (ast.Assign,
-                   ast.AnnAssign)) for t in (node.targets if isinstance(node, ast.Assign)
-                   else [node.target]) if isinstance(t, ast.Name)}
+                   ast.AnnAssign)) for target in (node.targets if isinstance(node, ast.Assign)
+                   else [node.target]) for t in ast.walk(target) if isinstance(t, ast.Name)}
         defined |= {node.name for node in tree.body
                     if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))}
         defined |= {(a.asname or a.name).split('.')[0] for node in tree.body
@@ -89,19 +94,44 @@ NOT_ERRORS = {
 def test_every_project_exception_derives_from_the_one_base() -> None:
     """So that ``trust-av`` catches one class (TrustAvError) and prints one line; a stop
     (KeyboardInterrupt: Ctrl-C, SIGTERM) is not an error."""
-    from trust_av_common.errors import TrustAvError
+    found = exception_classes(modules())
+    assert len(found) > 30
+    assert astray(found) == []
 
-    found = {}
-    for name in modules():
+
+def exception_classes(found: dict[str, Path]) -> dict[str, type]:
+    """Every exception class the modules define (imported: ``class X(Base)`` as Python sees
+    it), by qualified name."""
+    classes = {}
+    for name in found:
         if name.endswith('__main__'):
             continue
         module = importlib.import_module(name)
         for value in vars(module).values():
             if (isinstance(value, type) and issubclass(value, BaseException)
                     and value.__module__ == name):
-                found[f'{name}.{value.__qualname__}'] = value
-    assert len(found) > 30
-    astray = sorted(qualified for qualified, cls in found.items()
-                    if not issubclass(cls, (TrustAvError, KeyboardInterrupt))
-                    and qualified not in NOT_ERRORS)
-    assert astray == []
+                classes[f'{name}.{value.__qualname__}'] = value
+    return classes
+
+
+def astray(classes: dict[str, type]) -> list[str]:
+    """The exception classes that derive from neither the one base nor a stop."""
+    from trust_av_common.errors import TrustAvError
+
+    return sorted(qualified for qualified, cls in classes.items()
+                  if not issubclass(cls, (TrustAvError, KeyboardInterrupt))
+                  and qualified not in NOT_ERRORS)
+
+
+def test_a_new_package_is_checked_without_an_edit_here(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Not vacuous, and not a list: a package planted in a tree (``src/NAME/NAME/``) is
+    found, and its module without ``__all__`` and its ``ValueError`` subclass are named."""
+    root = tmp_path / 'src' / 'planted_package'
+    (root / 'planted_package').mkdir(parents=True)
+    (root / 'planted_package' / '__init__.py').write_text('__all__: list[str] = []\n')
+    (root / 'planted_package' / 'oops.py').write_text('class Oops(ValueError):\n    pass\n')
+    monkeypatch.syspath_prepend(str(root))
+    found = modules(tmp_path / 'src')
+    assert undeclared(found) == ['planted_package.oops']
+    assert astray(exception_classes(found)) == ['planted_package.oops.Oops']

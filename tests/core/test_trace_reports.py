@@ -16,7 +16,8 @@ from support.study import InlineExecutor
 from trust_av.study import sweep, trace_reports
 from trust_av.study.sweep import Case
 from trust_av.system.config import DEFAULT_PARAMS_FILE
-from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS
 
 MODELS = ('paper', 'beta_bernoulli')
 

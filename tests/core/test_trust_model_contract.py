@@ -23,10 +23,15 @@ import pytest
 from trust_av.contract import check_component
 from trust_av_common import registry
 from trust_av_common.params import ParamsError, build_config
-from trust_monitor.model_interface import TrustModel, make_trust_model, trust_model_component
+from trust_monitor.model_interface import (
+    TRUST_MODELS,
+    TrustModel,
+    make_trust_model,
+    trust_model_component,
+)
 from trust_monitor.paper_trust import TrustConfig
 
-NAMES = registry.names(registry.TRUST_MODELS)
+NAMES = registry.names(TRUST_MODELS)
 BASE = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,
                    trust_initial=0.0)
 
@@ -46,7 +51,7 @@ def test_contract(name: str) -> None:
     (what the numeric bound assumes), a numeric bound that keeps T >= T_min and is the
     largest, the closed form equal to it, parameters named after the model and refused in
     one line when bad."""
-    report = check_component(registry.TRUST_MODELS, name)
+    report = check_component(TRUST_MODELS, name)
     assert {'outputs', 'deterministic', 'time consistency', 'pure step', 'monotone',
             'bound'} <= set(report.passed), report
     if model(name).closed_form_bound is not None:

@@ -203,6 +203,7 @@ def test_bound_benchmark_smoke(tmp_path: Path) -> None:
                           capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr
     results = json.loads(out.read_text())
-    from trust_av_common.registry import TRUST_MODELS, names
+    from trust_av_common.registry import names
+    from trust_monitor.model_interface import TRUST_MODELS
     assert set(results['models']) == set(names(TRUST_MODELS))
     assert results['models']['paper']['1 Hz']['closed_form'] is True

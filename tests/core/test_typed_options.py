@@ -14,6 +14,7 @@ import pytest
 from trust_av.cli import (
     bags,
     compare,
+    drive,
     eval_driver,
     fit_driver,
     fit_trust,
@@ -26,7 +27,6 @@ from trust_av.cli import (
 )
 from trust_av.cli.main import build_parser
 from trust_av.cli.typed_options import RunOptions, options_from
-from trust_av.drive import command as drive
 
 COMMANDS: dict[str, tuple[type, list[str]]] = {
     'simulate': (simulate.SimulateOptions, []),

@@ -10,7 +10,8 @@ from pathlib import Path
 from support.graph import STEPS
 from support.paths import REPO
 
-from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS
 
 SCRIPT = REPO / 'scripts' / 'compare_trust_models.py'
 

@@ -22,10 +22,11 @@ import numpy as np
 import pytest
 from support.broken_plugins import AT_IMPORT, broken, environment, install, installed_here
 
+from human_driver_sim.followers import DRIVERS
 from trust_av.cli.main import main
 from trust_av.contract import ContractError, check_component
 from trust_av.system.closed_loop import simulate
-from trust_av.system.config import load_run_config
+from trust_av.system.config import GROUPS, load_run_config
 from trust_av_common import registry
 from trust_av_common.component_checks import (
     BOUND_TOLERANCE,
@@ -33,6 +34,8 @@ from trust_av_common.component_checks import (
     check_number,
     check_plan,
 )
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import TRUST_MODELS
 
 STEPS = 8
 GOOD = broken.GOOD_STEPS
@@ -48,8 +51,8 @@ SHOWN = {'nan': 'nan is not finite', 'inf': 'inf is not finite', 'nan_short': 's
 AT_BUILD = ('factory_raises', 'factory_type', 'signature', 'at_import')
 """Modes that break before the first step: nothing is written."""
 BROKEN = [(group, name) for group, table in broken.ENTRY_POINTS.items() for name in table] \
-    + [(registry.PREDICTORS, AT_IMPORT)]
-OPTION = {registry.PREDICTORS: '--predictor', registry.DRIVERS: '--driver-model'}
+    + [(PREDICTORS, AT_IMPORT)]
+OPTION = {PREDICTORS: '--predictor', DRIVERS: '--driver-model'}
 
 
 def mode(name: str) -> str:
@@ -59,7 +62,7 @@ def mode(name: str) -> str:
 def shown(group: str, name: str) -> str:
     """What the one line about broken plug-in ``name`` of ``group`` must show."""
     if mode(name) == 'text':   # the wrong type: a list of words, a word
-        return ('(list of <U4) is not an array of real numbers' if group == registry.PREDICTORS
+        return ('(list of <U4) is not an array of real numbers' if group == PREDICTORS
                 else "'high' (str) is not a real number")
     return SHOWN[mode(name)]
 
@@ -94,13 +97,13 @@ def choose(group: str, name: str, folder: Path) -> list[str]:
 
 
 @pytest.mark.parametrize(('group', 'name'),
-                         [(g, n) for g in registry.GROUPS for n in registry.names(g)])
+                         [(g, n) for g in GROUPS for n in registry.names(g)])
 def test_every_registered_component_runs_with_finite_outputs(group: str, name: str,
                                                              trace_csv: Path) -> None:
     """The checks let every registered component through, and what it gave is what ran."""
-    key = {registry.PREDICTORS: ('planner', 'predictor'),
-           registry.DRIVERS: ('human_driver', 'driver_model'),
-           registry.TRUST_MODELS: ('/**', 'trust_model')}[group]
+    key = {PREDICTORS: ('planner', 'predictor'),
+           DRIVERS: ('human_driver', 'driver_model'),
+           TRUST_MODELS: ('/**', 'trust_model')}[group]
     config = load_run_config(overrides={key[0]: {key[1]: name}})
     from preceding_traffic.sources import load_trace
 
@@ -167,8 +170,8 @@ def test_a_broken_plugin_nobody_chose_stops_nothing(site: Path, trace_csv: Path,
     assert proc.stderr.count('\n') == 1 and SHOWN['at_import'] in proc.stderr, proc.stderr
 
 
-GRAPH_CASES = [(registry.PREDICTORS, 'broken_nan', 'planner', 'plan[0] = nan is not finite'),
-               (registry.DRIVERS, 'broken_nan_short', 'human_driver',
+GRAPH_CASES = [(PREDICTORS, 'broken_nan', 'planner', 'plan[0] = nan is not finite'),
+               (DRIVERS, 'broken_nan_short', 'human_driver',
                 'plan_mps2 has shape (1,), expected (3,)')]
 """The issue's two cases through the node graph: a managed node (the planner) and a plain
 one (the driver); the trust monitor is managed like the planner."""
@@ -199,7 +202,7 @@ def test_a_broken_plugin_stops_the_graph_in_one_line(group: str, name: str, node
 
 
 def test_the_checks_take_what_the_interface_allows() -> None:
-    args = {'group': registry.PREDICTORS, 'name': 'x', 'step': 4}
+    args = {'group': PREDICTORS, 'name': 'x', 'step': 4}
     plan = check_plan([1, -3, 3 + BOUND_TOLERANCE / 2], steps=3, low=-3.0, high=3.0, **args)
     assert plan.dtype == float and plan.tolist() == [1.0, -3.0, 3.0 + BOUND_TOLERANCE / 2]
     same = np.zeros(3)

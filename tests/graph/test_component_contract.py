@@ -22,16 +22,18 @@ from typing import Any
 import pytest
 from support.contract import cli, trace_csv
 
+from human_driver_sim.followers import DRIVERS
 from trust_av.contract import check_component
 from trust_av.system.config import load_run_config
 from trust_av_common import registry
 from trust_av_common.errors import TrustAvError
 from trust_av_common.params import PARAM_METADATA_KEY
+from trust_av_planner.predictors import PREDICTORS
 
 __all__ = ['trace_csv']   # the shared fixture, found by pytest by its name
 
-SECTIONS = {registry.PREDICTORS: ('planner', 'predictor', '--predictor'),
-            registry.DRIVERS: ('human_driver', 'driver_model', '--driver-model')}
+SECTIONS = {PREDICTORS: ('planner', 'predictor', '--predictor'),
+            DRIVERS: ('human_driver', 'driver_model', '--driver-model')}
 """Group -> (node section, the parameter that chooses it, its command-line option)."""
 CASES = [(group, name) for group in SECTIONS for name in registry.names(group)]
 IDS = [f'{group.rsplit(".", 1)[-1]}-{name}' for group, name in CASES]
@@ -80,7 +82,7 @@ def test_bad_parameter_is_refused_in_one_line(group: str, name: str, tmp_path: P
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
-@pytest.mark.parametrize('name', registry.names(registry.PREDICTORS))
+@pytest.mark.parametrize('name', registry.names(PREDICTORS))
 def test_the_declared_needs_decide_what_runs_without_the_follower(name: str,
                                                                   tmp_path: Path) -> None:
     """Without the follower's odometry the planner and ``trust-av shadow`` refuse exactly
@@ -88,7 +90,7 @@ def test_the_declared_needs_decide_what_runs_without_the_follower(name: str,
     from trust_av_common.kinematics import VehicleState
     from trust_av_planner.planner import AvPlanner
 
-    needs = registry.FOLLOWER_STATE in registry.get(registry.PREDICTORS, name).needs
+    needs = registry.FOLLOWER_STATE in registry.get(PREDICTORS, name).needs
     config = load_run_config(overrides={'planner': {'predictor': name}})
     planner = AvPlanner(config.planner, config.trust, config.shared.vehicle_length_m,
                         predictor_params=config.predictor_params)

@@ -28,11 +28,11 @@ from support.cli import trust_av
 from support.paths import TESTS
 from support.rosbag2_rules import check_bag_directory
 
+from trust_av.errors import TrustAvAppError
 from trust_av.graph.bag_writer import BagWriter
 from trust_av.study.sweep import check_ray_address
 from trust_av_common.kinematics import VehicleState, advance, integrate
 from trust_av_common.params import PARAM_METADATA_KEY
-from trust_av_planner.errors import TrustAvPlannerError
 
 TINY_TRACE = 'time_s,speed_mps\n0,10\n1,10.5\n2,11\n3,11\n'
 
@@ -72,10 +72,10 @@ def test_every_count_has_a_documented_maximum(tmp_path: Path, argv: list[str], w
 
 def test_an_unreachable_ray_address_is_refused_at_once(tmp_path: Path) -> None:
     """ray.init retried an address nothing listens on for minutes (measured: > 3 min)."""
-    with pytest.raises(TrustAvPlannerError, match=r'127\.0\.0\.1:1: cannot connect within '
+    with pytest.raises(TrustAvAppError, match=r'127\.0\.0\.1:1: cannot connect within '
                                                   r'5 s \(Connection refused\)'):
         check_ray_address('127.0.0.1:1')
-    with pytest.raises(TrustAvPlannerError, match='expected HOST:PORT'):
+    with pytest.raises(TrustAvAppError, match='expected HOST:PORT'):
         check_ray_address('no-port')
     check_ray_address(None)
     check_ray_address('auto')

@@ -168,3 +168,42 @@ print(json.dumps([all(passed), moved]))
     shown = [line for line in proc.stderr.splitlines() if 'MovedPathWarning' in line]
     assert any(line.startswith(str(target)) and 'trust_monitor.common.params moved to '
                'trust_av_common.params' in line for line in shown), proc.stderr
+
+
+def test_python_m_with_every_old_path_runs_its_new_module_or_names_its_place() -> None:
+    """What ``python -m OLD`` finds (runpy: the spec, then its code), for every old path the
+    shims declare: the new module's file as the spec's origin (``sys.argv[0]``: with none,
+    ``rclpy.init`` in a node's ``main`` failed with ``TypeError: bad argument type``) and
+    the new module's code; an old package's ``__main__`` is its new one's; a module that is
+    not in the package's new place is not found, in one line naming that place (it was said
+    to have moved to a module that never existed)."""
+    import warnings
+    from importlib.abc import InspectLoader
+
+    moved = {**trust_monitor.MOVED, **trust_av_planner.MOVED}
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', FutureWarning)   # MovedPathWarning
+        for old, new in moved.items():
+            spec, new_spec = importlib.util.find_spec(old), importlib.util.find_spec(new)
+            assert spec is not None and new_spec is not None, old
+            assert spec.origin == new_spec.origin and spec.origin is not None, old
+            if spec.submodule_search_locations is None:
+                loader, new_loader = spec.loader, new_spec.loader
+                assert isinstance(loader, InspectLoader) and isinstance(new_loader, InspectLoader)
+                assert loader.get_code(old) == new_loader.get_code(new), old
+                continue
+            new_main = importlib.util.find_spec(f'{new}.__main__')
+            if new_main is not None:
+                main = importlib.util.find_spec(f'{old}.__main__')
+                assert main is not None and main.origin == new_main.origin, old
+            with pytest.raises(ModuleNotFoundError, match=f'^No module named .{old}.never_was.'
+                               f': {old} moved to {new}, which has no never_was$'):
+                importlib.util.find_spec(f'{old}.never_was')
+
+
+def test_python_m_with_an_old_path_that_never_was_names_the_new_place() -> None:
+    proc = subprocess.run([sys.executable, '-m', 'trust_av_planner.study.nmpc_reference'],
+                          capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 1 and len(proc.stderr.splitlines()) == 1, proc.stderr
+    assert ("No module named 'trust_av_planner.study.nmpc_reference': trust_av_planner.study "
+            'moved to trust_av.study, which has no nmpc_reference') in proc.stderr

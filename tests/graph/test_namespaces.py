@@ -26,6 +26,7 @@ from support.processes import INTERRUPTED_RUN_STEPS, long_trace, wait_for_steps,
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
+from trust_av.errors import TrustAvAppError
 from trust_av.graph.bag_records import records_from_bag
 from trust_av.graph.domains import check_domain_id, check_namespace, lease_domain
 from trust_av.graph.orchestrator import run_graph, run_graph_records
@@ -36,7 +37,6 @@ from trust_av.system.config import DEFAULT_PARAMS_FILE, RunConfig, load_run_conf
 from trust_av.system.metrics import StepRecord
 from trust_av_common.kinematics import VehicleState
 from trust_av_common.topics import TOPIC, TOPICS, qualified
-from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.planner import AvPlanner
 
 NAMESPACES = ('/car1', '/car2')
@@ -338,14 +338,14 @@ def test_valid_namespaces_are_accepted(namespace: str) -> None:
 
 @pytest.mark.parametrize(('namespace', 'reason'), BAD_NAMESPACES.items())
 def test_bad_namespaces_are_one_line_naming_the_option(namespace: str, reason: str) -> None:
-    with pytest.raises(TrustAvPlannerError, match='^--namespace .*' + re.escape(reason)):
+    with pytest.raises(TrustAvAppError, match='^--namespace .*' + re.escape(reason)):
         check_namespace(namespace, '--namespace')
 
 
 def test_a_namespace_whose_topics_would_be_too_long_is_refused() -> None:
     """rmw's full topic name limit (247) applies to the graph's longest topic too."""
     assert len(qualified('x' * LONGEST_TOPIC, LONGEST_NAMESPACE)) == 247
-    with pytest.raises(TrustAvPlannerError, match="longer than rmw's 247 characters"):
+    with pytest.raises(TrustAvAppError, match="longer than rmw's 247 characters"):
         check_namespace(LONGEST_NAMESPACE + 'a')
 
 
@@ -356,16 +356,16 @@ def test_domain_ids_fast_dds_can_use_are_accepted(domain_id: int) -> None:
 
 @pytest.mark.parametrize('domain_id', [-1, 233, 1000, True, 5.0, '5', None])
 def test_bad_domain_ids_are_refused(domain_id: object) -> None:
-    with pytest.raises(TrustAvPlannerError, match=r'^domain_id .*in 0\.\.232'):
+    with pytest.raises(TrustAvAppError, match=r'^domain_id .*in 0\.\.232'):
         check_domain_id(domain_id)
 
 
 def test_run_graph_checks_before_it_starts_anything(tmp_path: Path) -> None:
     config = load_run_config()
     trace = truncate(load_trace('us06', config.planner.dt_s, config.trace), 5)
-    with pytest.raises(TrustAvPlannerError, match=r"^namespace 'car1': namespace must be abs"):
+    with pytest.raises(TrustAvAppError, match=r"^namespace 'car1': namespace must be abs"):
         run_graph(config, 'us06', trace, tmp_path / 'bag', namespace='car1')
-    with pytest.raises(TrustAvPlannerError, match=r'^domain_id 233: '):
+    with pytest.raises(TrustAvAppError, match=r'^domain_id 233: '):
         run_graph(config, 'us06', trace, tmp_path / 'bag', domain_id=233)
     assert list(tmp_path.iterdir()) == []
 

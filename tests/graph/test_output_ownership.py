@@ -15,6 +15,7 @@ import pytest
 from support.bags import record
 
 from trust_av.cli.main import main
+from trust_av.errors import TrustAvAppError
 from trust_av.graph.bag_writer import BagWriter
 from trust_av.system.outputs import (
     MARKER,
@@ -23,7 +24,6 @@ from trust_av.system.outputs import (
     prepare_outputs,
     replacing_outputs,
 )
-from trust_av_planner.errors import TrustAvPlannerError
 
 
 def snapshot(directory: Path) -> dict[str, bytes]:
@@ -53,7 +53,7 @@ def test_a_directory_that_looks_like_a_bag_is_refused(tmp_path: Path,
     for name, text in content.items():
         (project / name).write_text(text)
     before = snapshot(tmp_path)
-    with pytest.raises(TrustAvPlannerError, match=f'proj: not written by trust-av .no {MARKER}'):
+    with pytest.raises(TrustAvAppError, match=f'proj: not written by trust-av .no {MARKER}'):
         prepare_outputs(project, overwrite=True)
     assert main(['run', '--bag', str(project), '--overwrite', '--max-steps', '3',
                  '--no-progress']) == 2
@@ -65,7 +65,7 @@ def test_a_bag_from_our_recorder_without_the_commands_marker_is_refused(tmp_path
     (e.g. copied in by the user) is not replaced."""
     bag = tmp_path / 'run'
     record(BagWriter(bag), 2)
-    with pytest.raises(TrustAvPlannerError, match='not written by trust-av'):
+    with pytest.raises(TrustAvAppError, match='not written by trust-av'):
         prepare_outputs(bag, overwrite=True)
 
 
@@ -91,7 +91,7 @@ def test_a_marked_plot_is_ours_an_unnamed_one_is_not(tmp_path: Path) -> None:
     assert prepare_outputs(outputs.bag, overwrite=True) == outputs
     other = tmp_path / 'other'
     (tmp_path / 'other.png').write_bytes(b'a user plot')
-    with pytest.raises(TrustAvPlannerError, match=r'other\.png: not written by trust-av'):
+    with pytest.raises(TrustAvAppError, match=r'other\.png: not written by trust-av'):
         prepare_outputs(other, overwrite=True)
 
 
@@ -102,12 +102,12 @@ def test_replacing_puts_the_previous_outputs_back_on_a_failure_or_a_stop(
     before = snapshot(tmp_path)
     words = (r"^the graph failed; the previous outputs are back in place, this run's were "
              r'moved to \S*/run\.incomplete$')      # logs holding only the marker: removed
-    with pytest.raises(TrustAvPlannerError, match=words), \
+    with pytest.raises(TrustAvAppError, match=words), \
             replacing_outputs(bag, overwrite=True, command='run') as outputs:
         assert not outputs.bag.exists() and not outputs.plot.exists()
         assert [p.name for p in tmp_path.iterdir() if p.name.startswith('.')] != []
         record(BagWriter(outputs.bag), 1)
-        raise TrustAvPlannerError('the graph failed')
+        raise TrustAvAppError('the graph failed')
     incomplete = RunOutputs.beside(tmp_path / 'run.incomplete')
     kept = {name: data for name, data in snapshot(tmp_path).items()
             if not name.startswith('run.incomplete')}
@@ -142,7 +142,7 @@ def test_a_killed_overwrite_is_named_not_lost(tmp_path: Path) -> None:
     previous_run(bag)
     hidden = tmp_path / f'.run.replaced-{os.getpid()}'
     bag.rename(hidden)
-    with pytest.raises(TrustAvPlannerError, match=r'\.run\.replaced-\d+: the previous bag '
+    with pytest.raises(TrustAvAppError, match=r'\.run\.replaced-\d+: the previous bag '
                                                    'directory kept by an --overwrite run'):
         prepare_outputs(bag, overwrite=True)
 

@@ -26,6 +26,7 @@ from preceding_traffic.errors import PrecedingTrafficError
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SHIPPED_TRACES, TRAINING_TRACES, TraceConfig, trace_path
 from trust_av.cli.options import EXIT_COLLISION, format_metrics
+from trust_av.errors import TrustAvAppError
 from trust_av.graph.bag_records import records_from_bag
 from trust_av.study.sweep import sweep_cases
 from trust_av.system import run_record
@@ -34,7 +35,6 @@ from trust_av.system.config import load_run_config
 from trust_av.system.metrics import compute_metrics
 from trust_av_common.kinematics import VehicleState, collision
 from trust_av_common.topics import TOPICS, qualified
-from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.planner import observe
 
 COLLISION_STEP = 8
@@ -204,9 +204,9 @@ def test_a_study_case_that_collides_says_so_in_its_row(tmp_path: Path) -> None:
 
 def test_sweep_cases_refuses_an_empty_or_repeated_axis() -> None:
     assert len(sweep_cases(['us06'], ['ca', 'cv'], [0.0, 1.0])) == 4
-    with pytest.raises(TrustAvPlannerError, match='alphas: no value'):
+    with pytest.raises(TrustAvAppError, match='alphas: no value'):
         sweep_cases(['us06'], ['ca'], [])
-    with pytest.raises(TrustAvPlannerError, match="predictors: 'ca' given twice"):
+    with pytest.raises(TrustAvAppError, match="predictors: 'ca' given twice"):
         sweep_cases(['us06'], ['ca', 'ca'], [0.5])
 
 

@@ -30,13 +30,13 @@ from support.processes import (
 )
 from support.rosbag2_rules import check_bag_directory  # the test-side oracle module
 
+from trust_av.errors import TrustAvAppError
 from trust_av.graph import bag_writer, mcap_steps
 from trust_av.graph.bag_repair import _swap_into_place, repair_bag
 from trust_av.graph.bag_writer import BagWriteError, BagWriter
 from trust_av.graph.domains import lease_domain
 from trust_av.graph.processes import GraphError
 from trust_av.system.outputs import MARKER, prepare_outputs
-from trust_av_planner.errors import TrustAvPlannerError
 
 
 def counts(bag: Path) -> dict[str, int]:
@@ -328,20 +328,20 @@ def test_the_bag_writer_uses_public_library_api_only(name: str) -> None:
 
 
 def test_outputs_are_checked_before_a_run(tmp_path: Path) -> None:
-    with pytest.raises(TrustAvPlannerError, match=r'not an \.mcap file'):
+    with pytest.raises(TrustAvAppError, match=r'not an \.mcap file'):
         prepare_outputs(tmp_path / 'x.mcap', overwrite=True)
     bag = tmp_path / 'run'
     (tmp_path / 'run.png').write_bytes(b'old plot')
-    with pytest.raises(TrustAvPlannerError, match=r'run\.png exists already'):
+    with pytest.raises(TrustAvAppError, match=r'run\.png exists already'):
         prepare_outputs(bag, overwrite=False)
     (tmp_path / 'run.png').unlink()
     (tmp_path / 'run.logs').symlink_to(tmp_path / 'nowhere')      # dangling
-    with pytest.raises(TrustAvPlannerError, match='is a symbolic link'):
+    with pytest.raises(TrustAvAppError, match='is a symbolic link'):
         prepare_outputs(bag, overwrite=True)
     (tmp_path / 'run.logs').unlink()
     bag.mkdir()
     (bag / 'thesis.tex').write_text('precious')
-    with pytest.raises(TrustAvPlannerError, match='not written by trust-av'):
+    with pytest.raises(TrustAvAppError, match='not written by trust-av'):
         prepare_outputs(bag, overwrite=True)
     assert (bag / 'thesis.tex').read_text() == 'precious'
     # what --overwrite may replace: tests/graph/test_output_ownership.py
@@ -552,8 +552,8 @@ def test_a_plan_without_points_in_a_recording_is_one_line(
     IndexError; an empty expected plan stays allowed."""
     from types import SimpleNamespace as M
 
+    from trust_av.errors import TrustAvAppError
     from trust_av.graph import bag_records
-    from trust_av_planner.errors import TrustAvPlannerError
 
     def diagnostics(**values: str) -> M:
         return M(status=[M(values=[M(key=k, value=v) for k, v in values.items()])])
@@ -578,7 +578,7 @@ def test_a_plan_without_points_in_a_recording_is_one_line(
     [record] = bag_records.records_from_bag(tmp_path, '/car1')
     assert record.human_plan_mps2 == (0.5, 0.25) and record.expected_plan_mps2 == ()
     recording(M(points=[]))
-    with pytest.raises(TrustAvPlannerError) as error:
+    with pytest.raises(TrustAvAppError) as error:
         bag_records.records_from_bag(tmp_path, '/car1')
     assert str(error.value) == (f'{tmp_path}: /car1/human/plan at t = 2 s: a plan without '
                                 'accelerations (not one the graph publishes: another '

@@ -72,8 +72,8 @@ def test_ray_executor_runs_the_same_sweep(tmp_path: Path, short_trace: str) -> N
 
 
 def test_failing_case_names_itself(tmp_path: Path) -> None:
-    from trust_av_planner.errors import TrustAvPlannerError
-    with pytest.raises(TrustAvPlannerError, match=r'case .*missing\.csv/TAC-CA/alpha=0 failed'):
+    from trust_av.errors import TrustAvAppError
+    with pytest.raises(TrustAvAppError, match=r'case .*missing\.csv/TAC-CA/alpha=0 failed'):
         sweep.run_sweep([Case(str(tmp_path / 'missing.csv'), 'ca', 0.0)],
                             DEFAULT_PARAMS_FILE, tmp_path, sweep.LocalExecutor(1))
 
@@ -172,10 +172,10 @@ def test_graph_sweep_equals_in_process_sweep(tmp_path: Path) -> None:
 
 
 def test_run_settings_are_checked() -> None:
-    from trust_av_planner.errors import TrustAvPlannerError
-    with pytest.raises(TrustAvPlannerError, match=r"runner must be one of .*'rviz'"):
+    from trust_av.errors import TrustAvAppError
+    with pytest.raises(TrustAvAppError, match=r"runner must be one of .*'rviz'"):
         sweep.RunSettings(runner='rviz')
-    with pytest.raises(TrustAvPlannerError, match='max_steps must be >= 0, got -1'):
+    with pytest.raises(TrustAvAppError, match='max_steps must be >= 0, got -1'):
         sweep.RunSettings(max_steps=-1)
 
 
@@ -197,8 +197,8 @@ def test_population_cases_are_seeded_and_named() -> None:
         1.2715, abs=1e-3)
     assert first[1].label == 'us06/TAC-GRU/alpha=0/driver=2'
     assert first[4].base == Case('us06', 'gru', 1.0)
-    from trust_av_planner.errors import TrustAvPlannerError
-    with pytest.raises(TrustAvPlannerError, match='number of drivers must be >= 1, got 0'):
+    from trust_av.errors import TrustAvAppError
+    with pytest.raises(TrustAvAppError, match='number of drivers must be >= 1, got 0'):
         population.population_cases(cases, 0, seed=1)
 
 

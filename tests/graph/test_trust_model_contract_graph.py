@@ -10,8 +10,9 @@ import pytest
 
 from trust_av.contract import check_component
 from trust_av_common import registry
+from trust_monitor.model_interface import TRUST_MODELS
 
-NAMES = registry.names(registry.TRUST_MODELS)
+NAMES = registry.names(TRUST_MODELS)
 
 
 @pytest.mark.parametrize('name', NAMES)
@@ -20,5 +21,5 @@ def test_graph_equals_in_process(name: str) -> None:
     its initial trust (so that the NMPC's trust constraint binds) equals the in-process
     loop over 30 steps: every recorded field (trust, E, E_max, the plans) but the solve
     times (the shipped contract's rule)."""
-    report = check_component(registry.TRUST_MODELS, name, graph=True)
+    report = check_component(TRUST_MODELS, name, graph=True)
     assert 'graph == in-process' in report.passed, report

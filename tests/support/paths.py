@@ -10,3 +10,9 @@ REPO = TESTS.parent
 """The repository's root."""
 GOLDEN = TESTS / 'golden'
 """Stored results the tests compare with."""
+
+
+def tree_packages(src: Path = REPO / 'src') -> tuple[str, ...]:
+    """Every package of the tree, found, never listed: each folder ``src/NAME/`` that holds
+    the Python package ``NAME/`` (a ROS 2 package, one setup.py each), by name."""
+    return tuple(sorted(p.name for p in src.iterdir() if (p / p.name / '__init__.py').is_file()))

@@ -30,7 +30,7 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
 from human_driver_sim.driver_mpc import DriverConfig
-from human_driver_sim.followers import FollowerConfig, make_follower
+from human_driver_sim.followers import DRIVERS, FollowerConfig, make_follower
 from trust_av_common import registry
 from trust_av_common.grids import hold_at
 from trust_av_common.kinematics import advance
@@ -91,7 +91,7 @@ class DriverNode(Node):
         # Every registered follower's parameters are declared (and checked), the chosen
         # one's are used: as trust-av's node_components reads the section.
         params: dict[str, object] = {c.name: declare_config(self, c.config_type)
-                  for c in registry.components(registry.DRIVERS) if c.config_type is not None}
+                  for c in registry.components(DRIVERS) if c.config_type is not None}
         self.follower = declare_config(self, FollowerState)
         self.clock = declare_config(self, WallClockConfig)
         self.mpc = make_follower(self.config, self.model, params.get(self.model.driver_model))

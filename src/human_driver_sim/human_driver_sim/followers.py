@@ -27,7 +27,12 @@ from trust_av_common.component_checks import (
 )
 from trust_av_common.params import check_fields, param, require
 
-__all__ = ['CheckedFollower', 'Follower', 'FollowerConfig', 'make_follower']
+__all__ = ['DRIVERS', 'CheckedFollower', 'Follower', 'FollowerConfig', 'make_follower']
+
+DRIVERS = registry.declare('trust_av.drivers', factory_arguments=('driver', 'params'),
+                           interface=('reset', 'step'))
+"""Entry-point group of the human follower (driver) models, declared here beside their
+interface: ``factory(driver, params)`` returns a :class:`Follower`."""
 
 
 class Follower(Protocol):
@@ -53,7 +58,7 @@ class FollowerConfig:
 
     def __post_init__(self) -> None:
         check_fields(self)
-        drivers = registry.names(registry.DRIVERS)
+        drivers = registry.names(DRIVERS)
         require(self.driver_model in drivers,
                 registry.not_one_of('driver_model', self.driver_model, drivers))
 
@@ -70,8 +75,8 @@ def make_follower(driver: DriverConfig, follower: FollowerConfig | None = None,
     Raises:
         RegistryError: the name is not registered, or ``params`` does not fit it.
     """
-    component = registry.get(registry.DRIVERS, (follower or FollowerConfig()).driver_model)
-    model: Follower = registry.build(registry.DRIVERS, component, driver,
+    component = registry.get(DRIVERS, (follower or FollowerConfig()).driver_model)
+    model: Follower = registry.build(DRIVERS, component, driver,
                                      registry.config_of(component, params))
     return CheckedFollower(model, component.name, driver)
 
@@ -98,7 +103,7 @@ class CheckedFollower:
 
     def reset(self) -> None:
         """Reset the model's state (the step count goes on)."""
-        call(registry.DRIVERS, self.name, self.steps_done, 'reset()', self.model.reset)
+        call(DRIVERS, self.name, self.steps_done, 'reset()', self.model.reset)
 
     def step(self, gap_m: float, speed_mps: float, av_speed_mps: float,
              expected_mps2: np.ndarray) -> DriverResult:
@@ -107,7 +112,7 @@ class CheckedFollower:
         Raises:
             ComponentError: it raised, or its result breaks the interface.
         """
-        group, name, k = registry.DRIVERS, self.name, self.steps_done
+        group, name, k = DRIVERS, self.name, self.steps_done
         try:
             result = self.model.step(gap_m, speed_mps, av_speed_mps, expected_mps2)
         except PASSING:

@@ -17,13 +17,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import TextIO
 
 import numpy as np
 
 from preceding_traffic.errors import PrecedingTrafficError
 from trust_av_common.errors import did_you_mean
-from trust_av_common.input_files import not_regular
+from trust_av_common.input_files import bounded_lines, not_regular
 from trust_av_common.params import MAX_STAMP_S, ParamsError, check_fields, param
 
 __all__ = ['MAX_SPEED_MPS', 'MAX_TRACE_STEPS', 'SHIPPED_TRACES', 'TRAINING_TRACES', 'SpeedTrace',
@@ -157,20 +156,6 @@ def trace_path(name_or_path: str) -> Path:
     return Path(name_or_path)
 
 
-def _lines(handle: TextIO, path: Path) -> Iterator[str]:
-    """The text lines of an open trace, each at most :data:`MAX_LINE_CHARS` long."""
-    number = 0
-    while True:
-        line = handle.readline(MAX_LINE_CHARS + 1)
-        if not line:
-            return
-        number += 1
-        if len(line) > MAX_LINE_CHARS:
-            raise TraceError(f'{path}:{number}: line longer than {MAX_LINE_CHARS} characters '
-                             '(not a time_s,speed_mps CSV)')
-        yield line
-
-
 def check_sample(where: str, t: float, v: float, previous_t: float | None,
                  config: TraceConfig) -> None:
     """The rules every speed sample obeys, CSV or bag.
@@ -272,7 +257,8 @@ def read_samples(path: Path, config: TraceConfig) -> tuple[np.ndarray, np.ndarra
     with handle:
         if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
             raise TraceError(f'{path}: not a regular file (expected a time_s,speed_mps CSV)')
-        reader = csv.reader(_lines(handle, path), strict=True)
+        reader = csv.reader(bounded_lines(handle, path, MAX_LINE_CHARS, TraceError,
+                                          ' (not a time_s,speed_mps CSV)'), strict=True)
         try:
             return _parse(path, reader, config)
         except UnicodeDecodeError as err:

@@ -19,13 +19,13 @@ is **deterministic**; a **bad parameter** is refused in one line naming it; a tr
 docs/reference/components.md says each in full.
 
 It drives the system a component plugs into (the configuration, the planner, the loop, the
-CLI), imported when called: importing the contract loads none of them.
+CLI), imported inside the functions that use them (so the type checker and the layer test see
+every one): importing the contract loads only the modules that declare the three groups.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import itertools
 import math
 import subprocess
@@ -39,9 +39,12 @@ from typing import Any
 
 import numpy as np
 
+from human_driver_sim.followers import DRIVERS
 from trust_av_common import registry
 from trust_av_common.errors import TrustAvError, one_line
 from trust_av_common.params import PARAM_METADATA_KEY, ParamsError, ParamSpec, build_config
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import TRUST_MODELS
 
 __all__ = ['ContractError', 'ContractReport', 'check_component']
 
@@ -50,7 +53,7 @@ GRAPH_STEPS = 30
 RECORD_TOLERANCE = 1e-7
 """How far a value the graph recorded may be from the in-process one (the two paths agree
 to ~1e-16 per step; an iterative solve turns that into up to ~1e-8)."""
-NODE_OF = {registry.PREDICTORS: 'planner', registry.DRIVERS: 'human_driver'}
+NODE_OF = {PREDICTORS: 'planner', DRIVERS: 'human_driver'}
 """The node section that runs a group (a trust model's parameters are shared: ``/**``)."""
 TRUST_BASE = {'epsilon_mps2': 6.0, 'trust_growth_rate': 0.1, 'performance_threshold': 0.8,
               'trust_initial': 0.0}
@@ -85,10 +88,6 @@ class _DoesNotApplyError(Exception):
     """A rule that does not apply to this component (the message says why)."""
 
 
-def _module(name: str) -> Any:
-    return importlib.import_module(name)
-
-
 def check_component(group: str, name: str, *, graph: bool = False, steps: int = 15,
                     seed: int = 7) -> ContractReport:
     """Check component ``name`` of ``group`` against its group's contract (module docstring).
@@ -119,7 +118,7 @@ def check_component(group: str, name: str, *, graph: bool = False, steps: int = 
         ('deterministic', lambda: _deterministic(group, name, steps, seed)),
         ('bad parameters', lambda: _bad_parameters(group, name)),
     ]
-    if group == registry.TRUST_MODELS:
+    if group == TRUST_MODELS:
         rules += [('time consistency', lambda: _time_consistent(name)),
                   ('pure step', lambda: _pure_step(name)),
                   ('monotone', lambda: _monotone(name)),
@@ -178,11 +177,11 @@ def _declaration(group: str, name: str) -> None:
         _require(isinstance(field.metadata.get(PARAM_METADATA_KEY), ParamSpec),
                  f'{field.name} is not declared with param()')
         _require(field.default is not dataclasses.MISSING, f'{field.name} has no default')
-        if group == registry.TRUST_MODELS:
+        if group == TRUST_MODELS:
             _require(field.name.startswith(f'{name}_'),
                      f'{field.name} does not start with {name}_ (one flat namespace)')
     cls()  # the defaults are valid
-    config = _module('trust_av.system.config')
+    from trust_av.system import config
     node = NODE_OF.get(group)
     own = (config.node_components(node) if node is not None else config.all_components())
     taken = {f.name for c in own if c is not cls for f in dataclasses.fields(c)}
@@ -193,30 +192,30 @@ def _declaration(group: str, name: str) -> None:
 
 def _run_config(group: str, name: str) -> Any:
     """The shipped run configuration with ``name`` chosen."""
-    chooser = {registry.PREDICTORS: ('planner', 'predictor'),
-               registry.DRIVERS: ('human_driver', 'driver_model')}.get(
+    chooser = {PREDICTORS: ('planner', 'predictor'),
+               DRIVERS: ('human_driver', 'driver_model')}.get(
                    group, ('/**', 'trust_model'))
-    return _module('trust_av.system.config').load_run_config(
-        (), {chooser[0]: {chooser[1]: name}})
+    from trust_av.system.config import load_run_config
+    return load_run_config((), {chooser[0]: {chooser[1]: name}})
 
 
 def _outputs(group: str, name: str, steps: int, seed: int) -> list[Any]:
     """A fresh instance's outputs over ``steps`` seeded inputs, each through the loop's own
     checks (a bad one raises :class:`~trust_av_common.component_checks.ComponentError`)."""
-    feed = {registry.PREDICTORS: _predictions, registry.DRIVERS: _follower_plans}
+    feed = {PREDICTORS: _predictions, DRIVERS: _follower_plans}
     return feed.get(group, _trust_readings)(name, steps, np.random.default_rng(seed))
 
 
 def _predictions(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
-    planner = _module('trust_av_planner.planner')
-    observation = _module('trust_av_planner.predictors').Observation
-    config = _run_config(registry.PREDICTORS, name)
+    from trust_av_planner import planner
+    from trust_av_planner.predictors import Observation
+    config = _run_config(PREDICTORS, name)
     predictor = planner.CheckedPredictor(planner.make_predictor(
         config.planner, config.predictor_params), config.planner)
     out = [predictor.predict()]
     for _ in range(steps):
         gap, speed = rng.uniform(8.0, 40.0), rng.uniform(2.0, 25.0)
-        predictor.observe(observation(
+        predictor.observe(Observation(
             gap_m=gap, relative_speed_mps=rng.uniform(-3.0, 3.0),
             time_headway_s=min(gap / speed, 10.0), av_accel_mps2=rng.uniform(-3.0, 3.0)))
         out.append(predictor.predict())
@@ -224,8 +223,8 @@ def _predictions(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
 
 
 def _follower_plans(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
-    followers = _module('human_driver_sim.followers')
-    config = _run_config(registry.DRIVERS, name)
+    from human_driver_sim import followers
+    config = _run_config(DRIVERS, name)
     follower = followers.make_follower(config.driver, followers.FollowerConfig(name),
                                        config.driver_params)   # checks every step
     out = []
@@ -238,19 +237,21 @@ def _follower_plans(name: str, steps: int, rng: np.random.Generator) -> list[Any
 
 
 def _trust_config(name: str) -> Any:
-    return _module('trust_monitor.paper_trust').TrustConfig(**TRUST_BASE, trust_model=name)
+    from trust_monitor.paper_trust import TrustConfig
+    return TrustConfig(**TRUST_BASE, trust_model=name)
 
 
 def _model(name: str) -> Any:
-    return _module('trust_monitor.model_interface').make_trust_model(_trust_config(name))
+    from trust_monitor.model_interface import make_trust_model
+    return make_trust_model(_trust_config(name))
 
 
 def _trust_readings(name: str, steps: int, rng: np.random.Generator) -> list[Any]:
-    interface = _module('trust_monitor.model_interface')
-    estimator_type = _module('trust_monitor.paper_trust').TrustEstimator
+    from trust_monitor import model_interface as interface
+    from trust_monitor.paper_trust import TrustEstimator
     config = _trust_config(name)
     model = interface.make_trust_model(config)
-    estimator = estimator_type(config, model)   # checks trust and variance every step
+    estimator = TrustEstimator(config, model)   # checks trust and variance every step
     bound = interface.CheckedBound(model, name)
     out = []
     for _ in range(steps):
@@ -346,7 +347,7 @@ def _states(m: Any) -> list[Any]:
 
 
 def _monotone(name: str) -> None:
-    propagate = _module('trust_monitor.model_interface').propagate
+    from trust_monitor.model_interface import propagate
     m = _model(name)
     state = m.step(m.initial_state(), 0.05, 1.0)
     grid = [i / 200 for i in range(201)]
@@ -357,7 +358,7 @@ def _monotone(name: str) -> None:
 
 
 def _bound(name: str) -> None:
-    interface = _module('trust_monitor.model_interface')
+    from trust_monitor import model_interface as interface
     m = _model(name)
     binding = 0
     for (steps, dt_s), state in itertools.product(((3, 1.0), (30, 0.1), (1, 1.0)), _states(m)):
@@ -380,7 +381,7 @@ def _bound(name: str) -> None:
 
 
 def _closed_form(name: str) -> None:
-    interface = _module('trust_monitor.model_interface')
+    from trust_monitor import model_interface as interface
     m = _model(name)
     if m.closed_form_bound is None:
         raise _DoesNotApplyError('none given')
@@ -408,21 +409,25 @@ def _compare_graph(group: str, name: str, folder: Path) -> None:
     trace_csv.write_text('time_s,speed_mps\n' + ''.join(
         f'{t},{12.0 + 6.0 * math.sin(t / 5.0):.3f}\n' for t in range(GRAPH_STEPS + 1)))
     params = folder / 'component.yaml'
-    if group == registry.TRUST_MODELS:   # T_min above its initial trust: the bound binds
+    if group == TRUST_MODELS:   # T_min above its initial trust: the bound binds
         model = _run_config(group, name).trust_model()
         trust_min = model.trust(model.initial_state()) + 0.1
         params.write_text(f'/**:\n  ros__parameters:\n    trust_model: {name}\n'
                           f'/**/planner:\n  ros__parameters:\n    trust_min: {trust_min!r}\n')
     else:
-        chooser = 'predictor' if group == registry.PREDICTORS else 'driver_model'
+        chooser = 'predictor' if group == PREDICTORS else 'driver_model'
         params.write_text(f'/**/{NODE_OF[group]}:\n  ros__parameters:\n'
                           f'    {chooser}: {name}\n')
-    config = _module('trust_av.system.config').load_run_config([params])
-    sources = _module('preceding_traffic.sources')
-    trace = _module('preceding_traffic.traces').truncate(
-        sources.load_trace(str(trace_csv), config.planner.dt_s, config.trace), GRAPH_STEPS)
-    reference = _module('trust_av.system.closed_loop').simulate(config, trace).records
-    if group == registry.TRUST_MODELS:
+    from preceding_traffic.sources import load_trace
+    from preceding_traffic.traces import truncate
+    from trust_av.graph.bag_records import records_from_bag
+    from trust_av.system.closed_loop import simulate
+    from trust_av.system.config import load_run_config
+
+    config = load_run_config([params])
+    trace = truncate(load_trace(str(trace_csv), config.planner.dt_s, config.trace), GRAPH_STEPS)
+    reference = simulate(config, trace).records
+    if group == TRUST_MODELS:
         binding = sum(1 for r in reference if 0.0 < r.explicability_max < 1.0)
         _require(binding >= 2, f'the trust constraint bound at {binding} step(s) of '
                                f'{GRAPH_STEPS}: the comparison would check little')
@@ -434,7 +439,7 @@ def _compare_graph(group: str, name: str, folder: Path) -> None:
                           stdin=subprocess.DEVNULL, check=False)
     _require(proc.returncode == 0, f'trust-av run exited with {proc.returncode}: '
                                    f'{" ".join(proc.stderr.split()[-40:])}')
-    recorded = _module('trust_av.graph.bag_records').records_from_bag(bag)
+    recorded = records_from_bag(bag)
     _require(len(recorded) == len(reference),
              f'the graph recorded {len(recorded)} steps, the loop made {len(reference)}')
     for g, r in zip(recorded, reference, strict=True):

@@ -8,6 +8,8 @@ from collections import Counter
 
 from trust_av_common.health import ERROR, OK, WARN, Report, age
 
+__all__ = ['AdapterStatus']
+
 
 class AdapterStatus:
     """Counts and the last drop of an adapter.

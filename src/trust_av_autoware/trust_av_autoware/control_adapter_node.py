@@ -48,6 +48,8 @@ from trust_av_common.ros.qos import wall_qos
 from trust_av_common.ros.spin import spin_node
 from trust_av_common.wall_clock import WallClockConfig
 
+__all__ = ['main']
+
 
 class ControlAdapterNode(Node):
     """The ``autoware_control`` adapter (see the module docstring)."""

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 from trust_av_autoware.lane_inputs import InputError, finite
 from trust_av_common.params import check_fields, param
 
+__all__ = ['ControlAdapterConfig', 'LongitudinalCommand', 'longitudinal']
+
 
 @dataclass(frozen=True)
 class ControlAdapterConfig:

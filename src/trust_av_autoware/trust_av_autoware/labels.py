@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+__all__ = ['TRUST_NAMES', 'finite_values', 'plan_names']
+
 TRUST_NAMES = ('explicability', 'performance', 'trust')
 """``vector.x``, ``vector.y``, ``vector.z`` of ``trust_monitor/trust`` (dimensionless)."""
 

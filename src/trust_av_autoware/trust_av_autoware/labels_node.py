@@ -30,6 +30,8 @@ from trust_av_common.ros.messages import trajectory_times
 from trust_av_common.ros.spin import spin_node
 from trust_av_common.topics import JOINT_NAME
 
+__all__ = ['main']
+
 IN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                     reliability=ReliabilityPolicy.BEST_EFFORT,
                     durability=DurabilityPolicy.VOLATILE)

@@ -25,6 +25,7 @@ from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
 
 from trust_av_autoware.adapter_status import AdapterStatus
+from trust_av_autoware.lane import Centreline
 from trust_av_autoware.lane_inputs import (
     InputError,
     LaneAdapterConfig,
@@ -48,12 +49,13 @@ from trust_av_autoware.ros.qos import (
     LEAD_TOPIC,
     OBJECTS_TOPIC,
 )
-from trust_av_common.lane import Centreline
 from trust_av_common.ros.diagnostics import NodeDiagnostics
 from trust_av_common.ros.parameters import declare_config
 from trust_av_common.ros.qos import wall_qos
 from trust_av_common.ros.spin import spin_node
 from trust_av_common.wall_clock import WallClockConfig
+
+__all__ = ['main']
 
 LEAD_CHILD_FRAME = 'preceding_vehicle'
 

@@ -1,13 +1,13 @@
 """From an Autoware stack's planar world to the planner's longitudinal inputs, pure (no rclpy):
 the AV's pose and the perceived objects in ``map`` become distances along a lane's centreline
-(:class:`~trust_av_common.lane.Centreline`) and speeds along it, as the planner reads its
+(:class:`~trust_av_autoware.lane.Centreline`) and speeds along it, as the planner reads its
 odometry inputs (``pose.position.x`` = the front bumper's distance along the road,
 ``twist.twist.linear.x`` = speed, the gap = lead x − AV x − ``vehicle_length_m``).
 
 - :func:`ego_on_lane`: the AV from its kinematic state (base_link pose in ``map``, body-frame
   twist) -> its front bumper's distance along the lane and its speed along it.
 - :func:`lead_from_objects`: the lead vehicle among the perceived objects (the nearest one
-  ahead within half a lane width, :func:`~trust_av_common.lane.lead_on_lane`) -> the
+  ahead within half a lane width, :func:`~trust_av_autoware.lane.lead_on_lane`) -> the
   position to publish, chosen so that the planner's gap is the real one: from the AV's front
   bumper to the lead's rear.
 
@@ -22,14 +22,19 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from trust_av_common.lane import Centreline, LaneError, OnLane, lead_on_lane
+from trust_av_autoware.lane import Centreline, LaneError, OnLane, lead_on_lane
+from trust_av_common.errors import TrustAvError
 from trust_av_common.params import MAX_VEHICLE_LENGTH_M, check_fields, param
+
+__all__ = ['BOUNDING_BOX', 'CYLINDER', 'POLYGON', 'InputError', 'LaneAdapterConfig', 'LaneState',
+           'Lead', 'Planar', 'Seen', 'centreline_from_points', 'check_frame', 'ego_on_lane',
+           'finite', 'half_length_m', 'lead_from_objects', 'seen', 'yaw']
 
 BOUNDING_BOX, CYLINDER, POLYGON = 0, 1, 2
 """``autoware_perception_msgs/msg/Shape`` types (its constants)."""
 
 
-class InputError(ValueError):
+class InputError(TrustAvError):
     """A message that cannot be used: one line naming the bad thing; ``kind`` is the counter
     it is dropped under (``frame``, ``not_finite``, ``off_lane``, ...)."""
 

@@ -5,8 +5,9 @@ Every exception the project raises for a reason the user can act on derives from
 :class:`~trust_monitor.errors.TrustMonitorError`,
 :class:`~preceding_traffic.errors.PrecedingTrafficError`,
 :class:`~human_driver_sim.errors.HumanDriverSimError`,
-:class:`~trust_av_planner.errors.TrustAvPlannerError`), so a command catches one class and
-prints one line (:func:`one_line`).
+:class:`~trust_av_planner.errors.TrustAvPlannerError`,
+:class:`~trust_av.errors.TrustAvAppError`), so a command catches one class and prints one line
+(:func:`one_line`).
 """
 
 from __future__ import annotations

@@ -5,7 +5,10 @@ A package whose modules moved installs a :class:`MovedModules` finder from its
 :class:`MovedPathWarning` naming the new one and gives the new module itself
 (``trust_av_common.params``: the same module object, so classes, registries and module
 state are shared, never copied). A moved package's old name covers its submodules, also
-one added after the move. ``python -m`` with an old name runs the new module.
+one added after the move. ``python -m`` with an old name runs the new module (its file is
+the program's ``sys.argv[0]``, as ``rclpy.init`` needs); an old name whose new module does
+not exist (``old_package.never_was``, an old package's ``__main__``) is a
+``ModuleNotFoundError`` that names the package's new place.
 
 The warning is a :class:`FutureWarning`, not a :class:`DeprecationWarning`: Python's default
 filters hide a DeprecationWarning unless the code that triggers it is ``__main__`` (PEP 565),
@@ -61,9 +64,19 @@ class MovedModules(importlib.abc.MetaPathFinder, importlib.abc.InspectLoader):
 
     def find_spec(self, fullname: str, path: object = None,
                   target: ModuleType | None = None) -> ModuleSpec | None:
-        if self.new_name(fullname) is None:
+        new = self.new_name(fullname)
+        if new is None:
             return None
-        return importlib.util.spec_from_loader(fullname, self)
+        found = importlib.util.find_spec(new)
+        if found is None:   # the old package moved, but this module is not in its new place
+            old_package = max((old for old in self.moves if fullname.startswith(old + '.')),
+                              key=len)
+            raise ModuleNotFoundError(
+                f'No module named {fullname!r}: {old_package} moved to '
+                f'{self.moves[old_package]}, which has no {fullname[len(old_package) + 1:]}',
+                name=fullname)
+        # the new module's file as the origin: ``python -m`` puts it in sys.argv[0]
+        return importlib.util.spec_from_loader(fullname, self, origin=found.origin)
 
     def create_module(self, spec: ModuleSpec) -> ModuleType | None:
         return None  # the default module, replaced by the new one in exec_module

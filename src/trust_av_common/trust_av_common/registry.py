@@ -1,4 +1,5 @@
-"""Registries of the interchangeable models: plan estimators, trust models, human drivers.
+"""Registries of interchangeable components (the project's: plan estimators, trust models,
+human drivers).
 
 A component is found by name in a Python entry-point group, so a package installed with
 pip adds one without an edit to this repository. The shipped components are registered the
@@ -7,9 +8,12 @@ same way (in the ``setup.py`` of the package that holds them). An entry point na
 
     entry_points={'trust_av.predictors': ['cv = my_pkg.cv:COMPONENT']}
 
-What a component's ``factory`` takes and returns is fixed per group (see the group's
-interface module); the registry only finds, checks and lists components. Callers decide
-from a component's declaration (``config_type``, ``needs``), never from its name.
+The registry is generic: it knows no group. The package that owns a group's interface
+declares it (:func:`declare`: how the group's ``factory`` is called and what the object it
+returns must have), beside that interface: ``trust_av_planner.predictors.PREDICTORS``,
+``trust_monitor.model_interface.TRUST_MODELS``, ``human_driver_sim.followers.DRIVERS``.
+The registry only finds, checks and lists components. Callers decide from a component's
+declaration (``config_type``, ``needs``), never from its name.
 """
 
 from __future__ import annotations
@@ -26,27 +30,9 @@ from typing import Any
 
 from trust_av_common.errors import TrustAvError, did_you_mean, one_line
 
-__all__ = ['DRIVERS', 'FOLLOWER_STATE', 'GROUPS', 'KNOWN_NEEDS', 'PREDICTORS', 'TRUST_MODELS',
-           'Component', 'RegistryError', 'build', 'components', 'config_of', 'config_types',
-           'describe', 'get', 'names', 'not_one_of']
-
-PREDICTORS = 'trust_av.predictors'
-"""Entry-point group of the plan estimators (the plan the human expects, u_R^H)."""
-TRUST_MODELS = 'trust_av.trust_models'
-"""Entry-point group of the trust models (trust from the explicability score)."""
-DRIVERS = 'trust_av.drivers'
-"""Entry-point group of the human follower (driver) models."""
-GROUPS = (PREDICTORS, TRUST_MODELS, DRIVERS)
-
-FACTORY_ARGUMENTS = {PREDICTORS: ('planner', 'params'), TRUST_MODELS: ('trust', 'params'),
-                     DRIVERS: ('driver', 'params')}
-"""How each group's ``factory`` is called: two positional arguments, the group's shared
-configuration and the component's own parameters (see the group's interface module)."""
-INTERFACES = {PREDICTORS: ('reset', 'predict', 'observe'),
-              TRUST_MODELS: ('name', 'closed_form_bound', 'initial_state', 'step', 'trust',
-                             'variance'),
-              DRIVERS: ('reset', 'step')}
-"""What the object a group's factory returns must have (its interface's attributes)."""
+__all__ = ['FOLLOWER_STATE', 'KNOWN_NEEDS', 'Component', 'Group', 'RegistryError', 'build',
+           'components', 'config_of', 'config_types', 'declare', 'describe', 'get', 'groups',
+           'names', 'not_one_of']
 
 LOG = logging.getLogger(__name__)
 
@@ -58,6 +44,54 @@ KNOWN_NEEDS = frozenset({FOLLOWER_STATE})
 class RegistryError(TrustAvError):
     """A component name is not registered, or a registered entry point is not a valid
     :class:`Component`; the message names the group and the name."""
+
+
+@dataclass(frozen=True)
+class Group:
+    """An entry-point group, as the package that owns its interface declares it.
+
+    Attributes:
+        name: the entry-point group (``trust_av.predictors``).
+        factory_arguments: how a component's ``factory`` is called: the names of its
+            positional arguments (the group's shared configuration, the component's own
+            parameters).
+        interface: what the object the factory returns must have (attribute names).
+    """
+
+    name: str
+    factory_arguments: tuple[str, ...]
+    interface: tuple[str, ...]
+
+
+_DECLARED: dict[str, Group] = {}
+
+
+def declare(name: str, factory_arguments: Sequence[str], interface: Sequence[str]) -> str:
+    """Declare the group ``name`` (from the module that defines its interface) and return
+    the name, the key every function here takes. Declaring it again the same way is a no-op.
+
+    Raises:
+        RegistryError: it is declared already, differently.
+    """
+    group = Group(name, tuple(factory_arguments), tuple(interface))
+    known = _DECLARED.setdefault(name, group)
+    if known != group:
+        raise RegistryError(f'component group {name!r} is declared twice, differently: '
+                            f'{known} and {group}')
+    return name
+
+
+def groups() -> tuple[str, ...]:
+    """The declared groups, sorted (those whose owning modules are imported)."""
+    return tuple(sorted(_DECLARED))
+
+
+def _declared(group: str) -> Group:
+    try:
+        return _DECLARED[group]
+    except KeyError:
+        raise RegistryError(f'unknown component group {group!r} (known: '
+                            f'{list(groups())})') from None
 
 
 @dataclass(frozen=True)
@@ -118,8 +152,7 @@ def _entry_points(group: str) -> tuple[EntryPoint, ...]:
 
 def names(group: str) -> tuple[str, ...]:
     """The registered names of ``group``, sorted (for ``--help`` and choices)."""
-    if group not in GROUPS:
-        raise RegistryError(f'unknown component group {group!r} (known: {list(GROUPS)})')
+    _declared(group)
     return tuple(sorted({ep.name for ep in _entry_points(group)}))
 
 
@@ -131,10 +164,9 @@ def get(group: str, name: str) -> Component:
             two distributions register it, or its entry point fails to load (any exception
             or ``SystemExit`` while importing it; ``KeyboardInterrupt`` passes), is not a
             :class:`Component` of that name, or its factory cannot be called as the group
-            calls it (:data:`FACTORY_ARGUMENTS`).
+            calls it (its :class:`Group`'s ``factory_arguments``).
     """
-    if group not in GROUPS:
-        raise RegistryError(f'unknown component group {group!r} (known: {list(GROUPS)})')
+    _declared(group)
     found = [ep for ep in _entry_points(group) if ep.name == name]
     if not found:
         raise RegistryError(f'unknown {_group_name(group)} {name!r} (registered: '
@@ -167,7 +199,7 @@ def _load(group: str, entry: EntryPoint) -> Component | RegistryError:
         return RegistryError(f'{where} is a {type(obj).__name__}, not a Component')
     if obj.name != entry.name:
         return RegistryError(f'{where} is named {obj.name!r} inside')
-    wanted = FACTORY_ARGUMENTS[group]
+    wanted = _declared(group).factory_arguments
     try:
         inspect.signature(obj.factory).bind(*wanted)
     except TypeError as err:
@@ -191,7 +223,8 @@ def _short(value: Any) -> str:
 def build(group: str, component: Component, shared: Any, params: Any) -> Any:
     """``component.factory(shared, params)``, checked: whatever the factory raises (any
     exception or ``SystemExit``; ``KeyboardInterrupt`` passes) and an object without the
-    group's interface (:data:`INTERFACES`) are one line naming the component.
+    group's interface (its :class:`Group`'s ``interface``) are one line naming the
+    component.
 
     Args:
         group: the component's group.
@@ -210,7 +243,7 @@ def build(group: str, component: Component, shared: Any, params: Any) -> Any:
     except BaseException as err:
         raise RegistryError(f'{where}: its factory raised {type(err).__name__}: '
                             f'{one_line(err)}') from err
-    missing = [a for a in INTERFACES[group] if not hasattr(built, a)]
+    missing = [a for a in _declared(group).interface if not hasattr(built, a)]
     if missing:
         raise RegistryError(f'{where}: its factory returned {_short(built)} '
                             f'({type(built).__name__}), not a {_group_name(group)}: it lacks '

@@ -15,7 +15,6 @@ __all__: list[str] = []
 
 MOVED = {
     'trust_av_planner.cli': 'trust_av.cli',
-    'trust_av_planner.cli.drive': 'trust_av.drive.command',
     'trust_av_planner.graph': 'trust_av.graph',
     'trust_av_planner.graph.drive': 'trust_av.drive.graph_run',
     'trust_av_planner.graph.drive_link': 'trust_av.drive.link',

@@ -44,6 +44,7 @@ from trust_av_common.params import (
 from trust_av_common.solver import nmpc_solver_options, solve
 from trust_av_planner import perturbations
 from trust_av_planner.plan_result import PlanResult
+from trust_av_planner.predictors import PREDICTORS
 from trust_monitor.model_interface import CheckedBound, TrustModel, make_trust_model
 from trust_monitor.paper_trust import TrustConfig, explicability
 
@@ -153,7 +154,7 @@ class PlannerConfig:
         require(self.speed_min_mps < self.speed_max_mps,
                 f'need 0 <= speed_min_mps < speed_max_mps, got {self.speed_min_mps}, '
                 f'{self.speed_max_mps}')
-        predictors = registry.names(registry.PREDICTORS)
+        predictors = registry.names(PREDICTORS)
         require(self.predictor in predictors,
                 registry.not_one_of('predictor', self.predictor, predictors))
         require(self.stale_decel_mps2 >= self.accel_min_mps2, 'stale_decel_mps2 must be >= '
@@ -381,18 +382,6 @@ class TrustAwareNmpc:
             return lower, upper, ''  # a rounding error (a stop that crept 1e-7 m too far)
         return lower, upper, (f' (gap bounds relaxed to what the vehicle can reach: '
                               f'{min(low):.3f} to {max(high):.3f} m)')
-
-    def bound_violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
-                        lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray,
-                        explicability_max: float, reachable: bool = False) -> float:
-        """Largest violation of any bound of eq. (12) by ``plan`` (0 when all hold); with
-        ``reachable``, of the gap bounds the vehicle can reach instead of d_min and d_max."""
-        lower, upper = self.bounds(explicability_max)
-        if reachable:
-            lower, upper, _ = self._reachable_gap_bounds(lower, upper, gap_m, speed_mps,
-                                                         lead_speeds_mps)
-        return self._violation(plan, gap_m, speed_mps, lead_speeds_mps, expected_mps2, lower,
-                               upper)
 
     def _violation(self, plan: np.ndarray, gap_m: float, speed_mps: float,
                    lead_speeds_mps: np.ndarray, expected_mps2: np.ndarray, lower: np.ndarray,

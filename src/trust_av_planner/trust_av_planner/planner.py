@@ -24,7 +24,7 @@ from trust_av_common.kinematics import VehicleState, gap_m
 from trust_av_planner.nmpc import PlannerConfig, TrustAwareNmpc
 from trust_av_planner.perturbations import Perturbation, stopping_cap_mps2
 from trust_av_planner.plan_result import PlanResult
-from trust_av_planner.predictors import Observation, Predictor
+from trust_av_planner.predictors import PREDICTORS, Observation, Predictor
 from trust_av_planner.predictors.sampling import ModelGridPredictor
 from trust_av_planner.preview import LeadPreview, hold_on_grid
 from trust_monitor.model_interface import TrustModel
@@ -44,8 +44,8 @@ def make_predictor(config: PlannerConfig, params: Any = None) -> Predictor:
         RegistryError: the name is not registered, its entry point is broken, or its
             factory fails or returns no predictor.
     """
-    component = registry.get(registry.PREDICTORS, config.predictor)
-    predictor: Predictor = registry.build(registry.PREDICTORS, component, config,
+    component = registry.get(PREDICTORS, config.predictor)
+    predictor: Predictor = registry.build(PREDICTORS, component, config,
                                           registry.config_of(component, params))
     return predictor
 
@@ -71,7 +71,7 @@ class CheckedPredictor:
     def reset(self) -> None:
         """Forget the history (the step count goes on: at a control period shorter than
         ``dt_s`` the sampler resets the estimator before every prediction)."""
-        call(registry.PREDICTORS, self.config.predictor, self.steps_done, 'reset()',
+        call(PREDICTORS, self.config.predictor, self.steps_done, 'reset()',
              self.inner.reset)
 
     def observe(self, observation: Observation) -> None:
@@ -81,7 +81,7 @@ class CheckedPredictor:
         except PASSING:
             raise
         except BaseException as err:
-            raise raised(registry.PREDICTORS, self.config.predictor, self.steps_done,
+            raise raised(PREDICTORS, self.config.predictor, self.steps_done,
                          'observe()', err) from err
 
     def predict(self) -> np.ndarray:
@@ -96,8 +96,8 @@ class CheckedPredictor:
         except PASSING:
             raise
         except BaseException as err:
-            raise raised(registry.PREDICTORS, c.predictor, k, 'predict()', err) from err
-        plan = check_plan(value, group=registry.PREDICTORS, name=c.predictor, step=k,
+            raise raised(PREDICTORS, c.predictor, k, 'predict()', err) from err
+        plan = check_plan(value, group=PREDICTORS, name=c.predictor, step=k,
                           steps=c.horizon_steps, low=c.accel_min_mps2, high=c.accel_max_mps2)
         self.steps_done += 1
         return plan
@@ -105,7 +105,7 @@ class CheckedPredictor:
 
 def needs_follower_state(config: PlannerConfig) -> bool:
     """Whether the configured plan estimator declares that it needs the follower's state."""
-    return registry.FOLLOWER_STATE in registry.get(registry.PREDICTORS, config.predictor).needs
+    return registry.FOLLOWER_STATE in registry.get(PREDICTORS, config.predictor).needs
 
 
 def observe(av: VehicleState, human: VehicleState, av_accel_mps2: float, length_m: float,

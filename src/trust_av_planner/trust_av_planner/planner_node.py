@@ -71,7 +71,8 @@ from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import PlannerConfig
 from trust_av_planner.planner import AvPlanner
 from trust_av_planner.planner_params import PlannerTopics, SharedConfig, check_control_rate
-from trust_monitor.model_interface import build_trust_model
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import TRUST_MODELS, build_trust_model
 from trust_monitor.paper_trust import TrustConfig
 
 __all__ = ['WARM_UP', 'PlannerNode', 'main']
@@ -106,9 +107,9 @@ class PlannerNode(ManagedNode):
         # declared now, read and checked at configure: `ros2 param` sees them unconfigured
         for cls in (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
                     FrameConfig, *(c.config_type for c in registry.components(
-                        registry.PREDICTORS) if c.config_type is not None)):
+                        PREDICTORS) if c.config_type is not None)):
             predeclare(self, cls)
-        predeclare_component(self, registry.TRUST_MODELS, 'trust_model')
+        predeclare_component(self, TRUST_MODELS, 'trust_model')
 
     def build(self) -> None:
         """``configure``: parameters, core (warmed in wall mode), publishers, subscriptions.
@@ -127,13 +128,13 @@ class PlannerNode(ManagedNode):
         # Every registered plan estimator's parameters are declared (and checked), the
         # chosen one's are used: as trust-av's node_components reads the section.
         params: dict[str, object] = {c.name: declare_config(self, c.config_type)
-                  for c in registry.components(registry.PREDICTORS)
+                  for c in registry.components(PREDICTORS)
                   if c.config_type is not None}
         wall = self.wall = self.clock.wall
         if wall:
             check_control_rate(self.config, self.clock.control_rate_hz)
         self.trust_model = build_trust_model(
-            trust, declare_component_params(self, registry.TRUST_MODELS, trust.trust_model))
+            trust, declare_component_params(self, TRUST_MODELS, trust.trust_model))
         # The trust topic carries E and T. A model whose state is T takes it from there; a
         # model with more state (Beta counts, a Kalman variance) is mirrored: in lock-step
         # the planner steps the same model with the E the monitor scored and publishes, over

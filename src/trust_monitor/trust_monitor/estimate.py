@@ -25,21 +25,22 @@ import os
 import re
 import stat
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
 from trust_av_common.errors import TrustAvError, one_line
-from trust_av_common.input_files import not_regular
+from trust_av_common.input_files import bounded_lines, not_regular
 from trust_av_common.lifecycle import LifecycleConfig
 from trust_av_common.output_files import cannot_write, link_refused, odd_path, replacing
 from trust_av_common.param_layers import layer_files, layered_params, read_layers
 from trust_av_common.params import build_config, check_known
 from trust_av_common.rcl_values import ParsedParams
-from trust_av_common.registry import TRUST_MODELS, names
+from trust_av_common.registry import names
 from trust_av_common.wall_clock import WallClockConfig
 from trust_monitor.errors import TrustMonitorError
 from trust_monitor.model_interface import (
+    TRUST_MODELS,
     TrustModel,
     make_trust_model,
     trust_model_config_types,
@@ -57,18 +58,6 @@ _COLUMN = re.compile(r'(plan|expected)_(\d+)')
 
 class EstimateError(TrustMonitorError):
     """The plans CSV is malformed; the message names the file, row and problem."""
-
-
-def _lines(handle: TextIO, path: Path) -> Iterator[str]:
-    number = 0
-    while True:
-        line = handle.readline(MAX_LINE_CHARS + 1)
-        if not line:
-            return
-        number += 1
-        if len(line) > MAX_LINE_CHARS:
-            raise EstimateError(f'{path}:{number}: line longer than {MAX_LINE_CHARS} characters')
-        yield line
 
 
 def plan_columns(path: Path, header: Sequence[str]) -> tuple[list[str], list[str]]:
@@ -105,7 +94,7 @@ def plan_columns(path: Path, header: Sequence[str]) -> tuple[list[str], list[str
 
 def _rows(path: Path, handle: TextIO, config: TrustConfig,
           model: TrustModel | None) -> list[tuple[float, ...]]:
-    reader = csv.reader(_lines(handle, path))
+    reader = csv.reader(bounded_lines(handle, path, MAX_LINE_CHARS, EstimateError))
     header = next(reader, None)
     if header is None:
         raise EstimateError(f'{path}: header needs t, plan_0.., expected_0..; the file is empty')

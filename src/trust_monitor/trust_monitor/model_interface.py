@@ -42,12 +42,18 @@ from typing import Any, Protocol, runtime_checkable
 
 from trust_av_common.component_checks import PASSING, call, check_number, raised
 from trust_av_common.params import build_config
-from trust_av_common.registry import TRUST_MODELS, Component, build, config_types, get
+from trust_av_common.registry import Component, build, config_types, declare, get
 
-__all__ = ['CheckedBound', 'ClosedForm', 'FitParameter', 'TrustModel', 'build_trust_model',
-           'common_trust', 'explicability_bound', 'fit_parameters', 'make_trust_model',
-           'numeric_bound', 'paper_bound_holds', 'trust_ceiling', 'trust_model_component',
-           'trust_model_config_types']
+__all__ = ['TRUST_MODELS', 'CheckedBound', 'ClosedForm', 'FitParameter', 'TrustModel',
+           'build_trust_model', 'common_trust', 'explicability_bound', 'fit_parameters',
+           'make_trust_model', 'numeric_bound', 'paper_bound_holds', 'trust_ceiling',
+           'trust_model_component', 'trust_model_config_types']
+
+TRUST_MODELS = declare('trust_av.trust_models', factory_arguments=('trust', 'params'),
+                       interface=('name', 'closed_form_bound', 'initial_state', 'step', 'trust',
+                                  'variance'))
+"""Entry-point group of the trust models (trust from the explicability score), declared here
+beside their interface: ``factory(trust, params)`` returns a :class:`TrustModel`."""
 
 BOUND_TOLERANCE = 1e-12
 """Bisection stops when the bracket of E_max is this narrow (E is dimensionless, < 1)."""

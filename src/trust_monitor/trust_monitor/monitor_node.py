@@ -31,7 +31,6 @@ from trajectory_msgs.msg import JointTrajectory
 from trust_av_common.grids import hold_at
 from trust_av_common.lifecycle import LifecycleConfig
 from trust_av_common.lockstep import StepBuffer
-from trust_av_common.registry import TRUST_MODELS
 from trust_av_common.ros import diagnostics as diag
 from trust_av_common.ros.lifecycle import ManagedNode
 from trust_av_common.ros.messages import msg_ns, trajectory_times, trajectory_values, vector3_bytes
@@ -46,7 +45,7 @@ from trust_av_common.ros.raw_inputs import subscribe
 from trust_av_common.ros.spin import WallLoop, now_ns, spin_node
 from trust_av_common.topics import NO_FRAME
 from trust_av_common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
-from trust_monitor.model_interface import build_trust_model
+from trust_monitor.model_interface import TRUST_MODELS, build_trust_model
 from trust_monitor.paper_trust import MonitorConfig, TrustConfig, TrustEstimator
 
 __all__ = ['main']

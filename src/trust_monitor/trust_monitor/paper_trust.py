@@ -28,7 +28,7 @@ from typing import Any
 from trust_av_common.component_checks import PASSING, call, check_number, raised
 from trust_av_common.moved import MovedPathWarning
 from trust_av_common.params import ParamsError, check_fields, param
-from trust_av_common.registry import TRUST_MODELS
+from trust_monitor.model_interface import TRUST_MODELS
 
 __all__ = ['SAME_MODEL', 'MonitorConfig', 'TrustConfig', 'TrustEstimator', 'explicability',
            'paper_explicability_bound', 'performance', 'trust_input',

@@ -10,6 +10,7 @@ from pathlib import Path
 from trust_av.cli.options import add_params_file_option, output_file
 from trust_av.cli.typed_options import ParamsFileOptions, command
 from trust_av_common import registry
+from trust_monitor.model_interface import TRUST_MODELS
 
 __all__ = ['CompareOptions', 'register']
 
@@ -52,7 +53,7 @@ def run(args: CompareOptions) -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``compare`` to ``trust-av``."""
-    models = ', '.join(registry.names(registry.TRUST_MODELS))
+    models = ', '.join(registry.names(TRUST_MODELS))
     parser = subparsers.add_parser(
         'compare', help='draw two runs side by side (speeds, gaps, accelerations, E, trust '
                         'per model)',

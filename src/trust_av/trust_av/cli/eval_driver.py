@@ -26,13 +26,13 @@ from human_driver_sim.ngsim import NGSIM_VEHICLE_LENGTH_M
 from human_driver_sim.population import DRIVER_FIT_FILE, DriverFitError, fitted_idm_params
 from trust_av.cli.options import output_file
 from trust_av.cli.typed_options import command
+from trust_av.errors import TrustAvAppError
 from trust_av.system.config import (
     DEFAULT_PARAMS_FILE,
     HUMAN_CAUTIOUS_PARAMS_FILE,
     load_run_config,
 )
 from trust_av_common import output_files
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__: list[str] = []
 
@@ -91,14 +91,14 @@ def models(params_file: Path, driver_fit: Path) -> dict[str, Follower]:
     constant speed.
 
     Raises:
-        TrustAvPlannerError: Bad driver-fit file (ParamsError propagates for a bad params file).
+        TrustAvAppError: Bad driver-fit file (ParamsError propagates for a bad params file).
     """
     config = load_run_config(params_file).driver
     cautious = load_run_config([params_file, HUMAN_CAUTIOUS_PARAMS_FILE]).driver
     try:
         idm = IdmParams(**fitted_idm_params(driver_fit))
     except (DriverFitError, ValueError) as err:
-        raise TrustAvPlannerError(str(err)) from err
+        raise TrustAvAppError(str(err)) from err
     return {SHIPPED: MpcFollower(config), CAUTIOUS: MpcFollower(cautious),
             BOUNDED_IDM: IdmFollower(idm),
             TEXTBOOK_IDM: IdmFollower(TEXTBOOK_MOTORWAY), CONSTANT_SPEED: ConstantSpeed()}
@@ -107,25 +107,25 @@ def models(params_file: Path, driver_fit: Path) -> dict[str, Follower]:
 def run(args: EvalDriverOptions) -> int:
     """Load, clean, score, print (and write JSON)."""
     if not (args.window_s > 0.0 and math.isfinite(args.window_s)):
-        raise TrustAvPlannerError(f'--window-s must be > 0 and finite, got {args.window_s}')
+        raise TrustAvAppError(f'--window-s must be > 0 and finite, got {args.window_s}')
     if not (math.isfinite(args.vehicle_length_m)
             and 0.0 <= args.vehicle_length_m <= MAX_VEHICLE_LENGTH_M):
-        raise TrustAvPlannerError(f'--vehicle-length-m must be in [0, {MAX_VEHICLE_LENGTH_M:g}] '
-                                  f'm, got {args.vehicle_length_m}')
+        raise TrustAvAppError(f'--vehicle-length-m must be in [0, {MAX_VEHICLE_LENGTH_M:g}] '
+                              f'm, got {args.vehicle_length_m}')
     if args.json is not None:
         output_file(args.json, '--json')
     scored = models(args.params_file, args.driver_fit)
     dt_s = load_run_config(args.params_file).driver.dt_s
     if args.window_s < MIN_WINDOW_STEPS * dt_s:
-        raise TrustAvPlannerError(f'--window-s {args.window_s:g}: a window needs at least '
-                                  f'{MIN_WINDOW_STEPS} steps of dt_s = {dt_s:g} s '
-                                  f'({MIN_WINDOW_STEPS * dt_s:g} s)')
+        raise TrustAvAppError(f'--window-s {args.window_s:g}: a window needs at least '
+                              f'{MIN_WINDOW_STEPS} steps of dt_s = {dt_s:g} s '
+                              f'({MIN_WINDOW_STEPS * dt_s:g} s)')
     report = LoadReport()
     try:
         pairs = load_directory(args.data, args.format, report=report, dt_s=dt_s,
                                vehicle_length_m=args.vehicle_length_m)
     except CarFollowingDataError as err:
-        raise TrustAvPlannerError(str(err)) from err
+        raise TrustAvAppError(str(err)) from err
     result = evaluate(scored, pairs, window_s=args.window_s)
     print(f'{args.data}: {len(report.files)} files, {len(result.pairs)} pairs '
           f'({len(pairs)} segments); splices cut: {len(report.splices)}; '

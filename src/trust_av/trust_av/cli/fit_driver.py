@@ -36,6 +36,7 @@ from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from human_driver_sim.splits import Split, split_ngsim, split_openacc
 from trust_av.cli.options import MAX_ITERATIONS, Progress, bounded_int, output_file
 from trust_av.cli.typed_options import command
+from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av.system.config import (
     DEFAULT_PARAMS_FILE,
@@ -43,7 +44,6 @@ from trust_av.system.config import (
     load_run_config,
 )
 from trust_av_common.output_files import replacing
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__: list[str] = []
 
@@ -174,7 +174,7 @@ def _load(args: FitDriverOptions, dt_s: float) -> tuple[dict[str, Split], dict[s
                                  'duplicates_merged': report.duplicates_merged,
                                  'vehicle_length_m': report.vehicle_length_m}
     except CarFollowingDataError as err:
-        raise TrustAvPlannerError(f'{args.data}: {err}') from err
+        raise TrustAvAppError(f'{args.data}: {err}') from err
     if args.drives is not None:          # driver-in-the-loop demonstrations
         from trust_av.drive.bag_data import drive_bag_pairs
         splits['drive'], cleaning['drive'] = drive_bag_pairs(
@@ -182,7 +182,7 @@ def _load(args: FitDriverOptions, dt_s: float) -> tuple[dict[str, Split], dict[s
     for name, split in splits.items():
         for role, pairs in split._asdict().items():
             if not pairs:
-                raise TrustAvPlannerError(f'no {name} pairs left for the {role} split')
+                raise TrustAvAppError(f'no {name} pairs left for the {role} split')
     return splits, cleaning
 
 
@@ -216,7 +216,7 @@ def run(args: FitDriverOptions) -> int:
     """Fit on train, select on validation, score once on test, write the fit and evaluation."""
     started = time.perf_counter()
     if args.iterations < 1:
-        raise TrustAvPlannerError(f'--iterations must be >= 1, got {args.iterations}')
+        raise TrustAvAppError(f'--iterations must be >= 1, got {args.iterations}')
     output_file(args.out)             # before the fit: minutes of work with nowhere to go
     output_file(args.out.with_name(args.out.stem + '_eval.json'), '--out (its evaluation)')
     # the cautious driver: the candidate that is not refitted, and the inverse-KKT start's tau_H

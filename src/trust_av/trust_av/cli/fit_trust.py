@@ -43,10 +43,11 @@ from trust_av.drive.trust_fit_pooling import (
     held_out_partial,
     partial_fits,
 )
+from trust_av.errors import TrustAvAppError
 from trust_av.system.config import load_run_config
 from trust_av_common import output_files
-from trust_av_common.registry import TRUST_MODELS, names
-from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS
 from trust_monitor.trust_fit import (
     PARSIMONY_SE,
     Fit,
@@ -131,8 +132,8 @@ def _models(option: str) -> list[str]:
     chosen = [m.strip() for m in option.split(',') if m.strip()] or registered
     unknown = [m for m in chosen if m not in registered]
     if unknown:
-        raise TrustAvPlannerError(f'--models: not registered: {", ".join(unknown)} '
-                                  f'(registered: {", ".join(registered)})')
+        raise TrustAvAppError(f'--models: not registered: {", ".join(unknown)} '
+                              f'(registered: {", ".join(registered)})')
     return chosen
 
 
@@ -224,7 +225,7 @@ def run(args: FitTrustOptions) -> int:
     if not rated:
         raise FitError(f'{args.study or args.ratings}: no drive has a rating')
     if args.out.exists() and not args.out.is_dir():
-        raise TrustAvPlannerError(f'--out {args.out}: exists and is not a directory')
+        raise TrustAvAppError(f'--out {args.out}: exists and is not a directory')
     args.out.mkdir(parents=True, exist_ok=True)
     specs = {m: model_spec(config.trust, m, dict(config.trust_model_params)) for m in models}
     sizes = {m: len(specs[m].parameters) for m in models}

@@ -26,7 +26,7 @@ COMMAND_MODULES = (
     'trust_av.cli.simulate',
     'trust_av.cli.run',
     'trust_av.cli.shadow',
-    'trust_av.drive.command',
+    'trust_av.cli.drive',
     'trust_av.cli.reproduce',
     'trust_av.cli.compare',
     'trust_av.cli.bags',

@@ -16,7 +16,9 @@ from types import TracebackType
 
 from tqdm import tqdm
 
+from human_driver_sim.followers import DRIVERS
 from preceding_traffic.traces import SHIPPED_TRACES, SpeedTrace
+from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av.system.config import DEFAULT_PARAMS_FILE, RunConfig
 from trust_av.system.metrics import Metrics
@@ -24,8 +26,8 @@ from trust_av_common import registry
 from trust_av_common.output_files import cannot_write, link_refused, odd_path
 from trust_av_common.params import field_spec
 from trust_av_common.wall_clock import WallClockConfig
-from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
+from trust_av_planner.predictors import PREDICTORS
 from trust_monitor.model_interface import trust_ceiling
 
 __all__ = ['EXIT_COLLISION', 'MAX_DRIVERS', 'MAX_ITERATIONS', 'MAX_SEED', 'MAX_WORKERS',
@@ -118,26 +120,26 @@ def output_file(path: Path, option: str = '--out') -> Path:
     """Check, before any work, that ``path`` can be written as a file.
 
     Raises:
-        TrustAvPlannerError: ``path`` is odd (a NUL or newline in it, ``.``), a symbolic
+        TrustAvAppError: ``path`` is odd (a NUL or newline in it, ``.``), a symbolic
             link (:func:`~trust_av_common.output_files.link_refused`), a directory, or
             its nearest existing ancestor is not a writable directory.
     """
     odd = odd_path(path)
     if odd is not None:
-        raise TrustAvPlannerError(f'{option} {str(path)!r}: {odd}')
+        raise TrustAvAppError(f'{option} {str(path)!r}: {odd}')
     refused = link_refused(path)
     if refused is not None:
-        raise TrustAvPlannerError(f'{option} {path}: {refused}')
+        raise TrustAvAppError(f'{option} {path}: {refused}')
     if path.is_dir():
-        raise TrustAvPlannerError(f'{path}: is a directory; {option} needs a file name')
+        raise TrustAvAppError(f'{path}: is a directory; {option} needs a file name')
     ancestor = path.parent
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
-        raise TrustAvPlannerError(f'{path}: {ancestor} is not a directory')
+        raise TrustAvAppError(f'{path}: {ancestor} is not a directory')
     problem = cannot_write(path, ancestor)
     if problem is not None:
-        raise TrustAvPlannerError(f'{path}: {problem}')
+        raise TrustAvAppError(f'{path}: {problem}')
     return path
 
 
@@ -159,11 +161,11 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help='its message type (default: preceding_traffic.bag_message_type)')
     parser.add_argument('--alpha', type=alpha_value, default=None,
                         help="explicability weight in [0, 1] (default: the params file's)")
-    parser.add_argument('--predictor', choices=registry.names(registry.PREDICTORS),
+    parser.add_argument('--predictor', choices=registry.names(PREDICTORS),
                         default=None,
                         help='registered estimator of the plan the human expects (default: '
                              "the params file's predictor)")
-    parser.add_argument('--driver-model', choices=registry.names(registry.DRIVERS),
+    parser.add_argument('--driver-model', choices=registry.names(DRIVERS),
                         default=None,
                         help="registered human follower model (default: the params file's "
                              'human_driver.driver_model)')

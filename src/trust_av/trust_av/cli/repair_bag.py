@@ -12,8 +12,8 @@ from pathlib import Path
 
 from trust_av.cli.typed_options import command
 from trust_av.drive.sessions import MARKER, PARTICIPANT_ID, participant_lock
+from trust_av.errors import TrustAvAppError
 from trust_av_common.output_lock import hold_output_lock, lock_path
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__: list[str] = []
 
@@ -31,16 +31,16 @@ def run(args: RepairBagOptions) -> int:
 
     raw = args.path
     if raw == '' or '\x00' in raw:
-        raise TrustAvPlannerError(f'{raw!r}: names no bag directory or .mcap file')
+        raise TrustAvAppError(f'{raw!r}: names no bag directory or .mcap file')
     path = Path(raw)
     if path.name in ('', '.', '..'):    # `repair-bag .` inside the bag directory
         path = path.resolve()
         if path.name == '':
-            raise TrustAvPlannerError(f'{raw}: the root directory is not a bag directory')
+            raise TrustAvAppError(f'{raw}: the root directory is not a bag directory')
     if not path.exists():
-        raise TrustAvPlannerError(f'{path}: no such bag directory or .mcap file')
+        raise TrustAvAppError(f'{path}: no such bag directory or .mcap file')
     if not (path.is_dir() or path.is_file()):       # a FIFO or a device: reading would block
-        raise TrustAvPlannerError(f'{path}: not a bag directory or a regular .mcap file')
+        raise TrustAvAppError(f'{path}: not a bag directory or a regular .mcap file')
     target = path if path.is_dir() else path.with_suffix('')
     if not path.is_dir():                # a lone .mcap: in a bag directory a run writes?
         _refuse_if_written(path.parent)
@@ -67,7 +67,7 @@ def _refuse_if_written(directory: Path) -> None:
     looked at, never created).
 
     Raises:
-        TrustAvPlannerError: it does.
+        TrustAvAppError: it does.
     """
     lock = lock_path(directory)
     try:
@@ -77,7 +77,7 @@ def _refuse_if_written(directory: Path) -> None:
     try:
         fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
     except BlockingIOError:
-        raise TrustAvPlannerError(f'{directory}: {IN_USE} (lock {lock})') from None
+        raise TrustAvAppError(f'{directory}: {IN_USE} (lock {lock})') from None
     finally:
         os.close(fd)
 

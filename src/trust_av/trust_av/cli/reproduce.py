@@ -14,6 +14,7 @@ from typing import Any
 
 import yaml
 
+from human_driver_sim.followers import DRIVERS
 from human_driver_sim.population import CAUTIOUS_FIT_FILE, DRIVER_FIT_FILE
 from preceding_traffic.sources import load_trace
 from trust_av.cli.options import (
@@ -29,6 +30,7 @@ from trust_av.cli.options import (
     steps_value,
 )
 from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.errors import TrustAvAppError
 from trust_av.study import population, sweep, tables, trace_reports
 from trust_av.study.frame import (
     TRUST_MODEL_PARAMETER,
@@ -45,8 +47,8 @@ from trust_av.system.config import (
     load_run_config,
 )
 from trust_av_common import output_files, registry
-from trust_av_planner.errors import TrustAvPlannerError
-from trust_monitor.model_interface import paper_bound_holds, trust_ceiling
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import TRUST_MODELS, paper_bound_holds, trust_ceiling
 
 __all__ = ['lead_preview_layer', 'truncation_note', 'unsafe_cases']
 
@@ -204,8 +206,8 @@ def run(args: ReproduceOptions) -> int:
     sweep.check_axis('--trust-models', args.trust_models)
     check_axes(args.predictors, args.driver_models, args.trust_models, args.alphas)
     if args.profile != 'table_i' and args.params_files:
-        raise TrustAvPlannerError('--profile and --params-file both choose the parameters: give '
-                                  'one of them')
+        raise TrustAvAppError('--profile and --params-file both choose the parameters: give '
+                              'one of them')
     files: list[Path] = list(args.params_files) or [PROFILES[args.profile]]
     out: Path = args.results_dir or DEFAULT_RESULTS[args.profile]
     if args.lead_preview is not None and args.lead_preview != 'recorded':
@@ -226,15 +228,15 @@ def run(args: ReproduceOptions) -> int:
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
-        raise TrustAvPlannerError(f'--results-dir {out}: cannot create it '
-                                  f'({err.strerror})') from err
+        raise TrustAvAppError(f'--results-dir {out}: cannot create it '
+                              f'({err.strerror})') from err
     per_trace = [path.relative_to(out) for paths in trace_reports.trace_paths(
         out, args.traces).values() for path in paths]
     for name in (*RESULT_FILES, f'params_lead_preview_{args.lead_preview}.yaml',
                  *map(str, per_trace)):
         refused = output_files.link_refused(out / name)   # before the sweep, not after it
         if refused is not None:
-            raise TrustAvPlannerError(f'--results-dir {out}: {name} is {refused}')
+            raise TrustAvAppError(f'--results-dir {out}: {name} is {refused}')
     if args.lead_preview is not None:
         files.append(lead_preview_layer(args.lead_preview, out))
     executor: sweep.Executor
@@ -336,9 +338,9 @@ def run(args: ReproduceOptions) -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``reproduce`` to ``trust-av``."""
-    predictors = ', '.join(registry.names(registry.PREDICTORS))
-    drivers = ', '.join(registry.names(registry.DRIVERS))
-    trust_models = ', '.join(registry.names(registry.TRUST_MODELS)) or 'none yet'
+    predictors = ', '.join(registry.names(PREDICTORS))
+    drivers = ', '.join(registry.names(DRIVERS))
+    trust_models = ', '.join(registry.names(TRUST_MODELS)) or 'none yet'
     parser = subparsers.add_parser(
         'reproduce', help="a study of any registered parts; the paper's Tables II-IV and "
                           'Figures 2-3',

@@ -125,7 +125,7 @@ def domain_id_value(text: str) -> int:
     """``--domain-id``: a whole number in 0..232.
 
     Raises:
-        TrustAvPlannerError: it is not (one line naming the option).
+        TrustAvAppError: it is not (one line naming the option).
     """
     try:
         value: object = int(text, 10)

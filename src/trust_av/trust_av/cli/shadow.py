@@ -19,14 +19,15 @@ from trust_av.cli.options import (
     positive_seconds,
 )
 from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.errors import TrustAvAppError
 from trust_av.system import run_record
 from trust_av.system.config import load_run_config
 from trust_av.system.outputs import replacing_outputs
 from trust_av_common import output_files, registry
 from trust_av_common.wall_clock import format_summary
-from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.planner import needs_follower_state
 from trust_av_planner.planner_params import PlannerTopics, check_control_rate
+from trust_av_planner.predictors import PREDICTORS
 
 if TYPE_CHECKING:
     from trust_av.graph.shadow import ShadowRun
@@ -84,13 +85,13 @@ def run(args: ShadowOptions) -> int:
     check_control_rate(config.planner, rate_hz)  # the planner node's rule, before any output
     if args.whole_graph and topics != PlannerTopics():
         files = ', '.join(str(p) for p in config.params_files)
-        raise TrustAvPlannerError('--whole-graph runs the simulated nodes on the standard topics; '
-                                  f'the params files ({files}) remap the planner inputs: '
-                                  f'{topics}')
+        raise TrustAvAppError('--whole-graph runs the simulated nodes on the standard topics; '
+                              f'the params files ({files}) remap the planner inputs: '
+                              f'{topics}')
     if not args.whole_graph and needs_follower_state(config.planner):
-        raise TrustAvPlannerError('trust-av shadow has no human follower state: predictor '
-                                  f'{config.planner.predictor} needs it (follower_state); '
-                                  'use one that does not or --whole-graph')
+        raise TrustAvAppError('trust-av shadow has no human follower state: predictor '
+                              f'{config.planner.predictor} needs it (follower_state); '
+                              'use one that does not or --whole-graph')
     trace = load_trace(str(args.bag), config.planner.dt_s, config.trace)
     whole_s = trace.steps * trace.dt_s
     duration_s = whole_s if args.duration_s is None else min(args.duration_s, whole_s)
@@ -149,7 +150,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="control rate, Hz (default: the params file's control_rate_hz)")
     parser.add_argument('--alpha', type=alpha_value, default=None,
                         help="explicability weight in [0, 1] (default: the params file's)")
-    parser.add_argument('--predictor', choices=registry.names(registry.PREDICTORS),
+    parser.add_argument('--predictor', choices=registry.names(PREDICTORS),
                         default=None,
                         help="registered plan estimator (default: the params file's)")
     parser.add_argument('--whole-graph', action='store_true',

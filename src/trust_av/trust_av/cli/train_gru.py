@@ -25,6 +25,7 @@ from trust_av.cli.options import (
     positive_int,
 )
 from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av.study.gru_training import TrainingSettings, save_model, train_with_dagger
 from trust_av.study.pinned_numerics import (
@@ -34,7 +35,6 @@ from trust_av.study.pinned_numerics import (
     unsupported_reason,
 )
 from trust_av.system.config import load_run_config
-from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors.gru import MODELS_DIR
 
 __all__: list[str] = []
@@ -75,15 +75,15 @@ def settings_from_args(args: TrainGruOptions) -> TrainingSettings:
     settings = TrainingSettings()
     if args.epochs is not None:
         if args.epochs < 1:
-            raise TrustAvPlannerError(f'--epochs must be >= 1, got {args.epochs}')
+            raise TrustAvAppError(f'--epochs must be >= 1, got {args.epochs}')
         settings = dataclasses.replace(settings, epochs=args.epochs)
     if args.seed is not None:
         settings = dataclasses.replace(settings, seed=args.seed)
     if args.jobs is not None and args.jobs < 1:
-        raise TrustAvPlannerError(f'--jobs must be >= 1, got {args.jobs}')
+        raise TrustAvAppError(f'--jobs must be >= 1, got {args.jobs}')
     if args.dagger_rounds is not None:
         if args.dagger_rounds < 0:
-            raise TrustAvPlannerError(f'--dagger-rounds must be >= 0, got {args.dagger_rounds}')
+            raise TrustAvAppError(f'--dagger-rounds must be >= 0, got {args.dagger_rounds}')
         settings = dataclasses.replace(settings, dagger_rounds=args.dagger_rounds)
     return settings
 
@@ -104,8 +104,8 @@ def run(args: TrainGruOptions) -> int:
                   file=sys.stderr)
         code = run_pinned(child_arguments(args)).returncode
         if code < 0:   # killed: the child could not say why (the OOM killer sends SIGKILL)
-            raise TrustAvPlannerError(f'the training process (pinned numerics) was killed by '
-                                      f'{signal.Signals(-code).name}; nothing was written')
+            raise TrustAvAppError(f'the training process (pinned numerics) was killed by '
+                                  f'{signal.Signals(-code).name}; nothing was written')
         return code
     check_pinned()
     start = time.monotonic()

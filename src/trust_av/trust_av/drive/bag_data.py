@@ -22,7 +22,7 @@ from rosbags.typesys import Stores, get_typestore
 from human_driver_sim.car_following import FollowingPair
 from human_driver_sim.splits import Split
 from trust_av.drive.trust_rating import DriveSeries
-from trust_av_planner.errors import TrustAvPlannerError
+from trust_av.errors import TrustAvAppError
 
 __all__ = ['DriveBag', 'DriveBagError', 'custom_data', 'demonstration', 'drive_bag_pairs',
            'read_drive', 'split_by_participant']
@@ -30,7 +30,7 @@ __all__ = ['DriveBag', 'DriveBagError', 'custom_data', 'demonstration', 'drive_b
 NS = 1e-9
 
 
-class DriveBagError(TrustAvPlannerError):
+class DriveBagError(TrustAvAppError):
     """A bag is not a complete drive recording; the message names the bag and what lacks."""
 
 

@@ -184,8 +184,8 @@ class ModelTrust:
     def __init__(self, config: Any, values: dict[str, Any]) -> None:
         import dataclasses
 
-        from trust_av_common.registry import TRUST_MODELS, names
-        from trust_monitor.model_interface import make_trust_model
+        from trust_av_common.registry import names
+        from trust_monitor.model_interface import TRUST_MODELS, make_trust_model
         from trust_monitor.paper_trust import TrustEstimator
 
         self.names = list(names(TRUST_MODELS))

@@ -35,7 +35,7 @@ __all__ = ['run_session']
 
 class SessionOptions(Protocol):
     """What a session reads of ``trust-av drive``'s options
-    (:class:`trust_av.drive.command.DriveOptions`)."""
+    (:class:`trust_av.cli.drive.DriveOptions`)."""
 
     @property
     def study(self) -> Path: ...

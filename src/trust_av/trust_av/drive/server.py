@@ -42,7 +42,7 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
-from trust_av_planner.errors import TrustAvPlannerError
+from trust_av.errors import TrustAvAppError
 
 __all__ = ['FLOOD_MESSAGES_PER_S', 'DriveServer', 'parse_message']
 
@@ -78,7 +78,7 @@ MAX_CONNECTIONS = 8
 driving tab's)."""
 
 
-class ServerError(TrustAvPlannerError):
+class ServerError(TrustAvAppError):
     """The server cannot start (e.g. the port is taken); the message says why."""
 
 
@@ -315,13 +315,6 @@ class DriveServer:
             await client.send(text)
         except ConnectionClosed:
             self.clients.discard(client)
-
-    def close_clients(self) -> None:
-        """Drop every page connection (what a lost network does; tests)."""
-        loop = self._loop
-        if loop is not None:
-            for client in list(self.clients):
-                asyncio.run_coroutine_threadsafe(client.close(), loop)
 
     def stop(self) -> None:
         """Stop serving and join the thread."""

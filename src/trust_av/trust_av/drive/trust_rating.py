@@ -207,7 +207,8 @@ def registered_models(config: TrustConfig, values: Mapping[str, Any] | None = No
     """Every registered trust model (group ``trust_av.trust_models``, plug-ins included) as a
     comparison model, each with the run's parameters (``values``: the params files' values
     of the models' own parameters, ``RunConfig.trust_model_params``)."""
-    from trust_av_common.registry import TRUST_MODELS, names
+    from trust_av_common.registry import names
+    from trust_monitor.model_interface import TRUST_MODELS
 
     return [(name, trust_model_series(dataclasses.replace(config, trust_model=name), values))
             for name in names(TRUST_MODELS)]

@@ -14,9 +14,9 @@ from typing import Any
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
+from trust_av.errors import TrustAvAppError
 from trust_av.system.metrics import StepRecord
 from trust_av_common.topics import qualified
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['TYPESTORE', 'message_stamp', 'read_topics', 'records_from_bag']
 
@@ -48,7 +48,7 @@ def read_topics(path: Path) -> dict[str, dict[int, Any]]:
                 msg = reader.deserialize(raw, connection.msgtype)
                 out[connection.topic][_ns(message_stamp(msg))] = msg
     except Exception as err:  # rosbags raises several unrelated types for a bad file
-        raise TrustAvPlannerError(f'{path}: cannot read the recording ({err})') from err
+        raise TrustAvAppError(f'{path}: cannot read the recording ({err})') from err
     return out
 
 
@@ -56,14 +56,14 @@ def _accels(msg: Any, where: str, *, may_be_empty: bool = False) -> tuple[float,
     """The accelerations of a recorded plan, one per point.
 
     Raises:
-        TrustAvPlannerError: a plan without points (unless ``may_be_empty``), or a point
+        TrustAvAppError: a plan without points (unless ``may_be_empty``), or a point
             without an acceleration (not one of the graph's plans: e.g. another node's on
             the same topic).
     """
     if (not msg.points and not may_be_empty) or any(len(p.accelerations) < 1
                                                     for p in msg.points):
-        raise TrustAvPlannerError(f'{where}: a plan without accelerations (not one the graph '
-                                  'publishes: another publisher on the topic?)')
+        raise TrustAvAppError(f'{where}: a plan without accelerations (not one the graph '
+                              'publishes: another publisher on the topic?)')
     return tuple(float(p.accelerations[0]) for p in msg.points)
 
 

@@ -53,6 +53,7 @@ from rosbags.interfaces import (
 )
 from rosbags.typesys import Stores, get_typestore
 
+from trust_av.errors import TrustAvAppError
 from trust_av.graph.bag_metadata import BagInfo, TopicInfo, qos_text
 from trust_av.graph.mcap_steps import (
     RECORDER_LIBRARY,
@@ -61,7 +62,6 @@ from trust_av.graph.mcap_steps import (
     new_writer,
     replay,
 )
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['EXIT_DISK_FULL', 'RESERVE_BASE_BYTES', 'RESERVE_NAME', 'RESERVE_PER_CHUNK_BYTES',
            'RESERVE_STEP_CHUNKS', 'STAMP_IN_FIRST_ELEMENT', 'TYPESTORE', 'BagWriteError',
@@ -89,7 +89,7 @@ MAX_INFINITE = QosTime(2147483647, 4294967295)
 """rmw's "infinite" duration as rosbag2 writes it in offered_qos_profiles."""
 
 
-class BagWriteError(TrustAvPlannerError):
+class BagWriteError(TrustAvAppError):
     """A recording cannot be written or read back; the message names the bag."""
 
 

@@ -23,10 +23,10 @@ import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from trust_av.errors import TrustAvAppError
 from trust_av.graph.processes import GraphError
 from trust_av_common.rcl_values import TOPIC_NAME_MAX, namespace_problem
 from trust_av_common.topics import TOPICS, qualified
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['DOMAIN_ID_MAX', 'check_domain_id', 'check_namespace', 'domain_ports_in_use',
            'lease_domain']
@@ -96,14 +96,14 @@ def check_domain_id(domain_id: object, option: str = 'domain_id') -> int:
     """``domain_id`` if it is a ROS domain id Fast DDS can use (0..:data:`DOMAIN_ID_MAX`).
 
     Raises:
-        TrustAvPlannerError: it is not a whole number in that range (one line naming
+        TrustAvAppError: it is not a whole number in that range (one line naming
             ``option``).
     """
     if isinstance(domain_id, bool) or not isinstance(domain_id, int) or \
             not 0 <= domain_id <= DOMAIN_ID_MAX:
-        raise TrustAvPlannerError(f'{option} {domain_id!r}: a ROS domain id is a whole number '
-                                  f'in 0..{DOMAIN_ID_MAX} (Fast DDS derives its UDP ports '
-                                  'from it)')
+        raise TrustAvAppError(f'{option} {domain_id!r}: a ROS domain id is a whole number '
+                              f'in 0..{DOMAIN_ID_MAX} (Fast DDS derives its UDP ports '
+                              'from it)')
     return domain_id
 
 
@@ -115,10 +115,10 @@ def check_namespace(namespace: object, option: str = 'namespace') -> str:
     valid full topic name (rmw ``validate_full_topic_name.c``: at most 247 characters).
 
     Raises:
-        TrustAvPlannerError: it is not (one line naming ``option`` and rmw's reason).
+        TrustAvAppError: it is not (one line naming ``option`` and rmw's reason).
     """
     if not isinstance(namespace, str):
-        raise TrustAvPlannerError(f'{option} {namespace!r}: a ROS namespace is a string')
+        raise TrustAvAppError(f'{option} {namespace!r}: a ROS namespace is a string')
     problem = namespace_problem(namespace)
     if problem is None:
         longest = max((qualified(t.name, namespace) for t in TOPICS), key=len)
@@ -126,7 +126,7 @@ def check_namespace(namespace: object, option: str = 'namespace') -> str:
             problem = (f"topic {longest[:40]}... would be longer than rmw's "
                        f'{TOPIC_NAME_MAX} characters')
     if problem is not None:
-        raise TrustAvPlannerError(f'{option} {namespace!r}: {problem}')
+        raise TrustAvAppError(f'{option} {namespace!r}: {problem}')
     return namespace
 
 

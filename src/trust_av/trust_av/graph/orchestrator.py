@@ -35,6 +35,7 @@ from typing import Any
 import yaml
 
 from preceding_traffic.traces import SpeedTrace
+from trust_av.errors import TrustAvAppError
 from trust_av.graph.bag_records import records_from_bag
 from trust_av.graph.bag_repair import repair_bag
 from trust_av.graph.bag_writer import EXIT_DISK_FULL, DiskFullError
@@ -47,10 +48,10 @@ from trust_av.system import run_record
 from trust_av.system.closed_loop import InitialState, equilibrium_start
 from trust_av.system.config import RunConfig
 from trust_av.system.metrics import StepRecord, first_collision
+from trust_av_common.errors import TrustAvError
 from trust_av_common.output_files import stop_signals_held
 from trust_av_common.record_window import window_steps
 from trust_av_common.topics import qualified
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['GraphRun', 'missing_messages', 'node_specs', 'run_graph', 'run_graph_records',
            'write_record']
@@ -132,7 +133,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
             lease a free, private domain (nothing else may be on it).
 
     Raises:
-        TrustAvPlannerError: ``namespace`` or ``domain_id`` is invalid (one line naming it).
+        TrustAvAppError: ``namespace`` or ``domain_id`` is invalid (one line naming it).
         GraphError: the configuration's ``clock_mode`` is not ``lockstep``.
         GraphError: the graph did not connect in time, a node died, a step stalled, or a
             foreign publisher appeared (on one of this graph's topics).
@@ -178,7 +179,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                 start_pub.publish(Empty())
                 _follow(session, trace.steps, step_timeout_s, on_step)
                 stepped = time.monotonic() - started - startup
-        except TrustAvPlannerError as err:
+        except TrustAvError as err:
             # The run failed: finish the recording, but a failure to do so must not hide
             # why the run failed (an exception raised in a `finally` would replace it).
             told = _failure(err, graph, bag, namespace, trace.steps)
@@ -194,7 +195,7 @@ def run_graph(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
                     wall_s=time.monotonic() - started, startup_s=startup, steps_s=stepped)
 
 
-def _failure(err: TrustAvPlannerError, graph: Graph, bag: Path, namespace: str,
+def _failure(err: TrustAvError, graph: Graph, bag: Path, namespace: str,
              steps: int) -> GraphError | None:
     """After a failed run: the recording finished, and the error that tells why with what
     the bag lacks, which node a stall waited for, that no step was kept or that the disk is
@@ -209,7 +210,7 @@ def _failure(err: TrustAvPlannerError, graph: Graph, bag: Path, namespace: str,
                 if isinstance(err, IncompleteRecordingError) else '')
     except DiskFullError:
         raise                       # the recorder ran out of disk: that is the cause
-    except TrustAvPlannerError as finishing:
+    except TrustAvError as finishing:
         return GraphError(f'{err}; {finishing}{_low_disk(bag)}')
     if lost:
         return GraphError(f'{err}; the bag lacks {lost} messages')
@@ -383,7 +384,7 @@ def missing_messages(bag: Path, steps: int, namespace: str = '/') -> str:
         namespace: the run's namespace (the recorded topic names are in it).
 
     Raises:
-        TrustAvPlannerError: the bag cannot be read.
+        TrustAvAppError: the bag cannot be read.
     """
     from rosbags.rosbag2 import Reader, ReaderError
 
@@ -393,7 +394,7 @@ def missing_messages(bag: Path, steps: int, namespace: str = '/') -> str:
         with Reader(bag) as reader:
             counts = {c.topic: c.msgcount for c in reader.connections}
     except (ReaderError, OSError) as err:
-        raise TrustAvPlannerError(f'{bag}: cannot read the recording ({err})') from err
+        raise TrustAvAppError(f'{bag}: cannot read the recording ({err})') from err
     lacking = []
     for row in TOPICS:
         if 'recorder' in row.subscribers:
@@ -437,13 +438,13 @@ def run_graph_records(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag:
 
     Raises:
         GraphError: as :func:`run_graph`.
-        TrustAvPlannerError: the recording does not hold every step of the run.
+        TrustAvAppError: the recording does not hold every step of the run.
     """
     result = run_graph(config, trace_arg, trace, bag, **options)
     records = records_from_bag(bag, options.get('namespace', '/'))
     crash = first_collision(records)
     if len(records) != trace.steps and (crash is None or crash.step != len(records) - 1):
-        raise TrustAvPlannerError(f'{bag}: {len(records)} complete steps recorded, expected '
-                                  f'{trace.steps}')
+        raise TrustAvAppError(f'{bag}: {len(records)} complete steps recorded, expected '
+                              f'{trace.steps}')
     result.steps = len(records)
     return result, records

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av_common.param_layers import node_fqn, shipped_params_file, to_params_text
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['DDS_PROFILE', 'PROFILE_VARIABLES', 'RECORDER', 'Graph', 'GraphError', 'NodeSpec',
            'use_run_discovery']
@@ -36,7 +36,7 @@ acknowledgements for at most 1 s, then rclpy's teardown: trust_av_common.ros.spi
 SIGINT is given 10 s. A second stop signal to trust-av moves on to the next rung at once."""
 
 
-class GraphError(TrustAvPlannerError):
+class GraphError(TrustAvAppError):
     """The graph could not start or a node died; the message names the node."""
 
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 
-from trust_av_planner.errors import TrustAvPlannerError
+from trust_av.errors import TrustAvAppError
 
 __all__ = ['Lost', 'PublicationLedger', 'Publisher', 'RecordingLossError', 'check_lossless']
 
@@ -53,7 +53,7 @@ class Lost:
         return f'{self.topic} from {self.node}: {self.count} (publications {numbers})'
 
 
-class RecordingLossError(TrustAvPlannerError):
+class RecordingLossError(TrustAvAppError):
     """A wall-mode recording lost messages; the bag holds the rest (the line says which)."""
 
     def __init__(self, message: str, losses: Sequence[Lost]) -> None:

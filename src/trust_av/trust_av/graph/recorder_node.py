@@ -38,6 +38,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import UInt64
 
+from trust_av.errors import TrustAvAppError
 from trust_av.graph.bag_qos import offered_profiles
 from trust_av.graph.bag_writer import EXIT_DISK_FULL, BagWriter
 from trust_av_common.params import check_fields, param
@@ -48,7 +49,6 @@ from trust_av_common.ros.qos import QOS
 from trust_av_common.ros.spin import spin_node
 from trust_av_common.topics import TOPICS
 from trust_av_common.wall_clock import WallClockConfig
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['READY_CHECK_PERIOD_S', 'main']
 
@@ -80,17 +80,17 @@ def read_record(path: str) -> dict[str, str]:
     ``custom_data`` entries, strings to strings ({} for no file).
 
     Raises:
-        TrustAvPlannerError: the file cannot be read or is not such a mapping.
+        TrustAvAppError: the file cannot be read or is not such a mapping.
     """
     if not path:
         return {}
     try:
         document = yaml.safe_load(Path(path).read_text())
     except (OSError, yaml.YAMLError) as err:
-        raise TrustAvPlannerError(f'record_file {path}: cannot read it ({err})') from err
+        raise TrustAvAppError(f'record_file {path}: cannot read it ({err})') from err
     if not (isinstance(document, dict)
             and all(isinstance(k, str) and isinstance(v, str) for k, v in document.items())):
-        raise TrustAvPlannerError(f'record_file {path}: not a mapping of text to text')
+        raise TrustAvAppError(f'record_file {path}: not a mapping of text to text')
     return document
 
 

@@ -29,13 +29,13 @@ from pathlib import Path
 
 import numpy as np
 
+from trust_av.errors import TrustAvAppError
 from trust_av.study.plots import pyplot, save_figure
 from trust_av.system.config import load_run_config
 from trust_av.system.metrics import StepRecord
 from trust_av_common.errors import with_suggestions
-from trust_av_common.registry import TRUST_MODELS, names
-from trust_av_planner.errors import TrustAvPlannerError
-from trust_monitor.model_interface import common_trust, make_trust_model
+from trust_av_common.registry import names
+from trust_monitor.model_interface import TRUST_MODELS, common_trust, make_trust_model
 from trust_monitor.paper_trust import explicability
 
 __all__ = ['compare_runs', 'read_run', 'trust_per_model']
@@ -62,20 +62,20 @@ class RunSeries:
 
     def __post_init__(self) -> None:
         if len(self.t_s) < 2:
-            raise TrustAvPlannerError(f'{self.name}: {len(self.t_s)} step(s); a run to compare '
-                                      'needs at least two')
+            raise TrustAvAppError(f'{self.name}: {len(self.t_s)} step(s); a run to compare '
+                                  'needs at least two')
         if not np.all(np.diff(self.t_s) > 0):
-            raise TrustAvPlannerError(f'{self.name}: step times do not increase')
+            raise TrustAvAppError(f'{self.name}: step times do not increase')
         for key, series in self.values.items():
             if len(series) != len(self.t_s) or not np.all(np.isfinite(series)):
-                raise TrustAvPlannerError(f'{self.name}: {key} is not one finite number per '
-                                          'step')
+                raise TrustAvAppError(f'{self.name}: {key} is not one finite number per '
+                                      'step')
 
 
 def from_records(name: str, records: Sequence[StepRecord]) -> RunSeries:
     """A run's series from its :class:`~trust_av.system.metrics.StepRecord`."""
     if not records:
-        raise TrustAvPlannerError(f'{name}: no complete step recorded')
+        raise TrustAvAppError(f'{name}: no complete step recorded')
     t = np.array([r.t_s for r in records], float)
     return RunSeries(name, t - t[0], {key: np.array([getattr(r, key) for r in records], float)
                                       for key in SERIES})
@@ -85,25 +85,25 @@ def read_csv_run(path: Path) -> RunSeries:
     """A ``trust-av simulate --out`` table.
 
     Raises:
-        TrustAvPlannerError: unreadable, a column missing, or a value that is not a number.
+        TrustAvAppError: unreadable, a column missing, or a value that is not a number.
     """
     try:
         with path.open(newline='', encoding='utf-8') as handle:
             rows = list(csv.DictReader(handle))
     except (OSError, UnicodeDecodeError, csv.Error) as err:
-        raise TrustAvPlannerError(f'{path}: cannot read it ({err})') from err
+        raise TrustAvAppError(f'{path}: cannot read it ({err})') from err
     if not rows:
-        raise TrustAvPlannerError(f'{path}: no rows (expected a trust-av simulate --out table)')
+        raise TrustAvAppError(f'{path}: no rows (expected a trust-av simulate --out table)')
     missing = [c for c in ('t_s', *SERIES) if c not in rows[0]]
     if missing:
-        raise TrustAvPlannerError(f'{path}: no column {", ".join(missing)} (expected a '
-                                  'trust-av simulate --out table)')
+        raise TrustAvAppError(f'{path}: no column {", ".join(missing)} (expected a '
+                              'trust-av simulate --out table)')
     columns: dict[str, np.ndarray] = {}
     for column in ('t_s', *SERIES):
         try:
             columns[column] = np.array([float(row[column]) for row in rows])
         except (TypeError, ValueError) as err:
-            raise TrustAvPlannerError(f'{path}: column {column}: {err}') from err
+            raise TrustAvAppError(f'{path}: column {column}: {err}') from err
     t = columns.pop('t_s')
     return RunSeries(path.name, t - t[0], columns)
 
@@ -112,7 +112,7 @@ def read_drive_run(bag: Path, params_files: Sequence[str | Path] = ()) -> RunSer
     """A ``trust-av drive`` recording as a run: every series at the AV's plan times.
 
     Raises:
-        TrustAvPlannerError: not a complete drive (no plans, a vehicle without odometry).
+        TrustAvAppError: not a complete drive (no plans, a vehicle without odometry).
     """
     from trust_av.drive.bag_data import read_drive  # rosbags: only for a bag
 
@@ -120,14 +120,14 @@ def read_drive_run(bag: Path, params_files: Sequence[str | Path] = ()) -> RunSer
     drive = read_drive(bag)
     t = np.asarray(drive.series.times_s, float)
     if len(t) < 2:
-        raise TrustAvPlannerError(f'{bag}: {len(t)} plan(s) recorded; a run to compare needs '
-                                  'at least two')
+        raise TrustAvAppError(f'{bag}: {len(t)} plan(s) recorded; a run to compare needs '
+                              'at least two')
     at: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for vehicle, topic in (('traffic', '/preceding_vehicle/odom'), ('av', '/ego/odom'),
                            ('human', '/human/odom')):
         rows = drive.odometry[topic]
         if len(rows) < 2:
-            raise TrustAvPlannerError(f'{bag}: no odometry on {topic}')
+            raise TrustAvAppError(f'{bag}: no odometry on {topic}')
         at[vehicle] = (np.interp(t, rows[:, 0], rows[:, 1]), np.interp(t, rows[:, 0], rows[:, 2]))
     length = config.shared.vehicle_length_m
     scores = [explicability(p, e, config.trust.epsilon_mps2)
@@ -152,18 +152,18 @@ def read_run(path: str | Path, params_files: Sequence[str | Path] = ()) -> RunSe
             its epsilon and vehicle length).
 
     Raises:
-        TrustAvPlannerError: no such file, not a run, or a run without two complete steps.
+        TrustAvAppError: no such file, not a run, or a run without two complete steps.
     """
     path = Path(path)
     if not path.exists():
-        raise TrustAvPlannerError(f'{path}: no such file or directory (give a bag directory, '
-                                  'its .mcap, or a trust-av simulate --out CSV)')
+        raise TrustAvAppError(f'{path}: no such file or directory (give a bag directory, '
+                              'its .mcap, or a trust-av simulate --out CSV)')
     if path.is_file() and path.suffix == '.csv':
         return read_csv_run(path)
     bag = path.parent if path.is_file() and path.suffix == '.mcap' else path
     if not (bag / 'metadata.yaml').is_file():
-        raise TrustAvPlannerError(f'{path}: not a run (neither a rosbag2 directory with '
-                                  'metadata.yaml, its .mcap, nor a .csv)')
+        raise TrustAvAppError(f'{path}: not a run (neither a rosbag2 directory with '
+                              'metadata.yaml, its .mcap, nor a .csv)')
     # Imported here: reading a CSV needs no rosbags.
     from trust_av.drive.bag_data import custom_data
     from trust_av.graph.bag_records import records_from_bag
@@ -176,14 +176,14 @@ def model_names(models: Sequence[str] | None) -> list[str]:
     """The chosen trust models (None or empty: every registered one).
 
     Raises:
-        TrustAvPlannerError: a name that is not registered (one line, with suggestions).
+        TrustAvAppError: a name that is not registered (one line, with suggestions).
     """
     registered = list(names(TRUST_MODELS))
     chosen = [m for m in (models or []) if m] or registered
     unknown = [m for m in chosen if m not in registered]
     if unknown:
-        raise TrustAvPlannerError(f'trust model(s) {with_suggestions(unknown, registered)} '
-                                  f'not registered; registered: {registered}')
+        raise TrustAvAppError(f'trust model(s) {with_suggestions(unknown, registered)} '
+                              f'not registered; registered: {registered}')
     return list(dict.fromkeys(chosen))
 
 
@@ -275,16 +275,16 @@ def compare_runs(run_a: str | Path, run_b: str | Path, out: str | Path, *,
         Per run label, each model's final trust on the common scale.
 
     Raises:
-        TrustAvPlannerError: a run that cannot be read, an unknown model, an output
+        TrustAvAppError: a run that cannot be read, an unknown model, an output
             suffix that is not a figure's (one line naming it).
     """
     out = Path(out)
     if out.suffix.lower() not in FIGURE_SUFFIXES:
-        raise TrustAvPlannerError(f'{out}: the figure must end in one of '
-                                  f'{", ".join(FIGURE_SUFFIXES)}')
+        raise TrustAvAppError(f'{out}: the figure must end in one of '
+                              f'{", ".join(FIGURE_SUFFIXES)}')
     chosen = model_names(models)
     if labels is not None and (len(labels) != 2 or not all(labels)):
-        raise TrustAvPlannerError(f'labels: need two names, got {list(labels)}')
+        raise TrustAvAppError(f'labels: need two names, got {list(labels)}')
     runs = [read_run(run_a, params_files), read_run(run_b, params_files)]
     if labels is not None:
         runs = [dataclasses.replace(run, name=label) for run, label in zip(runs, labels,

@@ -22,8 +22,10 @@ PRESENTATION_MODULES = ('plots.py', 'paper_results.py', 'tables.py', 'frame.py',
 def plugin_sources() -> list[Path]:
     """The source files of the registered components from outside the six packages (the
     installed plug-ins' modules), in name order."""
+    from trust_av.system.config import GROUPS
+
     files = set()
-    for group in registry.GROUPS:
+    for group in GROUPS:
         for component in registry.components(group):
             module = sys.modules[component.factory.__module__]
             if module.__name__.split('.')[0] not in PACKAGES and module.__file__:

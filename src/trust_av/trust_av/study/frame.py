@@ -23,13 +23,16 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from human_driver_sim.followers import DRIVERS
+from trust_av.errors import TrustAvAppError
 from trust_av.study import sweep
 from trust_av.study.sweep import Case
 from trust_av.study.trace_reports import write_trace_reports
 from trust_av.system.config import DEFAULT_PARAMS_FILE, all_components
 from trust_av_common import output_files, registry
 from trust_av_common.errors import with_suggestions
-from trust_av_planner.errors import TrustAvPlannerError
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import TRUST_MODELS
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -46,24 +49,24 @@ def check_axes(predictors: Iterable[str], driver_models: Iterable[str],
     is the params file's choice).
 
     Raises:
-        TrustAvPlannerError: one line naming the bad value and what is registered.
+        TrustAvAppError: one line naming the bad value and what is registered.
     """
-    for what, group, values in (('predictor', registry.PREDICTORS, predictors),
-                                ('driver model', registry.DRIVERS, driver_models),
-                                ('trust model', registry.TRUST_MODELS, trust_models)):
+    for what, group, values in (('predictor', PREDICTORS, predictors),
+                                ('driver model', DRIVERS, driver_models),
+                                ('trust model', TRUST_MODELS, trust_models)):
         known = registry.names(group)
         unknown = [v for v in values if v and v not in known]
         if unknown:
-            raise TrustAvPlannerError(f'unknown {what}(s) {with_suggestions(unknown, known)}; '
-                                      f'registered: {list(known)}')
+            raise TrustAvAppError(f'unknown {what}(s) {with_suggestions(unknown, known)}; '
+                                  f'registered: {list(known)}')
     if any(trust_models) and not any(f.name == TRUST_MODEL_PARAMETER for c in all_components()
                                      for f in dataclasses.fields(c)):
-        raise TrustAvPlannerError(f'trust models {[m for m in trust_models if m]}: no component '
-                                  f'declares the {TRUST_MODEL_PARAMETER} parameter yet, so '
-                                  "only the params file's trust model can run")
+        raise TrustAvAppError(f'trust models {[m for m in trust_models if m]}: no component '
+                              f'declares the {TRUST_MODEL_PARAMETER} parameter yet, so '
+                              "only the params file's trust model can run")
     bad = [a for a in alphas if not 0.0 <= a <= 1.0]
     if bad:
-        raise TrustAvPlannerError(f'alpha must be in [0, 1], got {bad}')
+        raise TrustAvAppError(f'alpha must be in [0, 1], got {bad}')
 
 
 def tidy_rows(cases: Sequence[Case], results: dict[Case, dict[str, Any]]
@@ -117,7 +120,7 @@ def study(traces: Iterable[str] = sweep.TRACES,
         trace_reports: write the per-trace tables and figures (False: the table only).
 
     Raises:
-        TrustAvPlannerError: an unregistered name, an alpha outside [0, 1], a case that
+        TrustAvAppError: an unregistered name, an alpha outside [0, 1], a case that
             failed (named).
     """
     import pandas as pd

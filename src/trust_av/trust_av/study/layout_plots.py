@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from trust_av.errors import TrustAvAppError
 from trust_av_common.output_files import OutputFileError, link_refused
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['LAYOUT_FILE', 'LayoutError', 'load_layout', 'main', 'parse_path', 'read_series',
            'render_plots']
@@ -37,7 +37,7 @@ _SEGMENT = re.compile(
     r'|\{(?P<key>[A-Za-z_][A-Za-z0-9_]*)==(?P<literal>"[^"]*"|-?\d+(?:\.\d+)?|true|false)\}')
 
 
-class LayoutError(TrustAvPlannerError):
+class LayoutError(TrustAvAppError):
     """The layout or one of its message paths cannot be read (the message says which)."""
 
 
@@ -281,7 +281,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         render_plots(args.bag, args.png, load_layout(args.layout), args.dpi)
-    except (TrustAvPlannerError, OutputFileError) as err:
+    except (TrustAvAppError, OutputFileError) as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
     return 0

@@ -59,8 +59,8 @@ from typing import Any
 import numpy as np
 from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
+from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
-from trust_av_planner.errors import TrustAvPlannerError
 from trust_av_planner.predictors.gru import FEATURES
 
 __all__ = ['CHILD_MARK', 'check_pinned', 'in_pinned_child', 'main', 'numerics_report',
@@ -217,7 +217,7 @@ def live_numerics(torch_settings: bool = True) -> dict[str, Any]:
 
 
 def check_pinned() -> None:
-    """Raise :class:`~.errors.TrustAvPlannerError` naming the setting if this pinned child's
+    """Raise :class:`~trust_av.errors.TrustAvAppError` naming the setting if this pinned child's
     libraries did not take the pin (e.g. a library version that ignores the variable)."""
     if os.environ.get(CHILD_MARK) != '1':
         return
@@ -226,7 +226,7 @@ def check_pinned() -> None:
               'torch_cpu_capability': 'AVX2', 'mkl_branch': 'COMPATIBLE', 'threads': 1}
     for key, value in wanted.items():
         if live[key] != value:
-            raise TrustAvPlannerError(f'pinned numerics not in effect: {key} is {live[key]!r}, '
+            raise TrustAvAppError(f'pinned numerics not in effect: {key} is {live[key]!r}, '
                                f'expected {value!r}')
 
 

@@ -19,8 +19,8 @@ from human_driver_sim.population import (
     sample_driver_params,
     sample_population,
 )
+from trust_av.errors import TrustAvAppError
 from trust_av.study.sweep import Case
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['by_driver', 'population_cases', 'population_mean']
 
@@ -37,10 +37,10 @@ def population_cases(cases: Sequence[Case], drivers: int, seed: int,
     same drivers.
 
     Raises:
-        TrustAvPlannerError: ``drivers`` < 1, or an unreadable driver-fit file.
+        TrustAvAppError: ``drivers`` < 1, or an unreadable driver-fit file.
     """
     if drivers < 1:
-        raise TrustAvPlannerError(f'the number of drivers must be >= 1, got {drivers}')
+        raise TrustAvAppError(f'the number of drivers must be >= 1, got {drivers}')
     try:
         per_driver = per_driver_fits(driver_fit)
         if per_driver is not None:
@@ -53,7 +53,7 @@ def population_cases(cases: Sequence[Case], drivers: int, seed: int,
             params = [tuple(zip(WEIGHT_NAMES, (float(w) for w in weights), strict=True))
                       + extra for weights in population]
     except ValueError as err:
-        raise TrustAvPlannerError(str(err)) from err
+        raise TrustAvAppError(str(err)) from err
     return [dataclasses.replace(case, driver=k + 1, driver_params=params[k])
             for case in cases for k in range(drivers)]
 

@@ -30,6 +30,7 @@ from typing import Any, Protocol
 from human_driver_sim.population import WEIGHT_NAMES
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
+from trust_av.errors import TrustAvAppError
 from trust_av.study.fingerprint import code_fingerprint, plugin_sources
 from trust_av.study.workers import worker_pool
 from trust_av.system.closed_loop import simulate
@@ -37,7 +38,6 @@ from trust_av.system.config import RunConfig, load_run_config
 from trust_av.system.metrics import StepRecord, compute_metrics
 from trust_av_common import output_files
 from trust_av_common.held_stops import STOP_SIGNALS
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['ALPHAS', 'METRICS', 'PAPER_PREDICTORS', 'TRACES', 'Case', 'Executor', 'LocalExecutor',
            'RayExecutor', 'RunSettings', 'check_axis', 'check_ray_address', 'code_fingerprint',
@@ -109,10 +109,10 @@ class RunSettings:
 
     def __post_init__(self) -> None:
         if self.runner not in RUNNERS:
-            raise TrustAvPlannerError(f'runner must be one of {list(RUNNERS)}, got '
-                                      f'{self.runner!r}')
+            raise TrustAvAppError(f'runner must be one of {list(RUNNERS)}, got '
+                                  f'{self.runner!r}')
         if self.max_steps < 0:
-            raise TrustAvPlannerError(f'max_steps must be >= 0, got {self.max_steps}')
+            raise TrustAvAppError(f'max_steps must be >= 0, got {self.max_steps}')
 
 
 def case_key(case: Case, params_text: str, fingerprint: str,
@@ -253,7 +253,7 @@ class LocalExecutor:
                 try:
                     result = future.result()
                 except Exception as err:
-                    raise TrustAvPlannerError(f'case {case.label} failed: {err}') from err
+                    raise TrustAvAppError(f'case {case.label} failed: {err}') from err
                 on_result(case, result)
 
 
@@ -272,29 +272,29 @@ def check_ray_address(address: str | None, timeout_s: float = RAY_CONNECT_TIMEOU
         timeout_s: connect timeout, s.
 
     Raises:
-        TrustAvPlannerError: not HOST:PORT, or nothing accepts a connection there.
+        TrustAvAppError: not HOST:PORT, or nothing accepts a connection there.
     """
     if address is None or address in ('auto', 'local'):
         return
     text = address.removeprefix('ray://')
     host, _, port_text = text.rpartition(':')
     if not host or not port_text.isdigit() or not 0 < int(port_text) < 65536:
-        raise TrustAvPlannerError(f'--ray-address {address!r}: expected HOST:PORT, '
-                                  'ray://HOST:PORT, auto or local')
+        raise TrustAvAppError(f'--ray-address {address!r}: expected HOST:PORT, '
+                              'ray://HOST:PORT, auto or local')
     try:
         with socket.create_connection((host.strip('[]'), int(port_text)), timeout=timeout_s):
             pass
     except OSError as err:
         reason = err.strerror or str(err) or type(err).__name__
-        raise TrustAvPlannerError(f'--ray-address {address}: cannot connect within '
-                                  f'{timeout_s:g} s ({reason})') from err
+        raise TrustAvAppError(f'--ray-address {address}: cannot connect within '
+                              f'{timeout_s:g} s ({reason})') from err
 
 
 class RayExecutor:
     """The same cases as Ray tasks (``pip install ray``; local cluster unless ``address``).
 
     Raises:
-        TrustAvPlannerError: ``address`` is unreachable (:func:`check_ray_address`).
+        TrustAvAppError: ``address`` is unreachable (:func:`check_ray_address`).
     """
 
     def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
@@ -309,7 +309,7 @@ class RayExecutor:
         try:
             import ray
         except ImportError as err:
-            raise TrustAvPlannerError('--executor ray needs the optional dependency ray '
+            raise TrustAvAppError('--executor ray needs the optional dependency ray '
                                '(pip install ray)') from err
         started = not ray.is_initialized()
         if started:
@@ -325,7 +325,7 @@ class RayExecutor:
                 try:
                     result = ray.get(done[0])
                 except Exception as err:
-                    raise TrustAvPlannerError(f'case {case.label} failed: {err}') from err
+                    raise TrustAvAppError(f'case {case.label} failed: {err}') from err
                 on_result(case, result)
         finally:
             if started:
@@ -359,18 +359,18 @@ def check_axis(name: str, values: Sequence[str] | Sequence[float]) -> None:
             shipped traces; numbers by value, so ``0.5`` and ``.50`` are one).
 
     Raises:
-        TrustAvPlannerError: no value, or a value given twice (one line naming it).
+        TrustAvAppError: no value, or a value given twice (one line naming it).
     """
     if not values:
-        raise TrustAvPlannerError(f'{name}: no value given (a study of no cases); give at '
-                                  'least one, comma-separated')
+        raise TrustAvAppError(f'{name}: no value given (a study of no cases); give at '
+                              'least one, comma-separated')
     seen: dict[object, object] = {}
     for value in values:
         key = value.lower() if isinstance(value, str) and value.lower() in TRACES else value
         if key in seen:
             shown = f'{value!r}' if value == seen[key] else f'{seen[key]!r} and {value!r}'
-            raise TrustAvPlannerError(f'{name}: {shown} given twice (each case runs once; a '
-                                      'duplicate row would weigh twice in every mean)')
+            raise TrustAvAppError(f'{name}: {shown} given twice (each case runs once; a '
+                                  'duplicate row would weigh twice in every mean)')
         seen[key] = value
 
 
@@ -381,7 +381,7 @@ def sweep_cases(traces: Iterable[str] = TRACES, predictors: Iterable[str] = PAPE
     each.
 
     Raises:
-        TrustAvPlannerError: an axis is empty or holds a value twice (:func:`check_axis`).
+        TrustAvAppError: an axis is empty or holds a value twice (:func:`check_axis`).
     """
     names = {'traces': list(traces), 'predictors': list(predictors),
              'driver models': list(driver_models), 'trust models': list(trust_models)}

@@ -34,9 +34,9 @@ from multiprocessing import resource_tracker
 from types import FrameType
 from typing import Any, TypeVar
 
+from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av_common.held_stops import STOP_SIGNALS, held
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['worker_pool']
 
@@ -152,11 +152,11 @@ class WorkerPool(ProcessPoolExecutor):
                 continue
             for process in processes:
                 if process.exitcode is not None:
-                    raise TrustAvPlannerError(f'worker process {process.pid} ended while it '
-                                              f'was starting (exit code {process.exitcode})')
+                    raise TrustAvAppError(f'worker process {process.pid} ended while it '
+                                          f'was starting (exit code {process.exitcode})')
             if time.monotonic() > deadline:
-                raise TrustAvPlannerError(f'{workers - up} of {workers} worker processes did '
-                                          f'not start within {WORKER_START_TIMEOUT_S:.0f} s')
+                raise TrustAvAppError(f'{workers - up} of {workers} worker processes did '
+                                      f'not start within {WORKER_START_TIMEOUT_S:.0f} s')
 
     def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
         return super().submit(functools.partial(_call, fn), *args, **kwargs)

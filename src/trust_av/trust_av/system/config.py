@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from human_driver_sim.driver_mpc import DriverConfig
-from human_driver_sim.followers import FollowerConfig
+from human_driver_sim.followers import DRIVERS, FollowerConfig
 from preceding_traffic.traces import SpeedTrace, TraceConfig
 from trust_av_common import registry
 from trust_av_common.errors import did_you_mean, with_suggestions
@@ -44,10 +44,16 @@ from trust_av_common.rcl_values import ParsedParams
 from trust_av_common.wall_clock import WallClockConfig
 from trust_av_planner.nmpc import PlannerConfig
 from trust_av_planner.planner_params import PlannerTopics, SharedConfig, check_control_rate
-from trust_monitor.model_interface import TrustModel, make_trust_model, trust_model_config_types
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import (
+    TRUST_MODELS,
+    TrustModel,
+    make_trust_model,
+    trust_model_config_types,
+)
 from trust_monitor.paper_trust import MonitorConfig, TrustConfig
 
-__all__ = ['COMPONENT_GROUPS', 'DEFAULT_PARAMS_FILE', 'HUMAN_CAUTIOUS_PARAMS_FILE',
+__all__ = ['COMPONENT_GROUPS', 'DEFAULT_PARAMS_FILE', 'GROUPS', 'HUMAN_CAUTIOUS_PARAMS_FILE',
            'NODE_COMPONENTS', 'RunConfig', 'all_components', 'load_run_config', 'node_components']
 
 DEFAULT_PARAMS_FILE = shipped_params_file()
@@ -76,12 +82,15 @@ NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
 }
 
 COMPONENT_GROUPS: dict[str, tuple[str, ...]] = {
-    'planner': (registry.PREDICTORS, registry.TRUST_MODELS),
-    'human_driver': (registry.DRIVERS,),
-    'trust_monitor': (registry.TRUST_MODELS,),
+    'planner': (PREDICTORS, TRUST_MODELS),
+    'human_driver': (DRIVERS,),
+    'trust_monitor': (TRUST_MODELS,),
 }
 """Node name -> the registry groups whose components it runs: it declares the parameters of
 every registered component of them (each validated, so a typo fails whichever is chosen)."""
+GROUPS = (PREDICTORS, TRUST_MODELS, DRIVERS)
+"""Every component group the application runs (each declared by the package that owns its
+interface)."""
 
 
 def node_components(node: str) -> tuple[type, ...]:
@@ -288,7 +297,7 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
     configs = {group: tuple((c.name, built[node, c.config_type])
                             for c in registry.components(group) if c.config_type is not None)
                for node, groups in COMPONENT_GROUPS.items() for group in groups
-               if group != registry.TRUST_MODELS}
+               if group != TRUST_MODELS}
     clock: WallClockConfig = built['planner', WallClockConfig]
     if clock.wall:
         check_control_rate(planner, clock.control_rate_hz)
@@ -304,8 +313,8 @@ def load_run_config(files: str | Path | Iterable[str | Path] = (),
         params_files=paths,
         namespace=namespace,
         follower=built['human_driver', FollowerConfig],
-        predictor_configs=configs[registry.PREDICTORS],
-        driver_configs=configs[registry.DRIVERS],
+        predictor_configs=configs[PREDICTORS],
+        driver_configs=configs[DRIVERS],
         ignored=tuple(ignored),
         node_params={node: {f.name: getattr(config, f.name)
                             for (owner, _), config in built.items() if owner == node

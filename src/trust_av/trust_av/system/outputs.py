@@ -29,10 +29,11 @@ from pathlib import Path
 
 import yaml
 
+from trust_av.errors import TrustAvAppError
 from trust_av_common import output_files
+from trust_av_common.errors import TrustAvError
 from trust_av_common.output_files import cannot_create_in, odd_path, stop_signals_held
 from trust_av_common.output_lock import hold_output_lock
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__ = ['MARKER', 'RunOutputs', 'marked_outputs', 'prepare_outputs', 'replacing_outputs']
 
@@ -118,7 +119,7 @@ def prepare_outputs(bag: Path, *, overwrite: bool, option: str = '--bag') -> Run
         The outputs (some may exist: only with ``overwrite`` and proven ours).
 
     Raises:
-        TrustAvPlannerError: an odd path (:func:`~trust_av_common.output_files.odd_path`:
+        TrustAvAppError: an odd path (:func:`~trust_av_common.output_files.odd_path`:
             a NUL or newline in it, ``.``), a path is a link, exists without ``overwrite``, is
             not proven
             written by this project (no marker), is left over from a killed ``--overwrite``
@@ -126,34 +127,34 @@ def prepare_outputs(bag: Path, *, overwrite: bool, option: str = '--bag') -> Run
     """
     odd = odd_path(bag)
     if odd is not None:
-        raise TrustAvPlannerError(f'{option} {str(bag)!r}: {odd}')
+        raise TrustAvAppError(f'{option} {str(bag)!r}: {odd}')
     if bag.suffix == '.mcap':
-        raise TrustAvPlannerError(f'{option} {bag}: a recording is a rosbag2 bag directory, '
-                                  f'not an .mcap file; name the directory (e.g. '
-                                  f'{bag.with_suffix("")})')
+        raise TrustAvAppError(f'{option} {bag}: a recording is a rosbag2 bag directory, '
+                              f'not an .mcap file; name the directory (e.g. '
+                              f'{bag.with_suffix("")})')
     outputs = RunOutputs.beside(bag)
     for path, kind in zip(outputs.paths(), ('bag directory', 'plot', 'logs directory'),
                           strict=True):
         for leftover in hidden_leftovers(path):
-            raise TrustAvPlannerError(f'{leftover}: the previous {kind} kept by an '
-                                      f'--overwrite run that did not finish; move it back to '
-                                      f'{path} (or away) first')
+            raise TrustAvAppError(f'{leftover}: the previous {kind} kept by an '
+                                  f'--overwrite run that did not finish; move it back to '
+                                  f'{path} (or away) first')
         try:
             info = os.lstat(path)
         except (FileNotFoundError, NotADirectoryError):   # checked below, with the parent
             continue
         if stat.S_ISLNK(info.st_mode):
-            raise TrustAvPlannerError(f'{path}: the {kind} is a symbolic link; give a real '
-                                      f'path in {option}')
+            raise TrustAvAppError(f'{path}: the {kind} is a symbolic link; give a real '
+                                  f'path in {option}')
         if not overwrite:
-            raise TrustAvPlannerError(f'{path} exists already; pass --overwrite or choose '
-                                      f'another {option}')
+            raise TrustAvAppError(f'{path} exists already; pass --overwrite or choose '
+                                  f'another {option}')
         is_dir = stat.S_ISDIR(info.st_mode)
         if (kind == 'plot' and not stat.S_ISREG(info.st_mode)) or (kind != 'plot'
                                                                   and not is_dir):
-            raise TrustAvPlannerError(f'{path}: not a {kind}; refusing to replace it')
+            raise TrustAvAppError(f'{path}: not a {kind}; refusing to replace it')
         if not _ours(path, kind, outputs):
-            raise TrustAvPlannerError(
+            raise TrustAvAppError(
                 f'{path}: not written by trust-av (no {MARKER} marker naming it); '
                 'refusing to replace it, move it away or choose another ' + option)
     parent = bag.parent
@@ -161,10 +162,10 @@ def prepare_outputs(bag: Path, *, overwrite: bool, option: str = '--bag') -> Run
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
-        raise TrustAvPlannerError(f'{ancestor}: not a directory ({option} {bag})')
+        raise TrustAvAppError(f'{ancestor}: not a directory ({option} {bag})')
     reason = cannot_create_in(ancestor)
     if reason is not None:
-        raise TrustAvPlannerError(f'{ancestor}: cannot write there ({option} {bag}: {reason})')
+        raise TrustAvAppError(f'{ancestor}: cannot write there ({option} {bag}: {reason})')
     return outputs
 
 
@@ -222,7 +223,7 @@ def replacing_outputs(bag: Path, *, overwrite: bool, command: str,
     second command aimed at the same outputs is refused before either writes.
 
     Raises:
-        TrustAvPlannerError: as :func:`_replacing_outputs`.
+        TrustAvAppError: as :func:`_replacing_outputs`.
         OutputLockedError: another command holds the lock (the line names it).
     """
     with hold_output_lock(bag), _replacing_outputs(bag, overwrite=overwrite, command=command,
@@ -250,7 +251,7 @@ def _replacing_outputs(bag: Path, *, overwrite: bool, command: str,
         option: the option that named ``bag``, for messages.
 
     Raises:
-        TrustAvPlannerError: as :func:`prepare_outputs`; an output cannot be moved aside
+        TrustAvAppError: as :func:`prepare_outputs`; an output cannot be moved aside
             or the logs directory cannot be created (nothing is changed then).
     """
     outputs = prepare_outputs(bag, overwrite=overwrite, option=option)
@@ -271,17 +272,17 @@ def _replacing_outputs(bag: Path, *, overwrite: bool, command: str,
         _put_back(outputs, aside)
         cause = err.__cause__ if isinstance(err, output_files.OutputFileError) else err
         reason = cause.strerror if isinstance(cause, OSError) else str(err)
-        raise TrustAvPlannerError(f'{outputs.logs}: cannot write the node logs there '
-                                  f'({reason})') from err
+        raise TrustAvAppError(f'{outputs.logs}: cannot write the node logs there '
+                              f'({reason})') from err
     try:
         yield outputs
-    except TrustAvPlannerError as err:
+    except TrustAvError as err:
         _remove_if_unused(outputs.logs)
         unmarked = _mark_after_failure(outputs, command)
         moved = _put_back(outputs, aside)
         if not moved and not unmarked:
             raise
-        raise TrustAvPlannerError(
+        raise TrustAvAppError(
             f'{err}' + ("; the previous outputs are back in place, this run's were moved to "
                         + ', '.join(str(p) for p in moved) if moved else '') + unmarked) from err
     except BaseException:

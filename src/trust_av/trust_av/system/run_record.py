@@ -15,9 +15,12 @@ from typing import Any
 
 import yaml
 
+from human_driver_sim.followers import DRIVERS
 from trust_av.system.config import RunConfig
 from trust_av_common import registry
 from trust_av_common.param_layers import node_fqn
+from trust_av_planner.predictors import PREDICTORS
+from trust_monitor.model_interface import TRUST_MODELS
 
 __all__ = ['COMPONENT_KEYS', 'PARAMS_FILE_NAME', 'PARAMS_KEY', 'RECORD_FILE_NAME', 'custom_data',
            'header']
@@ -96,7 +99,7 @@ def header(config: RunConfig) -> str:
     Raises:
         RegistryError: a chosen component does not load.
     """
-    for group, name in zip((registry.PREDICTORS, registry.TRUST_MODELS, registry.DRIVERS),
+    for group, name in zip((PREDICTORS, TRUST_MODELS, DRIVERS),
                            components(config).values(), strict=True):
         registry.get(group, name)
     names = ', '.join(f'{group.replace("_", " ")} {name}'

@@ -5,6 +5,10 @@ from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+__all__ = ['CENTRELINE_QOS', 'CENTRELINE_TOPIC', 'COMMAND_TOPIC', 'CONTROL_QOS', 'CONTROL_TOPIC',
+           'EGO_TOPIC', 'INPUT_QOS', 'KINEMATIC_STATE_TOPIC', 'LATERAL_QOS', 'LATERAL_TOPIC',
+           'LEAD_TOPIC', 'OBJECTS_TOPIC']
+
 KINEMATIC_STATE_TOPIC = '/localization/kinematic_state'
 OBJECTS_TOPIC = '/perception/object_recognition/objects'
 CENTRELINE_TOPIC = 'lane_centreline'

@@ -22,7 +22,14 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ['Observation', 'Predictor']
+from trust_av_common import registry
+
+__all__ = ['PREDICTORS', 'Observation', 'Predictor']
+
+PREDICTORS = registry.declare('trust_av.predictors', factory_arguments=('planner', 'params'),
+                              interface=('reset', 'predict', 'observe'))
+"""Entry-point group of the plan estimators (the plan the human expects, u_R^H), declared
+here beside their interface: ``factory(planner, params)`` returns a :class:`Predictor`."""
 
 
 @dataclass(frozen=True)

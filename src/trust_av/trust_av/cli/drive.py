@@ -10,8 +10,8 @@ from pathlib import Path
 
 from trust_av.cli.options import add_params_file_option, positive_seconds
 from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.errors import TrustAvAppError
 from trust_av.system.config import DEFAULT_PARAMS_FILE
-from trust_av_planner.errors import TrustAvPlannerError
 
 __all__: list[str] = []
 
@@ -46,7 +46,7 @@ def run(args: DriveOptions) -> int:
             from trust_av.drive.run_session import run_session
             return run_session(args)
     except SessionError as err:
-        raise TrustAvPlannerError(str(err)) from err
+        raise TrustAvAppError(str(err)) from err
 
 
 def _withdraw(args: DriveOptions) -> int:
@@ -60,9 +60,8 @@ def _withdraw(args: DriveOptions) -> int:
         return 0
     if not args.yes:
         if sys.stdin is None or not sys.stdin.isatty():
-            raise TrustAvPlannerError(f'--withdraw would delete {plan.files} files in '
-                                      f'{plan.directory}; no terminal to confirm on, pass '
-                                      '--yes')
+            raise TrustAvAppError(f'--withdraw would delete {plan.files} files in '
+                                  f'{plan.directory}; no terminal to confirm on, pass --yes')
         try:
             answer = input(f'delete the {plan.files} files trust-av wrote in '
                            f'{plan.directory} for good? [y/N] ')
