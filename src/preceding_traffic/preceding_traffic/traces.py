@@ -242,11 +242,16 @@ def check_accelerations(where: str, times_s: np.ndarray, speeds_mps: np.ndarray,
             ``trace_stopping_speed_max_mps`` (one line naming the trace, the time, the
             likely cause and the parameter that raises the limit).
     """
-    _check_stop_and_go(where, times_s, speeds_mps, config)
     span = float(times_s[-1] - times_s[0])
     window = min(ACCEL_WINDOW_S, span)
-    if not window > 0.0:
-        return
+    if window > 0.0:
+        _check_accel(where, times_s, speeds_mps, config, window)
+    _check_stop_and_go(where, times_s, speeds_mps, config)
+
+
+def _check_accel(where: str, times_s: np.ndarray, speeds_mps: np.ndarray,
+                 config: TraceConfig, window: float) -> None:
+    """The accelerations of :func:`check_accelerations` over ``window`` s."""
     ends = times_s[times_s >= times_s[0] + window]
     if ends.size == 0:       # a span of one window whose end rounds below it
         ends = times_s[-1:]
