@@ -50,7 +50,7 @@ from trust_av.drive.withdrawal import withdraw
 from trust_av.system.config import DEFAULT_PARAMS_FILE
 from trust_av_common.params import ParamsError
 from trust_av_common.registry import names
-from trust_monitor.model_interface import TRUST_MODELS
+from trust_monitor.model_interface import TRUST_MODELS, UnitTrust, unit_trust
 from trust_monitor.paper_trust import TrustConfig, TrustEstimator
 
 CONFIG = FollowerConfig(input_timeout_s=0.5, coast_s=1.0, fallback_brake_mps2=-2.0)
@@ -104,8 +104,8 @@ def _series(times: np.ndarray) -> DriveSeries:
 def test_comparison_finds_rmse_correlation_and_the_lag() -> None:
     times = np.arange(0.0, 60.0, 0.1)
 
-    def wave(series: DriveSeries) -> np.ndarray:
-        return 0.5 + 0.3 * np.sin(series.times_s / 5.0)
+    def wave(series: DriveSeries) -> list[UnitTrust]:
+        return [UnitTrust(v) for v in 0.5 + 0.3 * np.sin(series.times_s / 5.0)]
 
     rating_times = np.arange(5.0, 60.0, 2.0)
     lagged = 0.5 + 0.3 * np.sin((rating_times - 3.0) / 5.0)   # the person answers 3 s late
@@ -115,8 +115,8 @@ def test_comparison_finds_rmse_correlation_and_the_lag() -> None:
     [late] = compare(rating_times, lagged, _series(times), [('wave', wave)], max_lag_s=6.0)
     assert late.best_lag_s == pytest.approx(3.0) and late.rmse_at_best_lag < 0.01
     assert late.rmse > 0.1
-    [flat] = compare([1.0, 2.0], [0.2, 0.4], _series(times), [('flat', lambda s: np.full(
-        len(s.times_s), 0.3))])
+    [flat] = compare([1.0, 2.0], [0.2, 0.4], _series(times), [('flat', lambda s: [
+        UnitTrust(0.3)] * len(s.times_s))])
     assert flat.rmse == pytest.approx(0.1) and math.isnan(flat.correlation)
 
 
@@ -133,9 +133,10 @@ def test_paper_model_is_the_trust_estimator_over_the_plans() -> None:
                                                                [1.0, 2.0]]
     series = DriveSeries(times, plans, expected, np.full(3, np.nan))
     estimator = TrustEstimator(config)
-    by_hand = [estimator.step(p, e, dt).trust for p, e, dt in zip(plans, expected,
-                                                                   [0.1, 0.2, 0.0], strict=True)]
-    # every registered trust model is compared; 'paper' gives the monitor's own trust
+    by_hand = [unit_trust(estimator.model, estimator.step(p, e, dt).trust)
+               for p, e, dt in zip(plans, expected, [0.1, 0.2, 0.0], strict=True)]
+    # every registered trust model is compared; 'paper' gives the monitor's own trust, on
+    # the common scale (its raw units beside ratings on [0, 1] gave RMSE 7.01)
     models = dict(registered_models(config))
     assert set(models) == set(names(TRUST_MODELS)) >= {'paper', 'asymmetric', 'optimo'}
     np.testing.assert_allclose(models['paper'](series), by_hand)

@@ -133,6 +133,31 @@ def test_steps_are_bounded_before_allocating() -> None:
     assert load_trace('us06', 600 / MAX_TRACE_STEPS, CONFIG).steps == MAX_TRACE_STEPS
 
 
+@pytest.mark.parametrize('name', ['my_trace', 'urban_commute'])
+def test_gentle_stop_and_go_in_kmh_is_refused_with_the_units_hint(tmp_path: Path,
+                                                                  name: str) -> None:
+    """Read as m/s, a gentle trace in km/h accelerates below trace_accel_max_mps2 but stops
+    and goes at 207 km/h (the own-trace tutorial's my_trace) or 252 km/h (an urban commute
+    peaking at 70 km/h, 1 m/s^2)."""
+    t = np.arange(0.0, 120.0, 0.5)
+    if name == 'my_trace':
+        speeds = np.maximum(0.0, 8 + 8 * np.sin(t / 20))
+    else:
+        speeds = 19.4 * np.sin(np.pi * t / 60) ** 2      # stops at 0, 60, 120 s
+    kmh = write(tmp_path, 'time_s,speed_mps\n' + ''.join(
+        f'{a},{3.6 * v:.3f}\n' for a, v in zip(t, speeds, strict=True)))
+    with pytest.raises(TraceError) as err:
+        load_trace(str(kmh), 1.0, CONFIG)
+    line = str(err.value)
+    assert 'stop-and-go above motorway speeds' in line and 'km/h (divide by 3.6' in line
+    assert 'preceding_traffic.trace_stopping_speed_max_mps' in line and '\n' not in line
+    right = write(tmp_path, 'time_s,speed_mps\n' + ''.join(    # the trace in m/s: fine
+        f'{a},{v:.3f}\n' for a, v in zip(t, speeds, strict=True)), 'right.csv')
+    assert load_trace(str(right), 1.0, CONFIG).max_speed_mps <= 19.4
+    for shipped in ('us06', 'commute_pm', 'wltc_3b'):       # fast cycles with stops pass
+        load_trace(shipped, 1.0, CONFIG)
+
+
 def test_limits_are_documented() -> None:
     page = (REPO / 'docs' / 'tutorials' /
             'own-trace-or-bag.md').read_text()

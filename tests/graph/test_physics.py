@@ -136,7 +136,8 @@ def test_a_trace_in_kmh_is_refused_naming_units_and_the_parameter(tmp_path: Path
     # the parameter overrides it: the trace is then run (and the AV cannot keep up)
     layer = tmp_path / 'fast.yaml'
     layer.write_text('/**/preceding_traffic:\n  ros__parameters:\n'
-                     '    trace_accel_max_mps2: 12.0\n    trace_brake_max_mps2: 12.0\n')
+                     '    trace_accel_max_mps2: 12.0\n    trace_brake_max_mps2: 12.0\n'
+                     '    trace_stopping_speed_max_mps: 50.0\n')
     proc = cli('simulate', '--trace', str(trace), '--params-file', str(layer), '--max-steps',
                '3', '--no-progress')
     assert proc.returncode == 0, proc.stderr

@@ -21,6 +21,7 @@ from trust_av.drive.trust_fit_data import read_ratings_table
 from trust_av.study.trust_recovery import drive_scores, make_participant
 from trust_av.system.closed_loop import simulate
 from trust_av.system.config import load_run_config
+from trust_av.system.outputs import MARKER, marked_outputs
 from trust_av_common.params import ParamsError
 from trust_av_planner.perturbations import LIBRARY, Perturbation, schedule
 from trust_monitor.model_interface import fit_parameters
@@ -223,13 +224,18 @@ def test_fit_trust_from_a_ratings_table(tmp_path: Path,
     assert 'pooled,beta_bernoulli,beta_bernoulli_failure_weight' in fits
     assert 'beta_bernoulli_beta0' in fits and ',fixed' in fits
     assert (out / 'participant_a.png').stat().st_size > 10_000
+    # one set: every file named in the command's marker, nothing left beside it
+    names = {p.name for p in out.iterdir()} - {MARKER}
+    assert set(marked_outputs(out) or []) == names >= {'fits.csv', 'comparison.csv'}
+    assert 'trust-av fit-trust --ratings' in (out / MARKER).read_text()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['fit', 'ratings.csv']
 
 
 @pytest.mark.parametrize(('content', 'message'), [
     ('participant,drive,t_s\na,d,0\n', 'missing column(s) explicability, rating'),
     ('participant,drive,t_s,explicability,rating\na,d,x,0.1,\n', 't_s: not a number'),
     ('participant,drive,t_s,explicability,rating\na,d,0,1.5,\na,d,1,0.1,50\n',
-     'explicability must be in [0, 1]'),
+     ':2: column explicability: 1.5 is outside [0, 1]'),
     ('participant,drive,t_s,explicability,rating\na,d,0,0.1,\na,d,1,0.1,\n',
      'no drive has a rating'),
 ])

@@ -51,6 +51,15 @@ TRACE_BRAKE_MAX_MPS2 = 9.81
 """Default ``trace_brake_max_mps2``: the hardest braking of a trace, m/s^2: a tyre on dry
 asphalt transmits at most about 1 g (friction coefficient up to about 1.0; emergency stops
 of passenger cars reach 8-10 m/s^2)."""
+TRACE_STOPPING_SPEED_MAX_MPS = 150.0 / 3.6
+"""Default ``trace_stopping_speed_max_mps``: the fastest a trace that also comes to a
+standstill may drive, m/s (150 km/h, above every posted motorway limit but unrestricted
+German Autobahn stretches; WLTC class 3b, the fastest cycle with stops, peaks at
+131 km/h, US06 at 129 km/h). Stop-and-go driving above it is mostly speeds in km/h read as
+m/s: a gentle urban trace so read keeps its accelerations below ``trace_accel_max_mps2``
+(3.6 x 1.4 m/s^2) but not its speeds (3.6 x 50 km/h = 180 "km/h")."""
+STANDSTILL_MPS = 0.5
+"""A sample this slow is a standstill (for ``trace_stopping_speed_max_mps``), m/s."""
 ACCEL_WINDOW_S = 1.0
 """Accelerations of a trace are checked as speed changes over this window (a noisy 10 Hz
 odometry is not a hard acceleration), s."""
@@ -94,6 +103,10 @@ class TraceConfig:
         'hardest braking a trace may hold (over any 1 s, a magnitude); more is a unit '
         'mistake (km/h)', unit='m/s^2', low=0.0, low_inclusive=False, high=100.0,
         default=TRACE_BRAKE_MAX_MPS2)
+    trace_stopping_speed_max_mps: float = param(
+        'fastest speed a trace that also comes to a standstill may reach (stop-and-go above '
+        'motorway speeds); more is a unit mistake (km/h)', unit='m/s', low=0.0,
+        low_inclusive=False, high=MAX_SPEED_MPS, default=TRACE_STOPPING_SPEED_MAX_MPS)
 
     def __post_init__(self) -> None:
         try:
@@ -198,8 +211,10 @@ def check_accelerations(where: str, times_s: np.ndarray, speeds_mps: np.ndarray,
                         config: TraceConfig) -> None:
     """Refuse a trace that speeds up or brakes harder than a road vehicle does: the speed
     change over every :data:`ACCEL_WINDOW_S` (over the whole trace when it is shorter),
-    against ``trace_accel_max_mps2`` and ``trace_brake_max_mps2``. The usual cause is a
-    trace in km/h read as m/s (3.6 times the accelerations).
+    against ``trace_accel_max_mps2`` and ``trace_brake_max_mps2``; and one that comes to a
+    standstill (below :data:`STANDSTILL_MPS`) yet drives faster than
+    ``trace_stopping_speed_max_mps`` (stop-and-go above motorway speeds). The usual cause is
+    a trace in km/h read as m/s (3.6 times the speeds and the accelerations).
 
     Args:
         where: the trace's name for messages (its file, or bag and topic).
@@ -208,13 +223,20 @@ def check_accelerations(where: str, times_s: np.ndarray, speeds_mps: np.ndarray,
         config: the two limits.
 
     Raises:
-        TraceError: an acceleration beyond a limit (one line naming the trace, the time, the
+        TraceError: an acceleration beyond a limit, or a standstill and a speed above
+            ``trace_stopping_speed_max_mps`` (one line naming the trace, the time, the
             likely cause and the parameter that raises the limit).
     """
     span = float(times_s[-1] - times_s[0])
     window = min(ACCEL_WINDOW_S, span)
-    if not window > 0.0:
-        return
+    if window > 0.0:
+        _check_accel(where, times_s, speeds_mps, config, window)
+    _check_stop_and_go(where, times_s, speeds_mps, config)
+
+
+def _check_accel(where: str, times_s: np.ndarray, speeds_mps: np.ndarray,
+                 config: TraceConfig, window: float) -> None:
+    """The accelerations of :func:`check_accelerations` over ``window`` s."""
     ends = times_s[times_s >= times_s[0] + window]
     if ends.size == 0:       # a span of one window whose end rounds below it
         ends = times_s[-1:]
@@ -232,6 +254,22 @@ def check_accelerations(where: str, times_s: np.ndarray, speeds_mps: np.ndarray,
                 f'than a road vehicle ({name} = {limit:g} m/s^2); are its speeds in km/h '
                 '(divide by 3.6 for m/s) or in another unit? If the trace is right, raise '
                 f'preceding_traffic.{name} in a --params-file')
+
+
+def _check_stop_and_go(where: str, times_s: np.ndarray, speeds_mps: np.ndarray,
+                       config: TraceConfig) -> None:
+    """See :func:`check_accelerations`."""
+    top = int(np.argmax(speeds_mps))
+    limit = config.trace_stopping_speed_max_mps
+    stops = np.flatnonzero(speeds_mps < STANDSTILL_MPS)
+    if speeds_mps[top] > limit and stops.size:
+        raise TraceError(
+            f'{where}: stands still at t = {times_s[stops[0]]:g} s yet reaches '
+            f'{speeds_mps[top]:.3g} m/s ({speeds_mps[top] * 3.6:.0f} km/h) at t = '
+            f'{times_s[top]:g} s: stop-and-go above motorway speeds '
+            f'(trace_stopping_speed_max_mps = {limit:.4g} m/s); are its speeds in km/h '
+            '(divide by 3.6 for m/s)? If the trace is right, raise '
+            'preceding_traffic.trace_stopping_speed_max_mps in a --params-file')
 
 
 def read_samples(path: Path, config: TraceConfig) -> tuple[np.ndarray, np.ndarray]:

@@ -45,9 +45,9 @@ from trust_av_common.params import build_config
 from trust_av_common.registry import Component, build, config_types, declare, get
 
 __all__ = ['TRUST_MODELS', 'CheckedBound', 'ClosedForm', 'FitParameter', 'TrustModel',
-           'build_trust_model', 'common_trust', 'explicability_bound', 'fit_parameters',
-           'make_trust_model', 'numeric_bound', 'paper_bound_holds', 'trust_ceiling',
-           'trust_model_component', 'trust_model_config_types']
+           'UnitTrust', 'build_trust_model', 'common_trust', 'explicability_bound',
+           'fit_parameters', 'make_trust_model', 'numeric_bound', 'paper_bound_holds',
+           'trust_ceiling', 'trust_model_component', 'trust_model_config_types', 'unit_trust']
 
 TRUST_MODELS = declare('trust_av.trust_models', factory_arguments=('trust', 'params'),
                        interface=('name', 'closed_form_bound', 'initial_state', 'step', 'trust',
@@ -159,16 +159,30 @@ COMMON_SCALE = (0.0, 1.0)
 """The scale on which every model's trust is compared with ratings (rating / 100)."""
 
 
-def common_trust(model: TrustModel, state: Any) -> float:
-    """The trust of ``state`` on the common scale [0, 1] (:data:`COMMON_SCALE`).
+class UnitTrust(float):
+    """A trust on the common scale [0, 1] (:data:`COMMON_SCALE`), made by :func:`unit_trust`
+    (the one conversion). What compares a model's trust with ratings or with another model
+    (a table, a figure, a topic, a fit) takes this type, so a model's own reading, a plain
+    float, is refused: by mypy, and by ``isinstance`` where a plug-in's value enters.
+    Arithmetic on it gives a plain float (a difference is no trust)."""
 
-    A model declares how its own trust units map to it with an optional attribute
+
+def unit_trust(model: TrustModel, reading: float) -> UnitTrust:
+    """``reading``, a trust of ``model`` in its own units, on the common scale [0, 1].
+
+    A model declares how its units map to it with an optional attribute
     ``trust_range = (low, high)``: common = (T - low) / (high - low), clipped to [0, 1].
     Without it the model's trust is taken to be on [0, 1] already (and is clipped).
     """
     low, high = getattr(model, 'trust_range', COMMON_SCALE)
-    value = (float(model.trust(state)) - low) / (high - low)
-    return min(max(value, 0.0), 1.0)
+    value = (float(reading) - low) / (high - low)
+    return UnitTrust(min(max(value, 0.0), 1.0))
+
+
+def common_trust(model: TrustModel, state: Any) -> UnitTrust:
+    """The trust of ``state`` on the common scale [0, 1] (:func:`unit_trust` of its
+    reading)."""
+    return unit_trust(model, model.trust(state))
 
 
 def propagate(model: TrustModel, state: Any, score: float, steps: int,

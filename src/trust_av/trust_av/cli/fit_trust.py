@@ -19,6 +19,10 @@ out per participant, leave one participant out pooled). Writes to ``--out``:
   participants) are the scheme ``leave_one_drive_out_partial_pooling`` of the two tables;
 - ``participant_<id>.png``: each drive's ratings and every model's fitted prediction (own
   fit solid, partially pooled dashed).
+
+The files are written as one set (:func:`~trust_av.system.output_sets.writing_set`): all of
+them or, when the run fails or is stopped, the previous set as it was; ``--out`` must be new,
+empty or a set an earlier run wrote (its marker names every file), never a symbolic link.
 """
 
 from __future__ import annotations
@@ -29,7 +33,6 @@ import csv
 import dataclasses
 import io
 import math
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -37,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.drive.table_input import RatingScale, file_safe
 from trust_av.drive.trust_fit_data import read_ratings_table, read_study
 from trust_av.drive.trust_fit_pooling import (
     MIN_PARTICIPANTS,
@@ -45,6 +49,7 @@ from trust_av.drive.trust_fit_pooling import (
 )
 from trust_av.errors import TrustAvAppError
 from trust_av.system.config import load_run_config
+from trust_av.system.output_sets import check_set_folder, writing_set
 from trust_av_common import output_files
 from trust_av_common.registry import names
 from trust_monitor.model_interface import TRUST_MODELS
@@ -86,6 +91,7 @@ class FitTrustOptions(ParamsFileOptions):
     models: str
     no_figures: bool
     no_partial_pooling: bool
+    rating_scale: str = '0-100'
 
     def __post_init__(self) -> None:
         if (self.study is None) == (self.ratings is None):
@@ -117,6 +123,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--out', type=Path, required=True, help='output directory')
     parser.add_argument('--models', default='',
                         help='comma-separated registered trust models (default: all)')
+    parser.add_argument('--rating-scale', default='0-100', metavar='LOW-HIGH',
+                        help="the --ratings table's rating scale where it has no rating_scale "
+                             'column (default 0-100; e.g. 0-1, 1-7): ratings outside it, or '
+                             'all in its bottom tenth, are refused')
     parser.add_argument('--params-file', dest='params_files', type=Path, action='append',
                         default=[], help="params file(s) for eps and the models' "
                                          'configured values (repeatable)')
@@ -131,6 +141,10 @@ def _models(option: str) -> list[str]:
     registered = list(names(TRUST_MODELS))
     chosen = [m.strip() for m in option.split(',') if m.strip()] or registered
     unknown = [m for m in chosen if m not in registered]
+    twice = sorted({m for m in chosen if chosen.count(m) > 1})
+    if twice:
+        raise TrustAvAppError(f'--models: {", ".join(twice)} given twice (a model is not '
+                                  'compared with itself)')
     if unknown:
         raise TrustAvAppError(f'--models: not registered: {", ".join(unknown)} '
                               f'(registered: {", ".join(registered)})')
@@ -219,14 +233,13 @@ def run(args: FitTrustOptions) -> int:
     """Fit, score, write (see ``trust-av fit-trust --help``)."""
     models = _models(args.models)
     config = load_run_config(args.params_files)
+    scale = RatingScale.parse(args.rating_scale)
     drives = (read_study(args.study, config.trust.epsilon_mps2) if args.study is not None
-              else read_ratings_table(args.ratings_table))
+              else read_ratings_table(args.ratings_table, scale))
     rated = [d for d in drives if len(d.ratings)]
     if not rated:
         raise FitError(f'{args.study or args.ratings}: no drive has a rating')
-    if args.out.exists() and not args.out.is_dir():
-        raise TrustAvAppError(f'--out {args.out}: exists and is not a directory')
-    args.out.mkdir(parents=True, exist_ok=True)
+    check_set_folder(args.out)              # before the fit: refused in seconds, not minutes
     specs = {m: model_spec(config.trust, m, dict(config.trust_model_params)) for m in models}
     sizes = {m: len(specs[m].parameters) for m in models}
     people = by_participant(rated)
@@ -246,8 +259,8 @@ def run(args: FitTrustOptions) -> int:
     for m in models:
         fit_rows += _fit_rows('pooled', pooled_fits[m])
     partial: dict[str, dict[str, Fit]] = {who: {} for who in people}
+    partial_rows: list[dict[str, Any]] = []
     if not args.no_partial_pooling and len(people) >= 2:
-        partial_rows: list[dict[str, Any]] = []
         for m in models:
             population, shrunk = partial_fits(specs[m], people, own_fits[m], pooled_fits[m])
             partial_rows += [{'scope': 'population', 'model': m, 'parameter': k, 'value': v,
@@ -257,30 +270,33 @@ def run(args: FitTrustOptions) -> int:
             for who, fitted in shrunk.items():
                 partial[who][m] = fitted
                 partial_rows += [r for r in _fit_rows(who, fitted) if r['kind'] != 'fixed']
-        output_files.write_text(args.out / 'partial_pooling.csv', _csv(
-            ('scope', 'model', 'parameter', 'value', 'kind'), partial_rows))
         if len(people) >= MIN_PARTICIPANTS:
             for who, own in people.items():
                 if len(own) >= 2:
                     score_rows += _rows(who, [held_out_partial(specs[m], people, own_fits[m],
                                                                who) for m in models], sizes)
-    if not args.no_figures:
-        for who, own in people.items():
-            safe = re.sub(r'[^A-Za-z0-9_.-]', '_', who)
-            figure(args.out / f'participant_{safe}.png', who, own,
-                   {m: (specs[m], own_fits[m][who]) for m in models}, partial[who])
     if len(people) >= 2:
         groups = list(people.values())
         score_rows += _rows('pooled', [held_out(specs[m], groups, LOPO) for m in models],
                             sizes)
     else:
         print('one participant: no leave-one-participant-out score')
-    output_files.write_text(args.out / 'fits.csv', _csv(
-        ('scope', 'model', 'parameter', 'value', 'kind'), fit_rows))
-    output_files.write_text(args.out / 'scores.csv', _csv(
-        ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'rmse', 'rmse_se'),
-        score_rows))
-    output_files.write_text(args.out / 'comparison.csv', _csv(SCORE_FIELDS, score_rows))
+    # one set: every table and figure, or (failed, stopped) the previous set untouched
+    with writing_set(args.out, command='fit-trust') as new:
+        if partial_rows:
+            output_files.write_text(new / 'partial_pooling.csv', _csv(
+                ('scope', 'model', 'parameter', 'value', 'kind'), partial_rows))
+        if not args.no_figures:
+            for who, own in people.items():
+                safe = file_safe(who)   # the reader refused ids that share one
+                figure(new / f'participant_{safe}.png', who, own,
+                       {m: (specs[m], own_fits[m][who]) for m in models}, partial[who])
+        output_files.write_text(new / 'fits.csv', _csv(
+            ('scope', 'model', 'parameter', 'value', 'kind'), fit_rows))
+        output_files.write_text(new / 'scores.csv', _csv(
+            ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'rmse', 'rmse_se'),
+            score_rows))
+        output_files.write_text(new / 'comparison.csv', _csv(SCORE_FIELDS, score_rows))
     for row in score_rows:
         if row['scope'] == 'pooled' or len(people) == 1:
             diff = row['elpd_diff_se']

@@ -46,6 +46,7 @@ from trust_av.system.config import (
     HUMAN_CAUTIOUS_PARAMS_FILE,
     load_run_config,
 )
+from trust_av.system.output_sets import writing_set
 from trust_av_common import output_files, registry
 from trust_av_planner.predictors import PREDICTORS
 from trust_monitor.model_interface import TRUST_MODELS, paper_bound_holds, trust_ceiling
@@ -63,11 +64,8 @@ DEFAULT_RESULTS = {'table_i': Path('results/paper'),
                    'as_reported': Path('results/paper_as_reported'),
                    'paper_fitted': Path('results/paper_fitted'),
                    'human_cautious': Path('results/human_cautious')}
-RESULT_FILES = ('all_runs.csv', 'table_II_tac_gru_us06.csv', 'table_II_tac_gru_us06.md',
-                'table_III_tac_ca_us06.csv', 'table_III_tac_ca_us06.md',
-                'table_IV_max_improvements.csv', 'table_IV_max_improvements.md',
-                'figure_2_speed_profiles.png', 'figure_3_trust_us06.png')
-"""The files ``reproduce`` writes in the results directory (none may be a link)."""
+SWEEP_FOLDERS = ('cache', 'graph_bags')
+"""The sweep's work folders in the results directory, kept from run to run (resumable)."""
 DRIVER_FITS = {'human_cautious': CAUTIOUS_FIT_FILE}
 """The driver-fit file a profile's population (``--drivers K``) draws from; the shipped fit
 for the others."""
@@ -225,93 +223,84 @@ def run(args: ReproduceOptions) -> int:
                                                                           DRIVER_FIT_FILE))
     if args.executor == 'ray':
         sweep.check_ray_address(args.ray_address)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise TrustAvAppError(f'--results-dir {out}: cannot create it '
-                              f'({err.strerror})') from err
-    per_trace = [path.relative_to(out) for paths in trace_reports.trace_paths(
-        out, args.traces).values() for path in paths]
-    for name in (*RESULT_FILES, f'params_lead_preview_{args.lead_preview}.yaml',
-                 *map(str, per_trace)):
-        refused = output_files.link_refused(out / name)   # before the sweep, not after it
-        if refused is not None:
-            raise TrustAvAppError(f'--results-dir {out}: {name} is {refused}')
-    if args.lead_preview is not None:
-        files.append(lead_preview_layer(args.lead_preview, out))
-    executor: sweep.Executor
-    if args.executor == 'ray':
-        executor = sweep.RayExecutor(args.ray_address, args.workers)
-    else:
-        executor = sweep.LocalExecutor(args.workers)
-    note = truncation_note(args.max_steps, config.planner.dt_s,
-                           [load_trace(t, config.planner.dt_s, config.trace).steps
-                            for t in args.traces])
-    bar = Progress('reproduce', len(cases), shown=not args.no_progress)
-    start = time.monotonic()
-    runner = 'graph' if args.graph else 'in-process'
-    every = sweep.run_sweep(cases, [str(f) for f in files], out, executor,
-                            bar.update, runner=runner, max_steps=args.max_steps)
-    bar.close()
-    elapsed = time.monotonic() - start
-    write_tidy_csv(out / 'all_runs.csv', tidy_rows(cases, every))
-    # every trace's per-alpha table and trust figure, every axis kept (any traces)
-    trace_reports.write_trace_reports(out, cases, every, files, note)
-    print(f'per trace (every metric per alpha, every trust model and follower; trust over '
-          f'time): {out / "by_trace"}/<trace>/ ({", ".join(trace_reports.FILES)})')
-    crashed = [f'{case.label}: {every[case]["collision"]}' for case in cases
-               if every[case].get('collision')]
-    if crashed:     # their metrics end at the collision (all_runs.csv, column collision)
-        print(f'{len(crashed)} of {len(cases)} cases collided: ' + '; '.join(crashed))
-    trust_model = sweep.parameter_value(config, TRUST_MODEL_PARAMETER)
-    results = paper_cases(every, cases, (config.follower.driver_model, trust_model or ''))
-    if results and len(results) < len(cases):
-        print(f"Tables II-IV and Figure 3 are the paper's: {len(results)} of {len(cases)} "
-              f"cases, the params file's follower {config.follower.driver_model} and trust "
-              f'model {trust_model}; every trust model and follower is in by_trace/<trace>/')
-    written = ['all_runs.csv']
-    if not results:
-        print(f'{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; no case runs the '
-              "params file's follower and trust model, so no paper table: every run is in "
-              f'{out / "all_runs.csv"}')
-        return 0
-    if args.drivers:
-        alpha_table, improvement_table = (tables.population_alpha_table,
-                                          tables.population_improvement_table)
-        summary = population.population_mean(results)  # trends and Figure 3 on the means
-    else:
-        alpha_table, improvement_table = tables.alpha_table, tables.improvement_table
-        summary = results
-    if 'us06' in args.traces:
-        for predictor, name, paper in (('gru', 'table_II_tac_gru_us06', TABLE_II_TAC_GRU_US06),
-                                       ('ca', 'table_III_tac_ca_us06', TABLE_III_TAC_CA_US06)):
-            if predictor in args.predictors:
-                us06_steps = load_trace('us06', config.planner.dt_s, config.trace).steps
-                # The bound column is derived from the paper's update: only for a model
-                # that declares it runs that update (model_interface.paper_bound_holds).
-                bound = ((us06_steps, config.trust)
-                         if paper_bound_holds(config.trust_model()) else None)
-                tables.write_rows(out / name, *alpha_table(results, 'us06', predictor, paper,
-                                                           bound), note=note)
-                written.append(f'{name}.md')
-    tables.write_rows(out / 'table_IV_max_improvements',
-                         *improvement_table(results, args.traces, args.predictors), note=note)
-    written.append('table_IV_max_improvements.md')
-    traces = [load_trace(t, config.planner.dt_s, config.trace) for t in args.traces]
-    speed_profiles(traces, out / 'figure_2_speed_profiles.png')
-    written.append('figure_2_speed_profiles.png')
-    if 'us06' in args.traces:
-        series = {f'TAC-{p.upper()}': {a: (summary[Case('us06', p, a)]['time_s'],
-                                           summary[Case('us06', p, a)]['trust'])
-                                       for a in args.alphas}
-                  for p in args.predictors}
-        trust_over_time(series, 'us06', out / 'figure_3_trust_us06.png',
-                        trust_ceiling(config.trust_model()), note=note)
-        written.append('figure_3_trust_us06.png')
+    # one set: every table and figure, or (failed, stopped) the previous set as it was;
+    # the sweep's cache and graph bags stay in the folder (resumable)
+    with writing_set(out, command='reproduce', option='--results-dir',
+                     keep=SWEEP_FOLDERS) as new:
+        if args.lead_preview is not None:
+            files.append(lead_preview_layer(args.lead_preview, new))
+        executor: sweep.Executor
+        if args.executor == 'ray':
+            executor = sweep.RayExecutor(args.ray_address, args.workers)
+        else:
+            executor = sweep.LocalExecutor(args.workers)
+        note = truncation_note(args.max_steps, config.planner.dt_s,
+                               [load_trace(t, config.planner.dt_s, config.trace).steps
+                                for t in args.traces])
+        bar = Progress('reproduce', len(cases), shown=not args.no_progress)
+        start = time.monotonic()
+        runner = 'graph' if args.graph else 'in-process'
+        every = sweep.run_sweep(cases, [str(f) for f in files], out, executor,
+                                bar.update, runner=runner, max_steps=args.max_steps)
+        bar.close()
+        elapsed = time.monotonic() - start
+        write_tidy_csv(new / 'all_runs.csv', tidy_rows(cases, every))
+        # every trace's per-alpha table and trust figure, every axis kept (any traces)
+        trace_reports.write_trace_reports(new, cases, every, files, note)
+        print(f'per trace (every metric per alpha, every trust model and follower; trust over '
+              f'time): {out / "by_trace"}/<trace>/ ({", ".join(trace_reports.FILES)})')
+        crashed = [f'{case.label}: {every[case]["collision"]}' for case in cases
+                   if every[case].get('collision')]
+        if crashed:     # their metrics end at the collision (all_runs.csv, column collision)
+            print(f'{len(crashed)} of {len(cases)} cases collided: ' + '; '.join(crashed))
+        trust_model = sweep.parameter_value(config, TRUST_MODEL_PARAMETER)
+        results = paper_cases(every, cases, (config.follower.driver_model, trust_model or ''))
+        if results and len(results) < len(cases):
+            print(f"Tables II-IV and Figure 3 are the paper's: {len(results)} of {len(cases)} "
+                  f"cases, the params file's follower {config.follower.driver_model} and trust "
+                  f'model {trust_model}; every trust model and follower is in by_trace/<trace>/')
+        written = ['all_runs.csv']
+        if not results:
+            return _no_paper_table(cases, runner, elapsed, out)
+        if args.drivers:
+            alpha_table, improvement_table = (tables.population_alpha_table,
+                                              tables.population_improvement_table)
+            summary = population.population_mean(results)  # trends and Figure 3 on the means
+        else:
+            alpha_table, improvement_table = tables.alpha_table, tables.improvement_table
+            summary = results
+        if 'us06' in args.traces:
+            for predictor, name, paper in (
+                    ('gru', 'table_II_tac_gru_us06', TABLE_II_TAC_GRU_US06),
+                    ('ca', 'table_III_tac_ca_us06', TABLE_III_TAC_CA_US06)):
+                if predictor in args.predictors:
+                    us06_steps = load_trace('us06', config.planner.dt_s, config.trace).steps
+                    # The bound column is derived from the paper's update: only for a model
+                    # that declares it runs that update (model_interface.paper_bound_holds).
+                    bound = ((us06_steps, config.trust)
+                             if paper_bound_holds(config.trust_model()) else None)
+                    tables.write_rows(new / name, *alpha_table(results, 'us06', predictor,
+                                                               paper, bound), note=note)
+                    written.append(f'{name}.md')
+        tables.write_rows(new / 'table_IV_max_improvements',
+                          *improvement_table(results, args.traces, args.predictors), note=note)
+        written.append('table_IV_max_improvements.md')
+        traces = [load_trace(t, config.planner.dt_s, config.trace) for t in args.traces]
+        speed_profiles(traces, new / 'figure_2_speed_profiles.png')
+        written.append('figure_2_speed_profiles.png')
+        if 'us06' in args.traces:
+            series = {f'TAC-{p.upper()}': {a: (summary[Case('us06', p, a)]['time_s'],
+                                               summary[Case('us06', p, a)]['trust'])
+                                           for a in args.alphas}
+                      for p in args.predictors}
+            trust_over_time(series, 'us06', new / 'figure_3_trust_us06.png',
+                            trust_ceiling(config.trust_model()), note=note)
+            written.append('figure_3_trust_us06.png')
 
-    for path in written:
-        if path.endswith('.md'):
-            print(f'\n## {path}\n' + (out / path).read_text())
+        for path in written:
+            if path.endswith('.md'):
+                print(f'\n## {path}\n' + (new / path).read_text())
+    files = [out / f.name if f.parent == new else f for f in files]   # where they are now
     print('Trends of Tables II-IV (final trust up, mean E and RMSE down with alpha):')
     if args.drivers:
         print(f'(a population of {args.drivers} drivers, seed {args.drivers_seed}: tables give '
@@ -333,6 +322,13 @@ def run(args: ReproduceOptions) -> int:
         print(note)
     if args.graph:
         print(f'graph recordings (MCAP, one per case): {out / "graph_bags"}/')
+    return 0
+
+
+def _no_paper_table(cases: Sequence[Case], runner: str, elapsed: float, out: Path) -> int:
+    print(f'{len(cases)} cases ({runner}) in {elapsed:.1f} s wall; no case runs the '
+          "params file's follower and trust model, so no paper table: every run is in "
+          f'{out / "all_runs.csv"}')
     return 0
 
 

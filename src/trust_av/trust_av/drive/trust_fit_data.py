@@ -13,82 +13,131 @@ with the run's eps (eq. 8), exactly as the monitor scored it; ratings are read f
 - ``t_s``: time in the drive, s;
 - ``explicability``: E of the plan applied from ``t_s`` until the drive's next row with an
   E (empty on a row that only carries a rating);
-- ``rating``: a trust rating given at ``t_s``, 0-100 (empty on a row without one).
+- ``rating``: a trust rating given at ``t_s`` (empty on a row without one), on the table's
+  declared scale: ``--rating-scale`` (default ``0-100``), or an optional column
+  ``rating_scale`` per row (``0-1``, ``1-7``, any ``LOW-HIGH``); mapped to 0-100.
 
-Rows of a drive may come in any order; a drive needs at least two rows with an E.
+Rows of a drive may come in any order; a drive needs at least two rows with an E, and
+spans from its first E row to its last plus one step (the median). Refused, each in one line
+naming the file, the line and the column (:mod:`trust_av.drive.table_input` for the file
+and id rules): a row given twice (an E or a rating at the same time of the same drive), a
+rating outside its drive's span (a time in ms among times in s), a rating of a drive with
+no E rows (an unknown drive), a rating outside the declared scale or a table whose ratings
+all sit in its bottom tenth (ratings on 0-1 given as 0-100), ids that collide on disk or in
+a spreadsheet or start like a formula.
 """
 
 from __future__ import annotations
 
-import csv
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from trust_av.drive.table_input import IdCheck, RatingScale, table_rows
 from trust_monitor.paper_trust import explicability
 from trust_monitor.trust_fit import FitError, RatedDrive
 
 __all__ = ['read_ratings_table', 'read_study']
 
 COLUMNS = ('participant', 'drive', 't_s', 'explicability', 'rating')
+SCALE_COLUMN = 'rating_scale'
+DEFAULT_SCALE = RatingScale(0.0, 100.0)
+"""Ratings are 0-100 unless declared otherwise (the drive page's slider)."""
 
 
-def _number(text: str, what: str) -> float | None:
-    if text.strip() == '':
+def _number(text: str, what: str, decimal: str = '.') -> float | None:
+    text = text.strip()
+    if text == '':
         return None
     try:
-        value = float(text)
+        value = float(text.replace(',', '.') if decimal == ',' else text)
     except ValueError:
-        raise FitError(f'{what}: not a number: {text!r}') from None
+        raise FitError(f'{what}: not a number: {text[:40]!r}') from None
     if not math.isfinite(value):
-        raise FitError(f'{what}: not finite: {text!r}')
+        raise FitError(f'{what}: not finite: {text[:40]!r}')
     return value
 
 
-def read_ratings_table(path: Path) -> list[RatedDrive]:
-    """The drives of a tidy ratings table (format above).
+@dataclass
+class _Drive:
+    first_line: int
+    scores: dict[float, tuple[float, int]] = field(default_factory=dict)
+    ratings: dict[float, tuple[float, int]] = field(default_factory=dict)
+
+
+def read_ratings_table(path: Path, scale: RatingScale = DEFAULT_SCALE) -> list[RatedDrive]:
+    """The drives of a tidy ratings table (format above), ratings mapped to 0-100.
+
+    Args:
+        path: the table.
+        scale: the ratings' scale where the table has no ``rating_scale`` value.
 
     Raises:
-        FitError: unreadable, a missing column, a bad value (file and line named), or a
-            drive with fewer than two scored rows.
+        FitError: one line naming the file, the line and the column (see above).
     """
-    try:
-        with Path(path).open(newline='') as handle:
-            rows = list(csv.DictReader(handle))
-            header = rows[0].keys() if rows else []
-    except (OSError, UnicodeDecodeError, csv.Error) as err:
-        raise FitError(f'{path}: cannot read ({err})') from err
-    missing = [c for c in COLUMNS if c not in header]
-    if missing:
-        raise FitError(f'{path}: missing column(s) {", ".join(missing)} (need '
-                       f'{", ".join(COLUMNS)})')
-    drives: dict[tuple[str, str], dict[str, list[tuple[float, float]]]] = {}
-    for line, row in enumerate(rows, start=2):
+    drives: dict[tuple[str, str], _Drive] = {}
+    people, names = IdCheck('participant'), IdCheck('drive')
+    largest: dict[RatingScale, tuple[float, int]] = {}
+    for line, row, decimal in table_rows(path, COLUMNS):
         where = f'{path}:{line}'
-        who, drive = (row['participant'] or '').strip(), (row['drive'] or '').strip()
-        if not who or not drive:
-            raise FitError(f'{where}: participant and drive must not be empty')
-        t = _number(row['t_s'] or '', f'{where}: t_s')
+        who = people.check(where, row['participant'])
+        drive = names.check(where, row['drive'])
+        t = _number(row['t_s'], f'{where}: column t_s', decimal)
         if t is None:
-            raise FitError(f'{where}: t_s is empty')
-        score = _number(row['explicability'] or '', f'{where}: explicability')
-        rating = _number(row['rating'] or '', f'{where}: rating')
-        entry = drives.setdefault((who, drive), {'scores': [], 'ratings': []})
+            raise FitError(f'{where}: column t_s is empty')
+        if t < 0.0:
+            raise FitError(f'{where}: column t_s: {t:g} s is before the drive starts (0 s)')
+        entry = drives.setdefault((who, drive), _Drive(line))
+        score = _number(row['explicability'], f'{where}: column explicability', decimal)
         if score is not None:
-            entry['scores'].append((t, score))
+            if not 0.0 <= score <= 1.0:
+                raise FitError(f'{where}: column explicability: {score:g} is outside [0, 1]')
+            if t in entry.scores:
+                raise FitError(f'{where}: column explicability: a second E at t_s = {t:g} s '
+                               f'of drive {drive!r} of {who!r} (first on line '
+                               f'{entry.scores[t][1]}): a row given twice?')
+            entry.scores[t] = (score, line)
+        rating = _number(row['rating'], f'{where}: column rating', decimal)
         if rating is not None:
-            entry['ratings'].append((t, rating))
-    if not drives:
-        raise FitError(f'{path}: no rows')
+            own = (row.get(SCALE_COLUMN) or '').strip()
+            declared = RatingScale.parse(own, f'{where}: column {SCALE_COLUMN}') if own \
+                else scale
+            if t in entry.ratings:
+                raise FitError(f'{where}: column rating: a second rating at t_s = {t:g} s of '
+                               f'drive {drive!r} of {who!r} (first on line '
+                               f'{entry.ratings[t][1]}): a row given twice?')
+            entry.ratings[t] = (declared.percent(f'{where}: column rating', rating), line)
+            if rating > largest.get(declared, (-math.inf, 0))[0]:
+                largest[declared] = (rating, line)
+    for declared, (top, line) in largest.items():
+        if declared.too_narrow(top):
+            raise FitError(f'{path}:{line}: column rating: every rating on the declared scale '
+                           f'{declared} is at most {top:g}, in its bottom tenth: ratings on '
+                           'another scale (0-1, 1-7)? Declare it with --rating-scale or a '
+                           f'{SCALE_COLUMN} column')
     out = []
     for (who, drive), entry in drives.items():
-        scores = sorted(entry['scores'])
-        ratings = sorted(entry['ratings'])
-        out.append(RatedDrive(who, drive, np.array([t for t, _ in scores]),
-                              np.array([e for _, e in scores]),
-                              np.array([t for t, _ in ratings]),
-                              np.array([r for _, r in ratings])))
+        if not entry.scores:
+            line = min(line for _, line in entry.ratings.values())
+            raise FitError(f'{path}:{line}: column drive: {drive!r} of {who!r} has ratings '
+                           'but no row with an explicability (an unknown drive?)')
+        times = np.array(sorted(entry.scores))
+        if len(times) < 2:
+            raise FitError(f'{path}:{entry.first_line}: column explicability: drive {drive!r} '
+                           f'of {who!r} has {len(times)} row with an E, a drive needs two')
+        end = times[-1] + float(np.median(np.diff(times)))
+        for t, (_, line) in entry.ratings.items():
+            if not times[0] <= t <= end:
+                raise FitError(f'{path}:{line}: column t_s: a rating at {t:g} s is outside its '
+                               f'drive {drive!r} of {who!r} ({times[0]:g} to {end:g} s): a '
+                               'time in ms among times in s?')
+        rating_times = sorted(entry.ratings)
+        out.append(RatedDrive(who, drive, times,
+                              np.array([entry.scores[t][0] for t in times]),
+                              np.array(rating_times),
+                              np.array([entry.ratings[t][0] for t in rating_times])))
     return out
 
 
@@ -114,9 +163,11 @@ def read_study(study: Path, epsilon_mps2: float) -> list[RatedDrive]:
     if not bags:
         raise FitError(f'{study}: no drive bags (<participant>/drive_<k>_<condition>)')
     out = []
+    people = IdCheck('participant')
     for bag in bags:
         drive = read_drive(bag)
-        who = drive.metadata.get('trust_av.participant', bag.parent.name)
+        who = people.check(str(bag), drive.metadata.get('trust_av.participant',
+                                                        bag.parent.name))
         scores = np.array([explicability(p, e, epsilon_mps2) for p, e in
                            zip(drive.series.plans, drive.series.expected, strict=True)])
         out.append(RatedDrive(who, bag.name, drive.series.times_s, scores,

@@ -10,7 +10,10 @@ the scale of the monitor's trust.
 
 Comparison: each in-drive rating (0-100, mapped to [0, 1]) at its wall time against each
 model's trust series at that time minus a lag (the person may answer late): RMSE and
-Pearson correlation at lag 0 and the lag in [0, max_lag_s] with the smallest RMSE.
+Pearson correlation at lag 0 and the lag in [0, max_lag_s] with the smallest RMSE. Both
+sides are on the common scale [0, 1]: a model's trust enters only as
+:class:`~trust_monitor.model_interface.UnitTrust` (its own units converted once, by
+:func:`~trust_monitor.model_interface.unit_trust`); a raw reading is refused.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from trust_av_common.errors import TrustAvError
+from trust_monitor.model_interface import UnitTrust, common_trust
 from trust_monitor.paper_trust import TrustConfig, TrustEstimator
 
 __all__ = ['ITEM_NAMES', 'JIAN_ITEMS', 'SCORE_NAME', 'Agreement', 'DriveSeries', 'RatingError',
@@ -98,23 +102,26 @@ class DriveSeries:
     monitor_trust: np.ndarray
 
 
-TrustModel = Callable[[DriveSeries], np.ndarray]
-"""A trust model for the comparison: the drive's plans -> trust at each plan time."""
+TrustModel = Callable[[DriveSeries], Sequence[UnitTrust]]
+"""A trust model for the comparison: the drive's plans -> its trust at each plan time, on
+the common scale (:class:`~trust_monitor.model_interface.UnitTrust`)."""
 
 
 def trust_model_series(config: TrustConfig, values: Mapping[str, Any] | None = None
                        ) -> TrustModel:
     """The trust model ``config.trust_model`` names (with ``values`` for its own parameters,
     as the run's params files give them) over a drive's plans, each update scaled by the
-    time to the next plan, run by the monitor's own :class:`TrustEstimator`."""
+    time to the next plan, run by the monitor's own :class:`TrustEstimator`; its trust on
+    the common scale (:func:`~trust_monitor.model_interface.common_trust`)."""
     from trust_monitor.model_interface import make_trust_model
 
-    def model(series: DriveSeries) -> np.ndarray:
+    def model(series: DriveSeries) -> list[UnitTrust]:
         estimator = TrustEstimator(config, make_trust_model(config, values))
-        out = np.empty(len(series.times_s))
+        out = []
         gaps = np.diff(series.times_s, append=series.times_s[-1:])
         for i, (plan, expected) in enumerate(zip(series.plans, series.expected, strict=True)):
-            out[i] = estimator.step(plan, expected, float(gaps[i])).trust
+            estimator.step(plan, expected, float(gaps[i]))
+            out.append(common_trust(estimator.model, estimator.state))
         return out
     return model
 
@@ -126,7 +133,7 @@ class Agreement:
     Attributes:
         model: the model's name.
         ratings: number of ratings compared.
-        rmse: RMSE at lag 0, trust units.
+        rmse: RMSE at lag 0, on the common scale [0, 1].
         correlation: Pearson correlation at lag 0 (NaN with < 3 ratings or no variance).
         best_lag_s: the lag with the smallest RMSE, s (model trust at t - lag vs rating at t).
         rmse_at_best_lag: that RMSE.
@@ -160,7 +167,7 @@ def compare(rating_times_s: Sequence[float] | np.ndarray, ratings: Sequence[floa
 
     Args:
         rating_times_s: when each rating was given, s since the drive started.
-        ratings: the ratings, trust units in [0, 1].
+        ratings: the ratings on the common scale [0, 1] (a 0-100 rating / 100).
         series: the drive's plans (what each model is run on).
         models: (name, model) pairs, e.g. :func:`registered_models`.
         max_lag_s: largest lag tried, s (>= 0).
@@ -170,7 +177,9 @@ def compare(rating_times_s: Sequence[float] | np.ndarray, ratings: Sequence[floa
         One :class:`Agreement` per model, in the given order.
 
     Raises:
-        RatingError: no rating, no plan, or ratings and times of different lengths.
+        RatingError: no rating, no plan, ratings and times of different lengths, a rating
+            outside [0, 1] (a 0-100 rating not divided by 100), or a model whose trust is not
+            :class:`~trust_monitor.model_interface.UnitTrust` (a raw reading).
     """
     when = np.asarray(rating_times_s, dtype=float)
     person = np.asarray(ratings, dtype=float)
@@ -179,10 +188,19 @@ def compare(rating_times_s: Sequence[float] | np.ndarray, ratings: Sequence[floa
                           f'{len(when)} times and {len(person)} ratings')
     if len(series.times_s) == 0:
         raise RatingError('the drive recorded no plan: no model trust to compare with')
+    if not np.all((person >= 0.0) & (person <= 1.0)):
+        raise RatingError(f'ratings must be on the common scale [0, 1], got '
+                          f'{float(np.nanmin(person)):g} to {float(np.nanmax(person)):g} '
+                          '(a 0-100 rating is divided by 100)')
     lags = np.arange(0.0, max_lag_s + lag_step_s / 2, lag_step_s)
     out = []
     for name, model in models:
-        trust = np.asarray(model(series), dtype=float)
+        readings = model(series)
+        if not all(isinstance(value, UnitTrust) for value in readings):
+            raise RatingError(f'trust model {name!r}: its trust is not on the common scale '
+                              '(UnitTrust, made by trust_monitor.model_interface.unit_trust); '
+                              'a raw reading cannot be compared with ratings')
+        trust = np.asarray(readings, dtype=float)
         errors = [float(np.sqrt(np.mean((_at(series.times_s, trust, when - lag) - person)
                                         ** 2))) for lag in lags]
         best = int(np.argmin(errors))

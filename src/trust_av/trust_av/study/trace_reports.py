@@ -38,7 +38,7 @@ from trust_av.study.sweep import METRICS, Case, ParamsFiles, case_config
 from trust_av.study.tables import NO_VALUE, max_improvements
 from trust_av_common.output_files import replacing, write_text
 from trust_av_common.stats import mean_ci95
-from trust_monitor.model_interface import COMMON_SCALE
+from trust_monitor.model_interface import TrustModel, unit_trust
 
 __all__ = ['FILES', 'trace_folders', 'trace_paths', 'write_trace_reports']
 
@@ -82,16 +82,14 @@ def trace_paths(results_dir: Path, traces: Sequence[str]) -> dict[str, list[Path
 
 @dataclass(frozen=True)
 class Scale:
-    """A trust model's own units mapped to the common scale: (T - low) / (high - low)."""
+    """A trust model's own units mapped to the common scale by the one conversion
+    (:func:`~trust_monitor.model_interface.unit_trust`)."""
 
-    low: float
-    high: float
+    model: TrustModel
 
     def common(self, trust: Sequence[float] | np.ndarray) -> np.ndarray:
-        """``trust`` on the common scale, clipped to [0, 1]
-        (:func:`~trust_monitor.model_interface.common_trust`)."""
-        values = (np.asarray(trust, float) - self.low) / (self.high - self.low)
-        return np.clip(values, 0.0, 1.0)
+        """``trust`` (the model's readings) on the common scale [0, 1]."""
+        return np.array([unit_trust(self.model, value) for value in np.asarray(trust, float)])
 
 
 def scales(cases: Sequence[Case], params_file: ParamsFiles) -> dict[str, Scale]:
@@ -100,9 +98,7 @@ def scales(cases: Sequence[Case], params_file: ParamsFiles) -> dict[str, Scale]:
     out = {}
     for case in cases:
         if case.trust_model not in out:
-            model = case_config(case, params_file).trust_model()
-            low, high = getattr(model, 'trust_range', COMMON_SCALE)
-            out[case.trust_model] = Scale(float(low), float(high))
+            out[case.trust_model] = Scale(case_config(case, params_file).trust_model())
     return out
 
 
