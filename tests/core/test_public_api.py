@@ -115,11 +115,12 @@ def exception_classes(found: dict[str, Path]) -> dict[str, type]:
 
 
 def astray(classes: dict[str, type]) -> list[str]:
-    """The exception classes that derive from neither the one base nor a stop."""
+    """The exception classes that derive from neither the one base nor a stop (a warning
+    category, such as the old import paths' MovedPathWarning, is not an error)."""
     from trust_av_common.errors import TrustAvError
 
     return sorted(qualified for qualified, cls in classes.items()
-                  if not issubclass(cls, (TrustAvError, KeyboardInterrupt))
+                  if not issubclass(cls, (TrustAvError, KeyboardInterrupt, Warning))
                   and qualified not in NOT_ERRORS)
 
 
