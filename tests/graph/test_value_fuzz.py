@@ -7,6 +7,11 @@ node stays active and answers lifecycle requests, and every refused message is c
 ``/diagnostics``. The issue's own cases are replayed one by one: each gives the stale-input
 command (-2 m/s^2), with the refused field named in the planner's status.
 
+In this process (no wire, so every message is seen): the Autoware adapters, a planner and a
+trust monitor take arbitrary messages through their callbacks; every refusal is counted
+exactly, every Control and odometry they publish is in range. A separate planner process
+with an injected internal error hands over on the wire.
+
 The malformed-bytes fuzz is tests/graph/test_raw_inputs.py; the decode checks and the envelope
 alone, on many more cases, tests/core/test_envelope.py.
 """
@@ -71,6 +76,7 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Drive]:
 
     wall = WallClockConfig(clock_mode='wall')
     tmp_path = tmp_path_factory.mktemp('value_fuzz')
+    started = time.monotonic()
     with lease_domain() as domain:
         proc = start(tmp_path, domain, 'trust_av_planner.planner_node', '-p', 'clock_mode:=wall',
                      '-p', 'predictor:=ca', '-p', f'command_jerk_max_mps3:={JERK_MPS3}')
@@ -94,10 +100,22 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Drive]:
             yield Drive(manager, pubs, manager.received['ego/accel_cmd'],
                         manager.received['ego/planner_status'],
                         manager.received['/diagnostics'], start_s=time.monotonic())
+            statuses = list(manager.received['ego/planner_status'])
         finally:
             manager.close()
             out = stop(proc)
     assert 'internal error' not in out, out
+    # the stale-input error: once per reason (which inputs, not their ages or values), then
+    # at most every 10 s; before, once per tick while an input was stale by its age
+    from trust_av_common.ros.messages import diagnostic_values
+    from trust_av_planner.ros.planner_inputs import STALE_DETAIL
+
+    keys = [STALE_DETAIL.sub('', diagnostic_values(s)['reason'])
+            if diagnostic_values(s)['status'] == 'stale_inputs' else '' for s in statuses]
+    changes = sum(1 for a, b in zip(['', *keys], keys, strict=False) if b and a != b)
+    logged = out.count('stale inputs (')
+    assert logged <= changes + 10 and keys.count('') < len(keys), (logged, changes, len(keys))
+    assert out.count('still stale (') <= 1 + (time.monotonic() - started) / 10.0
 
 
 def sane(name: str, t_s: float) -> Any:
@@ -194,9 +212,232 @@ def check_commands(drive: Drive) -> None:
     drive.checked = len(values)
 
 
+def test_an_internal_error_while_active_hands_over_reports_and_waits_inactive(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An exception inside a planning step (injected: tests/support/faulty_planner.py):
+    the hand-over command on the wire right after the last planned one, ERROR on
+    ``/diagnostics`` naming it, the node inactive; activated again, it plans again."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from geometry_msgs.msg import AccelStamped, Vector3Stamped
+    from nav_msgs.msg import Odometry
+    from trajectory_msgs.msg import JointTrajectory
+
+    from trust_av_common.ros.diagnostics import QOS
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
+
+    monkeypatch.setenv('PYTHONPATH', f'{TESTS}{os.pathsep}{os.environ.get("PYTHONPATH", "")}')
+    wall = WallClockConfig(clock_mode='wall')
+    with lease_domain() as domain:
+        proc = start(tmp_path, domain, 'support.faulty_planner', '-p', 'clock_mode:=wall',
+                     '-p', 'predictor:=ca')
+        manager = Manager(domain, 'planner')
+        try:
+            manager.record(AccelStamped, 'ego/accel_cmd', topic_qos('ego/accel_cmd', wall))
+            manager.record(DiagnosticArray, '/diagnostics', QOS)
+            types = {'traffic': Odometry, 'preview': JointTrajectory, 'ego': Odometry,
+                     'human': Odometry, 'trust': Vector3Stamped}
+            pubs = {name: manager.node.create_publisher(
+                types[name], topic, topic_qos(topic, wall, publisher=True))
+                for name, topic in INPUTS.items()}
+            assert manager.spin_until(lambda: all(p.get_subscription_count()
+                                                  for p in pubs.values()))
+            assert manager.transition(ACTIVATE)
+            start_s = time.monotonic()
+            commands = manager.received['ego/accel_cmd']
+            diagnostics = manager.received['/diagnostics']
+
+            def feed_until(done: Any) -> bool:
+                end = time.monotonic() + 60.0
+                while time.monotonic() < end and not done():
+                    for name, pub in pubs.items():
+                        pub.publish(sane(name, time.monotonic() - start_s))
+                    manager.spin_for(0.05)
+                return bool(done())
+
+            def errors() -> list[Any]:
+                return [m.status[0] for m in diagnostics if m.status
+                        and m.status[0].level == DiagnosticStatus.ERROR
+                        and 'internal error' in m.status[0].message]
+
+            assert feed_until(lambda: errors())
+            assert manager.state() == INACTIVE
+            manager.spin_for(0.5)
+            values = [c.accel.linear.x for c in commands]
+            assert values[-1] == STALE and len(values) >= 4, values   # 4 plans, the hand-over
+            assert 'RuntimeError: injected internal error' in errors()[0].message
+            assert manager.transition(ACTIVATE)
+            handed = len(commands)
+            assert feed_until(lambda: len(commands) >= handed + 3)
+            assert all(math.isfinite(c.accel.linear.x) for c in commands)
+        finally:
+            manager.close()
+            os.killpg(proc.pid, signal.SIGINT)
+            out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 0, out
+    # the traceback once, then the node went on
+    assert out.count('internal error (handing over and deactivating)') == 1, out
+    assert out.count('Traceback') == 1, out
+    assert 'deactivate: handed over with -2 m/s^2' in out
+
+
+@pytest.fixture(scope='module')
+def adapters() -> Iterator[tuple[Any, Any, list[Any], list[Any], Any]]:
+    """The two Autoware adapters and a planner (wall mode, configured) in this process
+    (default context), the adapters' publishers captured: (control adapter, lane adapter,
+    Controls, odometries, planner)."""
+    import rclpy
+
+    from trust_av_autoware.control_adapter_node import ControlAdapterNode
+    from trust_av_autoware.lane_adapter_node import LaneAdapterNode
+
+    rclpy.init(args=['--ros-args', '-p', 'vehicle_length_m:=4.5', '-p', 'clock_mode:=wall',
+                     '-p', 'predictor:=ca'])
+    try:
+        from trust_av_planner.planner_node import PlannerNode
+        from trust_monitor.monitor_node import MonitorNode
+
+        control, lane, planner = ControlAdapterNode(), LaneAdapterNode(), PlannerNode()
+        monitor = MonitorNode()
+        planner.start([])   # configured (wall mode: they wait inactive)
+        monitor.start([])
+        controls: list[Any] = []
+        odometries: list[Any] = []
+        control.pub.publish = controls.append
+        lane.pub_ego.publish = lane.pub_lead.publish = odometries.append
+        yield control, lane, controls, odometries, (planner, monitor)
+        for node in (control, lane, planner, monitor):
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown()
+
+
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(st.data())
+def test_the_autoware_adapters_pass_only_values_in_range(
+        adapters: tuple[Any, Any, list[Any], list[Any], Any], data: st.DataObject) -> None:
+    """Arbitrary values in every field the adapters read (the kinematic state, the
+    planner's command, the controller's lateral command, the objects): nothing raises, every
+    Control is finite as float32 with the acceleration and velocity in range, every odometry
+    they publish is in the planner's input ranges, and every message not used is counted."""
+    import numpy as np
+    from autoware_control_msgs.msg import Control
+    from autoware_perception_msgs.msg import PredictedObject, PredictedObjects
+    from geometry_msgs.msg import AccelStamped, PoseStamped
+    from nav_msgs.msg import Odometry, Path
+
+    from trust_av_common.envelope import InputRanges, odometry_problem
+
+    control, lane, controls, odometries, _ = adapters
+    ranges = InputRanges()
+    if lane.lane is None:
+        path = Path()
+        path.header.frame_id = 'map'
+        for x in (0.0, 1000.0):
+            pose = PoseStamped()
+            pose.pose.position.x = x
+            path.poses.append(pose)
+        lane.on_centreline(path)
+    value = st.one_of(WIDE, st.floats(-10.0, 120.0), st.floats(-1.0, 1.0))
+    state = Odometry(child_frame_id='base_link')
+    state.header.frame_id = 'map'
+    state.pose.pose.position.x = data.draw(value)
+    state.pose.pose.position.y = data.draw(st.one_of(value, st.just(0.0)))
+    state.pose.pose.orientation.w = data.draw(st.one_of(value, st.just(1.0)))
+    state.twist.twist.linear.x = data.draw(value)
+    state.twist.twist.linear.y = data.draw(st.one_of(value, st.just(0.0)))
+    command = AccelStamped()
+    command.header.frame_id = 'base_link'
+    command.accel.linear.x = data.draw(value)
+    lateral = Control()
+    lateral.lateral.steering_tire_angle = np.float32(data.draw(st.floats(width=32)))
+    lateral.lateral.steering_tire_rotation_rate = np.float32(data.draw(st.floats(width=32)))
+    objects = PredictedObjects()
+    objects.header.frame_id = 'map'
+    for _ in range(data.draw(st.integers(0, 3))):
+        obj = PredictedObject()
+        kin = obj.kinematics
+        kin.initial_pose_with_covariance.pose.position.x = data.draw(value)
+        kin.initial_pose_with_covariance.pose.orientation.w = 1.0
+        kin.initial_twist_with_covariance.twist.linear.x = data.draw(value)
+        obj.shape.dimensions.x = data.draw(value)
+        objects.objects.append(obj)
+    before = (sum(control.status.counts.values()), sum(lane.status.counts.values()))
+    control.on_kinematic_state(state)
+    control.on_lateral(lateral)
+    control.on_command(command)
+    lane.on_kinematic_state(state)
+    lane.on_objects(objects)
+    # every message received is either used or dropped (counted by reason)
+    for node, names in ((control, ('kinematic_state', 'lateral', 'accel_cmd')),
+                        (lane, ('kinematic_state', 'objects'))):
+        counts = node.status.counts
+        for name in names:
+            dropped = sum(v for k, v in counts.items() if k.startswith(f'{name}_dropped_'))
+            assert counts[f'{name}_received'] == counts[f'{name}_used'] + dropped, counts
+    assert sum(control.status.counts.values()) > before[0]
+    for out in controls:
+        lon = out.longitudinal
+        assert np.isfinite(np.float32(lon.velocity)) and np.isfinite(np.float32(lon.acceleration))
+        assert 0.0 <= lon.velocity <= ranges.input_speed_max_mps
+        assert abs(lon.acceleration) <= control.config.max_abs_accel_mps2
+    for odom in odometries:
+        assert odometry_problem(odom, ranges) == '', odom
+    controls.clear()
+    odometries.clear()
+
+
+def test_the_planner_counts_every_refused_message(
+        adapters: tuple[Any, Any, list[Any], list[Any], Any]) -> None:
+    """The planner node in this process (wall mode, configured), its input callback called
+    directly with arbitrary messages (:func:`arbitrary`, hypothesis): every message the
+    checks refuse is counted under its input, no other; nothing raises."""
+    node = adapters[4][0]
+    expected: dict[str, int] = dict(node.refusals)
+
+    @settings(max_examples=150, deadline=None, derandomize=True, database=None,
+              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+    @given(st.sampled_from(sorted(INPUTS)), st.data())
+    def deliver(name: str, data: st.DataObject) -> None:
+        msg = data.draw(arbitrary(name))
+        if problem(name, msg):
+            expected[name] = expected.get(name, 0) + 1
+        node.on_latest(name, msg)
+        assert dict(node.refusals) == expected
+
+    deliver()
+    assert len(expected) == len(INPUTS) and node.faults == 0
+
+
+def test_the_monitor_counts_every_refused_plan(
+        adapters: tuple[Any, Any, list[Any], list[Any], Any]) -> None:
+    """The trust monitor in this process (wall mode, configured), its plan callback called
+    directly with arbitrary plans: every plan the checks refuse is counted, nothing raises."""
+    from trust_av_common.envelope import InputRanges, trajectory_problem
+
+    node = adapters[4][1]
+    ranges = InputRanges()
+    expected: dict[str, int] = dict(node.refusals)
+
+    @settings(max_examples=100, deadline=None, derandomize=True, database=None,
+              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+    @given(st.sampled_from(['plan', 'expected']), arbitrary('preview'))
+    def deliver(name: str, msg: Any) -> None:
+        for point in msg.points:   # the preview's velocities as a plan's accelerations
+            point.accelerations, point.velocities = point.velocities, []
+        if trajectory_problem(msg, 'accelerations', -ranges.input_accel_abs_max_mps2,
+                              ranges.input_accel_abs_max_mps2, ranges.input_points_max):
+            expected[name] = expected.get(name, 0) + 1
+        node.on_latest(name, msg)
+        assert dict(node.refusals) == expected
+
+    deliver()
+    assert len(expected) == 2 and node.faults == 0
+
+
 BURST = st.lists(st.tuples(st.sampled_from(sorted(INPUTS)), st.booleans()), min_size=1,
                  max_size=8)
-EXAMPLES = 150
+EXAMPLES = 100
 
 
 def latest_values(drive: Drive) -> dict[str, str]:
@@ -322,197 +563,3 @@ def test_the_issue_s_cases_give_the_stale_input_command(drive: Drive, case: str)
     assert ticks(False, lambda: any(diagnostic_values(s)['status'] != 'stale_inputs'
                                     for s in statuses[seen:]))
     print(f'{case}: {reason}')
-
-
-def test_an_internal_error_while_active_hands_over_reports_and_waits_inactive(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """An exception inside a planning step (injected: tests/support/faulty_planner.py):
-    the hand-over command on the wire right after the last planned one, ERROR on
-    ``/diagnostics`` naming it, the node inactive; activated again, it plans again."""
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-    from geometry_msgs.msg import AccelStamped, Vector3Stamped
-    from nav_msgs.msg import Odometry
-    from trajectory_msgs.msg import JointTrajectory
-
-    from trust_av_common.ros.diagnostics import QOS
-    from trust_av_common.ros.qos import topic_qos
-    from trust_av_common.wall_clock import WallClockConfig
-
-    monkeypatch.setenv('PYTHONPATH', f'{TESTS}{os.pathsep}{os.environ.get("PYTHONPATH", "")}')
-    wall = WallClockConfig(clock_mode='wall')
-    with lease_domain() as domain:
-        proc = start(tmp_path, domain, 'support.faulty_planner', '-p', 'clock_mode:=wall',
-                     '-p', 'predictor:=ca')
-        manager = Manager(domain, 'planner')
-        try:
-            manager.record(AccelStamped, 'ego/accel_cmd', topic_qos('ego/accel_cmd', wall))
-            manager.record(DiagnosticArray, '/diagnostics', QOS)
-            types = {'traffic': Odometry, 'preview': JointTrajectory, 'ego': Odometry,
-                     'human': Odometry, 'trust': Vector3Stamped}
-            pubs = {name: manager.node.create_publisher(
-                types[name], topic, topic_qos(topic, wall, publisher=True))
-                for name, topic in INPUTS.items()}
-            assert manager.spin_until(lambda: all(p.get_subscription_count()
-                                                  for p in pubs.values()))
-            assert manager.transition(ACTIVATE)
-            start_s = time.monotonic()
-            commands = manager.received['ego/accel_cmd']
-            diagnostics = manager.received['/diagnostics']
-
-            def feed_until(done: Any) -> bool:
-                end = time.monotonic() + 60.0
-                while time.monotonic() < end and not done():
-                    for name, pub in pubs.items():
-                        pub.publish(sane(name, time.monotonic() - start_s))
-                    manager.spin_for(0.05)
-                return bool(done())
-
-            def errors() -> list[Any]:
-                return [m.status[0] for m in diagnostics if m.status
-                        and m.status[0].level == DiagnosticStatus.ERROR
-                        and 'internal error' in m.status[0].message]
-
-            assert feed_until(lambda: errors())
-            assert manager.state() == INACTIVE
-            manager.spin_for(0.5)
-            values = [c.accel.linear.x for c in commands]
-            assert values[-1] == STALE and len(values) >= 4, values   # 4 plans, the hand-over
-            assert 'RuntimeError: injected internal error' in errors()[0].message
-            assert manager.transition(ACTIVATE)
-            handed = len(commands)
-            assert feed_until(lambda: len(commands) >= handed + 3)
-            assert all(math.isfinite(c.accel.linear.x) for c in commands)
-        finally:
-            manager.close()
-            os.killpg(proc.pid, signal.SIGINT)
-            out, _ = proc.communicate(timeout=60)
-    assert proc.returncode == 0, out
-    # the traceback once, then the node went on
-    assert out.count('internal error (handing over and deactivating)') == 1, out
-    assert out.count('Traceback') == 1, out
-    assert 'deactivate: handed over with -2 m/s^2' in out
-
-
-@pytest.fixture(scope='module')
-def adapters() -> Iterator[tuple[Any, Any, list[Any], list[Any], Any]]:
-    """The two Autoware adapters and a planner (wall mode, configured) in this process
-    (default context), the adapters' publishers captured: (control adapter, lane adapter,
-    Controls, odometries, planner)."""
-    import rclpy
-
-    from trust_av_autoware.control_adapter_node import ControlAdapterNode
-    from trust_av_autoware.lane_adapter_node import LaneAdapterNode
-
-    rclpy.init(args=['--ros-args', '-p', 'vehicle_length_m:=4.5', '-p', 'clock_mode:=wall',
-                     '-p', 'predictor:=ca'])
-    try:
-        from trust_av_planner.planner_node import PlannerNode
-
-        control, lane, planner = ControlAdapterNode(), LaneAdapterNode(), PlannerNode()
-        planner.start([])   # configured (wall mode: it waits inactive)
-        controls: list[Any] = []
-        odometries: list[Any] = []
-        control.pub.publish = controls.append
-        lane.pub_ego.publish = lane.pub_lead.publish = odometries.append
-        yield control, lane, controls, odometries, planner
-        for node in (control, lane, planner):
-            node.destroy_node()
-    finally:
-        rclpy.try_shutdown()
-
-
-@settings(max_examples=300, deadline=None, derandomize=True)
-@given(st.data())
-def test_the_autoware_adapters_pass_only_values_in_range(
-        adapters: tuple[Any, Any, list[Any], list[Any], Any], data: st.DataObject) -> None:
-    """Arbitrary values in every field the adapters read (the kinematic state, the
-    planner's command, the controller's lateral command, the objects): nothing raises, every
-    Control is finite as float32 with the acceleration and velocity in range, every odometry
-    they publish is in the planner's input ranges, and every message not used is counted."""
-    import numpy as np
-    from autoware_control_msgs.msg import Control
-    from autoware_perception_msgs.msg import PredictedObject, PredictedObjects
-    from geometry_msgs.msg import AccelStamped, PoseStamped
-    from nav_msgs.msg import Odometry, Path
-
-    from trust_av_common.envelope import InputRanges, odometry_problem
-
-    control, lane, controls, odometries, _ = adapters
-    ranges = InputRanges()
-    if lane.lane is None:
-        path = Path()
-        path.header.frame_id = 'map'
-        for x in (0.0, 1000.0):
-            pose = PoseStamped()
-            pose.pose.position.x = x
-            path.poses.append(pose)
-        lane.on_centreline(path)
-    value = st.one_of(WIDE, st.floats(-10.0, 120.0), st.floats(-1.0, 1.0))
-    state = Odometry(child_frame_id='base_link')
-    state.header.frame_id = 'map'
-    state.pose.pose.position.x = data.draw(value)
-    state.pose.pose.position.y = data.draw(st.one_of(value, st.just(0.0)))
-    state.pose.pose.orientation.w = data.draw(st.one_of(value, st.just(1.0)))
-    state.twist.twist.linear.x = data.draw(value)
-    state.twist.twist.linear.y = data.draw(st.one_of(value, st.just(0.0)))
-    command = AccelStamped()
-    command.header.frame_id = 'base_link'
-    command.accel.linear.x = data.draw(value)
-    lateral = Control()
-    lateral.lateral.steering_tire_angle = np.float32(data.draw(st.floats(width=32)))
-    lateral.lateral.steering_tire_rotation_rate = np.float32(data.draw(st.floats(width=32)))
-    objects = PredictedObjects()
-    objects.header.frame_id = 'map'
-    for _ in range(data.draw(st.integers(0, 3))):
-        obj = PredictedObject()
-        kin = obj.kinematics
-        kin.initial_pose_with_covariance.pose.position.x = data.draw(value)
-        kin.initial_pose_with_covariance.pose.orientation.w = 1.0
-        kin.initial_twist_with_covariance.twist.linear.x = data.draw(value)
-        obj.shape.dimensions.x = data.draw(value)
-        objects.objects.append(obj)
-    before = (sum(control.status.counts.values()), sum(lane.status.counts.values()))
-    control.on_kinematic_state(state)
-    control.on_lateral(lateral)
-    control.on_command(command)
-    lane.on_kinematic_state(state)
-    lane.on_objects(objects)
-    # every message received is either used or dropped (counted by reason)
-    for node, names in ((control, ('kinematic_state', 'lateral', 'accel_cmd')),
-                        (lane, ('kinematic_state', 'objects'))):
-        counts = node.status.counts
-        for name in names:
-            dropped = sum(v for k, v in counts.items() if k.startswith(f'{name}_dropped_'))
-            assert counts[f'{name}_received'] == counts[f'{name}_used'] + dropped, counts
-    assert sum(control.status.counts.values()) > before[0]
-    for out in controls:
-        lon = out.longitudinal
-        assert np.isfinite(np.float32(lon.velocity)) and np.isfinite(np.float32(lon.acceleration))
-        assert 0.0 <= lon.velocity <= ranges.input_speed_max_mps
-        assert abs(lon.acceleration) <= control.config.max_abs_accel_mps2
-    for odom in odometries:
-        assert odometry_problem(odom, ranges) == '', odom
-    controls.clear()
-    odometries.clear()
-
-
-def test_the_planner_counts_every_refused_message(
-        adapters: tuple[Any, Any, list[Any], list[Any], Any]) -> None:
-    """The planner node in this process (wall mode, configured), its input callback called
-    directly with arbitrary messages (:func:`arbitrary`, hypothesis): every message the
-    checks refuse is counted under its input, no other; nothing raises."""
-    node = adapters[4]
-    expected: dict[str, int] = dict(node.refusals)
-
-    @settings(max_examples=300, deadline=None, derandomize=True, database=None,
-              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-    @given(st.sampled_from(sorted(INPUTS)), st.data())
-    def deliver(name: str, data: st.DataObject) -> None:
-        msg = data.draw(arbitrary(name))
-        if problem(name, msg):
-            expected[name] = expected.get(name, 0) + 1
-        node.on_latest(name, msg)
-        assert dict(node.refusals) == expected
-
-    deliver()
-    assert len(expected) == len(INPUTS) and node.faults == 0

@@ -20,8 +20,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from trust_av_autoware.lane_inputs import InputError, finite
 from trust_av_common.params import check_fields, param
 
@@ -69,13 +67,17 @@ class LongitudinalCommand:
     clipped: bool = False
 
 
+FLOAT32_MAX = 3.4028234663852886e38
+"""The largest finite float32 (IEEE 754 binary32): a float64 beyond it (3.5e38) rounds to
+``inf`` in a float32 field."""
+
+
 def float32_finite(kind: str, **values: float) -> None:
     """Raise :class:`InputError` ``kind`` naming the first value that is not finite as a
     ``float32`` (the type of Autoware's Control fields)."""
-    with np.errstate(over='ignore'):
-        for name, value in values.items():
-            if not np.isfinite(np.float32(value)):
-                raise InputError(kind, f'{name} {value!r} is not finite as a float32')
+    for name, value in values.items():
+        if not abs(value) <= FLOAT32_MAX:   # NaN too
+            raise InputError(kind, f'{name} {value!r} is not finite as a float32')
 
 
 def longitudinal(accel_mps2: float, speed_mps: float, config: ControlAdapterConfig,

@@ -305,7 +305,7 @@ class PlannerNode(PlannerInputs):
             return
         if self.stale_reason:
             self.get_logger().info('inputs fresh again: planning resumed')
-            self.stale_reason = ''
+            self.stale_reason = self.stale_logged = ''
             self.diagnostics.changed()
         items: dict[str, object] = {name: self.latest.get(name) for name in self.required}
         items.setdefault('preview', None)
