@@ -71,6 +71,7 @@ LAYERS: dict[str, dict[str, Layer]] = {
         '': Layer(0, True, 'the NMPC, the per-step decision, the planner, ego-plant and '
                            'stand-in nodes'),
         'predictors': Layer(0, True, 'plan estimators (CA, CV, GRU)'),
+        'ros': Layer(1, False, "the planner node's input checks and stale-input policy"),
     },
     'trust_av': {
         'system': Layer(1, True, 'the run configuration and the in-process closed loop'),

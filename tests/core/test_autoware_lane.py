@@ -122,14 +122,14 @@ def test_a_repeated_path_pose_is_not_a_segment() -> None:
 
 def test_the_longitudinal_command() -> None:
     config = ControlAdapterConfig()   # velocity over 0.1 s, |a| <= 10 m/s^2
-    command = longitudinal(-2.0, 10.0, config)
+    command = longitudinal(-2.0, 10.0, config, 100.0)
     assert (command.velocity_mps, command.acceleration_mps2) == (pytest.approx(9.8), -2.0)
-    assert longitudinal(-3.0, 0.1, config).velocity_mps == 0.0   # never below standstill
-    assert longitudinal(1.5, 20.0, config).velocity_mps == pytest.approx(20.15)
+    assert longitudinal(-3.0, 0.1, config, 100.0).velocity_mps == 0.0   # never below standstill
+    assert longitudinal(1.5, 20.0, config, 100.0).velocity_mps == pytest.approx(20.15)
     for accel, speed, kind in ((math.nan, 1.0, 'not_finite'), (1.0, math.inf, 'not_finite'),
                                (-10.5, 1.0, 'out_of_range')):
         with pytest.raises(InputError) as caught:
-            longitudinal(accel, speed, config)
+            longitudinal(accel, speed, config, 100.0)
         assert caught.value.kind == kind
 
 

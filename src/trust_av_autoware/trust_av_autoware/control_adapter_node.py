@@ -16,7 +16,11 @@ else zero (and the status says so). Autoware's vehicle_cmd_gate takes it by rema
 
 A command in another frame than ``base_frame_id``, not finite or beyond
 ``max_abs_accel_mps2``, or arriving with no recent speed, is dropped and counted
-(``/diagnostics``).
+(``/diagnostics``); so is a kinematic state whose speed is not finite or outside
+``input_speed_min_mps``..``input_speed_max_mps`` (then no command is passed on until a usable
+one), and a lateral command with a steering angle or rate out of range. The Control passes
+its envelope last (:mod:`trust_av_autoware.control_output`: float32-finite, the velocity
+clipped to ``input_speed_max_mps`` and counted as ``control_cmd_clipped``).
 """
 
 from __future__ import annotations
@@ -30,8 +34,8 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 
 from trust_av_autoware.adapter_status import AdapterStatus
-from trust_av_autoware.control_output import ControlAdapterConfig, longitudinal
-from trust_av_autoware.lane_inputs import InputError, check_frame, finite
+from trust_av_autoware.control_output import ControlAdapterConfig, lateral_problem, longitudinal
+from trust_av_autoware.lane_inputs import InputError, check_frame, finite, in_range
 from trust_av_autoware.ros.qos import (
     COMMAND_TOPIC,
     CONTROL_QOS,
@@ -41,6 +45,7 @@ from trust_av_autoware.ros.qos import (
     LATERAL_QOS,
     LATERAL_TOPIC,
 )
+from trust_av_common.envelope import InputRanges
 from trust_av_common.ros.diagnostics import NodeDiagnostics
 from trust_av_common.ros.messages import time_msg
 from trust_av_common.ros.parameters import declare_config
@@ -61,6 +66,7 @@ class ControlAdapterNode(Node):
         self.exit_code = 0
         self.config = declare_config(self, ControlAdapterConfig)
         self.clock_config = declare_config(self, WallClockConfig)
+        self.ranges = declare_config(self, InputRanges)
         self.status = AdapterStatus(('accel_cmd', 'kinematic_state', 'lateral'))
         self.speed_mps: float | None = None
         self.speed_ns: int | None = None
@@ -104,8 +110,11 @@ class ControlAdapterNode(Node):
             check_frame(msg.child_frame_id, self.config.base_frame_id,
                         'kinematic state twist (child_frame_id)')
             finite('not_finite', **{'twist.linear.x': msg.twist.twist.linear.x})
+            in_range('twist.linear.x', msg.twist.twist.linear.x, self.ranges.input_speed_min_mps,
+                     self.ranges.input_speed_max_mps)
         except InputError as error:
             self.drop('kinematic_state', error)
+            self.speed_mps = None   # stale: no command until a usable one
             return
         self.status.used('kinematic_state')
         self.speed_mps, self.speed_ns = float(msg.twist.twist.linear.x), now
@@ -117,10 +126,10 @@ class ControlAdapterNode(Node):
         self.status.received('lateral', now)
         lat = msg.lateral
         try:
-            finite('not_finite', steering_tire_angle=lat.steering_tire_angle,
-                   steering_tire_rotation_rate=lat.steering_tire_rotation_rate)
+            lateral_problem(lat.steering_tire_angle, lat.steering_tire_rotation_rate)
         except InputError as error:
             self.drop('lateral', error)
+            self.lateral = self.lateral_ns = None   # stale: lateral 0 until a usable one
             return
         self.status.used('lateral')
         self.lateral, self.lateral_ns = lat, now
@@ -131,13 +140,16 @@ class ControlAdapterNode(Node):
         self.status.received('accel_cmd', now)
         try:
             check_frame(msg.header.frame_id, self.config.base_frame_id, 'accel_cmd')
-            if self.speed_mps is None or self.speed_ns is None:
+            if self.speed_ns is None:
                 raise InputError('no_speed', 'no kinematic state (current speed) yet')
+            if self.speed_mps is None:
+                raise InputError('no_speed', 'the newest kinematic state was dropped')
             age_s = (now - self.speed_ns) / 1e9
             if age_s > self.config.speed_timeout_s:
                 raise InputError('no_speed', f'the newest kinematic state is {age_s:.3f} s old '
                                  f'(speed_timeout_s {self.config.speed_timeout_s:g})')
-            command = longitudinal(msg.accel.linear.x, self.speed_mps, self.config)
+            command = longitudinal(msg.accel.linear.x, self.speed_mps, self.config,
+                                   self.ranges.input_speed_max_mps)
         except InputError as error:
             self.drop('accel_cmd', error)
             return
@@ -155,6 +167,8 @@ class ControlAdapterNode(Node):
             out.lateral.stamp, out.lateral.control_time = stamp, stamp
         self.pub.publish(out)
         self.status.published('control_cmd')
+        if command.clipped:
+            self.status.counts['control_cmd_clipped'] += 1
         self.last_accel_mps2 = command.acceleration_mps2
         self.diagnostics.changed()
 

@@ -12,7 +12,10 @@ the lane (stamped as the objects). The geometry is :mod:`trust_av_autoware.lane_
 
 A message that cannot be used (a frame other than ``frame_id``, a value not finite, the AV off
 its lane, objects with no recent AV state) is dropped and counted; ``/diagnostics`` says what
-is dropped and why, and what is missing.
+is dropped and why, and what is missing. So is one whose positions or speeds (as given, and
+along the lane) are outside the ``input_*`` ranges (``out_of_range``,
+:class:`trust_av_common.envelope.InputRanges`): a dropped kinematic state publishes no
+``ego/odom`` (the planner's ego input goes stale), dropped objects no lead.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from trust_av_autoware.lane_inputs import (
     check_frame,
     ego_on_lane,
     half_length_m,
+    in_range,
     lead_from_objects,
     seen,
     yaw,
@@ -49,6 +53,8 @@ from trust_av_autoware.ros.qos import (
     LEAD_TOPIC,
     OBJECTS_TOPIC,
 )
+from trust_av_common.envelope import InputRanges
+from trust_av_common.params import MAX_VEHICLE_LENGTH_M
 from trust_av_common.ros.diagnostics import NodeDiagnostics
 from trust_av_common.ros.parameters import declare_config
 from trust_av_common.ros.qos import wall_qos
@@ -70,6 +76,7 @@ class LaneAdapterNode(Node):
         self.exit_code = 0
         self.config = declare_config(self, LaneAdapterConfig)
         self.clock_config = declare_config(self, WallClockConfig)
+        self.ranges = declare_config(self, InputRanges)
         self.status = AdapterStatus(('centreline', 'kinematic_state', 'objects'))
         self.lane: Centreline | None = None
         self.ego: LaneState | None = None
@@ -108,8 +115,10 @@ class LaneAdapterNode(Node):
         self.status.received('centreline', time.time_ns())
         try:
             check_frame(msg.header.frame_id, self.config.frame_id, 'centreline')
-            self.lane = centreline_from_points(
-                [(p.pose.position.x, p.pose.position.y) for p in msg.poses])
+            points = [(p.pose.position.x, p.pose.position.y) for p in msg.poses]
+            self.lane = centreline_from_points(points)
+            for k, (x, y) in enumerate(points):
+                self.position(f'poses[{k}]', x, y)
         except InputError as error:
             self.drop('centreline', error)
             return
@@ -133,6 +142,8 @@ class LaneAdapterNode(Node):
                          yaw(o.x, o.y, o.z, o.w, 'kinematic state'),
                          twist.linear.x, twist.linear.y)
             state = ego_on_lane(self.lane, ego, self.config)
+            self.position('kinematic state', ego.x_m, ego.y_m)
+            self.speed('kinematic state', twist.linear.x, twist.linear.y, state.speed_mps)
         except InputError as error:
             self.drop('kinematic_state', error)
             return
@@ -157,6 +168,13 @@ class LaneAdapterNode(Node):
                 raise InputError('no_ego', f'the newest kinematic state is {age_s:.3f} s old '
                                  f'(ego_timeout_s {self.config.ego_timeout_s:g})')
             objects = [self.seen(k, o) for k, o in enumerate(msg.objects)]
+            for k, o in enumerate(objects):
+                self.position(f'objects[{k}]', o.pose.x_m, o.pose.y_m)
+                for axis, value in (('vx', o.pose.vx_mps), ('vy', o.pose.vy_mps)):
+                    high = self.ranges.input_speed_max_mps   # any object, any direction
+                    in_range(f'objects[{k}] {axis}', value, -high, high)
+                in_range(f'objects[{k}] half length', o.half_length_m, 0.0,
+                         MAX_VEHICLE_LENGTH_M)
         except InputError as error:
             self.drop('objects', error)
             return
@@ -170,6 +188,22 @@ class LaneAdapterNode(Node):
             self.pub_lead.publish(self.odometry(msg.header.stamp, lead.state, LEAD_CHILD_FRAME))
             self.status.published('preceding_vehicle_odom')
         self.diagnostics.changed()
+
+    def position(self, what: str, x_m: float, y_m: float) -> None:
+        """Raise :class:`InputError` ``out_of_range`` for a position beyond
+        ``input_position_abs_max_m``."""
+        limit = self.ranges.input_position_abs_max_m
+        in_range(f'{what} x', x_m, -limit, limit)
+        in_range(f'{what} y', y_m, -limit, limit)
+
+    def speed(self, what: str, *speeds_mps: float) -> None:
+        """Raise :class:`InputError` ``out_of_range`` for a speed (a twist component, a speed
+        along the lane) outside the speed range; a sideways component within +-the largest
+        speed."""
+        low, high = self.ranges.input_speed_min_mps, self.ranges.input_speed_max_mps
+        in_range(f'{what} speed', speeds_mps[0], low, high)
+        for value in speeds_mps[1:]:
+            in_range(f'{what} speed', value, -high, high)
 
     @staticmethod
     def seen(index: int, obj: PredictedObject) -> Seen:

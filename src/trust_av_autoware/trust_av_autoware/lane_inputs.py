@@ -112,6 +112,13 @@ def finite(kind: str, **values: float) -> None:
             raise InputError(kind, f'{name} is not finite ({value!r})')
 
 
+def in_range(name: str, value: float, low: float, high: float) -> None:
+    """Raise :class:`InputError` ``out_of_range`` unless ``value`` is within [low, high]
+    (the ``input_*`` ranges, :class:`trust_av_common.envelope.InputRanges`)."""
+    if not low <= value <= high:
+        raise InputError('out_of_range', f'{name} {value!r} outside [{low:g}, {high:g}]')
+
+
 def yaw(qx: float, qy: float, qz: float, qw: float, what: str) -> float:
     """The heading (rotation about z) of a quaternion, rad.
 

@@ -186,8 +186,12 @@ def hold_gap_plan(gap_m: float, speed_mps: float, lead_speeds_mps: Sequence[floa
 
     ``u = k_d (d - d_s - tau v) + k_v (v_lead - v)``, then limited so that the gap two steps
     ahead (the first one an acceleration can change) stays >= d_s if the leader keeps its
-    previewed speed, then clipped to the acceleration bounds and to what keeps the next speed
-    within [speed_min, speed_max] (never reversing). Used when an MPC has no solution.
+    previewed speed, then clipped to what keeps the next speed within [speed_min, speed_max]
+    (never reversing) and last to the acceleration bounds, which always hold: from a speed
+    outside the speed bounds the plan returns towards them at the bounded acceleration (an
+    ego speed of 500 m/s against a 36 m/s bound gives ``accel_min_mps2``, not
+    (36 - 500) / dt). A speed or gap that is not finite gives a plan that is not finite (the
+    caller's envelope replaces it). Used when an MPC has no solution.
     """
     plan: list[float] = []
     leads = list(lead_speeds_mps)
@@ -198,9 +202,9 @@ def hold_gap_plan(gap_m: float, speed_mps: float, lead_speeds_mps: Sequence[floa
                  + speed_gain_per_s * (lead - speed_mps))
         # d[k+2] = d[k+1] + (v_lead[k+1] - v[k] - u dt) dt >= d_s
         accel = min(accel, ((next_gap - standstill_gap_m) / dt_s + next_lead - speed_mps) / dt_s)
-        accel = min(max(accel, accel_min_mps2), accel_max_mps2)
         accel = min(max(accel, (speed_min_mps - speed_mps) / dt_s),
                     (speed_max_mps - speed_mps) / dt_s)
+        accel = min(max(accel, accel_min_mps2), accel_max_mps2)
         plan.append(accel)
         gap_m, speed_mps = step(gap_m, speed_mps, lead, accel, dt_s)
     return plan

@@ -24,6 +24,10 @@ CA or CV). With ``use_sim_time`` true it does not command at all and its status 
 <trust_av_common.ros.lifecycle.ManagedNode.clock_problem>`). Trust: the latest estimate,
 ``trust_initial`` before the first. ``alpha``, ``trust_min`` and ``solver_cpu_budget_s`` can be
 changed with ``ros2 param set`` (from the next tick).
+
+Input messages are checked where they enter (:mod:`trust_av_planner.ros.planner_inputs`: a
+refused one is counted and its input stale; lock-step: the step waits); every command passes
+the :class:`~trust_av_common.envelope.CommandEnvelope` last (docs/operations/real-vehicle.md).
 """
 
 from __future__ import annotations
@@ -40,13 +44,16 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from trust_av_common import registry
-from trust_av_common.frames import FrameConfig, body_frame, position_frame_problem
+from trust_av_common.envelope import (
+    CommandEnvelope,
+    EnvelopeConfig,
+    InputRanges,
+)
+from trust_av_common.frames import FrameConfig, body_frame
 from trust_av_common.grids import interp_at
 from trust_av_common.health import Report, SolveRecord, age
-from trust_av_common.kinematics import VehicleState
 from trust_av_common.lifecycle import LifecycleConfig
 from trust_av_common.lockstep import StepBuffer
-from trust_av_common.ros.lifecycle import ManagedNode
 from trust_av_common.ros.messages import (
     TrajectoryBytes,
     VehicleMarkers,
@@ -68,10 +75,11 @@ from trust_av_common.ros.spin import WallLoop, now_ns, spin_node
 from trust_av_common.ros.tuning import Tunable, enable_tuning
 from trust_av_common.wall_clock import NS_PER_S, LatestInputs, WallClockConfig
 from trust_av_planner.errors import TrustAvPlannerError
-from trust_av_planner.nmpc import PlannerConfig
+from trust_av_planner.nmpc import BOUND_TOLERANCE, PlannerConfig
 from trust_av_planner.planner import AvPlanner
 from trust_av_planner.planner_params import PlannerTopics, SharedConfig, check_control_rate
 from trust_av_planner.predictors import PREDICTORS
+from trust_av_planner.ros.planner_inputs import PlannerInputs, vehicle
 from trust_monitor.model_interface import TRUST_MODELS, build_trust_model
 from trust_monitor.paper_trust import TrustConfig
 
@@ -87,12 +95,7 @@ TABLE_TOPIC = {'traffic': 'preceding_vehicle/odom', 'preview': 'preceding_vehicl
 """Input -> the topic-table row whose QoS it uses (its actual name may be remapped)."""
 
 
-def vehicle(msg: Odometry) -> VehicleState:
-    """Odometry to the core's vehicle state."""
-    return VehicleState(float(msg.pose.pose.position.x), float(msg.twist.twist.linear.x))
-
-
-class PlannerNode(ManagedNode):
+class PlannerNode(PlannerInputs):
     """Thin adapter over :class:`~trust_av_planner.planner.AvPlanner`, a managed node:
     ``configure`` builds and warms it, ``activate`` starts outputs, ``deactivate`` hands over."""
 
@@ -106,8 +109,9 @@ class PlannerNode(ManagedNode):
         self.tuning = False
         # declared now, read and checked at configure: `ros2 param` sees them unconfigured
         for cls in (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
-                    FrameConfig, *(c.config_type for c in registry.components(
-                        PREDICTORS) if c.config_type is not None)):
+                    FrameConfig, InputRanges, EnvelopeConfig,
+                    *(c.config_type for c in registry.components(PREDICTORS)
+                      if c.config_type is not None)):
             predeclare(self, cls)
         predeclare_component(self, TRUST_MODELS, 'trust_model')
 
@@ -125,6 +129,8 @@ class PlannerNode(ManagedNode):
         self.clock = declare_config(self, WallClockConfig)
         topics = declare_config(self, PlannerTopics)
         self.frames = declare_config(self, FrameConfig)
+        self.ranges = declare_config(self, InputRanges)
+        envelope = declare_config(self, EnvelopeConfig)
         # Every registered plan estimator's parameters are declared (and checked), the
         # chosen one's are used: as trust-av's node_components reads the section.
         params: dict[str, object] = {c.name: declare_config(self, c.config_type)
@@ -171,6 +177,12 @@ class PlannerNode(ManagedNode):
         self.missed: dict[str, int] = {}  # input -> deadline events since its last message
         self.record = SolveRecord(self.trust_initial)   # for /diagnostics
         self.stale_reason = ''
+        self.stale_logged = ''   # the last stale reason logged, without the inputs' ages
+        self.refused_now: dict[str, str] = {}  # input -> why its newest message was refused
+        self.period_s = 1.0 / self.clock.control_rate_hz if wall else self.config.dt_s
+        self.envelope = CommandEnvelope(self.config.accel_min_mps2, self.config.accel_max_mps2,
+                                        envelope.command_jerk_max_mps3 if wall else None,
+                                        self.config.stale_decel_mps2)
         self.frame = ''
         self.set_frame(self.frames.base_frame_id)
         self.markers = VehicleMarkers(shared.vehicle_length_m)
@@ -191,6 +203,7 @@ class PlannerNode(ManagedNode):
                   ('human', Odometry, topics.human_odom_topic),
                   ('trust', Vector3Stamped, topics.trust_topic))
         callback = self.on_latest if wall else self.on_input
+        self.topics = {name: topic for name, _, topic in inputs}
         for name, msgtype, topic in inputs:
             if topic:
                 subscribe(
@@ -231,7 +244,7 @@ class PlannerNode(ManagedNode):
         """``deactivate``: one last command, ``stale_decel_mps2`` (the stale-input
         deceleration, :class:`~trust_av_planner.nmpc.PlannerConfig`), stamped now in the
         AV's frame; then the outputs stop until ``activate``."""
-        accel = self.config.stale_decel_mps2
+        accel = self.envelope.command(self.config.stale_decel_mps2, self.period_s, stop=True)
         self.pub_accel.publish(self.command_bytes.render(now_ns(self), accel))
         self.get_logger().info(f'deactivate: handed over with {accel:g} m/s^2')
 
@@ -239,6 +252,7 @@ class PlannerNode(ManagedNode):
         """``cleanup``/``shutdown``: drop the core and the step buffers."""
         for name in ('planner', 'buffer', 'latest', 'markers'):
             self.__dict__.pop(name, None)
+        self.refused_now = {}
 
     def set_frame(self, frame: str) -> None:
         """The frame_id of the plans and the command from now on (the AV's body frame)."""
@@ -259,29 +273,14 @@ class PlannerNode(ManagedNode):
 
     def on_latest(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Wall mode: keep the latest message of each input with its receive time (also
-        while inactive: the first active tick has fresh inputs; none once released)."""
-        if not self.configured:
+        while inactive: the first active tick has fresh inputs; none once released); a
+        refused one is not kept (:meth:`refused`)."""
+        if not self.configured or self.refused(name, msg):
             return
         self.latest.put(name, time.monotonic_ns(), msg)
         self.missed.pop(name, None)
         if name == 'ego':
             self.set_frame(body_frame(msg.child_frame_id, self.frames))
-
-    def problems(self, now_mono_ns: int) -> str:
-        """Wall mode: why the required inputs cannot be used ('' when they can)."""
-        missed = [n for n in self.required if n in self.missed]
-        polled = self.latest.problems(now_mono_ns, self.clock.input_timeout_s, self.required)
-        event = f'deadline missed (QoS event): {", ".join(missed)}' if missed else ''
-        frames = '' if polled else self.frame_problem(
-            [n for n in self.required if n in ('traffic', 'ego', 'human')])
-        return '; '.join(p for p in (event, polled, frames) if p)
-
-    def frame_problem(self, names: list[str]) -> str:
-        """Why the positions of the latest ``names`` odometry cannot be compared ('' if
-        they can: one world-fixed frame)."""
-        latest = {n: self.latest.get(n) for n in names}
-        return position_frame_problem(
-            {n: m.header.frame_id for n, m in latest.items() if m is not None}, self.frames)
 
     def wall_step(self) -> None:
         """Wall mode: one planning step from the latest inputs, stamped now; the stale-input
@@ -296,43 +295,23 @@ class PlannerNode(ManagedNode):
         ns, mono = now_ns(self), time.monotonic_ns()
         t_s = mono / NS_PER_S
         why = self.problems(mono)
-        human_ok = self.has_human and not self.latest.problems(
+        human_ok = self.has_human and 'human' not in self.refused_now and not self.latest.problems(
             mono, self.clock.input_timeout_s, ['human']) and not self.frame_problem(
             ['ego', 'human'])
         human = self.latest.get('human') if human_ok else None
-        trust_msg = self.latest.get('trust')
+        trust_msg = None if 'trust' in self.refused_now else self.latest.get('trust')
         trust = self.trust_initial if trust_msg is None else float(trust_msg.vector.z)
         if why:
             self.hold(ns, t_s, why, human, trust)
             return
         if self.stale_reason:
             self.get_logger().info('inputs fresh again: planning resumed')
-            self.stale_reason = ''
+            self.stale_reason = self.stale_logged = ''
             self.diagnostics.changed()
         items: dict[str, object] = {name: self.latest.get(name) for name in self.required}
         items.setdefault('preview', None)
         items['human'] = human
         self.plan(ns, items, trust, t_s)
-
-    def hold(self, ns: int, t_s: float, why: str, human: Odometry | None, trust: float) -> None:
-        """The stale-input policy: command ``stale_decel_mps2``, status ERROR with the reason;
-        the plan estimator keeps observing and the plans are published (the monitor scores
-        them: trust goes on)."""
-        ego_fresh = not self.latest.problems(time.monotonic_ns(), self.clock.input_timeout_s,
-                                             ['ego']) and 'ego' not in self.missed
-        ego = self.latest.get('ego') if ego_fresh else None
-        accel = self.config.stale_decel_mps2
-        plan, expected = self.planner.hold(accel, None if ego is None else vehicle(ego),
-                                           None if human is None else vehicle(human), t_s)
-        self.record.stale()
-        if why != self.stale_reason:
-            self.get_logger().error(f'stale inputs ({why}): commanding {accel:g} m/s^2 until '
-                                    'they are fresh')
-            self.stale_reason = why
-            self.diagnostics.changed()
-        self.publish(ns, plan, expected, accel, trust, status='stale_inputs', ok=False,
-                     extra={'reason': why, 'fallback': 'True', 'success': 'False'},
-                     error=True)
 
     def health(self) -> Report:
         """``/diagnostics`` (:meth:`ManagedNode.diagnose`): :meth:`SolveRecord.report
@@ -340,13 +319,15 @@ class PlannerNode(ManagedNode):
         mono = time.monotonic_ns()
         ages = {name: age(mono, self.latest.received(name)) for name in self.latest.names
                 if self.wall and (name != 'human' or self.has_human)}
-        return self.record.report(self.stale_reason, self.config.stale_decel_mps2, ages)
+        level, message, values = self.record.report(self.stale_reason,
+                                                    self.config.stale_decel_mps2, ages)
+        return level, message, {**values, **self.envelope.values()}
 
     def on_input(self, name: str, msg: Odometry | JointTrajectory | Vector3Stamped) -> None:
         """Store an input; plan every step whose inputs are complete, in order (only while
         active: while inactive the lock-step chain waits, its inputs kept for
         :meth:`resume`; none once released)."""
-        if not self.configured:
+        if not self.configured or self.refused(name, msg):
             return
         self.buffer.put(name, msg_ns(msg.header.stamp), msg)
         if name == 'ego':
@@ -355,7 +336,9 @@ class PlannerNode(ManagedNode):
             self.try_plan()
 
     def resume(self) -> None:
-        """``activate`` in lock-step: plan the steps whose inputs came while inactive."""
+        """``activate``: the command envelope starts afresh; in lock-step, plan the steps
+        whose inputs came while inactive."""
+        self.envelope.reset()
         if not self.wall:
             self.try_plan()
 
@@ -432,6 +415,11 @@ class PlannerNode(ManagedNode):
         """The vehicles' markers, then the step's four outputs (they complete its recorded
         chunk), stamped ``ns``; plans on the prediction grid, in the AV's frame."""
         step_s = self.planner.grid[0]
+        requested = accel_mps2
+        accel_mps2 = self.envelope.command(requested, self.period_s)
+        plan = self.envelope.plan(plan, accel_mps2, BOUND_TOLERANCE)
+        if accel_mps2 != requested:   # NaN too
+            extra = {**extra, 'command_requested_mps2': repr(requested)}
         self.record.published(trust, accel_mps2)
         self.pub_markers.publish(self.markers.update(ns))
         self.pub_plan.publish(self.plan_bytes.render(ns, step_s, plan.tolist()))

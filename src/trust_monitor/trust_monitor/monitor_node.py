@@ -16,6 +16,12 @@ after an activation, the time since the activation, at most one control period).
 counts from the activation: plans stamped before it (kept while inactive) are not scored,
 so a drive that activates the monitor at its start (``trust-av drive``) gets trust for
 the drive's time only. Loop jitter as in the planner.
+
+Every plan is checked where it enters (:func:`trust_av_common.envelope.trajectory_problem`:
+1 to ``input_points_max`` points, each with an acceleration within
++-``input_accel_abs_max_mps2``, on increasing times, valid stamps): one that is not is
+dropped, counted and named on ``/diagnostics`` (a log line at most once a second), and no
+pair is scored until that plan's next usable message.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from trajectory_msgs.msg import JointTrajectory
 
+from trust_av_common.envelope import InputRanges, trajectory_problem
 from trust_av_common.grids import hold_at
 from trust_av_common.lifecycle import LifecycleConfig
 from trust_av_common.lockstep import StepBuffer
@@ -63,7 +70,7 @@ class MonitorNode(ManagedNode):
         super().__init__('trust_monitor')
         self.lifecycle = declare_config(self, LifecycleConfig)
         # declared now, read and checked at configure: `ros2 param` sees them unconfigured
-        for cls in (TrustConfig, MonitorConfig, WallClockConfig):
+        for cls in (TrustConfig, MonitorConfig, WallClockConfig, InputRanges):
             predeclare(self, cls)
         predeclare_component(self, TRUST_MODELS, 'trust_model')
 
@@ -79,6 +86,8 @@ class MonitorNode(ManagedNode):
         self.step_s = declare_config(self, MonitorConfig).dt_s
         self.clock = declare_config(self, WallClockConfig)
         self.wall = self.clock.wall
+        self.ranges = declare_config(self, InputRanges)
+        self.refused_now: dict[str, str] = {}   # plan kind -> why its newest was refused
         self.buffer = StepBuffer(['plan', 'expected'])
         self.latest = LatestInputs(['plan', 'expected'])
         self.scored_ns: int | None = None
@@ -99,14 +108,14 @@ class MonitorNode(ManagedNode):
         """Wall mode: keep the latest plan of each kind and score a new pair as soon as it
         is complete (on the tick alone, a tick that fell just before the planner's publish
         found nothing new, and under load whole seconds went unscored). None once released."""
-        if not self.configured:
+        if not self.configured or self.refused(name, msg):
             return
         self.latest.put(name, time.monotonic_ns(), msg)
         self.wall_step()
 
     def wall_step(self) -> None:
         """Wall mode: score the latest plan pair once, stamped now (only while active)."""
-        if not self.active or not self.check_clock():
+        if not self.active or not self.check_clock() or self.refused_now:
             return
         plan, expected = self.latest.get('plan'), self.latest.get('expected')
         if plan is None or expected is None:
@@ -120,6 +129,19 @@ class MonitorNode(ManagedNode):
             dt_s = min(max(ns - self.scored_ns, 0) / NS_PER_S, self.clock.input_timeout_s)
         self.scored_ns = ns
         self.publish(now_ns(self), plan, expected, dt_s)
+
+    def refused(self, name: str, msg: JointTrajectory) -> bool:
+        """Check a plan: a refused one is counted and named (:meth:`ManagedNode.refuse`),
+        and no pair is scored until that plan's next usable message."""
+        r = self.ranges
+        problem = trajectory_problem(msg, 'accelerations', -r.input_accel_abs_max_mps2,
+                                     r.input_accel_abs_max_mps2, r.input_points_max)
+        if problem:
+            self.refused_now[name] = problem
+            self.refuse(name, 'ego/plan' if name == 'plan' else 'ego/expected_plan', problem)
+            return True
+        self.refused_now.pop(name, None)
+        return False
 
     def release(self) -> None:
         """``cleanup``/``shutdown``: drop the estimator and the step buffers."""
@@ -142,7 +164,7 @@ class MonitorNode(ManagedNode):
     def on_input(self, name: str, msg: JointTrajectory) -> None:
         """Store a plan; when both plans of a step are there, score them (only while
         active: while inactive they wait for :meth:`resume`; none once released)."""
-        if not self.configured:
+        if not self.configured or self.refused(name, msg):
             return
         ns = msg_ns(msg.header.stamp)
         self.buffer.put(name, ns, msg)

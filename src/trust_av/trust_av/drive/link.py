@@ -215,7 +215,7 @@ class ModelTrust:
             self.period_s = (stamp_ns - self.last_ns) / 1e9
         self.last_ns = stamp_ns
         from trust_monitor.model_interface import common_trust
-        trust = []
+        trust: list[float] = []   # on the common scale (common_trust: UnitTrust)
         for estimator in self.estimators:
             estimator.step(plan_r, expected, self.period_s)
             trust.append(common_trust(estimator.model, estimator.state))

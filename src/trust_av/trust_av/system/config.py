@@ -22,6 +22,7 @@ from human_driver_sim.driver_mpc import DriverConfig
 from human_driver_sim.followers import DRIVERS, FollowerConfig
 from preceding_traffic.traces import SpeedTrace, TraceConfig
 from trust_av_common import registry
+from trust_av_common.envelope import EnvelopeConfig, InputRanges
 from trust_av_common.errors import did_you_mean, with_suggestions
 from trust_av_common.frames import FrameConfig
 from trust_av_common.lifecycle import LifecycleConfig
@@ -76,9 +77,10 @@ TRUST_MODEL_CONFIGS = trust_model_config_types()
 NODE_COMPONENTS: dict[str, tuple[type, ...]] = {
     'preceding_traffic': (TraceConfig, SharedConfig, WallClockConfig),
     'planner': (PlannerConfig, TrustConfig, SharedConfig, WallClockConfig, PlannerTopics,
-                FrameConfig, LifecycleConfig),
+                FrameConfig, LifecycleConfig, InputRanges, EnvelopeConfig),
     'human_driver': (DriverConfig, FollowerConfig, SharedConfig, WallClockConfig),
-    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig, LifecycleConfig),
+    'trust_monitor': (TrustConfig, WallClockConfig, MonitorConfig, LifecycleConfig,
+                      InputRanges),
 }
 
 COMPONENT_GROUPS: dict[str, tuple[str, ...]] = {

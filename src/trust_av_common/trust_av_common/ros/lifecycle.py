@@ -17,6 +17,18 @@ What each transition does here (:class:`ManagedNode`):
 - ``cleanup`` / ``shutdown`` (and an error): everything ``configure`` made is destroyed and
   the wall loop's statistics are written.
 
+An exception raised in a subscription or timer callback of a node in ``clock_mode: wall``
+(an internal error: the messages' values are checked before, :mod:`trust_av_common.envelope`)
+never leaves the callback (:meth:`ManagedNode.internal_error`): it is logged with its
+traceback, counted and reported as ERROR on ``/diagnostics``, and an active node is
+deactivated at once, which publishes its hand-over command (the planner: one
+``stale_decel_mps2``); the node then waits ``inactive`` until a lifecycle manager or an
+operator activates it again (docs/operations/failures.md). A
+:class:`~trust_av_common.component_checks.ComponentError` (a plug-in that broke its
+interface) still ends the process with exit 2 after the same hand-over
+(:func:`trust_av_common.ros.spin.spin_node`); in lock-step (a simulation) an exception ends
+the process with its traceback, so the orchestrator names the node.
+
 rclpy runs a transition's callback inside ``LifecycleNodeMixin.__change_state``
 (``rclpy/lifecycle/node.py``): a callback's return value SUCCESS/FAILURE/ERROR picks the
 next state (rcl_lifecycle ``default_state_machine.c``: FAILURE of ``configure`` returns to
@@ -40,7 +52,10 @@ plain nodes. In ``clock_mode: wall`` it waits ``inactive`` for ``activate``. Wit
 
 from __future__ import annotations
 
+import functools
 import traceback
+from collections import Counter
+from collections.abc import Callable
 from typing import Any
 
 from rclpy.exceptions import InvalidParameterValueException, ParameterUninitializedException
@@ -52,6 +67,7 @@ from rclpy.lifecycle import (
     TransitionCallbackReturn,
 )
 
+from trust_av_common.component_checks import PASSING
 from trust_av_common.errors import one_line
 from trust_av_common.params import ParamsError
 from trust_av_common.registry import RegistryError
@@ -85,6 +101,9 @@ class ManagedNode(LifecycleNode):
             100 Hz: an ``AttributeError`` out of the callback ended the node).
         wall: ``clock_mode`` is ``wall`` (set by :meth:`build`).
         configure_error: why the last ``configure`` failed (None if it did not).
+        refusals: input name -> messages dropped for their values (:meth:`refuse`).
+        fault: the internal error that deactivated the node ('' once activated again).
+        faults: internal errors caught since start (:meth:`internal_error`).
     """
 
     user_errors: tuple[type[BaseException], ...] = (ValueError,)
@@ -111,6 +130,11 @@ class ManagedNode(LifecycleNode):
         self.dropped = 0      # malformed input messages dropped (trust_av_common.ros.raw_inputs)
         self.wrong_types: dict[str, str] = {}   # input topic -> its publishers of another type
         self.typed_inputs: list[tuple[Any, str]] = []   # (subscription, type): raw_inputs
+        self.refusals: Counter[str] = Counter()
+        self.last_refusal = ''
+        self.fault = ''
+        self.faults = 0
+        self._fault_logged = ''
         # in every state, from construction (a regular publisher: kept across cleanup)
         self.diagnostics = NodeDiagnostics(self, self.task, self.diagnose)
         self._base = (set(self.publishers), set(self.subscriptions), set(self.timers))
@@ -131,6 +155,70 @@ class ManagedNode(LifecycleNode):
                 response.success = False
                 return response
         return guarded
+
+    def create_subscription(self, msg_type: Any, topic: str, callback: Callable[[Any], None],
+                            qos_profile: Any, **options: Any) -> Any:
+        """``Node.create_subscription`` with the callback guarded (:meth:`internal_error`)."""
+        return super().create_subscription(msg_type, topic, self._guarded(callback),
+                                           qos_profile, **options)
+
+    def create_timer(self, timer_period_sec: float, callback: Callable[[], Any],
+                     callback_group: Any = None, clock: Any = None,
+                     autostart: bool = True) -> Any:
+        """``Node.create_timer`` with the callback guarded (:meth:`internal_error`)."""
+        return super().create_timer(timer_period_sec, self._guarded(callback),
+                                    callback_group=callback_group, clock=clock,
+                                    autostart=autostart)
+
+    def _guarded(self, callback: Callable[..., Any]) -> Callable[..., Any]:
+        @functools.wraps(callback)
+        def guarded(*args: Any) -> Any:
+            try:
+                return callback(*args)
+            except PASSING:
+                raise
+            except Exception as err:
+                if not getattr(self, 'wall', False):   # lock-step: the process ends, the
+                    # orchestrator names the node
+                    raise
+                self.internal_error(err)
+                return None
+        return guarded
+
+    def internal_error(self, err: Exception) -> None:
+        """Wall mode: an exception of a callback or a timer. Logged (the traceback the first
+        time a fault is seen, then one line at most every 5 s), counted, ERROR on
+        ``/diagnostics`` until the next ``activate``; an active node is deactivated, which
+        hands over (:meth:`handover`)."""
+        self.faults += 1
+        self.fault = f'{type(err).__name__}: {one_line(err)}'
+        was_active = self.active
+        what = 'handing over and deactivating' if was_active else 'not active'
+        if self.fault != self._fault_logged:
+            self._fault_logged = self.fault
+            self.get_logger().error(f'internal error ({what}): {self.fault}\n'
+                                    + traceback.format_exc())
+        else:
+            self.get_logger().error(f'internal error again ({what}; {self.faults} so far): '
+                                    f'{self.fault}', throttle_duration_sec=5.0)
+        if was_active:
+            self.trigger_deactivate()
+        try:
+            self.diagnostics.changed()
+        except Exception:   # the status itself fails: its timer reports it again
+            self.get_logger().error('diagnostics failed:\n' + traceback.format_exc(),
+                                    throttle_duration_sec=5.0)
+
+    def refuse(self, name: str, topic: str, problem: str) -> None:
+        """A message of input ``name`` dropped for its values (``problem``: one line naming
+        the field): counted, named on ``/diagnostics`` and in a log line (at most one a
+        second)."""
+        self.refusals[name] += 1
+        self.last_refusal = f'{name}: {problem}'
+        self.get_logger().warning(
+            f'refused a message on {topic} ({sum(self.refusals.values())} refused so far): '
+            f'{problem}', throttle_duration_sec=1.0)
+        self.diagnostics.changed()
 
     def build(self) -> None:
         """Declare and validate the parameters, build the core, publishers, subscriptions.
@@ -173,7 +261,11 @@ class ManagedNode(LifecycleNode):
 
     def _state_report(self) -> Report:
         state = str(self._state_machine.current_state[1])
-        values = {'lifecycle_state': state, 'dropped_messages': str(self.dropped)}
+        values = {'lifecycle_state': state, 'dropped_messages': str(self.dropped),
+                  'refused_messages': str(sum(self.refusals.values())),
+                  **{f'refused_{name}': str(n) for name, n in sorted(self.refusals.items())},
+                  'last_refused': self.last_refusal or 'none',
+                  'internal_errors': str(self.faults)}
         if not self.configured:
             error = self.configure_error
             if error is not None:
@@ -185,6 +277,9 @@ class ManagedNode(LifecycleNode):
         values.update(more)
         if problem:
             return diag.ERROR, f'not running: {problem}', values
+        if self.fault:
+            return (diag.ERROR, f'internal error, handed over, inactive until activate: '
+                    f'{self.fault}', values)
         if not self.active:
             return diag.OK, self.idle, values
         return level, message, values
@@ -273,6 +368,7 @@ class ManagedNode(LifecycleNode):
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         result = super().on_activate(state)   # enables the LifecyclePublishers
         self.active = True
+        self.fault = ''
         if self.loop is not None:
             self.loop.timer.reset()
         self.get_logger().info('active')

@@ -296,8 +296,17 @@ def vector3_bytes(frame_id: str) -> SerializedTemplate:
 
 
 def trajectory_values(msg: JointTrajectory, field: str) -> list[float]:
-    """The joint's ``accelerations`` or ``velocities`` over the points."""
-    return [float(getattr(p, field)[0]) for p in msg.points]
+    """The joint's ``accelerations`` or ``velocities`` over the points (the nodes check a
+    message first: :func:`trust_av_common.envelope.trajectory_problem`).
+
+    Raises:
+        ValueError: a point without a value in ``field`` (one line naming it).
+    """
+    try:
+        return [float(getattr(p, field)[0]) for p in msg.points]
+    except IndexError:
+        empty = next(k for k, p in enumerate(msg.points) if len(getattr(p, field)) == 0)
+        raise ValueError(f'points[{empty}] has no {field}') from None
 
 
 def trajectory_times(msg: JointTrajectory) -> list[float]:

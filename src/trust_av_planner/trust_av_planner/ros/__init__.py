@@ -1,0 +1,1 @@
+"""The planner node's rclpy side beyond the node module itself."""
