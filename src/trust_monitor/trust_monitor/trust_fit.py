@@ -61,7 +61,7 @@ from trust_monitor.rating_observation import (
 )
 
 __all__ = ['Fit', 'FitError', 'ModelSpec', 'Observation', 'RatedDrive', 'Score', 'by_participant',
-           'compare', 'fit', 'held_out', 'model_spec', 'model_trust']
+           'compare', 'fit', 'held_out', 'model_spec', 'model_trust', 'parameter_count']
 
 STARTS = 8
 """Random starts drawn from the prior besides its mean."""
@@ -345,6 +345,9 @@ class Score:
     scheme: str
     pointwise: np.ndarray
     errors: np.ndarray
+    sd: np.ndarray = field(default_factory=lambda: np.array([]))
+    """The predictive standard deviation of every held-out rating, rating points (empty:
+    not recorded)."""
 
     @property
     def elpd(self) -> float:
@@ -380,14 +383,16 @@ def held_out(spec: ModelSpec, groups: Sequence[Sequence[RatedDrive]], scheme: st
     """
     if len(groups) < 2:
         raise FitError(f'{scheme} needs at least two held-out units, got {len(groups)}')
-    points, errors = [], []
+    points, errors, sds = [], [], []
     for k, group in enumerate(groups):
         train = [d for j, g in enumerate(groups) if j != k for d in g]
         fitted = fit(spec, train, seed)
         out = predict(spec, fitted, group)
         points.append(out.log_density)
         errors.append(out.ratings - out.predicted)
-    return Score(spec.name, scheme, np.concatenate(points), np.concatenate(errors))
+        sds.append(np.full(len(out.ratings), 100.0 * fitted.observation.s))
+    return Score(spec.name, scheme, np.concatenate(points), np.concatenate(errors),
+                 np.concatenate(sds))
 
 
 def compare(scores: Sequence[Score]) -> list[dict[str, Any]]:
@@ -414,6 +419,17 @@ def compare(scores: Sequence[Score]) -> list[dict[str, Any]]:
     return rows
 
 
+OBSERVATION_PARAMETERS = {'linear': 3, 'direct': 1}
+"""Parameters an observation model fits: ``linear`` a, b, s; ``direct`` s."""
+
+
+def parameter_count(spec: ModelSpec) -> int:
+    """Every parameter a fit of ``spec`` estimates: the model's identifiable parameters and
+    its observation model's (:data:`OBSERVATION_PARAMETERS`), the size :func:`preferred`
+    compares."""
+    return len(spec.parameters) + OBSERVATION_PARAMETERS[spec.observation]
+
+
 PARSIMONY_SE = 1.0
 """:func:`preferred`: a model with more parameters must beat a simpler one by more than this
 many standard errors of the held-out elpd difference."""
@@ -421,11 +437,11 @@ many standard errors of the held-out elpd difference."""
 
 def preferred(scores: Sequence[Score], sizes: Mapping[str, int]) -> str:
     """The model the held-out scores prefer, with a parsimony rule: the simplest model
-    (fewest fitted parameters, ``sizes``; then the higher elpd) whose elpd is within
-    :data:`PARSIMONY_SE` standard errors of the paired difference to the best model's. A
-    model nested in another (``paper`` in ``asymmetric``: loss ratio 1) fits at least as
-    well in sample and can win a held-out comparison by noise alone; this rule asks for
-    evidence before the extra parameter is preferred.
+    (fewest fitted parameters, ``sizes``: :func:`parameter_count`; then the higher elpd)
+    whose elpd is within :data:`PARSIMONY_SE` standard errors of the paired difference to
+    the best model's. A model nested in another (``paper`` in ``asymmetric``: loss ratio 1)
+    fits at least as well in sample and can win a held-out comparison by noise alone; this
+    rule asks for evidence before the extra parameter is preferred.
 
     Raises:
         FitError: no scores, or scores not over the same ratings.
