@@ -19,7 +19,8 @@ are):
 
 A model is ``adequate`` for a participant when no check's p is below :data:`ALPHA`.
 :func:`stacking_weights` combines the held-out predictive densities of the adequate models
-(Yao, Vehtari, Simpson & Gelman 2018).
+(Yao, Vehtari, Simpson & Gelman 2018). :func:`parameter_count` is the size of a fit the
+parsimony rule of :func:`~trust_monitor.trust_fit.preferred` compares.
 
 What the checks cannot tell (docs/concepts/trust-models.md): a model that passes is not
 shown true (another model, in the zoo or not, may pass as well; few ratings pass almost
@@ -38,8 +39,9 @@ import numpy as np
 
 from trust_monitor.trust_fit import Fit, ModelSpec, RatedDrive, Score, model_trust
 
-__all__ = ['ALPHA', 'INTERVAL', 'REPLICATES', 'STATISTICS', 'Check', 'adequate',
-           'check_model', 'lag1', 'misfit_text', 'stacking_weights']
+__all__ = ['ALPHA', 'INTERVAL', 'OBSERVATION_PARAMETERS', 'REPLICATES', 'STATISTICS', 'Check',
+           'adequate', 'check_model', 'lag1', 'misfit_text', 'parameter_count',
+           'stacking_weights']
 
 ALPHA = 0.01
 """A check with a p-value below this rejects the model. Two checks per model at 1 % each:
@@ -52,6 +54,17 @@ REPLICATES = 2000
 STATISTICS = ('residual_lag1', 'interval_90')
 _Z = 1.6448536269514722
 """The standard normal's 95 % quantile: the half-width of the central 90 % interval."""
+
+
+OBSERVATION_PARAMETERS = {'linear': 3, 'direct': 1}
+"""Parameters an observation model fits: ``linear`` a, b, s; ``direct`` s."""
+
+
+def parameter_count(spec: ModelSpec) -> int:
+    """Every parameter a fit of ``spec`` estimates: the model's identifiable parameters and
+    its observation model's (:data:`OBSERVATION_PARAMETERS`): the size the parsimony rule of
+    :func:`~trust_monitor.trust_fit.preferred` compares, counted here beside the checks."""
+    return len(spec.parameters) + OBSERVATION_PARAMETERS[spec.observation]
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -61,7 +61,7 @@ from trust_monitor.rating_observation import (
 )
 
 __all__ = ['Fit', 'FitError', 'ModelSpec', 'Observation', 'RatedDrive', 'Score', 'by_participant',
-           'compare', 'fit', 'held_out', 'model_spec', 'model_trust', 'parameter_count']
+           'compare', 'fit', 'held_out', 'model_spec', 'model_trust']
 
 STARTS = 8
 """Random starts drawn from the prior besides its mean."""
@@ -339,6 +339,7 @@ class Score:
         scheme: ``leave_one_drive_out`` or ``leave_one_participant_out``.
         pointwise: held-out log density of every rating (nats, 0-100 scale).
         errors: held-out rating errors, rating points.
+        sd: the predictive SD of every held-out rating, rating points (empty: not kept).
     """
 
     model: str
@@ -346,8 +347,6 @@ class Score:
     pointwise: np.ndarray
     errors: np.ndarray
     sd: np.ndarray = field(default_factory=lambda: np.array([]))
-    """The predictive standard deviation of every held-out rating, rating points (empty:
-    not recorded)."""
 
     @property
     def elpd(self) -> float:
@@ -391,8 +390,7 @@ def held_out(spec: ModelSpec, groups: Sequence[Sequence[RatedDrive]], scheme: st
         points.append(out.log_density)
         errors.append(out.ratings - out.predicted)
         sds.append(np.full(len(out.ratings), 100.0 * fitted.observation.s))
-    return Score(spec.name, scheme, np.concatenate(points), np.concatenate(errors),
-                 np.concatenate(sds))
+    return Score(spec.name, scheme, *(np.concatenate(x) for x in (points, errors, sds)))
 
 
 def compare(scores: Sequence[Score]) -> list[dict[str, Any]]:
@@ -419,17 +417,6 @@ def compare(scores: Sequence[Score]) -> list[dict[str, Any]]:
     return rows
 
 
-OBSERVATION_PARAMETERS = {'linear': 3, 'direct': 1}
-"""Parameters an observation model fits: ``linear`` a, b, s; ``direct`` s."""
-
-
-def parameter_count(spec: ModelSpec) -> int:
-    """Every parameter a fit of ``spec`` estimates: the model's identifiable parameters and
-    its observation model's (:data:`OBSERVATION_PARAMETERS`), the size :func:`preferred`
-    compares."""
-    return len(spec.parameters) + OBSERVATION_PARAMETERS[spec.observation]
-
-
 PARSIMONY_SE = 1.0
 """:func:`preferred`: a model with more parameters must beat a simpler one by more than this
 many standard errors of the held-out elpd difference."""
@@ -437,7 +424,7 @@ many standard errors of the held-out elpd difference."""
 
 def preferred(scores: Sequence[Score], sizes: Mapping[str, int]) -> str:
     """The model the held-out scores prefer, with a parsimony rule: the simplest model
-    (fewest fitted parameters, ``sizes``: :func:`parameter_count`; then the higher elpd)
+    (fewest fitted parameters, ``sizes``: ``model_check.parameter_count``; then the higher elpd)
     whose elpd is within :data:`PARSIMONY_SE` standard errors of the paired difference to
     the best model's. A model nested in another (``paper`` in ``asymmetric``: loss ratio 1)
     fits at least as well in sample and can win a held-out comparison by noise alone; this
@@ -461,5 +448,3 @@ def by_participant(drives: Sequence[RatedDrive]) -> dict[str, list[RatedDrive]]:
         out.setdefault(d.participant, []).append(d)
     return out
 
-
-ProgressFn = Callable[[str], None]
