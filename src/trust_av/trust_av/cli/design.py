@@ -157,8 +157,9 @@ def _conditions(option: str, text: str) -> tuple[str, ...]:
     chosen = tuple(c.strip() for c in text.split(',') if c.strip())
     unknown = [c for c in chosen if c not in LIBRARY]
     if not chosen or unknown:
-        raise TrustAvPlannerError(f'{option}: not perturbations: {", ".join(unknown) or text!r}'
-                                  f' (known: {", ".join(sorted(LIBRARY))})')
+        named = ', '.join(unknown) or repr(text)
+        raise TrustAvPlannerError(f'{option}: not perturbations: {named} '
+                                  f'(known: {", ".join(sorted(LIBRARY))})')
     return chosen
 
 
