@@ -131,7 +131,7 @@ def test_the_simpler_model_is_preferred_unless_the_richer_one_beats_it_by_an_se(
     close = score('rich', list(base + noise + 0.5 * PARSIMONY_SE * se / 40 - noise.mean()))
     assert preferred([score('simple', list(base)), close], sizes) == 'simple'
     # better by several SE: the richer one
-    far = score('rich', list(base + noise + 4.0 * se / 40 - noise.mean()))
+    far = score('rich', list(base + noise + 4.0 * se / 60 - noise.mean()))
     assert preferred([score('simple', list(base)), far], sizes) == 'rich'
     # the simpler model is best outright: it wins whatever the sizes say
     assert preferred([score('simple', list(base + 1.0)), score('rich', list(base))],
@@ -145,14 +145,14 @@ def test_fit_trusts_comparison_marks_the_model_the_parsimony_rule_prefers() -> N
     the recovery's rule, which is not the best when it wins by less than an SE."""
     from trust_av.cli.fit_trust import RULE, _rows
 
-    rng = np.random.Generator(np.random.PCG64(5))
-    base, noise = rng.normal(-3.0, 1.0, 40), rng.normal(0.0, 0.5, 40)
-    se = math.sqrt(40) * float(np.std(noise, ddof=1))
-    close = score('rich', list(base + noise + 0.5 * se / 40 - noise.mean()))
+    rng = np.random.Generator(np.random.PCG64(5))     # 60 ratings: enough to prefer one
+    base, noise = rng.normal(-3.0, 1.0, 60), rng.normal(0.0, 0.5, 60)
+    se = math.sqrt(60) * float(np.std(noise, ddof=1))
+    close = score('rich', list(base + noise + 0.5 * se / 60 - noise.mean()))
     rows = _rows('p1', [score('simple', list(base)), close], {'simple': 1, 'rich': 2})
     assert [r['model'] for r in rows] == ['rich', 'simple']          # best first
     assert [r['preferred'] for r in rows] == [0, 1] and {r['rule'] for r in rows} == {RULE}
     assert RULE == 'parsimony_1se' and PARSIMONY_SE == 1.0
-    far = score('rich', list(base + noise + 4.0 * se / 40 - noise.mean()))
+    far = score('rich', list(base + noise + 4.0 * se / 60 - noise.mean()))
     rows = _rows('p1', [score('simple', list(base)), far], {'simple': 1, 'rich': 2})
     assert [(r['model'], r['preferred']) for r in rows] == [('rich', 1), ('simple', 0)]

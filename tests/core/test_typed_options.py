@@ -14,6 +14,7 @@ import pytest
 from trust_av.cli import (
     bags,
     compare,
+    design,
     drive,
     eval_driver,
     fit_driver,
@@ -41,6 +42,9 @@ COMMANDS: dict[str, tuple[type, list[str]]] = {
     'eval-driver': (eval_driver.EvalDriverOptions, ['--data', 'd']),
     'fit-trust': (fit_trust.FitTrustOptions, ['--ratings', 'r.csv', '--out', 'o']),
     'compare': (compare.CompareOptions, ['a', 'b', '--out', 'f.png']),
+    'design-evaluate': (design.DesignOptions, []),
+    'design-power': (design.DesignOptions, []),
+    'design-propose': (design.ProposeOptions, ['--budget-min', '60']),
 }
 NOT_OPTIONS = {'help', 'func', 'command', 'verbose', 'params_file', 'params_files'}
 """Namespace entries that are no command's own option: argparse's and main's, and the

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from support.contract import GRAPH_STEPS, cli, trace_csv
 from support.graph import assert_records_equal  # the graph == in-process comparison
-from support.paths import REPO
 
 from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
 from trust_av.drive.study import conditions_from
 from trust_av.drive.trust_fit_data import read_ratings_table
+from trust_av.study.trust_design import Design, recover
 from trust_av.study.trust_recovery import drive_scores, make_participant
 from trust_av.system.closed_loop import simulate
 from trust_av.system.config import load_run_config
@@ -36,8 +36,6 @@ from trust_monitor.trust_fit import (
 
 __all__ = ['trace_csv']
 
-sys.path.insert(0, str(REPO / 'benchmarks'))
-from bench_trust_recovery import recover  # the benchmark's study, run small here
 
 CONFIG = load_run_config()
 
@@ -159,7 +157,8 @@ def test_small_recovery() -> None:
     """The suite's version of benchmarks/bench_trust_recovery.py: 3 participants x 2
     drives of 60 s of two models; each model's participants are best fitted by their own
     model."""
-    result = recover(CONFIG, ['beta_bernoulli', 'optimo'], 3, 2, seed=2, steps=60)
+    result = recover(CONFIG, ['beta_bernoulli', 'optimo'],
+                     Design(drives=2, drive_s=60, participants=3), seed=2)
     assert {t: sum(row.values()) for t, row in result.confusion.items()} == \
         {'beta_bernoulli': 3, 'optimo': 3}
     assert result.confusion['beta_bernoulli']['beta_bernoulli'] >= 2
@@ -220,6 +219,21 @@ def test_fit_trust_from_a_ratings_table(tmp_path: Path,
     chosen = next(r['model'] for r in pooled if r['preferred'] == '1')
     assert f'preferred leave_one_participant_out: {chosen}' in proc.stdout
     assert 'preferred leave_one_drive_out: ' in proc.stdout and 'parsimony rule' in proc.stdout
+    assert {r['parameters'] for r in pooled} == {'4', '5'}   # a, b, s counted for paper
+    assert 'parameters counted: beta_bernoulli 5, paper 4' in proc.stdout
+    with (out / 'adequacy.csv').open() as handle:
+        checks = list(csv.DictReader(handle))
+    assert {(r['participant'], r['model'], r['statistic']) for r in checks} == {
+        (p, m, s) for p in 'ab' for m in ('paper', 'beta_bernoulli')
+        for s in ('residual_lag1', 'interval_90')}
+    assert {r['adequate'] for r in checks} <= {'true', 'false'}
+    for p in 'ab':              # the summary says what adequacy.csv says, per participant
+        fits = any(all(r['adequate'] == 'true' for r in checks
+                       if r['participant'] == p and r['model'] == m)
+                   for m in ('paper', 'beta_bernoulli'))
+        assert (f'\n{p}: fitted adequately by' in proc.stdout) is fits
+        assert (f'none of the registered models fits {p}: ' in proc.stdout) is not fits
+    assert 'fitting a (1/2)' in proc.stdout
     fits = (out / 'fits.csv').read_text()
     assert 'pooled,beta_bernoulli,beta_bernoulli_failure_weight' in fits
     assert 'beta_bernoulli_beta0' in fits and ',fixed' in fits

@@ -38,7 +38,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -339,12 +339,14 @@ class Score:
         scheme: ``leave_one_drive_out`` or ``leave_one_participant_out``.
         pointwise: held-out log density of every rating (nats, 0-100 scale).
         errors: held-out rating errors, rating points.
+        sd: the predictive SD of every held-out rating, rating points (empty: not kept).
     """
 
     model: str
     scheme: str
     pointwise: np.ndarray
     errors: np.ndarray
+    sd: np.ndarray = field(default_factory=lambda: np.array([]))
 
     @property
     def elpd(self) -> float:
@@ -380,14 +382,15 @@ def held_out(spec: ModelSpec, groups: Sequence[Sequence[RatedDrive]], scheme: st
     """
     if len(groups) < 2:
         raise FitError(f'{scheme} needs at least two held-out units, got {len(groups)}')
-    points, errors = [], []
+    points, errors, sds = [], [], []
     for k, group in enumerate(groups):
         train = [d for j, g in enumerate(groups) if j != k for d in g]
         fitted = fit(spec, train, seed)
         out = predict(spec, fitted, group)
         points.append(out.log_density)
         errors.append(out.ratings - out.predicted)
-    return Score(spec.name, scheme, np.concatenate(points), np.concatenate(errors))
+        sds.append(np.full(len(out.ratings), 100.0 * fitted.observation.s))
+    return Score(spec.name, scheme, *(np.concatenate(x) for x in (points, errors, sds)))
 
 
 def compare(scores: Sequence[Score]) -> list[dict[str, Any]]:
@@ -421,11 +424,11 @@ many standard errors of the held-out elpd difference."""
 
 def preferred(scores: Sequence[Score], sizes: Mapping[str, int]) -> str:
     """The model the held-out scores prefer, with a parsimony rule: the simplest model
-    (fewest fitted parameters, ``sizes``; then the higher elpd) whose elpd is within
-    :data:`PARSIMONY_SE` standard errors of the paired difference to the best model's. A
-    model nested in another (``paper`` in ``asymmetric``: loss ratio 1) fits at least as
-    well in sample and can win a held-out comparison by noise alone; this rule asks for
-    evidence before the extra parameter is preferred.
+    (fewest fitted parameters, ``sizes``: ``model_check.parameter_count``; then the higher elpd)
+    whose elpd is within :data:`PARSIMONY_SE` standard errors of the paired difference to
+    the best model's. A model nested in another (``paper`` in ``asymmetric``: loss ratio 1)
+    fits at least as well in sample and can win a held-out comparison by noise alone; this
+    rule asks for evidence before the extra parameter is preferred.
 
     Raises:
         FitError: no scores, or scores not over the same ratings.
@@ -445,5 +448,3 @@ def by_participant(drives: Sequence[RatedDrive]) -> dict[str, list[RatedDrive]]:
         out.setdefault(d.participant, []).append(d)
     return out
 
-
-ProgressFn = Callable[[str], None]

@@ -10,7 +10,17 @@ out per participant, leave one participant out pooled). Writes to ``--out``:
 - ``comparison.csv``: the same per scope and scheme, best first, with elpd_diff (to the
   best) and elpd_diff_se, and ``preferred`` (1 for the model the scope and scheme prefer by
   :func:`~trust_monitor.trust_fit.preferred`'s parsimony rule, named in ``rule``: the rule the
-  recovery benchmark's confusion matrix uses; the printed summary names it too);
+  recovery benchmark's confusion matrix uses; the printed summary names it too), with
+  every fitted parameter counted (:func:`~trust_monitor.model_check.parameter_count`: the
+  model's and its observation's a, b, s), ``evidence`` (``not enough data`` below
+  :data:`MIN_RATINGS_TO_PREFER` held-out ratings: then nothing is preferred; ``clear``: the
+  preferred model is the best and beats every other by more than :data:`CLEAR_SE` standard
+  errors and :data:`CLEAR_NATS` nats; else ``weak``) and ``stacking_weight`` (participants:
+  the stacking weights of the models the checks find adequate, when two or more are;
+  :func:`~trust_monitor.model_check.stacking_weights`);
+- ``adequacy.csv``: participant, model, statistic, value, p_value, adequate (true/false),
+  ratings: the absolute checks of :mod:`trust_monitor.model_check` (does the model describe
+  the participant's ratings at all? the summary names a participant no model fits);
 - ``partial_pooling.csv`` (two or more participants): scope (a participant, or
   ``population``), model, parameter, value, kind (``fitted``, ``observation``; for the
   population ``center``: the pooled value, ``spread``: the between-participant standard
@@ -52,6 +62,7 @@ from trust_av.system.config import load_run_config
 from trust_av.system.output_sets import check_set_folder, writing_set
 from trust_av_common import output_files
 from trust_av_common.registry import names
+from trust_monitor import model_check
 from trust_monitor.model_interface import TRUST_MODELS
 from trust_monitor.trust_fit import (
     PARSIMONY_SE,
@@ -73,12 +84,26 @@ __all__: list[str] = []
 
 LODO, LOPO = 'leave_one_drive_out', 'leave_one_participant_out'
 SCORE_FIELDS = ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'elpd_diff',
-                'elpd_diff_se', 'rmse', 'rmse_se', 'preferred', 'rule')
+                'elpd_diff_se', 'rmse', 'rmse_se', 'preferred', 'rule', 'parameters',
+                'evidence', 'stacking_weight')
+ADEQUACY_FIELDS = ('participant', 'model', 'statistic', 'value', 'p_value', 'adequate',
+                   'ratings')
+MIN_RATINGS_TO_PREFER = 50
+"""Below this many held-out ratings a scope's preference is ``not enough data``: the
+standard error of an elpd difference is itself a poor estimate from few ratings, and one
+badly predicted rating can carry the whole difference (Sivula, Magnusson & Vehtari 2020);
+fewer than 50 ratings is a convention, not a derived bound."""
+CLEAR_SE, CLEAR_NATS = 2.0, 4.0
+"""A ``clear`` preference: every other model's elpd is more than 2 standard errors of
+the paired difference and more than 4 nats below the preferred one's (a difference under 4
+nats is small whatever its standard error: Sivula et al. 2020)."""
 RULE = f'parsimony_{PARSIMONY_SE:g}se'
 """The ``rule`` column: :func:`~trust_monitor.trust_fit.preferred` (the simplest model within
 ``PARSIMONY_SE`` standard errors of the paired elpd difference to the best)."""
-RULE_TEXT = (f'parsimony rule: the model with the fewest fitted parameters whose held-out elpd '
-             f'is within {PARSIMONY_SE:g} SE of the paired difference to the best')
+RULE_TEXT = (f"parsimony rule: the model with the fewest fitted parameters (the model's and "
+             f"the observation's a, b, s) whose held-out elpd is within {PARSIMONY_SE:g} SE "
+             f'of the paired difference to the best; none below {MIN_RATINGS_TO_PREFER} '
+             f'held-out ratings')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,26 +176,75 @@ def _models(option: str) -> list[str]:
     return chosen
 
 
+def _evidence(rows: Sequence[dict[str, Any]], chosen: str) -> str:
+    """How much the held-out ratings carry the preference for ``chosen`` (see
+    :data:`MIN_RATINGS_TO_PREFER`, :data:`CLEAR_SE`)."""
+    if rows[0]['ratings'] < MIN_RATINGS_TO_PREFER:
+        return 'not enough data'
+    if rows[0]['model'] != chosen:
+        return 'weak'
+    others = rows[1:]
+    return 'clear' if all(-r['elpd_diff'] > max(CLEAR_NATS, CLEAR_SE * r['elpd_diff_se'])
+                          for r in others) else 'weak'
+
+
 def _rows(scope: str, scores: Sequence[Score], sizes: dict[str, int]) -> list[dict[str, Any]]:
-    """The comparison rows of one scope and scheme, the preferred model marked."""
+    """The comparison rows of one scope and scheme, the preferred model marked (none when
+    the ratings are too few to prefer one)."""
     chosen = preferred(scores, sizes)
-    return [{'scope': scope, **row, 'preferred': int(row['model'] == chosen), 'rule': RULE}
-            for row in compare(scores)]
+    rows = compare(scores)
+    evidence = _evidence(rows, chosen)
+    if evidence == 'not enough data':
+        chosen = ''
+    return [{'scope': scope, **row, 'preferred': int(row['model'] == chosen), 'rule': RULE,
+             'parameters': sizes[row['model']], 'evidence': evidence, 'stacking_weight': ''}
+            for row in rows]
 
 
 def _print_preferred(rows: Sequence[dict[str, Any]]) -> None:
     """Per scheme, the preferred model of each scope (the pooled one by name, the
     participants' as counts), and the rule."""
     chosen = [r for r in rows if r['preferred']]
-    for scheme in dict.fromkeys(r['scheme'] for r in chosen):
+    for scheme in dict.fromkeys(r['scheme'] for r in rows):
         picks = [r for r in chosen if r['scheme'] == scheme]
         pooled = [r['model'] for r in picks if r['scope'] == 'pooled']
         counts = collections.Counter(r['model'] for r in picks if r['scope'] != 'pooled')
         said = pooled[0] if pooled else ', '.join(
-            f'{m} ({n} participant{"s" if n > 1 else ""})' for m, n in counts.most_common())
+            f'{m} ({n} participant{"s" if n > 1 else ""})'
+            for m, n in counts.most_common()) or 'none'
         print(f'preferred {scheme}: {said}')
-    if chosen:
-        print(f'  ({RULE_TEXT}; comparison.csv: preferred = 1)')
+        unsure = sorted({r['scope'] for r in rows if r['scheme'] == scheme
+                         and r['evidence'] == 'not enough data'})
+        if unsure:
+            print(f'  not enough data to prefer (under {MIN_RATINGS_TO_PREFER} held-out '
+                  f'ratings): {", ".join(unsure)}')
+    if rows:
+        sizes = dict.fromkeys(sorted({(r['model'], r['parameters']) for r in rows}))
+        print(f'  ({RULE_TEXT}; parameters counted: '
+              f'{", ".join(f"{m} {n}" for m, n in sizes)}; comparison.csv: preferred = 1)')
+
+
+def _print_adequacy(checks: dict[str, list[model_check.Check]],
+                    rows: Sequence[dict[str, Any]]) -> None:
+    """Per participant: which models the checks find adequate (with the stacking weights
+    when two or more are), or plainly that none is."""
+    none = []
+    for who, found in checks.items():
+        fine = [m for m, ok in model_check.adequate(found).items() if ok]
+        if not fine:
+            none.append(who)
+            print(f'none of the registered models fits {who}: '
+                  f'{model_check.misfit_text(found)}')
+            continue
+        weights = {r['model']: r['stacking_weight'] for r in rows
+                   if r['scope'] == who and r['scheme'] == LODO and r['stacking_weight'] != ''}
+        said = ', '.join(f'{m} {weights[m]:.2f}' if m in weights else m for m in fine)
+        print(f'{who}: fitted adequately by {said}'
+              f'{" (stacking weights)" if weights else ""}')
+    print(f'model checks (adequacy.csv): {len(checks) - len(none)} of {len(checks)} '
+          f'participant(s) fitted adequately by a registered model; a model is rejected when '
+          f'a check has p < {model_check.ALPHA:g} (residual lag-1 autocorrelation, held-out '
+          f'{100 * model_check.INTERVAL:.0f} % interval coverage)')
 
 
 def _fit_rows(scope: str, fitted: Fit) -> list[dict[str, Any]]:
@@ -241,26 +315,40 @@ def run(args: FitTrustOptions) -> int:
         raise FitError(f'{args.study or args.ratings}: no drive has a rating')
     check_set_folder(args.out)              # before the fit: refused in seconds, not minutes
     specs = {m: model_spec(config.trust, m, dict(config.trust_model_params)) for m in models}
-    sizes = {m: len(specs[m].parameters) for m in models}
+    sizes = {m: model_check.parameter_count(specs[m]) for m in models}
     people = by_participant(rated)
     fit_rows: list[dict[str, Any]] = []
     score_rows: list[dict[str, Any]] = []
     own_fits: dict[str, dict[str, Fit]] = {m: {} for m in models}
-    for who, own in people.items():
+    checks: dict[str, list[model_check.Check]] = {}
+    for k, (who, own) in enumerate(people.items()):
+        print(f'fitting {who} ({k + 1}/{len(people)}): {len(models)} model(s)'
+              f'{", leave-one-drive-out" if len(own) >= 2 else ""}', flush=True)
         for m in models:
             own_fits[m][who] = fit(specs[m], own)
             fit_rows += _fit_rows(who, own_fits[m][who])
-        if len(own) >= 2:
-            score_rows += _rows(who, [held_out(specs[m], [[d] for d in own], LODO)
-                                      for m in models], sizes)
+        lodo = {m: held_out(specs[m], [[d] for d in own], LODO) for m in models} \
+            if len(own) >= 2 else {}
+        checks[who] = [c for m in models for c in model_check.check_model(
+            who, specs[m], own_fits[m][who], own, lodo.get(m))]
+        if lodo:
+            rows = _rows(who, list(lodo.values()), sizes)
+            fine = [m for m, ok in model_check.adequate(checks[who]).items() if ok]
+            if len(fine) >= 2:
+                weights = model_check.stacking_weights({m: lodo[m] for m in fine})
+                for row in rows:
+                    row['stacking_weight'] = weights.get(row['model'], '')
+            score_rows += rows
         else:
             print(f'{who}: one rated drive, no leave-one-drive-out score')
+    print(f'fitting all {len(people)} participant(s) pooled', flush=True)
     pooled_fits = {m: fit(specs[m], rated) for m in models}
     for m in models:
         fit_rows += _fit_rows('pooled', pooled_fits[m])
     partial: dict[str, dict[str, Fit]] = {who: {} for who in people}
     partial_rows: list[dict[str, Any]] = []
     if not args.no_partial_pooling and len(people) >= 2:
+        print('partial pooling', flush=True)
         for m in models:
             population, shrunk = partial_fits(specs[m], people, own_fits[m], pooled_fits[m])
             partial_rows += [{'scope': 'population', 'model': m, 'parameter': k, 'value': v,
@@ -277,6 +365,7 @@ def run(args: FitTrustOptions) -> int:
                                                                who) for m in models], sizes)
     if len(people) >= 2:
         groups = list(people.values())
+        print('leave-one-participant-out', flush=True)
         score_rows += _rows('pooled', [held_out(specs[m], groups, LOPO) for m in models],
                             sizes)
     else:
@@ -297,6 +386,9 @@ def run(args: FitTrustOptions) -> int:
             ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'rmse', 'rmse_se'),
             score_rows))
         output_files.write_text(new / 'comparison.csv', _csv(SCORE_FIELDS, score_rows))
+        output_files.write_text(new / 'adequacy.csv', _csv(ADEQUACY_FIELDS, [
+            {**dataclasses.asdict(c), 'adequate': str(c.adequate).lower()}
+            for found in checks.values() for c in found]))
     for row in score_rows:
         if row['scope'] == 'pooled' or len(people) == 1:
             diff = row['elpd_diff_se']
@@ -312,6 +404,7 @@ def run(args: FitTrustOptions) -> int:
         print(f"{'all':>10s} {scheme:36s} {model:16s} elpd {sum(values):9.1f} summed over "
               f'{len(values)} participant(s)')
     _print_preferred(score_rows)
+    _print_adequacy(checks, score_rows)
     print(f'{len(people)} participant(s), {len(rated)} rated drive(s); tables and figures in '
           f'{args.out}')
     return 0

@@ -35,6 +35,7 @@ COMMAND_MODULES = (
     'trust_av.cli.fit_driver',
     'trust_av.cli.eval_driver',
     'trust_av.cli.fit_trust',
+    'trust_av.cli.design',
 )
 """Modules that add a subcommand (in help order)."""
 

@@ -101,11 +101,17 @@ def drive_scores(config: RunConfig, perturbation: str, seed: int,
     return times, np.array([r.explicability for r in result.records])
 
 
-def draw_theta(spec: ModelSpec, rng: np.random.Generator) -> dict[str, float]:
+Ranges = dict[str, dict[str, tuple[float, float]]]
+"""{model: {parameter: (low, high)}}: where true values are drawn."""
+
+
+def draw_theta(spec: ModelSpec, rng: np.random.Generator,
+               true_ranges: Ranges | None = None) -> dict[str, float]:
     """Parameters drawn from the declared prior (truncated to the bounds), or uniformly
-    (log-uniformly for ``log_scale``) from :data:`TRUE_RANGES` where it names the parameter."""
+    (log-uniformly for ``log_scale``) from ``true_ranges`` (default :data:`TRUE_RANGES`)
+    where it names the parameter."""
     out = {}
-    ranges = TRUE_RANGES.get(spec.name, {})
+    ranges = (TRUE_RANGES if true_ranges is None else true_ranges).get(spec.name, {})
     for p in spec.parameters:
         low, high = (math.log(p.low), math.log(p.high)) if p.log_scale else (p.low, p.high)
         if p.name in ranges:
@@ -120,9 +126,13 @@ def draw_theta(spec: ModelSpec, rng: np.random.Generator) -> dict[str, float]:
 def make_participant(spec: ModelSpec, name: str, drives: Sequence[tuple[str, np.ndarray,
                                                                         np.ndarray]],
                      rng: np.random.Generator, noise: float = RATING_NOISE,
-                     rating_period_s: float = RATING_PERIOD_S) -> Participant:
-    """A participant whose ratings ``spec`` generates over ``drives`` ((name, times, E))."""
-    theta = draw_theta(spec, rng)
+                     rating_period_s: float = RATING_PERIOD_S,
+                     rating_span: tuple[float, float] = RATING_SPAN,
+                     true_ranges: Ranges | None = None) -> Participant:
+    """A participant whose ratings ``spec`` generates over ``drives`` ((name, times, E)):
+    true values from ``true_ranges`` (:func:`draw_theta`); a ``linear`` observation maps the
+    model's trust range onto a span of ratings drawn from ``rating_span``."""
+    theta = draw_theta(spec, rng, true_ranges)
     model = spec.build(theta)
     rated = []
     for drive, times, scores in drives:
@@ -135,7 +145,7 @@ def make_participant(spec: ModelSpec, name: str, drives: Sequence[tuple[str, np.
     else:
         low = min(float(t.min()) for t in trusts)
         high = max(float(t.max()) for t in trusts)
-        span = rng.uniform(*RATING_SPAN) / 100.0
+        span = rng.uniform(*rating_span) / 100.0
         b = span / max(high - low, 1e-6)
         obs = Observation(rng.uniform(0.2, 0.3) - b * low, b, noise / 100.0)
     out = []
