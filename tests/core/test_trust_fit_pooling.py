@@ -15,14 +15,17 @@ import pytest
 
 from trust_av.drive.trust_fit_pooling import (
     MIN_SPREAD,
+    PARTICIPANT_FOLDS,
     SCHEME,
     Population,
     held_out_partial,
     partial_fits,
+    participant_folds,
     population,
     shrunk,
 )
 from trust_av.study.trust_recovery import synthetic_study, write_ratings_table
+from trust_av.study.workers import call_runner
 from trust_av.system.config import load_run_config
 from trust_monitor.trust_fit import Fit, Observation, by_participant, fit, model_spec
 
@@ -141,3 +144,29 @@ def test_fit_trust_writes_and_scores_partial_pooling(tmp_path: Path, people) -> 
     assert proc.returncode == 0, proc.stderr
     assert not (bare / 'partial_pooling.csv').exists()
     assert SCHEME not in (bare / 'comparison.csv').read_text()
+
+
+def test_participants_are_dealt_into_at_most_eight_folds() -> None:
+    """Up to eight participants each is a fold (leave one participant out); beyond, eight
+    folds dealt round-robin in order, every participant in exactly one."""
+    assert participant_folds(['a', 'b', 'c']) == [['a'], ['b'], ['c']]
+    names = [f'p{i:02d}' for i in range(24)]
+    folds = participant_folds(names)
+    assert len(folds) == PARTICIPANT_FOLDS == 8
+    assert folds[0] == ['p00', 'p08', 'p16'] and folds[7] == ['p07', 'p15', 'p23']
+    assert sorted(n for fold in folds for n in fold) == names
+    with pytest.raises(ValueError, match='at least one fold'):
+        participant_folds(names, 0)
+
+
+def test_calls_give_the_same_results_here_and_on_a_pool() -> None:
+    """The runner fit-trust uses: in this process and on two worker processes, the same
+    result per key, progress reported to the total."""
+    calls = {k: (math.hypot, (float(k), 2.0)) for k in range(6)}
+    seen: list[tuple[int, int]] = []
+    with call_runner(1) as run:
+        here = run(calls, lambda done, total: seen.append((done, total)))
+    with call_runner(2) as run:
+        pooled = run(calls, None)
+    assert here == pooled == {k: math.hypot(k, 2.0) for k in range(6)}
+    assert seen[-1] == (6, 6) and len(seen) == 6

@@ -18,6 +18,7 @@ import subprocess
 import sys
 from typing import Any
 
+import numpy as np
 import pytest
 
 from trust_av.contract import check_component
@@ -26,12 +27,16 @@ from trust_av_common.params import ParamsError, build_config
 from trust_monitor.model_interface import (
     TRUST_MODELS,
     TrustModel,
+    common_trust,
     make_trust_model,
     trust_model_component,
+    trust_trajectory,
 )
 from trust_monitor.paper_trust import TrustConfig
+from trust_monitor.trust_fit import RatedDrive, _Timeline, _trust_on, model_spec
 
 NAMES = registry.names(TRUST_MODELS)
+SHIPPED = ('paper', 'asymmetric', 'beta_bernoulli', 'optimo')
 BASE = TrustConfig(epsilon_mps2=6.0, trust_growth_rate=0.1, performance_threshold=0.8,
                    trust_initial=0.0)
 
@@ -161,3 +166,66 @@ def test_simulate_refuses_a_bad_model_parameter_in_one_line(name: str, tmp_path:
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert proc.stderr.count('\n') == 1 and bad[0] in proc.stderr, proc.stderr
     assert not out.exists()
+
+
+def random_drive(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """E and step lengths of a random drive: 1 s steps, or a mix of 0, 0.1, 1 s and odd
+    lengths (episodes of beta_bernoulli then end inside steps; a step of no time)."""
+    steps = int(rng.integers(1, 400))
+    scores = rng.uniform(0.0, 0.8, steps) * (rng.random(steps) < 0.9)
+    dts = (np.ones(steps) if rng.random() < 0.3 else
+           rng.choice([0.0, 0.1, 1.0, 0.37, 2.6], steps) * rng.uniform(0.5, 1.5, steps))
+    return scores, dts
+
+
+@pytest.mark.parametrize('name', NAMES)
+def test_the_fast_path_is_the_step_loop(name: str) -> None:
+    """A model's ``trajectory`` over a drive (what the fit runs) gives the trust the step
+    loop gives, within 1e-12 on the common scale, for parameters anywhere in the fit's
+    bounds and random drives; the shipped models have one."""
+    rng = np.random.Generator(np.random.PCG64(51))
+    spec = model_spec(BASE, name)
+    if name in SHIPPED:
+        assert callable(getattr(spec.build({}), 'trajectory', None))
+    worst = 0.0
+    for _ in range(60):
+        theta = {p.name: float(rng.uniform(p.low, p.high)) for p in spec.parameters}
+        built = spec.build(theta)
+        scores, dts = random_drive(rng)
+        loop = [common_trust(built, built.initial_state())]
+        state = built.initial_state()
+        for score, dt in zip(scores, dts, strict=True):
+            state = built.step(state, float(score), float(dt))
+            loop.append(common_trust(built, state))
+        times = np.concatenate(([0.0], np.cumsum(dts[:-1] + 1e-3)))
+        drive = RatedDrive('p', 'd', times, scores, np.array([]), np.array([]))
+        timeline = dataclasses.replace(_Timeline.of(drive), dts_s=dts,
+                                       done=np.arange(len(scores) + 1))
+        after, at = _trust_on(built, timeline, every_step=True)
+        worst = max(worst, float(np.max(np.abs(after - loop[1:]))),
+                    float(np.max(np.abs(at - loop))))
+    assert worst <= 1e-12, f'{name}: fast path and step loop differ by {worst:.3g}'
+
+
+def test_a_model_without_a_fast_path_runs_its_steps() -> None:
+    """A plug-in that gives only ``step`` is run step by step (the same trust)."""
+    class Stepped:
+        name = 'stepped'
+        closed_form_bound = None
+
+        def initial_state(self) -> float:
+            return 0.5
+
+        def step(self, state: float, score: float, dt_s: float) -> float:
+            return state - score * dt_s
+
+        def trust(self, state: float) -> float:
+            return state
+
+        def variance(self, state: float) -> float | None:
+            return None
+
+    got = trust_trajectory(Stepped(), np.array([0.1, 0.2]), np.array([1.0, 0.5]))
+    assert got.tolist() == pytest.approx([0.4, 0.3])
+    with pytest.raises(ValueError, match='as many of each'):
+        trust_trajectory(Stepped(), np.array([0.1, 0.2]), np.array([1.0]))

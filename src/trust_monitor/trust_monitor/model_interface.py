@@ -31,6 +31,14 @@ an instance of its own ``config_type`` (None when it has none) and returns a
 :class:`TrustModel`. A model's own parameters are fields of its ``config_type`` whose names
 start with the model's name (``asymmetric_loss_ratio``), declared as ROS parameters like
 every other (``docs/concepts/trust-models.md``).
+
+**A fast path over a whole drive (optional).** A model may also give ``trajectory(scores,
+dts_s)``: its trust (own units) after each step of a drive started from
+:meth:`TrustModel.initial_state`, computed at once (numpy) instead of step by step; the fit
+(:mod:`trust_monitor.trust_fit`) runs models through :func:`trust_trajectory`, which uses it
+when present and the step loop otherwise (a plug-in needs only ``step``).
+``tests/core/test_trust_model_contract.py`` holds every registered model's fast path to its
+step loop (1e-12 on random drives).
 """
 
 from __future__ import annotations
@@ -40,6 +48,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
+import numpy as np
+
 from trust_av_common.component_checks import PASSING, call, check_number, raised
 from trust_av_common.params import build_config
 from trust_av_common.registry import Component, build, config_types, declare, get
@@ -47,7 +57,8 @@ from trust_av_common.registry import Component, build, config_types, declare, ge
 __all__ = ['TRUST_MODELS', 'CheckedBound', 'ClosedForm', 'FitParameter', 'TrustModel',
            'UnitTrust', 'build_trust_model', 'common_trust', 'explicability_bound',
            'fit_parameters', 'make_trust_model', 'numeric_bound', 'paper_bound_holds',
-           'trust_ceiling', 'trust_model_component', 'trust_model_config_types', 'unit_trust']
+           'step_trajectory', 'trust_ceiling', 'trust_model_component',
+           'trust_model_config_types', 'trust_trajectory', 'unit_trust']
 
 TRUST_MODELS = declare('trust_av.trust_models', factory_arguments=('trust', 'params'),
                        interface=('name', 'closed_form_bound', 'initial_state', 'step', 'trust',
@@ -204,6 +215,41 @@ def propagate(model: TrustModel, state: Any, score: float, steps: int,
         state = model.step(state, score, dt_s)
         out.append(model.trust(state))
     return out
+
+
+def step_trajectory(model: TrustModel, scores: np.ndarray, dts_s: np.ndarray) -> np.ndarray:
+    """The model's trust (own units) after each step of a drive from its initial state, by
+    :meth:`TrustModel.step` (the reference the fast path is held to).
+
+    Args:
+        model: the trust model.
+        scores: E applied in each step, in [0, 1].
+        dts_s: each step's length, s (>= 0), as many as ``scores``.
+    """
+    state, step, trust = model.initial_state(), model.step, model.trust
+    out = np.empty(len(scores))
+    for i, (score, dt) in enumerate(zip(np.asarray(scores, float).tolist(),
+                                        np.asarray(dts_s, float).tolist(), strict=True)):
+        state = step(state, score, dt)
+        out[i] = trust(state)
+    return out
+
+
+def trust_trajectory(model: TrustModel, scores: np.ndarray, dts_s: np.ndarray) -> np.ndarray:
+    """:func:`step_trajectory`, through the model's own ``trajectory`` when it gives one
+    (the module docstring: the fast path; same arguments and result).
+
+    Raises:
+        ValueError: ``scores`` and ``dts_s`` are not 1-D arrays of the same length.
+    """
+    scores, dts_s = np.asarray(scores, float), np.asarray(dts_s, float)
+    if scores.ndim != 1 or scores.shape != dts_s.shape:
+        raise ValueError(f'need scores and step lengths of one drive, as many of each, got '
+                         f'shapes {scores.shape} and {dts_s.shape}')
+    fast = getattr(model, 'trajectory', None)
+    if fast is None:
+        return step_trajectory(model, scores, dts_s)
+    return np.asarray(fast(scores, dts_s), float)
 
 
 def admissible(model: TrustModel, state: Any, score: float, trust_min: float, steps: int,

@@ -16,13 +16,17 @@ their sources are in ``docs/concepts/trust-models.md``. All are pure and determi
 
 Every model reports trust on the common scale [0, 1]
 (:func:`trust_monitor.model_interface.common_trust`) and declares what ratings can fit
-(``fit_parameters``).
+(``fit_parameters``). Each also gives the fast path ``trajectory`` over a whole drive
+(numpy; :func:`trust_monitor.model_interface.trust_trajectory`), held to its ``step``.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from trust_av_common.params import check_fields, param
 from trust_av_common.registry import Component
@@ -61,6 +65,25 @@ def _check_step(dt_s: float) -> None:
         raise ValueError(f'dt_s must be finite and >= 0, got {dt_s}')
 
 
+def _check_steps(dts_s: np.ndarray) -> None:
+    """:func:`_check_step` for every step of a drive (NaN fails the first comparison)."""
+    if len(dts_s) and not (dts_s.min() >= 0.0 and dts_s.max() < math.inf):
+        bad = dts_s[~(np.isfinite(dts_s) & (dts_s >= 0.0))][0]
+        raise ValueError(f'dt_s must be finite and >= 0, got {bad}')
+
+
+def _inputs(scores: np.ndarray, threshold: float) -> np.ndarray:
+    """u_T of eq. (11) for each step's E (:func:`~trust_monitor.paper_trust.trust_input` of
+    :func:`~trust_monitor.paper_trust.performance`)."""
+    perf: np.ndarray = 1.0 - np.tanh(scores)
+    return np.where(perf >= threshold, perf, perf - 1.0)
+
+
+def _accumulated(start: float, increments: np.ndarray) -> np.ndarray:
+    """``start`` plus the running sum of ``increments`` (the state after each step)."""
+    return start + np.cumsum(increments)
+
+
 class PaperModel:
     """Eqs. (9)-(11) of Ozkan & Ma: ``T += delta dt u_T(P(E))``; the state is T."""
 
@@ -96,6 +119,12 @@ class PaperModel:
         """Eq. (10) scaled by the elapsed time (:func:`~trust_monitor.paper_trust.trust_step`)."""
         _check_step(dt_s)
         return trust_step(state, score, self.config, dt_s)
+
+    def trajectory(self, scores: np.ndarray, dts_s: np.ndarray) -> np.ndarray:
+        """T after each step of a drive (the fast path of :meth:`step`)."""
+        _check_steps(dts_s)
+        u = _inputs(scores, self.config.performance_threshold)
+        return _accumulated(self.config.trust_initial, self.config.trust_growth_rate * dts_s * u)
 
     def trust(self, state: float) -> float:
         """T itself."""
@@ -158,6 +187,14 @@ class AsymmetricModel:
         rate = self.config.trust_growth_rate * (1.0 if u >= 0.0 else
                                                 self.params.asymmetric_loss_ratio)
         return state + rate * dt_s * u
+
+    def trajectory(self, scores: np.ndarray, dts_s: np.ndarray) -> np.ndarray:
+        """T after each step of a drive (the fast path of :meth:`step`)."""
+        _check_steps(dts_s)
+        u = _inputs(scores, self.config.performance_threshold)
+        rate = self.config.trust_growth_rate * np.where(u >= 0.0, 1.0,
+                                                        self.params.asymmetric_loss_ratio)
+        return _accumulated(self.config.trust_initial, rate * dts_s * u)
 
     def trust(self, state: float) -> float:
         """T itself."""
@@ -279,6 +316,24 @@ class BetaBernoulliModel:
                     break
         return BetaState(alpha, beta, elapsed, integral)
 
+    def trajectory(self, scores: np.ndarray, dts_s: np.ndarray) -> np.ndarray:
+        """alpha / (alpha + beta) after each step of a drive (the fast path of
+        :meth:`step`): which episodes end in which step and which succeed does not depend on
+        alpha0, beta0, the weights or lambda, so it is found once per drive
+        (:func:`_episodes`) and the fitted parameters enter only the linear recurrence."""
+        _check_steps(dts_s)
+        p = self.params
+        successes, closed = _episodes(scores.tobytes(), dts_s.tobytes(),
+                                      p.beta_bernoulli_episode_s,
+                                      p.beta_bernoulli_success_threshold)
+        a0, b0 = p.beta_bernoulli_alpha0, p.beta_bernoulli_beta0
+        alpha = a0 + _decaying(p.beta_bernoulli_forgetting,
+                               p.beta_bernoulli_success_weight * successes)
+        beta = b0 + _decaying(p.beta_bernoulli_forgetting,
+                              p.beta_bernoulli_failure_weight * (1.0 - successes))
+        trust: np.ndarray = (alpha / (alpha + beta))[closed]
+        return trust
+
     def trust(self, state: BetaState) -> float:
         """The Beta mean alpha / (alpha + beta)."""
         return state.alpha / (state.alpha + state.beta)
@@ -287,6 +342,50 @@ class BetaBernoulliModel:
         """The Beta variance alpha beta / ((alpha + beta)^2 (alpha + beta + 1))."""
         total = state.alpha + state.beta
         return state.alpha * state.beta / (total * total * (total + 1.0))
+
+
+def _decaying(keep: float, added: np.ndarray) -> np.ndarray:
+    """``d_0 = 0, d_k = keep d_{k-1} + added_k`` for k = 1..K (the evidence beyond the prior
+    after each episode; d_0 first), as ``keep^k (d + sum_j keep^-j added_j)`` over runs of
+    episodes short enough that ``keep^-j`` stays below 1e300."""
+    out = np.zeros(len(added) + 1)
+    run = len(added) if keep >= 1.0 else max(1, int(300.0 / -math.log10(keep)))
+    for start in range(0, len(added), max(run, 1)):
+        chunk = added[start:start + run]
+        powers = keep ** np.arange(1.0, len(chunk) + 1.0)
+        out[start + 1:start + 1 + len(chunk)] = powers * (out[start] + np.cumsum(chunk / powers))
+    return out
+
+
+@functools.lru_cache(maxsize=4096)
+def _episodes(scores: bytes, dts_s: bytes, episode_s: float,
+              threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """The episodes of a drive as :meth:`BetaBernoulliModel.step` closes them: 1.0 for each
+    that succeeds (else 0.0), in order, and per step the number closed by its end (the same
+    arithmetic as the step, so the same episodes). Keyed by the drive's bytes: a fit calls it
+    with the same drive at every evaluation."""
+    successes: list[float] = []
+    closed = []
+    elapsed, integral = 0.0, 0.0
+    for score, dt in zip(np.frombuffer(scores).tolist(), np.frombuffer(dts_s).tolist(),
+                         strict=True):
+        perf = performance(score)
+        remaining = dt
+        while remaining > 0.0:
+            take = min(remaining, episode_s - elapsed)
+            elapsed += take
+            integral += perf * take
+            remaining -= take
+            if elapsed >= episode_s - EPISODE_TOLERANCE_S:
+                successes.append(1.0 if integral / elapsed >= threshold else 0.0)
+                elapsed, integral = 0.0, 0.0
+                if remaining < EPISODE_TOLERANCE_S:
+                    break
+        closed.append(len(successes))
+    out = np.array(successes), np.array(closed, dtype=np.intp)
+    for array in out:
+        array.flags.writeable = False
+    return out
 
 
 @dataclass(frozen=True)
@@ -380,6 +479,22 @@ class OptimoModel:
         return GaussianState(min(max(mean, 0.0), 1.0),
                              state.variance + p.optimo_noise_std ** 2 * dt_s, u)
 
+    def trajectory(self, scores: np.ndarray, dts_s: np.ndarray) -> np.ndarray:
+        """The mean after each step of a drive (the fast path of :meth:`step`): the drift
+        and change terms at once, then the running sum kept in [0, 1]
+        (:func:`_clipped_sum`). A step of no time changes nothing (not even the last
+        input), as in :meth:`step`."""
+        _check_steps(dts_s)
+        p = self.params
+        moving = dts_s > 0.0
+        u, dt = _inputs(scores[moving], p.optimo_performance_threshold), dts_s[moving]
+        change = np.diff(u, prepend=u[:1]) if len(u) else u
+        means = _clipped_sum(p.optimo_initial_trust, (p.optimo_bias_rate_per_s
+                                                      + p.optimo_performance_rate_per_s * u)
+                             * dt + p.optimo_change_gain * change)
+        done = np.cumsum(moving)
+        return np.concatenate(([p.optimo_initial_trust], means))[done]
+
     def observe(self, state: GaussianState, reported: float,
                 noise_variance: float) -> GaussianState:
         """Kalman update with a reported trust on [0, 1] (a rating / 100), noise variance R;
@@ -403,6 +518,33 @@ class OptimoModel:
     def variance(self, state: GaussianState) -> float | None:
         """The Kalman variance."""
         return state.variance
+
+
+def _clipped_sum(start: float, increments: np.ndarray) -> np.ndarray:
+    """``x_0 = start, x_k = min(max(x_{k-1} + increments_k, 0), 1)`` for k = 1..K.
+
+    In stretches: from a point of the path, the running sum clipped at one bound only has a
+    closed form (Lindley's recursion: the running sum less its running extreme), and it is
+    the path until it crosses the other bound; of the two one-bound paths, the one that
+    crosses later is the path up to that crossing, where the path sits on the bound and a
+    new stretch starts (one stretch per crossing from bound to bound, not per step).
+    """
+    n = len(increments)
+    out = np.empty(n)
+    x, k = start, 0
+    while k < n:
+        sums = np.cumsum(increments[k:])
+        low = sums - np.minimum(-x, np.minimum.accumulate(sums))          # clipped at 0
+        high = 1.0 + sums - np.maximum(1.0 - x, np.maximum.accumulate(sums))  # at 1
+        over, under = np.flatnonzero(low > 1.0), np.flatnonzero(high < 0.0)
+        j_low = int(over[0]) if len(over) else n - k
+        j_high = int(under[0]) if len(under) else n - k
+        path, j, bound = (low, j_low, 1.0) if j_low >= j_high else (high, j_high, 0.0)
+        out[k:k + j] = path[:j]
+        if k + j < n:
+            out[k + j] = bound
+        x, k = bound, k + j + 1
+    return out
 
 
 PAPER = Component('paper', PaperModel, None, description='Ozkan & Ma eqs. (9)-(11)')

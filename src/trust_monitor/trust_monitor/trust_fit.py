@@ -10,7 +10,8 @@ Pure numerics (no ROS, no files): :mod:`trust_av.drive.trust_fit_data` reads dri
 - **Model trust.** A registered trust model runs over the drive's E with each update scaled
   by its step, and its trust is read on the common scale [0, 1]
   (:func:`~trust_monitor.model_interface.common_trust`) after every step completed by the
-  rating's time.
+  rating's time; a whole drive at once through the model's fast path when it gives one
+  (:func:`~trust_monitor.model_interface.trust_trajectory`), else step by step.
 - **Observation model** (its parameters are fitted too). ``linear`` (default):
   ``rating / 100 = a + b T + e``, ``b >= 0``; ``direct`` (a model that declares
   ``rating_observation = 'direct'``: ``optimo``, ``beta_bernoulli``, whose trust is itself a
@@ -36,7 +37,6 @@ Pure numerics (no ROS, no files): :mod:`trust_av.drive.trust_fit_data` reads dri
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -46,11 +46,13 @@ import numpy as np
 
 from trust_monitor.errors import TrustMonitorError
 from trust_monitor.model_interface import (
+    COMMON_SCALE,
     FitParameter,
     TrustModel,
     common_trust,
     fit_parameters,
     make_trust_model,
+    trust_trajectory,
 )
 from trust_monitor.paper_trust import TrustConfig
 from trust_monitor.rating_observation import (
@@ -180,11 +182,11 @@ class _Timeline:
     """A drive's step lengths and, per rating, the number of steps completed by then (the
     same for every model: a fit reads it once per drive, not at every evaluation)."""
 
-    steps: tuple[tuple[float, float], ...]
-    """(E, dt) per step as Python floats (read at every evaluation: no numpy indexing)."""
+    scores: np.ndarray
+    """E per step."""
+    dts_s: np.ndarray
+    """Each step's length, s (the last: the median step)."""
     done: np.ndarray
-    wanted: frozenset[int]
-    """The steps after which some rating is read."""
 
     @classmethod
     def of(cls, drive: RatedDrive) -> _Timeline:
@@ -193,8 +195,7 @@ class _Timeline:
         dt = np.append(steps, np.median(steps))
         done = np.searchsorted(t + dt, np.asarray(drive.rating_times_s, float)
                                + TIME_TOLERANCE_S, side='right')
-        pairs = tuple(zip(np.asarray(drive.scores, float).tolist(), dt.tolist(), strict=True))
-        return cls(pairs, done, frozenset(int(k) - 1 for k in done if k > 0))
+        return cls(np.ascontiguousarray(drive.scores, float), dt, done)
 
 
 def model_trust(model: TrustModel, drive: RatedDrive,
@@ -205,19 +206,21 @@ def model_trust(model: TrustModel, drive: RatedDrive,
     return _trust_on(model, _Timeline.of(drive), every_step)
 
 
+def _common_trusts(model: TrustModel, trust: np.ndarray) -> np.ndarray:
+    """:func:`~trust_monitor.model_interface.common_trust` of each of the model's trust
+    values (own units) at once."""
+    low, high = getattr(model, 'trust_range', COMMON_SCALE)
+    common: np.ndarray = np.minimum(np.maximum((trust - low) / (high - low), 0.0), 1.0)
+    return common
+
+
 def _trust_on(model: TrustModel, timeline: _Timeline,
               every_step: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`model_trust` on a drive's :class:`_Timeline`."""
-    done, wanted, step = timeline.done, timeline.wanted, model.step
-    state = model.initial_state()
-    initial = common_trust(model, state)
-    values = [math.nan] * len(timeline.steps)
-    last = max(wanted) if wanted and not every_step else len(values) - 1
-    for i, (score, dt) in enumerate(itertools.islice(timeline.steps, last + 1)):
-        state = step(state, score, dt)
-        if every_step or i in wanted:
-            values[i] = common_trust(model, state)
-    after = np.array(values)
+    """:func:`model_trust` on a drive's :class:`_Timeline` (through the model's fast path
+    when it has one: :func:`~trust_monitor.model_interface.trust_trajectory`)."""
+    done = timeline.done
+    after = _common_trusts(model, trust_trajectory(model, timeline.scores, timeline.dts_s))
+    initial = common_trust(model, model.initial_state())
     at = np.where(done > 0, after[np.maximum(done - 1, 0)], initial)
     return (after if every_step else np.array([])), at
 

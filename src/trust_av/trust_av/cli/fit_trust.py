@@ -2,7 +2,11 @@
 
 Per participant and pooled over participants, through an explicit observation model
 (:mod:`trust_monitor.trust_fit`); scored on held-out ratings (leave one drive
-out per participant, leave one participant out pooled). Writes to ``--out``:
+out per participant, leave one participant out pooled: beyond eight participants one of
+eight folds of participants, :mod:`trust_av.drive.trust_fit_pooling`). The fits are
+independent calls, run on ``--workers`` processes (or Ray tasks with ``--ray-address``;
+:func:`trust_av.study.workers.call_runner`), with a progress bar on stderr; the results do
+not depend on where they ran. Writes to ``--out``:
 
 - ``fits.csv``: scope (a participant or ``pooled``), model, parameter, value, kind
   (``fitted``, ``fixed``: declared but not identifiable, ``observation``: a, b, s);
@@ -43,21 +47,29 @@ import csv
 import dataclasses
 import io
 import math
-from collections.abc import Sequence
+import os
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from trust_av.cli.options import Progress, positive_int
 from trust_av.cli.typed_options import ParamsFileOptions, command
 from trust_av.drive.table_input import RatingScale, file_safe
 from trust_av.drive.trust_fit_data import read_ratings_table, read_study
 from trust_av.drive.trust_fit_pooling import (
     MIN_PARTICIPANTS,
-    held_out_partial,
-    partial_fits,
+    PARTICIPANT_FOLDS,
+    SCHEME,
+    Population,
+    fold_prior,
+    participant_folds,
+    population,
+    shrunk,
 )
 from trust_av.errors import TrustAvAppError
+from trust_av.study.workers import call_runner
 from trust_av.system.config import load_run_config
 from trust_av.system.output_sets import check_set_folder, writing_set
 from trust_av_common import output_files
@@ -77,12 +89,16 @@ from trust_monitor.trust_fit import (
     held_out,
     model_spec,
     model_trust,
+    predict,
     preferred,
 )
 
 __all__: list[str] = []
 
 LODO, LOPO = 'leave_one_drive_out', 'leave_one_participant_out'
+LOPFO = 'leave_one_participant_fold_out'
+"""The pooled held-out scheme beyond :data:`~trust_av.drive.trust_fit_pooling.PARTICIPANT_FOLDS`
+participants (each fold of participants predicted from the pooled fit to the others)."""
 SCORE_FIELDS = ('scope', 'model', 'scheme', 'ratings', 'elpd', 'elpd_se', 'elpd_diff',
                 'elpd_diff_se', 'rmse', 'rmse_se', 'preferred', 'rule', 'parameters',
                 'evidence', 'stacking_weight')
@@ -117,6 +133,8 @@ class FitTrustOptions(ParamsFileOptions):
     no_figures: bool
     no_partial_pooling: bool
     rating_scale: str = '0-100'
+    workers: int | None = None
+    ray_address: str | None = None
 
     def __post_init__(self) -> None:
         if (self.study is None) == (self.ratings is None):
@@ -159,6 +177,12 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--no-partial-pooling', action='store_true',
                         help='skip the partially pooled fits (each participant shrunk toward '
                              'the pooled fit by a fitted spread; about doubles the time)')
+    parser.add_argument('--workers', type=positive_int, default=None,
+                        help='processes for the fits, 1..256 (default: one per core; the '
+                             'results do not depend on it)')
+    parser.add_argument('--ray-address', default=None,
+                        help='run the fits as Ray tasks on this cluster (HOST:PORT, auto or '
+                             'local; pip install ray) instead of local processes')
     parser.set_defaults(func=command(FitTrustOptions, run))
 
 
@@ -303,6 +327,74 @@ def figure(path: Path, participant: str, drives: Sequence[RatedDrive],
     plt.close(fig)
 
 
+def _fit_all(args: FitTrustOptions, specs: dict[str, ModelSpec], rated: Sequence[RatedDrive],
+             people: dict[str, list[RatedDrive]]
+             ) -> tuple[dict[str, dict[str, Fit]], dict[str, Fit],
+                        dict[str, tuple[Population, dict[str, Fit]]],
+                        dict[tuple[str, str, str], Score]]:
+    """Every fit and held-out score, as independent calls on ``--workers`` processes (or
+    Ray): own fits and leave-one-drive-out scores, the pooled fit and the pooled fits outside
+    each fold of participants (:func:`~trust_av.drive.trust_fit_pooling.participant_folds`),
+    then the partially pooled fits and their held-out scores.
+
+    Returns:
+        own fits (model -> participant -> fit), pooled fits (model -> fit), partial pooling
+        (model -> (population, participant -> fit); empty without it), scores by (scheme,
+        participant or ``pooled``, model).
+    """
+    models = list(specs)
+    folds = participant_folds(list(people)) if len(people) >= 2 else []
+    outside = [[d for who, own in people.items() if who not in fold for d in own]
+               for fold in folds]
+    calls: dict[tuple[str, ...], tuple[Callable[..., Any], tuple[Any, ...]]] = {}
+    for m in models:   # the largest first: the pool finishes together
+        calls['pooled', m] = (fit, (specs[m], rated))
+        for k, drives in enumerate(outside):
+            calls['fold', str(k), m] = (fit, (specs[m], drives))
+    for who, own in people.items():
+        for m in models:
+            calls['own', who, m] = (fit, (specs[m], own))
+            if len(own) >= 2:
+                calls[LODO, who, m] = (held_out, (specs[m], [[d] for d in own], LODO))
+    with call_runner(args.workers or os.cpu_count() or 1, args.ray_address) as run_calls:
+        with Progress('fit-trust: fits', len(calls)) as bar:
+            done = run_calls(calls, bar.update)
+        own_fits = {m: {who: done['own', who, m] for who in people} for m in models}
+        scores: dict[tuple[str, str, str], Score] = {
+            (LODO, who, m): done[LODO, who, m] for who, own in people.items() for m in models
+            if len(own) >= 2}
+        for m in models:
+            if folds:
+                scheme = LOPO if all(len(fold) == 1 for fold in folds) else LOPFO
+                fold_of = {who: k for k, fold in enumerate(folds) for who in fold}
+                predicted = {who: predict(specs[m], done['fold', str(fold_of[who]), m],
+                                          people[who]) for who in people}
+                scores[scheme, 'pooled', m] = Score(
+                    m, scheme, np.concatenate([p.log_density for p in predicted.values()]),
+                    np.concatenate([p.ratings - p.predicted for p in predicted.values()]))
+        partial: dict[str, tuple[Population, dict[str, Fit]]] = {}
+        if args.no_partial_pooling or len(people) < 2:
+            return own_fits, {m: done['pooled', m] for m in models}, partial, scores
+        populations = {m: population(specs[m], done['pooled', m], own_fits[m]) for m in models}
+        calls = {('partial', who, m): (fit, (shrunk(specs[m], populations[m]), own))
+                 for who, own in people.items() for m in models}
+        if len(people) >= MIN_PARTICIPANTS:
+            for k, fold in enumerate(folds):
+                for m in models:
+                    prior = fold_prior(specs[m], own_fits[m], fold, done['fold', str(k), m])
+                    for who in fold:
+                        if len(people[who]) >= 2:
+                            calls[SCHEME, who, m] = (held_out, (prior, [[d] for d in people[who]],
+                                                                SCHEME))
+        with Progress('fit-trust: partial pooling', len(calls)) as bar:
+            more = run_calls(calls, bar.update)
+    for m in models:
+        partial[m] = (populations[m], {who: more['partial', who, m] for who in people})
+    scores.update({(SCHEME, who, m): more[SCHEME, who, m] for who in people for m in models
+                   if (SCHEME, who, m) in more})
+    return own_fits, {m: done['pooled', m] for m in models}, partial, scores
+
+
 def run(args: FitTrustOptions) -> int:
     """Fit, score, write (see ``trust-av fit-trust --help``)."""
     models = _models(args.models)
@@ -319,16 +411,12 @@ def run(args: FitTrustOptions) -> int:
     people = by_participant(rated)
     fit_rows: list[dict[str, Any]] = []
     score_rows: list[dict[str, Any]] = []
-    own_fits: dict[str, dict[str, Fit]] = {m: {} for m in models}
+    own_fits, pooled_fits, partial, scores = _fit_all(args, specs, rated, people)
     checks: dict[str, list[model_check.Check]] = {}
-    for k, (who, own) in enumerate(people.items()):
-        print(f'fitting {who} ({k + 1}/{len(people)}): {len(models)} model(s)'
-              f'{", leave-one-drive-out" if len(own) >= 2 else ""}', flush=True)
+    for who, own in people.items():
         for m in models:
-            own_fits[m][who] = fit(specs[m], own)
             fit_rows += _fit_rows(who, own_fits[m][who])
-        lodo = {m: held_out(specs[m], [[d] for d in own], LODO) for m in models} \
-            if len(own) >= 2 else {}
+        lodo = {m: scores[LODO, who, m] for m in models if (LODO, who, m) in scores}
         checks[who] = [c for m in models for c in model_check.check_model(
             who, specs[m], own_fits[m][who], own, lodo.get(m))]
         if lodo:
@@ -341,33 +429,24 @@ def run(args: FitTrustOptions) -> int:
             score_rows += rows
         else:
             print(f'{who}: one rated drive, no leave-one-drive-out score')
-    print(f'fitting all {len(people)} participant(s) pooled', flush=True)
-    pooled_fits = {m: fit(specs[m], rated) for m in models}
     for m in models:
         fit_rows += _fit_rows('pooled', pooled_fits[m])
-    partial: dict[str, dict[str, Fit]] = {who: {} for who in people}
     partial_rows: list[dict[str, Any]] = []
-    if not args.no_partial_pooling and len(people) >= 2:
-        print('partial pooling', flush=True)
+    if partial:
         for m in models:
-            population, shrunk = partial_fits(specs[m], people, own_fits[m], pooled_fits[m])
+            population = partial[m][0]
             partial_rows += [{'scope': 'population', 'model': m, 'parameter': k, 'value': v,
                               'kind': kind} for kind, values in (
                                   ('center', population.center), ('spread', population.spread))
                              for k, v in values.items()]
-            for who, fitted in shrunk.items():
-                partial[who][m] = fitted
+            for who, fitted in partial[m][1].items():
                 partial_rows += [r for r in _fit_rows(who, fitted) if r['kind'] != 'fixed']
-        if len(people) >= MIN_PARTICIPANTS:
-            for who, own in people.items():
-                if len(own) >= 2:
-                    score_rows += _rows(who, [held_out_partial(specs[m], people, own_fits[m],
-                                                               who) for m in models], sizes)
+        for who in people:
+            if (SCHEME, who, models[0]) in scores:
+                score_rows += _rows(who, [scores[SCHEME, who, m] for m in models], sizes)
     if len(people) >= 2:
-        groups = list(people.values())
-        print('leave-one-participant-out', flush=True)
-        score_rows += _rows('pooled', [held_out(specs[m], groups, LOPO) for m in models],
-                            sizes)
+        scheme = LOPO if len(people) <= PARTICIPANT_FOLDS else LOPFO
+        score_rows += _rows('pooled', [scores[scheme, 'pooled', m] for m in models], sizes)
     else:
         print('one participant: no leave-one-participant-out score')
     # one set: every table and figure, or (failed, stopped) the previous set untouched
@@ -379,7 +458,8 @@ def run(args: FitTrustOptions) -> int:
             for who, own in people.items():
                 safe = file_safe(who)   # the reader refused ids that share one
                 figure(new / f'participant_{safe}.png', who, own,
-                       {m: (specs[m], own_fits[m][who]) for m in models}, partial[who])
+                       {m: (specs[m], own_fits[m][who]) for m in models},
+                       {m: partial[m][1][who] for m in partial})
         output_files.write_text(new / 'fits.csv', _csv(
             ('scope', 'model', 'parameter', 'value', 'kind'), fit_rows))
         output_files.write_text(new / 'scores.csv', _csv(

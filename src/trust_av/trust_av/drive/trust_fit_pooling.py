@@ -23,13 +23,25 @@ Its held-out score (:func:`held_out_partial`) leaves one drive out per participa
 ``mu`` and ``tau`` estimated from the *other* participants only, so no rating scored was
 seen by any step of its fit. It needs at least three participants (two others to estimate a
 spread from).
+
+**Folds of participants.** The participants are dealt round-robin, in first-seen order, into
+at most :data:`PARTICIPANT_FOLDS` folds (:func:`participant_folds`). The pooled fit to the
+participants outside a fold is made once per fold and model, and serves both the
+fold's leave-one-participant-out score (each participant of the fold predicted from it) and
+the population of the fold's partially pooled held-out scores (``mu`` from it, ``tau`` from
+the own fits outside the fold). Refitting the pooled model once per participant made these
+two schemes grow with the square of the participants; with at most
+:data:`PARTICIPANT_FOLDS` folds they grow linearly. Up to :data:`PARTICIPANT_FOLDS`
+participants each fold is one participant, and both schemes are exactly leave one
+participant out; beyond, a participant is scored from fits that left out its fold-mates
+too (fewer participants fitted, each score still from fits that saw none of it).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,8 +57,9 @@ from trust_monitor.trust_fit import (
     held_out,
 )
 
-__all__ = ['MIN_PARTICIPANTS', 'MIN_SPREAD', 'SCHEME', 'Population', 'held_out_partial',
-           'partial_fits', 'population', 'shrunk']
+__all__ = ['MIN_PARTICIPANTS', 'MIN_SPREAD', 'PARTICIPANT_FOLDS', 'SCHEME', 'Population',
+           'fold_prior', 'held_out_partial', 'partial_fits', 'participant_folds', 'population',
+           'shrunk']
 
 MIN_SPREAD = 0.05
 """Smallest between-participant spread, in prior standard deviations (participants whose
@@ -54,6 +67,23 @@ own estimates all equal the pooled one would otherwise pin every fit to it exact
 MIN_PARTICIPANTS = 3
 """Participants a held-out partial-pooling score needs (two others give a spread)."""
 SCHEME = 'leave_one_drive_out_partial_pooling'
+PARTICIPANT_FOLDS = 8
+"""Most folds of participants (module docstring): the pooled refits per model that the
+leave-one-participant-out and the partially pooled held-out scores need."""
+
+
+def participant_folds(participants: Sequence[str], folds: int = PARTICIPANT_FOLDS
+                      ) -> list[list[str]]:
+    """The participants dealt round-robin into ``min(folds, len(participants))`` folds
+    (one participant each up to ``folds``).
+
+    Raises:
+        ValueError: ``folds`` < 1.
+    """
+    if folds < 1:
+        raise ValueError(f'need at least one fold, got {folds}')
+    count = min(folds, len(participants))
+    return [list(participants[k::count]) for k in range(count)]
 
 
 @dataclass(frozen=True)
@@ -130,25 +160,44 @@ def partial_fits(spec: ModelSpec, people: Mapping[str, Sequence[RatedDrive]],
 
 
 def held_out_partial(spec: ModelSpec, people: Mapping[str, Sequence[RatedDrive]],
-                     own: Mapping[str, Fit], who: str, seed: int = 0) -> Score:
+                     own: Mapping[str, Fit], who: str, seed: int = 0, *,
+                     fold: Sequence[str] | None = None, others: Fit | None = None) -> Score:
     """Leave-one-drive-out score of participant ``who``'s partially pooled fit, its
-    population estimated from the other participants only.
+    population estimated from the participants outside ``who``'s fold only.
 
     Args:
         spec: the model.
         people: every participant's rated drives.
-        own: every participant's own fit (those of the others are used).
+        own: every participant's own fit (those outside the fold are used).
         who: the participant scored.
         seed: the fits' seed.
+        fold: the participants left out with ``who`` (default: ``who`` alone).
+        others: the pooled fit to the participants outside the fold, when already made
+            (:func:`~trust_monitor.trust_fit.fit` of their drives in ``people``'s order,
+            with ``seed``); fitted here when None.
 
     Raises:
-        FitError: fewer than :data:`MIN_PARTICIPANTS` participants, or fewer than two
-            drives of ``who``.
+        FitError: fewer than :data:`MIN_PARTICIPANTS` participants, fewer than two outside
+            the fold, or fewer than two drives of ``who``.
     """
     if len(people) < MIN_PARTICIPANTS:
         raise FitError(f'partial pooling scores need at least {MIN_PARTICIPANTS} '
                        f'participants, got {len(people)}')
-    others = [d for k, drives in people.items() if k != who for d in drives]
-    fitted = population(spec, fit(spec, others, seed),
-                        {k: f for k, f in own.items() if k != who})
-    return held_out(shrunk(spec, fitted), [[d] for d in people[who]], SCHEME, seed)
+    out = set(fold if fold is not None else [who]) | {who}
+    if others is None:
+        others = fit(spec, [d for k, drives in people.items() if k not in out for d in drives],
+                     seed)
+    return held_out(fold_prior(spec, own, out, others), [[d] for d in people[who]], SCHEME,
+                    seed)
+
+
+def fold_prior(spec: ModelSpec, own: Mapping[str, Fit], fold: Collection[str],
+               others: Fit) -> ModelSpec:
+    """``spec`` shrunk (:func:`shrunk`) toward the population of the participants outside
+    ``fold``: their pooled fit ``others`` and their own fits.
+
+    Raises:
+        FitError: fewer than two own fits outside the fold.
+    """
+    return shrunk(spec, population(spec, others, {k: f for k, f in own.items()
+                                                  if k not in fold}))

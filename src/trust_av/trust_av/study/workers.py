@@ -17,6 +17,10 @@ Workers ignore SIGINT and SIGHUP: a Ctrl-C at the terminal, or the terminal clos
 the whole process group, and the command that owns the pool decides what its workers do
 (the graph's node processes are handled the same way, in their own process groups). A
 worker whose command dies (even by SIGKILL) gets SIGTERM and stops as above.
+
+:func:`call_runner` runs a command's independent calls (``trust-av fit-trust``'s fits) in
+this process, on such a pool, or as Ray tasks when a Ray address is given; each way gives
+the same results.
 """
 
 from __future__ import annotations
@@ -28,8 +32,8 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable, Iterator
-from concurrent.futures import Future, ProcessPoolExecutor
+from collections.abc import Callable, Iterator, Mapping
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from multiprocessing import resource_tracker
 from types import FrameType
 from typing import Any, TypeVar
@@ -38,7 +42,7 @@ from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av_common.held_stops import STOP_SIGNALS, held
 
-__all__ = ['worker_pool']
+__all__ = ['Calls', 'call_runner', 'worker_pool']
 
 T = TypeVar('T')
 
@@ -212,3 +216,89 @@ def worker_pool(workers: int) -> Iterator[WorkerPool]:
         pool.stop_workers()
         raise
     pool.shutdown(wait=True)
+
+
+Calls = Mapping[Any, tuple[Callable[..., Any], tuple[Any, ...]]]
+"""Independent calls by key: ``key -> (function, arguments)`` (a module-level function and
+picklable arguments, for a pool or Ray)."""
+RunCalls = Callable[[Calls, Callable[[int, int], None] | None], dict[Any, Any]]
+"""What :func:`call_runner` yields: runs the calls, reports ``(done, total)`` after each,
+returns ``key -> result``; the first call that raises ends it with that exception."""
+
+
+@contextlib.contextmanager
+def call_runner(workers: int, ray_address: str | None = None) -> Iterator[RunCalls]:
+    """A runner of independent calls: in this process (``workers`` 1, no Ray), on a
+    :func:`worker_pool` of ``workers`` processes kept for the block, or as Ray tasks on
+    the cluster at ``ray_address`` (``auto``, ``local`` or HOST:PORT; ``pip install ray``).
+
+    Raises:
+        TrustAvAppError: ray is not installed, or the address does not answer
+            (:func:`trust_av.study.sweep.check_ray_address`).
+    """
+    if ray_address is not None:
+        with _ray_runner(ray_address) as run:
+            yield run
+        return
+    if workers <= 1:
+        def here(calls: Calls, progress: Callable[[int, int], None] | None) -> dict[Any, Any]:
+            out = {}
+            for key, (function, args) in calls.items():
+                out[key] = function(*args)
+                if progress is not None:
+                    progress(len(out), len(calls))
+            return out
+
+        yield here
+        return
+    with worker_pool(workers) as pool:
+        def pooled(calls: Calls, progress: Callable[[int, int], None] | None
+                   ) -> dict[Any, Any]:
+            futures = {pool.submit(function, *args): key
+                       for key, (function, args) in calls.items()}
+            out = {}
+            for future in as_completed(futures):
+                out[futures[future]] = future.result()
+                if progress is not None:
+                    progress(len(out), len(futures))
+            return out
+
+        yield pooled
+
+
+@contextlib.contextmanager
+def _ray_runner(address: str) -> Iterator[RunCalls]:
+    """:func:`call_runner` on Ray (a cluster this process joins for the block)."""
+    from trust_av.study.sweep import _stop_handlers_kept, check_ray_address  # sweep uses us
+
+    check_ray_address(address)
+    try:
+        import ray
+    except ImportError as err:
+        raise TrustAvAppError('--ray-address needs the optional dependency ray '
+                                  '(pip install ray)') from err
+    started = not ray.is_initialized()
+    if started:
+        with _stop_handlers_kept():   # ray.init installs a SIGTERM handler of its own
+            ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    remotes: dict[Callable[..., Any], Any] = {}
+
+    def on_ray(calls: Calls, progress: Callable[[int, int], None] | None) -> dict[Any, Any]:
+        pending = {}
+        for key, (function, args) in calls.items():
+            remote = remotes.setdefault(function, ray.remote(function))
+            pending[remote.remote(*args)] = key
+        out = {}
+        total = len(pending)
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            out[pending.pop(done[0])] = ray.get(done[0])
+            if progress is not None:
+                progress(len(out), total)
+        return out
+
+    try:
+        yield on_ray
+    finally:
+        if started:
+            ray.shutdown()
