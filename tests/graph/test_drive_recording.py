@@ -123,6 +123,23 @@ def test_a_slow_start_counts_trust_from_the_start_only(driven: Driven) -> None:
     assert drive.series.times_s[0] >= 0.0 and drive.series.times_s[-1] <= outcome.driven_s
 
 
+def test_the_summary_gives_the_monitor_trust_on_the_ratings_scale(driven: Driven) -> None:
+    """summary.csv's final_monitor_trust is the monitor's last trust on [0, 1], the scale of
+    the ratings beside it (the paper's model maps T(0) + delta * 600 s to 1), not its raw T."""
+    from trust_av.drive.bag_data import read_drive
+    from trust_av.drive.study import drive_summary
+
+    model = driven.config.trust_model()
+    low, high = model.trust_range
+    summary, _ = drive_summary(driven.bag, None, driven.outcome, [], 4.5, 10.0, model)
+    raw = read_drive(driven.bag).series.monitor_trust
+    last = float(raw[raw == raw][-1])
+    assert high - low > 1.0   # a raw T and its unit value differ: the test can tell them apart
+    assert summary['final_monitor_trust'] == pytest.approx((last - low) / (high - low),
+                                                           abs=1e-4)
+    assert 0.0 <= summary['final_monitor_trust'] <= 1.0
+
+
 def test_a_drive_whose_recorder_fell_behind_names_what_it_lost(driven: Driven) -> None:
     """The drive keeps its bag and names every publisher that lost messages, in its outcome
     and in the bag's metadata; for the traffic node (it publishes only after the start),

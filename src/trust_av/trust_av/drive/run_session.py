@@ -132,7 +132,8 @@ def run_session(args: SessionOptions) -> int:
                                 page_info=_page_info(session, condition is None),
                                 startup_timeout_s=args.startup_timeout_s)
             summary = _summary(bag, condition, outcome, models if condition is not None
-                               else [], config.shared.vehicle_length_m, drive.max_lag_s)
+                               else [], config.shared.vehicle_length_m, drive.max_lag_s,
+                               config.trust_model())
             record_drive(args.study, session, DriveRecord(
                 index, name, str(bag.relative_to(args.study)), outcome.status, seed, summary),
                 output_files.write_text)
@@ -177,12 +178,12 @@ def _page_info(session: Any, practice: bool) -> dict[str, Any]:
 
 
 def _summary(bag: Path, condition: Any, outcome: Any, models: Any, vehicle_length_m: float,
-             max_lag_s: float) -> dict[str, Any]:
+             max_lag_s: float, monitor_model: Any) -> dict[str, Any]:
     """The drive's summary (:func:`~trust_av.drive.study.drive_summary`; a drive never
     started has nothing to summarise), its comparison rows and its recording's losses."""
     if outcome.driven_s > 0:
         summary, rows = drive_summary(bag, condition, outcome, models, vehicle_length_m,
-                                      max_lag_s)
+                                      max_lag_s, monitor_model)
     else:
         summary, rows = {'driven_s': 0.0}, []
     summary['comparison'] = rows

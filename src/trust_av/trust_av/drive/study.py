@@ -41,6 +41,7 @@ from trust_av.drive.trust_rating import (
 )
 from trust_av_common.params import ParamsError, build_config, check_fields, param
 from trust_av_planner.perturbations import LIBRARY
+from trust_monitor import model_interface
 
 __all__ = ['DriveConfig', 'comparison_csv', 'comparison_text', 'conditions_from', 'drive_summary',
            'load_drive_settings', 'next_drive', 'plan_session', 'record_drive', 'summary_csv']
@@ -153,7 +154,7 @@ SUMMARY_FIELDS = ('drive', 'condition', 'alpha', 'predictor', 'trace', 'perturba
                   'status', 'driven_s',
                   'ratings', 'mean_rating', 'final_monitor_trust', 'questionnaire_score',
                   'min_gap_m', 'collisions', 'ended_by', 'refused_messages', 'latency_p50_ms',
-                  'latency_p99_ms', 'latency_samples', 'bag')
+                  'latency_p99_ms', 'latency_samples', 'recording_lost', 'bag')
 
 
 def summary_row(record: DriveRecord) -> dict[str, Any]:
@@ -174,11 +175,14 @@ def summary_csv(session: Session) -> str:
 
 def drive_summary(bag: Path, condition: Condition | None, outcome: Any,
                   models: Sequence[tuple[str, TrustModel]], vehicle_length_m: float,
-                  max_lag_s: float) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+                  max_lag_s: float, monitor_model: model_interface.TrustModel | None = None
+                  ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """The summary of one recorded drive and its comparison rows (one per model).
 
     Reads the drive back from its bag (:func:`~trust_av.drive.bag_data.read_drive`),
-    so the numbers are the recording's.
+    so the numbers are the recording's. ``final_monitor_trust`` is on the common scale
+    [0, 1], the ratings' (:func:`~trust_monitor.model_interface.unit_trust` of the trust
+    model the monitor ran, ``monitor_model``; without it, the trust as published).
     """
     from trust_av.drive.bag_data import read_drive
 
@@ -198,7 +202,9 @@ def drive_summary(bag: Path, condition: Condition | None, outcome: Any,
         'perturbation': condition.perturbation if condition else '',
         'driven_s': round(outcome.driven_s, 3), 'ratings': len(drive.ratings),
         'mean_rating': round(float(np.mean(drive.ratings)), 4) if len(drive.ratings) else '',
-        'final_monitor_trust': round(float(monitor[-1]), 4)
+        'final_monitor_trust': round(float(
+            monitor[-1] if monitor_model is None
+            else model_interface.unit_trust(monitor_model, monitor[-1])), 4)
         if len(monitor) and math.isfinite(monitor[-1]) else '',
         'questionnaire_score': round(drive.questionnaire[-1], 4) if drive.questionnaire else '',
         'min_gap_m': round(float(gaps.min()), 3) if len(gaps) else '',
