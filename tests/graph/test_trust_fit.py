@@ -233,7 +233,7 @@ def test_fit_trust_from_a_ratings_table(tmp_path: Path,
                    for m in ('paper', 'beta_bernoulli'))
         assert (f'\n{p}: fitted adequately by' in proc.stdout) is fits
         assert (f'none of the registered models fits {p}: ' in proc.stdout) is not fits
-    assert 'fitting a (1/2)' in proc.stdout
+    assert 'fit-trust: fits: 14/14 in ' in proc.stderr   # the progress, counted in fits
     fits = (out / 'fits.csv').read_text()
     assert 'pooled,beta_bernoulli,beta_bernoulli_failure_weight' in fits
     assert 'beta_bernoulli_beta0' in fits and ',fixed' in fits
