@@ -431,7 +431,7 @@ def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         reopened = context.new_page()
         reopened.goto(drive.url)
         reopened.wait_for_function("window.drive.controlling && document.getElementById("
-                                   "'time-left').dataset.s", timeout=10_000)
+                                   "'time-left').dataset.s", timeout=30_000)
         asked = time.monotonic()
         left_after = float(reopened.locator('#time-left').get_attribute('data-s'))
         read_after = (asked, time.monotonic())

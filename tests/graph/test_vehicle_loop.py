@@ -43,7 +43,7 @@ seen = {'deadline': 0, 'incompatible': 0, 'messages': 0}
 def count(key):
     return lambda *_: seen.__setitem__(key, seen[key] + 1)
 wanted = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
-                    deadline=Duration(seconds=0.2))
+                    deadline=Duration(seconds=1.0))
 events = SubscriptionEventCallbacks(deadline=count('deadline'),
                                     incompatible_qos=count('incompatible'))
 node.create_subscription(Empty, 'with_deadline', count('messages'), wanted,
@@ -51,7 +51,7 @@ node.create_subscription(Empty, 'with_deadline', count('messages'), wanted,
 node.create_subscription(Empty, 'without', lambda _: None, wanted, event_callbacks=
                          SubscriptionEventCallbacks(incompatible_qos=count('incompatible')))
 offers = node.create_publisher(Empty, 'with_deadline',
-                               QoSProfile(depth=1, deadline=Duration(seconds=0.1)))
+                               QoSProfile(depth=1, deadline=Duration(seconds=0.5)))
 node.create_publisher(Empty, 'without', QoSProfile(depth=1))  # offers no deadline
 executor = EventsExecutor()
 executor.add_node(node)
@@ -60,7 +60,7 @@ while time.monotonic() < end:
     offers.publish(Empty())
     executor.spin_once(timeout_sec=0.02)
 during = dict(seen)
-end = time.monotonic() + 1.0
+end = time.monotonic() + 3.0
 while time.monotonic() < end:
     executor.spin_once(timeout_sec=0.05)
 print(during['deadline'], seen['deadline'], seen['incompatible'], seen['messages'])
@@ -78,8 +78,10 @@ executor.shutdown(); node.destroy_node(); rclpy.try_shutdown()
               if re.fullmatch(r'\d+ \d+ \d+ \d+', line.strip())]
     assert len(counts) == 1, proc.stdout
     during, after, incompatible, messages = map(int, counts[0].split())
-    assert messages > 0 and during == 0  # no event while the deadline is kept
-    assert after >= 3                     # 1 s of silence, 0.2 s deadline
+    # no event while the deadline is kept: a message every 20 ms against a 1 s deadline
+    # (0.2 s was missed once on a loaded host, the process descheduled that long)
+    assert messages > 0 and during == 0
+    assert after >= 2                     # 3 s of silence, 1 s deadline
     assert incompatible >= 1              # a publisher without a deadline is named
 
 

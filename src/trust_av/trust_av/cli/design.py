@@ -102,7 +102,9 @@ def _add_design_options(parser: argparse.ArgumentParser, participants: int) -> N
                              'or a JSON file {model: {parameter: [low, high]}}')
     parser.add_argument('--models', default='',
                         help='comma-separated registered trust models (default: all)')
-    parser.add_argument('--seed', type=bounded_int('--seed', 0, 2 ** 31 - 1), default=0)
+    parser.add_argument('--seed', type=bounded_int('--seed', 0, 2 ** 31 - 1), default=0,
+                        help="the simulated participants' seed (default: 0); the same seed "
+                             'gives the same participants')
     parser.add_argument('--workers', type=positive_int, default=1,
                         help='processes for the drives and fits (the result is the same)')
     parser.add_argument('--out', type=Path, help='also write the result as JSON here')

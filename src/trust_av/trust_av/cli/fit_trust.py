@@ -69,6 +69,7 @@ from trust_av.drive.trust_fit_pooling import (
     shrunk,
 )
 from trust_av.errors import TrustAvAppError
+from trust_av.study.sweep import check_ray_address
 from trust_av.study.workers import call_runner
 from trust_av.system.config import load_run_config
 from trust_av.system.output_sets import check_set_folder, writing_set
@@ -406,6 +407,8 @@ def run(args: FitTrustOptions) -> int:
     if not rated:
         raise FitError(f'{args.study or args.ratings}: no drive has a rating')
     check_set_folder(args.out)              # before the fit: refused in seconds, not minutes
+    if args.ray_address is not None:
+        check_ray_address(args.ray_address)   # an address nothing listens on: one line
     specs = {m: model_spec(config.trust, m, dict(config.trust_model_params)) for m in models}
     sizes = {m: model_check.parameter_count(specs[m]) for m in models}
     people = by_participant(rated)

@@ -13,16 +13,13 @@ default (one per core), or Ray (optional extra, ``--executor ray``).
 from __future__ import annotations
 
 import concurrent.futures
-import contextlib
 import dataclasses
 import hashlib
 import json
 import logging
 import os
-import signal
 import socket
-import threading
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -32,12 +29,11 @@ from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
 from trust_av.errors import TrustAvAppError
 from trust_av.study.fingerprint import code_fingerprint, plugin_sources
-from trust_av.study.workers import worker_pool
+from trust_av.study.workers import stop_handlers_kept, worker_pool
 from trust_av.system.closed_loop import simulate
 from trust_av.system.config import RunConfig, load_run_config
 from trust_av.system.metrics import StepRecord, compute_metrics
 from trust_av_common import output_files
-from trust_av_common.held_stops import STOP_SIGNALS
 
 __all__ = ['ALPHAS', 'METRICS', 'PAPER_PREDICTORS', 'TRACES', 'Case', 'Executor', 'LocalExecutor',
            'RayExecutor', 'RunSettings', 'check_axis', 'check_ray_address', 'code_fingerprint',
@@ -313,7 +309,7 @@ class RayExecutor:
                                '(pip install ray)') from err
         started = not ray.is_initialized()
         if started:
-            with _stop_handlers_kept():   # ray.init installs a SIGTERM handler of its own
+            with stop_handlers_kept():   # ray.init installs a SIGTERM handler of its own
                 ray.init(address=self.address, num_cpus=self.num_cpus,
                          include_dashboard=False, log_to_driver=False)
         try:
@@ -330,23 +326,6 @@ class RayExecutor:
         finally:
             if started:
                 ray.shutdown()
-
-
-@contextlib.contextmanager
-def _stop_handlers_kept() -> Iterator[None]:
-    """Put the stop signals' handlers back after the block: ``ray.init`` replaces this
-    process's SIGTERM handler with one that exits at once, so a ``docker stop`` would have
-    ended a sweep without the command's own stop (workers ended, its one line)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    handlers = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
-    try:
-        yield
-    finally:
-        for signum, handler in handlers.items():
-            if handler is not None:
-                signal.signal(signum, handler)
 
 
 def check_axis(name: str, values: Sequence[str] | Sequence[float]) -> None:

@@ -31,6 +31,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
@@ -42,7 +43,7 @@ from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av_common.held_stops import STOP_SIGNALS, held
 
-__all__ = ['Calls', 'call_runner', 'worker_pool']
+__all__ = ['Calls', 'call_runner', 'stop_handlers_kept', 'worker_pool']
 
 T = TypeVar('T')
 
@@ -267,11 +268,25 @@ def call_runner(workers: int, ray_address: str | None = None) -> Iterator[RunCal
 
 
 @contextlib.contextmanager
+def stop_handlers_kept() -> Iterator[None]:
+    """Put the stop signals' handlers back after the block: ``ray.init`` replaces this
+    process's SIGTERM handler with one that exits at once, so a ``docker stop`` would have
+    ended a sweep without the command's own stop (workers ended, its one line)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    handlers = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in handlers.items():
+            if handler is not None:
+                signal.signal(signum, handler)
+
+
+@contextlib.contextmanager
 def _ray_runner(address: str) -> Iterator[RunCalls]:
     """:func:`call_runner` on Ray (a cluster this process joins for the block)."""
-    from trust_av.study.sweep import _stop_handlers_kept, check_ray_address  # sweep uses us
-
-    check_ray_address(address)
     try:
         import ray
     except ImportError as err:
@@ -279,7 +294,7 @@ def _ray_runner(address: str) -> Iterator[RunCalls]:
                                   '(pip install ray)') from err
     started = not ray.is_initialized()
     if started:
-        with _stop_handlers_kept():   # ray.init installs a SIGTERM handler of its own
+        with stop_handlers_kept():   # ray.init installs a SIGTERM handler of its own
             ray.init(address=address, include_dashboard=False, log_to_driver=False)
     remotes: dict[Callable[..., Any], Any] = {}
 
