@@ -22,7 +22,8 @@ from support.paths import REPO
 
 ALLOWED: dict[str, str] = {
     'trust_av.study.trust_design.Recovery.confusion_best':
-        'benchmarks/bench_trust_recovery.py reports the confusion without the parsimony rule',
+        'the recovery benchmark reports the confusion without the parsimony rule '
+        '(benchmarks/bench_trust_recovery.py)',
     # documented for users: a tutorial's code imports them
     'trust_av.study.trust_recovery.synthetic_study':
         'the fit tutorial (docs/tutorials/fit-trust-models.md) makes its ratings table with it',
