@@ -286,14 +286,14 @@ def test_hand_started_nodes(tmp_path: Path) -> None:
     alone = procs.pop('alone')
     assert alone.stdout is not None
     seen = []
-    # until it has checked its overrides (its 'ready' line follows the check), or ends; a
-    # node that never warns is stopped after 60 s
+    # until it says it is ready (its 'ready' line follows the overrides' check and its
+    # warning), or ends; a node that never says so is stopped after 60 s
     watchdog = threading.Timer(60.0, os.killpg, (alone.pid, signal.SIGINT))
     watchdog.start()
     try:
         for line in alone.stdout:
             seen.append(line)
-            if 'ignoring parameter' in line:
+            if 'ready (' in line:
                 break
     finally:
         watchdog.cancel()
