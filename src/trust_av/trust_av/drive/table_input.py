@@ -33,7 +33,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from trust_av_common.input_files import not_regular
+from trust_av_common.input_files import bounded_lines, not_regular
 from trust_monitor.trust_fit import FitError
 
 __all__ = ['MAX_LINE_CHARS', 'MAX_TABLE_BYTES', 'IdCheck', 'RatingScale', 'file_safe',
@@ -142,19 +142,6 @@ def _encoding(head: bytes) -> str:
     return 'utf-8-sig'
 
 
-def _lines(handle: io.TextIOBase, path: Path) -> Iterator[str]:
-    number = 0
-    while True:
-        line = handle.readline(MAX_LINE_CHARS + 1)
-        if not line:
-            return
-        number += 1
-        if len(line) > MAX_LINE_CHARS:
-            raise FitError(f'{path}:{number}: line longer than {MAX_LINE_CHARS} characters '
-                           '(not a CSV table)')
-        yield line
-
-
 def table_rows(path: Path, columns: tuple[str, ...]
                ) -> Iterator[tuple[int, dict[str, str], str]]:
     """The rows of the table ``path`` one at a time: (line, row, decimal separator).
@@ -191,7 +178,7 @@ def _rows(path: Path, raw: io.BufferedReader, columns: tuple[str, ...]
     handle = io.TextIOWrapper(raw, encoding=_encoding(raw.peek(4)[:4]), newline='')
     reader = None
     try:
-        lines = _lines(handle, path)
+        lines = bounded_lines(handle, path, MAX_LINE_CHARS, FitError, ' (not a CSV table)')
         first = next(lines, None)
         if first is None or not first.strip():
             raise FitError(f'{path}: empty file (expected the header '
