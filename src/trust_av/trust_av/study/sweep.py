@@ -29,7 +29,7 @@ from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import truncate
 from trust_av.errors import TrustAvAppError
 from trust_av.study.fingerprint import code_fingerprint, plugin_sources
-from trust_av.study.workers import stop_handlers_kept, worker_pool
+from trust_av.study.workers import joined_ray, worker_pool
 from trust_av.system.closed_loop import simulate
 from trust_av.system.config import RunConfig, load_run_config
 from trust_av.system.metrics import StepRecord, compute_metrics
@@ -302,17 +302,7 @@ class RayExecutor:
             on_result: Callable[[Case, dict[str, Any]], None],
             settings: RunSettings = RunSettings()) -> None:
         """Submit one Ray task per case and collect them as they finish."""
-        try:
-            import ray
-        except ImportError as err:
-            raise TrustAvAppError('--executor ray needs the optional dependency ray '
-                               '(pip install ray)') from err
-        started = not ray.is_initialized()
-        if started:
-            with stop_handlers_kept():   # ray.init installs a SIGTERM handler of its own
-                ray.init(address=self.address, num_cpus=self.num_cpus,
-                         include_dashboard=False, log_to_driver=False)
-        try:
+        with joined_ray('--executor ray', self.address, num_cpus=self.num_cpus) as ray:
             remote = ray.remote(run_case)
             pending = {remote.remote(case, params_file, settings): case for case in cases}
             while pending:
@@ -323,9 +313,6 @@ class RayExecutor:
                 except Exception as err:
                     raise TrustAvAppError(f'case {case.label} failed: {err}') from err
                 on_result(case, result)
-        finally:
-            if started:
-                ray.shutdown()
 
 
 def check_axis(name: str, values: Sequence[str] | Sequence[float]) -> None:

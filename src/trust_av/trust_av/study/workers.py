@@ -43,7 +43,7 @@ from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av_common.held_stops import STOP_SIGNALS, held
 
-__all__ = ['Calls', 'call_runner', 'stop_handlers_kept', 'worker_pool']
+__all__ = ['Calls', 'call_runner', 'joined_ray', 'stop_handlers_kept', 'worker_pool']
 
 T = TypeVar('T')
 
@@ -285,17 +285,38 @@ def stop_handlers_kept() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _ray_runner(address: str) -> Iterator[RunCalls]:
-    """:func:`call_runner` on Ray (a cluster this process joins for the block)."""
+def joined_ray(option: str, address: str | None, **init: Any) -> Iterator[Any]:
+    """The ``ray`` module, joined to the cluster at ``address`` for the block (``ray.init``
+    with ``init``, unless this process has joined one already; left again after it), the
+    stop signals' handlers kept.
+
+    Raises:
+        TrustAvAppError: ray is not installed (one line naming ``option``).
+    """
     try:
         import ray
     except ImportError as err:
-        raise TrustAvAppError('--ray-address needs the optional dependency ray '
-                                  '(pip install ray)') from err
+        raise TrustAvAppError(f'{option} needs the optional dependency ray '
+                              '(pip install ray)') from err
     started = not ray.is_initialized()
     if started:
         with stop_handlers_kept():   # ray.init installs a SIGTERM handler of its own
-            ray.init(address=address, include_dashboard=False, log_to_driver=False)
+            ray.init(address=address, include_dashboard=False, log_to_driver=False, **init)
+    try:
+        yield ray
+    finally:
+        if started:
+            ray.shutdown()
+
+
+@contextlib.contextmanager
+def _ray_runner(address: str) -> Iterator[RunCalls]:
+    """:func:`call_runner` on Ray (a cluster this process joins for the block)."""
+    with joined_ray('--ray-address', address) as ray:
+        yield _on_ray(ray)
+
+
+def _on_ray(ray: Any) -> RunCalls:
     remotes: dict[Callable[..., Any], Any] = {}
 
     def on_ray(calls: Calls, progress: Callable[[int, int], None] | None) -> dict[Any, Any]:
@@ -312,8 +333,4 @@ def _ray_runner(address: str) -> Iterator[RunCalls]:
                 progress(len(out), total)
         return out
 
-    try:
-        yield on_ray
-    finally:
-        if started:
-            ray.shutdown()
+    return on_ray
