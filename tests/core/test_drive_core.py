@@ -180,6 +180,38 @@ def test_sessions_are_counterbalanced_resumed_and_withdrawn(tmp_path: Path) -> N
     assert 'P01' not in (tmp_path / 'study.json').read_text()
 
 
+def test_participants_who_enrol_at_once_get_a_row_each(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Eight participants enrol at the same instant (threads; each waits 20 ms between
+    reading the counter and writing it back, where two lab machines on one shared study folder
+    would interleave): eight rows, and the counter at eight."""
+    import threading
+    import time
+
+    from trust_av.drive import sessions
+    real = sessions._study_record
+
+    def slow_record(study: Path) -> tuple[int, str]:
+        record = real(study)
+        time.sleep(0.02)
+        return record
+    monkeypatch.setattr(sessions, '_study_record', slow_record)
+    enrol(tmp_path, 'P00', CONDITIONS)       # the study's id is written once, before the race
+    start = threading.Barrier(8)
+    rows: dict[str, int] = {}
+
+    def one(participant: str) -> None:
+        start.wait()
+        rows[participant] = enrol(tmp_path, participant, CONDITIONS).row
+    threads = [threading.Thread(target=one, args=(f'P{k:02d}',)) for k in range(1, 9)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert sorted(rows.values()) == list(range(1, 9)), rows
+    assert json.loads((tmp_path / 'study.json').read_text())['enrolled'] == 9
+
+
 @pytest.mark.parametrize('bad', ['', 'Jane Doe', '../x', 'a' * 33, '-x'])
 def test_participant_ids_are_pseudonyms(tmp_path: Path, bad: str) -> None:
     with pytest.raises(SessionError, match='participant id'):

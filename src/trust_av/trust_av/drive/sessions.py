@@ -15,7 +15,8 @@ Counterbalancing: the k-th participant enrolled gets row k of a balanced Latin s
 the conditions (Williams design: with n conditions every condition appears once in each
 position in n rows, and each ordered pair of neighbours once; for odd n, 2n rows, the
 second n reversed). After a withdrawal the enrolment counter keeps counting, so the next
-participant still gets the next row.
+participant still gets the next row, and two participants who enrol at the same instant
+get two rows (the counter is read and written under a lock on the study folder).
 
 A participant folder is created whole with its marker (:data:`MARKER`, made in a hidden
 folder beside it and renamed into place), and a participant id whose folder exists without
@@ -33,6 +34,7 @@ naming the holder's pid.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import os
 import re
@@ -268,13 +270,30 @@ def enrol(study: Path, participant: str, conditions: list[Condition], *,
         return existing
     study.mkdir(parents=True, exist_ok=True)
     _participant_folder(study, participant)
-    row, study_id = _study_record(study)
-    session = Session(participant, row,
-                      [names[i] for i in balanced_latin_square_row(len(names), row)],
-                      practice_done=not practice)
-    save_session(study, session)
-    _write_json(study / STUDY_FILE, json.dumps({'enrolled': row + 1, 'study': study_id}) + '\n')
+    with _enrolment_lock(study):    # one counter value per participant, also when two enrol
+        row, study_id = _study_record(study)
+        session = Session(participant, row,
+                          [names[i] for i in balanced_latin_square_row(len(names), row)],
+                          practice_done=not practice)
+        save_session(study, session)
+        _write_json(study / STUDY_FILE,
+                    json.dumps({'enrolled': row + 1, 'study': study_id}) + '\n')
     return session
+
+
+@contextlib.contextmanager
+def _enrolment_lock(study: Path) -> Iterator[None]:
+    """Hold the study's enrolment lock for the block: ``fcntl.flock`` on the study directory
+    itself (no file of its own to leave behind), waited for, as it is held only while the
+    counter in ``study.json`` is read and written. Two participants who enrol at the same
+    instant (two lab machines on one shared study folder) get two rows; without it both read
+    the same count."""
+    fd = os.open(study, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)                    # releases the lock
 
 
 def _study_record(study: Path) -> tuple[int, str]:
