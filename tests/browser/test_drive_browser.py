@@ -56,9 +56,11 @@ ABANDON_S = 5.0
 RATING_S = 2.0
 SESSION_DRIVE_S = 7.0
 """The synthetic session's drives: three rating prompts each (two answers are asked for)."""
-PRACTICE_S = 7.0
-"""The synthetic session's practice drive: rated once, its connection lost 3 s in, back a
-second or two later, and driven on."""
+PRACTICE_S = 12.0
+"""The synthetic session's practice drive: its connection lost half a second in, back a second
+or two later, driven on and rated. Each step waits on the page, not on a window, but the drive
+itself ends on time: everything up to the rating must fit in it, with room for a host that runs
+the page three times slower than an idle one (the reconnection alone waits 1 s)."""
 VIEWPORT = {'width': 800, 'height': 680}
 """Small enough to draw cheaply (the page redraws its canvas every display frame while
 driving: Chromium takes most of a drive's CPU, less the smaller the canvas), tall enough for
@@ -118,19 +120,20 @@ def test_a_synthetic_participant_completes_a_session_through_the_page(
         page.goto(drive.url)
         page.wait_for_selector('#start:not([hidden])', timeout=120_000)
         assert page.text_content('#title') == 'Practice drive'
-        # the practice drive: rated once, then the connection drops; the page reconnects
-        # and the drive goes on (the participant lets go of the pedal)
-        drive_once(page, who, rating=70, stop_after_s=3.0)
-        if not who.ratings:                # the prompt came as the participant stopped
-            page.wait_for_selector('#rating', state='visible', timeout=30_000)
-            page.locator('#rating-slider').fill('70')
-            page.click('#rating-submit')
-            who.ratings.append(70)
+        # the practice drive: the connection drops as soon as it drives; the page reconnects
+        # and the drive goes on (the participant lets go of the pedal), and the rating asked
+        # for (before the drop or after it: the server asks again) is answered
+        drive_once(page, who, rating=70, stop_after_s=0.5)
         page.mouse.up()
         page.evaluate('window.drive.ws.close()')
         page.wait_for_function("window.drive.phase === 'driving' && window.drive.ws"
                                '.readyState === 1 && window.drive.inputTimer !== null',
                                timeout=30_000)
+        if not who.ratings:
+            page.wait_for_selector('#rating', state='visible', timeout=30_000)
+            page.locator('#rating-slider').fill('70')
+            page.click('#rating-submit')
+            who.ratings.append(70)
         for _ in range(2):
             assert drive_once(page, who, rating=70, answers=ANSWERS) in ('ready', 'finished',
                                                                           'questionnaire')
@@ -297,8 +300,11 @@ for (const query of ['?token=' + location.hash.slice(1), '']) {
 }
 </script>"""
 """Another web page on this machine that knows the drive's port and even its token."""
-ROBUST_DRIVE_S = 16.0
-"""The misuse drive's length: every step below fits in it with time to spare under load."""
+ROBUST_DRIVE_S = 32.0
+"""The misuse drive's length. Each step waits on the page, but the drive ends on time, and
+every step up to the reopened tab's rating must fit in it: 16 s did on an idle host and not
+beside the rest of the suite on a host three times slower (the drive ended, and the reopened
+tab waited for a drive that was over)."""
 ROBUST_RATING_S = 3.0
 ROBUST = f"""/**/drive:
   ros__parameters:
@@ -342,9 +348,6 @@ def _shown(page: Any, selector: str) -> bool:
     return bool(page.locator(selector).is_visible())
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    'open defect: in the whole suite (2 of 2 runs, 2026-11-29) the reopened tab never took '
-    'control within 30 s; alone it passes in 32 s; to be found, not waited out'))
 def test_no_participant_second_tab_or_other_page_breaks_a_drive(
         tmp_path: Path, browser: Any) -> None:
     """One drive, every misuse in turn: a foreign page, a second tab, the gas held at the
