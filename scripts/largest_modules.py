@@ -44,6 +44,32 @@ def sizes(src: Path = SRC) -> list[Size]:
     return sorted(found, key=lambda s: (-s.lines, s.name))
 
 
+FUNCTION_LINES = 100
+"""A function longer than this needs a reason written beside it: a comment line
+``# over 100 lines: <why>`` right above its ``def`` (or its first decorator)."""
+REASON = '# over 100 lines:'
+
+
+def long_functions(src: Path = SRC, limit: int = FUNCTION_LINES) -> list[str]:
+    """Every function of the tree's packages over ``limit`` lines (docstring included) with
+    no reason written above it, as ``path:line name() N lines``."""
+    found = []
+    for path in module_files(src).values():
+        text = path.read_text(encoding='utf-8')
+        lines = text.splitlines()
+        for node in ast.walk(ast.parse(text, str(path))):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            assert node.end_lineno is not None
+            length = node.end_lineno - node.lineno + 1
+            first = min([node.lineno, *(d.lineno for d in node.decorator_list)])
+            above = lines[first - 2].strip() if first >= 2 else ''
+            if length > limit and not above.startswith(REASON):
+                found.append(f'{path.relative_to(src).as_posix()}:{node.lineno} '
+                             f'{node.name}() {length} lines')
+    return sorted(found)
+
+
 def report(src: Path = SRC, at_least: int = LOOK_AT_LINES) -> str:
     """The report: one line per module of at least ``at_least`` lines."""
     big = [s for s in sizes(src) if s.lines >= at_least]

@@ -266,3 +266,22 @@ def test_the_largest_modules_are_reported_not_refused(tmp_path: Path) -> None:
     listed = [int(line.split()[0]) for line in report[1:]]
     assert listed == sorted(listed, reverse=True) and min(listed) >= 400
     assert report[0].startswith(f'{len(listed)} modules of 400 lines or more')
+
+
+def test_no_function_over_100_lines_without_a_reason_beside_it(tmp_path: Path) -> None:
+    """A function of more than 100 lines (docstring included) in any package of the tree has
+    its reason written above its ``def`` (``# over 100 lines: ...``), or it is cut: none is
+    today. Planted: a long function is named with its length; the same with a reason is not."""
+    spec = importlib.util.spec_from_file_location(
+        'largest_modules', REPO / 'scripts' / 'largest_modules.py')
+    assert spec is not None and spec.loader is not None
+    largest = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(largest)
+    assert largest.long_functions() == []
+    body = '    pass\n' * 100
+    plant(tmp_path, {'preceding_traffic/preceding_traffic/planted_long.py':
+                     f'"""Two long ones."""\n\n\ndef long() -> None:\n{body}\n\n'
+                     f'# over 100 lines: one table, read top to bottom\n'
+                     f'def explained() -> None:\n{body}'})
+    assert largest.long_functions(tmp_path) == [
+        'preceding_traffic/preceding_traffic/planted_long.py:4 long() 101 lines']

@@ -186,6 +186,24 @@ class PlannerNode(PlannerInputs):
         self.frame = ''
         self.set_frame(self.frames.base_frame_id)
         self.markers = VehicleMarkers(shared.vehicle_length_m)
+        self.make_publishers()
+        inputs = self.subscribe_inputs(topics, recorded, wall)
+        self.loop = WallLoop(self, self.clock, self.wall_step) if wall else None
+        if not self.tuning:   # once: the values it guards stay declared across cleanup
+            enable_tuning(self, [Tunable(PlannerConfig, lambda: self.config, self.retune)], wall)
+            self.tuning = True
+        warm = self.warm_up() if wall and WARM_UP else ''
+
+        mode = f'wall clock at {self.clock.control_rate_hz:g} Hz' if wall else 'lock-step'
+        step_s, steps = self.planner.grid
+        self.ready_line = (f'ready ({mode}): predictor {self.config.predictor}, alpha '
+                           f'{self.config.alpha:g}, prediction grid {steps} x {step_s:g} s, '
+                           f'lead preview {self.config.lead_preview}, inputs '
+                           f'{", ".join(t for _, _, t in inputs if t)}{warm}')
+
+
+    def make_publishers(self) -> None:
+        """The planner's lifecycle publishers (plan, expected plan, command, status, markers)."""
         self.pub_plan = self.create_lifecycle_publisher(JointTrajectory, 'ego/plan',
                                               topic_qos('ego/plan', self.clock))
         self.pub_expected = self.create_lifecycle_publisher(JointTrajectory, 'ego/expected_plan',
@@ -196,6 +214,11 @@ class PlannerNode(PlannerInputs):
                                                 topic_qos('ego/planner_status', self.clock))
         self.pub_markers = self.create_lifecycle_publisher(MarkerArray, 'vehicle_markers',
                                                  topic_qos('vehicle_markers', self.clock))
+
+    def subscribe_inputs(self, topics: PlannerTopics, recorded: bool,
+                         wall: bool) -> tuple[tuple[str, type, str], ...]:
+        """Subscribe every input that has a topic (the preview only where it is used); the
+        inputs as (name, type, topic), an empty topic for one not subscribed."""
         inputs = (('traffic', Odometry, topics.lead_odom_topic),
                   ('preview', JointTrajectory,
                    topics.lead_preview_topic if recorded or not wall else ''),
@@ -211,18 +234,7 @@ class PlannerNode(PlannerInputs):
                     topic_qos(TABLE_TOPIC[name], self.clock), readers=not wall,
                     event_callbacks=input_events(self, name, self.missed, self.clock) if wall
                     else None)
-        self.loop = WallLoop(self, self.clock, self.wall_step) if wall else None
-        if not self.tuning:   # once: the values it guards stay declared across cleanup
-            enable_tuning(self, [Tunable(PlannerConfig, lambda: self.config, self.retune)], wall)
-            self.tuning = True
-        warm = self.warm_up() if wall and WARM_UP else ''
-
-        mode = f'wall clock at {self.clock.control_rate_hz:g} Hz' if wall else 'lock-step'
-        step_s, steps = self.planner.grid
-        self.ready_line = (f'ready ({mode}): predictor {self.config.predictor}, alpha '
-                           f'{self.config.alpha:g}, prediction grid {steps} x {step_s:g} s, '
-                           f'lead preview {self.config.lead_preview}, inputs '
-                           f'{", ".join(t for _, _, t in inputs if t)}{warm}')
+        return inputs
 
     def warm_up(self) -> str:
         """Take the first-use costs off the first active tick: the output templates of the

@@ -19,6 +19,7 @@ import yaml
 from human_driver_sim import irl
 from human_driver_sim.car_following import CarFollowingDataError, LoadReport
 from human_driver_sim.datasets import load_directory
+from human_driver_sim.driver_mpc import DriverConfig
 from human_driver_sim.evaluation import (
     ConstantSpeed,
     Evaluation,
@@ -278,27 +279,7 @@ def run(args: FitDriverOptions) -> int:
                       for protocol in ('full', 'window')} for name, ev in tests.items()}
     fit_time_s = time.perf_counter() - started
     document = {
-        'provenance': {
-            'data': [args.data.name] + ([args.ngsim.name] if args.ngsim is not None else []),
-            'split': 'OpenACC: part2 first 70 % of each segment train, the rest validation, '
-                     'part3 test; NGSIM by follower ID: 0 mod 4 train, 2 mod 4 validation, '
-                     'odd test. Candidates and the IDM fitted on train, the model selected '
-                     'on validation, test scored once',
-            'licence': 'JRC OpenACC database, CC BY 4.0, (c) European Union; NGSIM I-80, US '
-                       'DOT FHWA (public), chains from Keke-Long/PERL_planning (Apache-2.0). '
-                       'Changed: speeds from GNSS along-track positions, splices cut, '
-                       'resampled to dt_s; NGSIM windows merged, 4.5 m leaders assumed',
-            'method': 'bounded multi-start Nelder-Mead on the mean window (30 s) gap NRMSE, '
-                      'averaged over data sets, of W, tau_H, the desired standstill gap d_s '
-                      'and (not cautious) the caution a_extra (w_a = 1); IDM fitted the same '
-                      'way inside physical bounds; per-driver fits of the selected model from '
-                      'the pooled one (population); per-pair inverse KKT at the selected model',
-            'expected_leader_plan': 'constant acceleration at the last observed one',
-            'integrator': 'explicit Euler (longitudinal.step), as the MPC and the simulator',
-            'dt_s': base.dt_s, 'horizon_steps': n,
-            'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
-            'code_version': _code_version(), 'fit_time_s': round(fit_time_s, 1),
-            'iterations': args.iterations},
+        'provenance': _provenance(args, base, fit_time_s),
         'selected': selected,
         'pooled': {'weight_acceleration': 1.0, **chosen_params, 'cautious': chosen.cautious},
         'fit_loss': fits[selected].loss if selected in fits else None,
@@ -325,6 +306,40 @@ def run(args: FitDriverOptions) -> int:
                 for name, split in splits.items()},
             'selected': selected, 'validation_loss': validation, 'target': targets,
             'sets': {k: v.to_dict() for k, v in tests.items()}}), indent=1))
+    _report(validation, selected, tests, targets)
+    print(f'selected: {document["pooled"]}; fit time {fit_time_s:.1f} s; wrote {args.out} '
+          f'and {eval_path}')
+    return 0
+
+
+def _provenance(args: FitDriverOptions, base: DriverConfig, fit_time_s: float) -> dict[str, Any]:
+    """Where the fit comes from: data, split, licence, method, and this run."""
+    return {
+        'data': [args.data.name] + ([args.ngsim.name] if args.ngsim is not None else []),
+        'split': 'OpenACC: part2 first 70 % of each segment train, the rest validation, '
+                 'part3 test; NGSIM by follower ID: 0 mod 4 train, 2 mod 4 validation, '
+                 'odd test. Candidates and the IDM fitted on train, the model selected '
+                 'on validation, test scored once',
+        'licence': 'JRC OpenACC database, CC BY 4.0, (c) European Union; NGSIM I-80, US '
+                   'DOT FHWA (public), chains from Keke-Long/PERL_planning (Apache-2.0). '
+                   'Changed: speeds from GNSS along-track positions, splices cut, '
+                   'resampled to dt_s; NGSIM windows merged, 4.5 m leaders assumed',
+        'method': 'bounded multi-start Nelder-Mead on the mean window (30 s) gap NRMSE, '
+                  'averaged over data sets, of W, tau_H, the desired standstill gap d_s '
+                  'and (not cautious) the caution a_extra (w_a = 1); IDM fitted the same '
+                  'way inside physical bounds; per-driver fits of the selected model from '
+                  'the pooled one (population); per-pair inverse KKT at the selected model',
+        'expected_leader_plan': 'constant acceleration at the last observed one',
+        'integrator': 'explicit Euler (longitudinal.step), as the MPC and the simulator',
+        'dt_s': base.dt_s, 'horizon_steps': base.horizon_steps,
+        'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
+        'code_version': _code_version(), 'fit_time_s': round(fit_time_s, 1),
+        'iterations': args.iterations}
+
+
+def _report(validation: dict[str, dict[str, float]], selected: str,
+            tests: dict[str, Any], targets: dict[str, dict[str, dict[str, Any]]]) -> None:
+    """Print the validation losses, the selection, the test tables and the targets."""
     for name, losses in validation.items():
         print(f'validation {name}: ' + ', '.join(f'{k} {v:.4f}' for k, v in losses.items()))
     print(f'selected on validation: {selected}')
@@ -339,9 +354,6 @@ def run(args: FitDriverOptions) -> int:
                   f'({"met" if t["met"] else "not met"}, <= {TARGET_RATIO}); paired '
                   f'difference {d["mean"]:+.3f} ± {d["ci95"]:.3f} (MPC better on '
                   f'{d["better"]} of {d["pairs"]}); {platoon_interval(d)}')
-    print(f'selected: {document["pooled"]}; fit time {fit_time_s:.1f} s; wrote {args.out} '
-          f'and {eval_path}')
-    return 0
 
 
 def platoon_interval(difference: dict[str, Any]) -> str:

@@ -44,6 +44,7 @@ from trust_av.study.sweep import Case
 from trust_av.system.config import (
     DEFAULT_PARAMS_FILE,
     HUMAN_CAUTIOUS_PARAMS_FILE,
+    RunConfig,
     load_run_config,
 )
 from trust_av.system.output_sets import writing_set
@@ -259,44 +260,9 @@ def run(args: ReproduceOptions) -> int:
             print(f"Tables II-IV and Figure 3 are the paper's: {len(results)} of {len(cases)} "
                   f"cases, the params file's follower {config.follower.driver_model} and trust "
                   f'model {trust_model}; every trust model and follower is in by_trace/<trace>/')
-        written = ['all_runs.csv']
         if not results:
             return _no_paper_table(cases, runner, elapsed, out)
-        if args.drivers:
-            alpha_table, improvement_table = (tables.population_alpha_table,
-                                              tables.population_improvement_table)
-            summary = population.population_mean(results)  # trends and Figure 3 on the means
-        else:
-            alpha_table, improvement_table = tables.alpha_table, tables.improvement_table
-            summary = results
-        if 'us06' in args.traces:
-            for predictor, name, paper in (
-                    ('gru', 'table_II_tac_gru_us06', TABLE_II_TAC_GRU_US06),
-                    ('ca', 'table_III_tac_ca_us06', TABLE_III_TAC_CA_US06)):
-                if predictor in args.predictors:
-                    us06_steps = load_trace('us06', config.planner.dt_s, config.trace).steps
-                    # The bound column is derived from the paper's update: only for a model
-                    # that declares it runs that update (model_interface.paper_bound_holds).
-                    bound = ((us06_steps, config.trust)
-                             if paper_bound_holds(config.trust_model()) else None)
-                    tables.write_rows(new / name, *alpha_table(results, 'us06', predictor,
-                                                               paper, bound), note=note)
-                    written.append(f'{name}.md')
-        tables.write_rows(new / 'table_IV_max_improvements',
-                          *improvement_table(results, args.traces, args.predictors), note=note)
-        written.append('table_IV_max_improvements.md')
-        traces = [load_trace(t, config.planner.dt_s, config.trace) for t in args.traces]
-        speed_profiles(traces, new / 'figure_2_speed_profiles.png')
-        written.append('figure_2_speed_profiles.png')
-        if 'us06' in args.traces:
-            series = {f'TAC-{p.upper()}': {a: (summary[Case('us06', p, a)]['time_s'],
-                                               summary[Case('us06', p, a)]['trust'])
-                                           for a in args.alphas}
-                      for p in args.predictors}
-            trust_over_time(series, 'us06', new / 'figure_3_trust_us06.png',
-                            trust_ceiling(config.trust_model()), note=note)
-            written.append('figure_3_trust_us06.png')
-
+        written, summary = _paper_outputs(args, config, new, results, note)
         for path in written:
             if path.endswith('.md'):
                 print(f'\n## {path}\n' + (new / path).read_text())
@@ -323,6 +289,50 @@ def run(args: ReproduceOptions) -> int:
     if args.graph:
         print(f'graph recordings (MCAP, one per case): {out / "graph_bags"}/')
     return 0
+
+
+def _paper_outputs(args: ReproduceOptions, config: RunConfig, new: Path,
+                   results: dict[Case, dict[str, Any]], note: str
+                   ) -> tuple[list[str], dict[Case, dict[str, Any]]]:
+    """The paper's Tables II-IV and Figures 2-3 written into ``new``: the names written
+    (``all_runs.csv`` first) and the results their trends are read from (a population's
+    means, or the cases themselves)."""
+    written = ['all_runs.csv']
+    if args.drivers:
+        alpha_table, improvement_table = (tables.population_alpha_table,
+                                          tables.population_improvement_table)
+        summary = population.population_mean(results)  # trends and Figure 3 on the means
+    else:
+        alpha_table, improvement_table = tables.alpha_table, tables.improvement_table
+        summary = results
+    if 'us06' in args.traces:
+        for predictor, name, paper in (
+                ('gru', 'table_II_tac_gru_us06', TABLE_II_TAC_GRU_US06),
+                ('ca', 'table_III_tac_ca_us06', TABLE_III_TAC_CA_US06)):
+            if predictor in args.predictors:
+                us06_steps = load_trace('us06', config.planner.dt_s, config.trace).steps
+                # The bound column is derived from the paper's update: only for a model
+                # that declares it runs that update (model_interface.paper_bound_holds).
+                bound = ((us06_steps, config.trust)
+                         if paper_bound_holds(config.trust_model()) else None)
+                tables.write_rows(new / name, *alpha_table(results, 'us06', predictor,
+                                                           paper, bound), note=note)
+                written.append(f'{name}.md')
+    tables.write_rows(new / 'table_IV_max_improvements',
+                      *improvement_table(results, args.traces, args.predictors), note=note)
+    written.append('table_IV_max_improvements.md')
+    traces = [load_trace(t, config.planner.dt_s, config.trace) for t in args.traces]
+    speed_profiles(traces, new / 'figure_2_speed_profiles.png')
+    written.append('figure_2_speed_profiles.png')
+    if 'us06' in args.traces:
+        series = {f'TAC-{p.upper()}': {a: (summary[Case('us06', p, a)]['time_s'],
+                                           summary[Case('us06', p, a)]['trust'])
+                                       for a in args.alphas}
+                  for p in args.predictors}
+        trust_over_time(series, 'us06', new / 'figure_3_trust_us06.png',
+                        trust_ceiling(config.trust_model()), note=note)
+        written.append('figure_3_trust_us06.png')
+    return written, summary
 
 
 def _no_paper_table(cases: Sequence[Case], runner: str, elapsed: float, out: Path) -> int:

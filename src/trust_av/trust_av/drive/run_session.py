@@ -9,13 +9,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
+from human_driver_sim.follower_plant import FollowerConfig
 from preceding_traffic.sources import load_trace
 from trust_av.drive.gate import INPUT_BURST, Gate
 from trust_av.drive.graph_run import run_drive
 from trust_av.drive.link import DriveLink, code_version
 from trust_av.drive.server import DriveServer
-from trust_av.drive.sessions import PRACTICE, DriveRecord
+from trust_av.drive.sessions import PRACTICE, Condition, DriveRecord
 from trust_av.drive.study import (
+    DriveConfig,
     comparison_csv,
     comparison_text,
     drive_summary,
@@ -25,7 +27,7 @@ from trust_av.drive.study import (
     record_drive,
 )
 from trust_av.drive.trust_rating import registered_models
-from trust_av.system.config import load_run_config
+from trust_av.system.config import RunConfig, load_run_config
 from trust_av_common import output_files
 from trust_av_common.params import ParamsError
 from trust_av_planner.planner_params import check_control_rate
@@ -55,6 +57,28 @@ class SessionOptions(Protocol):
     def params_files(self) -> tuple[Path, ...]: ...
 
 
+def _checked_settings(args: SessionOptions) -> tuple[DriveConfig, FollowerConfig,
+                                                     list[Condition],
+                                                     RunConfig, dict[str, RunConfig]]:
+    """The drive file's settings and every condition's run configuration, each checked
+    (trace and control rate included) before anything starts."""
+    drive, follower, conditions = load_drive_settings(args.drive_file)
+    if args.port is not None:
+        if not 0 <= args.port <= 65535:
+            raise ParamsError(f'--port must be in [0, 65535], got {args.port}')
+        drive = dataclasses.replace(drive, port=args.port)
+    base = load_run_config(args.params_files)
+    rate_hz = base.clock.control_rate_hz
+    configs: dict[str, RunConfig] = {}
+    for listed in conditions:      # every condition is checked before anything starts
+        configs[listed.name] = load_run_config(args.params_files, {'planner': {
+            'alpha': listed.alpha, 'predictor': listed.predictor,
+            'perturbation': listed.perturbation}})
+        load_trace(listed.trace, base.planner.dt_s, base.trace)
+        check_control_rate(configs[listed.name].planner, rate_hz)
+    return drive, follower, conditions, base, configs
+
+
 def run_session(args: SessionOptions) -> int:
     """Run the participant's remaining drives (see ``trust-av drive --help``).
 
@@ -63,19 +87,8 @@ def run_session(args: SessionOptions) -> int:
         SessionError: bad participant id or a complete session.
         GraphError: the nodes did not connect or one died.
     """
-    drive, follower, conditions = load_drive_settings(args.drive_file)
-    if args.port is not None:
-        if not 0 <= args.port <= 65535:
-            raise ParamsError(f'--port must be in [0, 65535], got {args.port}')
-        drive = dataclasses.replace(drive, port=args.port)
-    base = load_run_config(args.params_files)
-    rate_hz, configs = base.clock.control_rate_hz, {}
-    for listed in conditions:      # every condition is checked before anything starts
-        configs[listed.name] = load_run_config(args.params_files, {'planner': {
-            'alpha': listed.alpha, 'predictor': listed.predictor,
-            'perturbation': listed.perturbation}})
-        load_trace(listed.trace, base.planner.dt_s, base.trace)
-        check_control_rate(configs[listed.name].planner, rate_hz)
+    drive, follower, conditions, base, configs = _checked_settings(args)
+    rate_hz = base.clock.control_rate_hz
     by_name = {c.name: c for c in conditions}
     link = DriveLink(Gate(rate_hz, follower.accel_min_mps2, follower.accel_max_mps2))
     # The page's server thread and the recording loop share the GIL: a 1 ms switch interval

@@ -263,6 +263,53 @@ def repair_bag(path: Path) -> int:
     return repair(path).messages
 
 
+def _write_copy(staging: Path, target: Path, found: _Records,
+                topics: dict[int, tuple[str, str, list[Qos]]], kept_messages: list[Message],
+                unused_schemas: list[Schema], ours: bool) -> list[tuple[str, int, bytes]]:
+    """Write the repaired bag at ``staging``: every topic, unused schema, attachment and
+    metadata record, and the kept messages (a recording of ours re-cut into one chunk per
+    step, another tool's keeping its log times); what was written, (topic, log time, data)
+    per message, for :func:`_verify`.
+
+    Raises:
+        BagWriteError: no room on the disk for it (the recording is not changed).
+    """
+    expected: list[tuple[str, int, bytes]] = []
+    writer = BagWriter(staging, copy_of=None if ours else found.library)
+    for topic, msgtype, qos in topics.values():
+        # every publisher's offered profile, as recorded (rosbag2 writes one per publisher)
+        writer.add_topic(topic, msgtype,
+                         qos or qos_profile(reliable=True, transient_local=False, depth=10))
+    for schema in unused_schemas:
+        writer.add_schema(schema.name, schema.encoding, schema.data)
+    for attachment in found.attachments:
+        writer.add_attachment(attachment.name, attachment.media_type, attachment.data,
+                              log_time_ns=attachment.log_time,
+                              create_time_ns=attachment.create_time)
+    for record in found.metadata:
+        if record.name != 'rosbag2':     # the bag's own: written anew for the copy
+            writer.add_metadata(record.name, dict(record.metadata))
+    step_time = None
+    in_chunk = 0
+    for message in sorted(kept_messages, key=lambda m: m.log_time):
+        topic = topics[message.channel_id][0]
+        if ours and step_time is not None and message.log_time != step_time:
+            writer.end_step()
+        elif not ours and in_chunk >= FOREIGN_CHUNK_MESSAGES:
+            writer.end_step()
+            in_chunk = 0
+        log_time = writer.write(topic, message.data,
+                                None if ours else message.log_time)
+        expected.append((topic, log_time, bytes(message.data)))
+        step_time = message.log_time
+        in_chunk += 1
+    writer.finish()
+    if writer.disk_full:
+        raise BagWriteError(f'{target}: no room to repair the bag ({writer.disk_full}); '
+                            'nothing was changed')
+    return expected
+
+
 def repair(path: Path) -> Repaired:
     """Rewrite a recording left unfinished (a killed recorder, a machine crash) into a
     complete bag directory, in place: every message of every complete chunk is kept.
@@ -322,43 +369,12 @@ def repair(path: Path) -> Repaired:
     shutil.rmtree(workspace, ignore_errors=True)
     workspace.mkdir()
     staging = workspace / target.name
-    expected: list[tuple[str, int, bytes]] = []
     used_schemas = {channel.schema_id for channel in found.channels.values()}
     unused_schemas = [schema for sid, schema in sorted(found.schemas.items())
                       if sid not in used_schemas]
     try:
-        writer = BagWriter(staging, copy_of=None if ours else found.library)
-        for topic, msgtype, qos in topics.values():
-            # every publisher's offered profile, as recorded (rosbag2 writes one per publisher)
-            writer.add_topic(topic, msgtype,
-                             qos or qos_profile(reliable=True, transient_local=False, depth=10))
-        for schema in unused_schemas:
-            writer.add_schema(schema.name, schema.encoding, schema.data)
-        for attachment in found.attachments:
-            writer.add_attachment(attachment.name, attachment.media_type, attachment.data,
-                                  log_time_ns=attachment.log_time,
-                                  create_time_ns=attachment.create_time)
-        for record in found.metadata:
-            if record.name != 'rosbag2':     # the bag's own: written anew for the copy
-                writer.add_metadata(record.name, dict(record.metadata))
-        step_time = None
-        in_chunk = 0
-        for message in sorted(kept_messages, key=lambda m: m.log_time):
-            topic = topics[message.channel_id][0]
-            if ours and step_time is not None and message.log_time != step_time:
-                writer.end_step()
-            elif not ours and in_chunk >= FOREIGN_CHUNK_MESSAGES:
-                writer.end_step()
-                in_chunk = 0
-            log_time = writer.write(topic, message.data,
-                                    None if ours else message.log_time)
-            expected.append((topic, log_time, bytes(message.data)))
-            step_time = message.log_time
-            in_chunk += 1
-        writer.finish()
-        if writer.disk_full:
-            raise BagWriteError(f'{target}: no room to repair the bag ({writer.disk_full}); '
-                                'nothing was changed')
+        expected = _write_copy(staging, target, found, topics, kept_messages,
+                               unused_schemas, ours)
         _verify(staging, expected, found)
         _swap_into_place(path, staging, target, workspace / 'old')
     finally:
