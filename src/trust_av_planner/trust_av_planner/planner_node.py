@@ -35,6 +35,7 @@ from __future__ import annotations
 import functools
 import sys
 import time
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -204,16 +205,13 @@ class PlannerNode(PlannerInputs):
 
     def make_publishers(self) -> None:
         """The planner's lifecycle publishers (plan, expected plan, command, status, markers)."""
-        self.pub_plan = self.create_lifecycle_publisher(JointTrajectory, 'ego/plan',
-                                              topic_qos('ego/plan', self.clock))
-        self.pub_expected = self.create_lifecycle_publisher(JointTrajectory, 'ego/expected_plan',
-                                                  topic_qos('ego/expected_plan', self.clock))
-        self.pub_accel = self.create_lifecycle_publisher(AccelStamped, 'ego/accel_cmd',
-                                               topic_qos('ego/accel_cmd', self.clock))
-        self.pub_status = self.create_lifecycle_publisher(DiagnosticArray, 'ego/planner_status',
-                                                topic_qos('ego/planner_status', self.clock))
-        self.pub_markers = self.create_lifecycle_publisher(MarkerArray, 'vehicle_markers',
-                                                 topic_qos('vehicle_markers', self.clock))
+        def publisher(msgtype: type, topic: str) -> Any:   # rclpy's method is unannotated
+            return self.create_lifecycle_publisher(msgtype, topic, topic_qos(topic, self.clock))
+        self.pub_plan = publisher(JointTrajectory, 'ego/plan')
+        self.pub_expected = publisher(JointTrajectory, 'ego/expected_plan')
+        self.pub_accel = publisher(AccelStamped, 'ego/accel_cmd')
+        self.pub_status = publisher(DiagnosticArray, 'ego/planner_status')
+        self.pub_markers = publisher(MarkerArray, 'vehicle_markers')
 
     def subscribe_inputs(self, topics: PlannerTopics, recorded: bool,
                          wall: bool) -> tuple[tuple[str, type, str], ...]:
