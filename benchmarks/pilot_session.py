@@ -32,6 +32,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -70,6 +71,9 @@ def drive_session(settings: Path, study: Path, start_wait_s: float) -> dict[str,
     if url is None:
         process.terminate()
         raise SystemExit(f'pilot_session: trust-av drive printed no URL: {first.strip()}')
+    lines: list[str] = []               # read as it comes: a full pipe would stop the drive
+    reader = threading.Thread(target=lambda: lines.extend(process.stdout or ()), daemon=True)
+    reader.start()
     who = Participant()
     phases = []
     with sync_playwright() as playwright:
@@ -84,7 +88,9 @@ def drive_session(settings: Path, study: Path, start_wait_s: float) -> dict[str,
             phases.append(drive_once(page, who, rating=60, until_s=900.0))
         page.wait_for_function("window.drive.phase === 'finished'", timeout=120_000)
         browser.close()
-    output = process.communicate(timeout=300)[0]
+    process.wait(timeout=300)
+    reader.join(timeout=30)
+    output = ''.join(lines)
     if process.returncode != 0:
         raise SystemExit(f'pilot_session: trust-av drive exit {process.returncode}:\n{output}')
     return {'ratings_given': len(who.ratings), 'questionnaires': who.questionnaires,
