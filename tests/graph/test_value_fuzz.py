@@ -62,13 +62,32 @@ class Drive:
     start_s: float = 0.0
 
 
+def activated_with_inputs(manager: Any) -> dict[str, Any]:
+    """A publisher on each of the planner's inputs (wall mode's QoS), once the node has
+    subscribed all of them; the node activated."""
+    from geometry_msgs.msg import Vector3Stamped
+    from nav_msgs.msg import Odometry
+    from trajectory_msgs.msg import JointTrajectory
+
+    from trust_av_common.ros.qos import topic_qos
+    from trust_av_common.wall_clock import WallClockConfig
+
+    wall = WallClockConfig(clock_mode='wall')
+    types = {'traffic': Odometry, 'preview': JointTrajectory, 'ego': Odometry,
+             'human': Odometry, 'trust': Vector3Stamped}
+    pubs = {name: manager.node.create_publisher(
+        types[name], topic, topic_qos(topic, wall, publisher=True))
+        for name, topic in INPUTS.items()}
+    assert manager.spin_until(lambda: all(p.get_subscription_count() for p in pubs.values()))
+    assert manager.transition(ACTIVATE)
+    return pubs
+
+
 @pytest.fixture(scope='module')
 def drive(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Drive]:
     from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import AccelStamped, Vector3Stamped
-    from nav_msgs.msg import Odometry
+    from geometry_msgs.msg import AccelStamped
     from rclpy.qos import QoSProfile
-    from trajectory_msgs.msg import JointTrajectory
 
     from trust_av_common.ros.diagnostics import QOS
     from trust_av_common.ros.qos import topic_qos
@@ -89,14 +108,7 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Drive]:
                 manager.record(msgtype, topic, QoSProfile(
                     depth=1000, reliability=topic_qos(topic, wall).reliability))
             manager.record(DiagnosticArray, '/diagnostics', QOS)
-            types = {'traffic': Odometry, 'preview': JointTrajectory, 'ego': Odometry,
-                     'human': Odometry, 'trust': Vector3Stamped}
-            pubs = {name: manager.node.create_publisher(
-                types[name], topic, topic_qos(topic, wall, publisher=True))
-                for name, topic in INPUTS.items()}
-            assert manager.spin_until(lambda: all(p.get_subscription_count()
-                                                  for p in pubs.values()))
-            assert manager.transition(ACTIVATE)
+            pubs = activated_with_inputs(manager)
             yield Drive(manager, pubs, manager.received['ego/accel_cmd'],
                         manager.received['ego/planner_status'],
                         manager.received['/diagnostics'], start_s=time.monotonic())
@@ -177,6 +189,9 @@ def arbitrary(draw: Any, name: str) -> Any:
 
 
 def problem(name: str, msg: Any) -> str:
+    """Why the planner must refuse ``msg`` on input ``name`` within the shipped ranges: the
+    test's own statement of which field each input is checked on (not the node's code, so a
+    node that stops checking an input fails here)."""
     from trust_av_common.envelope import (
         InputRanges,
         odometry_problem,
@@ -218,9 +233,7 @@ def test_an_internal_error_while_active_hands_over_reports_and_waits_inactive(
     the hand-over command on the wire right after the last planned one, ERROR on
     ``/diagnostics`` naming it, the node inactive; activated again, it plans again."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-    from geometry_msgs.msg import AccelStamped, Vector3Stamped
-    from nav_msgs.msg import Odometry
-    from trajectory_msgs.msg import JointTrajectory
+    from geometry_msgs.msg import AccelStamped
 
     from trust_av_common.ros.diagnostics import QOS
     from trust_av_common.ros.qos import topic_qos
@@ -235,14 +248,7 @@ def test_an_internal_error_while_active_hands_over_reports_and_waits_inactive(
         try:
             manager.record(AccelStamped, 'ego/accel_cmd', topic_qos('ego/accel_cmd', wall))
             manager.record(DiagnosticArray, '/diagnostics', QOS)
-            types = {'traffic': Odometry, 'preview': JointTrajectory, 'ego': Odometry,
-                     'human': Odometry, 'trust': Vector3Stamped}
-            pubs = {name: manager.node.create_publisher(
-                types[name], topic, topic_qos(topic, wall, publisher=True))
-                for name, topic in INPUTS.items()}
-            assert manager.spin_until(lambda: all(p.get_subscription_count()
-                                                  for p in pubs.values()))
-            assert manager.transition(ACTIVATE)
+            pubs = activated_with_inputs(manager)
             start_s = time.monotonic()
             commands = manager.received['ego/accel_cmd']
             diagnostics = manager.received['/diagnostics']
