@@ -30,16 +30,21 @@ class Size(NamedTuple):
     longest_lines: int
 
 
+def functions(text: str, path: Path) -> list[tuple[int, ast.FunctionDef | ast.AsyncFunctionDef]]:
+    """Every function of a module's source, with its lines (docstring included)."""
+    return [(node.end_lineno - node.lineno + 1, node)
+            for node in ast.walk(ast.parse(text, str(path)))
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and node.end_lineno is not None]
+
+
 def sizes(src: Path = SRC) -> list[Size]:
     """Every module of the tree's packages, largest first."""
     found = []
     for name, path in module_files(src).items():
         text = path.read_text(encoding='utf-8')
-        functions = [(node.end_lineno - node.lineno + 1, node.name)
-                     for node in ast.walk(ast.parse(text, str(path)))
-                     if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
-                     and node.end_lineno is not None]
-        longest_lines, longest = max(functions, default=(0, ''))
+        longest_lines, longest = max(((length, node.name) for length, node
+                                      in functions(text, path)), default=(0, ''))
         found.append(Size(name, path, len(text.splitlines()), longest, longest_lines))
     return sorted(found, key=lambda s: (-s.lines, s.name))
 
@@ -57,11 +62,7 @@ def long_functions(src: Path = SRC, limit: int = FUNCTION_LINES) -> list[str]:
     for path in module_files(src).values():
         text = path.read_text(encoding='utf-8')
         lines = text.splitlines()
-        for node in ast.walk(ast.parse(text, str(path))):
-            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                continue
-            assert node.end_lineno is not None
-            length = node.end_lineno - node.lineno + 1
+        for length, node in functions(text, path):
             first = min([node.lineno, *(d.lineno for d in node.decorator_list)])
             above = lines[first - 2].strip() if first >= 2 else ''
             if length > limit and not above.startswith(REASON):
