@@ -90,6 +90,13 @@ def vehicle(args: argparse.Namespace) -> int:
         'loops': {name: {'ticks': loop['ticks'], 'jitter_ms': loop['jitter_ms'],
                          'compute_ms': loop['compute_ms']}
                   for name, loop in data['loops'].items()}}
+    ticks = data['ticks']
+    fresh = sum(t['command_age_s'] is not None for t in ticks)
+    figures['vehicle_ticks'] = len(ticks)
+    figures['ticks_with_a_fresh_command'] = fresh
+    figures['command_deadline_s'] = data['command_deadline_s']
+    print(f'the vehicle applied a command no older than {data["command_deadline_s"]:g} s on '
+          f'{fresh} of {len(ticks)} ticks ({100 * fresh / max(len(ticks), 1):.1f} %)')
     return report(args, figures, 'vehicle in the loop (stand-in vehicle, commute_am)')
 
 
