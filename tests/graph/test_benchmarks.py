@@ -256,3 +256,19 @@ def test_component_checks_benchmark_smoke(tmp_path: Path) -> None:
     assert figures['steps'] == 5 and figures['step_ms_median'] > 0
     assert figures['component_calls_checked_us_per_step'] > 0
     assert 'checks_percent_of_step' in figures
+
+
+def test_bag_writer_memory_benchmark_smoke(tmp_path: Path) -> None:
+    """bench_bag_writer.py --memory on 600 steps split every 100: both recordings run in their
+    own process and their slopes are written (no threshold: the figure is the benchmark's)."""
+    out = tmp_path / 'memory.json'
+    proc = subprocess.run([sys.executable, str(REPO / 'benchmarks' / 'bench_bag_writer.py'),
+                           '--memory', '--steps', '600', '--topics', '2',
+                           '--max-chunks-per-file', '100', '--out', str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    figures = json.loads(out.read_text())
+    assert (figures['split']['files'], figures['one file']['files']) == (7, 1)
+    assert all(len(figures[label]['samples']) == 2 and 'slope_kb_per_step' in figures[label]
+               for label in ('split', 'one file'))
+    assert 'kB/step' in proc.stdout

@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 from support.bags import QOS, fail_commit, odometry, record
@@ -32,7 +33,7 @@ from support.rosbag2_rules import check_bag_directory  # the test-side oracle mo
 
 from trust_av.errors import TrustAvAppError
 from trust_av.graph import bag_writer, mcap_steps
-from trust_av.graph.bag_repair import _swap_into_place, repair_bag
+from trust_av.graph.bag_repair import _swap_into_place, mcap_files, repair_bag
 from trust_av.graph.bag_writer import BagWriteError, BagWriter
 from trust_av.graph.domains import lease_domain
 from trust_av.graph.processes import GraphError
@@ -202,6 +203,80 @@ def test_a_real_full_disk(small_disk: Path) -> None:
     assert 'disk full' in writer.disk_full and writer.steps > 10
     assert check_bag_directory(bag) == []
     assert sorted(p.name for p in bag.iterdir()) == ['metadata.yaml', 'run.mcap']
+
+
+def test_a_long_recording_goes_on_in_numbered_files_rosbag2_reads_in_order(
+        tmp_path: Path) -> None:
+    """After max_chunks_per_file steps the file is finished and the next begins: rosbag2's
+    split, every file complete with its own summary, metadata.yaml listing them in order
+    with each one's messages and span (rosbag2's reader rules, tests/support/rosbag2_rules.py)."""
+    bag = tmp_path / 'long'
+    writer = BagWriter(bag, max_chunks_per_file=4)
+    record(writer, 10)
+    assert writer.files == ['long.mcap', 'long_1.mcap', 'long_2.mcap']
+    assert sorted(p.name for p in bag.iterdir()) == sorted([*writer.files, 'metadata.yaml'])
+    assert check_bag_directory(bag) == []
+    assert counts(bag) == {'/a/odom': 10, '/b/odom': 10}
+    chunks = []
+    for name in writer.files:
+        with (bag / name).open('rb') as handle:
+            summary = make_reader(handle).get_summary()
+        assert summary is not None and summary.statistics is not None
+        chunks.append(summary.statistics.chunk_count)
+        assert sorted(c.topic for c in summary.channels.values()) == ['/a/odom', '/b/odom']
+    assert chunks == [4, 4, 2]
+    with Reader(bag) as reader:          # rosbags: the files one after the other, in order
+        stamps = [stamp for _, stamp, _ in reader.messages()]
+    assert stamps == sorted(stamps) and len(stamps) == 20
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert [(f['path'], f['message_count'], f['starting_time']['nanoseconds_since_epoch'])
+            for f in info['files']] == [('long.mcap', 8, 100 * 10**9),
+                                        ('long_1.mcap', 8, 104 * 10**9),
+                                        ('long_2.mcap', 4, 108 * 10**9)]
+
+
+def test_a_killed_split_recording_is_repaired_whole(tmp_path: Path) -> None:
+    """Killed in its twelfth file (no metadata.yaml, the last file without a summary): the
+    repair reads the files by their numbers (long_10 after long_9, not after long_1) and
+    keeps every complete step of every file."""
+    bag = tmp_path / 'killed'
+    writer = BagWriter(bag, max_chunks_per_file=1)
+    record(writer, 12, finish=False)
+    writer.write('/a/odom', odometry(112 * 10**9, 12.0))   # a step not yet ended: lost
+    assert not (bag / 'metadata.yaml').exists()
+    assert [file.name for file in mcap_files(bag)] == [
+        'killed.mcap', *(f'killed_{n}.mcap' for n in range(1, 13))]
+    assert repair_bag(bag) == 24
+    assert check_bag_directory(bag) == []
+    assert counts(bag) == {'/a/odom': 12, '/b/odom': 12}
+    other = tmp_path / 'other'                 # files of no known order, and no metadata.yaml
+    other.mkdir()
+    for name in ('a.mcap', 'b.mcap'):
+        shutil.copy(bag / 'killed.mcap', other / name)
+    with pytest.raises(BagWriteError, match='cannot tell the order of its 2 MCAP files'):
+        repair_bag(other)
+
+
+def test_a_full_disk_at_the_next_file_finishes_the_bag_with_the_files_before(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The next file cannot be created (a full disk): it is not left behind, and the bag is
+    finished with every step of the files before it."""
+    create = mcap_steps.WholeWrites.__init__
+
+    def full(handle: mcap_steps.WholeWrites, path: Path) -> None:
+        if path.name != 'full.mcap':
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        create(handle, path)
+
+    monkeypatch.setattr(mcap_steps.WholeWrites, '__init__', full)
+    writer = BagWriter(tmp_path / 'full', max_chunks_per_file=3)
+    record(writer, 5, finish=False)
+    assert writer.finished and writer.steps == 3
+    assert 'cannot start its next file full_1.mcap (No space left on device)' in writer.disk_full
+    assert sorted(p.name for p in (tmp_path / 'full').iterdir()) == ['full.mcap',
+                                                                     'metadata.yaml']
+    assert check_bag_directory(tmp_path / 'full') == []
+    assert counts(tmp_path / 'full') == {'/a/odom': 3, '/b/odom': 3}
 
 
 def test_the_reserve_always_pays_for_the_summary_and_grows_every_64_steps(

@@ -23,7 +23,7 @@ from typing import Any
 import yaml
 from rosbags.interfaces import Qos
 
-__all__ = ['BagInfo', 'TopicInfo', 'qos_text']
+__all__ = ['BagInfo', 'FileInfo', 'TopicInfo', 'qos_text']
 
 METADATA_VERSION = 9
 """rosbag2 metadata version written (Jazzy's)."""
@@ -71,10 +71,30 @@ class TopicInfo:
 
 
 @dataclass
-class BagInfo:
-    """What ``metadata.yaml`` says of a finished bag."""
+class FileInfo:
+    """One MCAP file of a bag: what its ``files`` entry says (rosbag2's ``FileInformation``:
+    ``metadata_io.cpp`` ``convert<FileInformation>``)."""
 
-    mcap_name: str
+    path: str
+    """its name, relative to the bag directory"""
+    start_ns: int = 0
+    end_ns: int = 0
+    count: int = 0
+
+    def document(self) -> dict[str, Any]:
+        """The ``files[]`` mapping."""
+        return {'path': self.path,
+                'starting_time': {'nanoseconds_since_epoch': self.start_ns},
+                'duration': {'nanoseconds': max(0, self.end_ns - self.start_ns)},
+                'message_count': self.count}
+
+
+@dataclass
+class BagInfo:
+    """What ``metadata.yaml`` says of a finished bag: its files in order (rosbag2 reads them
+    one after the other), its topics, its time span and ``custom_data``."""
+
+    files: list[FileInfo]
     topics: list[TopicInfo] = field(default_factory=list)
     start_ns: int = 0
     end_ns: int = 0
@@ -87,7 +107,7 @@ class BagInfo:
         return {
             'version': METADATA_VERSION,
             'storage_identifier': 'mcap',
-            'relative_file_paths': [self.mcap_name],
+            'relative_file_paths': [file.path for file in self.files],
             'duration': {'nanoseconds': duration},
             'starting_time': {'nanoseconds_since_epoch': self.start_ns},
             'message_count': count,
@@ -100,10 +120,7 @@ class BagInfo:
                 for topic in self.topics],
             'compression_format': '',
             'compression_mode': '',
-            'files': [{'path': self.mcap_name,
-                       'starting_time': {'nanoseconds_since_epoch': self.start_ns},
-                       'duration': {'nanoseconds': duration},
-                       'message_count': count}],
+            'files': [file.document() for file in self.files],
             'custom_data': dict(self.custom_data) or None,
             'ros_distro': ROS_DISTRO,
         }

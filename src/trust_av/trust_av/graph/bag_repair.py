@@ -1,7 +1,10 @@
 """Repair of a recording whose writer did not finish (a killed recorder, a machine crash):
 every message of every complete MCAP chunk is kept (the graph writes one chunk per step,
 :mod:`~trust_av.graph.bag_writer`), rewritten into a complete rosbag2 directory that
-replaces the recording only once it is whole.
+replaces the recording only once it is whole. A recording split into several MCAP files
+(rosbag2's split; the graph's after ``MAX_CHUNKS_PER_FILE`` steps) is read file after file,
+in ``metadata.yaml``'s order or, without it, by the files' numbers (``<bag>.mcap``, then
+``<bag>_1.mcap``, ...; rosbag2's ``<bag>_0.mcap``, ``<bag>_1.mcap``, ...).
 
 A complete recording is never rewritten. Complete is MCAP's own rule (the specification,
 https://mcap.dev/spec: a file is the magic, the header, the data section, the optional summary
@@ -18,9 +21,10 @@ topic at its log time, with every attachment and metadata record."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import yaml
@@ -38,27 +42,56 @@ from trust_av.graph.mcap_steps import RECORDER_LIBRARY
 from trust_av_common.errors import one_line
 from trust_av_common.output_files import stop_signals_held
 
-__all__ = ['complete_mcap', 'repair', 'repair_bag', 'written_here']
+__all__ = ['complete_mcap', 'mcap_files', 'repair', 'repair_bag', 'written_here']
 
 FOREIGN_CHUNK_MESSAGES = 1000
 """Messages per chunk in the repaired copy of another tool's bag (it has no steps)."""
 
 
-def mcap_file(path: Path) -> Path:
-    """The MCAP file of a bag directory (or ``path`` itself if it is a file).
+def mcap_files(path: Path) -> list[Path]:
+    """The MCAP files of a bag directory in the order they were written (or ``path`` itself
+    if it is a file): ``metadata.yaml``'s ``relative_file_paths`` if it lists exactly the
+    files there, else by their numbers after the directory's name (none first).
 
     Raises:
-        BagWriteError: no bag at ``path``.
+        BagWriteError: no bag at ``path``, or files whose order cannot be told.
     """
     if path.is_file():
-        return path
+        return [path]
     files = sorted(path.glob('*.mcap')) if path.is_dir() else []
-    if len(files) != 1:
-        raise BagWriteError(f'{path}: not a bag directory with one MCAP file '
-                            f'({len(files)} found)')
-    if not files[0].is_file():          # a FIFO would block the read
-        raise BagWriteError(f'{files[0]}: not a regular file')
-    return files[0]
+    if not files:
+        raise BagWriteError(f'{path}: not a bag directory with an MCAP file (0 found)')
+    for file in files:
+        if not file.is_file():          # a FIFO would block the read
+            raise BagWriteError(f'{file}: not a regular file')
+    listed = _listed_files(path)
+    if sorted(listed) == [file.name for file in files]:
+        return [path / name for name in listed]
+    numbered = re.compile(re.escape(path.name) + r'(?:_(\d+))?\.mcap')
+    numbers = [numbered.fullmatch(file.name) for file in files]
+    if len(files) > 1 and not all(numbers):
+        raise BagWriteError(f'{path}: cannot tell the order of its {len(files)} MCAP files '
+                            f'(not all named {path.name}_<n>.mcap, and metadata.yaml does not '
+                            'list them); nothing was changed')
+
+    def number(file: Path) -> int:
+        match = numbered.fullmatch(file.name)
+        return int(match[1]) if match and match[1] else -1
+
+    return sorted(files, key=number)
+
+
+def _listed_files(bag: Path) -> list[str]:
+    """The ``relative_file_paths`` of the bag's ``metadata.yaml`` ([] if none can be read)."""
+    metadata = bag / 'metadata.yaml'
+    try:
+        document = yaml.safe_load(metadata.read_text(errors='replace'))
+    except (OSError, yaml.YAMLError):
+        return []
+    info = document.get('rosbag2_bagfile_information') if isinstance(document, dict) else None
+    names = info.get('relative_file_paths') if isinstance(info, dict) else None
+    return ([name for name in names if isinstance(name, str)]
+            if isinstance(names, list) else [])
 
 
 @dataclass
@@ -103,6 +136,42 @@ def _complete_records(path: Path) -> _Records:
         found.problem = str(err) or type(err).__name__
         found.complete = False
     return found
+
+
+def _merged(parts: list[_Records]) -> _Records:
+    """The records of a recording's files as one: schemas and channels by their content (each
+    file registers them again; another tool's ids may differ from file to file), numbered in
+    the order first seen, the messages pointed at them, everything in file order."""
+    if len(parts) == 1:
+        return parts[0]
+    merged = _Records(library=parts[0].library, complete=all(part.complete for part in parts),
+                      problem=next((part.problem for part in parts if part.problem), ''))
+    schema_ids: dict[tuple[str, str, bytes], int] = {}
+    channel_ids: dict[tuple[str, str, int, tuple[tuple[str, str], ...]], int] = {}
+    for part in parts:
+        schemas: dict[int, int] = {}
+        for sid, schema in part.schemas.items():
+            key = (schema.name, schema.encoding, bytes(schema.data))
+            if key not in schema_ids:
+                schema_ids[key] = len(merged.schemas) + 1
+                merged.schemas[schema_ids[key]] = replace(schema, id=schema_ids[key])
+            schemas[sid] = schema_ids[key]
+        channels: dict[int, int] = {}
+        for cid, channel in part.channels.items():
+            schema_id = schemas.get(channel.schema_id, 0)   # 0: none (or one not in the file)
+            ckey = (channel.topic, channel.message_encoding, schema_id,
+                    tuple(sorted(channel.metadata.items())))
+            if ckey not in channel_ids:
+                channel_ids[ckey] = len(merged.channels) + 1
+                merged.channels[channel_ids[ckey]] = replace(channel, id=channel_ids[ckey],
+                                                             schema_id=schema_id)
+            channels[cid] = channel_ids[ckey]
+        # a message on a channel its file does not have stays on none (it cannot be kept)
+        merged.messages.extend(replace(message, channel_id=channels.get(message.channel_id, 0))
+                               for message in part.messages)
+        merged.attachments.extend(part.attachments)
+        merged.metadata.extend(part.metadata)
+    return merged
 
 
 def complete_mcap(path: Path) -> bool:
@@ -217,23 +286,31 @@ def _verify(staging: Path, expected: list[tuple[str, int, bytes]], source: _Reco
     Raises:
         BagWriteError: it does not (the recording is then kept as it was).
     """
-    mcap = mcap_file(staging)
-    found = _complete_records(mcap)
-    names = {cid: channel.topic for cid, channel in found.channels.items()}
+    files = mcap_files(staging)
+    parts = [_complete_records(file) for file in files]
     want = sorted(expected)
     readers: dict[str, list[tuple[str, int, bytes]]] = {'a linear read': sorted(
-        (names.get(m.channel_id, ''), m.log_time, bytes(m.data)) for m in found.messages)}
-    problem = found.problem if not found.complete else ''
+        (part.channels[m.channel_id].topic if m.channel_id in part.channels else '',
+         m.log_time, bytes(m.data)) for part in parts for m in part.messages)}
+    problem = next((f'{file.name}: {part.problem or "incomplete"}'
+                    for file, part in zip(files, parts, strict=True) if not part.complete), '')
+    readers['the mcap reader'] = []
+    summary_attachments: list[tuple[str, str, int, bytes]] = []
+    summary_metadata: list[tuple[str, list[tuple[str, str]]]] = []
     try:
-        with mcap.open('rb') as handle:
-            reader = make_reader(handle)
-            readers['the mcap reader'] = sorted(
-                (channel.topic, message.log_time, bytes(message.data))
-                for _, channel, message in reader.iter_messages(log_time_order=False))
-            summary_attachments = sorted((a.name, a.media_type, a.log_time, bytes(a.data))
-                                         for a in reader.iter_attachments())
-            summary_metadata = sorted((m.name, sorted(m.metadata.items()))
-                                      for m in reader.iter_metadata() if m.name != 'rosbag2')
+        for file in files:
+            with file.open('rb') as handle:
+                reader = make_reader(handle)
+                readers['the mcap reader'].extend(
+                    (channel.topic, message.log_time, bytes(message.data))
+                    for _, channel, message in reader.iter_messages(log_time_order=False))
+                summary_attachments.extend((a.name, a.media_type, a.log_time, bytes(a.data))
+                                           for a in reader.iter_attachments())
+                summary_metadata.extend((m.name, sorted(m.metadata.items()))
+                                        for m in reader.iter_metadata() if m.name != 'rosbag2')
+        readers['the mcap reader'].sort()
+        summary_attachments.sort()
+        summary_metadata.sort()
         with Rosbag2Reader(staging) as bag:
             readers['rosbags'] = sorted((connection.topic, time, bytes(data))
                                         for connection, time, data in bag.messages())
@@ -340,17 +417,18 @@ def repair(path: Path) -> Repaired:
     if (workspace / 'old').exists():
         raise BagWriteError(f'{workspace / "old"}: the recording of an earlier repair that '
                             f'did not finish; move it back to {path} (or away) first')
-    for link in (path, mcap_file(path)):
+    sources = mcap_files(path)
+    for link in (path, *sources):
         if link.is_symlink():           # the swap would move the link, not the recording
             raise BagWriteError(f'{link}: a symbolic link; repair-bag rewrites a recording in '
                                 'place, never through a link: give the real path')
-    source = mcap_file(path)
-    found = _complete_records(source)
+    source = sources[0] if len(sources) == 1 else path
+    found = _merged([_complete_records(file) for file in sources])
     if not found.channels:
         raise BagWriteError(f'{source}: no readable MCAP channels '
                             f'({found.problem or "empty"})')
     ours = written_here(path, found.library)
-    if found.complete and complete_mcap(source):
+    if found.complete and all(complete_mcap(file) for file in sources):
         hint = ('' if lone or (path / 'metadata.yaml').is_file() else
                 "; its bag directory lacks metadata.yaml: 'ros2 bag reindex' writes one")
         raise BagWriteError(f'{path}: a complete bag written by '

@@ -1,6 +1,6 @@
 """Crash-safe rosbag2 bag directories: the graph's recordings.
 
-A recording is a rosbag2 bag directory (``metadata.yaml`` + one MCAP file), written through
+A recording is a rosbag2 bag directory (``metadata.yaml`` + its MCAP files), written through
 public library API only: the MCAP file by the ``mcap`` library's ``mcap.writer.Writer``
 (:mod:`~trust_av.graph.mcap_steps`), ``metadata.yaml`` and the MCAP's ``rosbag2``
 metadata record by :mod:`~trust_av.graph.bag_metadata` (PyYAML), the types'
@@ -17,6 +17,12 @@ On top of it, :class:`BagWriter` adds what a recording that must survive any end
   through to the file (unbuffered), so a killed process leaves every step up to the kill
   on disk; :func:`~trust_av.graph.bag_repair.repair_bag` turns such a directory
   into a complete bag.
+- **split files**: after :data:`MAX_CHUNKS_PER_FILE` chunks (steps) the MCAP file is
+  finished (summary, footer) and recording goes on in the next, ``<bag>_1.mcap``,
+  ``<bag>_2.mcap``, ... (rosbag2's split: ``metadata.yaml`` lists the files in order, with
+  each one's messages and time span). The MCAP writer keeps an index entry per chunk until
+  its file's summary is written (1.4-2.3 kB each, measured), so a file's chunks bound the
+  recorder's memory: without the split it grew by about 80 MB an hour at 10 Hz.
 - **a full disk**: a reserve file inside the bag directory holds, at all times, room for
   the MCAP summary and ``metadata.yaml``; when a write fails with ``ENOSPC`` the partial
   step is cut off, the reserve is released, the bag is finished with every complete step,
@@ -54,7 +60,7 @@ from rosbags.interfaces import (
 from rosbags.typesys import Stores, get_typestore
 
 from trust_av.errors import TrustAvAppError
-from trust_av.graph.bag_metadata import BagInfo, TopicInfo, qos_text
+from trust_av.graph.bag_metadata import BagInfo, FileInfo, TopicInfo, qos_text
 from trust_av.graph.mcap_steps import (
     RECORDER_LIBRARY,
     REPAIR_LIBRARY,
@@ -63,9 +69,9 @@ from trust_av.graph.mcap_steps import (
     replay,
 )
 
-__all__ = ['EXIT_DISK_FULL', 'RESERVE_BASE_BYTES', 'RESERVE_NAME', 'RESERVE_PER_CHUNK_BYTES',
-           'RESERVE_STEP_CHUNKS', 'STAMP_IN_FIRST_ELEMENT', 'TYPESTORE', 'BagWriteError',
-           'BagWriter', 'DiskFullError', 'header_stamp_ns', 'qos_profile']
+__all__ = ['EXIT_DISK_FULL', 'MAX_CHUNKS_PER_FILE', 'RESERVE_BASE_BYTES', 'RESERVE_NAME',
+           'RESERVE_PER_CHUNK_BYTES', 'RESERVE_STEP_CHUNKS', 'STAMP_IN_FIRST_ELEMENT', 'TYPESTORE',
+           'BagWriteError', 'BagWriter', 'DiskFullError', 'header_stamp_ns', 'qos_profile']
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 RESERVE_BASE_BYTES = 48 * 1024
@@ -84,6 +90,11 @@ CHUNK_OVERHEAD_BYTES = 4096
 """Room a step's chunk record may need beyond twice its messages' bytes (record headers,
 message indexes), for the file-size limit check."""
 EXIT_DISK_FULL = 3
+MAX_CHUNKS_PER_FILE = 10_000
+"""Chunks (steps) per MCAP file before the recording goes on in the next file: above the
+longest shipped cycle (about 8,500 steps at 10 Hz), so a run on one is one file; an hour at
+10 Hz is four. One file's chunk index is held in memory until the file is finished (about
+14-23 MB at this size)."""
 """Exit code of a recorder that stopped because the disk was full (the bag is finished)."""
 MAX_INFINITE = QosTime(2147483647, 4294967295)
 """rmw's "infinite" duration as rosbag2 writes it in offered_qos_profiles."""
@@ -144,6 +155,8 @@ class BagWriter:
             header stamps): that tool's MCAP ``library``; the copy is then not marked as
             this project's recording (:data:`~trust_av.graph.mcap_steps.RECORDER_LIBRARY`,
             ``trust_av.recorder``).
+        custom_data: ``custom_data`` entries of ``metadata.yaml`` (the run's record).
+        max_chunks_per_file: chunks (steps) per MCAP file before the next file starts.
 
     Raises:
         BagWriteError: the directory exists or cannot be created.
@@ -151,15 +164,19 @@ class BagWriter:
     """
 
     def __init__(self, path: Path, *, copy_of: str | None = None,
-                 custom_data: Mapping[str, str] | None = None) -> None:
+                 custom_data: Mapping[str, str] | None = None,
+                 max_chunks_per_file: int = MAX_CHUNKS_PER_FILE) -> None:
+        if max_chunks_per_file < 1:
+            raise ValueError(f'max_chunks_per_file must be at least 1, got {max_chunks_per_file}')
         self.path = Path(path)
+        self._max_chunks = max_chunks_per_file
         if threading.current_thread() is threading.main_thread():
             # past a file-size limit a write fails with EFBIG instead of killing the process
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         self._library = (RECORDER_LIBRARY if copy_of is None
                          else f'{REPAIR_LIBRARY} of {copy_of or "unknown"}')
-        self._mcap_path = self.path / f'{self.path.name}.mcap'
-        self._info = BagInfo(self._mcap_path.name)
+        self._file = FileInfo(f'{self.path.name}.mcap')
+        self._info = BagInfo([self._file])
         if copy_of is None:
             self._info.custom_data['trust_av.recorder'] = 'one MCAP chunk per step'
         else:
@@ -175,7 +192,7 @@ class BagWriter:
         self._offsets: dict[str, int] = {}
         self._reserve = self.path / RESERVE_NAME
         self._reserved = 0
-        self._chunks = 0
+        self._chunks = 0     # of the current file
         self._step_first, self._step_last = 2**63 - 1, -1
         self._times = (2**63 - 1, 0)
         self.finished = False
@@ -206,6 +223,16 @@ class BagWriter:
                 stream.close()
             shutil.rmtree(self.path, ignore_errors=True)
             raise
+
+    @property
+    def _mcap_path(self) -> Path:
+        """The MCAP file being written."""
+        return self.path / self._file.path
+
+    @property
+    def files(self) -> list[str]:
+        """The bag's MCAP files so far, in order (names in the bag directory)."""
+        return [file.path for file in self._info.files]
 
     def _start_error(self, err: OSError) -> BagWriteError:
         """The error of a start that failed."""
@@ -266,6 +293,7 @@ class BagWriter:
     def add_schema(self, name: str, encoding: str, data: bytes) -> None:
         """Register a schema no topic of the bag uses (kept from a repaired recording: it is
         in the summary)."""
+        self._schema_records.append((name, encoding, data))   # in every file, in this order
         self._mcap.register_schema(name, encoding, data)
 
     def write(self, topic: str, data: bytes | memoryview, log_time_ns: int | None = None, *,
@@ -327,15 +355,21 @@ class BagWriter:
                 self._finish_after_write_error(start, err)
                 return False
             self._chunks += 1
-        for name, entry in self._topics.items():
-            entry.count += self._pending[name]
-            self._pending[name] = 0
-        self._step_bytes = 0
         if self._step_last >= 0:
+            self._file.start_ns = (min(self._file.start_ns, self._step_first) if self._file.count
+                                   else self._step_first)
+            self._file.end_ns = max(self._file.end_ns, self._step_last)
             self._times = (min(self._times[0], self._step_first),
                            max(self._times[1], self._step_last))
+        for name, entry in self._topics.items():
+            entry.count += self._pending[name]
+            self._file.count += self._pending[name]
+            self._pending[name] = 0
+        self._step_bytes = 0
         self._step_first, self._step_last = 2**63 - 1, -1
         self.steps += 1
+        if self._chunks >= self._max_chunks:
+            return self._next_file()
         if self._reserved < RESERVE_BASE_BYTES + RESERVE_PER_CHUNK_BYTES * self._chunks:
             try:   # the reserve no longer pays for the summary: room for 64 more chunks
                 self._grow_reserve()
@@ -362,6 +396,55 @@ class BagWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.finish()
+
+    def _next_file(self) -> bool:
+        """Finish the current MCAP file and go on in the next, ``<bag>_<n>.mcap``: the same
+        header, schemas and channels (same ids), in the same order; its reserve grown.
+
+        Returns:
+            True; False if the next file cannot be started (a full disk): it is removed,
+            and the bag is finished with the files before it (see :attr:`disk_full`).
+
+        Raises:
+            BagWriteError: the current file or ``metadata.yaml`` cannot be finished (the bag
+                is left for ``trust-av repair-bag``).
+        """
+        try:
+            self._finish_file()
+        except BagWriteError:
+            self.finished = True
+            raise
+        following = FileInfo(f'{self.path.name}_{len(self._info.files)}.mcap')
+        stream: WholeWrites | None = None
+        try:
+            stream = WholeWrites(self.path / following.path)
+            writer = new_writer(stream, self._library)
+            for schema in self._schema_records:
+                writer.register_schema(*schema)
+            for channel in self._channel_records:
+                writer.register_channel(*channel)
+            self._stream, self._mcap, self._file, self._chunks = stream, writer, following, 0
+            self._info.files.append(following)
+            self._grow_reserve()
+        except OSError as err:
+            if self._info.files[-1] is following:
+                self._info.files.pop()
+            if stream is not None:
+                stream.close()
+            (self.path / following.path).unlink(missing_ok=True)
+            self._reserve.unlink(missing_ok=True)
+            reason = os.strerror(err.errno) if err.errno else str(err)
+            self.disk_full = (f'{self.path}: cannot start its next file {following.path} '
+                              f'({reason}) after {self.steps} complete steps; the bag holds '
+                              'them and is finished')
+            self.finished = True
+            try:
+                self._info.write(self.path)
+            except OSError as error:
+                raise BagWriteError(f'{self.path}: cannot finish the bag ({error.strerror})'
+                                    ) from error
+            return False
+        return True
 
     def _needed_reserve(self) -> int:
         """The reserve's size when grown: the summary of the chunks so far and of
@@ -425,13 +508,26 @@ class BagWriter:
         return rebuilt.writer
 
     def _close(self) -> None:
-        """Finish the MCAP (the ``rosbag2`` metadata record, summary, footer), fsync it and
-        write metadata.yaml with the complete steps' counts.
+        """Finish the current MCAP file and write metadata.yaml with the complete steps'
+        counts.
 
         Raises:
             BagWriteError: it cannot be written.
         """
         self.finished = True
+        self._finish_file()
+        try:
+            self._info.write(self.path)
+        except OSError as err:
+            raise BagWriteError(f'{self.path}: cannot finish the bag ({err.strerror})') from err
+
+    def _finish_file(self) -> None:
+        """Finish the current MCAP file (the ``rosbag2`` metadata record: the bag as it is
+        so far; summary, footer) on the room of the reserve, fsync and close it.
+
+        Raises:
+            BagWriteError: it cannot be written.
+        """
         self._reserve.unlink(missing_ok=True)
         if self._times[1] >= self._times[0]:
             self._info.start_ns, self._info.end_ns = self._times
@@ -443,6 +539,5 @@ class BagWriter:
                 self._stream.sync()
             finally:
                 self._stream.close()
-            self._info.write(self.path)
         except OSError as err:
             raise BagWriteError(f'{self.path}: cannot finish the bag ({err.strerror})') from err

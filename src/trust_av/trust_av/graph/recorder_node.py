@@ -40,7 +40,7 @@ from std_msgs.msg import UInt64
 
 from trust_av.errors import TrustAvAppError
 from trust_av.graph.bag_qos import offered_profiles
-from trust_av.graph.bag_writer import EXIT_DISK_FULL, BagWriter
+from trust_av.graph.bag_writer import EXIT_DISK_FULL, MAX_CHUNKS_PER_FILE, BagWriter
 from trust_av_common.params import check_fields, param
 from trust_av_common.record_window import ACK_EVERY_STEPS, ACK_TOPIC, recorded_topics
 from trust_av_common.ros.messages import diagnostics, message_class, status_gap_m
@@ -68,6 +68,10 @@ class RecorderConfig:
                                 'stopped)', low=0, default=0, high=10_000_000)
     flush_period_s: float = param('wall mode: a chunk is written at least this often',
                                   unit='s', low=0.0, low_inclusive=False, default=1.0, high=3600.0)
+    max_chunks_per_file: int = param('chunks (steps) per MCAP file before the recording goes on '
+                                     'in the next (rosbag2 split; bounds the memory of a long '
+                                     'recording)', low=1, default=MAX_CHUNKS_PER_FILE,
+                                     high=10_000_000)
     record_file: str = param("YAML mapping of the run's record (what ran, the effective "
                              "parameters) for the bag's custom_data ('' = none)", default='')
 
@@ -105,7 +109,8 @@ class RecorderNode(Node):
         self.config = declare_config(self, RecorderConfig)
         self.clock = declare_config(self, WallClockConfig)
         self.bag = BagWriter(Path(self.config.bag_path),
-                             custom_data=read_record(self.config.record_file))
+                             custom_data=read_record(self.config.record_file),
+                             max_chunks_per_file=self.config.max_chunks_per_file)
         self.write_delay_s = float(os.environ.get(WRITE_DELAY_ENV, '0') or 0)
         self.needed: dict[str, int] = {}
         self.publishers_needed: dict[str, int] = {}
