@@ -83,7 +83,7 @@ def test_cli_prints_each_runs_final_trust(runs: tuple[Path, Path, Path],
     (('MISSING', 'B', '--out', 'x.png'), 'MISSING: no such file or directory'),
     (('A', 'B', '--out', 'x.txt'), 'x.txt: the figure must end in one of .png, .pdf, .svg'),
     (('A', 'B', '--out', 'x.png', '--trust-models', 'papr'), "did you mean 'paper'?"),
-    (('A', 'TRACE', '--out', 'x.png'), 'no column t_s'),
+    (('A', 'TRACE', '--out', 'x.png'), 'missing column(s) t_s'),
     (('A', 'B', '--out', 'x.png', '--labels', 'one'), "'one': give two names"),
 ])
 def test_bad_input_is_one_line_and_exit_2(runs: tuple[Path, Path, Path], tmp_path: Path,
@@ -96,6 +96,69 @@ def test_bad_input_is_one_line_and_exit_2(runs: tuple[Path, Path, Path], tmp_pat
     assert proc.returncode == 2
     assert message in proc.stderr and len(proc.stderr.strip().splitlines()) <= 2
     assert not (tmp_path / 'x.png').exists()
+
+
+def _edited(source: Path, target: Path, edit: str) -> Path:
+    """``source`` (a simulate CSV) with one defect, or as a spreadsheet exports it."""
+    lines = source.read_text().splitlines()
+    header = lines[0].split(',')
+    if edit == 'nan':
+        row = lines[4].split(',')
+        row[header.index('av_gap_m')] = 'nan'
+        lines[4] = ','.join(row)
+    elif edit == 'twice':
+        lines.insert(4, lines[3])
+    elif edit == 'header only':
+        lines = lines[:1]
+    elif edit == 'empty cell':
+        row = lines[2].split(',')
+        row[header.index('explicability')] = ''
+        lines[2] = ','.join(row)
+    text = '\n'.join(lines) + '\n'
+    if edit == 'spreadsheet':       # Excel's "CSV UTF-8" where the decimal sign is a comma
+        text = '\ufeff' + '\n'.join(';'.join(cell.replace('.', ',') if _number(cell) else cell
+                                              for cell in line.split(','))
+                                     for line in lines) + '\n'
+    target.write_text(text, encoding='utf-8')
+    return target
+
+
+def _number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+@pytest.mark.parametrize(('edit', 'message'), [
+    ('nan', ":5: column av_gap_m: not finite: 'nan'"),
+    ('twice', ':5: column t_s: 2 s is not after the row before (2 s): rows out of order, '
+              'or one given twice?'),
+    ('header only', ': no rows, only the header'),
+    ('empty cell', ':3: column explicability is empty'),
+])
+def test_a_simulate_table_is_checked_like_every_input_table(
+        runs: tuple[Path, Path, Path], tmp_path: Path, edit: str, message: str) -> None:
+    """A run's table names the file, the line and the column of what is wrong with it, and
+    nothing is drawn."""
+    _, a, b = runs
+    bad = _edited(a, tmp_path / 'bad.csv', edit)
+    proc = trust_av('compare', str(bad), str(b), '--out', str(tmp_path / 'x.png'))
+    assert proc.returncode == 2, proc.stdout
+    assert proc.stderr == f'trust-av compare: error: {bad}{message}\n'
+    assert not (tmp_path / 'x.png').exists()
+
+
+def test_a_spreadsheet_export_of_a_simulate_table_reads_the_same(
+        runs: tuple[Path, Path, Path], tmp_path: Path) -> None:
+    """A byte-order mark, semicolons and decimal commas (a spreadsheet's export) read as the
+    table they came from."""
+    _, a, _ = runs
+    exported = read_run(_edited(a, tmp_path / 'exported.csv', 'spreadsheet'))
+    original = read_run(a)
+    assert np.array_equal(exported.t_s, original.t_s)
+    assert all(np.array_equal(exported.values[k], original.values[k]) for k in original.values)
 
 
 def test_help_names_what_a_run_is() -> None:

@@ -36,8 +36,8 @@ from pathlib import Path
 from trust_av_common.input_files import bounded_lines, not_regular
 from trust_monitor.trust_fit import FitError
 
-__all__ = ['MAX_LINE_CHARS', 'MAX_TABLE_BYTES', 'IdCheck', 'RatingScale', 'file_safe',
-           'table_rows']
+__all__ = ['MAX_LINE_CHARS', 'MAX_TABLE_BYTES', 'IdCheck', 'RatingScale', 'cell_number',
+           'file_safe', 'table_rows']
 
 MAX_TABLE_BYTES = 64 * 1024 * 1024
 """Largest input table, bytes (64 MiB: about a million rows of a ratings table, 2,000
@@ -140,6 +140,25 @@ def _encoding(head: bytes) -> str:
     if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
         return 'utf-16'
     return 'utf-8-sig'
+
+
+def cell_number(text: str, what: str, decimal: str = '.') -> float | None:
+    """A table cell as a finite number (``None`` if it is empty); ``decimal`` is the
+    row's decimal separator (:func:`table_rows`).
+
+    Raises:
+        FitError: ``what``: not a number, or not finite (``nan``, ``inf``).
+    """
+    text = text.strip()
+    if text == '':
+        return None
+    try:
+        value = float(text.replace(',', '.') if decimal == ',' else text)
+    except ValueError:
+        raise FitError(f'{what}: not a number: {text[:40]!r}') from None
+    if not math.isfinite(value):
+        raise FitError(f'{what}: not finite: {text[:40]!r}')
+    return value
 
 
 def table_rows(path: Path, columns: tuple[str, ...]

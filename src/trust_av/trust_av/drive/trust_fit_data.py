@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from trust_av.drive.table_input import IdCheck, RatingScale, table_rows
+from trust_av.drive.table_input import IdCheck, RatingScale, cell_number, table_rows
 from trust_monitor.paper_trust import explicability
 from trust_monitor.trust_fit import FitError, RatedDrive
 
@@ -45,19 +45,6 @@ COLUMNS = ('participant', 'drive', 't_s', 'explicability', 'rating')
 SCALE_COLUMN = 'rating_scale'
 DEFAULT_SCALE = RatingScale(0.0, 100.0)
 """Ratings are 0-100 unless declared otherwise (the drive page's slider)."""
-
-
-def _number(text: str, what: str, decimal: str = '.') -> float | None:
-    text = text.strip()
-    if text == '':
-        return None
-    try:
-        value = float(text.replace(',', '.') if decimal == ',' else text)
-    except ValueError:
-        raise FitError(f'{what}: not a number: {text[:40]!r}') from None
-    if not math.isfinite(value):
-        raise FitError(f'{what}: not finite: {text[:40]!r}')
-    return value
 
 
 @dataclass
@@ -84,13 +71,13 @@ def read_ratings_table(path: Path, scale: RatingScale = DEFAULT_SCALE) -> list[R
         where = f'{path}:{line}'
         who = people.check(where, row['participant'])
         drive = names.check(where, row['drive'])
-        t = _number(row['t_s'], f'{where}: column t_s', decimal)
+        t = cell_number(row['t_s'], f'{where}: column t_s', decimal)
         if t is None:
             raise FitError(f'{where}: column t_s is empty')
         if t < 0.0:
             raise FitError(f'{where}: column t_s: {t:g} s is before the drive starts (0 s)')
         entry = drives.setdefault((who, drive), _Drive(line))
-        score = _number(row['explicability'], f'{where}: column explicability', decimal)
+        score = cell_number(row['explicability'], f'{where}: column explicability', decimal)
         if score is not None:
             if not 0.0 <= score <= 1.0:
                 raise FitError(f'{where}: column explicability: {score:g} is outside [0, 1]')
@@ -99,7 +86,7 @@ def read_ratings_table(path: Path, scale: RatingScale = DEFAULT_SCALE) -> list[R
                                f'of drive {drive!r} of {who!r} (first on line '
                                f'{entry.scores[t][1]}): a row given twice?')
             entry.scores[t] = (score, line)
-        rating = _number(row['rating'], f'{where}: column rating', decimal)
+        rating = cell_number(row['rating'], f'{where}: column rating', decimal)
         if rating is not None:
             own = (row.get(SCALE_COLUMN) or '').strip()
             declared = RatingScale.parse(own, f'{where}: column {SCALE_COLUMN}') if own \

@@ -20,7 +20,6 @@ params file it ran with, its line is the run's recorded trust on the common scal
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 from collections.abc import Sequence
@@ -37,6 +36,7 @@ from trust_av_common.errors import with_suggestions
 from trust_av_common.registry import names
 from trust_monitor.model_interface import TRUST_MODELS, common_trust, make_trust_model
 from trust_monitor.paper_trust import explicability
+from trust_monitor.trust_fit import FitError
 
 __all__ = ['compare_runs', 'read_run', 'trust_per_model']
 
@@ -82,30 +82,33 @@ def from_records(name: str, records: Sequence[StepRecord]) -> RunSeries:
 
 
 def read_csv_run(path: Path) -> RunSeries:
-    """A ``trust-av simulate --out`` table.
+    """A ``trust-av simulate --out`` table (or one made like it), read as every input table
+    is (:func:`~trust_av.drive.table_input.table_rows`: a size limit, UTF-8 with or without a
+    byte-order mark or UTF-16, comma, semicolon or tab): every value of the columns it needs
+    a finite number, ``t_s`` increasing from row to row, at least two rows.
 
     Raises:
-        TrustAvAppError: unreadable, a column missing, or a value that is not a number.
+        FitError: one line naming the file, the line and the column.
     """
-    try:
-        with path.open(newline='', encoding='utf-8') as handle:
-            rows = list(csv.DictReader(handle))
-    except (OSError, UnicodeDecodeError, csv.Error) as err:
-        raise TrustAvAppError(f'{path}: cannot read it ({err})') from err
-    if not rows:
-        raise TrustAvAppError(f'{path}: no rows (expected a trust-av simulate --out table)')
-    missing = [c for c in ('t_s', *SERIES) if c not in rows[0]]
-    if missing:
-        raise TrustAvAppError(f'{path}: no column {", ".join(missing)} (expected a '
-                              'trust-av simulate --out table)')
-    columns: dict[str, np.ndarray] = {}
-    for column in ('t_s', *SERIES):
-        try:
-            columns[column] = np.array([float(row[column]) for row in rows])
-        except (TypeError, ValueError) as err:
-            raise TrustAvAppError(f'{path}: column {column}: {err}') from err
-    t = columns.pop('t_s')
-    return RunSeries(path.name, t - t[0], columns)
+    from trust_av.drive.table_input import cell_number, table_rows
+
+    needed = ('t_s', *SERIES)
+    values: dict[str, list[float]] = {column: [] for column in needed}
+    for line, row, decimal in table_rows(path, needed):
+        for column in needed:
+            value = cell_number(row[column], f'{path}:{line}: column {column}', decimal)
+            if value is None:
+                raise FitError(f'{path}:{line}: column {column} is empty')
+            values[column].append(value)
+        times = values['t_s']
+        if len(times) > 1 and times[-1] <= times[-2]:
+            raise FitError(f'{path}:{line}: column t_s: {times[-1]:g} s is not after the row '
+                           f'before ({times[-2]:g} s): rows out of order, or one given twice?')
+    if len(values['t_s']) < 2:
+        raise FitError(f'{path}: one row; a run to compare needs at least two')
+    t = np.array(values.pop('t_s'))
+    return RunSeries(path.name, t - t[0],
+                     {column: np.array(series) for column, series in values.items()})
 
 
 def read_drive_run(bag: Path, params_files: Sequence[str | Path] = ()) -> RunSeries:
