@@ -6,6 +6,7 @@ recovery)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -46,6 +47,38 @@ def test_a_design_from_the_shipped_drive_file() -> None:
 def test_bad_design_options_one_line(argv: list[str], message: str) -> None:
     with pytest.raises(TrustAvAppError, match=message):
         design.design_of(options(*argv))
+
+
+@pytest.mark.parametrize(('text', 'message'), [
+    ('{"papr": {}}', "not registered trust models: papr (did you mean 'paper'?)"),
+    ('{"paper": {"performance_treshold": [0.7, 0.9]}}',
+     "paper: not a parameter paper fits: performance_treshold (did you mean "
+     "'performance_threshold'?)"),
+    ('{"paper": {"performance_threshold": [0.9, 0.7]}}',
+     'paper.performance_threshold: [0.9, 0.7]: low must be below high'),
+    ('{"paper": {"performance_threshold": [0.7, NaN]}}', 'not JSON (NaN is not a number'),
+    ('{"paper": {"performance_threshold": [0.7, 5]}}',
+     "paper.performance_threshold: [0.7, 5] reaches past the parameter's bounds"),
+    ('{"paper": {"performance_threshold": [0.7, true]}}',
+     'paper.performance_threshold: expected [low, high], two numbers, got [0.7, true]'),
+    ('{"paper": [0.7, 0.9]}', 'paper: expected {parameter: [low, high]}, got list'),
+    ('[]', 'expected {model: {parameter: [low, high]}}, got nothing'),
+    ('{"paper": {', 'not JSON'),
+])
+def test_a_ranges_file_is_checked_like_every_input(tmp_path: Path, text: str,
+                                                   message: str) -> None:
+    """--ranges FILE: every model registered, every parameter one it fits, every range two
+    finite numbers low < high inside the parameter's bounds; one line naming the file and
+    the entry. A spreadsheet editor's byte-order mark is read."""
+    ranges = tmp_path / 'ranges.json'
+    ranges.write_text(text)
+    with pytest.raises(TrustAvAppError) as raised:
+        design.design_of(options('--ranges', str(ranges)))
+    assert str(raised.value).startswith(f'{ranges}: ') and message in str(raised.value)
+    assert '\n' not in str(raised.value)
+    ranges.write_text('\ufeff{"asymmetric": {"asymmetric_loss_ratio": [1.5, 8]}}', 'utf-8')
+    chosen = design.design_of(options('--ranges', str(ranges)))
+    assert chosen.true_ranges == {'asymmetric': {'asymmetric_loss_ratio': (1.5, 8.0)}}
 
 
 def recovery(margin: float, spread: float, count: int = 12) -> Recovery:

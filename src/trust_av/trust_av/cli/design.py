@@ -39,6 +39,7 @@ from trust_av.study.trust_design import (
     WIDE_RANGES,
     Design,
     Recovery,
+    read_ranges,
     recover,
 )
 from trust_av.study.trust_recovery import RATING_SPAN, TRUE_RANGES
@@ -198,21 +199,21 @@ def design_of(args: DesignOptions) -> Design:
         raise TrustAvAppError(f'--rating-span: need low,high in (0, 100], got '
                                   f'{args.rating_span!r}')
     return dataclasses.replace(design, rating_span=(span[0], span[1]),
-                               true_ranges=_ranges(args.ranges))
+                               true_ranges=_ranges(args.ranges, args.params_files))
 
 
-def _ranges(text: str) -> dict[str, dict[str, tuple[float, float]]]:
+def _ranges(text: str, params_files: Sequence[Path]) -> dict[str, dict[str, tuple[float, float]]]:
+    """``benchmark``, ``wide`` or a JSON file's ranges, checked against the models the params
+    files declare (:func:`~trust_av.study.trust_design.read_ranges`)."""
     if text == 'benchmark':
         return dict(TRUE_RANGES)
     if text == 'wide':
         return dict(WIDE_RANGES)
-    try:
-        raw = json.loads(Path(text).read_text())
-        return {str(m): {str(k): (float(v[0]), float(v[1])) for k, v in row.items()}
-                for m, row in raw.items()}
-    except (OSError, ValueError, TypeError, AttributeError, IndexError, KeyError) as error:
+    path = Path(text)
+    if not path.exists():
         raise TrustAvAppError(f'--ranges {text}: not benchmark, wide or a JSON file of '
-                                  f'{{model: {{parameter: [low, high]}}}} ({error})') from error
+                              '{model: {parameter: [low, high]}} (no such file)')
+    return read_ranges(path, load_run_config(list(params_files)).trust)
 
 
 def _models(option: str) -> list[str]:

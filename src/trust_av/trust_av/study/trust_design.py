@@ -14,13 +14,16 @@ every model's held-out elpd. ``trust-av design-evaluate``, ``design-power`` and
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from trust_av.errors import TrustAvAppError
 from trust_av.study.trust_recovery import (
     CONDITIONS,
     DRIVE_S,
@@ -35,7 +38,12 @@ from trust_av.study.trust_recovery import (
     make_participant,
 )
 from trust_av.system.config import RunConfig
+from trust_av_common.errors import with_suggestions
+from trust_av_common.input_files import not_regular
+from trust_av_common.registry import names
 from trust_monitor.model_check import parameter_count
+from trust_monitor.model_interface import TRUST_MODELS
+from trust_monitor.paper_trust import TrustConfig
 from trust_monitor.trust_fit import (
     ModelSpec,
     Score,
@@ -45,7 +53,8 @@ from trust_monitor.trust_fit import (
     preferred,
 )
 
-__all__ = ['GOAL', 'POWER_SIZES', 'WIDE_RANGES', 'Design', 'Recovery', 'recover']
+__all__ = ['GOAL', 'MAX_RANGES_BYTES', 'POWER_SIZES', 'WIDE_RANGES', 'Design', 'Recovery',
+           'read_ranges', 'recover']
 
 POWER_SIZES = (2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96)
 """Participant counts the power analysis tries."""
@@ -63,6 +72,76 @@ WIDE_RANGES: Ranges = {
 covering the published estimates: the paper's P_thre (0.8) and δ (0.1 /s), a loss ratio of
 1-10 (the loss-aversion ratio of about 2 of Kahneman & Tversky and the 2-10 of trust studies'
 negativity bias), OPTIMo rates from slow to saturating within a drive."""
+
+
+MAX_RANGES_BYTES = 1024 * 1024
+"""Largest ranges file read, bytes (a few hundred bytes per model)."""
+
+
+def read_ranges(path: Path, trust: TrustConfig) -> Ranges:
+    """True-value ranges from a JSON file ``{model: {parameter: [low, high]}}``, checked as
+    the draw needs them: registered models, parameters each model fits (not one it holds
+    fixed), two finite numbers low < high inside the parameter's bounds (a range past them
+    draws people the fit can never recover).
+
+    Raises:
+        TrustAvAppError: one line naming the file and the model, parameter or value.
+    """
+    kind = not_regular(path)
+    if kind is not None:
+        raise TrustAvAppError(f'{path}: not a regular file ({kind}; expected a JSON file)')
+    try:
+        with path.open('rb') as handle:
+            text = handle.read(MAX_RANGES_BYTES + 1)
+    except OSError as err:
+        raise TrustAvAppError(f'{path}: cannot read ({err.strerror})') from err
+    if len(text) > MAX_RANGES_BYTES:
+        raise TrustAvAppError(f'{path}: larger than the {MAX_RANGES_BYTES // 1024} KiB a '
+                              'ranges file may be')
+
+    def no_constant(name: str) -> None:
+        raise ValueError(f'{name} is not a number JSON allows')
+
+    try:
+        raw = json.loads(text.decode('utf-8-sig'), parse_constant=no_constant)
+    except (UnicodeDecodeError, ValueError) as err:
+        raise TrustAvAppError(f'{path}: not JSON ({err})') from err
+    if not isinstance(raw, dict) or not raw:
+        raise TrustAvAppError(f'{path}: expected {{model: {{parameter: [low, high]}}}}, got '
+                              f'{type(raw).__name__ if raw else "nothing"}')
+    registered = list(names(TRUST_MODELS))
+    unknown = [model for model in raw if model not in registered]
+    if unknown:
+        raise TrustAvAppError(f'{path}: not registered trust models: '
+                              f'{with_suggestions(unknown, registered)} (registered: '
+                              f'{", ".join(registered)})')
+    out: Ranges = {}
+    for model, row in raw.items():
+        fitted = {p.name: p for p in model_spec(trust, model).parameters}
+        if not isinstance(row, dict):
+            raise TrustAvAppError(f'{path}: {model}: expected {{parameter: [low, high]}}, '
+                                  f'got {type(row).__name__}')
+        others = [name for name in row if name not in fitted]
+        if others:
+            raise TrustAvAppError(f'{path}: {model}: not a parameter {model} fits: '
+                                  f'{with_suggestions(others, fitted)} (fitted: '
+                                  f'{", ".join(fitted)})')
+        out[model] = {}
+        for name, value in row.items():
+            where, bounds = f'{path}: {model}.{name}', fitted[name]
+            if not (isinstance(value, list) and len(value) == 2
+                    and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                            for v in value)):
+                raise TrustAvAppError(f'{where}: expected [low, high], two numbers, got '
+                                      f'{json.dumps(value)[:60]}')
+            low, high = float(value[0]), float(value[1])
+            if not low < high:
+                raise TrustAvAppError(f'{where}: [{low:g}, {high:g}]: low must be below high')
+            if low < bounds.low or high > bounds.high:
+                raise TrustAvAppError(f'{where}: [{low:g}, {high:g}] reaches past the '
+                                      f"parameter's bounds [{bounds.low:g}, {bounds.high:g}]")
+            out[model][name] = (low, high)
+    return out
 
 
 @dataclass(frozen=True)
