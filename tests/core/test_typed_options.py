@@ -25,6 +25,7 @@ from trust_av.cli import (
     shadow,
     simulate,
     train_gru,
+    typed_options,
 )
 from trust_av.cli.main import build_parser
 from trust_av.cli.typed_options import RunOptions, options_from
@@ -109,3 +110,59 @@ def test_fit_trust_takes_one_source() -> None:
         fit_trust.FitTrustOptions(params_files=(), study=None, ratings=None, out=Path('o'),
                                   models='', no_figures=False,
                                   no_partial_pooling=False)
+
+
+_SIDE = typed_options.Exclusive('side')
+
+
+@dataclasses.dataclass(frozen=True)
+class _Declared:
+    """Every kind of declaration the builder knows."""
+
+    source: Path = typed_options.positional(metavar='SRC', help='a source')
+    out: Path | None = typed_options.option('--out', default=None, help='an output')
+    count: int = typed_options.option('--count', default=2, help=lambda: 'built %(default)s')
+    fast: bool = typed_options.option('--fast', help='be fast')
+    left: str | None = typed_options.option('--left', exclusive=_SIDE, also_sets={'extra': 1})
+    right: str | None = typed_options.option('--right', exclusive=_SIDE)
+
+
+def test_the_parser_is_built_from_the_fields() -> None:
+    parser = argparse.ArgumentParser(prog='p')
+    typed_options.add_command(parser, _Declared, lambda options: 0)
+    typed_options.check_parser(parser)
+    assert [a.dest for a in parser._actions] == ['help', 'source', 'out', 'count', 'fast',
+                                                  'left', 'right']
+    namespace = parser.parse_args(['s', '--count', '5', '--fast', '--left', 'x'])
+    assert options_from(_Declared, namespace) == _Declared(
+        source=Path('s'), out=None, count=5, fast=True, left='x', right=None)
+    assert namespace.extra == 1 and 'built 2' in parser.format_help()
+    with pytest.raises(SystemExit):           # the exclusive group
+        parser.parse_args(['s', '--left', 'x', '--right', 'y'])
+
+
+def test_a_field_without_a_declaration_is_refused() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class Undeclared(_Declared):
+        forgotten: int
+
+    with pytest.raises(TypeError, match=r'Undeclared.forgotten: no option declared'):
+        typed_options.add_options(argparse.ArgumentParser(), Undeclared)
+
+
+def test_a_flag_that_names_another_field_is_refused() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class Renamed:
+        out: Path = typed_options.option('--output')
+
+    with pytest.raises(TypeError, match=r"--output sets 'output', not the field"):
+        typed_options.add_options(argparse.ArgumentParser(), Renamed)
+
+
+def test_an_option_added_outside_the_builder_is_caught() -> None:
+    parser = argparse.ArgumentParser(prog='p')
+    typed_options.add_command(parser, _Declared, lambda options: 0)
+    parser.add_argument('--stray')
+    with pytest.raises(TypeError, match='p: --stray is no field of _Declared'):
+        typed_options.check_parser(parser)
+
