@@ -28,7 +28,8 @@ from trust_av.cli import (
     typed_options,
 )
 from trust_av.cli.main import build_parser
-from trust_av.cli.typed_options import RunOptions, options_from
+from trust_av.cli.options import RunOptions
+from trust_av.cli.typed_options import options_from
 
 COMMANDS: dict[str, tuple[type, list[str]]] = {
     'simulate': (simulate.SimulateOptions, []),

@@ -5,7 +5,9 @@ checker sees every option a command uses and a command reads nothing else.
 
 A field is an option by its declaration, :func:`option` (``--flag``) or :func:`positional`,
 which holds argparse's keywords; :func:`add_options` adds the fields in field order (a base
-class's fields first), each with its ``dest`` the field's name. A field declared without
+class's fields first), each with its ``dest`` the field's name. An option that a command's
+help lists after its own (``--params-file``) is a field the command declares last with the
+shared declaration (:func:`trust_av.cli.options.params_files_option`). A field declared without
 either is refused (:class:`TypeError`), and :func:`check_parser` refuses a parser with an
 option that is no field (an ``add_argument`` outside the builder). The namespace entries
 that are no option of a command are argparse's ``help``, ``trust-av``'s own (``command``,
@@ -62,9 +64,11 @@ class Declaration:
 def option(*flags: str, exclusive: Exclusive | None = None,
            also_sets: dict[str, object] | None = None, **keywords: Any) -> Any:
     """A field that is the option ``flags`` (``--out``) with argparse's ``keywords``; its
-    ``dest`` is the field's name. ``type=`` may be left out for a field of type ``Path``,
-    ``int`` or ``float`` (or ``X | None``: ``type=X``), ``action=`` for a ``bool`` field
-    (``store_true``). ``default=`` is argparse's: the dataclass field has no default."""
+    ``dest`` is the field's name (or the field is one of the namespace entries it
+    ``also_sets``: an action that sets several, as ``--params-file``). ``type=`` may be left
+    out for a field of type ``Path``, ``int`` or ``float`` (or ``X | None``: ``type=X``),
+    ``action=`` for a ``bool`` field (``store_true``). ``default=`` is argparse's: the
+    dataclass field has no default."""
     if not flags or not all(flag.startswith('-') for flag in flags):
         raise TypeError(f'option{flags!r}: an option needs flags starting with -')
     return dataclasses.field(metadata={DECLARATION: Declaration(
@@ -121,13 +125,18 @@ def add_options(parser: argparse.ArgumentParser, kind: type) -> None:
             target = groups[name]
         if declared.flags:
             action = target.add_argument(*declared.flags, **keywords)
-            if action.dest != field.name:
+            if action.dest != field.name and field.name not in declared.also_sets:
                 raise TypeError(f'{kind.__name__}.{field.name}: {declared.flags[0]} sets '
                                 f'{action.dest!r}, not the field')
         else:
             target.add_argument(field.name, **keywords)
         if declared.also_sets:
             parser.set_defaults(**declared.also_sets)
+
+
+def _declared(field: dataclasses.Field[Any]) -> Declaration:
+    declared = field.metadata.get(DECLARATION)
+    return declared if isinstance(declared, Declaration) else Declaration((), {})
 
 
 def check_parser(parser: argparse.ArgumentParser) -> None:
@@ -140,7 +149,8 @@ def check_parser(parser: argparse.ArgumentParser) -> None:
     func = parser.get_default('func')
     if not isinstance(func, Command):
         raise TypeError(f'{parser.prog}: its func is not a typed command')
-    fields = {field.name for field in dataclasses.fields(func.options)}
+    fields = {name for field in dataclasses.fields(func.options)
+              for name in (field.name, *_declared(field).also_sets)}
     for action in parser._actions:
         if not isinstance(action, argparse._HelpAction) and action.dest not in fields:
             raise TypeError(f'{parser.prog}: {"/".join(action.option_strings) or action.dest} '
