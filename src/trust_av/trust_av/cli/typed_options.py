@@ -7,12 +7,14 @@ A field is an option by its declaration, :func:`option` (``--flag``) or :func:`p
 which holds argparse's keywords; :func:`add_options` adds the fields in field order (a base
 class's fields first), each with its ``dest`` the field's name. An option that a command's
 help lists after its own (``--params-file``) is a field the command declares last with the
-shared declaration (:func:`trust_av.cli.options.params_files_option`). A field declared without
-either is refused (:class:`TypeError`), and :func:`check_parser` refuses a parser with an
-option that is no field (an ``add_argument`` outside the builder). The namespace entries
-that are no option of a command are argparse's ``help``, ``trust-av``'s own (``command``,
-``verbose``), the command's ``func`` (:func:`command`) and the extra defaults an option
-declares (``params_file``, the last of ``--params-file``).
+shared declaration (:func:`trust_av.cli.options.params_files_option`). A field declared
+without either is refused (:class:`TypeError`), and :func:`check_parser` refuses a parser
+with an option that is no field (an ``add_argument`` outside the builder). The namespace
+entries that are no option of a command are argparse's ``help``, ``trust-av``'s own
+(``command``, ``verbose``: a command that reads one declares it with
+:func:`trust_avs_option`), the command's ``func`` (:func:`command`) and the extra defaults
+an option declares (``params_file``, the last of ``--params-file``). A mutually exclusive
+group is the fields that name the same :class:`Exclusive`.
 
 The values' ranges and formats are checked by the parser's ``type=`` functions
 (:mod:`trust_av.cli.options`), one line and exit 2 for bad input; what
@@ -31,7 +33,8 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 __all__ = ['Command', 'Exclusive', 'ParamsFileOptions', 'RunOptions', 'add_command',
-           'add_options', 'check_parser', 'command', 'option', 'options_from', 'positional']
+           'add_options', 'check_parser', 'command', 'option', 'options_from', 'positional',
+           'trust_avs_option']
 
 Options = TypeVar('Options')
 
@@ -59,6 +62,7 @@ class Declaration:
     keywords: dict[str, Any]
     exclusive: Exclusive | None = None
     also_sets: dict[str, object] = dataclasses.field(default_factory=dict)
+    trust_avs: bool = False
 
 
 def option(*flags: str, exclusive: Exclusive | None = None,
@@ -73,6 +77,12 @@ def option(*flags: str, exclusive: Exclusive | None = None,
         raise TypeError(f'option{flags!r}: an option needs flags starting with -')
     return dataclasses.field(metadata={DECLARATION: Declaration(
         flags, keywords, exclusive, dict(also_sets or {}))})
+
+
+def trust_avs_option() -> Any:
+    """A field that is ``trust-av``'s own option of its name (``verbose``: ``-v``, before
+    the command), not one of the command's: its parser adds nothing for it."""
+    return dataclasses.field(metadata={DECLARATION: Declaration((), {}, trust_avs=True)})
 
 
 def positional(**keywords: Any) -> Any:
@@ -112,6 +122,8 @@ def add_options(parser: argparse.ArgumentParser, kind: type) -> None:
         if not isinstance(declared, Declaration):
             raise TypeError(f'{kind.__name__}.{field.name}: no option declared; declare it '
                             'with option(...) or positional(...)')
+        if declared.trust_avs:
+            continue
         keywords = {key: value() if key in ('help', 'choices') and callable(value) else value
                     for key, value in declared.keywords.items()}
         if 'type' not in keywords and 'action' not in keywords:
