@@ -109,8 +109,8 @@ def test_run_overrides_name_each_section() -> None:
 def test_fit_trust_takes_one_source() -> None:
     with pytest.raises(TypeError, match='one of them'):
         fit_trust.FitTrustOptions(params_files=(), study=None, ratings=None, out=Path('o'),
-                                  models='', no_figures=False,
-                                  no_partial_pooling=False)
+                                  models='', rating_scale='0-100', no_figures=False,
+                                  no_partial_pooling=False, workers=None, ray_address=None)
 
 
 _SIDE = typed_options.Exclusive('side')
