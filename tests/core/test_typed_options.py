@@ -1,7 +1,9 @@
-"""Each ``trust-av`` command reads a frozen, typed options dataclass built from argparse's
-namespace (trust_av.cli.typed_options): every option the parser defines is a field
-of the command's options, every field is an option of the parser, and a value of the wrong
-type is refused where the namespace becomes options."""
+"""Each ``trust-av`` command reads a frozen, typed options dataclass that is the one
+declaration its parser is built from, and is built from argparse's namespace
+(trust_av.cli.typed_options): every option the parser defines is a field of the command's
+options, every field is an option of the parser, a field without a declaration or an option
+added outside the builder is refused, and a value of the wrong type is refused where the
+namespace becomes options."""
 
 from __future__ import annotations
 
@@ -167,3 +169,8 @@ def test_an_option_added_outside_the_builder_is_caught() -> None:
     with pytest.raises(TypeError, match='p: --stray is no field of _Declared'):
         typed_options.check_parser(parser)
 
+
+
+def test_every_command_parser_is_its_options() -> None:
+    for parser in subparsers().values():
+        typed_options.check_parser(parser)

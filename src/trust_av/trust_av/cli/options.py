@@ -33,9 +33,8 @@ from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
 from trust_av_planner.predictors import PREDICTORS
 from trust_monitor.model_interface import trust_ceiling
 
-__all__ = ['EXIT_COLLISION', 'MAX_DRIVERS', 'MAX_ITERATIONS', 'MAX_SEED', 'MAX_WORKERS',
-           'Progress', 'RunOptions', 'add_lead_preview_option', 'add_params_file_option',
-           'add_run_options', 'alpha_value', 'bounded_int', 'ceiling_at_end',
+__all__ = ['BAG_TYPES', 'EXIT_COLLISION', 'MAX_DRIVERS', 'MAX_ITERATIONS', 'MAX_SEED',
+           'MAX_WORKERS', 'Progress', 'RunOptions', 'alpha_value', 'bounded_int', 'ceiling_at_end',
            'collision_exit', 'format_metrics', 'lead_preview_option', 'output_file',
            'params_files_option', 'positive_hz', 'positive_int', 'positive_seconds',
            'process_age_s', 'steps_value']
@@ -63,16 +62,6 @@ class _ParamsFiles(argparse.Action):
         files = [*getattr(namespace, 'params_files', []), Path(str(values))]
         namespace.params_files = files
         namespace.params_file = files[-1]
-
-
-def add_params_file_option(parser: argparse.ArgumentParser) -> None:
-    """``--params-file``, repeatable, layered over the shipped config/trust_av.yaml."""
-    parser.add_argument('--params-file', action=_ParamsFiles, metavar='FILE',
-                        help='ROS 2 params file layered over the shipped '
-                             f'{DEFAULT_PARAMS_FILE.name}; repeat for more layers, later over '
-                             "earlier, as a node's --ros-args --params-file layers them "
-                             '(a file may hold only the keys it changes)')
-    parser.set_defaults(params_files=[], params_file=DEFAULT_PARAMS_FILE)
 
 
 def params_files_option() -> Any:
@@ -229,44 +218,6 @@ def output_file(path: Path, option: str = '--out') -> Path:
     if problem is not None:
         raise TrustAvAppError(f'{path}: {problem}')
     return path
-
-
-def add_run_options(parser: argparse.ArgumentParser) -> None:
-    """Options shared by the commands that run one closed loop."""
-    source = parser.add_mutually_exclusive_group()
-    source.add_argument('--trace', default=None,
-                        help=f'preceding-traffic trace: one of {", ".join(SHIPPED_TRACES)}, a '
-                             'time_s,speed_mps CSV or a rosbag2 bag '
-                             "(default: the params file's preceding_traffic.trace)")
-    source.add_argument('--bag-in', type=Path, default=None, metavar='BAG',
-                        help='replay a rosbag2 bag (MCAP or sqlite3 directory or file) as the '
-                             'preceding vehicle; the same as --trace BAG')
-    parser.add_argument('--bag-topic', default=None,
-                        help="the preceding vehicle's topic in the bag (default: the params "
-                             "file's preceding_traffic.bag_topic)")
-    parser.add_argument('--bag-type', default=None,
-                        choices=('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'),
-                        help='its message type (default: preceding_traffic.bag_message_type)')
-    parser.add_argument('--alpha', type=alpha_value, default=None,
-                        help="explicability weight in [0, 1] (default: the params file's)")
-    parser.add_argument('--predictor', choices=registry.names(PREDICTORS),
-                        default=None,
-                        help='registered estimator of the plan the human expects (default: '
-                             "the params file's predictor)")
-    parser.add_argument('--driver-model', choices=registry.names(DRIVERS),
-                        default=None,
-                        help="registered human follower model (default: the params file's "
-                             'human_driver.driver_model)')
-    add_lead_preview_option(parser)
-    add_params_file_option(parser)
-    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
-
-
-def add_lead_preview_option(parser: argparse.ArgumentParser) -> None:
-    """``--lead-preview``: the planner parameter ``lead_preview``."""
-    parser.add_argument('--lead-preview', choices=LEAD_PREVIEWS, default=None,
-                        help="the lead's speed over the horizon: the recorded preview, or "
-                             "built from the lead's odometry (default: the params file's)")
 
 
 def positive_hz(text: str) -> float:

@@ -32,9 +32,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = ['Command', 'Exclusive', 'ParamsFileOptions', 'RunOptions', 'add_command',
-           'add_options', 'check_parser', 'command', 'option', 'options_from', 'positional',
-           'trust_avs_option']
+__all__ = ['Command', 'Exclusive', 'add_command', 'add_options', 'check_parser', 'command',
+           'option', 'options_from', 'positional', 'trust_avs_option']
 
 Options = TypeVar('Options')
 
@@ -239,51 +238,3 @@ def add_command(parser: argparse.ArgumentParser, kind: type[Options],
     add_options(parser, kind)
     parser.set_defaults(func=command(kind, run))
 
-
-@dataclasses.dataclass(frozen=True)
-class ParamsFileOptions:
-    """``--params-file``, repeatable
-    (:func:`~trust_av.cli.options.add_params_file_option`): every file in order,
-    later over earlier."""
-
-    params_files: tuple[Path, ...]
-
-
-@dataclasses.dataclass(frozen=True)
-class RunOptions(ParamsFileOptions):
-    """The options of the commands that run one closed loop
-    (:func:`~trust_av.cli.options.add_run_options`): each one None where the params
-    file's value holds."""
-
-    trace: str | None
-    bag_in: Path | None
-    bag_topic: str | None
-    bag_type: str | None
-    alpha: float | None
-    predictor: str | None
-    driver_model: str | None
-    lead_preview: str | None
-    no_progress: bool
-
-    def overrides(self) -> dict[str, dict[str, object]]:
-        """Params-file overrides from the options given."""
-        planner: dict[str, object] = {}
-        if self.lead_preview is not None:
-            planner['lead_preview'] = self.lead_preview
-        if self.alpha is not None:
-            planner['alpha'] = self.alpha
-        if self.predictor is not None:
-            planner['predictor'] = self.predictor
-        traffic: dict[str, object] = {}
-        if self.trace is not None:
-            traffic['trace'] = self.trace
-        if self.bag_in is not None:
-            traffic['trace'] = str(self.bag_in)
-        if self.bag_topic is not None:
-            traffic['bag_topic'] = self.bag_topic
-        if self.bag_type is not None:
-            traffic['bag_message_type'] = self.bag_type
-        driver: dict[str, object] = {}
-        if self.driver_model is not None:
-            driver['driver_model'] = self.driver_model
-        return {'planner': planner, 'preceding_traffic': traffic, 'human_driver': driver}
