@@ -1,7 +1,9 @@
-"""Each ``trust-av`` command reads a frozen, typed options dataclass built from argparse's
-namespace (trust_av.cli.typed_options): every option the parser defines is a field
-of the command's options, every field is an option of the parser, and a value of the wrong
-type is refused where the namespace becomes options."""
+"""Each ``trust-av`` command reads a frozen, typed options dataclass that is the one
+declaration its parser is built from, and is built from argparse's namespace
+(trust_av.cli.typed_options): every option the parser defines is a field of the command's
+options, every field is an option of the parser, a field without a declaration or an option
+added outside the builder is refused, and a value of the wrong type is refused where the
+namespace becomes options."""
 
 from __future__ import annotations
 
@@ -25,9 +27,11 @@ from trust_av.cli import (
     shadow,
     simulate,
     train_gru,
+    typed_options,
 )
 from trust_av.cli.main import build_parser
-from trust_av.cli.typed_options import RunOptions, options_from
+from trust_av.cli.options import RunOptions
+from trust_av.cli.typed_options import options_from
 
 COMMANDS: dict[str, tuple[type, list[str]]] = {
     'simulate': (simulate.SimulateOptions, []),
@@ -107,5 +111,66 @@ def test_run_overrides_name_each_section() -> None:
 def test_fit_trust_takes_one_source() -> None:
     with pytest.raises(TypeError, match='one of them'):
         fit_trust.FitTrustOptions(params_files=(), study=None, ratings=None, out=Path('o'),
-                                  models='', no_figures=False,
-                                  no_partial_pooling=False)
+                                  models='', rating_scale='0-100', no_figures=False,
+                                  no_partial_pooling=False, workers=None, ray_address=None)
+
+
+_SIDE = typed_options.Exclusive('side')
+
+
+@dataclasses.dataclass(frozen=True)
+class _Declared:
+    """Every kind of declaration the builder knows."""
+
+    source: Path = typed_options.positional(metavar='SRC', help='a source')
+    out: Path | None = typed_options.option('--out', default=None, help='an output')
+    count: int = typed_options.option('--count', default=2, help=lambda: 'built %(default)s')
+    fast: bool = typed_options.option('--fast', help='be fast')
+    left: str | None = typed_options.option('--left', exclusive=_SIDE, also_sets={'extra': 1})
+    right: str | None = typed_options.option('--right', exclusive=_SIDE)
+
+
+def test_the_parser_is_built_from_the_fields() -> None:
+    parser = argparse.ArgumentParser(prog='p')
+    typed_options.add_command(parser, _Declared, lambda options: 0)
+    typed_options.check_parser(parser)
+    assert [a.dest for a in parser._actions] == ['help', 'source', 'out', 'count', 'fast',
+                                                  'left', 'right']
+    namespace = parser.parse_args(['s', '--count', '5', '--fast', '--left', 'x'])
+    assert options_from(_Declared, namespace) == _Declared(
+        source=Path('s'), out=None, count=5, fast=True, left='x', right=None)
+    assert namespace.extra == 1 and 'built 2' in parser.format_help()
+    with pytest.raises(SystemExit):           # the exclusive group
+        parser.parse_args(['s', '--left', 'x', '--right', 'y'])
+
+
+def test_a_field_without_a_declaration_is_refused() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class Undeclared(_Declared):
+        forgotten: int
+
+    with pytest.raises(TypeError, match=r'Undeclared.forgotten: no option declared'):
+        typed_options.add_options(argparse.ArgumentParser(), Undeclared)
+
+
+def test_a_flag_that_names_another_field_is_refused() -> None:
+    @dataclasses.dataclass(frozen=True)
+    class Renamed:
+        out: Path = typed_options.option('--output')
+
+    with pytest.raises(TypeError, match=r"--output sets 'output', not the field"):
+        typed_options.add_options(argparse.ArgumentParser(), Renamed)
+
+
+def test_an_option_added_outside_the_builder_is_caught() -> None:
+    parser = argparse.ArgumentParser(prog='p')
+    typed_options.add_command(parser, _Declared, lambda options: 0)
+    parser.add_argument('--stray')
+    with pytest.raises(TypeError, match='p: --stray is no field of _Declared'):
+        typed_options.check_parser(parser)
+
+
+
+def test_every_command_parser_is_its_options() -> None:
+    for parser in subparsers().values():
+        typed_options.check_parser(parser)

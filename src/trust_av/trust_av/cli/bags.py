@@ -7,20 +7,23 @@ import dataclasses
 from pathlib import Path
 
 from preceding_traffic.traces import SHIPPED_TRACES, TraceConfig, read_samples, trace_path
-from trust_av.cli.options import add_params_file_option
-from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.cli.options import params_files_option
+from trust_av.cli.typed_options import add_command, option, positional
 from trust_av.system.config import load_run_config
 
 __all__: list[str] = []
 
 
 @dataclasses.dataclass(frozen=True)
-class TraceToBagOptions(ParamsFileOptions):
+class TraceToBagOptions:
     """``trust-av trace-to-bag``'s options."""
 
-    trace: str
-    out: Path
-    topic: str | None
+    trace: str = positional(help=f'one of {", ".join(SHIPPED_TRACES)} or a CSV path')
+    out: Path = positional(help='bag directory to create (must not exist; missing parent '
+                                'folders are created)')
+    topic: str | None = option('--topic', default=None,
+                               help="topic name (default: the params file's bag_topic)")
+    params_files: tuple[Path, ...] = params_files_option()
 
 
 def run(args: TraceToBagOptions) -> int:
@@ -45,11 +48,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'nav_msgs/msg/Odometry: speed in twist.twist.linear.x, position '
                     'integrated along x, header stamps and log times at the recorded times '
                     '(holes kept as they are). The bag replays with --trace BAG.')
-    parser.add_argument('trace', help=f'one of {", ".join(SHIPPED_TRACES)} or a CSV path')
-    parser.add_argument('out', type=Path,
-                        help='bag directory to create (must not exist; missing parent '
-                             'folders are created)')
-    parser.add_argument('--topic', default=None,
-                        help="topic name (default: the params file's bag_topic)")
-    add_params_file_option(parser)
-    parser.set_defaults(func=command(TraceToBagOptions, run))
+    add_command(parser, TraceToBagOptions, run)

@@ -7,8 +7,8 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from trust_av.cli.options import add_params_file_option, output_file
-from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.cli.options import output_file, params_files_option
+from trust_av.cli.typed_options import add_command, option, positional
 from trust_av_common import registry
 from trust_monitor.model_interface import TRUST_MODELS
 
@@ -24,14 +24,21 @@ def labels(text: str) -> list[str]:
 
 
 @dataclasses.dataclass(frozen=True)
-class CompareOptions(ParamsFileOptions):
+class CompareOptions:
     """``trust-av compare``'s options."""
 
-    run_a: Path
-    run_b: Path
-    out: Path
-    trust_models: str
-    labels: tuple[str, ...] | None
+    run_a: Path = positional(
+        metavar='RUN_A', help='the first run: a bag directory, its .mcap, or a simulate CSV')
+    run_b: Path = positional(metavar='RUN_B', help='the second run, the same')
+    out: Path = option('--out', required=True, help='the figure to write: .png, .pdf or .svg')
+    trust_models: str = option(
+        '--trust-models', default='',
+        help=lambda: 'comma-separated registered trust models to draw '
+                     f'({", ".join(registry.names(TRUST_MODELS))}; default: all)')
+    labels: tuple[str, ...] | None = option(
+        '--labels', type=labels, default=None, metavar='NAME_A,NAME_B',
+        help="the runs' names in the figure (default: their file names)")
+    params_files: tuple[Path, ...] = params_files_option()
 
 
 def run(args: CompareOptions) -> int:
@@ -53,7 +60,6 @@ def run(args: CompareOptions) -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``compare`` to ``trust-av``."""
-    models = ', '.join(registry.names(TRUST_MODELS))
     parser = subparsers.add_parser(
         'compare', help='draw two runs side by side (speeds, gaps, accelerations, E, trust '
                         'per model)',
@@ -65,15 +71,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     "study's drive: the directory or its .mcap) or a per-step CSV (trust-av "
                     'simulate --out FILE). Prints each '
                     "model's final trust per run. Bad input: one line, exit 2.")
-    parser.add_argument('run_a', metavar='RUN_A', type=Path,
-                        help='the first run: a bag directory, its .mcap, or a simulate CSV')
-    parser.add_argument('run_b', metavar='RUN_B', type=Path, help='the second run, the same')
-    parser.add_argument('--out', type=Path, required=True,
-                        help='the figure to write: .png, .pdf or .svg')
-    parser.add_argument('--trust-models', default='',
-                        help=f'comma-separated registered trust models to draw ({models}; '
-                             'default: all)')
-    parser.add_argument('--labels', type=labels, default=None, metavar='NAME_A,NAME_B',
-                        help="the runs' names in the figure (default: their file names)")
-    add_params_file_option(parser)
-    parser.set_defaults(func=command(CompareOptions, run))
+    add_command(parser, CompareOptions, run)

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from trust_av.cli.options import bounded_int, positive_int, positive_seconds
-from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.cli.typed_options import add_command, option
 from trust_av.errors import TrustAvAppError
 from trust_av.study.trust_design import (
     GOAL,
@@ -52,65 +52,67 @@ from trust_monitor.trust_fit import model_spec
 __all__: list[str] = []
 
 
+def _participants(default: int) -> Any:
+    """The field ``participants: int``, ``--participants`` defaulting to ``default``."""
+    return option('--participants', type=bounded_int('--participants', 3, 500),
+                  default=default, help=f'synthetic participants per model (default {default})')
+
+
 @dataclasses.dataclass(frozen=True)
-class DesignOptions(ParamsFileOptions):
+class DesignOptions:
     """The options every design command reads."""
 
-    drive_file: Path | None
-    conditions: str | None
-    drive_s: float | None
-    rating_period_s: float | None
-    drives: int | None
-    participants: int
-    rating_span: str
-    ranges: str
-    models: str
-    seed: int
-    workers: int
-    out: Path | None
+    drive_file: Path | None = option(
+        '--drive-file',
+        help="a study's drive settings (config/drive.yaml): its conditions, "
+             'drive length and rating period')
+    conditions: str | None = option(
+        '--conditions',
+        help='comma-separated perturbations, cycled over the drives '
+             "(default: the drive file's conditions, else rough_random)")
+    drive_s: float | None = option('--drive-s', type=positive_seconds, help='drive length, s')
+    rating_period_s: float | None = option(
+        '--rating-period-s', type=positive_seconds,
+        help='a rating at the start of each drive and this often after, s')
+    drives: int | None = option(
+        '--drives', type=bounded_int('--drives', 2, 20),
+        help="drives per participant (default: one per drive file's condition, else 4)")
+    participants: int = _participants(12)
+    rating_span: str = option(
+        '--rating-span', default=f'{RATING_SPAN[0]:g},{RATING_SPAN[1]:g}',
+        help="low,high: the span of a linear model's ratings, rating points")
+    ranges: str = option(
+        '--ranges', default='benchmark',
+        help="true values: 'benchmark' (TRUE_RANGES), 'wide' (WIDE_RANGES) "
+             'or a JSON file {model: {parameter: [low, high]}}')
+    models: str = option('--models', default='',
+                         help='comma-separated registered trust models (default: all)')
+    seed: int = option(
+        '--seed', type=bounded_int('--seed', 0, 2 ** 31 - 1), default=0,
+        help="the simulated participants' seed (default: 0); the same seed "
+             'gives the same participants')
+    workers: int = option('--workers', type=positive_int, default=1,
+                          help='processes for the drives and fits (the result is the same)')
+    out: Path | None = option('--out', help='also write the result as JSON here')
+    params_files: tuple[Path, ...] = option(
+        '--params-file', dest='params_files', type=Path, action='append', default=[],
+        help='params file(s) of the simulated drives (repeatable)')
 
 
 @dataclasses.dataclass(frozen=True)
 class ProposeOptions(DesignOptions):
-    """``design-propose``: the budget and the candidates."""
+    """``design-propose``: the budget and the candidates (and 3 participants by default)."""
 
-    budget_min: float
-    periods: str
-    drive_lengths: str
-    condition_sets: str
-
-
-def _add_design_options(parser: argparse.ArgumentParser, participants: int) -> None:
-    parser.add_argument('--drive-file', type=Path,
-                        help="a study's drive settings (config/drive.yaml): its conditions, "
-                             'drive length and rating period')
-    parser.add_argument('--conditions',
-                        help='comma-separated perturbations, cycled over the drives '
-                             "(default: the drive file's conditions, else rough_random)")
-    parser.add_argument('--drive-s', type=positive_seconds, help='drive length, s')
-    parser.add_argument('--rating-period-s', type=positive_seconds,
-                        help='a rating at the start of each drive and this often after, s')
-    parser.add_argument('--drives', type=bounded_int('--drives', 2, 20),
-                        help="drives per participant (default: one per drive file's "
-                             'condition, else 4)')
-    parser.add_argument('--participants', type=bounded_int('--participants', 3, 500),
-                        default=participants,
-                        help=f'synthetic participants per model (default {participants})')
-    parser.add_argument('--rating-span', default=f'{RATING_SPAN[0]:g},{RATING_SPAN[1]:g}',
-                        help="low,high: the span of a linear model's ratings, rating points")
-    parser.add_argument('--ranges', default='benchmark',
-                        help="true values: 'benchmark' (TRUE_RANGES), 'wide' (WIDE_RANGES) "
-                             'or a JSON file {model: {parameter: [low, high]}}')
-    parser.add_argument('--models', default='',
-                        help='comma-separated registered trust models (default: all)')
-    parser.add_argument('--seed', type=bounded_int('--seed', 0, 2 ** 31 - 1), default=0,
-                        help="the simulated participants' seed (default: 0); the same seed "
-                             'gives the same participants')
-    parser.add_argument('--workers', type=positive_int, default=1,
-                        help='processes for the drives and fits (the result is the same)')
-    parser.add_argument('--out', type=Path, help='also write the result as JSON here')
-    parser.add_argument('--params-file', dest='params_files', type=Path, action='append',
-                        default=[], help='params file(s) of the simulated drives (repeatable)')
+    participants: int = _participants(3)
+    budget_min: float = option('--budget-min', type=positive_seconds, required=True,
+                               help='participant minutes of driving in the whole study')
+    periods: str = option('--periods', default='2.5,5,15',
+                          help='candidate rating periods, s (comma-separated)')
+    drive_lengths: str = option('--drive-lengths', default='120',
+                                help='candidate drive lengths, s (comma-separated)')
+    condition_sets: str = option(
+        '--condition-sets', default='rough_random;mixed_random;rough_random,mixed_random',
+        help='candidate condition sets (;-separated, each comma-separated)')
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -120,31 +122,19 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         description='Draw synthetic participants of every registered trust model under a '
                     'study design, fit every model to each; print the confusion and every '
                     'parameter r against the recovery goal (docs/tutorials/fit-trust-models.md).')
-    _add_design_options(evaluate, 12)
-    evaluate.set_defaults(func=command(DesignOptions, run_evaluate))
+    add_command(evaluate, DesignOptions, run_evaluate)
     power = subparsers.add_parser(
         'design-power', help='participants a model comparison needs under a study design',
         description='Simulated power of the summed held-out elpd difference to prefer the '
                     'true model, per ordered pair of models, with its bootstrap interval.')
-    _add_design_options(power, 12)
-    power.set_defaults(func=command(DesignOptions, run_power))
+    add_command(power, DesignOptions, run_power)
     propose = subparsers.add_parser(
         'design-propose', help='the design within a budget that best separates the models',
         description='Evaluate candidate designs (rating period x drive length x conditions, '
                     'drives filling the budget) by a small simulated recovery; propose the '
                     'one whose worst pair of models has the largest expected z of the '
                     'summed held-out elpd difference.')
-    _add_design_options(propose, 3)
-    propose.add_argument('--budget-min', type=positive_seconds, required=True,
-                         help='participant minutes of driving in the whole study')
-    propose.add_argument('--periods', default='2.5,5,15',
-                         help='candidate rating periods, s (comma-separated)')
-    propose.add_argument('--drive-lengths', default='120',
-                         help='candidate drive lengths, s (comma-separated)')
-    propose.add_argument('--condition-sets', default='rough_random;mixed_random;'
-                                                     'rough_random,mixed_random',
-                         help='candidate condition sets (;-separated, each comma-separated)')
-    propose.set_defaults(func=command(ProposeOptions, run_propose))
+    add_command(propose, ProposeOptions, run_propose)
 
 
 def _numbers(option: str, text: str) -> list[float]:

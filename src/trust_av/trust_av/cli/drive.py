@@ -8,8 +8,8 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from trust_av.cli.options import add_params_file_option, positive_seconds
-from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.cli.options import params_files_option, positive_seconds
+from trust_av.cli.typed_options import add_command, option
 from trust_av.errors import TrustAvAppError
 from trust_av.system.config import DEFAULT_PARAMS_FILE
 
@@ -19,18 +19,40 @@ DEFAULT_DRIVE_FILE = DEFAULT_PARAMS_FILE.with_name('drive.yaml')
 
 
 @dataclasses.dataclass(frozen=True)
-class DriveOptions(ParamsFileOptions):
+class DriveOptions:
     """``trust-av drive``'s options."""
 
-    study: Path
-    participant: str
-    drive_file: Path
-    no_practice: bool
-    duration_s: float | None
-    port: int | None
-    withdraw: bool
-    yes: bool
-    startup_timeout_s: float
+    study: Path = option(
+        '--study', required=True,
+        help='study directory (created; one sub-directory per participant)')
+    participant: str = option(
+        '--participant', required=True,
+        help='pseudonymous participant id (1-32 letters, digits, _ or -)')
+    drive_file: Path = option(
+        '--drive-file', default=DEFAULT_DRIVE_FILE,
+        help=f'study settings and conditions (default: the shipped {DEFAULT_DRIVE_FILE.name})')
+    no_practice: bool = option('--no-practice',
+                               help='a new session starts without the practice drive')
+    duration_s: float | None = option(
+        '--duration-s', type=positive_seconds, default=None,
+        help="wall time of each drive, s (default: the drive file's)")
+    port: int | None = option(
+        '--port', default=None,
+        help="TCP port of the page (0: any free; default: the drive file's)")
+    withdraw: bool = option(
+        '--withdraw',
+        help='delete every file trust-av wrote for the participant in this '
+             'study and exit: only in a folder trust-av made for them (its '
+             '.trust_av_participant marker naming this study, or a '
+             'session.json of theirs from before markers), never through a '
+             'symbolic link, never a file it did not write (named, left with '
+             'the folder); asks for confirmation on the terminal')
+    yes: bool = option(
+        '--yes', help='--withdraw without asking (needed when stdin is not a terminal)')
+    startup_timeout_s: float = option(
+        '--startup-timeout-s', type=positive_seconds, default=60.0,
+        help='how long to wait for the nodes to connect (default: %(default)s)')
+    params_files: tuple[Path, ...] = params_files_option()
 
 
 def run(args: DriveOptions) -> int:
@@ -90,29 +112,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     '0 done (or stopped by an abandoned drive: run again to resume; a withdrawal '
                     'done or declined), 2 bad input, a node failed or a withdrawal refused, '
                     '130 interrupted.')
-    parser.add_argument('--study', type=Path, required=True,
-                        help='study directory (created; one sub-directory per participant)')
-    parser.add_argument('--participant', required=True,
-                        help='pseudonymous participant id (1-32 letters, digits, _ or -)')
-    parser.add_argument('--drive-file', type=Path, default=DEFAULT_DRIVE_FILE,
-                        help='study settings and conditions (default: the shipped '
-                             f'{DEFAULT_DRIVE_FILE.name})')
-    parser.add_argument('--no-practice', action='store_true',
-                        help='a new session starts without the practice drive')
-    parser.add_argument('--duration-s', type=positive_seconds, default=None,
-                        help="wall time of each drive, s (default: the drive file's)")
-    parser.add_argument('--port', type=int, default=None,
-                        help="TCP port of the page (0: any free; default: the drive file's)")
-    parser.add_argument('--withdraw', action='store_true',
-                        help='delete every file trust-av wrote for the participant in this '
-                             'study and exit: only in a folder trust-av made for them (its '
-                             '.trust_av_participant marker naming this study, or a '
-                             'session.json of theirs from before markers), never through a '
-                             'symbolic link, never a file it did not write (named, left with '
-                             'the folder); asks for confirmation on the terminal')
-    parser.add_argument('--yes', action='store_true',
-                        help='--withdraw without asking (needed when stdin is not a terminal)')
-    parser.add_argument('--startup-timeout-s', type=positive_seconds, default=60.0,
-                        help='how long to wait for the nodes to connect (default: %(default)s)')
-    add_params_file_option(parser)
-    parser.set_defaults(func=command(DriveOptions, run))
+    add_command(parser, DriveOptions, run)

@@ -25,7 +25,7 @@ from human_driver_sim.idm import TEXTBOOK_MOTORWAY, IdmParams
 from human_driver_sim.ngsim import NGSIM_VEHICLE_LENGTH_M
 from human_driver_sim.population import DRIVER_FIT_FILE, DriverFitError, fitted_idm_params
 from trust_av.cli.options import output_file
-from trust_av.cli.typed_options import command
+from trust_av.cli.typed_options import add_command, option
 from trust_av.errors import TrustAvAppError
 from trust_av.system.config import (
     DEFAULT_PARAMS_FILE,
@@ -49,13 +49,22 @@ MAX_VEHICLE_LENGTH_M = 30.0
 class EvalDriverOptions:
     """``trust-av eval-driver``'s options (one ``--params-file``, not layered)."""
 
-    data: Path
-    format: str | None
-    json: Path | None
-    params_file: Path
-    driver_fit: Path
-    window_s: float
-    vehicle_length_m: float
+    data: Path = option('--data', required=True, help='directory of CSV files')
+    format: str | None = option('--format', choices=FORMATS, default=None,
+                                help='file layout (default: detected from the first file)')
+    json: Path | None = option('--json', default=None,
+                               help='write pooled and per-pair scores to this JSON file')
+    params_file: Path = option('--params-file', default=DEFAULT_PARAMS_FILE,
+                               help='ROS 2 params file whose human_driver section is scored')
+    driver_fit: Path = option(
+        '--driver-fit', default=DRIVER_FIT_FILE,
+        help='driver-fit file holding the bounded IDM (default: the shipped '
+             "driver's fit, whose IDM is fitted on the training split)")
+    window_s: float = option('--window-s', default=WINDOW_S,
+                             help='re-initialised window length, s (default: %(default)s)')
+    vehicle_length_m: float = option(
+        '--vehicle-length-m', default=NGSIM_VEHICLE_LENGTH_M,
+        help='NGSIM: assumed leader length, m (default: %(default)s)')
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -68,21 +77,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
             'textbook IDM and constant speed on a directory of OpenACC or NGSIM-chain CSVs '
             '(read only): gap and speed NRMSE with 95 % CIs over pairs, collisions, gaps below '
             "2 m, beside the data's noise floor, for full runs and re-initialised windows."))
-    parser.add_argument('--data', type=Path, required=True, help='directory of CSV files')
-    parser.add_argument('--format', choices=FORMATS, default=None,
-                        help='file layout (default: detected from the first file)')
-    parser.add_argument('--json', type=Path, default=None,
-                        help='write pooled and per-pair scores to this JSON file')
-    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
-                        help='ROS 2 params file whose human_driver section is scored')
-    parser.add_argument('--driver-fit', type=Path, default=DRIVER_FIT_FILE,
-                        help='driver-fit file holding the bounded IDM (default: the shipped '
-                             "driver's fit, whose IDM is fitted on the training split)")
-    parser.add_argument('--window-s', type=float, default=WINDOW_S,
-                        help='re-initialised window length, s (default: %(default)s)')
-    parser.add_argument('--vehicle-length-m', type=float, default=NGSIM_VEHICLE_LENGTH_M,
-                        help='NGSIM: assumed leader length, m (default: %(default)s)')
-    parser.set_defaults(func=command(EvalDriverOptions, run))
+    add_command(parser, EvalDriverOptions, run)
 
 
 def models(params_file: Path, driver_fit: Path) -> dict[str, Follower]:

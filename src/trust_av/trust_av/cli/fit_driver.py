@@ -36,7 +36,7 @@ from human_driver_sim.idm import PARAM_NAMES, TEXTBOOK_MOTORWAY, IdmParams
 from human_driver_sim.population import DRIVER_FIT_FILE, WEIGHT_NAMES
 from human_driver_sim.splits import Split, split_ngsim, split_openacc
 from trust_av.cli.options import MAX_ITERATIONS, Progress, bounded_int, output_file
-from trust_av.cli.typed_options import command
+from trust_av.cli.typed_options import add_command, option
 from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av.system.config import (
@@ -71,13 +71,32 @@ IDM_TEXTBOOK = 'IDM textbook'
 class FitDriverOptions:
     """``trust-av fit-driver``'s options (one ``--params-file``, not layered)."""
 
-    data: Path
-    ngsim: Path | None
-    drives: Path | None
-    out: Path
-    params_file: Path
-    iterations: int
-    no_progress: bool
+    data: Path = option('--data', required=True,
+                        help='OpenACC Vicolungo directory: part2 trains and validates, part3 '
+                             'is the test set (read only, never copied)')
+    ngsim: Path | None = option(
+        '--ngsim', default=None,
+        help='NGSIM I-80 chain directory: split by follower ID (optional)')
+    drives: Path | None = option(
+        '--drives', default=None,
+        help='a trust-av drive study directory: its complete drives (a person '
+             'following the AV) are demonstrations too, split by participant '
+             'into train, validation and test like NGSIM (optional)')
+    out: Path = option(
+        '--out', default=DRIVER_FIT_FILE,
+        help='fit file with provenance (default: '
+             'human_driver_sim/models/driver_fit_caution.yaml, whose pooled fit '
+             "is config/trust_av.yaml's driver); its evaluation is written "
+             'beside it as <stem>_eval.json')
+    params_file: Path = option(
+        '--params-file', default=DEFAULT_PARAMS_FILE,
+        help='ROS 2 params file whose human_driver section gives what is '
+             'not fitted (dt_s, horizon, bounds); with config/human_cautious.yaml '
+             'layered over it, the cautious candidate (default: the shipped)')
+    iterations: int = option(
+        '--iterations', type=bounded_int('--iterations', 1, MAX_ITERATIONS), default=70,
+        help='Nelder-Mead iterations per start (default: %(default)s, the shipped fit)')
+    no_progress: bool = option('--no-progress', help='no progress bar')
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -93,30 +112,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
             'against the IDMs, constant speed and the noise floor, and write the fit with its '
             'provenance and the evaluation beside it. The data are read from their paths, never '
             'copied.'))
-    parser.add_argument('--data', type=Path, required=True,
-                        help='OpenACC Vicolungo directory: part2 trains and validates, part3 '
-                             'is the test set (read only, never copied)')
-    parser.add_argument('--ngsim', type=Path, default=None,
-                        help='NGSIM I-80 chain directory: split by follower ID (optional)')
-    parser.add_argument('--drives', type=Path, default=None,
-                        help='a trust-av drive study directory: its complete drives (a person '
-                             'following the AV) are demonstrations too, split by participant '
-                             'into train, validation and test like NGSIM (optional)')
-    parser.add_argument('--out', type=Path, default=DRIVER_FIT_FILE,
-                        help='fit file with provenance (default: '
-                             'human_driver_sim/models/driver_fit_caution.yaml, whose pooled fit '
-                             "is config/trust_av.yaml's driver); its evaluation is written "
-                             'beside it as <stem>_eval.json')
-    parser.add_argument('--params-file', type=Path, default=DEFAULT_PARAMS_FILE,
-                        help='ROS 2 params file whose human_driver section gives what is '
-                             'not fitted (dt_s, horizon, bounds); with config/human_cautious.yaml '
-                             'layered over it, the cautious candidate (default: the shipped)')
-    parser.add_argument('--iterations', type=bounded_int('--iterations', 1, MAX_ITERATIONS),
-                        default=70,
-                        help='Nelder-Mead iterations per start (default: %(default)s, the '
-                             'shipped fit)')
-    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
-    parser.set_defaults(func=command(FitDriverOptions, run))
+    add_command(parser, FitDriverOptions, run)
 
 
 def _code_version() -> str:

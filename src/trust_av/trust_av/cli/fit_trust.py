@@ -55,7 +55,7 @@ from typing import Any
 import numpy as np
 
 from trust_av.cli.options import Progress, positive_int
-from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.cli.typed_options import Exclusive, add_command, option
 from trust_av.drive.table_input import RatingScale, file_safe
 from trust_av.drive.trust_fit_data import read_ratings_table, read_study
 from trust_av.drive.trust_fit_pooling import (
@@ -123,19 +123,42 @@ RULE_TEXT = (f"parsimony rule: the model with the fewest fitted parameters (the 
              f'held-out ratings')
 
 
+_SOURCE = Exclusive('study or ratings', required=True)
+
+
 @dataclasses.dataclass(frozen=True)
-class FitTrustOptions(ParamsFileOptions):
+class FitTrustOptions:
     """``trust-av fit-trust``'s options (``--study`` or ``--ratings``, one of them)."""
 
-    study: Path | None
-    ratings: Path | None
-    out: Path
-    models: str
-    no_figures: bool
-    no_partial_pooling: bool
-    rating_scale: str = '0-100'
-    workers: int | None = None
-    ray_address: str | None = None
+    study: Path | None = option('--study', exclusive=_SOURCE,
+                                help='a study directory of trust-av drive')
+    ratings: Path | None = option(
+        '--ratings', exclusive=_SOURCE,
+        help='a tidy ratings table (CSV: participant, drive, t_s, explicability, rating)')
+    out: Path = option('--out', required=True, help='output directory')
+    models: str = option('--models', default='',
+                         help='comma-separated registered trust models (default: all)')
+    rating_scale: str = option(
+        '--rating-scale', default='0-100', metavar='LOW-HIGH',
+        help="the --ratings table's rating scale where it has no rating_scale "
+             'column (default 0-100; e.g. 0-1, 1-7): ratings outside it, or '
+             'all in its bottom tenth, are refused')
+    params_files: tuple[Path, ...] = option(
+        '--params-file', dest='params_files', type=Path, action='append', default=[],
+        help="params file(s) for eps and the models' configured values (repeatable)")
+    no_figures: bool = option('--no-figures', help='tables only')
+    no_partial_pooling: bool = option(
+        '--no-partial-pooling',
+        help='skip the partially pooled fits (each participant shrunk toward '
+             'the pooled fit by a fitted spread; about doubles the time)')
+    workers: int | None = option(
+        '--workers', type=positive_int, default=None,
+        help='processes for the fits, 1..256 (default: one per core; the '
+             'results do not depend on it)')
+    ray_address: str | None = option(
+        '--ray-address', default=None,
+        help='run the fits as Ray tasks on this cluster (HOST:PORT, auto or '
+             'local; pip install ray) instead of local processes')
 
     def __post_init__(self) -> None:
         if (self.study is None) == (self.ratings is None):
@@ -159,32 +182,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
             'participants pooled; score each model on held-out ratings (leave one drive out, '
             'leave one participant out: log predictive density and RMSE with standard errors); '
             'write tables and a figure per participant (docs/tutorials/fit-trust-models.md).'))
-    source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument('--study', type=Path, help='a study directory of trust-av drive')
-    source.add_argument('--ratings', type=Path,
-                        help='a tidy ratings table (CSV: participant, drive, t_s, '
-                             'explicability, rating)')
-    parser.add_argument('--out', type=Path, required=True, help='output directory')
-    parser.add_argument('--models', default='',
-                        help='comma-separated registered trust models (default: all)')
-    parser.add_argument('--rating-scale', default='0-100', metavar='LOW-HIGH',
-                        help="the --ratings table's rating scale where it has no rating_scale "
-                             'column (default 0-100; e.g. 0-1, 1-7): ratings outside it, or '
-                             'all in its bottom tenth, are refused')
-    parser.add_argument('--params-file', dest='params_files', type=Path, action='append',
-                        default=[], help="params file(s) for eps and the models' "
-                                         'configured values (repeatable)')
-    parser.add_argument('--no-figures', action='store_true', help='tables only')
-    parser.add_argument('--no-partial-pooling', action='store_true',
-                        help='skip the partially pooled fits (each participant shrunk toward '
-                             'the pooled fit by a fitted spread; about doubles the time)')
-    parser.add_argument('--workers', type=positive_int, default=None,
-                        help='processes for the fits, 1..256 (default: one per core; the '
-                             'results do not depend on it)')
-    parser.add_argument('--ray-address', default=None,
-                        help='run the fits as Ray tasks on this cluster (HOST:PORT, auto or '
-                             'local; pip install ray) instead of local processes')
-    parser.set_defaults(func=command(FitTrustOptions, run))
+    add_command(parser, FitTrustOptions, run)
 
 
 def _models(option: str) -> list[str]:

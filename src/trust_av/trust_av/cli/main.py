@@ -1,8 +1,9 @@
 """``trust-av``: the project's command line.
 
 Each subcommand lives in its own module that exposes ``register(subparsers)``; the module
-adds its parser and sets ``func(args) -> int`` on it, which builds the command's typed
-options from the namespace and runs it (:func:`trust_av.cli.typed_options.command`).
+adds its parser, built from the command's options dataclass, and sets ``func(args) -> int``
+on it, which builds the typed options from the namespace and runs the command
+(:mod:`trust_av.cli.typed_options`).
 Every project error derives from :class:`~trust_av_common.errors.TrustAvError`; one
 becomes one line on stderr and exit
 code 2.
@@ -17,6 +18,7 @@ import signal
 import sys
 
 from trust_av.cli.parser import Parser
+from trust_av.cli.typed_options import check_parser
 from trust_av.graph import stop_signals
 from trust_av_common.errors import TrustAvError, one_line
 
@@ -51,6 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(subparsers)
+    for command in subparsers.choices.values():
+        check_parser(command)      # each option is a field of the command's options
     return parser
 
 

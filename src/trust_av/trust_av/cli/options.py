@@ -1,11 +1,12 @@
 """Options and output shared by the ``trust-av`` commands: the run options (trace or bag,
-alpha, predictor, params file) and the argparse types that check values where they enter,
-the metrics table, and the progress bar (tqdm). The typed options the commands read are in
-:mod:`trust_av.cli.typed_options`."""
+alpha, predictor, params file, :class:`RunOptions`) and the argparse types that check values
+where they enter, the metrics table, and the progress bar (tqdm). How a command's options
+dataclass becomes its parser is :mod:`trust_av.cli.typed_options`."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import sys
@@ -13,11 +14,13 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 from tqdm import tqdm
 
 from human_driver_sim.followers import DRIVERS
 from preceding_traffic.traces import SHIPPED_TRACES, SpeedTrace
+from trust_av.cli.typed_options import Exclusive, option
 from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av.system.config import DEFAULT_PARAMS_FILE, RunConfig
@@ -30,11 +33,11 @@ from trust_av_planner.nmpc import LEAD_PREVIEWS, PlannerConfig
 from trust_av_planner.predictors import PREDICTORS
 from trust_monitor.model_interface import trust_ceiling
 
-__all__ = ['EXIT_COLLISION', 'MAX_DRIVERS', 'MAX_ITERATIONS', 'MAX_SEED', 'MAX_WORKERS',
-           'Progress', 'add_lead_preview_option', 'add_params_file_option', 'add_run_options',
-           'alpha_value', 'bounded_int', 'ceiling_at_end', 'collision_exit', 'format_metrics',
-           'output_file', 'positive_hz', 'positive_int', 'positive_seconds', 'process_age_s',
-           'steps_value']
+__all__ = ['BAG_TYPES', 'EXIT_COLLISION', 'MAX_DRIVERS', 'MAX_ITERATIONS', 'MAX_SEED',
+           'MAX_WORKERS', 'Progress', 'RunOptions', 'alpha_value', 'bounded_int', 'ceiling_at_end',
+           'collision_exit', 'format_metrics', 'lead_preview_option', 'output_file',
+           'params_files_option', 'positive_hz', 'positive_int', 'positive_seconds',
+           'process_age_s', 'steps_value']
 
 
 def alpha_value(text: str) -> float:
@@ -61,14 +64,88 @@ class _ParamsFiles(argparse.Action):
         namespace.params_file = files[-1]
 
 
-def add_params_file_option(parser: argparse.ArgumentParser) -> None:
-    """``--params-file``, repeatable, layered over the shipped config/trust_av.yaml."""
-    parser.add_argument('--params-file', action=_ParamsFiles, metavar='FILE',
-                        help='ROS 2 params file layered over the shipped '
-                             f'{DEFAULT_PARAMS_FILE.name}; repeat for more layers, later over '
-                             "earlier, as a node's --ros-args --params-file layers them "
-                             '(a file may hold only the keys it changes)')
-    parser.set_defaults(params_files=[], params_file=DEFAULT_PARAMS_FILE)
+def params_files_option() -> Any:
+    """The field ``params_files: tuple[Path, ...]``: ``--params-file``, repeatable, layered
+    over the shipped config/trust_av.yaml, every file in order (``params_file`` in the
+    namespace is the last one)."""
+    return option('--params-file', action=_ParamsFiles, metavar='FILE',
+                  also_sets={'params_files': [], 'params_file': DEFAULT_PARAMS_FILE},
+                  help='ROS 2 params file layered over the shipped '
+                       f'{DEFAULT_PARAMS_FILE.name}; repeat for more layers, later over '
+                       "earlier, as a node's --ros-args --params-file layers them "
+                       '(a file may hold only the keys it changes)')
+
+
+def lead_preview_option() -> Any:
+    """The field ``lead_preview: str | None``: the planner parameter ``lead_preview``."""
+    return option('--lead-preview', choices=LEAD_PREVIEWS, default=None,
+                  help="the lead's speed over the horizon: the recorded preview, or "
+                       "built from the lead's odometry (default: the params file's)")
+
+
+BAG_TYPES = ('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped')
+"""The message types a lead vehicle's bag topic may have."""
+_SOURCE = Exclusive('trace or bag')
+
+
+@dataclasses.dataclass(frozen=True)
+class RunOptions:
+    """The options of the commands that run one closed loop, first in their help: each one
+    None where the params file's value holds."""
+
+    trace: str | None = option(
+        '--trace', default=None, exclusive=_SOURCE,
+        help=f'preceding-traffic trace: one of {", ".join(SHIPPED_TRACES)}, a '
+             'time_s,speed_mps CSV or a rosbag2 bag '
+             "(default: the params file's preceding_traffic.trace)")
+    bag_in: Path | None = option(
+        '--bag-in', default=None, metavar='BAG', exclusive=_SOURCE,
+        help='replay a rosbag2 bag (MCAP or sqlite3 directory or file) as the '
+             'preceding vehicle; the same as --trace BAG')
+    bag_topic: str | None = option(
+        '--bag-topic', default=None,
+        help="the preceding vehicle's topic in the bag (default: the params "
+             "file's preceding_traffic.bag_topic)")
+    bag_type: str | None = option(
+        '--bag-type', default=None, choices=BAG_TYPES,
+        help='its message type (default: preceding_traffic.bag_message_type)')
+    alpha: float | None = option(
+        '--alpha', type=alpha_value, default=None,
+        help="explicability weight in [0, 1] (default: the params file's)")
+    predictor: str | None = option(
+        '--predictor', choices=lambda: registry.names(PREDICTORS), default=None,
+        help='registered estimator of the plan the human expects (default: '
+             "the params file's predictor)")
+    driver_model: str | None = option(
+        '--driver-model', choices=lambda: registry.names(DRIVERS), default=None,
+        help="registered human follower model (default: the params file's "
+             'human_driver.driver_model)')
+    lead_preview: str | None = lead_preview_option()
+    params_files: tuple[Path, ...] = params_files_option()
+    no_progress: bool = option('--no-progress', help='no progress bar')
+
+    def overrides(self) -> dict[str, dict[str, object]]:
+        """Params-file overrides from the options given."""
+        planner: dict[str, object] = {}
+        if self.lead_preview is not None:
+            planner['lead_preview'] = self.lead_preview
+        if self.alpha is not None:
+            planner['alpha'] = self.alpha
+        if self.predictor is not None:
+            planner['predictor'] = self.predictor
+        traffic: dict[str, object] = {}
+        if self.trace is not None:
+            traffic['trace'] = self.trace
+        if self.bag_in is not None:
+            traffic['trace'] = str(self.bag_in)
+        if self.bag_topic is not None:
+            traffic['bag_topic'] = self.bag_topic
+        if self.bag_type is not None:
+            traffic['bag_message_type'] = self.bag_type
+        driver: dict[str, object] = {}
+        if self.driver_model is not None:
+            driver['driver_model'] = self.driver_model
+        return {'planner': planner, 'preceding_traffic': traffic, 'human_driver': driver}
 
 
 MAX_STEPS = 10_000_000
@@ -141,44 +218,6 @@ def output_file(path: Path, option: str = '--out') -> Path:
     if problem is not None:
         raise TrustAvAppError(f'{path}: {problem}')
     return path
-
-
-def add_run_options(parser: argparse.ArgumentParser) -> None:
-    """Options shared by the commands that run one closed loop."""
-    source = parser.add_mutually_exclusive_group()
-    source.add_argument('--trace', default=None,
-                        help=f'preceding-traffic trace: one of {", ".join(SHIPPED_TRACES)}, a '
-                             'time_s,speed_mps CSV or a rosbag2 bag '
-                             "(default: the params file's preceding_traffic.trace)")
-    source.add_argument('--bag-in', type=Path, default=None, metavar='BAG',
-                        help='replay a rosbag2 bag (MCAP or sqlite3 directory or file) as the '
-                             'preceding vehicle; the same as --trace BAG')
-    parser.add_argument('--bag-topic', default=None,
-                        help="the preceding vehicle's topic in the bag (default: the params "
-                             "file's preceding_traffic.bag_topic)")
-    parser.add_argument('--bag-type', default=None,
-                        choices=('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'),
-                        help='its message type (default: preceding_traffic.bag_message_type)')
-    parser.add_argument('--alpha', type=alpha_value, default=None,
-                        help="explicability weight in [0, 1] (default: the params file's)")
-    parser.add_argument('--predictor', choices=registry.names(PREDICTORS),
-                        default=None,
-                        help='registered estimator of the plan the human expects (default: '
-                             "the params file's predictor)")
-    parser.add_argument('--driver-model', choices=registry.names(DRIVERS),
-                        default=None,
-                        help="registered human follower model (default: the params file's "
-                             'human_driver.driver_model)')
-    add_lead_preview_option(parser)
-    add_params_file_option(parser)
-    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
-
-
-def add_lead_preview_option(parser: argparse.ArgumentParser) -> None:
-    """``--lead-preview``: the planner parameter ``lead_preview``."""
-    parser.add_argument('--lead-preview', choices=LEAD_PREVIEWS, default=None,
-                        help="the lead's speed over the horizon: the recorded preview, or "
-                             "built from the lead's odometry (default: the params file's)")
 
 
 def positive_hz(text: str) -> float:

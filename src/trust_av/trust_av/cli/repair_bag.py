@@ -10,7 +10,7 @@ import fcntl
 import os
 from pathlib import Path
 
-from trust_av.cli.typed_options import command
+from trust_av.cli.typed_options import add_command, positional
 from trust_av.drive.sessions import MARKER, PARTICIPANT_ID, participant_lock
 from trust_av.errors import TrustAvAppError
 from trust_av_common.output_lock import hold_output_lock, lock_path
@@ -22,7 +22,7 @@ __all__: list[str] = []
 class RepairBagOptions:
     """``trust-av repair-bag``'s options."""
 
-    path: str
+    path: str = positional(metavar='PATH', help='bag directory or .mcap file')
 
 
 def run(args: RepairBagOptions) -> int:
@@ -105,5 +105,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     "participant has a live session, is refused. Exit codes: 0 repaired, 2 "
                     'nothing readable, no complete message, a complete recording, a recording '
                     'in use, or the copy failed (nothing is changed then).')
-    parser.add_argument('path', metavar='PATH', help='bag directory or .mcap file')
-    parser.set_defaults(func=command(RepairBagOptions, run))
+    add_command(parser, RepairBagOptions, run)

@@ -22,14 +22,14 @@ from trust_av.cli.options import (
     MAX_SEED,
     MAX_WORKERS,
     Progress,
-    add_lead_preview_option,
-    add_params_file_option,
     alpha_value,
     bounded_int,
+    lead_preview_option,
+    params_files_option,
     positive_int,
     steps_value,
 )
-from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.cli.typed_options import add_command, option
 from trust_av.errors import TrustAvAppError
 from trust_av.study import population, sweep, tables, trace_reports
 from trust_av.study.frame import (
@@ -173,27 +173,82 @@ def truncation_note(max_steps: int, dt_s: float, trace_steps: list[int]) -> str:
 
 
 @dataclasses.dataclass(frozen=True)
-class ReproduceOptions(ParamsFileOptions):
+class ReproduceOptions:
     """``trust-av reproduce``'s options (the axes each a tuple of values, in the order
     given)."""
 
-    traces: tuple[str, ...]
-    predictors: tuple[str, ...]
-    alphas: tuple[float, ...]
-    driver_models: tuple[str, ...]
-    trust_models: tuple[str, ...]
-    executor: str
-    workers: int | None
-    ray_address: str | None
-    graph: bool
-    max_steps: int
-    drivers: int
-    drivers_seed: int
-    driver_fit: Path | None
-    profile: str
-    results_dir: Path | None
-    lead_preview: str | None
-    no_progress: bool
+    traces: tuple[str, ...] = option(
+        '--traces', type=csv_list, default=list(sweep.TRACES),
+        help='comma-separated traces: shipped names, CSV files or rosbag2 bags '
+             '(default: %(default)s)')
+    predictors: tuple[str, ...] = option(
+        '--predictors', type=csv_list, default=list(sweep.PAPER_PREDICTORS),
+        help=lambda: 'comma-separated registered plan estimators '
+                     f'({", ".join(registry.names(PREDICTORS))}; default: %(default)s)')
+    alphas: tuple[float, ...] = option(
+        '--alphas', type=alpha_list, default=list(sweep.ALPHAS),
+        help='comma-separated explicability weights in [0, 1] (default: %(default)s)')
+    driver_models: tuple[str, ...] = option(
+        '--driver-models', type=csv_list, default=[''],
+        help=lambda: 'comma-separated registered follower models '
+                     f'({", ".join(registry.names(DRIVERS))}; '
+                     "default: the params file's driver_model)")
+    trust_models: tuple[str, ...] = option(
+        '--trust-models', type=csv_list, default=[''],
+        help=lambda: 'comma-separated registered trust models '
+                     f'({", ".join(registry.names(TRUST_MODELS)) or "none yet"}), set '
+                     "as the trust_model parameter (default: the params file's)")
+    executor: str = option('--executor', choices=('local', 'ray'), default='local',
+                           help='local process pool (default) or a Ray cluster')
+    workers: int | None = option(
+        '--workers', type=positive_int, default=None,
+        help=f'parallel workers, 1..{MAX_WORKERS} (default: one per core)')
+    ray_address: str | None = option('--ray-address', default=None,
+                                     help='Ray cluster address (default: start a local one)')
+    graph: bool = option(
+        '--graph',
+        help='run every case through the ROS 2 node graph (six processes in '
+             'lock-step, recorded to MCAP under RESULTS_DIR/graph_bags/) '
+             'instead of in-process; same numbers, about 10 s per case')
+    max_steps: int = option(
+        '--max-steps', type=steps_value, default=0,
+        help='stop every case after this many steps, for a quick check '
+             "(default: whole traces; tables then differ from the paper's)")
+    drivers: int = option(
+        '--drivers', type=bounded_int('--drivers', 0, MAX_DRIVERS), default=0, metavar='K',
+        help='run every case for K human drivers sampled (seeded) from the '
+             "driver fit's per-driver fits instead of the params file's driver; "
+             'tables then give mean ± 95 %% confidence interval per cell '
+             f"(default: 0, the params file's driver; at most {MAX_DRIVERS})")
+    drivers_seed: int = option(
+        '--drivers-seed', type=bounded_int('--drivers-seed', 0, MAX_SEED), default=1,
+        help='seed of the driver population (default: %(default)s)')
+    driver_fit: Path | None = option(
+        '--driver-fit', default=None,
+        help='driver-fit file: its per-driver fits, or else its per-pair '
+             'weights, are the population source (default: '
+             'human_driver_sim/models/driver_fit.yaml for the '
+             'human_cautious profile, the shipped driver_fit_caution.yaml '
+             'otherwise)')
+    profile: str = option(
+        '--profile', choices=tuple(PROFILES), default='table_i',
+        help="which parameters: table_i = the paper's Table I (epsilon 6, "
+             "config/trust_av.yaml), as_reported = what the paper's printed "
+             'mean E imply (epsilon 3, config/paper_as_reported.yaml; '
+             'docs/RESULTS.md), paper_fitted = as_reported with P_thre 0.97 '
+             "FITTED to the paper's final trusts (a hypothesis; "
+             'config/paper_fitted_threshold.yaml), human_cautious = Table I with '
+             'the cautious human driver, who never breaks d_s '
+             '(config/human_cautious.yaml; '
+             'docs/DRIVER_IRL.md); default: %(default)s')
+    results_dir: Path | None = option(
+        '--results-dir', default=None,
+        help='where tables, figures and the cache go (default: results/paper '
+             'for table_i, results/paper_<profile> for as_reported and '
+             'paper_fitted, results/human_cautious for human_cautious)')
+    params_files: tuple[Path, ...] = params_files_option()  # layered as in run and simulate
+    lead_preview: str | None = lead_preview_option()
+    no_progress: bool = option('--no-progress', help='no progress bar')
 
 
 def run(args: ReproduceOptions) -> int:
@@ -344,9 +399,6 @@ def _no_paper_table(cases: Sequence[Case], runner: str, elapsed: float, out: Pat
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``reproduce`` to ``trust-av``."""
-    predictors = ', '.join(registry.names(PREDICTORS))
-    drivers = ', '.join(registry.names(DRIVERS))
-    trust_models = ', '.join(registry.names(TRUST_MODELS)) or 'none yet'
     parser = subparsers.add_parser(
         'reproduce', help="a study of any registered parts; the paper's Tables II-IV and "
                           'Figures 2-3',
@@ -359,64 +411,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'params files and code, so a rerun only runs what changed. Every axis '
                     'needs a value and holds each value once (an empty axis or a duplicate is '
                     'refused, exit 2): one row per distinct case.')
-    parser.add_argument('--traces', type=csv_list, default=list(sweep.TRACES),
-                        help='comma-separated traces: shipped names, CSV files or rosbag2 bags '
-                             '(default: %(default)s)')
-    parser.add_argument('--predictors', type=csv_list, default=list(sweep.PAPER_PREDICTORS),
-                        help=f'comma-separated registered plan estimators ({predictors}; '
-                             'default: %(default)s)')
-    parser.add_argument('--alphas', type=alpha_list, default=list(sweep.ALPHAS),
-                        help='comma-separated explicability weights in [0, 1] (default: '
-                             '%(default)s)')
-    parser.add_argument('--driver-models', type=csv_list, default=[''],
-                        help=f'comma-separated registered follower models ({drivers}; '
-                             "default: the params file's driver_model)")
-    parser.add_argument('--trust-models', type=csv_list, default=[''],
-                        help=f'comma-separated registered trust models ({trust_models}), set '
-                             "as the trust_model parameter (default: the params file's)")
-    parser.add_argument('--executor', choices=('local', 'ray'), default='local',
-                        help='local process pool (default) or a Ray cluster')
-    parser.add_argument('--workers', type=positive_int, default=None,
-                        help=f'parallel workers, 1..{MAX_WORKERS} (default: one per core)')
-    parser.add_argument('--ray-address', default=None,
-                        help='Ray cluster address (default: start a local one)')
-    parser.add_argument('--graph', action='store_true',
-                        help='run every case through the ROS 2 node graph (six processes in '
-                             'lock-step, recorded to MCAP under RESULTS_DIR/graph_bags/) '
-                             'instead of in-process; same numbers, about 10 s per case')
-    parser.add_argument('--max-steps', type=steps_value, default=0,
-                        help='stop every case after this many steps, for a quick check '
-                             "(default: whole traces; tables then differ from the paper's)")
-    parser.add_argument('--drivers', type=bounded_int('--drivers', 0, MAX_DRIVERS),
-                        default=0, metavar='K',
-                        help='run every case for K human drivers sampled (seeded) from the '
-                             "driver fit's per-driver fits instead of the params file's driver; "
-                             'tables then give mean ± 95 %% confidence interval per cell '
-                             f"(default: 0, the params file's driver; at most {MAX_DRIVERS})")
-    parser.add_argument('--drivers-seed', type=bounded_int('--drivers-seed', 0, MAX_SEED),
-                        default=1,
-                        help='seed of the driver population (default: %(default)s)')
-    parser.add_argument('--driver-fit', type=Path, default=None,
-                        help='driver-fit file: its per-driver fits, or else its per-pair '
-                             'weights, are the population source (default: '
-                             'human_driver_sim/models/driver_fit.yaml for the '
-                             'human_cautious profile, the shipped driver_fit_caution.yaml '
-                             'otherwise)')
-    parser.add_argument('--profile', choices=tuple(PROFILES), default='table_i',
-                        help="which parameters: table_i = the paper's Table I (epsilon 6, "
-                             "config/trust_av.yaml), as_reported = what the paper's printed "
-                             'mean E imply (epsilon 3, config/paper_as_reported.yaml; '
-                             'docs/RESULTS.md), paper_fitted = as_reported with P_thre 0.97 '
-                             "FITTED to the paper's final trusts (a hypothesis; "
-                             'config/paper_fitted_threshold.yaml), human_cautious = Table I with '
-                             'the cautious human driver, who never breaks d_s '
-                             '(config/human_cautious.yaml; '
-                             'docs/DRIVER_IRL.md); default: %(default)s')
-    parser.add_argument('--results-dir', type=Path, default=None,
-                        help='where tables, figures and the cache go (default: results/paper '
-                             'for table_i, results/paper_<profile> for as_reported and '
-                             'paper_fitted, results/human_cautious for human_cautious)')
-    add_params_file_option(parser)  # repeatable, layered as in run and simulate
-    add_lead_preview_option(parser)
-    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
-    parser.set_defaults(func=command(ReproduceOptions, run))
+    add_command(parser, ReproduceOptions, run)

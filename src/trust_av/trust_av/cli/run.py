@@ -12,7 +12,7 @@ from preceding_traffic.sources import load_trace
 from preceding_traffic.traces import SpeedTrace, truncate
 from trust_av.cli.options import (
     Progress,
-    add_run_options,
+    RunOptions,
     ceiling_at_end,
     collision_exit,
     format_metrics,
@@ -20,7 +20,7 @@ from trust_av.cli.options import (
     process_age_s,
     steps_value,
 )
-from trust_av.cli.typed_options import RunOptions, command
+from trust_av.cli.typed_options import add_command, option
 from trust_av.graph.domains import DOMAIN_ID_MAX, check_domain_id, check_namespace
 from trust_av.system import run_record
 from trust_av.system.closed_loop import SimResult, simulate
@@ -36,13 +36,39 @@ __all__: list[str] = []
 class GraphRunOptions(RunOptions):
     """``trust-av run``'s options."""
 
-    bag: Path | None
-    overwrite: bool
-    no_plot: bool
-    max_steps: int
-    namespace: str
-    domain_id: str | None
-    startup_timeout_s: float
+    bag: Path | None = option(
+        '--bag', default=None,
+        help='bag directory to write (default: bags/run_<trace>_<predictor>_alpha<alpha>)')
+    overwrite: bool = option(
+        '--overwrite',
+        help='replace an existing bag directory, plot and logs, only if an '
+             'earlier trust-av run wrote them (its .trust_av_output marker); '
+             'they are replaced once the new ones are complete, and put back '
+             'if the run fails or is stopped')
+    no_plot: bool = option(
+        '--no-plot',
+        help='do not draw BAG.png (saves about 1 CPU-s per run in scripted '
+             'batches; the metrics are printed either way)')
+    max_steps: int = option('--max-steps', type=steps_value, default=0,
+                            help='stop after this many steps (default: the whole trace)')
+    namespace: str = option(
+        '--namespace', default='/', metavar='NS',
+        help='ROS namespace of every node (as --ros-args -r __ns:=NS): the '
+             'topics become NS/ego/odom, NS/tf, ... and the bag records those '
+             'names; a valid ROS 2 namespace (absolute, tokens of letters, '
+             'digits and _ not starting with a digit). Two runs in different '
+             'namespaces on one --domain-id do not hear each other '
+             '(default: %(default)s)')
+    domain_id: str | None = option(
+        '--domain-id', default=None, metavar='N',
+        help=f'run on ROS_DOMAIN_ID N (0..{DOMAIN_ID_MAX}, what Fast DDS can '
+             'use), shared with other graphs in other namespaces: refused if '
+             'a node in --namespace or a publisher on one of its topics is '
+             'already there, and stopped if one appears. Default: lease a '
+             'free, private domain that nothing else uses')
+    startup_timeout_s: float = option(
+        '--startup-timeout-s', type=positive_seconds, default=30.0,
+        help='how long to wait for the graph to connect (default: %(default)s)')
 
 
 def run(args: GraphRunOptions) -> int:
@@ -150,33 +176,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'a node failed (named) or the disk is full, 130 interrupted (SIGINT), '
                     '143 terminated (SIGTERM), 129 its terminal closed (SIGHUP; not under '
                     'nohup).')
-    add_run_options(parser)
-    parser.add_argument('--bag', type=Path, default=None,
-                        help='bag directory to write (default: bags/run_<trace>_<predictor>_'
-                             'alpha<alpha>)')
-    parser.add_argument('--overwrite', action='store_true',
-                        help='replace an existing bag directory, plot and logs, only if an '
-                             'earlier trust-av run wrote them (its .trust_av_output marker); '
-                             'they are replaced once the new ones are complete, and put back '
-                             'if the run fails or is stopped')
-    parser.add_argument('--no-plot', action='store_true',
-                        help='do not draw BAG.png (saves about 1 CPU-s per run in scripted '
-                             'batches; the metrics are printed either way)')
-    parser.add_argument('--max-steps', type=steps_value, default=0,
-                        help='stop after this many steps (default: the whole trace)')
-    parser.add_argument('--namespace', default='/', metavar='NS',
-                        help='ROS namespace of every node (as --ros-args -r __ns:=NS): the '
-                             'topics become NS/ego/odom, NS/tf, ... and the bag records those '
-                             'names; a valid ROS 2 namespace (absolute, tokens of letters, '
-                             'digits and _ not starting with a digit). Two runs in different '
-                             'namespaces on one --domain-id do not hear each other '
-                             '(default: %(default)s)')
-    parser.add_argument('--domain-id', default=None, metavar='N',
-                        help=f'run on ROS_DOMAIN_ID N (0..{DOMAIN_ID_MAX}, what Fast DDS can '
-                             'use), shared with other graphs in other namespaces: refused if '
-                             'a node in --namespace or a publisher on one of its topics is '
-                             'already there, and stopped if one appears. Default: lease a '
-                             'free, private domain that nothing else uses')
-    parser.add_argument('--startup-timeout-s', type=positive_seconds, default=30.0,
-                        help='how long to wait for the graph to connect (default: %(default)s)')
-    parser.set_defaults(func=command(GraphRunOptions, run))
+    add_command(parser, GraphRunOptions, run)

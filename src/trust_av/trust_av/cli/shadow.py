@@ -12,13 +12,14 @@ from typing import TYPE_CHECKING
 
 from preceding_traffic.sources import load_trace
 from trust_av.cli.options import (
-    add_params_file_option,
+    BAG_TYPES,
     alpha_value,
     output_file,
+    params_files_option,
     positive_hz,
     positive_seconds,
 )
-from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.cli.typed_options import add_command, option
 from trust_av.errors import TrustAvAppError
 from trust_av.system import run_record
 from trust_av.system.config import load_run_config
@@ -44,21 +45,47 @@ def summary_lines(result: ShadowRun) -> list[str]:
 
 
 @dataclasses.dataclass(frozen=True)
-class ShadowOptions(ParamsFileOptions):
+class ShadowOptions:
     """``trust-av shadow``'s options."""
 
-    bag: Path
-    bag_topic: str | None
-    bag_type: str | None
-    out: Path
-    overwrite: bool
-    duration_s: float | None
-    rate_hz: float | None
-    alpha: float | None
-    predictor: str | None
-    whole_graph: bool
-    json: Path | None
-    startup_timeout_s: float
+    bag: Path = option('--bag', required=True,
+                       help='rosbag2 bag (MCAP or sqlite3) whose lead vehicle is replayed')
+    bag_topic: str | None = option(
+        '--bag-topic', default=None,
+        help="the lead vehicle's topic (default: preceding_traffic.bag_topic)")
+    bag_type: str | None = option(
+        '--bag-type', default=None, choices=BAG_TYPES,
+        help='its message type (default: preceding_traffic.bag_message_type)')
+    out: Path = option('--out', required=True,
+                       help='bag directory to write (rosbag2: metadata.yaml + MCAP)')
+    overwrite: bool = option(
+        '--overwrite',
+        help='replace an existing --out bag directory and its logs, only if '
+             'an earlier trust-av command wrote them (its .trust_av_output '
+             'marker); put back if this run fails or is stopped')
+    duration_s: float | None = option(
+        '--duration-s', type=positive_seconds, default=None,
+        help='wall time to replay, s (default: the whole bag)')
+    rate_hz: float | None = option(
+        '--rate-hz', type=positive_hz, default=None,
+        help="control rate, Hz (default: the params file's control_rate_hz)")
+    alpha: float | None = option(
+        '--alpha', type=alpha_value, default=None,
+        help="explicability weight in [0, 1] (default: the params file's)")
+    predictor: str | None = option(
+        '--predictor', choices=lambda: registry.names(PREDICTORS), default=None,
+        help="registered plan estimator (default: the params file's)")
+    whole_graph: bool = option(
+        '--whole-graph',
+        help='run all five nodes in wall mode (simulated ego and human '
+             'follower) instead of the planner and monitor alone')
+    json: Path | None = option(
+        '--json', default=None,
+        help='also write the loop statistics and message counts as JSON')
+    startup_timeout_s: float = option(
+        '--startup-timeout-s', type=positive_seconds, default=30.0,
+        help='how long to wait for the nodes to connect (default: %(default)s)')
+    params_files: tuple[Path, ...] = params_files_option()
 
 
 def run(args: ShadowOptions) -> int:
@@ -131,34 +158,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     '(so a predictor that needs the follower state works), and every topic '
                     'is recorded. '
                     'Exit codes: 0 done, 2 bad input or a node failed (named), 130 interrupted.')
-    parser.add_argument('--bag', type=Path, required=True,
-                        help='rosbag2 bag (MCAP or sqlite3) whose lead vehicle is replayed')
-    parser.add_argument('--bag-topic', default=None,
-                        help="the lead vehicle's topic (default: preceding_traffic.bag_topic)")
-    parser.add_argument('--bag-type', default=None,
-                        choices=('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped'),
-                        help='its message type (default: preceding_traffic.bag_message_type)')
-    parser.add_argument('--out', type=Path, required=True,
-                        help='bag directory to write (rosbag2: metadata.yaml + MCAP)')
-    parser.add_argument('--overwrite', action='store_true',
-                        help='replace an existing --out bag directory and its logs, only if '
-                             'an earlier trust-av command wrote them (its .trust_av_output '
-                             'marker); put back if this run fails or is stopped')
-    parser.add_argument('--duration-s', type=positive_seconds, default=None,
-                        help='wall time to replay, s (default: the whole bag)')
-    parser.add_argument('--rate-hz', type=positive_hz, default=None,
-                        help="control rate, Hz (default: the params file's control_rate_hz)")
-    parser.add_argument('--alpha', type=alpha_value, default=None,
-                        help="explicability weight in [0, 1] (default: the params file's)")
-    parser.add_argument('--predictor', choices=registry.names(PREDICTORS),
-                        default=None,
-                        help="registered plan estimator (default: the params file's)")
-    parser.add_argument('--whole-graph', action='store_true',
-                        help='run all five nodes in wall mode (simulated ego and human '
-                             'follower) instead of the planner and monitor alone')
-    parser.add_argument('--json', type=Path, default=None,
-                        help='also write the loop statistics and message counts as JSON')
-    parser.add_argument('--startup-timeout-s', type=positive_seconds, default=30.0,
-                        help='how long to wait for the nodes to connect (default: %(default)s)')
-    add_params_file_option(parser)
-    parser.set_defaults(func=command(ShadowOptions, run))
+    add_command(parser, ShadowOptions, run)

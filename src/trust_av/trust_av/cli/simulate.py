@@ -10,7 +10,7 @@ from pathlib import Path
 from preceding_traffic.traces import truncate
 from trust_av.cli.options import (
     Progress,
-    add_run_options,
+    RunOptions,
     ceiling_at_end,
     collision_exit,
     format_metrics,
@@ -18,7 +18,7 @@ from trust_av.cli.options import (
     positive_hz,
     steps_value,
 )
-from trust_av.cli.typed_options import RunOptions, command
+from trust_av.cli.typed_options import add_command, option
 from trust_av.system import run_record
 from trust_av.system.closed_loop import SimResult, control_trace, simulate
 from trust_av.system.config import load_run_config
@@ -34,9 +34,17 @@ __all__: list[str] = []
 class SimulateOptions(RunOptions):
     """``trust-av simulate``'s options."""
 
-    control_rate_hz: float | None
-    out: Path | None
-    max_steps: int
+    control_rate_hz: float | None = option(
+        '--control-rate-hz', type=positive_hz, default=None,
+        help='control rate: the trace is interpolated to it, the NMPC predicts '
+             'on its period, trust is per second (default: 1 / dt_s, the '
+             "paper's 1 Hz)")
+    out: Path | None = option('--out', default=None,
+                              help='write the per-step table (CSV) here')
+    max_steps: int = option(
+        '--max-steps', type=steps_value, default=0,
+        help='stop after this many control steps (default: the whole trace); '
+             "the steps equal the first ones of the whole trace's run")
 
 
 def run(args: SimulateOptions) -> int:
@@ -94,15 +102,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'prediction RMSE, minimum gaps and fallback counts. A gap at or below 0 m '
                     'is a collision: the run ends at that step, the summary says so and the '
                     'exit status is 3 (0 done, 2 bad input).')
-    add_run_options(parser)
-    parser.add_argument('--control-rate-hz', type=positive_hz, default=None,
-                        help='control rate: the trace is interpolated to it, the NMPC predicts '
-                             'on its period, trust is per second (default: 1 / dt_s, the '
-                             "paper's 1 Hz)")
-    parser.add_argument('--out', type=Path, default=None,
-                        help='write the per-step table (CSV) here')
-    parser.add_argument('--max-steps', type=steps_value, default=0,
-                        help='stop after this many control steps (default: the whole trace); '
-                             "the steps equal the first ones of the whole trace's run")
-    parser.set_defaults(func=command(SimulateOptions, run))
-
+    add_command(parser, SimulateOptions, run)

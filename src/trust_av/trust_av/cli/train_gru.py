@@ -19,12 +19,12 @@ from trust_av.cli.options import (
     MAX_ITERATIONS,
     MAX_SEED,
     Progress,
-    add_params_file_option,
     bounded_int,
     output_file,
+    params_files_option,
     positive_int,
 )
-from trust_av.cli.typed_options import ParamsFileOptions, command
+from trust_av.cli.typed_options import add_command, option, trust_avs_option
 from trust_av.errors import TrustAvAppError
 from trust_av.graph import stop_signals
 from trust_av.study.gru_training import TrainingSettings, save_model, train_with_dagger
@@ -46,15 +46,26 @@ def default_jobs() -> int:
 
 
 @dataclasses.dataclass(frozen=True)
-class TrainGruOptions(ParamsFileOptions):
+class TrainGruOptions:
     """``trust-av train-gru``'s options (``verbose``: trust-av's ``-v``, for the child)."""
 
-    verbose: bool
-    out: Path
-    epochs: int | None
-    seed: int | None
-    dagger_rounds: int | None
-    jobs: int | None
+    verbose: bool = trust_avs_option()
+    out: Path = option('--out', default=MODELS_DIR / 'gru_plan_estimator.npz',
+                       help='weights file to write (default: the shipped model)')
+    epochs: int | None = option(
+        '--epochs', type=bounded_int('--epochs', 1, MAX_ITERATIONS), default=None,
+        help=f'override the epochs (1..{MAX_ITERATIONS})')
+    seed: int | None = option('--seed', type=bounded_int('--seed', 0, MAX_SEED), default=None,
+                              help=f'override the seed (0..{MAX_SEED})')
+    dagger_rounds: int | None = option(
+        '--dagger-rounds', type=bounded_int('--dagger-rounds', 0, MAX_ITERATIONS),
+        default=None, help=lambda: 'override the number of DAgger rounds (default: '
+                                   f'{TrainingSettings().dagger_rounds})')
+    jobs: int | None = option(
+        '--jobs', type=positive_int, default=None,
+        help='processes for the closed-loop runs (default: the usable CPUs; '
+             'the result does not depend on it)')
+    params_files: tuple[Path, ...] = params_files_option()
 
 
 def child_arguments(args: TrainGruOptions) -> list[str]:
@@ -63,10 +74,10 @@ def child_arguments(args: TrainGruOptions) -> list[str]:
             '--out', os.path.abspath(args.out),
             *[arg for path in args.params_files
               for arg in ('--params-file', os.path.abspath(path))]]
-    for option, value in (('--epochs', args.epochs), ('--seed', args.seed),
-                          ('--dagger-rounds', args.dagger_rounds), ('--jobs', args.jobs)):
+    for flag, value in (('--epochs', args.epochs), ('--seed', args.seed),
+                        ('--dagger-rounds', args.dagger_rounds), ('--jobs', args.jobs)):
         if value is not None:
-            argv += [option, str(value)]
+            argv += [flag, str(value)]
     return argv
 
 
@@ -154,18 +165,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                     'the shipped model was trained on (AMD EPYC without AVX-512) give the '
                     'shipped weights bit for bit, other x86-64 CPUs with AVX2 weights within '
                     'about 1e-4 (docs/GRU.md). The default output replaces the shipped model.')
-    parser.add_argument('--out', type=Path, default=MODELS_DIR / 'gru_plan_estimator.npz',
-                        help='weights file to write (default: the shipped model)')
-    parser.add_argument('--epochs', type=bounded_int('--epochs', 1, MAX_ITERATIONS),
-                        default=None, help=f'override the epochs (1..{MAX_ITERATIONS})')
-    parser.add_argument('--seed', type=bounded_int('--seed', 0, MAX_SEED), default=None,
-                        help=f'override the seed (0..{MAX_SEED})')
-    parser.add_argument('--dagger-rounds', type=bounded_int('--dagger-rounds', 0, MAX_ITERATIONS),
-                        default=None,
-                        help='override the number of DAgger rounds (default: '
-                             f'{TrainingSettings().dagger_rounds})')
-    parser.add_argument('--jobs', type=positive_int, default=None,
-                        help='processes for the closed-loop runs (default: the usable CPUs; '
-                             'the result does not depend on it)')
-    add_params_file_option(parser)
-    parser.set_defaults(func=command(TrainGruOptions, run))
+    add_command(parser, TrainGruOptions, run)
