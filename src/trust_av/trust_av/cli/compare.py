@@ -15,7 +15,7 @@ from trust_monitor.model_interface import TRUST_MODELS
 __all__ = ['CompareOptions', 'register']
 
 
-def labels(text: str) -> list[str]:
+def two_labels(text: str) -> list[str]:
     """argparse type: two comma-separated names."""
     names = [t.strip() for t in text.split(',')]
     if len(names) != 2 or not all(names):
@@ -36,7 +36,7 @@ class CompareOptions:
         help=lambda: 'comma-separated registered trust models to draw '
                      f'({", ".join(registry.names(TRUST_MODELS))}; default: all)')
     labels: tuple[str, ...] | None = option(
-        '--labels', type=labels, default=None, metavar='NAME_A,NAME_B',
+        '--labels', type=two_labels, default=None, metavar='NAME_A,NAME_B',
         help="the runs' names in the figure (default: their file names)")
     params_files: tuple[Path, ...] = params_files_option()
 
