@@ -225,6 +225,12 @@ def test_a_long_recording_goes_on_in_numbered_files_rosbag2_reads_in_order(
         chunks.append(summary.statistics.chunk_count)
         assert sorted(c.topic for c in summary.channels.values()) == ['/a/odom', '/b/odom']
     assert chunks == [4, 4, 2]
+    even = BagWriter(tmp_path / 'even', max_chunks_per_file=5)
+    record(even, 10)              # the file begun at the last split is empty: not kept
+    assert even.files == ['even.mcap', 'even_1.mcap']
+    assert sorted(p.name for p in (tmp_path / 'even').iterdir()) == [
+        'even.mcap', 'even_1.mcap', 'metadata.yaml']
+    assert check_bag_directory(tmp_path / 'even') == []
     with Reader(bag) as reader:          # rosbags: the files one after the other, in order
         stamps = [stamp for _, stamp, _ in reader.messages()]
     assert stamps == sorted(stamps) and len(stamps) == 20

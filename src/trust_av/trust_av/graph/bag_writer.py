@@ -515,11 +515,20 @@ class BagWriter:
             BagWriteError: it cannot be written.
         """
         self.finished = True
-        self._finish_file()
+        if self._chunks == 0 and len(self._info.files) > 1:
+            self._drop_empty_file()   # begun at the last split, nothing written to it since
+        else:
+            self._finish_file()
         try:
             self._info.write(self.path)
         except OSError as err:
             raise BagWriteError(f'{self.path}: cannot finish the bag ({err.strerror})') from err
+
+    def _drop_empty_file(self) -> None:
+        """Remove the current MCAP file, which holds no chunk (only its header)."""
+        self._reserve.unlink(missing_ok=True)
+        self._stream.close()
+        (self.path / self._info.files.pop().path).unlink()
 
     def _finish_file(self) -> None:
         """Finish the current MCAP file (the ``rosbag2`` metadata record: the bag as it is
