@@ -313,14 +313,16 @@ class DrivePage(WallHooks):
         return False
 
     def every_tick(self, run: WallRun, now_ns: int) -> None:
-        """The page's messages; a rating prompt every ``rating_period_s``."""
+        """The page's messages; a rating prompt every ``rating_period_s`` on the drive's
+        clock (its event says when it was due: a late tick sends it late, the schedule stays)."""
         self.drain()
         if time.monotonic() >= self.next_prompt:
+            due_s = self.next_prompt - self.begin
             self.next_prompt += self.settings.rating_period_s
             if not self.gate.open_prompts():     # one still open stays open
                 prompt = self.gate.open_prompt(time.time_ns())
                 self.server.send({'type': 'rate', 'id': prompt})
-                self.event('rating_prompt', time.time_ns(), id=prompt)
+                self.event('rating_prompt', time.time_ns(), id=prompt, due_s=f'{due_s:.3f}')
 
     def stopping(self, run: WallRun) -> None:
         """The end: the drive's time and what ended it; the page waits."""
