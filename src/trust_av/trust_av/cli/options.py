@@ -34,10 +34,10 @@ from trust_av_planner.predictors import PREDICTORS
 from trust_monitor.model_interface import trust_ceiling
 
 __all__ = ['BAG_TYPES', 'EXIT_COLLISION', 'MAX_DRIVERS', 'MAX_ITERATIONS', 'MAX_SEED',
-           'MAX_WORKERS', 'Progress', 'RunOptions', 'alpha_value', 'bounded_int', 'ceiling_at_end',
-           'collision_exit', 'format_metrics', 'lead_preview_option', 'output_file',
-           'params_files_option', 'positive_hz', 'positive_int', 'positive_seconds',
-           'process_age_s', 'steps_value']
+           'MAX_WORKERS', 'Progress', 'RunOptions', 'alpha_option', 'alpha_value', 'bounded_int',
+           'ceiling_at_end', 'collision_exit', 'format_metrics', 'lead_preview_option',
+           'output_file', 'params_files_option', 'positive_hz', 'positive_int',
+           'positive_seconds', 'process_age_s', 'steps_value']
 
 
 def alpha_value(text: str) -> float:
@@ -83,6 +83,12 @@ def lead_preview_option() -> Any:
                        "built from the lead's odometry (default: the params file's)")
 
 
+def alpha_option() -> Any:
+    """The field ``alpha: float | None``: the planner parameter ``alpha``."""
+    return option('--alpha', type=alpha_value, default=None,
+                  help="explicability weight in [0, 1] (default: the params file's)")
+
+
 BAG_TYPES = ('nav_msgs/msg/Odometry', 'geometry_msgs/msg/TwistStamped')
 """The message types a lead vehicle's bag topic may have."""
 _SOURCE = Exclusive('trace or bag')
@@ -109,9 +115,7 @@ class RunOptions:
     bag_type: str | None = option(
         '--bag-type', default=None, choices=BAG_TYPES,
         help='its message type (default: preceding_traffic.bag_message_type)')
-    alpha: float | None = option(
-        '--alpha', type=alpha_value, default=None,
-        help="explicability weight in [0, 1] (default: the params file's)")
+    alpha: float | None = alpha_option()
     predictor: str | None = option(
         '--predictor', choices=lambda: registry.names(PREDICTORS), default=None,
         help='registered estimator of the plan the human expects (default: '

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from preceding_traffic.sources import load_trace
 from trust_av.cli.options import (
     BAG_TYPES,
-    alpha_value,
+    alpha_option,
     output_file,
     params_files_option,
     positive_hz,
@@ -69,9 +69,7 @@ class ShadowOptions:
     rate_hz: float | None = option(
         '--rate-hz', type=positive_hz, default=None,
         help="control rate, Hz (default: the params file's control_rate_hz)")
-    alpha: float | None = option(
-        '--alpha', type=alpha_value, default=None,
-        help="explicability weight in [0, 1] (default: the params file's)")
+    alpha: float | None = alpha_option()
     predictor: str | None = option(
         '--predictor', choices=lambda: registry.names(PREDICTORS), default=None,
         help="registered plan estimator (default: the params file's)")
