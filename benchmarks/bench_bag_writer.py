@@ -99,16 +99,11 @@ def memory_once(directory: Path, steps: int, topics: int, max_chunks: int) -> di
     return {'samples': samples, 'files': files, 'max_chunks_per_file': max_chunks}
 
 
-def slope_kb_per_step(samples: list[tuple[int, int]]) -> float:
-    """Least-squares slope of the second half of the samples, kB per step."""
-    half = samples[len(samples) // 2:]
-    steps = np.array([step for step, _ in half], dtype=float)
-    rss = np.array([kb for _, kb in half], dtype=float)
-    return float(np.polyfit(steps, rss, 1)[0]) if len(half) > 1 else 0.0
-
-
 def memory(args: argparse.Namespace) -> int:
-    """Both recordings, each in its own process; print and write the slopes."""
+    """Both recordings, each in its own process; print and write the slopes (the soak's
+    least-squares slope, over the second half of the samples)."""
+    from soak import slope_kb_per_step  # benchmarks/, beside this script
+
     results: dict[str, Any] = {'steps': args.steps, 'topics': args.topics,
                                'cpu_count': os.cpu_count(),
                                'date': datetime.datetime.now(datetime.UTC).isoformat()}
@@ -122,7 +117,9 @@ def memory(args: argparse.Namespace) -> int:
             return done.returncode
         run = json.loads(done.stdout)
         samples = run['samples']
-        run['slope_kb_per_step'] = slope_kb_per_step(samples)
+        run['slope_kb_per_step'] = slope_kb_per_step(
+            {step: {'writer': kb / 1024} for step, kb in samples},
+            samples[len(samples) // 2][0], 'writer')
         run['growth_mb'] = (max(kb for _, kb in samples) - samples[0][1]) / 1024
         results[label] = run
         print(f'{label:9s} ({run["files"]} file{"s" if run["files"] != 1 else ""}, '
