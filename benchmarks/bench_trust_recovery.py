@@ -138,8 +138,9 @@ def main() -> int:
     config = load_run_config([])
     start = time.perf_counter()
     result = recover(config, models, design, seed=args.seed,
-                     workers=args.workers, on_participant=lambda who: print(
-                         f'{who} {time.perf_counter() - start:.0f} s', flush=True))
+                     workers=args.workers, on_progress=lambda done, total: print(
+                         f'{done}/{total} participants {time.perf_counter() - start:.0f} s',
+                         flush=True))
     wall = time.perf_counter() - start
     specs = {m: model_spec(config.trust, m) for m in models}
     r = result.parameter_r(specs)

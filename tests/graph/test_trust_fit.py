@@ -167,6 +167,23 @@ def test_small_recovery() -> None:
     assert r['beta_bernoulli']['beta_bernoulli_beta0'] is None   # declared unidentifiable
 
 
+def test_a_design_evaluated_on_workers_equals_one_process(tmp_path: Path) -> None:
+    """`design-evaluate --workers 2` runs its drives and fits on the study's worker pool
+    (study/workers.py) and prints what one process prints, with no worker's traceback
+    (a fork pool's workers, ended at its close, raised the command's own stop signal)."""
+    argv = ('design-evaluate', '--conditions', 'rough_random', '--drives', '2',
+            '--drive-s', '20', '--participants', '3', '--models', 'paper,optimo')
+    runs = [cli(*argv, '--workers', n, cwd=tmp_path) for n in ('1', '2')]
+    for run in runs:
+        assert run.returncode == 0, run.stderr
+        assert 'Traceback' not in run.stdout + run.stderr
+        assert '6/6 participants fitted' in run.stdout
+
+    def result(text: str) -> str:
+        return text[text.index('confusion'):text.rindex('wall')]
+    assert result(runs[0].stdout) == result(runs[1].stdout)
+
+
 def write_table(path: Path, rows: list[dict[str, object]]) -> Path:
     with path.open('w', newline='') as handle:
         writer = csv.DictWriter(handle, ['participant', 'drive', 't_s', 'explicability',

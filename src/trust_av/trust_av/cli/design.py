@@ -221,16 +221,13 @@ def _simulate(args: DesignOptions, design: Design) -> tuple[Recovery, list[str],
     models = _models(args.models)
     config = load_run_config(args.params_files)
     print(f'design: {design.describe()}; models {", ".join(models)}', flush=True)
-    total = design.participants * len(models)
-    done = [0]
     start = time.perf_counter()
 
-    def progress(who: str) -> None:
-        done[0] += 1
-        print(f'  {done[0]}/{total} participants ({who}) {time.perf_counter() - start:.0f} s',
+    def progress(done: int, total: int) -> None:
+        print(f'  {done}/{total} participants fitted, {time.perf_counter() - start:.0f} s',
               flush=True)
     result = recover(config, models, design, seed=args.seed, workers=args.workers,
-                     on_participant=progress)
+                     on_progress=progress)
     return result, models, time.perf_counter() - start
 
 

@@ -37,6 +37,7 @@ from trust_av.study.trust_recovery import (
     drive_seed,
     make_participant,
 )
+from trust_av.study.workers import call_runner
 from trust_av.system.config import RunConfig
 from trust_av_common.errors import with_suggestions
 from trust_av_common.input_files import not_regular
@@ -300,12 +301,9 @@ class Recovery:
                 'r_min': bool(rs) and min(rs) >= GOAL['r_min']}
 
 
-_JOB: dict[str, Any] = {}
-"""What a worker process needs (set before the pool forks; read by :func:`_score_one`)."""
-
-
-def _scores_of(key: tuple[str, int]) -> tuple[np.ndarray, np.ndarray]:
-    config, seed, design = _JOB['config'], _JOB['seed'], _JOB['design']
+def _scores_of(config: RunConfig, seed: int, design: Design,
+               key: tuple[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    """One condition's drive under ``design`` (the simulated AV's scores)."""
     settings = {k: v for k, v in design.planner.get(key[0], {}).items()
                 if k in ('alpha', 'predictor')}
     if settings:
@@ -319,34 +317,27 @@ def _scores_of(key: tuple[str, int]) -> tuple[np.ndarray, np.ndarray]:
                         design.drive_s)
 
 
-def _score_one(who: Any) -> tuple[dict[str, float], dict[str, float], str]:
+def _score_one(specs: dict[str, Any], sizes: dict[str, int], fit_seed: int,
+               who: Any) -> tuple[dict[str, float], dict[str, float], str]:
     """One participant: its true model's fit, every model's leave-one-drive-out elpd, the
     preferred model."""
-    specs, sizes, fit_seed = _JOB['specs'], _JOB['sizes'], _JOB['fit_seed']
     fitted = fit(specs[who.model], who.drives, fit_seed)
     held: list[Score] = [held_out(specs[m], [[d] for d in who.drives], 'leave_one_drive_out',
                                   fit_seed) for m in specs]
     return fitted.theta, {s.model: s.elpd for s in held}, preferred(held, sizes)
 
 
-def mapped(function: Callable[[Any], Any], items: list[Any], workers: int) -> list[Any]:
-    """``function`` over ``items`` in order, in ``workers`` forked processes (1: here)."""
-    if workers <= 1:
-        return [function(item) for item in items]
-    import multiprocessing
-    with multiprocessing.get_context('fork').Pool(workers) as pool:
-        return pool.map(function, items, chunksize=1)
-
-
 def recover(config: RunConfig, models: Sequence[str], design: Design, seed: int = 0,
             values: dict[str, Any] | None = None,
-            on_participant: Callable[[str], None] | None = None,
+            on_progress: Callable[[int, int], None] | None = None,
             workers: int = 1) -> Recovery:
     """For each true model in ``models``: ``design.participants`` synthetic participants
     drawn under ``design``, every model fitted to each (parameters: full fit; preferred
     model: leave-one-drive-out elpd with :func:`~trust_monitor.trust_fit.preferred`'s
     parsimony rule, every fitted parameter counted); drives and fits in ``workers``
-    processes (the result does not depend on it).
+    processes of the study's worker pool (:func:`~trust_av.study.workers.call_runner`;
+    the result does not depend on it); ``on_progress(done, total)`` after each participant
+    is fitted.
 
     Raises:
         FitError: fewer than two drives (no held-out drive).
@@ -354,35 +345,33 @@ def recover(config: RunConfig, models: Sequence[str], design: Design, seed: int 
     rng = np.random.Generator(np.random.PCG64(seed))
     specs = {m: model_spec(config.trust, m, values) for m in models}
     fit_seed = seed + 1   # not the participants' stream: a start must not be the truth
-    _JOB.update(config=config, seed=seed, design=design, specs=specs,
-                fit_seed=fit_seed, sizes={m: parameter_count(specs[m]) for m in models})
+    sizes = {m: parameter_count(specs[m]) for m in models}
     names = design.drive_conditions()
     keys = list(dict.fromkeys(
         (c, DRIVES_PER_SEED * i + j if design.randomised(c) else 0)
         for i in range(design.participants) for j, c in enumerate(names)))
-    cache = dict(zip(keys, mapped(_scores_of, keys, workers), strict=True))
-    people = []
-    for true in models:   # drawn in order from one stream: the same for any `workers`
-        for i in range(design.participants):
-            data = [(f'{c}_{j + 1}', *cache[(c, DRIVES_PER_SEED * i + j
-                                             if design.randomised(c) else 0)])
-                    for j, c in enumerate(names)]
-            people.append(make_participant(
-                specs[true], f'{true}_{i:02d}', data, rng, design.rating_noise,
-                design.rating_period_s, design.rating_span, design.true_ranges))
+    with call_runner(workers) as run_calls:   # the study's worker pool (workers.py)
+        cache = run_calls({key: (_scores_of, (config, seed, design, key)) for key in keys},
+                          None)
+        people = []
+        for true in models:   # drawn in order from one stream: the same for any `workers`
+            for i in range(design.participants):
+                data = [(f'{c}_{j + 1}', *cache[(c, DRIVES_PER_SEED * i + j
+                                                 if design.randomised(c) else 0)])
+                        for j, c in enumerate(names)]
+                people.append(make_participant(
+                    specs[true], f'{true}_{i:02d}', data, rng, design.rating_noise,
+                    design.rating_period_s, design.rating_span, design.true_ranges))
+        results = run_calls({k: (_score_one, (specs, sizes, fit_seed, who))
+                             for k, who in enumerate(people)}, on_progress)
     pairs: dict[str, dict[str, list[tuple[float, float]]]] = {
         m: {p.name: [] for p in specs[m].parameters} for m in models}
     elpd: dict[str, list[dict[str, float]]] = {m: [] for m in models}
     chosen: dict[str, list[str]] = {m: [] for m in models}
-    batch = max(workers, 1) * 4
-    for start in range(0, len(people), batch):
-        group = people[start:start + batch]
-        for who, (theta, scores, pick) in zip(group, mapped(_score_one, group, workers),
-                                              strict=True):
-            for p in specs[who.model].parameters:
-                pairs[who.model][p.name].append((who.theta[p.name], theta[p.name]))
-            elpd[who.model].append(scores)
-            chosen[who.model].append(pick)
-            if on_participant is not None:
-                on_participant(who.name)
+    for k, who in enumerate(people):
+        theta, scores, pick = results[k]
+        for p in specs[who.model].parameters:
+            pairs[who.model][p.name].append((who.theta[p.name], theta[p.name]))
+        elpd[who.model].append(scores)
+        chosen[who.model].append(pick)
     return Recovery(design.participants, design.drives, pairs, elpd, chosen)
