@@ -1,9 +1,9 @@
 """A pilot session through the real page, as a researcher's first pilot runs it: ``trust-av
 drive`` with the shipped drive file (its conditions, rating period and follower), a practice
-drive and the two conditions driven in Debian's headless chromium by the synthetic participant
+drive and every condition driven in Debian's headless chromium by the synthetic participant
 (benchmarks/synthetic_participant.py), who reads every start screen for ``--start-wait-s``
-before pressing Start (a deliberately slow start), rates every prompt and answers the
-questionnaire.
+before pressing Start (a deliberately slow start), rates (every prompt, or on the continuous
+scale) and answers the questionnaire.
 
     python benchmarks/pilot_session.py [--drive-s 120] [--practice-s 60] [--start-wait-s 30]
                                        [--out benchmarks/results_pilot.json]
@@ -80,7 +80,8 @@ def drive_session(settings: Path, study: Path, start_wait_s: float) -> dict[str,
         browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         page = browser.new_page(viewport={'width': 800, 'height': 680})
         page.goto(url.group(1))
-        for _ in range(3):                      # the practice drive and two conditions
+        drives = yaml.safe_load(settings.read_text())['/**/drive']['ros__parameters']
+        for _ in range(1 + len(drives['condition_names'])):   # the practice, each condition
             page.wait_for_selector('#start:not([hidden])', timeout=900_000)
             print(f'start screen of {page.text_content("#title")!r}: read for '
                   f'{start_wait_s:g} s', flush=True)

@@ -29,9 +29,14 @@ READ_DISPLAY = """() => ({
     speed: document.getElementById('speed').dataset.mps,
     av: document.getElementById('av-speed').dataset.mps,
     max: window.drive.accelMax, min: window.drive.accelMin,
-    rating: !document.getElementById('rating').hidden})"""
-"""The displayed gap (m), own and AV speed (m/s), the pedal's range and whether the rating
-card is open, as the page shows them."""
+    continuous: window.drive.ratingMode === 'continuous',
+    rating: window.drive.ratingMode !== 'continuous'
+        && !document.getElementById('rating').hidden})"""
+"""The displayed gap (m), own and AV speed (m/s), the pedal's range, whether the study rates
+on the continuous scale and whether the rating card is open, as the page shows them."""
+SCALE_MOVE_S = 10.0
+"""On the continuous scale, the participant moves it this often (between ``rating`` and
+``rating`` - 10)."""
 DRIVER = IdmParams(desired_speed_mps=36.0, time_headway_s=1.2, min_gap_m=3.0,
                    max_accel_mps2=2.0, comfort_decel_mps2=2.5)
 
@@ -59,7 +64,9 @@ def drive_once(page: Any, who: Participant, *, rating: int = 70, until_s: float 
     Args:
         page: a Playwright page showing the drive.
         who: the participant's record (appended to).
-        rating: the rating given each time the prompt shows.
+        rating: the rating given each time the prompt shows (on the continuous scale: set
+            on the start screen, then moved to ``rating`` - 10 and back every
+            :data:`SCALE_MOVE_S`).
         until_s: give up after this long.
         stop_after_s: stop driving (return) this long after the start, with the pedal held
             (the caller then closes the tab or cuts the connection).
@@ -69,6 +76,9 @@ def drive_once(page: Any, who: Participant, *, rating: int = 70, until_s: float 
         The page's status text when it returned.
     """
     page.wait_for_selector('#start:not([hidden])', timeout=until_s * 1000)
+    if page.evaluate("window.drive.ratingMode === 'continuous'"):
+        page.locator('#rating-slider').fill(str(rating))   # Start waits for the scale
+        who.ratings.append(rating)
     page.click('#start')
     page.wait_for_function("window.drive.phase === 'driving'", timeout=30_000)
     box = page.locator('#pedal').bounding_box()
@@ -77,6 +87,7 @@ def drive_once(page: Any, who: Participant, *, rating: int = 70, until_s: float 
     page.mouse.down()
     started = time.monotonic()
     deadline = started + until_s
+    moved = started
     while time.monotonic() < deadline:
         # what the page displays, read in one call (a person looks once, not five times)
         seen = page.evaluate(READ_DISPLAY)
@@ -91,6 +102,14 @@ def drive_once(page: Any, who: Participant, *, rating: int = 70, until_s: float 
             value = pedal_height(accel, float(seen['max']), float(seen['min']))
             page.mouse.move(x, box['y'] + box['height'] * (1 - value) / 2)
             who.pedal_moves += 1
+        if seen['continuous'] and time.monotonic() - moved >= SCALE_MOVE_S:
+            moved = time.monotonic()
+            value = rating - 10 if who.ratings[-1:] == [rating] else rating
+            page.mouse.up()          # one hand: let go of the pedal for a moment
+            page.locator('#rating-slider').fill(str(value))
+            who.ratings.append(value)
+            page.mouse.move(x, box['y'] + box['height'] / 2)
+            page.mouse.down()
         if seen['rating']:
             page.mouse.up()          # one hand: let go of the pedal for a moment
             page.locator('#rating-slider').fill(str(rating))

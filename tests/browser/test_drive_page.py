@@ -266,3 +266,73 @@ def close_clients(server: DriveServer) -> None:
     assert loop is not None
     for client in list(server.clients):
         asyncio.run_coroutine_threadsafe(client.close(), loop)
+
+
+def _next(inbox: queue.Queue[dict[str, Any]], kind: str) -> dict[str, Any]:
+    """The next message of type ``kind`` the page sent (others skipped)."""
+    while True:
+        message = inbox.get(timeout=30)
+        if message['type'] == kind:
+            return message
+
+
+def test_the_continuous_scale_is_set_before_the_start_and_stays_while_driving() -> None:
+    """rating_mode continuous: the scale sits on the start screen, unset, and Start waits for
+    it; it stays on screen while driving and each move reaches the server as ``trust``, no
+    more than one every 0.2 s and the last position always; a reopened page shows the
+    position it had; the next drive's start screen asks again."""
+    from playwright.sync_api import sync_playwright
+    inbox: queue.Queue[dict[str, Any]] = queue.Queue()
+    hello = {**HELLO, 'rating_mode': 'continuous', 'scale': None}
+    server = DriveServer(lambda m, _ns: inbox.put(m), lambda: hello, port=0)
+    server.start()
+    try:
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+            tab = browser.new_page()
+            tab.goto(server.url)
+            tab.wait_for_function('window.drive.ws && window.drive.ws.readyState === 1')
+            server.send({'type': 'phase', 'phase': 'ready', 'duration_s': 60.0})
+            tab.wait_for_selector('#intro #rating:not([hidden])', timeout=10_000)
+            assert 'unset' in tab.locator('#rating-slider').get_attribute('class')
+            assert tab.locator('#start').is_disabled()
+            assert not tab.locator('#rating-submit').is_visible()
+            tab.locator('#rating-slider').click()            # the middle: an answer too
+            assert _next(inbox, 'trust')['value'] == 50
+            assert tab.locator('#start').is_enabled()
+            tab.click('#start')
+            assert _next(inbox, 'ready') == {'type': 'ready'}
+            _drive(server, tab)
+            tab.wait_for_selector('#stage #rating:not([hidden])', timeout=10_000)
+            assert tab.locator('#rating-slider').input_value() == '50'
+            sent = tab.evaluate("""async () => {
+                const s = document.getElementById('rating-slider');
+                for (let v = 60; v <= 90; v += 2) {      // a drag: 16 moves within 0.1 s
+                    s.value = v; s.dispatchEvent(new Event('input'));
+                    await new Promise((r) => setTimeout(r, 6));
+                }
+                await new Promise((r) => setTimeout(r, 500));
+                return drive.scale; }""")
+            assert sent == 90
+            values = []
+            while not values or values[-1] != 90:
+                values.append(_next(inbox, 'trust')['value'])
+            assert 1 <= len(values) <= 3, values             # one, then the last after 0.2 s
+            tab.close()
+            hello['scale'] = 90                              # the server's kept position
+            tab = browser.new_page()
+            tab.goto(server.url)
+            tab.wait_for_function('window.drive.ws && window.drive.ws.readyState === 1')
+            server.send({'type': 'phase', 'phase': 'driving', 'duration_s': 60.0})
+            tab.wait_for_selector('#stage #rating:not([hidden])', timeout=10_000)
+            assert tab.locator('#rating-slider').input_value() == '90'
+            assert 'unset' not in tab.locator('#rating-slider').get_attribute('class')
+            server.send({'type': 'phase', 'phase': 'wait'})
+            tab.wait_for_selector('#rating', state='hidden', timeout=10_000)
+            server.send({'type': 'phase', 'phase': 'ready', 'duration_s': 60.0})
+            tab.wait_for_selector('#intro #rating:not([hidden])', timeout=10_000)
+            assert 'unset' in tab.locator('#rating-slider').get_attribute('class')
+            assert tab.locator('#start').is_disabled()
+            browser.close()
+    finally:
+        server.stop()

@@ -23,6 +23,8 @@ from trust_av.drive.gate import (
     INPUT_BURST,
     QUESTIONNAIRE,
     READY,
+    TRUST_BURST,
+    TRUST_PER_S,
     WAIT,
     Gate,
 )
@@ -185,6 +187,37 @@ def test_ratings_only_answer_open_prompts() -> None:
     late = gate.open_prompt(0)
     assert gate.rating({'id': late, 'value': 10}, MS) is not None
     assert gate.refused_counts() == {'rating outside a prompt': 2, 'rating not in [0, 100]': 1}
+
+
+@pytest.mark.parametrize('value', [-0.5, 100.5, math.nan, math.inf, '50', True, None, 10**400])
+def test_the_continuous_scale_keeps_only_values_on_it(value: Any) -> None:
+    gate = Gate(10.0, -6.0, 2.5, continuous=True)
+    gate.set_phase(READY)
+    assert gate.admit({'type': 'trust'})          # set on the start screen
+    assert gate.trust({'value': 30}, 5 * MS) == 30.0
+    assert gate.trust({'value': value}, 6 * MS) is None
+    assert gate.trust_now() == (30.0, 5 * MS)      # the refused value left it where it was
+    assert gate.refused_counts() == {'rating not in [0, 100]': 1}
+
+
+def test_the_continuous_scale_is_per_drive_rate_limited_and_only_in_its_study() -> None:
+    prompted = _gate()
+    assert prompted.trust({'value': 50}, 0) is None and prompted.trust_now() is None
+    assert prompted.refused_counts() == {'trust without the continuous rating': 1}
+    gate = Gate(10.0, -6.0, 2.5, continuous=True)
+    gate.set_phase(READY)
+    gate.set_phase(DRIVING)
+    # a burst is taken, then one a tenth of a second (TRUST_PER_S) on the arrival clock
+    taken = [gate.trust({'value': k}, 1000 * MS) for k in range(TRUST_BURST + 3)]
+    assert taken[:TRUST_BURST] == [float(k) for k in range(TRUST_BURST)]
+    assert taken[TRUST_BURST:] == [None] * 3
+    assert gate.trust_now() == (TRUST_BURST - 1.0, 1000 * MS)
+    assert gate.trust({'value': 77}, 1000 * MS + int(1e9 / TRUST_PER_S)) == 77.0
+    assert gate.refused_counts() == {'trust over its rate': 3}
+    gate.set_phase(WAIT)
+    assert not gate.admit({'type': 'trust'})       # the drive is over
+    gate.set_phase(READY)                          # the next drive's scale starts unset
+    assert gate.trust_now() is None
 
 
 def test_latency_comes_only_from_acknowledgements_the_server_sent() -> None:

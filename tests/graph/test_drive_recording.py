@@ -6,8 +6,9 @@ it is given, and the participant presses Start through the drive's own link
 (:class:`~trust_av.drive.link.DriveLink`) after reading the start screen for
 :data:`READING_S`, far longer than the drive. The drive's recording loop is stalled once for
 :data:`STALL_S` with room for 3 samples per topic (its subscriptions' depth, patched in this
-process; the nodes keep theirs), so it falls behind and loses messages. One drive serves
-every test here (a node-graph run is the expensive part)."""
+process; the nodes keep theirs), so it falls behind and loses messages. The study rates
+continuously: the participant sets the scale on the start screen and moves it once while
+driving. One drive serves every test here (a node-graph run is the expensive part)."""
 
 from __future__ import annotations
 
@@ -26,9 +27,15 @@ pytestmark = pytest.mark.wall_clock
 
 READING_S = 4.0
 """How long the participant reads the start screen before pressing Start."""
-DRIVE_S = 3.0
+DRIVE_S = 4.0
 STALL_S = 2.0
 """The recording loop's one stall, once the drive runs (3 samples at 10 Hz are 0.3 s)."""
+RATING_PERIOD_S = 1.0
+SCALE = (30, 80)
+"""The continuous scale's position on the start screen, and after the move."""
+MOVED_AFTER_S = 0.4
+"""The participant moves the scale once a frame says the drive has run this long (the
+scale's first sample, at the start, is taken by then)."""
 
 
 class _Page:
@@ -47,6 +54,7 @@ class Driven:
     outcome: Any
     config: Any
     started_after_s: float
+    moved_ns: int
 
 
 @pytest.fixture(scope='module')
@@ -76,29 +84,40 @@ def driven(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Driven]:
     trace = load_trace('us06', config.planner.dt_s, config.trace)
     follower = FollowerConfig()
     rate_hz = config.clock.control_rate_hz
-    link = DriveLink(Gate(rate_hz, follower.accel_min_mps2, follower.accel_max_mps2))
+    link = DriveLink(Gate(rate_hz, follower.accel_min_mps2, follower.accel_max_mps2,
+                          continuous=True))
     shown: list[float] = []
+    moved: list[int] = []
 
     def participant() -> None:
         while link.greet.get('phase') != READY:     # the start screen is shown
             time.sleep(0.01)
         shown.append(time.monotonic())
+        link.on_message({'type': 'trust', 'value': SCALE[0]}, time.time_ns())
         time.sleep(READING_S)
         link.on_message({'type': 'ready'}, time.time_ns())
+        while not any(f.get('type') == 'state' and f.get('left_s', DRIVE_S) <=
+                      DRIVE_S - MOVED_AFTER_S for f in list(page.frames)):
+            time.sleep(0.01)
+        moved.append(time.time_ns())
+        link.on_message({'type': 'trust', 'value': SCALE[1]}, moved[0])
 
+    page = _Page()
     reader = threading.Thread(target=participant, daemon=True)
     reader.start()
     bag = work / 'drive_01'
     try:
-        outcome = run_drive(config, 'us06', trace, bag, server=cast(DriveServer, _Page()),
+        outcome = run_drive(config, 'us06', trace, bag, server=cast(DriveServer, page),
                             link=link, follower=follower, metadata={'trust_av.drive': '1'},
                             duration_s=DRIVE_S, rate_hz=rate_hz, abandon_after_s=60.0,
                             start_timeout_s=60.0, questionnaire=False,
-                            questionnaire_timeout_s=1.0)
+                            questionnaire_timeout_s=1.0, rating_period_s=RATING_PERIOD_S,
+                            rating_mode='continuous')
     finally:
         patch.undo()
     assert stalls, 'the recording loop was never stalled'
-    yield Driven(bag, outcome, config, READING_S)
+    reader.join(timeout=60)
+    yield Driven(bag, outcome, config, READING_S, moved[0])
 
 
 def test_a_slow_start_counts_trust_from_the_start_only(driven: Driven) -> None:
@@ -165,3 +184,32 @@ def test_a_drive_whose_recorder_fell_behind_names_what_it_lost(driven: Driven) -
     assert losses.get((topic, 'preceding_traffic'), 0) > 0, losses   # 2 s at 10 Hz > 3
     assert recorded[topic] + losses[(topic, 'preceding_traffic')] == \
         reports['preceding_traffic'][topic]
+
+
+def test_the_continuous_scale_is_recorded_from_the_start_at_its_period(driven: Driven) -> None:
+    """Each /driver/rating is the scale's position when it was taken: the start screen's
+    value from the drive's start (the first at its start), the moved value after the move;
+    one per period on the drive's clock (a stalled loop takes the ones due late, not
+    fewer); y is how long the scale had stood there."""
+    from rosbags.highlevel import AnyReader
+
+    from trust_av.drive.bag_data import custom_data
+
+    start = int(custom_data(driven.bag)['trust_av.drive.start_ns'])
+    with AnyReader([driven.bag]) as reader:
+        ratings = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(
+            connections=[c for c in reader.connections if c.topic == '/driver/rating'])]
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in ratings]
+    assert len(ratings) >= int(DRIVE_S / RATING_PERIOD_S) - 1, [ns - start for ns in stamps]
+    assert 0 <= stamps[0] - start < 0.5e9, stamps[0] - start   # the first at the start
+    for k, (msg, ns) in enumerate(zip(ratings, stamps, strict=True)):
+        assert ns - start >= k * RATING_PERIOD_S * 1e9 - 0.05e9   # never ahead of its time
+        assert msg.vector.y >= 0.0
+        if ns < driven.moved_ns:
+            assert msg.vector.z == SCALE[0], (k, ns - driven.moved_ns)
+        elif ns > driven.moved_ns + 0.05e9:
+            assert msg.vector.z == SCALE[1], (k, ns - driven.moved_ns)
+        assert msg.vector.x == pytest.approx(msg.vector.z / 100.0)
+    assert {m.vector.z for m in ratings} == set(SCALE)
+    assert ratings[0].vector.y >= driven.started_after_s - 0.5   # set on the start screen
+    assert [v for _, v in driven.outcome.ratings] == [m.vector.x for m in ratings]

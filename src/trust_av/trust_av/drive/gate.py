@@ -16,12 +16,12 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ['INPUT_BURST', 'Gate', 'reason_key']
+__all__ = ['INPUT_BURST', 'TRUST_BURST', 'Gate', 'reason_key']
 
 READY, DRIVING, WAIT, QUESTIONNAIRE, IDLE = 'ready', 'driving', 'wait', 'questionnaire', 'idle'
 """The drive's phases as the gate sees them (IDLE: between drives)."""
-ALLOWED = {READY: frozenset({'ready'}),
-           DRIVING: frozenset({'input', 'ack', 'rating'}),
+ALLOWED = {READY: frozenset({'ready', 'trust'}),
+           DRIVING: frozenset({'input', 'ack', 'rating', 'trust'}),
            WAIT: frozenset({'ack', 'rating'}),
            QUESTIONNAIRE: frozenset({'questionnaire'}),
            IDLE: frozenset()}
@@ -35,6 +35,12 @@ between two periodic samples) refilled a little slower, so it never meets this o
 once (1 s of samples at 10 Hz) does the graph no harm. It also takes up a stall at the very
 start of a connection, before any sample came promptly (the page's clock is then not yet
 known, and a bunch counts at its arrival)."""
+TRUST_BURST = 10
+"""``trust`` messages (the continuous scale's position) that may come at once, refilled at
+:data:`TRUST_PER_S` a second on their arrival: the page sends one at most every 0.2 s
+while the scale moves (5 a second)."""
+TRUST_PER_S = 10.0
+"""``trust`` messages a second allowed on average."""
 
 
 def finite_number(value: Any) -> float | None:
@@ -72,10 +78,13 @@ class Gate:
         control_rate_hz: pedal samples per second allowed on average.
         accel_min_mps2: full brake (samples below are clipped).
         accel_max_mps2: full gas (samples above are clipped).
+        continuous: the study's rating is the continuous scale (``trust`` messages, its
+            position, sampled by the drive); else rated prompts (``rating`` messages).
     """
 
     def __init__(self, control_rate_hz: float, accel_min_mps2: float,
-                 accel_max_mps2: float) -> None:
+                 accel_max_mps2: float, continuous: bool = False) -> None:
+        self.continuous = continuous
         self.rate_hz = control_rate_hz
         self.accel_min, self.accel_max = accel_min_mps2, accel_max_mps2
         self.lock = threading.Lock()
@@ -89,12 +98,16 @@ class Gate:
         self._next_prompt = 1
         self._acks: dict[int, tuple[int, int, int]] = {}   # seq -> arrived, applied, sent
         self.questionnaire_taken = False
+        self._trust: tuple[float, int] | None = None     # scale position, set at ns
+        self._trust_tokens = float(TRUST_BURST)
+        self._trust_at = -math.inf
 
     def set_phase(self, phase: str) -> None:
         """The drive moved to ``phase`` (a new ``READY`` starts a new drive's bookkeeping)."""
         with self.lock:
-            if phase == READY:
+            if phase == READY:          # each drive's scale starts unset
                 self._prompts.clear()
+                self._trust = None
                 self._acks.clear()
                 self.questionnaire_taken = False
             if phase in (QUESTIONNAIRE, IDLE, READY):
@@ -188,6 +201,35 @@ class Gate:
                 return None
             shown = self._prompts.pop(prompt)
         return prompt, value, max(0, now_ns - shown) / 1e9
+
+    def trust(self, message: dict[str, Any], now_ns: int) -> float | None:
+        """An admitted ``trust`` (the continuous scale moved) as its value 0-100, kept as the
+        scale's position from ``now_ns``; None (refused and counted): the study rates by
+        prompts, a value that is not a number in [0, 100], or over :data:`TRUST_PER_S`."""
+        value = finite_number(message.get('value'))
+        with self.lock:
+            if not self.continuous:
+                self.refused['trust without the continuous rating'] += 1
+                return None
+            if value is None or not 0 <= value <= 100:
+                self.refused['rating not in [0, 100]'] += 1
+                return None
+            now_s = now_ns / 1e9
+            self._trust_tokens = min(float(TRUST_BURST), self._trust_tokens
+                                     + max(0.0, now_s - self._trust_at) * TRUST_PER_S)
+            self._trust_at = max(self._trust_at, now_s)
+            if self._trust_tokens < 1.0:
+                self.refused['trust over its rate'] += 1
+                return None
+            self._trust_tokens -= 1.0
+            self._trust = (value, now_ns)
+            return value
+
+    def trust_now(self) -> tuple[float, int] | None:
+        """The continuous scale's position (0-100) and when it was set (ns), or None: not
+        set since this drive's start screen."""
+        with self.lock:
+            return self._trust
 
     def sent_ack(self, seq: int, arrived_ns: int, applied_ns: int, sent_ns: int) -> None:
         """A state frame acknowledging sample ``seq`` was sent to the page."""

@@ -149,10 +149,11 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
               abandon_after_s: float, start_timeout_s: float, questionnaire: bool,
               questionnaire_timeout_s: float, rating_period_s: float = 15.0,
               on_collision: str = 'continue', page_info: dict[str, Any] | None = None,
-              startup_timeout_s: float = 60.0) -> DriveOutcome:
+              startup_timeout_s: float = 60.0, rating_mode: str = 'prompt') -> DriveOutcome:
     """Run one drive: start the graph, wait for the page's start, drive ``duration_s`` of
     wall time (or until the person has sent nothing for ``abandon_after_s``, or until a
-    collision if ``on_collision`` is ``end``), asking a rating every ``rating_period_s``,
+    collision if ``on_collision`` is ``end``), asking a rating every ``rating_period_s``
+    (``rating_mode`` prompt) or recording the continuous scale's position that often,
     stop the nodes, ask the questionnaire (if ``questionnaire`` and not abandoned), finish
     the bag. ``page_info`` is shown on the start screen (drive ``number`` ``of``).
 
@@ -163,7 +164,7 @@ def run_drive(config: RunConfig, trace_arg: str, trace: SpeedTrace, bag: Path, *
     outcome = DriveOutcome(bag=bag, status='abandoned', driven_s=0.0, counts={})
     settings = DriveSettings(duration_s, rate_hz, abandon_after_s, start_timeout_s,
                              questionnaire, questionnaire_timeout_s, rating_period_s,
-                             on_collision, dict(page_info or {}))
+                             on_collision, rating_mode, dict(page_info or {}))
     result = run_wall(drive_plan(config, trace_arg, trace, bag, follower, metadata, rate_hz,
                                  startup_timeout_s),
                       DrivePage(config, server, link, settings, outcome))

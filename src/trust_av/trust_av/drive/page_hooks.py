@@ -63,6 +63,7 @@ class DriveSettings:
     questionnaire_timeout_s: float
     rating_period_s: float = 15.0
     on_collision: str = 'continue'
+    rating_mode: str = 'prompt'
     page_info: dict[str, Any] = field(default_factory=dict)
 
 
@@ -243,6 +244,8 @@ class DrivePage(WallHooks):
                 self.write_own('/driver/rating', vector_msg(arrived, value / 100.0, response_s,
                                                             value))
                 self.outcome.ratings.append((self.t_s(arrived), value / 100.0))
+        elif kind == 'trust':
+            self.gate.trust(message, arrived)    # the scale's position, sampled every tick
         elif kind == 'ack':
             latency = self.gate.echo(message, arrived)
             if latency is not None:
@@ -293,7 +296,9 @@ class DrivePage(WallHooks):
         self.begin = time.monotonic()
         self.set_phase(DRIVING, duration_s=settings.duration_s)
         self.event('start', self.start_ns)
-        self.next_prompt = self.begin + settings.rating_period_s
+        # the continuous scale's first sample is its position at the start
+        self.next_prompt = self.begin + (0.0 if settings.rating_mode == 'continuous'
+                                         else settings.rating_period_s)
         self.outcome.status = 'done'
         return True
 
@@ -313,16 +318,33 @@ class DrivePage(WallHooks):
         return False
 
     def every_tick(self, run: WallRun, now_ns: int) -> None:
-        """The page's messages; a rating prompt every ``rating_period_s`` on the drive's
-        clock (its event says when it was due: a late tick sends it late, the schedule stays)."""
+        """The page's messages; every ``rating_period_s`` on the drive's clock a rating
+        prompt, or (continuous) the scale's position recorded as a rating (its event or
+        message says when it was due: a late tick is late, the schedule stays)."""
         self.drain()
-        if time.monotonic() >= self.next_prompt:
-            due_s = self.next_prompt - self.begin
-            self.next_prompt += self.settings.rating_period_s
-            if not self.gate.open_prompts():     # one still open stays open
-                prompt = self.gate.open_prompt(time.time_ns())
-                self.server.send({'type': 'rate', 'id': prompt})
-                self.event('rating_prompt', time.time_ns(), id=prompt, due_s=f'{due_s:.3f}')
+        if time.monotonic() < self.next_prompt:
+            return
+        due_s = self.next_prompt - self.begin
+        self.next_prompt += self.settings.rating_period_s
+        if self.settings.rating_mode == 'continuous':
+            self.sample_scale(due_s)
+        elif not self.gate.open_prompts():     # one still open stays open
+            prompt = self.gate.open_prompt(time.time_ns())
+            self.server.send({'type': 'rate', 'id': prompt})
+            self.event('rating_prompt', time.time_ns(), id=prompt, due_s=f'{due_s:.3f}')
+
+    def sample_scale(self, due_s: float) -> None:
+        """The continuous scale's position now, as a ``/driver/rating`` (y: how long it has
+        stood there, s); nothing while it is unset (not touched since the start screen)."""
+        scale = self.gate.trust_now()
+        if scale is None:
+            self.event('rating_unset', time.time_ns(), due_s=f'{due_s:.3f}')
+            return
+        value, set_ns = scale
+        now = time.time_ns()
+        self.write_own('/driver/rating', vector_msg(now, value / 100.0,
+                                                    max(0, now - set_ns) / NS_PER_S, value))
+        self.outcome.ratings.append((self.t_s(now), value / 100.0))
 
     def stopping(self, run: WallRun) -> None:
         """The end: the drive's time and what ended it; the page waits."""

@@ -90,7 +90,8 @@ def run_session(args: SessionOptions) -> int:
     drive, follower, conditions, base, configs = _checked_settings(args)
     rate_hz = base.clock.control_rate_hz
     by_name = {c.name: c for c in conditions}
-    link = DriveLink(Gate(rate_hz, follower.accel_min_mps2, follower.accel_max_mps2))
+    link = DriveLink(Gate(rate_hz, follower.accel_min_mps2, follower.accel_max_mps2,
+                          continuous=drive.rating_mode == 'continuous'))
     # The page's server thread and the recording loop share the GIL: a 1 ms switch interval
     # (Python's default is 5 ms) lets a pedal sample or a state frame through sooner.
     sys.setswitchinterval(0.001)
@@ -102,7 +103,8 @@ def run_session(args: SessionOptions) -> int:
                 'participant': args.participant,
                 'accel_max_mps2': follower.accel_max_mps2,
                 'accel_min_mps2': follower.accel_min_mps2,
-                'on_collision': drive.on_collision, 'prompts': link.gate.open_prompts(),
+                'on_collision': drive.on_collision, 'rating_mode': drive.rating_mode,
+                'prompts': link.gate.open_prompts(), 'scale': _scale(link.gate),
                 **{k: v for k, v in link.greet.items() if k != 'type'}}
     server = DriveServer(link.on_message, hello, on_event=link.on_event,
                          on_refused=link.gate.refuse, host=drive.host, port=drive.port)
@@ -141,6 +143,7 @@ def run_session(args: SessionOptions) -> int:
                                 questionnaire=condition is not None,
                                 questionnaire_timeout_s=drive.questionnaire_timeout_s,
                                 rating_period_s=drive.rating_period_s,
+                                rating_mode=drive.rating_mode,
                                 on_collision=drive.on_collision,
                                 page_info=_page_info(session, condition is None),
                                 startup_timeout_s=args.startup_timeout_s)
@@ -182,6 +185,12 @@ def _metadata(participant: str, name: str, index: int, config: Any, trace_name: 
             'trust_av.perturbation_seed': str(config.planner.perturbation_seed),
             'trust_av.trace': trace_name, 'trust_av.code_version': version,
             'trust_av.seed': str(seed)}
+
+
+def _scale(gate: Gate) -> float | None:
+    """The continuous scale's position this drive (a reopened tab shows it), or None."""
+    scale = gate.trust_now()
+    return None if scale is None else scale[0]
 
 
 def _page_info(session: Any, practice: bool) -> dict[str, Any]:

@@ -19,7 +19,8 @@ Messages are JSON objects with a ``type`` (the page's protocol, not ROS: the dri
 each into standard ROS messages). In: ``ready``, ``input`` (``seq``, ``accel_mps2``,
 ``t_ms``: the page's send time, for the rate limit only),
 ``ack`` (``seq``: a state frame's acknowledgement echoed), ``rating`` (``id`` of the prompt,
-``value`` 0-100), ``questionnaire`` (``answers``: 12 integers 1-7), ``take_over``. Out:
+``value`` 0-100), ``trust`` (``value`` 0-100: the continuous scale's new position, when the
+study rates continuously), ``questionnaire`` (``answers``: 12 integers 1-7), ``take_over``. Out:
 ``hello``, ``control``, ``phase``, ``state``, ``rate`` (a rating prompt).
 """
 
@@ -63,7 +64,8 @@ CONTENT_SECURITY_POLICY = ("default-src 'none'; script-src 'self' 'unsafe-eval';
 same host and port), so nothing is fetched from elsewhere even by mistake. The page
 evaluates no string; ``'unsafe-eval'`` is there for the browser tests and the synthetic
 participant, whose Playwright ``wait_for_function`` evaluates its predicate in the page."""
-MESSAGE_TYPES = frozenset({'ready', 'input', 'ack', 'rating', 'questionnaire', 'take_over'})
+MESSAGE_TYPES = frozenset({'ready', 'input', 'ack', 'rating', 'trust', 'questionnaire',
+                           'take_over'})
 MAX_MESSAGE_BYTES = 4096
 TOKEN_MARK = b'__DRIVE_TOKEN__'
 """Replaced in the served ``index.html`` by the server's token."""

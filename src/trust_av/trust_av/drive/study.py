@@ -65,8 +65,15 @@ class DriveConfig:
     practice: bool = param('start each new session with a practice drive', default=True)
     practice_duration_s: float = param('wall time of the practice drive', unit='s', low=1.0,
                                        default=60.0, high=86400.0)
-    rating_period_s: float = param('the in-drive trust rating is asked this often', unit='s',
-                                   low=1.0, default=15.0, high=3600.0)
+    rating_period_s: float = param('the in-drive trust rating is asked (prompt) or recorded '
+                                   '(continuous) this often', unit='s', low=1.0, default=15.0,
+                                   high=3600.0)
+    rating_mode: str = param('how the in-drive trust rating is taken: a card asks for it '
+                             'every rating_period_s (prompt), or a scale stays on screen, '
+                             'set on the start screen and moved whenever trust changes, and '
+                             'its position is recorded at the start and every '
+                             'rating_period_s (continuous)', choices=('prompt', 'continuous'),
+                             default='prompt')
     abandon_after_s: float = param('a drive ends as abandoned when no pedal sample came for '
                                    'this long', unit='s', low=0.5, default=10.0, high=3600.0)
     start_timeout_s: float = param("how long a drive waits for the participant's start",

@@ -62,11 +62,14 @@ function onMessage(msg) {
     drive.accelMax = msg.accel_max_mps2;
     drive.accelMin = msg.accel_min_mps2;
     drive.onCollision = msg.on_collision || 'continue';
+    drive.ratingMode = msg.rating_mode === 'continuous' ? 'continuous' : 'prompt';
+    drive.scale = typeof msg.scale === 'number' ? msg.scale : null;
     if (msg.phase) setPhase(msg);
     if (msg.prompts && msg.prompts.length && drive.phase === 'driving') showRating(msg.prompts[msg.prompts.length - 1]);
   } else if (msg.type === 'control') {
     setControl(msg);
   } else if (msg.type === 'phase') {
+    if (msg.phase === 'ready') drive.scale = null;   // a new drive: its scale starts unset
     setPhase(msg);
   } else if (msg.type === 'rate') {
     if (drive.controlling && ['driving', 'wait'].includes(drive.phase)) showRating(msg.id);
@@ -93,8 +96,9 @@ function setControl(msg) {
   $('control-text').textContent = msg.other
     ? 'Another tab is driving this session. Only one tab can drive.'
     : 'No tab is driving this session.';
-  if (!msg.controlling) { stopInput(); hideRating(); }
-  else if (drive.phase === 'driving') startInput();
+  if (!msg.controlling) { stopInput(); hideRating(); return; }
+  if (drive.phase === 'driving') startInput();
+  if (continuous() && ['ready', 'driving'].includes(drive.phase)) showScale(drive.scale);
 }
 $('take-over').addEventListener('click', () => send({type: 'take_over'}));
 
@@ -113,11 +117,13 @@ function setPhase(msg) {
       + (msg.practice ? ' It is for getting used to the car: nothing you do here counts.' : '');
     $('start').textContent = msg.practice ? 'Start the practice drive' : 'Start the drive';
     $('intro').hidden = false;
+    if (continuous()) showScale(drive.scale);
     drive.frames = [];
     setStatus('ready');
   } else if (msg.phase === 'driving') {
     drive.durationS = msg.duration_s;
     if (drive.controlling) startInput();
+    if (continuous()) showScale(drive.scale);
     setStatus('driving');
   } else if (msg.phase === 'questionnaire') {
     stopInput();
@@ -139,7 +145,8 @@ function setPhase(msg) {
       if (drive.ws) drive.ws.close();
     }
   }
-  if (!['driving', 'wait'].includes(msg.phase)) hideRating();
+  if (!['driving', 'wait'].includes(msg.phase) && !(continuous() && msg.phase === 'ready')) hideRating();
+  if (continuous() && msg.phase === 'wait') hideRating();
   if (msg.phase !== 'driving') $('crash').hidden = true;
 }
 
@@ -251,7 +258,11 @@ function stopInput() {
   drive.inputTimer = null;
 }
 
-$('start').addEventListener('click', () => { $('intro').hidden = true; send({type: 'ready'}); });
+$('start').addEventListener('click', () => {
+  if (continuous() && $('rating-slider').classList.contains('unset')) return;   // set it first
+  $('intro').hidden = true;
+  send({type: 'ready'});
+});
 
 // ---- trust rating (non-blocking, asked by the server) ----------------------------------------
 function showRating(id) {
@@ -264,6 +275,49 @@ function showRating(id) {
   $('rating').hidden = false;
 }
 function hideRating() { $('rating').hidden = true; drive.prompt = null; }
+
+// The continuous rating (the study's rating_mode): the scale stays on screen from the start
+// screen (where it must be set before Start) to the drive's end; each move is sent as a
+// 'trust' message, at most every TRUST_SEND_MS and the last position always, and the drive
+// records its position every rating period. Its first position of a drive is the
+// participant's own: it starts unset (no thumb) on every start screen.
+const TRUST_SEND_MS = 200;
+function continuous() { return drive.ratingMode === 'continuous'; }
+function showScale(value) {
+  const r = $('rating');
+  r.classList.add('continuous');
+  $('rating-submit').hidden = true;
+  $('rating-question').textContent = 'How much do you trust the automated vehicle (AV) right now? '
+    + 'Move the scale whenever that changes.';
+  $('intro-rating').textContent = 'Set the scale below to how much you trust the AV now, then start. '
+    + 'It stays on screen while you drive: move it whenever your trust in the AV changes, and keep driving.';
+  if (drive.phase === 'ready') {
+    $('intro').insertBefore(r, $('start'));
+    if (value === null) {
+      $('rating-slider').value = 50;
+      $('rating-slider').classList.add('unset');
+      $('rating-value').textContent = 'click the scale';
+    }
+  } else if (r.parentElement !== $('stage')) {
+    $('stage').appendChild(r);
+  }
+  if (value !== null) { $('rating-slider').value = value; rated(); }
+  $('start').disabled = $('rating-slider').classList.contains('unset');
+  r.hidden = false;
+}
+function sendTrust() {
+  drive.trustTimer = null;
+  drive.trustSentMs = performance.now();
+  drive.scale = Number($('rating-slider').value);
+  send({type: 'trust', value: drive.scale});
+}
+function scaleMoved() {
+  if (!continuous() || !['ready', 'driving'].includes(drive.phase)) return;
+  $('start').disabled = false;
+  const wait = (drive.trustSentMs || -Infinity) + TRUST_SEND_MS - performance.now();
+  if (wait <= 0) sendTrust();
+  else if (!drive.trustTimer) drive.trustTimer = setTimeout(sendTrust, wait);
+}
 // The scale shows no thumb until it is touched (a visual-analogue scale: no default answer to
 // lean on), and any touch of it is an answer, wherever it lands: a click on the very spot where
 // the hidden thumb stands changes no value and so fires no 'input' event, hence 'click' too.
@@ -272,8 +326,8 @@ function rated() {
   $('rating-value').textContent = $('rating-slider').value;
   $('rating-submit').disabled = false;
 }
-$('rating-slider').addEventListener('input', rated);
-$('rating-slider').addEventListener('click', rated);
+$('rating-slider').addEventListener('input', () => { rated(); scaleMoved(); });
+$('rating-slider').addEventListener('click', () => { rated(); scaleMoved(); });
 $('rating-submit').addEventListener('click', () => {
   if (drive.prompt === null || $('rating-slider').classList.contains('unset')) return;
   send({type: 'rating', id: drive.prompt, value: Number($('rating-slider').value)});
