@@ -227,23 +227,27 @@ def test_changed_conditions_refuse_to_resume(tmp_path: Path) -> None:
 def test_shipped_drive_settings_load() -> None:
     drive, follower, conditions = load_drive_settings(DEFAULT_PARAMS_FILE.with_name(
         'drive.yaml'))
-    assert drive == DriveConfig(drive_duration_s=120.0)
+    assert drive == DriveConfig(drive_duration_s=120.0, rating_mode='continuous',
+                                rating_period_s=2.5)
     assert follower == FollowerConfig()
-    assert [c.name for c in conditions] == ['low_alpha', 'high_alpha']
+    assert [c.name for c in conditions] == ['low_alpha_1', 'high_alpha_1', 'low_alpha_2',
+                                            'high_alpha_2']
+    assert {c.perturbation for c in conditions} == {'rough_random'}
 
 
 @pytest.mark.parametrize(('text', 'message'), [
     ('rating_period_s: 0.5', 'rating_period_s must be in \\[1, 3600\\]'),
+    ('rating_mode: slider', "rating_mode must be one of \\['prompt', 'continuous'\\], got 'sl"),
     ('colour: red', 'unknown parameter'),
     ('condition_alphas: [0.0]', 'arrays of one length'),
-    ('condition_alphas: [0.0, 2.0]', 'alpha must be in'),
+    ('condition_alphas: [0.0, 2.0, 0.0, 1.0]', 'alpha must be in'),
     # a condition name is part of its drives' folder names: never a path, never empty
-    ("condition_names: ['../../outside', high_alpha]", "condition name '../../outside'"),
-    ("condition_names: ['', high_alpha]", "condition name ''"),
-    ('condition_names: [low_alpha, low_alpha]', "'low_alpha' is listed twice"),
-    ('condition_names: [practice, high_alpha]', "condition name 'practice'"),
-    ('condition_names: [1, 2]', 'condition name 1'),
-    ('condition_traces: [7, 8]', 'condition_traces holds 7'),
+    ("condition_names: ['../../outside', b, c, d]", "condition name '../../outside'"),
+    ("condition_names: ['', b, c, d]", "condition name ''"),
+    ('condition_names: [low_alpha, low_alpha, c, d]', "'low_alpha' is listed twice"),
+    ('condition_names: [practice, b, c, d]', "condition name 'practice'"),
+    ('condition_names: [1, 2, 3, 4]', 'condition name 1'),
+    ('condition_traces: [7, 8, 9, 10]', 'condition_traces holds 7'),
 ])
 def test_bad_drive_settings_are_named(tmp_path: Path, text: str, message: str) -> None:
     lines = DEFAULT_PARAMS_FILE.with_name('drive.yaml').read_text().splitlines()

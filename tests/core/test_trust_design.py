@@ -26,11 +26,12 @@ def options(*argv: str) -> design.DesignOptions:
 
 def test_a_design_from_the_shipped_drive_file() -> None:
     shipped = design.design_of(options('--drive-file', str(REPO / 'config' / 'drive.yaml')))
-    assert shipped.conditions == ('low_alpha', 'high_alpha') and shipped.drives == 2
-    assert shipped.rating_period_s == 15.0 and shipped.drive_s == 120
-    assert shipped.planner['high_alpha'] == {'alpha': 1.0, 'predictor': 'ca',
-                                             'perturbation': 'none', 'trace': 'us06'}
-    assert not shipped.randomised('low_alpha')
+    assert shipped.conditions == ('low_alpha_1', 'high_alpha_1', 'low_alpha_2',
+                                  'high_alpha_2') and shipped.drives == 4
+    assert shipped.rating_period_s == 2.5 and shipped.drive_s == 120
+    assert shipped.planner['high_alpha_2'] == {'alpha': 1.0, 'predictor': 'ca',
+                                               'perturbation': 'rough_random', 'trace': 'us06'}
+    assert shipped.randomised('low_alpha_1')
     chosen = design.design_of(options('--conditions', 'rough_random,mixed_random',
                                       '--rating-period-s', '5', '--rating-span', '20,40',
                                       '--ranges', 'wide'))
