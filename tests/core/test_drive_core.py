@@ -4,6 +4,7 @@ questionnaire's scoring, the ratings-vs-models comparison, counterbalancing, ses
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -408,3 +409,24 @@ def test_every_model_s_live_trust_is_on_the_common_scale() -> None:
     assert trust[live.names.index('paper')] == pytest.approx(
         (paper.trust - low) / (high - low), abs=1e-12)
     assert paper.trust > 0.3      # five steps of growth: the own scale is not the common one
+
+
+def test_a_session_tells_its_page_and_gate_how_the_study_rates() -> None:
+    """The shipped study rates continuously: its gate takes the scale's moves and the page is
+    told so (with the kept position, for a reopened tab); a prompted study's gate refuses
+    them."""
+    from trust_av.drive.gate import DRIVING, READY
+    from trust_av.drive.run_session import page_hello, page_link
+
+    drive, follower, _ = load_drive_settings(DEFAULT_PARAMS_FILE.with_name('drive.yaml'))
+    link = page_link(drive, follower, 10.0)
+    assert page_hello(link, drive, follower, 10.0, 'P01')['rating_mode'] == 'continuous'
+    link.gate.set_phase(READY)
+    assert link.gate.trust({'value': 64}, 0) == 64.0
+    link.gate.set_phase(DRIVING)
+    hello = page_hello(link, drive, follower, 10.0, 'P01')
+    assert hello['scale'] == 64.0 and hello['accel_min_mps2'] == follower.accel_min_mps2
+    prompted = dataclasses.replace(drive, rating_mode='prompt')
+    link = page_link(prompted, follower, 10.0)
+    assert page_hello(link, prompted, follower, 10.0, 'P01')['rating_mode'] == 'prompt'
+    assert link.gate.trust({'value': 64}, 0) is None

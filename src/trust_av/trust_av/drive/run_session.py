@@ -32,7 +32,7 @@ from trust_av_common import output_files
 from trust_av_common.params import ParamsError
 from trust_av_planner.planner_params import check_control_rate
 
-__all__ = ['run_session']
+__all__ = ['page_hello', 'page_link', 'run_session']
 
 
 class SessionOptions(Protocol):
@@ -90,22 +90,13 @@ def run_session(args: SessionOptions) -> int:
     drive, follower, conditions, base, configs = _checked_settings(args)
     rate_hz = base.clock.control_rate_hz
     by_name = {c.name: c for c in conditions}
-    link = DriveLink(Gate(rate_hz, follower.accel_min_mps2, follower.accel_max_mps2,
-                          continuous=drive.rating_mode == 'continuous'))
+    link = page_link(drive, follower, rate_hz)
     # The page's server thread and the recording loop share the GIL: a 1 ms switch interval
     # (Python's default is 5 ms) lets a pedal sample or a state frame through sooner.
     sys.setswitchinterval(0.001)
 
     def hello() -> dict[str, Any]:
-        """What a page is told when it connects: the settings and where the session is (a
-        reopened tab shows the phase, the open rating prompt; frames give the time left)."""
-        return {'type': 'hello', 'control_rate_hz': rate_hz, 'input_burst': INPUT_BURST,
-                'participant': args.participant,
-                'accel_max_mps2': follower.accel_max_mps2,
-                'accel_min_mps2': follower.accel_min_mps2,
-                'on_collision': drive.on_collision, 'rating_mode': drive.rating_mode,
-                'prompts': link.gate.open_prompts(), 'scale': _scale(link.gate),
-                **{k: v for k, v in link.greet.items() if k != 'type'}}
+        return page_hello(link, drive, follower, rate_hz, args.participant)
     server = DriveServer(link.on_message, hello, on_event=link.on_event,
                          on_refused=link.gate.refuse, host=drive.host, port=drive.port)
     url = server.start()         # before any file is written: a taken port writes nothing
@@ -187,10 +178,26 @@ def _metadata(participant: str, name: str, index: int, config: Any, trace_name: 
             'trust_av.seed': str(seed)}
 
 
-def _scale(gate: Gate) -> float | None:
-    """The continuous scale's position this drive (a reopened tab shows it), or None."""
-    scale = gate.trust_now()
-    return None if scale is None else scale[0]
+def page_link(drive: DriveConfig, follower: FollowerConfig, rate_hz: float) -> DriveLink:
+    """The session's link to its page: a gate with the study's pedal range, control rate and
+    rating mode."""
+    return DriveLink(Gate(rate_hz, follower.accel_min_mps2, follower.accel_max_mps2,
+                          continuous=drive.rating_mode == 'continuous'))
+
+
+def page_hello(link: DriveLink, drive: DriveConfig, follower: FollowerConfig,
+               rate_hz: float, participant: str) -> dict[str, Any]:
+    """What a page is told when it connects: the settings and where the session is (a
+    reopened tab shows the phase, the open rating prompt or the continuous scale's
+    position; frames give the time left)."""
+    scale = link.gate.trust_now()
+    return {'type': 'hello', 'control_rate_hz': rate_hz, 'input_burst': INPUT_BURST,
+            'participant': participant,
+            'accel_max_mps2': follower.accel_max_mps2,
+            'accel_min_mps2': follower.accel_min_mps2,
+            'on_collision': drive.on_collision, 'rating_mode': drive.rating_mode,
+            'prompts': link.gate.open_prompts(), 'scale': None if scale is None else scale[0],
+            **{k: v for k, v in link.greet.items() if k != 'type'}}
 
 
 def _page_info(session: Any, practice: bool) -> dict[str, Any]:
