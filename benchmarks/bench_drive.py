@@ -137,14 +137,14 @@ def flood_effect(bag: Path, flood_ns: tuple[int, int], other_client: dict[str, A
 
 def _keyboard_drive(page: Any, duration_s: float, seed: int, flood: Any) -> list[int]:
     """Drive by key presses until the drive ends; the press times (wall ns)."""
-    from synthetic_participant import DRIVER, READ_DISPLAY
+    from synthetic_participant import DRIVER, READ_DISPLAY, press_start
 
     from human_driver_sim.idm import idm_accel
 
     rng = random.Random(seed)
     presses: list[int] = []
     page.wait_for_selector('#start', state='visible', timeout=180_000)
-    page.click('#start')
+    press_start(page, rng.randint(30, 90))
     page.wait_for_function("window.drive.phase === 'driving'", timeout=30_000)
     started = time.monotonic()
     while time.monotonic() - started < duration_s + 30:

@@ -17,7 +17,8 @@ from typing import Any
 
 from human_driver_sim.idm import IdmParams, idm_accel
 
-__all__ = ['CHROMIUM', 'CHROMIUM_ARGS', 'DRIVER', 'READ_DISPLAY', 'Participant', 'drive_once']
+__all__ = ['CHROMIUM', 'CHROMIUM_ARGS', 'DRIVER', 'READ_DISPLAY', 'Participant', 'drive_once',
+           'press_start']
 
 CHROMIUM = '/usr/bin/chromium'
 CHROMIUM_ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic',
@@ -57,6 +58,16 @@ def pedal_height(accel_mps2: float, accel_max: float, accel_min: float) -> float
     return max(-1.0, -accel_mps2 / accel_min)
 
 
+def press_start(page: Any, rating: int) -> bool:
+    """Press the start screen's Start, setting the continuous scale to ``rating`` first
+    when the study rates continuously (Start waits for it); whether it was set."""
+    continuous = bool(page.evaluate("window.drive.ratingMode === 'continuous'"))
+    if continuous:
+        page.locator('#rating-slider').fill(str(rating))
+    page.click('#start')
+    return continuous
+
+
 def drive_once(page: Any, who: Participant, *, rating: int = 70, until_s: float = 120.0,
                stop_after_s: float | None = None, answers: list[int] | None = None) -> str:
     """Start the drive shown on the page, drive it, rate, answer the questionnaire.
@@ -76,10 +87,8 @@ def drive_once(page: Any, who: Participant, *, rating: int = 70, until_s: float 
         The page's status text when it returned.
     """
     page.wait_for_selector('#start:not([hidden])', timeout=until_s * 1000)
-    if page.evaluate("window.drive.ratingMode === 'continuous'"):
-        page.locator('#rating-slider').fill(str(rating))   # Start waits for the scale
+    if press_start(page, rating):
         who.ratings.append(rating)
-    page.click('#start')
     page.wait_for_function("window.drive.phase === 'driving'", timeout=30_000)
     box = page.locator('#pedal').bounding_box()
     x = box['x'] + box['width'] / 2
