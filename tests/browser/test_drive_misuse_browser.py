@@ -95,16 +95,17 @@ RECORD_RECEIVED = """(() => {
 """Every field of every message type the page receives."""
 PAGE_FIELDS = {
     'hello': {'type', 'control_rate_hz', 'input_burst', 'participant', 'accel_max_mps2',
-              'accel_min_mps2', 'on_collision', 'prompts', 'phase', 'duration_s',
-              'practice', 'number', 'of'},
+              'accel_min_mps2', 'on_collision', 'rating_mode', 'prompts', 'scale', 'phase',
+              'duration_s', 'practice', 'number', 'of'},
     'control': {'type', 'controlling', 'other', 'taken_over'},
     'phase': {'type', 'phase', 'duration_s', 'practice', 'number', 'of', 'ended_by', 'items'},
     'state': {'type', 't_s', 'left_s', 'vehicles', 'av_accel_mps2', 'collisions', 'crash',
               'ack'},
     'rate': {'type', 'id'}}
 """What the page may be told (docs/concepts/driver-in-the-loop.md, The page): the vehicles,
-the AV's commanded acceleration, the time left, collisions, the phase; nothing about any
-model's trust."""
+the AV's commanded acceleration, the time left, collisions, the phase, how the study rates
+and the participant's own scale position (for a reopened tab); nothing about any model's
+trust."""
 
 
 def _events(bag: Path) -> list[tuple[str, dict[str, str]]]:
@@ -230,6 +231,7 @@ STRAYS = """(phase) => {
     const raw = [
         JSON.stringify({type: 'input', seq: 1, accel_mps2: 2.0}),
         JSON.stringify({type: 'rating', id: 999, value: 100}),
+        JSON.stringify({type: 'trust', value: 50}),     // a continuous study's scale
         JSON.stringify({type: 'ack', seq: 1}),
         JSON.stringify({type: 'take_over'}),
         JSON.stringify({type: 'hello'}), JSON.stringify({type: 'state'}), '[1, 2]', 'null',
@@ -315,7 +317,9 @@ def test_gas_held_under_the_continue_protocol_drives_on_and_strays_in_every_phas
                    'input without a finite accel_mps2', 'ack of no sent frame',
                    'input during wait', 'questionnaire during wait', 'ready during wait',
                    'input during questionnaire', 'rating during questionnaire',
-                   'ready during questionnaire', 'questionnaire with bad answers'):
+                   'ready during questionnaire', 'questionnaire with bad answers',
+                   'trust without the continuous rating', 'trust during wait',
+                   'trust during questionnaire'):
         assert refused.get(reason_key(reason), 0) >= 1, (reason, refused)
     # 4 non-objects or unknown types, the deep nesting and the binary frame, 6 times (the
     # last time the page may have closed its connection on the end screen)
