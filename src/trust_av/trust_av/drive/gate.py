@@ -16,7 +16,7 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ['INPUT_BURST', 'TRUST_BURST', 'Gate', 'reason_key']
+__all__ = ['INPUT_BURST', 'TRUST_BURST', 'TRUST_PER_S', 'Gate', 'reason_key']
 
 READY, DRIVING, WAIT, QUESTIONNAIRE, IDLE = 'ready', 'driving', 'wait', 'questionnaire', 'idle'
 """The drive's phases as the gate sees them (IDLE: between drives)."""

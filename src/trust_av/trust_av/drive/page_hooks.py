@@ -319,8 +319,9 @@ class DrivePage(WallHooks):
 
     def every_tick(self, run: WallRun, now_ns: int) -> None:
         """The page's messages; every ``rating_period_s`` on the drive's clock a rating
-        prompt, or (continuous) the scale's position recorded as a rating (its event or
-        message says when it was due: a late tick is late, the schedule stays)."""
+        prompt (its event says when it was due), or (continuous) the scale's position
+        recorded as a rating, stamped when it was taken: a late tick is late, the schedule
+        stays."""
         self.drain()
         if time.monotonic() < self.next_prompt:
             return
