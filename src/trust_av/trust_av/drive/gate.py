@@ -61,6 +61,28 @@ def reason_key(reason: str) -> str:
     return re.sub(r'[^a-z0-9]+', '_', reason.lower()).strip('_')
 
 
+@dataclass
+class _Bucket:
+    """A token bucket: ``burst`` tokens at most, refilled at ``per_s`` a second on the clock
+    of the times it is given; a time earlier than one already credited refills nothing."""
+
+    burst: float
+    per_s: float
+    at_s: float = -math.inf         # the latest time credited, s
+
+    def __post_init__(self) -> None:
+        self.tokens = self.burst
+
+    def take(self, at_s: float) -> bool:
+        """Take a token at ``at_s``; False when none is left."""
+        self.tokens = min(self.burst, self.tokens + max(0.0, at_s - self.at_s) * self.per_s)
+        self.at_s = max(self.at_s, at_s)
+        if self.tokens < 1.0:
+            return False
+        self.tokens -= 1.0
+        return True
+
+
 @dataclass(frozen=True)
 class Sample:
     """An accepted pedal sample: the server's sequence number, the command (clipped to the
@@ -90,8 +112,7 @@ class Gate:
         self.lock = threading.Lock()
         self.phase = IDLE
         self.refused: Counter[str] = Counter()
-        self._tokens = float(INPUT_BURST)
-        self._tokens_at = -math.inf     # the latest sample time credited, s
+        self._inputs = _Bucket(INPUT_BURST, control_rate_hz)
         self._offset_s: float | None = None   # least (arrival - t_ms) of this connection
         self._seq = 0
         self._prompts: dict[int, int] = {}           # prompt id -> sent at, ns
@@ -99,8 +120,7 @@ class Gate:
         self._acks: dict[int, tuple[int, int, int]] = {}   # seq -> arrived, applied, sent
         self.questionnaire_taken = False
         self._trust: tuple[float, int] | None = None     # scale position, set at ns
-        self._trust_tokens = float(TRUST_BURST)
-        self._trust_at = -math.inf
+        self._trusts = _Bucket(TRUST_BURST, TRUST_PER_S)
 
     def set_phase(self, phase: str) -> None:
         """The drive moved to ``phase`` (a new ``READY`` starts a new drive's bookkeeping)."""
@@ -162,13 +182,9 @@ class Gate:
                 if self._offset_s is None or offset_s < self._offset_s:
                     self._offset_s = offset_s
                 at_s = sent_ms / 1e3 + self._offset_s       # <= now_s
-            elapsed = max(0.0, at_s - self._tokens_at)
-            self._tokens = min(float(INPUT_BURST), self._tokens + elapsed * self.rate_hz)
-            self._tokens_at = max(self._tokens_at, at_s)
-            if self._tokens < 1.0:
+            if not self._inputs.take(at_s):
                 self.refused['input over the control rate'] += 1
                 return None
-            self._tokens -= 1.0
             self._seq += 1
             accel = min(self.accel_max, max(self.accel_min, value))
             return Sample(self._seq, accel, accel != value)
@@ -214,14 +230,9 @@ class Gate:
             if value is None or not 0 <= value <= 100:
                 self.refused['rating not in [0, 100]'] += 1
                 return None
-            now_s = now_ns / 1e9
-            self._trust_tokens = min(float(TRUST_BURST), self._trust_tokens
-                                     + max(0.0, now_s - self._trust_at) * TRUST_PER_S)
-            self._trust_at = max(self._trust_at, now_s)
-            if self._trust_tokens < 1.0:
+            if not self._trusts.take(now_ns / 1e9):
                 self.refused['trust over its rate'] += 1
                 return None
-            self._trust_tokens -= 1.0
             self._trust = (value, now_ns)
             return value
 
