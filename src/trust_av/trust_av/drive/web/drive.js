@@ -98,7 +98,7 @@ function setControl(msg) {
     : 'No tab is driving this session.';
   if (!msg.controlling) { stopInput(); hideRating(); return; }
   if (drive.phase === 'driving') startInput();
-  if (continuous() && ['ready', 'driving'].includes(drive.phase)) showScale(drive.scale);
+  if (continuous() && SCALE_PHASES.includes(drive.phase)) showScale(drive.scale);
 }
 $('take-over').addEventListener('click', () => send({type: 'take_over'}));
 
@@ -145,8 +145,7 @@ function setPhase(msg) {
       if (drive.ws) drive.ws.close();
     }
   }
-  if (!['driving', 'wait'].includes(msg.phase) && !(continuous() && msg.phase === 'ready')) hideRating();
-  if (continuous() && msg.phase === 'wait') hideRating();
+  if (!(continuous() ? SCALE_PHASES : ['driving', 'wait']).includes(msg.phase)) hideRating();
   if (msg.phase !== 'driving') $('crash').hidden = true;
 }
 
@@ -282,6 +281,7 @@ function hideRating() { $('rating').hidden = true; drive.prompt = null; }
 // records its position every rating period. Its first position of a drive is the
 // participant's own: it starts unset (no thumb) on every start screen.
 const TRUST_SEND_MS = 200;
+const SCALE_PHASES = ['ready', 'driving'];   // the phases the continuous scale is on screen
 function continuous() { return drive.ratingMode === 'continuous'; }
 function showScale(value) {
   const r = $('rating');
@@ -312,7 +312,7 @@ function sendTrust() {
   send({type: 'trust', value: drive.scale});
 }
 function scaleMoved() {
-  if (!continuous() || !['ready', 'driving'].includes(drive.phase)) return;
+  if (!continuous() || !SCALE_PHASES.includes(drive.phase)) return;
   $('start').disabled = false;
   const wait = (drive.trustSentMs || -Infinity) + TRUST_SEND_MS - performance.now();
   if (wait <= 0) sendTrust();
