@@ -6,6 +6,7 @@ state stream is played by the test."""
 
 from __future__ import annotations
 
+import itertools
 import queue
 import sys
 import time
@@ -305,19 +306,37 @@ def test_the_continuous_scale_is_set_before_the_start_and_stays_while_driving() 
             _drive(server, tab)
             tab.wait_for_selector('#stage #rating:not([hidden])', timeout=10_000)
             assert tab.locator('#rating-slider').input_value() == '50'
+            # a drag of 17 moves, 6 ms apart when the host keeps up, with the page once busy for
+            # 0.25 s while a send waits on its timer; checked on the page's own send times, so a
+            # slow host changes how many sends there are, not the rule they keep
             sent = tab.evaluate("""async () => {
                 const s = document.getElementById('rating-slider');
-                for (let v = 60; v <= 90; v += 2) {      // a drag: 16 moves within 0.1 s
+                const ws = drive.ws, raw = ws.send.bind(ws), times = [];
+                ws.send = (data) => {
+                    if (JSON.parse(data).type === 'trust') times.push(performance.now());
+                    raw(data);
+                };
+                for (let v = 60; v <= 90; v += 2) {
                     s.value = v; s.dispatchEvent(new Event('input'));
+                    if (v === 62) {         // a busy page: the deferred send's timer is due
+                        const t = performance.now();       // but has not run when 63 comes
+                        while (performance.now() - t < 250) {}
+                        s.value = 63; s.dispatchEvent(new Event('input'));
+                    }
                     await new Promise((r) => setTimeout(r, 6));
                 }
-                await new Promise((r) => setTimeout(r, 500));
-                return drive.scale; }""")
-            assert sent == 90
+                while (drive.trustTimer) await new Promise((r) => setTimeout(r, 20));
+                return {scale: drive.scale, times: times}; }""")
+            assert sent['scale'] == 90
             values = []
             while not values or values[-1] != 90:
                 values.append(_next(inbox, 'trust')['value'])
-            assert 1 <= len(values) <= 3, values             # one, then the last after 0.2 s
+            times = sent['times']
+            assert len(values) == len(times), (values, times)
+            # each send a newer position than the one before (none repeated), the last the
+            # final one, and no two sends closer than the page's 0.2 s limit
+            assert values == sorted(set(values)) and values[0] >= 60, values
+            assert all(b - a >= 199.0 for a, b in itertools.pairwise(times)), times
             tab.close()
             hello['scale'] = 90                              # the server's kept position
             tab = browser.new_page()

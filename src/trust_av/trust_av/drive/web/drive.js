@@ -306,6 +306,9 @@ function showScale(value) {
   r.hidden = false;
 }
 function sendTrust() {
+  // A timer fires late on a busy page; a move that finds the period over sends at once, and the
+  // late timer must not then send the same position again.
+  clearTimeout(drive.trustTimer);
   drive.trustTimer = null;
   drive.trustSentMs = performance.now();
   drive.scale = Number($('rating-slider').value);
@@ -316,7 +319,8 @@ function scaleMoved() {
   $('start').disabled = false;
   const wait = (drive.trustSentMs || -Infinity) + TRUST_SEND_MS - performance.now();
   if (wait <= 0) sendTrust();
-  else if (!drive.trustTimer) drive.trustTimer = setTimeout(sendTrust, wait);
+  // setTimeout takes whole milliseconds and would cut the fraction, sending a little early
+  else if (!drive.trustTimer) drive.trustTimer = setTimeout(sendTrust, Math.ceil(wait));
 }
 // The scale shows no thumb until it is touched (a visual-analogue scale: no default answer to
 // lean on), and any touch of it is an answer, wherever it lands: a click on the very spot where
