@@ -14,7 +14,8 @@ are):
   process the model lacks, another model's dynamics) leaves runs of residuals of one sign.
   One-sided: p is the share of replicates whose autocorrelation is at least the observed.
 - ``interval_90``: the share of held-out ratings (leave one drive out) inside the fitted
-  model's central 90 % predictive interval; should be about 0.9. Two-sided: p is twice the
+  model's central 90 % predictive interval (of the censored rating: the latent interval cut
+  to 0-100); about 0.9, more where ratings sit at an end. Two-sided: p is twice the
   smaller tail of the replicates' shares.
 
 A model is ``adequate`` for a participant when no check's p is below :data:`ALPHA`.
@@ -37,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trust_monitor.rating_observation import LOWER, UPPER
 from trust_monitor.trust_fit import Fit, ModelSpec, RatedDrive, Score, model_trust
 
 __all__ = ['ALPHA', 'INTERVAL', 'OBSERVATION_PARAMETERS', 'REPLICATES', 'STATISTICS', 'Check',
@@ -108,6 +110,16 @@ def _replicate(mean: np.ndarray, sd: np.ndarray, rng: np.random.Generator) -> np
     return out
 
 
+def _inside(ratings: np.ndarray, mean: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """Which ratings lie in the central 90 % predictive interval: the latent interval
+    ``mean +- 1.645 sd`` cut to the scale, the interval of the censored rating (a mean far
+    above 100 puts most of the rating's probability on 100 itself)."""
+    low = np.clip(mean - _Z * sd, LOWER, UPPER)
+    high = np.clip(mean + _Z * sd, LOWER, UPPER)
+    out: np.ndarray = (ratings >= low - 1e-9) & (ratings <= high + 1e-9)
+    return out
+
+
 def _upper_p(observed: float, replicated: np.ndarray) -> float:
     return float((1 + np.sum(replicated >= observed - 1e-12)) / (1 + len(replicated)))
 
@@ -132,9 +144,9 @@ def check_model(participant: str, spec: ModelSpec, own: Fit, drives: Sequence[Ra
         # the held-out rating is mean + error: replicate around the held-out mean
         held_mean = ratings - lodo.errors if len(ratings) == len(lodo.errors) else None
         if held_mean is not None:
-            inside = float(np.mean(np.abs(lodo.errors) <= _Z * lodo.sd))
+            inside = float(np.mean(_inside(ratings, held_mean, lodo.sd)))
             rep = _replicate(held_mean, lodo.sd, rng)
-            shares = np.mean(np.abs(rep - held_mean) <= _Z * lodo.sd, axis=1)
+            shares = np.mean(_inside(rep, held_mean, lodo.sd), axis=1)
             low = float((1 + np.sum(shares <= inside + 1e-12)) / (1 + len(shares)))
             high = float((1 + np.sum(shares >= inside - 1e-12)) / (1 + len(shares)))
             out.append(Check(participant, spec.name, 'interval_90', inside,

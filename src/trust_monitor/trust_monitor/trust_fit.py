@@ -15,9 +15,13 @@ Pure numerics (no ROS, no files): :mod:`trust_av.drive.trust_fit_data` reads dri
 - **Observation model** (its parameters are fitted too). ``linear`` (default):
   ``rating / 100 = a + b T + e``, ``b >= 0``; ``direct`` (a model that declares
   ``rating_observation = 'direct'``: ``optimo``, ``beta_bernoulli``, whose trust is itself a
-  probability of trusting): ``rating / 100 = T + e``; ``e ~ N(0, s^2)`` in both. For given
-  model parameters a, b and s have closed-form maximum-likelihood values (least squares),
-  so they are profiled out exactly and the optimiser searches the model's parameters only.
+  probability of trusting): ``rating / 100 = T + e``; ``e ~ N(0, s^2)`` in both, censored
+  at the scale's ends (a rating of 0 or 100 counts as the probability of the latent rating
+  being there or beyond: :mod:`trust_monitor.rating_observation`). For given model
+  parameters the maximum-likelihood a, b and s are found exactly (least squares in closed
+  form when no rating sits at an end, Newton's method on the concave censored likelihood
+  when some do), so they are profiled out and the optimiser searches the model's parameters
+  only.
 - **Parameters** come from the model's own declaration
   (:func:`~trust_monitor.model_interface.fit_parameters`): the identifiable ones are fitted
   by maximising the profile likelihood times the declared normal prior (on the log scale
