@@ -35,9 +35,10 @@ MIN_RATING_STD = 0.5 / 100.0
 LOWER, UPPER = 0.0, 100.0
 """The rating scale's ends, where ratings are censored."""
 _NEWTON_STEPS = 50
-_TOL = 1e-10
-"""Newton stops when the squared Newton decrement (the log-likelihood it still expects to
-gain) is below this, in nats."""
+_TOL = 1e-8
+"""Newton stops when the Newton decrement squared (twice the log-likelihood the next step
+expects to gain) is below this, in nats: far below what a fit's search can tell apart
+(its values are hundreds of nats, compared to 1e-4 relative)."""
 
 
 @dataclass(frozen=True)
@@ -72,14 +73,22 @@ def _least_squares(kind: str, trust: np.ndarray, y: np.ndarray) -> Observation:
     return Observation(a, b, max(s, MIN_RATING_STD))
 
 
-def _loglik(theta: np.ndarray, d_mid: np.ndarray, d_cut: np.ndarray) -> float:
+_HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+def _evaluate(theta: np.ndarray, d_mid: np.ndarray,
+              d_cut: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """The log-likelihood at ``theta`` (-inf for tau <= 0) and what its derivatives reuse:
+    the uncensored ratings' residuals r, the censored ones' forms w and log Phi(w)."""
     from scipy.special import log_ndtr
 
-    tau = theta[-1]
-    if tau <= 0.0:
-        return -math.inf
     r = d_mid @ theta
-    return float(len(r) * math.log(tau) - 0.5 * r @ r + log_ndtr(d_cut @ theta).sum())
+    w = d_cut @ theta
+    log_cdf = log_ndtr(w)
+    tau = theta[-1]
+    value = (float(len(r) * math.log(tau) - 0.5 * r @ r + log_cdf.sum()) if tau > 0.0
+             else -math.inf)
+    return value, r, w, log_cdf
 
 
 def _newton(theta: np.ndarray, free: np.ndarray, d_mid: np.ndarray,
@@ -89,24 +98,22 @@ def _newton(theta: np.ndarray, free: np.ndarray, d_mid: np.ndarray,
     In Olsen's parameters every rating's term is a function of one linear form of theta:
     an uncensored rating contributes ``log tau - (d . theta)^2 / 2``, a censored one
     ``log Phi(d . theta)`` (the rows of ``d_mid`` and ``d_cut``); theta's last coordinate is
-    tau = 1 / s.
+    tau = 1 / s. Damped Newton (backtracking to a sufficient increase), which converges
+    from any start on a strictly concave function.
     """
-    from scipy.special import log_ndtr
-
-    theta = theta.copy()
     n_mid = len(d_mid)
-    value = _loglik(theta, d_mid, d_cut)
+    mid_curvature = d_mid.T @ d_mid                   # the same at every theta
+    value, r, w, log_cdf = _evaluate(theta, d_mid, d_cut)
     for _ in range(_NEWTON_STEPS):
         tau = theta[-1]
-        r = d_mid @ theta
-        w = d_cut @ theta
-        lam = np.exp(-0.5 * w * w - 0.5 * math.log(2.0 * math.pi) - log_ndtr(w))  # phi/Phi
-        grad = -(d_mid.T @ r) + d_cut.T @ lam
+        lam = np.exp(-0.5 * w * w - _HALF_LOG_2PI - log_cdf)          # phi(w) / Phi(w)
+        grad = d_cut.T @ lam - d_mid.T @ r
         grad[-1] += n_mid / tau
-        hess = -(d_mid.T @ d_mid) - (d_cut.T * (lam * (w + lam))) @ d_cut
+        hess = -mid_curvature - (d_cut.T * (lam * (w + lam))) @ d_cut
         hess[-1, -1] -= n_mid / tau ** 2
-        g, h = grad[free], hess[np.ix_(free, free)]
-        step = np.linalg.solve(h, -g)
+        every = bool(free.all())
+        g = grad if every else grad[free]
+        step = np.linalg.solve(hess if every else hess[np.ix_(free, free)], -g)
         decrement = float(g @ step)
         if not decrement > _TOL:
             break
@@ -115,18 +122,25 @@ def _newton(theta: np.ndarray, free: np.ndarray, d_mid: np.ndarray,
         t = 1.0
         while t > 1e-8:
             trial = theta + t * full
-            trial_value = _loglik(trial, d_mid, d_cut)
+            trial_value, trial_r, trial_w, trial_log_cdf = _evaluate(trial, d_mid, d_cut)
             if trial_value >= value + 0.25 * t * decrement:
                 break
             t *= 0.5
         else:
             break
-        theta, value = trial, trial_value
+        theta, value, r, w, log_cdf = trial, trial_value, trial_r, trial_w, trial_log_cdf
     return theta
 
 
-def fit_observation(kind: str, trust: np.ndarray, y: np.ndarray) -> Observation:
-    """Maximum-likelihood a, b >= 0 and s for ratings / 100 ``y``, censored at 0 and 1."""
+def fit_observation(kind: str, trust: np.ndarray, y: np.ndarray,
+                    near: Observation | None = None) -> Observation:
+    """Maximum-likelihood a, b >= 0 and s for ratings / 100 ``y``, censored at 0 and 1.
+
+    ``near``: where Newton's method starts when ratings sit at an end (the maximum is
+    unique, so the start changes only the iterations: a fit over a model's parameters
+    passes the solution for the previous trust, which is close); default the least-squares
+    values.
+    """
     trust, y = np.asarray(trust, float), np.asarray(y, float)
     start = _least_squares(kind, trust, y)
     low, high = censored(100.0 * y)
@@ -136,6 +150,8 @@ def fit_observation(kind: str, trust: np.ndarray, y: np.ndarray) -> Observation:
         return start
     # the linear forms (module docstring): columns (a/s, b/s, 1/s) for 'linear', (1/s) for
     # 'direct' whose mean is T itself; lower end Phi((0 - m) / s), upper Phi((m - 1) / s)
+    if near is not None and near.s > 0.0 and math.isfinite(near.a + near.b + near.s):
+        start = near
     if kind == 'direct':
         d_mid = (y - trust)[~cut, None]
         d_cut = np.where(low, -trust, trust - 1.0)[cut, None]
@@ -145,7 +161,7 @@ def fit_observation(kind: str, trust: np.ndarray, y: np.ndarray) -> Observation:
         d_mid = np.column_stack([-ones, -trust, y])[~cut]
         sign = np.where(low, -1.0, 1.0)
         d_cut = np.column_stack([sign * ones, sign * trust, np.where(low, 0.0, -1.0)])[cut]
-        theta = np.array([start.a, start.b, 1.0]) / start.s
+        theta = np.array([start.a, max(start.b, 0.0), 1.0]) / start.s
     free = np.ones(len(theta), bool)
     theta = _newton(theta, free, d_mid, d_cut)
     if kind == 'linear' and theta[1] < 0.0:          # b >= 0: the maximum on b = 0

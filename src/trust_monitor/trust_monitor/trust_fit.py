@@ -281,11 +281,13 @@ def fit(spec: ModelSpec, drives: Sequence[RatedDrive], seed: int = 0) -> Fit:
         model = spec.build(theta_of(x))
         return np.concatenate([_trust_on(model, timeline)[1] for timeline in timelines])
 
+    last: list[Observation | None] = [None]
+
     def objective(x: np.ndarray) -> float:
         evaluations[0] += 1
         x = np.clip(x, [b[0] for b in box], [b[1] for b in box])
         trust = trust_at(x)
-        obs = fit_observation(spec.observation, trust, y)
+        obs = last[0] = fit_observation(spec.observation, trust, y, last[0])
         loglik = float(log_density(obs, trust, 100.0 * y).sum())
         return -(loglik + _prior(params, x))
 
@@ -318,7 +320,9 @@ def fit(spec: ModelSpec, drives: Sequence[RatedDrive], seed: int = 0) -> Fit:
 
 @dataclass(frozen=True)
 class Prediction:
-    """A fitted model on drives it may not have seen: trust and ratings at rating times."""
+    """A fitted model on drives it may not have seen: trust and ratings at rating times;
+    ``predicted`` is the observation model's latent mean (x 100: it may lie beyond 0-100,
+    where the rating itself stops), ``log_density`` each rating's log likelihood."""
 
     trust: np.ndarray
     ratings: np.ndarray
