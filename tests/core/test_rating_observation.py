@@ -67,6 +67,7 @@ def _scipy_fit(kind: str, trust: np.ndarray, y: np.ndarray) -> tuple[float, floa
     ('linear', Observation(-0.1, 1.2, 0.08), 3),    # both ends
     ('linear', Observation(0.95, 0.0, 0.05), 4),     # flat, at 100: the maximum on b = 0
     ('direct', Observation(0.0, 1.0, 0.12), 5),
+    ('linear', Observation(0.5, 0.6, 0.001), 6),    # the maximum on s = MIN_RATING_STD
 ])
 def test_the_fit_is_the_maximum_of_the_censored_likelihood(kind: str, truth: Observation,
                                                             seed: int) -> None:
@@ -80,6 +81,9 @@ def test_the_fit_is_the_maximum_of_the_censored_likelihood(kind: str, truth: Obs
     assert ours >= theirs - 1e-6                      # nothing scipy finds is higher
     assert fitted.s == pytest.approx(s, rel=1e-3)
     assert fitted.b >= 0.0
+    # the start changes the iterations, not the maximum
+    far = fit_observation(kind, trust, y, Observation(0.9, 0.1, 0.3))
+    assert (far.a, far.b, far.s) == pytest.approx((fitted.a, fitted.b, fitted.s), abs=1e-6)
 
 
 def test_without_ratings_at_an_end_the_fit_is_least_squares() -> None:

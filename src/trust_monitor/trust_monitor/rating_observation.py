@@ -11,8 +11,9 @@ Fitting a, b and s for given trust:
 - no rating at an end: the censored likelihood is the Gaussian one, whose maximum is in
   closed form (least squares), so a fit profiles them out exactly and at no cost;
 - ratings at an end: the log-likelihood is concave in Olsen's (1978) parameters
-  ``(a / s, b / s, 1 / s)``, so Newton's method from the least-squares values finds its
-  unique maximum (a few iterations, each vectorised over the ratings); ``b >= 0`` and
+  ``(a / s, b / s, 1 / s)``, so Newton's method (from the least-squares values, or from a
+  given nearby solution) finds its unique maximum (two or three iterations, each vectorised
+  over the ratings); ``b >= 0`` and
   ``s >= MIN_RATING_STD`` are kept by refitting on the bound when the free maximum lies
   beyond it (a concave function's maximum under one violated bound lies on that bound).
   With fewer uncensored ratings than parameters the maximum may not exist (all ratings at
@@ -171,6 +172,9 @@ def fit_observation(kind: str, trust: np.ndarray, y: np.ndarray,
         theta = theta / theta[-1] * (1.0 / MIN_RATING_STD)
         free[-1] = False
         theta = _newton(theta, free, d_mid, d_cut)
+        if kind == 'linear' and theta[1] < 0.0:      # and b >= 0 with it
+            theta[1], free[1] = 0.0, False
+            theta = _newton(theta, free, d_mid, d_cut)
     tau = float(theta[-1])
     if kind == 'direct':
         return Observation(0.0, 1.0, 1.0 / tau)
