@@ -1,10 +1,11 @@
 """The observation model from a trust model's trust to the rating scale, fitted with it
 (:mod:`trust_monitor.trust_fit`): ``linear`` (default), ``rating / 100 = a + b T + e``,
 ``b >= 0``; ``direct`` (a model whose trust is itself a probability of trusting),
-``rating / 100 = T + e``; ``e ~ N(0, s^2)`` in both, censored at the scale's ends (Tobit,
-1958): the scale stops at 0 and 100, so a rating of 0 says only that the latent rating is
-at or below 0 (probability ``Phi(-mean / s)``) and a rating of 100 that it is at or above
-100 (``Phi((mean - 1) / s)``); every other rating has the Gaussian density.
+``rating / 100 = T + e``; ``e ~ N(0, s^2)`` in both, censored at the scale's ends (a Tobit
+model, Tobin 1958): the scale stops at 0 and 100, so a rating of 0 says only that the
+latent rating is at or below 0 (probability ``Phi(-mean / s)``) and a rating of 100 that
+it is at or above 100 (``Phi((mean - 1) / s)``); every other rating has the Gaussian
+density.
 
 Fitting a, b and s for given trust:
 
