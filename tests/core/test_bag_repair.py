@@ -211,3 +211,63 @@ def test_a_drive_bag_is_not_repaired_while_its_participant_s_session_lives(
         _refused_in_use(capsys, 'participant P01 already has a live session', 'pid ')
     assert snapshot(tmp_path) == before
     assert main(['repair-bag', str(bag)]) == 0
+
+
+def test_a_bag_is_finished_only_with_every_file_whole_and_listed(tmp_path: Path) -> None:
+    """``finished``: metadata.yaml listing exactly the MCAP files, each complete; a bag cut
+    anywhere before that is not (its repair keeps what it can)."""
+    whole = tmp_path / 'whole'
+    record(BagWriter(whole), 3)
+    assert bag_repair.finished(whole)
+    split = tmp_path / 'split'
+    record(BagWriter(split, max_chunks_per_file=2), 5)
+    assert len(list(split.glob('*.mcap'))) == 3 and bag_repair.finished(split)
+    cut = tmp_path / 'cut'                          # killed before it finished
+    record(BagWriter(cut), 3, finish=False)
+    assert not bag_repair.finished(cut)
+    cut_after_split = tmp_path / 'cut_after_split'  # files 0 and 1 whole, file 2 open
+    record(BagWriter(cut_after_split, max_chunks_per_file=2), 5, finish=False)
+    assert not bag_repair.finished(cut_after_split)
+    unlisted = tmp_path / 'copy' / 'split'          # a whole file metadata.yaml does not list
+    shutil.copytree(split, unlisted)
+    assert bag_repair.finished(unlisted)
+    shutil.copy(unlisted / 'split_2.mcap', unlisted / 'split_3.mcap')
+    assert not bag_repair.finished(unlisted)
+    no_metadata = tmp_path / 'no_metadata'          # killed between the MCAP and metadata.yaml
+    shutil.copytree(whole, no_metadata)
+    (no_metadata / 'whole.mcap').rename(no_metadata / 'no_metadata.mcap')
+    (no_metadata / 'metadata.yaml').unlink()
+    assert not bag_repair.finished(no_metadata)
+    truncated = tmp_path / 'truncated'
+    shutil.copytree(whole, truncated)
+    mcap = truncated / 'whole.mcap'
+    mcap.write_bytes(mcap.read_bytes()[:-9])        # the closing magic lost
+    assert not bag_repair.finished(truncated)
+    assert not bag_repair.finished(tmp_path / 'nothing')
+
+
+@pytest.mark.parametrize('code', [-9, 130, 1])
+def test_a_recorder_stopped_after_it_finished_its_bag_leaves_it_as_it_is(
+        tmp_path: Path, code: int) -> None:
+    """A stop signal can reach the recorder after its bag is whole (SIGINT, SIGTERM, SIGINT in
+    quick succession: the last kills it on its way out): the run's stop keeps that bag as it
+    is and does not try to repair a complete recording, which repair refuses."""
+    from types import SimpleNamespace
+
+    from trust_av.graph.orchestrator import _finish_recording
+    from trust_av.graph.processes import RECORDER
+
+    bag = tmp_path / 'run'
+    record(BagWriter(bag), 3)
+    recorder = SimpleNamespace(spec=SimpleNamespace(name=RECORDER),
+                               popen=SimpleNamespace(returncode=code), error_line=lambda: '')
+    graph = SimpleNamespace(processes=[recorder], by_name=lambda _name: recorder)
+    before = snapshot(tmp_path)
+    _finish_recording(graph, bag)  # type: ignore[arg-type]
+    assert snapshot(tmp_path) == before
+    with pytest.raises(BagWriteError, match='nothing to repair'):
+        repair_bag(bag)                              # what the stop used to call
+    cut = tmp_path / 'cut'                           # and one it did not finish is repaired
+    record(BagWriter(cut), 3, finish=False)
+    _finish_recording(graph, cut)  # type: ignore[arg-type]
+    assert bag_repair.finished(cut) and check_bag_directory(cut) == []

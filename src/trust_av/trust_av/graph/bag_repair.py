@@ -42,7 +42,7 @@ from trust_av.graph.mcap_steps import RECORDER_LIBRARY
 from trust_av_common.errors import one_line
 from trust_av_common.output_files import stop_signals_held
 
-__all__ = ['complete_mcap', 'mcap_files', 'repair', 'repair_bag', 'written_here']
+__all__ = ['complete_mcap', 'finished', 'mcap_files', 'repair', 'repair_bag', 'written_here']
 
 FOREIGN_CHUNK_MESSAGES = 1000
 """Messages per chunk in the repaired copy of another tool's bag (it has no steps)."""
@@ -185,6 +185,22 @@ def complete_mcap(path: Path) -> bool:
                 handle, skip_magic=False, validate_crcs=True, record_size_limit=size).records)
     except (McapError, struct.error, EOFError, ValueError, OSError, MemoryError):
         return False
+
+
+def finished(path: Path) -> bool:
+    """Whether the bag directory at ``path`` is finished as its writer finishes one: a
+    ``metadata.yaml`` that lists exactly its MCAP files, each complete
+    (:func:`complete_mcap`). A recorder stopped after it finished its bag (a stop signal
+    racing the end of its exit) leaves one: there is nothing to repair. A bag cut at a
+    split is not finished: the file begun after the split has no footer."""
+    if not path.is_dir() or not (path / 'metadata.yaml').is_file():
+        return False
+    try:
+        files = mcap_files(path)
+    except BagWriteError:
+        return False
+    return (sorted(_listed_files(path)) == sorted(file.name for file in files)
+            and all(complete_mcap(file) for file in files))
 
 
 @dataclass(frozen=True)

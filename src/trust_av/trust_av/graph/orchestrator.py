@@ -37,7 +37,7 @@ import yaml
 from preceding_traffic.traces import SpeedTrace
 from trust_av.errors import TrustAvAppError
 from trust_av.graph.bag_records import records_from_bag
-from trust_av.graph.bag_repair import repair_bag
+from trust_av.graph.bag_repair import finished, repair_bag
 from trust_av.graph.bag_writer import EXIT_DISK_FULL, DiskFullError
 from trust_av.graph.domains import check_domain_id, check_namespace, lease_domain
 from trust_av.graph.lifecycle_client import MANAGED_NODES, set_states
@@ -421,14 +421,16 @@ def _low_disk(bag: Path) -> str:
 
 def _finish_recording(graph: Graph, bag: Path) -> None:
     """After the nodes are stopped: a full disk is reported, a recording whose recorder
-    died is repaired (every complete chunk kept)."""
+    died is repaired (every complete chunk kept) unless the recorder had finished it before
+    it was stopped (:func:`~trust_av.graph.bag_repair.finished`: a stop signal can reach it
+    after its bag is whole)."""
     if not any(p.spec.name == RECORDER for p in graph.processes):
         return
     recorder = graph.by_name(RECORDER)
     code = recorder.popen.returncode
     if code == EXIT_DISK_FULL:
         raise DiskFullError(recorder.error_line() or f'{bag}: the disk filled up')
-    if code not in (0, None) and bag.exists():
+    if code not in (0, None) and bag.exists() and not finished(bag):
         repair_bag(bag)
 
 
