@@ -106,7 +106,7 @@ def lag1(residuals: np.ndarray, drive: np.ndarray) -> np.ndarray:
 def _replicate(mean: np.ndarray, sd: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """:data:`REPLICATES` rating sets drawn from N(mean, sd), rounded, kept in [0, 100]."""
     draws = mean + sd * rng.standard_normal((REPLICATES, len(mean)))
-    out: np.ndarray = np.clip(np.round(draws), 0.0, 100.0)
+    out: np.ndarray = np.clip(np.round(draws), LOWER, UPPER)
     return out
 
 

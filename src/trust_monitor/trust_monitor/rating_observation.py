@@ -105,6 +105,7 @@ def _newton(theta: np.ndarray, free: np.ndarray, d_mid: np.ndarray,
     """
     n_mid = len(d_mid)
     mid_curvature = d_mid.T @ d_mid                   # the same at every theta
+    every = bool(free.all())
     value, r, w, log_cdf = _evaluate(theta, d_mid, d_cut)
     for _ in range(_NEWTON_STEPS):
         tau = theta[-1]
@@ -113,14 +114,16 @@ def _newton(theta: np.ndarray, free: np.ndarray, d_mid: np.ndarray,
         grad[-1] += n_mid / tau
         hess = -mid_curvature - (d_cut.T * (lam * (w + lam))) @ d_cut
         hess[-1, -1] -= n_mid / tau ** 2
-        every = bool(free.all())
         g = grad if every else grad[free]
         step = np.linalg.solve(hess if every else hess[np.ix_(free, free)], -g)
         decrement = float(g @ step)
         if not decrement > _TOL:
             break
-        full = np.zeros_like(theta)
-        full[free] = step
+        if every:
+            full = step
+        else:
+            full = np.zeros_like(theta)
+            full[free] = step
         t = 1.0
         while t > 1e-8:
             trial = theta + t * full
@@ -144,16 +147,15 @@ def fit_observation(kind: str, trust: np.ndarray, y: np.ndarray,
     values.
     """
     trust, y = np.asarray(trust, float), np.asarray(y, float)
-    start = _least_squares(kind, trust, y)
     low, high = censored(100.0 * y)
     cut = low | high
     width = 1 if kind == 'direct' else 3
     if not cut.any() or int((~cut).sum()) < width:
-        return start
+        return _least_squares(kind, trust, y)
+    start = (near if near is not None and near.s > 0.0
+             and math.isfinite(near.a + near.b + near.s) else _least_squares(kind, trust, y))
     # the linear forms (module docstring): columns (a/s, b/s, 1/s) for 'linear', (1/s) for
     # 'direct' whose mean is T itself; lower end Phi((0 - m) / s), upper Phi((m - 1) / s)
-    if near is not None and near.s > 0.0 and math.isfinite(near.a + near.b + near.s):
-        start = near
     if kind == 'direct':
         d_mid = (y - trust)[~cut, None]
         d_cut = np.where(low, -trust, trust - 1.0)[cut, None]
@@ -166,16 +168,15 @@ def fit_observation(kind: str, trust: np.ndarray, y: np.ndarray,
         theta = np.array([start.a, max(start.b, 0.0), 1.0]) / start.s
     free = np.ones(len(theta), bool)
     theta = _newton(theta, free, d_mid, d_cut)
-    if kind == 'linear' and theta[1] < 0.0:          # b >= 0: the maximum on b = 0
-        theta[1], free[1] = 0.0, False
-        theta = _newton(theta, free, d_mid, d_cut)
-    if theta[-1] > 1.0 / MIN_RATING_STD:             # s >= MIN_RATING_STD: on the bound
-        theta = theta / theta[-1] * (1.0 / MIN_RATING_STD)
-        free[-1] = False
-        theta = _newton(theta, free, d_mid, d_cut)
-        if kind == 'linear' and theta[1] < 0.0:      # and b >= 0 with it
+    while True:                      # a violated bound: the maximum on it (each fixed once)
+        if kind == 'linear' and free[1] and theta[1] < 0.0:               # b >= 0
             theta[1], free[1] = 0.0, False
-            theta = _newton(theta, free, d_mid, d_cut)
+        elif free[-1] and theta[-1] > 1.0 / MIN_RATING_STD:              # s >= its least
+            theta = theta / theta[-1] * (1.0 / MIN_RATING_STD)
+            free[-1] = False
+        else:
+            break
+        theta = _newton(theta, free, d_mid, d_cut)
     tau = float(theta[-1])
     if kind == 'direct':
         return Observation(0.0, 1.0, 1.0 / tau)
